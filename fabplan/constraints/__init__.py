@@ -1,0 +1,22 @@
+"""Constraint families: each module holds one family's residuals and Jacobian side by side."""
+
+from .angle import ConstantAngle
+from .base import Constraint, Layout, NetState
+from .closeness import Closeness
+from .fairness import Fairness
+from .orientation import CoherentOrientation
+from .radius import ConstantCurvature
+from .sphere import SphereCondition, SphereNormalization
+
+__all__ = [
+    "Constraint",
+    "Layout",
+    "NetState",
+    "SphereCondition",
+    "SphereNormalization",
+    "ConstantAngle",
+    "ConstantCurvature",
+    "CoherentOrientation",
+    "Fairness",
+    "Closeness",
+]

@@ -1,0 +1,110 @@
+"""The measured properties of a net: what `fabplan measure` prints and every result carries.
+
+Everything here is recomputed from the vertex positions with `fabplan.geometry`, never
+copied from a solver's residuals.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import (
+    canonical_stars,
+    face_planarity,
+    fit_star_spheres,
+    intersection_angles,
+    principal_curvatures,
+    star_planarity,
+)
+
+__all__ = ["measure_net", "format_summary"]
+
+
+def _stats(values: np.ndarray) -> dict:
+    """min / max / median / mean of the finite values (None when there are none)."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return {"min": None, "max": None, "median": None, "mean": None, "count": 0}
+    return {"min": float(v.min()), "max": float(v.max()), "median": float(np.median(v)),
+            "mean": float(v.mean()), "count": int(v.size)}
+
+
+def measure_net(mesh, *, reference=None) -> dict:
+    """Measure the S-net properties of a quad mesh.
+
+    Parameters
+    ----------
+    mesh : `fabplan.mesh.QuadMesh`
+    reference : optional `fabplan.reference.ReferenceSurface` to measure the distance to.
+
+    Returns
+    -------
+    dict, JSON-ready. Lengths are in model units; ``*_relative`` values are divided by the
+    mean edge length; angles are in degrees.
+    """
+    X = mesh.vertices
+    L = mesh.mean_edge_length
+    stars = canonical_stars(X, mesh.stars)
+    sizes, counts = np.unique(mesh.face_sizes, return_counts=True)
+    record: dict = {
+        "vertices": mesh.vertex_count,
+        "faces": int(len(mesh.face_sizes)),
+        "face_sizes": {str(int(k)): int(c) for k, c in zip(sizes, counts, strict=True)},
+        "regular_stars": int(len(stars)),
+        "irregular_vertices": mesh.irregular_vertices.tolist(),
+        "boundary_vertices": int(mesh.is_boundary_vertex.sum()),
+        "mean_edge_length": L,
+    }
+    if len(stars):
+        spheres = fit_star_spheres(X, stars)
+        k1, k2 = principal_curvatures(X, stars, spheres.curvature)
+        record.update({
+            "sphere_residual": _stats(spheres.residual),
+            "sphere_residual_relative": _stats(spheres.residual / L),
+            "meusnier_radius": _stats(spheres.radius),
+            "normal_curvature": _stats(spheres.curvature),
+            "intersection_angle_deg": _stats(np.degrees(intersection_angles(X, stars))),
+            "principal_curvature_1": _stats(k1),
+            "principal_curvature_2": _stats(k2),
+            "mean_curvature": _stats((k1 + k2) / 2),
+            "star_planarity_relative": _stats(star_planarity(X, stars) / L),
+        })
+    record["face_planarity_relative"] = _stats(face_planarity(X, mesh.quads) / L)
+    if reference is not None:
+        d = reference.distances(X)
+        record["distance_to_reference"] = _stats(d)
+        record["distance_to_reference_relative"] = _stats(d / L)
+    return record
+
+
+def _fmt(stats: dict | None, key: str = "max", spec: str = ".4g") -> str:
+    if not stats or stats.get(key) is None:
+        return "n/a"
+    return format(stats[key], spec)
+
+
+def format_summary(record: dict) -> str:
+    """A few human-readable lines summarizing a `measure_net` record."""
+    lines = [
+        f"vertices {record['vertices']}, faces {record['faces']} "
+        f"(sizes {record['face_sizes']}), regular stars {record['regular_stars']}, "
+        f"irregular vertices {len(record['irregular_vertices'])}",
+        f"mean edge length {record['mean_edge_length']:.6g}",
+    ]
+    if record["regular_stars"]:
+        r = record["meusnier_radius"]
+        a = record["intersection_angle_deg"]
+        lines += [
+            f"sphere residual / mean edge: max {_fmt(record['sphere_residual_relative'], 'max', '.3e')}"
+            f", median {_fmt(record['sphere_residual_relative'], 'median', '.3e')}",
+            f"Meusnier radius: {_fmt(r, 'min')} .. {_fmt(r, 'max')} (median {_fmt(r, 'median')})",
+            f"intersection angle: {_fmt(a, 'min', '.4f')} .. {_fmt(a, 'max', '.4f')} deg",
+            f"mean curvature: {_fmt(record['mean_curvature'], 'min')} .. "
+            f"{_fmt(record['mean_curvature'], 'max')}",
+        ]
+    lines.append(f"face planarity / mean edge: max {_fmt(record['face_planarity_relative'], 'max', '.3e')}")
+    if "distance_to_reference" in record:
+        d = record["distance_to_reference"]
+        lines.append(f"distance to reference: max {_fmt(d, 'max', '.3e')}, mean {_fmt(d, 'mean', '.3e')}")
+    return "\n".join(lines)

@@ -1,0 +1,109 @@
+"""The catalogue of net types (Table 2 of the paper) as named presets of constraint families."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .constraints import (
+    CoherentOrientation,
+    ConstantAngle,
+    ConstantCurvature,
+    SphereCondition,
+    SphereNormalization,
+)
+from .errors import InputError
+
+__all__ = ["NetType", "NETS", "get_net", "net_constraints"]
+
+
+@dataclass(frozen=True)
+class NetType:
+    """A named preset.
+
+    Attributes
+    ----------
+    name : the name used on the command line.
+    summary : the defining properties in one line.
+    angle : "none" (unconstrained), "param" (prescribed with --angle, else a free common
+        angle) or "right" (90 degrees).
+    radius : "none", "param" (prescribed with --radius, else a free common radius).
+    coherent : spheres kept on one side of the surface.
+    """
+
+    name: str
+    summary: str
+    angle: str = "none"
+    radius: str = "none"
+    coherent: bool = False
+
+
+NETS: dict[str, NetType] = {n.name: n for n in [
+    NetType("snet", "general S-net: every regular vertex and its four neighbours on a sphere"),
+    NetType("isogonal", "S-net with a constant intersection angle (--angle, or free)",
+            angle="param"),
+    NetType("orthogonal", "S-net whose families meet at 90 deg (bisecting the principal "
+            "directions)", angle="right"),
+    NetType("const-radius", "S-net whose Meusnier spheres share one radius (--radius, or free): "
+            "both families of constant normal curvature", radius="param", coherent=False),
+    NetType("cmc", "orthogonal S-net of constant radius: constant mean curvature 1/r",
+            angle="right", radius="param"),
+    NetType("linear-weingarten", "isogonal S-net of constant radius: a k1 + b k2 = c "
+            "(affine linear Weingarten surface)", angle="param", radius="param"),
+]}
+
+
+def get_net(name: str) -> NetType:
+    """The preset called `name`; a clear error lists the known ones."""
+    try:
+        return NETS[name]
+    except KeyError:
+        raise InputError(f"unknown net type {name!r}; known: {', '.join(NETS)}") from None
+
+
+def check_angle(angle_deg: float | None) -> None:
+    if angle_deg is not None and not (0.0 < angle_deg < 180.0 and math.isfinite(angle_deg)):
+        raise InputError(f"--angle must lie strictly between 0 and 180 degrees, got {angle_deg}")
+
+
+def check_radius(radius: float | None) -> None:
+    if radius is not None and not (radius > 0.0 and math.isfinite(radius)):
+        raise InputError(f"--radius must be a positive length, got {radius}")
+
+
+def net_constraints(net: NetType, *, angle_deg: float | None = None,
+                    radius: float | None = None, length_scale: float = 1.0,
+                    curvature_sign: float = 1.0) -> list:
+    """The hard constraint families of a preset.
+
+    Parameters
+    ----------
+    angle_deg : prescribed intersection angle in degrees; an angle above 90 is the same
+        net with the families swapped, so ``min(angle, 180 - angle)`` is used.
+    radius : prescribed Meusnier radius in model units.
+    length_scale : model units per normalized unit of the solver.
+    curvature_sign : side of the spheres (sign of the normal curvature) for a prescribed
+        radius.
+    """
+    check_angle(angle_deg)
+    check_radius(radius)
+    if angle_deg is not None and net.angle != "param":
+        raise InputError(f"net type {net.name!r} takes no --angle")
+    if radius is not None and net.radius != "param":
+        raise InputError(f"net type {net.name!r} takes no --radius")
+    families = [SphereCondition(), SphereNormalization()]
+    if net.angle == "right":
+        families.append(ConstantAngle(0.0))
+    elif net.angle == "param":
+        cosine = None
+        if angle_deg is not None:
+            cosine = math.cos(math.radians(min(angle_deg, 180.0 - angle_deg)))
+        families.append(ConstantAngle(cosine))
+    if net.radius == "param":
+        curvature = None if radius is None else float(np.sign(curvature_sign) or 1.0) * length_scale / radius
+        families.append(ConstantCurvature(curvature))
+    if net.coherent:
+        families.append(CoherentOrientation())
+    return families

@@ -1,0 +1,273 @@
+"""The guided-projection solver (Algorithm 1): regularized Gauss-Newton on constraint families.
+
+Every iteration linearizes all residuals, solves ``(J^T J + eps I) h = -J^T r`` and steps.
+The Jacobian's sparsity pattern is fixed for the whole run: it is analysed once, and each
+iteration only refills values (one `np.bincount`) and refactors numerically.
+Coordinates are normalized (centroid at the origin, mean edge length 1) so that weights,
+tolerances and the regularization mean the same on every net.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from .constraints import Constraint, Layout, NetState
+from .errors import SolverError
+from .geometry import canonical_stars
+from .linalg import SparseSPDSolver
+
+__all__ = ["SolverSettings", "IterationRecord", "GuidedProjection"]
+
+
+@dataclass
+class SolverSettings:
+    """Numbers that steer the solve (lengths in mean edges of the input net).
+
+    Attributes
+    ----------
+    max_iterations : iteration cap.
+    tolerance : converged when every hard residual is below this (mean edges for spheres,
+        cosine for angles, curvature times mean edge for radii).
+    epsilon : regularization of the normal equations at unit residual; keeps steps short
+        in the directions the constraints leave free. It is scaled by the current hard
+        residual (Levenberg-Marquardt with damping proportional to the residual), which
+        keeps the convergence quadratic near a solution.
+    fairness_weight, closeness_weight : initial row weights of the soft families.
+    fade : factor applied to the soft weights after every iteration.
+    stagnation : stop when the hard residual has not halved over this many iterations.
+    backend : linear solver backend (see `fabplan.linalg`).
+    """
+
+    max_iterations: int = 50
+    tolerance: float = 1e-10
+    epsilon: float = 1e-3
+    fairness_weight: float = 1e-3
+    closeness_weight: float = 1e-2
+    fade: float = 0.3
+    stagnation: int = 8
+    backend: str = "auto"
+
+
+@dataclass
+class IterationRecord:
+    """What happened in one iteration; residuals are measured before its step."""
+
+    iteration: int
+    residuals: dict            # family name -> max |residual| (unweighted, normalized units)
+    hard_residual: float
+    step: float                # norm of the step (mean edges)
+    seconds: float
+    assembly_seconds: float = 0.0
+    factor_seconds: float = 0.0
+    solve_seconds: float = 0.0
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class _Pattern:
+    keep: np.ndarray           # (nnz_coo,) bool, entries on free variables
+    slot: np.ndarray           # (kept,) position of each kept entry in J.data
+    indices: np.ndarray
+    indptr: np.ndarray
+    rows: int
+    family_rows: list = field(default_factory=list)  # (start, stop) per family
+
+
+class GuidedProjection:
+    """Solve a set of constraint families on a quad mesh.
+
+    Parameters
+    ----------
+    mesh : `fabplan.mesh.QuadMesh`, the starting net.
+    constraints : list of `Constraint`, hard and soft families.
+    fixed : (k,) int, vertices held at their positions.
+    settings : `SolverSettings`.
+
+    The instance keeps its state between calls of `run`, so an interactive editor can run
+    one iteration per drag step and reuse the symbolic factorization.
+    """
+
+    def __init__(self, mesh, constraints: list[Constraint], *, fixed=None,
+                 settings: SolverSettings | None = None):
+        self.mesh = mesh
+        self.constraints = list(constraints)
+        self.settings = settings or SolverSettings()
+        X = mesh.vertices
+        self.length_scale = float(mesh.mean_edge_length)
+        self.origin = X.mean(axis=0)
+        stars = canonical_stars(X, mesh.stars)
+        layout = Layout()
+        layout.add("vertices", (mesh.vertex_count, 3))
+        self.state = NetState(mesh=mesh, stars=stars, layout=layout, x=np.zeros(0),
+                              length_scale=self.length_scale, origin=self.origin)
+        for c in self.constraints:
+            for name, shape in c.declare(self.state).items():
+                layout.add(name, shape)
+        self.state.x = np.zeros(layout.size)
+        self.state.X[:] = (X - self.origin) / self.length_scale
+        for c in self.constraints:
+            c.initialize(self.state)
+        self.fixed = np.unique(np.asarray([] if fixed is None else fixed, dtype=np.int64))
+        free = np.ones(layout.size, bool)
+        free[layout.index("vertices")[self.fixed].ravel()] = False
+        self.free = np.flatnonzero(free)
+        self.history: list[IterationRecord] = []
+        self._linear = SparseSPDSolver(self.settings.backend)
+        self._pattern: _Pattern | None = None
+        self._normal_pattern = None
+        self.status = "not started"
+
+    # -------------------------------------------------------------- results
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n, 3) float, current vertex positions in model units."""
+        return self.state.X * self.length_scale + self.origin
+
+    def variable(self, name: str) -> np.ndarray:
+        """Current value of a variable block (normalized units)."""
+        return self.state.layout.view(self.state.x, name).copy()
+
+    def set_vertices(self, ids: np.ndarray, positions: np.ndarray) -> None:
+        """Move vertices (model units), e.g. handles dragged by a user."""
+        self.state.X[np.asarray(ids)] = (np.asarray(positions) - self.origin) / self.length_scale
+
+    # -------------------------------------------------------------- assembly
+    def _build_pattern(self) -> _Pattern:
+        state = self.state
+        col_map = np.full(state.layout.size, -1)
+        col_map[self.free] = np.arange(len(self.free))
+        rows, cols, family_rows, start = [], [], [], 0
+        for c in self.constraints:
+            C = np.asarray(c.columns(state))
+            m, k = C.shape
+            rows.append(np.repeat(np.arange(start, start + m), k))
+            cols.append(C.ravel())
+            family_rows.append((start, start + m))
+            start += m
+        rows, cols = np.concatenate(rows), col_map[np.concatenate(cols)]
+        keep = cols >= 0
+        nfree = len(self.free)
+        keys = rows[keep] * nfree + cols[keep]
+        ukeys, slot = np.unique(keys, return_inverse=True)
+        indptr = np.searchsorted(ukeys // nfree, np.arange(start + 1))
+        return _Pattern(keep=keep, slot=slot, indices=ukeys % nfree, indptr=indptr, rows=start,
+                        family_rows=family_rows)
+
+    def _normal_matrix(self, J: sp.csr_matrix, eps: float) -> sp.csc_matrix:
+        """``J^T J + eps I`` in the run's fixed pattern (exact zeros kept as entries)."""
+        C = (J.T @ J).tocsr()
+        C.sort_indices()
+        if self._normal_pattern is None:
+            ones = sp.csr_matrix((np.ones_like(J.data), J.indices, J.indptr), shape=J.shape)
+            P = (ones.T @ ones + sp.eye(J.shape[1], format="csr")).tocsr()
+            P.sort_indices()
+            n = P.shape[0]
+            keys = np.repeat(np.arange(n), np.diff(P.indptr)) * n + P.indices
+            diag = np.searchsorted(keys, np.arange(n) * (n + 1))
+            self._normal_pattern = (P, keys, diag)
+        P, keys, diag = self._normal_pattern
+        data = np.zeros(len(keys))
+        if C.nnz == len(keys):
+            data[:] = C.data
+        else:
+            n = C.shape[0]
+            ckeys = np.repeat(np.arange(n), np.diff(C.indptr)) * n + C.indices
+            data[np.searchsorted(keys, ckeys)] = C.data
+        data[diag] += eps
+        # symmetric: CSR of A is CSC of A
+        return sp.csc_matrix((data, P.indices, P.indptr), shape=P.shape)
+
+    # -------------------------------------------------------------- iteration
+    def _evaluate(self, weights: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+        residuals, values, measured = [], [], {}
+        for c in self.constraints:
+            r, J = c.evaluate(self.state)
+            w = weights.get(c.name, 1.0)
+            measured[c.name] = float(np.max(np.abs(r))) if len(r) else 0.0
+            residuals.append(w * r)
+            values.append(w * np.asarray(J).ravel())
+        return np.concatenate(residuals), np.concatenate(values), measured
+
+    def _weights(self, iteration: int) -> dict:
+        s = self.settings
+        fade = s.fade ** iteration
+        soft = {"fairness": s.fairness_weight, "closeness": s.closeness_weight}
+        return {c.name: soft.get(c.name, 1.0) * fade for c in self.constraints if not c.hard}
+
+    def run(self, max_iterations: int | None = None,
+            callback: Callable[[IterationRecord], None] | None = None) -> str:
+        """Iterate until converged, stagnant or at the cap; returns the status.
+
+        Raises
+        ------
+        SolverError
+            When the residuals become non-finite or grow without bound.
+        """
+        s = self.settings
+        cap = s.max_iterations if max_iterations is None else max_iterations
+        hard_names = {c.name for c in self.constraints if c.hard}
+        if self._pattern is None:
+            for c in self.constraints:
+                c.prepare(self.state)
+            self._pattern = self._build_pattern()
+        pat = self._pattern
+        first = len(self.history)
+        self.status = "iteration cap"
+        for _ in range(cap + 1):
+            it = len(self.history)
+            t0 = time.perf_counter()
+            for c in self.constraints:
+                c.prepare(self.state)
+            r, vals, measured = self._evaluate(self._weights(it))
+            hard = max([measured[n] for n in hard_names], default=0.0)
+            if not np.isfinite(r).all() or not np.isfinite(vals).all():
+                raise SolverError(f"the solver diverged at iteration {it}: non-finite residuals")
+            initial = self.history[0].hard_residual if self.history else hard
+            if hard > 1e6 * max(initial, 1.0):
+                raise SolverError(
+                    f"the solver diverged at iteration {it}: residual {hard:.3g} "
+                    f"(started at {initial:.3g})")
+            if hard <= s.tolerance:
+                self.status = "converged"
+                self.history.append(IterationRecord(it, measured, hard, 0.0,
+                                                    time.perf_counter() - t0))
+                break
+            if it - first >= cap:
+                self.history.append(IterationRecord(it, measured, hard, 0.0,
+                                                    time.perf_counter() - t0))
+                break
+            if it - first >= s.stagnation and \
+                    hard > 0.5 * self.history[it - s.stagnation].hard_residual:
+                self.status = "stagnated"
+                self.history.append(IterationRecord(it, measured, hard, 0.0,
+                                                    time.perf_counter() - t0))
+                break
+            data = np.bincount(pat.slot, weights=vals[pat.keep], minlength=len(pat.indices))
+            J = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(pat.rows, len(self.free)))
+            # Damping proportional to the residual (stable far away, quadratic near the end),
+            # but fading no faster than the soft terms: otherwise fairness and closeness take
+            # long steps along the solution manifold that the linearization cannot follow.
+            soft = s.fade ** it if any(not c.hard for c in self.constraints) else 0.0
+            damping = max(s.epsilon * min(hard, 1.0), s.epsilon * soft, 1e-14)
+            A = self._normal_matrix(J, damping)
+            t1 = time.perf_counter()
+            self._linear.factor(A)
+            t2 = time.perf_counter()
+            h = self._linear.solve(-(J.T @ r))
+            t3 = time.perf_counter()
+            if not np.isfinite(h).all():
+                raise SolverError(f"the solver diverged at iteration {it}: singular system")
+            self.state.x[self.free] += h
+            rec = IterationRecord(it, measured, hard, float(np.linalg.norm(h)),
+                                  time.perf_counter() - t0, t1 - t0, t2 - t1, t3 - t2)
+            self.history.append(rec)
+            if callback is not None:
+                callback(rec)
+        return self.status
