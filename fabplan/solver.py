@@ -10,7 +10,7 @@ tolerances and the regularization mean the same on every net.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -71,13 +71,21 @@ class IterationRecord:
 
 
 @dataclass
+class _FamilyPattern:
+    """Where one family's Jacobian entries land in the normal equations."""
+
+    cols: np.ndarray           # (m, k) free-variable column of each entry, -1 if fixed
+    first: np.ndarray          # (p,) local entry index of each product pair
+    second: np.ndarray         # (p,) local entry index of each product pair
+    slots: np.ndarray          # (m, p) position in the upper triangle, or the dummy slot
+
+
+@dataclass
 class _Pattern:
-    keep: np.ndarray           # (nnz_coo,) bool, entries on free variables
-    slot: np.ndarray           # (kept,) position of each kept entry in J.data
+    families: list             # _FamilyPattern per constraint family
+    indptr: np.ndarray         # upper triangle of J^T J + eps I, CSR (= lower, CSC)
     indices: np.ndarray
-    indptr: np.ndarray
-    rows: int
-    family_rows: list = field(default_factory=list)  # (start, stop) per family
+    diagonal: np.ndarray       # (nfree,) positions of the diagonal entries
 
 
 class GuidedProjection:
@@ -121,7 +129,6 @@ class GuidedProjection:
         self.history: list[IterationRecord] = []
         self._linear = SparseSPDSolver(self.settings.backend)
         self._pattern: _Pattern | None = None
-        self._normal_pattern = None
         self.status = "not started"
 
     # -------------------------------------------------------------- results
@@ -140,60 +147,70 @@ class GuidedProjection:
 
     # -------------------------------------------------------------- assembly
     def _build_pattern(self) -> _Pattern:
-        state = self.state
-        col_map = np.full(state.layout.size, -1)
-        col_map[self.free] = np.arange(len(self.free))
-        rows, cols, family_rows, start = [], [], [], 0
-        for c in self.constraints:
-            C = np.asarray(c.columns(state))
-            m, k = C.shape
-            rows.append(np.repeat(np.arange(start, start + m), k))
-            cols.append(C.ravel())
-            family_rows.append((start, start + m))
-            start += m
-        rows, cols = np.concatenate(rows), col_map[np.concatenate(cols)]
-        keep = cols >= 0
-        nfree = len(self.free)
-        keys = rows[keep] * nfree + cols[keep]
-        ukeys, slot = np.unique(keys, return_inverse=True)
-        indptr = np.searchsorted(ukeys // nfree, np.arange(start + 1))
-        return _Pattern(keep=keep, slot=slot, indices=ukeys % nfree, indptr=indptr, rows=start,
-                        family_rows=family_rows)
+        """Fix the sparsity of the normal equations once for the whole run.
 
-    def _normal_matrix(self, J: sp.csr_matrix, eps: float) -> sp.csc_matrix:
-        """``J^T J + eps I`` in the run's fixed pattern (exact zeros kept as entries)."""
-        C = (J.T @ J).tocsr()
-        C.sort_indices()
-        if self._normal_pattern is None:
-            ones = sp.csr_matrix((np.ones_like(J.data), J.indices, J.indptr), shape=J.shape)
-            P = (ones.T @ ones + sp.eye(J.shape[1], format="csr")).tocsr()
-            P.sort_indices()
-            n = P.shape[0]
-            keys = np.repeat(np.arange(n), np.diff(P.indptr)) * n + P.indices
-            diag = np.searchsorted(keys, np.arange(n) * (n + 1))
-            self._normal_pattern = (P, keys, diag)
-        P, keys, diag = self._normal_pattern
-        data = np.zeros(len(keys))
-        if C.nnz == len(keys):
-            data[:] = C.data
-        else:
-            n = C.shape[0]
-            ckeys = np.repeat(np.arange(n), np.diff(C.indptr)) * n + C.indices
-            data[np.searchsorted(keys, ckeys)] = C.data
-        data[diag] += eps
-        # symmetric: CSR of A is CSC of A
-        return sp.csc_matrix((data, P.indices, P.indptr), shape=P.shape)
+        Row ``i`` of ``J`` contributes ``J[i, p] J[i, q]`` to entry ``(p, q)`` of ``J^T J``;
+        each family's products are mapped once to their slots in the upper triangle, so
+        every iteration assembles ``J^T J`` with one `np.bincount` per family, keeping
+        exact zeros as entries (the factorization's symbolic analysis stays valid).
+        """
+        state = self.state
+        nfree = len(self.free)
+        col_map = np.full(state.layout.size, -1)
+        col_map[self.free] = np.arange(nfree)
+        families, keys = [], [np.arange(nfree) * (nfree + 1)]
+        for c in self.constraints:
+            cols = col_map[np.asarray(c.columns(state))]
+            k = cols.shape[1]
+            first, second = (g.ravel() for g in np.meshgrid(np.arange(k), np.arange(k),
+                                                            indexing="ij"))
+            cp, cq = cols[:, first], cols[:, second]
+            valid = (cp >= 0) & (cp <= cq)
+            keys.append((cp * nfree + cq)[valid])
+            families.append(_FamilyPattern(cols, first, second, valid))
+        ukeys = np.unique(np.concatenate(keys))
+        dummy = len(ukeys)
+        for f in families:
+            cp, cq = f.cols[:, f.first], f.cols[:, f.second]
+            slots = np.full(cp.shape, dummy, dtype=np.int64)
+            slots[f.slots] = np.searchsorted(ukeys, (cp * nfree + cq)[f.slots])
+            f.slots = slots
+        rows = ukeys // nfree
+        return _Pattern(families=families, indptr=np.searchsorted(rows, np.arange(nfree + 1)),
+                        indices=ukeys % nfree,
+                        diagonal=np.searchsorted(ukeys, np.arange(nfree) * (nfree + 1)))
+
+    def _assemble(self, jacobians: list, residuals: list,
+                  damping: float) -> tuple[sp.csr_matrix, np.ndarray]:
+        """Upper triangle of ``J^T J + damping I`` (CSR) and the gradient ``J^T r``."""
+        pat = self._pattern
+        nnz, nfree = len(pat.indices), len(self.free)
+        data = np.zeros(nnz + 1)
+        gradient = np.zeros(nfree + 1)
+        for f, J, r in zip(pat.families, jacobians, residuals, strict=True):
+            if J.size == 0:
+                continue
+            data += np.bincount(f.slots.ravel(), weights=(J[:, f.first] * J[:, f.second]).ravel(),
+                                minlength=nnz + 1)
+            gradient += np.bincount(np.where(f.cols < 0, nfree, f.cols).ravel(),
+                                    weights=(J * r[:, None]).ravel(), minlength=nfree + 1)
+        data = data[:nnz]
+        data[pat.diagonal] += damping
+        upper = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(nfree, nfree))
+        return upper, gradient[:nfree]
 
     # -------------------------------------------------------------- iteration
-    def _evaluate(self, weights: dict) -> tuple[np.ndarray, np.ndarray, dict]:
-        residuals, values, measured = [], [], {}
+    def _evaluate(self, weights: dict) -> tuple[list, list, dict]:
+        """Weighted residuals (m,) and Jacobian values (m, k) of every family, and the
+        unweighted max residual of each."""
+        residuals, jacobians, measured = [], [], {}
         for c in self.constraints:
             r, J = c.evaluate(self.state)
             w = weights.get(c.name, 1.0)
             measured[c.name] = float(np.max(np.abs(r))) if len(r) else 0.0
-            residuals.append(w * r)
-            values.append(w * np.asarray(J).ravel())
-        return np.concatenate(residuals), np.concatenate(values), measured
+            residuals.append(w * np.asarray(r, dtype=np.float64))
+            jacobians.append(w * np.asarray(J, dtype=np.float64))
+        return residuals, jacobians, measured
 
     def _weights(self, iteration: int) -> dict:
         s = self.settings
@@ -217,7 +234,6 @@ class GuidedProjection:
             for c in self.constraints:
                 c.prepare(self.state)
             self._pattern = self._build_pattern()
-        pat = self._pattern
         first = len(self.history)
         self.status = "iteration cap"
         for _ in range(cap + 1):
@@ -225,9 +241,10 @@ class GuidedProjection:
             t0 = time.perf_counter()
             for c in self.constraints:
                 c.prepare(self.state)
-            r, vals, measured = self._evaluate(self._weights(it))
+            residuals, jacobians, measured = self._evaluate(self._weights(it))
             hard = max([measured[n] for n in hard_names], default=0.0)
-            if not np.isfinite(r).all() or not np.isfinite(vals).all():
+            if not all(np.isfinite(r).all() and np.isfinite(J).all()
+                       for r, J in zip(residuals, jacobians, strict=True)):
                 raise SolverError(f"the solver diverged at iteration {it}: non-finite residuals")
             initial = self.history[0].hard_residual if self.history else hard
             if hard > 1e6 * max(initial, 1.0):
@@ -249,18 +266,16 @@ class GuidedProjection:
                 self.history.append(IterationRecord(it, measured, hard, 0.0,
                                                     time.perf_counter() - t0))
                 break
-            data = np.bincount(pat.slot, weights=vals[pat.keep], minlength=len(pat.indices))
-            J = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(pat.rows, len(self.free)))
             # Damping proportional to the residual (stable far away, quadratic near the end),
             # but fading no faster than the soft terms: otherwise fairness and closeness take
             # long steps along the solution manifold that the linearization cannot follow.
             soft = s.fade ** it if any(not c.hard for c in self.constraints) else 0.0
             damping = max(s.epsilon * min(hard, 1.0), s.epsilon * soft, 1e-14)
-            A = self._normal_matrix(J, damping)
+            upper, gradient = self._assemble(jacobians, residuals, damping)
             t1 = time.perf_counter()
-            self._linear.factor(A)
+            self._linear.factor(upper)
             t2 = time.perf_counter()
-            h = self._linear.solve(-(J.T @ r))
+            h = self._linear.solve(-gradient)
             t3 = time.perf_counter()
             if not np.isfinite(h).all():
                 raise SolverError(f"the solver diverged at iteration {it}: singular system")
