@@ -76,10 +76,12 @@ def _cmd_optimize(args) -> int:
                   f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms", file=sys.stderr)
 
     result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
-                      reference=reference, fixed=fixed, settings=settings, progress=progress)
+                      reference=reference, fixed=fixed, settings=settings,
+                      coherent=args.coherent, progress=progress)
     obj_path, json_path = result.write(out)
     print(format_summary(result.properties))
-    params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items() if v is not None)
+    params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items()
+                       if isinstance(v, float))
     print(f"{result.net}: {result.status} after {result.iterations} iterations in "
           f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
     print(f"wrote {obj_path} and {json_path}")
@@ -113,6 +115,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--radius", type=float, help="Meusnier radius in model units")
     p.add_argument("--reference", help="surface to stay close to (default: the input)")
     p.add_argument("--fix", help="'boundary' or a file of vertex ids to hold in place")
+    p.add_argument("--coherent", action="store_true",
+                   help="keep all Meusnier spheres on one side of the surface")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")

@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from .constraints import Closeness, Fairness
+from .constraints import Closeness, CoherentOrientation, Fairness
 from .errors import InputError
 from .geometry import canonical_stars, fit_star_spheres
 from .io import write_json
@@ -96,7 +96,7 @@ def read_fixed(spec: str | None, mesh: QuadMesh) -> np.ndarray:
 def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              radius: float | None = None, reference: ReferenceSurface | None = None,
              fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
-             fairness: bool = True,
+             fairness: bool = True, coherent: bool = False,
              progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
 
@@ -110,6 +110,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     fixed : (k,) int, vertices held in place.
     settings : solver settings.
     fairness : add the fading fairness term.
+    coherent : keep every Meusnier sphere on the side where most of them start (stars
+        that would cross over become planar rather than flip).
     progress : called after every iteration with its record.
 
     Returns
@@ -122,6 +124,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     side = np.nanmedian(fit_star_spheres(mesh.vertices, stars).curvature)
     families = net_constraints(preset, angle_deg=angle, radius=radius,
                                length_scale=mesh.mean_edge_length, curvature_sign=np.sign(side))
+    if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
+        families.append(CoherentOrientation())
     if reference is None:
         reference = ReferenceSurface.from_mesh(mesh)
     if fairness:
@@ -132,7 +136,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     status = solver.run(callback=progress)
     seconds = time.perf_counter() - start
     result_mesh = mesh.with_vertices(solver.vertices)
-    parameters = {"angle_deg": angle, "radius": radius}
+    parameters = {"angle_deg": angle, "radius": radius, "coherent": coherent,
+                  "fixed_vertices": int(len(solver.fixed))}
     layout = solver.state.layout
     if "cosine" in layout.blocks:
         parameters["angle_deg"] = float(np.degrees(np.arccos(np.clip(solver.variable("cosine")[0], -1, 1))))

@@ -123,6 +123,7 @@ class GuidedProjection:
         for c in self.constraints:
             c.initialize(self.state)
         self.fixed = np.unique(np.asarray([] if fixed is None else fixed, dtype=np.int64))
+        self._held = X[self.fixed].copy()
         free = np.ones(layout.size, bool)
         free[layout.index("vertices")[self.fixed].ravel()] = False
         self.free = np.flatnonzero(free)
@@ -134,8 +135,11 @@ class GuidedProjection:
     # -------------------------------------------------------------- results
     @property
     def vertices(self) -> np.ndarray:
-        """(n, 3) float, current vertex positions in model units."""
-        return self.state.X * self.length_scale + self.origin
+        """(n, 3) float, current vertex positions in model units (held vertices exactly as
+        given, free of the normalization's rounding)."""
+        X = self.state.X * self.length_scale + self.origin
+        X[self.fixed] = self._held
+        return X
 
     def variable(self, name: str) -> np.ndarray:
         """Current value of a variable block (normalized units)."""
@@ -143,7 +147,11 @@ class GuidedProjection:
 
     def set_vertices(self, ids: np.ndarray, positions: np.ndarray) -> None:
         """Move vertices (model units), e.g. handles dragged by a user."""
-        self.state.X[np.asarray(ids)] = (np.asarray(positions) - self.origin) / self.length_scale
+        ids, positions = np.asarray(ids), np.asarray(positions, dtype=np.float64)
+        self.state.X[ids] = (positions - self.origin) / self.length_scale
+        held = np.searchsorted(self.fixed, ids)
+        on = (held < len(self.fixed)) & (self.fixed[np.minimum(held, len(self.fixed) - 1)] == ids)
+        self._held[held[on]] = positions[on]
 
     # -------------------------------------------------------------- assembly
     def _build_pattern(self) -> _Pattern:

@@ -87,3 +87,35 @@ def test_cmc_net_has_constant_mean_curvature(cmc1):
     assert inner.size > 50
     H = _jet_mean_curvature(mesh.vertices, mesh.edges, inner)
     assert np.abs(H * r - 1).max() <= 0.05
+
+
+def _inflected_grid():
+    """A diagonal grid on z = c x^3 + d y^2: the S-net's spheres change side across x = 0."""
+    u, v = np.meshgrid(np.linspace(-6, 6, 13), np.linspace(-6, 6, 13), indexing="ij")
+    x, y = (u + v) / np.sqrt(2), (u - v) / np.sqrt(2)
+    return fabplan.QuadMesh.grid(np.stack([x, y, 0.004 * x**3 + 0.02 * y**2], axis=-1))
+
+
+def test_fixed_boundary_stays_put(wein99):
+    start = noisy(wein99, 0.01, seed=2)
+    boundary = np.flatnonzero(start.is_boundary_vertex)
+    result = fabplan.optimize(start, "snet", fixed=boundary)
+    assert result.converged
+    assert np.array_equal(result.mesh.vertices[boundary], start.vertices[boundary])
+    assert result.properties["sphere_residual_relative"]["max"] <= 1e-6
+    inner = ~start.is_boundary_vertex
+    assert np.abs(result.mesh.vertices[inner] - start.vertices[inner]).max() > 0
+
+
+def test_coherent_orientation_keeps_spheres_on_one_side():
+    start = _inflected_grid()
+    plain = fabplan.optimize(start, "snet")
+    spheres, _ = _measured(plain.mesh)
+    assert (spheres.curvature > 1e-3).sum() > 10 and (spheres.curvature < -1e-3).sum() > 10
+    result = fabplan.optimize(start, "snet", coherent=True)
+    assert result.converged
+    spheres, _ = _measured(result.mesh)
+    assert spheres.residual.max() <= 1e-6 * result.mesh.mean_edge_length
+    # spheres that would cross over become planes instead (curvature ~ 0)
+    worst = min(spheres.curvature.max(), -spheres.curvature.min())
+    assert worst <= 1e-8
