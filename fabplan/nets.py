@@ -11,6 +11,8 @@ from .constraints import (
     CoherentOrientation,
     ConstantAngle,
     ConstantCurvature,
+    PlanarFaces,
+    PlaneNormalization,
     SphereCondition,
     SphereNormalization,
 )
@@ -29,7 +31,9 @@ class NetType:
     summary : the defining properties in one line.
     angle : "none" (unconstrained), "param" (prescribed with --angle, else a free common
         angle) or "right" (90 degrees).
-    radius : "none", "param" (prescribed with --radius, else a free common radius).
+    radius : "none", "param" (prescribed with --radius, else a free common radius) or
+        "infinite" (planar vertex stars: an A-net).
+    planar_faces : every quad planar.
     coherent : spheres kept on one side of the surface.
     """
 
@@ -37,6 +41,7 @@ class NetType:
     summary: str
     angle: str = "none"
     radius: str = "none"
+    planar_faces: bool = False
     coherent: bool = False
 
 
@@ -52,6 +57,16 @@ NETS: dict[str, NetType] = {n.name: n for n in [
             angle="right", radius="param"),
     NetType("linear-weingarten", "isogonal S-net of constant radius: a k1 + b k2 = c "
             "(affine linear Weingarten surface)", angle="param", radius="param"),
+    NetType("anet", "A-net: infinite Meusnier radius, every vertex star planar (asymptotic "
+            "lines; lamellas unroll straight)", radius="infinite"),
+    NetType("minimal", "orthogonal A-net: a discrete minimal surface (H = 0)",
+            angle="right", radius="infinite"),
+    NetType("constant-ratio", "isogonal A-net (--angle, or free): k1/k2 constant and negative",
+            angle="param", radius="infinite"),
+    NetType("char-conjugate", "S-net with planar quads: a characteristic conjugate net "
+            "(flat panels)", planar_faces=True),
+    NetType("mean-curvature-spheres", "orthogonal S-net with free radii: each Meusnier sphere "
+            "is the mean curvature sphere (radius 1/H)", angle="right"),
 ]}
 
 
@@ -101,9 +116,13 @@ def net_constraints(net: NetType, *, angle_deg: float | None = None,
         if angle_deg is not None:
             cosine = math.cos(math.radians(min(angle_deg, 180.0 - angle_deg)))
         families.append(ConstantAngle(cosine))
-    if net.radius == "param":
+    if net.radius == "infinite":
+        families.append(ConstantCurvature(0.0))
+    elif net.radius == "param":
         curvature = None if radius is None else float(np.sign(curvature_sign) or 1.0) * length_scale / radius
         families.append(ConstantCurvature(curvature))
+    if net.planar_faces:
+        families += [PlanarFaces(), PlaneNormalization()]
     if net.coherent:
         families.append(CoherentOrientation())
     return families

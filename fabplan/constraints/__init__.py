@@ -5,6 +5,7 @@ from .base import Constraint, Layout, NetState
 from .closeness import Closeness
 from .fairness import Fairness
 from .orientation import CoherentOrientation
+from .planarity import PlanarFaces, PlaneNormalization
 from .radius import ConstantCurvature
 from .sphere import SphereCondition, SphereNormalization
 
@@ -17,6 +18,8 @@ __all__ = [
     "ConstantAngle",
     "ConstantCurvature",
     "CoherentOrientation",
+    "PlanarFaces",
+    "PlaneNormalization",
     "Fairness",
     "Closeness",
 ]
