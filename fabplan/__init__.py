@@ -10,6 +10,7 @@ The main objects are re-exported here::
 
 from pathlib import Path
 
+from .edit import NetEditor
 from .errors import FabplanError, InputError, SolverError
 from .measure import measure_net
 from .mesh import QuadMesh, load_mesh
@@ -30,6 +31,7 @@ __all__ = [
     "NETS",
     "get_net",
     "optimize",
+    "NetEditor",
     "OptimizationResult",
     "ReferenceSurface",
     "load_reference",

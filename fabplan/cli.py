@@ -17,7 +17,7 @@ from .io import write_json
 from .measure import format_summary, measure_net
 from .mesh import load_mesh
 from .nets import NETS, check_angle, check_radius
-from .optimize import check_net_input, optimize, read_fixed
+from .optimize import check_net_input, optimize, read_fixed, read_handles
 from .reference import load_reference
 from .solver import SolverSettings
 
@@ -65,6 +65,7 @@ def _cmd_optimize(args) -> int:
     check_net_input(mesh)
     reference = load_reference(args.reference) if args.reference else None
     fixed = read_fixed(args.fix, mesh)
+    handles = read_handles(args.handle)
     settings = SolverSettings()
     if args.max_iter is not None:
         settings.max_iterations = args.max_iter
@@ -76,7 +77,7 @@ def _cmd_optimize(args) -> int:
                   f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms", file=sys.stderr)
 
     result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
-                      reference=reference, fixed=fixed, settings=settings,
+                      reference=reference, fixed=fixed, handles=handles, settings=settings,
                       coherent=args.coherent, progress=progress)
     obj_path, json_path = result.write(out)
     print(format_summary(result.properties))
@@ -115,6 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--radius", type=float, help="Meusnier radius in model units")
     p.add_argument("--reference", help="surface to stay close to (default: the input)")
     p.add_argument("--fix", help="'boundary' or a file of vertex ids to hold in place")
+    p.add_argument("--handle", action="append", metavar="ID:X,Y,Z",
+                   help="move vertex ID to (X, Y, Z) and hold it there; repeatable, or a file "
+                        "of 'ID X Y Z' lines")
     p.add_argument("--coherent", action="store_true",
                    help="keep all Meusnier spheres on one side of the surface")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")

@@ -10,8 +10,8 @@ from typing import Callable
 
 import numpy as np
 
-from .constraints import Closeness, CoherentOrientation, Fairness
-from .errors import InputError
+from .constraints import Closeness, CoherentOrientation, ConstantAngle, ConstantCurvature, Fairness
+from .errors import InputError, SolverError
 from .geometry import canonical_stars, fit_star_spheres
 from .io import write_json
 from .measure import measure_net
@@ -20,7 +20,16 @@ from .nets import get_net, net_constraints
 from .reference import ReferenceSurface
 from .solver import GuidedProjection, IterationRecord, SolverSettings
 
-__all__ = ["optimize", "OptimizationResult", "check_net_input", "read_fixed"]
+__all__ = [
+    "optimize",
+    "build_solver",
+    "OptimizationResult",
+    "check_net_input",
+    "read_fixed",
+    "read_handles",
+    "solved_parameters",
+    "unmet_constraints",
+]
 
 
 @dataclass
@@ -93,10 +102,66 @@ def read_fixed(spec: str | None, mesh: QuadMesh) -> np.ndarray:
     return ids
 
 
+def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
+                 radius: float | None = None, reference: ReferenceSurface | None = None,
+                 fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
+                 fairness: bool = True, coherent: bool = False) -> GuidedProjection:
+    """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
+    check_net_input(mesh)
+    preset = get_net(net)
+    stars = canonical_stars(mesh.vertices, mesh.stars)
+    side = np.nanmedian(fit_star_spheres(mesh.vertices, stars).curvature)
+    families = net_constraints(preset, angle_deg=angle, radius=radius,
+                               length_scale=mesh.mean_edge_length, curvature_sign=np.sign(side))
+    if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
+        families.append(CoherentOrientation())
+    if fairness:
+        families.append(Fairness())
+    families.append(Closeness(ReferenceSurface.from_mesh(mesh) if reference is None else reference))
+    solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings)
+    solver.net = preset.name
+    solver.reference = families[-1].reference
+    return solver
+
+
+def solved_parameters(solver: GuidedProjection) -> dict:
+    """The common angle (degrees) and Meusnier radius (model units) of a solved net, where
+    its net type has them."""
+    layout, parameters = solver.state.layout, {}
+    for family in solver.constraints:
+        if isinstance(family, ConstantAngle) and family.cosine is not None:
+            parameters["angle_deg"] = float(np.degrees(np.arccos(family.cosine)))
+        if isinstance(family, ConstantCurvature) and family.curvature is not None:
+            k = family.curvature / solver.length_scale
+            parameters["radius"] = float(abs(1 / k)) if k != 0 else float("inf")
+    if "cosine" in layout.blocks:
+        cosine = np.clip(solver.variable("cosine")[0], -1.0, 1.0)
+        parameters["angle_deg"] = float(np.degrees(np.arccos(cosine)))
+    if "curvature" in layout.blocks:
+        k = solver.variable("curvature")[0] / solver.length_scale
+        parameters["radius"] = float(abs(1 / k)) if k != 0 else float("inf")
+    return parameters
+
+
+def unmet_constraints(solver: GuidedProjection) -> dict:
+    """Hard constraint families whose last measured residual is above the tolerance:
+    name -> max |residual| (mean edges for distances, cosines for angles)."""
+    last = solver.history[-1].residuals if solver.history else {}
+    hard = {c.name for c in solver.constraints if c.hard}
+    tol = solver.settings.tolerance
+    return {name: r for name, r in last.items() if name in hard and r > tol}
+
+
+def describe_unmet(unmet: dict) -> str:
+    """One line naming the constraint families that could not be met and their residuals."""
+    return ", ".join(f"{name} residual {r:.2e}" for name, r in sorted(unmet.items()))
+
+
 def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              radius: float | None = None, reference: ReferenceSurface | None = None,
-             fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
-             fairness: bool = True, coherent: bool = False,
+             fixed: np.ndarray | None = None, handles: dict | None = None,
+             settings: SolverSettings | None = None, fairness: bool = True,
+             coherent: bool = False,
              progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
 
@@ -108,6 +173,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     radius : prescribed Meusnier radius in model units (constant-radius types).
     reference : surface to stay close to; defaults to the input mesh itself.
     fixed : (k,) int, vertices held in place.
+    handles : {vertex id: (3,) target position}: vertices moved to their targets and held.
     settings : solver settings.
     fairness : add the fading fairness term.
     coherent : keep every Meusnier sphere on the side where most of them start (stars
@@ -117,40 +183,73 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     Returns
     -------
     OptimizationResult, with the properties measured on the result.
+
+    Raises
+    ------
+    SolverError
+        When handles ask for a net the constraints cannot reach (the message names the
+        constraint families left unmet and their residuals), or the solver diverges.
     """
-    check_net_input(mesh)
-    preset = get_net(net)
-    stars = canonical_stars(mesh.vertices, mesh.stars)
-    side = np.nanmedian(fit_star_spheres(mesh.vertices, stars).curvature)
-    families = net_constraints(preset, angle_deg=angle, radius=radius,
-                               length_scale=mesh.mean_edge_length, curvature_sign=np.sign(side))
-    if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
-        families.append(CoherentOrientation())
-    if reference is None:
-        reference = ReferenceSurface.from_mesh(mesh)
-    if fairness:
-        families.append(Fairness())
-    families.append(Closeness(reference))
+    handle_ids, targets = _handle_arrays(handles, mesh)
+    held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
-    solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings)
+    solver = build_solver(mesh, net, angle=angle, radius=radius, reference=reference,
+                          fixed=held, settings=settings, fairness=fairness, coherent=coherent)
+    if handle_ids.size:
+        solver.set_vertices(handle_ids, targets)
     status = solver.run(callback=progress)
+    if handle_ids.size and status != "converged":
+        raise SolverError(f"the handles ask for a net that cannot be reached ({status} after "
+                          f"{len(solver.history) - 1} iterations): "
+                          f"{describe_unmet(unmet_constraints(solver))}")
     seconds = time.perf_counter() - start
     result_mesh = mesh.with_vertices(solver.vertices)
-    parameters = {"angle_deg": angle, "radius": radius, "coherent": coherent,
-                  "fixed_vertices": int(len(solver.fixed))}
-    layout = solver.state.layout
-    if "cosine" in layout.blocks:
-        parameters["angle_deg"] = float(np.degrees(np.arccos(np.clip(solver.variable("cosine")[0], -1, 1))))
-    if "curvature" in layout.blocks:
-        k = solver.variable("curvature")[0] / solver.length_scale
-        parameters["radius"] = float(abs(1 / k)) if k != 0 else float("inf")
+    parameters = {"angle_deg": angle, "radius": radius, **solved_parameters(solver),
+                  "coherent": coherent, "fixed_vertices": int(len(solver.fixed)),
+                  "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)}}
     return OptimizationResult(
         mesh=result_mesh,
-        net=preset.name,
+        net=solver.net,
         parameters=parameters,
         status=status,
         iterations=sum(1 for h in solver.history if h.step > 0),
         seconds=seconds,
         history=[h.as_dict() for h in solver.history],
-        properties=measure_net(result_mesh, reference=reference),
+        properties=measure_net(result_mesh, reference=solver.reference),
     )
+
+
+def _handle_arrays(handles: dict | None, mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray]:
+    if not handles:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    ids = np.array(list(handles), dtype=np.int64)
+    targets = np.array([np.asarray(handles[i], dtype=np.float64) for i in handles]).reshape(-1, 3)
+    bad = ids[(ids < 0) | (ids >= mesh.vertex_count)]
+    if bad.size:
+        raise InputError(f"handle vertex {bad[0]} does not exist (the mesh has "
+                         f"{mesh.vertex_count} vertices, numbered from 0)")
+    if not np.isfinite(targets).all():
+        raise InputError("handle targets must be finite coordinates")
+    return ids, targets
+
+
+def read_handles(specs: list[str] | None) -> dict:
+    """Handles from ``ID:X,Y,Z`` strings or files of ``ID X Y Z`` lines."""
+    handles: dict = {}
+    for spec in specs or []:
+        path = Path(spec)
+        lines = path.read_text().splitlines() if ":" not in spec and path.is_file() else [spec]
+        for line in lines:
+            line = line.split("#")[0].strip()
+            if not line:
+                continue
+            parts = line.replace(":", " ").replace(",", " ").split()
+            try:
+                vid, xyz = int(parts[0]), [float(p) for p in parts[1:]]
+            except (ValueError, IndexError):
+                xyz = []
+            if len(xyz) != 3:
+                where = f"{spec}" if lines == [spec] else f"{spec}: line {line!r}"
+                raise InputError(f"{where}: a handle is ID:X,Y,Z (or a file of 'ID X Y Z' lines)")
+            handles[vid] = xyz
+    return handles

@@ -1,0 +1,84 @@
+"""Editing with handles (task B): feasible moves keep the net type, impossible ones are
+reported with the residuals that could not be met."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fabplan
+from fabplan.cli import main
+from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
+from fabplan.optimize import read_handles
+
+
+def _check_linear_weingarten(mesh):
+    X = mesh.vertices
+    stars = canonical_stars(X, mesh.stars)
+    spheres = fit_star_spheres(X, stars)
+    angles = np.degrees(intersection_angles(X, stars))
+    assert spheres.residual.max() <= 1e-6 * mesh.mean_edge_length
+    assert np.ptp(spheres.radius) / spheres.radius.mean() <= 1e-4
+    assert np.ptp(angles) <= 0.01
+
+
+@pytest.fixture(scope="module")
+def handle(wein99):
+    """An interior vertex and a target half an edge off the surface."""
+    vid = int(np.flatnonzero(~wein99.is_boundary_vertex)[600])
+    stars = canonical_stars(wein99.vertices, wein99.stars)
+    normal = fabplan.geometry.star_normals(wein99.vertices, stars)[wein99.star_of_vertex[vid]]
+    return vid, wein99.vertices[vid] + 0.5 * wein99.mean_edge_length * normal
+
+
+def test_feasible_handle_keeps_a_linear_weingarten_net(wein99, handle):
+    vid, target = handle
+    result = fabplan.optimize(wein99, "linear-weingarten", handles={vid: target})
+    assert result.converged
+    assert np.array_equal(result.mesh.vertices[vid], target)
+    _check_linear_weingarten(result.mesh)
+    # the net really moved to follow the handle, not just the handle vertex
+    moved = np.linalg.norm(result.mesh.vertices - wein99.vertices, axis=1)
+    assert (moved > 0.01 * wein99.mean_edge_length).sum() > 10
+
+
+def test_editor_drag_steps_reuse_the_factorization(wein99, handle):
+    vid, target = handle
+    editor = fabplan.NetEditor(wein99, "linear-weingarten", handles=[vid])
+    start = wein99.vertices[vid]
+    factor = None
+    for step in np.linspace(0.2, 1.0, 5):
+        editor.drag({vid: start + step * (target - start)})
+        factor = factor or editor.solver._linear._factor
+        assert editor.solver._linear._factor is factor      # symbolic analysis kept
+    report = editor.release()
+    assert report["converged"], report["message"]
+    assert np.array_equal(editor.vertices[vid], target)
+    _check_linear_weingarten(editor.mesh)
+
+
+def test_impossible_handles_are_reported(wein99, tmp_path, capsys):
+    src = tmp_path / "wein99.obj"
+    src.write_bytes(fabplan.data_path("wein99.obj").read_bytes())
+    vid = int(np.flatnonzero(~wein99.is_boundary_vertex)[600])
+    x, y, z = wein99.vertices[vid] + [0.0, 0.0, 8 * wein99.mean_edge_length]
+    out = tmp_path / "out.obj"
+    code = main(["optimize", str(src), "--net", "linear-weingarten", "--fix", "boundary",
+                 "--handle", f"{vid}:{x},{y},{z}", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("fabplan: error: the handles ask for")
+    assert "sphere residual" in err[0]
+    assert not out.exists() and not out.with_suffix(".json").exists()
+    assert src.read_bytes() == fabplan.data_path("wein99.obj").read_bytes()
+
+
+def test_handle_file_and_bad_handles(tmp_path, wein99):
+    good = tmp_path / "handles.txt"
+    good.write_text("# id x y z\n12 1.0 2.0 3.0\n40 4 5 6\n")
+    assert read_handles([str(good), "7:0,0,1"]) == {12: [1.0, 2.0, 3.0], 40: [4.0, 5.0, 6.0],
+                                                     7: [0.0, 0.0, 1.0]}
+    with pytest.raises(fabplan.InputError, match="ID:X,Y,Z"):
+        read_handles(["12:1,2"])
+    with pytest.raises(fabplan.InputError, match="vertex 99999 does not exist"):
+        fabplan.optimize(wein99, "snet", handles={99999: [0, 0, 0]})
