@@ -105,7 +105,8 @@ def read_fixed(spec: str | None, mesh: QuadMesh) -> np.ndarray:
 def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
                  radius: float | None = None, reference: ReferenceSurface | None = None,
                  fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
-                 fairness: bool = True, coherent: bool = False) -> GuidedProjection:
+                 fairness: bool = True, coherent: bool = False,
+                 closeness: bool = True) -> GuidedProjection:
     """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
     check_net_input(mesh)
     preset = get_net(net)
@@ -117,10 +118,13 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
         families.append(CoherentOrientation())
     if fairness:
         families.append(Fairness())
-    families.append(Closeness(ReferenceSurface.from_mesh(mesh) if reference is None else reference))
+    if reference is None and closeness:
+        reference = ReferenceSurface.from_mesh(mesh)
+    if closeness:
+        families.append(Closeness(reference))
     solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings)
     solver.net = preset.name
-    solver.reference = families[-1].reference
+    solver.reference = reference
     return solver
 
 
@@ -161,7 +165,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              radius: float | None = None, reference: ReferenceSurface | None = None,
              fixed: np.ndarray | None = None, handles: dict | None = None,
              settings: SolverSettings | None = None, fairness: bool = True,
-             coherent: bool = False,
+             coherent: bool = False, closeness: bool = True,
              progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
 
@@ -178,6 +182,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     fairness : add the fading fairness term.
     coherent : keep every Meusnier sphere on the side where most of them start (stars
         that would cross over become planar rather than flip).
+    closeness : pull towards the reference; off for form-finding from combinatorics,
+        where the start positions are only a guess.
     progress : called after every iteration with its record.
 
     Returns
@@ -194,7 +200,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
     solver = build_solver(mesh, net, angle=angle, radius=radius, reference=reference,
-                          fixed=held, settings=settings, fairness=fairness, coherent=coherent)
+                          fixed=held, settings=settings, fairness=fairness, coherent=coherent,
+                          closeness=closeness)
     if handle_ids.size:
         solver.set_vertices(handle_ids, targets)
     status = solver.run(callback=progress)
