@@ -13,7 +13,7 @@ from pathlib import Path
 
 from . import __version__
 from .errors import FabplanError, InputError
-from .io import write_json
+from .io import check_writable, write_json
 from .measure import format_summary, measure_net
 from .mesh import load_mesh
 from .nets import NETS, check_angle, check_radius
@@ -35,23 +35,32 @@ def _cmd_nets(args) -> int:
 
 
 def _cmd_measure(args) -> int:
+    out = Path(args.output) if args.output else Path(args.net).with_suffix(".measure.json")
+    _check_outputs([out], [args.net, args.reference])
     mesh = load_mesh(args.net)
     reference = load_reference(args.reference) if args.reference else None
     record = measure_net(mesh, reference=reference)
     record["file"] = str(args.net)
     print(format_summary(record))
-    out = Path(args.output) if args.output else Path(args.net).with_suffix(".measure.json")
     write_json(out, record)
     print(f"wrote {out}")
     return 0
+
+
+def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
+    """Refuse outputs that would overwrite an input or cannot be written, before working."""
+    protected = {Path(p).resolve() for p in inputs if p}
+    for out in outputs:
+        if out.resolve() in protected:
+            raise InputError(f"{out}: refusing to overwrite the input file")
+        check_writable(out)
 
 
 def _output_path(args) -> Path:
     out = Path(args.output)
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")
-    if out.resolve() == Path(args.input).resolve():
-        raise InputError(f"{out}: refusing to overwrite the input")
+    _check_outputs([out, out.with_suffix(".json")], [args.input, args.reference, args.fix])
     return out
 
 
@@ -93,8 +102,15 @@ def _cmd_optimize(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line and exit code 2, like every other bad input."""
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"fabplan: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fabplan", description="Fabrication planning with principal symmetric meshes.")
     parser.add_argument("--version", action="version", version=f"fabplan {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)

@@ -27,6 +27,12 @@ __all__ = [
     "face_planarity",
     "star_planarity",
     "circumcircle_tangent",
+    "face_normals",
+    "vertex_contact_normals",
+    "MannheimSpheres",
+    "fit_mannheim_spheres",
+    "ruling_directions",
+    "ruling_angles",
 ]
 
 
@@ -54,8 +60,9 @@ def circumcircle_tangent(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndar
     array([0., 1., 0.])
     """
     ab, ac = b - a, c - a
-    return (ab / np.sum(ab * ab, axis=-1, keepdims=True)
-            - ac / np.sum(ac * ac, axis=-1, keepdims=True))
+    with np.errstate(invalid="ignore", divide="ignore"):  # coincident points give NaN
+        return (ab / np.sum(ab * ab, axis=-1, keepdims=True)
+                - ac / np.sum(ac * ac, axis=-1, keepdims=True))
 
 
 def osculating_tangents(X: np.ndarray, stars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -154,7 +161,7 @@ def fit_star_spheres(X: np.ndarray, stars: np.ndarray,
         a_model = a / scale  # coefficients in model units: a/scale, b, c*scale
         curvature = 2 * a_model
         radius = np.abs(1 / curvature)
-        centre = X[stars[:, 0]] - b / curvature[:, None]
+        centre = np.where(curvature[:, None] != 0, X[stars[:, 0]] - b / curvature[:, None], np.nan)
     coefficients = np.column_stack([a_model, b, c * scale])
     return StarSpheres(centre=centre, radius=radius, curvature=curvature, residual=residual,
                        coefficients=coefficients)
@@ -243,3 +250,86 @@ def star_planarity(X: np.ndarray, stars: np.ndarray) -> np.ndarray:
     if len(stars) == 0:
         return np.zeros(0)
     return _plane_distances(X[stars])
+
+
+# ---------------------------------------------------------------------- S*-nets
+def face_normals(X: np.ndarray, mesh) -> np.ndarray:
+    """(f, 3) unit normals of all faces (Newell's method, any polygon size)."""
+    idx, ptr, sizes = mesh.face_indices, mesh.face_indptr, mesh.face_sizes
+    face = np.repeat(np.arange(len(sizes)), sizes)
+    local = np.arange(len(idx)) - ptr[face]
+    nxt = np.where(local == sizes[face] - 1, ptr[face], np.arange(len(idx)) + 1)
+    a, b = X[idx], X[idx[nxt]]
+    normal = np.zeros((len(sizes), 3))
+    np.add.at(normal, face, np.cross(a, b))
+    return _unit(normal)
+
+
+def vertex_contact_normals(mesh, X: np.ndarray, stars: np.ndarray) -> np.ndarray:
+    """(n, 3) unit normals for contact elements: the discrete normal (Def. 2.13) at star
+    centres, the mean of the adjacent face normals elsewhere (section 4.3)."""
+    F = face_normals(X, mesh)
+    face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+    N = np.zeros_like(X)
+    np.add.at(N, mesh.face_indices, F[face])
+    N = _unit(N)
+    N[stars[:, 0]] = star_normals(X, stars)
+    return N
+
+
+@dataclass(frozen=True)
+class MannheimSpheres:
+    """Oriented spheres touching the five oriented tangent planes of each star.
+
+    Attributes
+    ----------
+    centre : (s, 3) float
+    radius : (s,) float, signed: the centre is at ``v + radius * n`` from each contact point.
+    residual : (s,) float, largest signed-distance misfit of the five planes (model units).
+    """
+
+    centre: np.ndarray
+    radius: np.ndarray
+    residual: np.ndarray
+
+
+def fit_mannheim_spheres(X: np.ndarray, N: np.ndarray, stars: np.ndarray) -> MannheimSpheres:
+    """Least-squares oriented sphere ``n_i . (m - v_i) = rho`` for the planes of each star.
+
+    Parameters
+    ----------
+    X : (n, 3) float, contact points.
+    N : (n, 3) float, unit normals of the tangent planes.
+    stars : (s, 5) int
+    """
+    n, v = N[stars], X[stars]
+    origin = v[:, :1, :]
+    A = np.concatenate([n, -np.ones_like(n[..., :1])], axis=2)          # (s, 5, 4)
+    b = np.sum(n * (v - origin), axis=2)                                 # about the centre
+    sol = np.einsum("sij,sj->si", np.linalg.pinv(A), b)
+    residual = np.abs(np.einsum("sij,sj->si", A, sol) - b).max(axis=1)
+    return MannheimSpheres(centre=sol[:, :3] + origin[:, 0], radius=sol[:, 3], residual=residual)
+
+
+def ruling_directions(X: np.ndarray, N: np.ndarray, stars: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Rulings of the two osculating cones at each star centre (Eq. 5), not normalized.
+
+    The cone of family 1 touches the planes at v3, v, v1; its ruling through v is
+    ``<v1 - v, n1> n x n3 + <v3 - v, n3> n1 x n``; family 2 uses v2, v4 likewise.
+    """
+    P, M = X[stars], N[stars]
+
+    def ruling(i, j):
+        a = np.sum((P[:, i] - P[:, 0]) * M[:, i], axis=1)[:, None]
+        b = np.sum((P[:, j] - P[:, 0]) * M[:, j], axis=1)[:, None]
+        return a * np.cross(M[:, 0], M[:, j]) + b * np.cross(M[:, i], M[:, 0])
+
+    return ruling(1, 3), ruling(2, 4)
+
+
+def ruling_angles(X: np.ndarray, N: np.ndarray, stars: np.ndarray) -> np.ndarray:
+    """(s,) float, angle in radians in [0, pi/2] between the two ruling lines of each star."""
+    r1, r2 = ruling_directions(X, N, stars)
+    c = np.abs(np.sum(_unit(r1) * _unit(r2), axis=1))
+    return np.arccos(np.clip(c, 0.0, 1.0))

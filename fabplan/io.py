@@ -18,11 +18,33 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["read_obj", "write_obj", "atomic_path", "write_json", "format_obj"]
+__all__ = [
+    "read_obj",
+    "parse_obj",
+    "write_obj",
+    "atomic_path",
+    "write_json",
+    "write_texts",
+    "check_writable",
+    "json_text",
+    "format_obj",
+]
 
 
 def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Read vertices and polygonal faces from an OBJ file.
+    """Read vertices and polygonal faces from an OBJ file (see `parse_obj`).
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+    faces : list of (k,) int arrays, 0-based vertex indices in file order.
+    """
+    vertices, faces, _ = parse_obj(path)
+    return vertices, faces
+
+
+def parse_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray], np.ndarray | None]:
+    """Read vertices, polygonal faces and per-vertex normals from an OBJ file.
 
     Parameters
     ----------
@@ -32,6 +54,8 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray]]:
     -------
     vertices : (n, 3) float64
     faces : list of (k,) int arrays, 0-based vertex indices in file order.
+    normals : (n, 3) float64 when the file has one ``vn`` line per vertex (in vertex
+        order, as fabplan writes the contact elements of S*-nets), else None.
 
     Raises
     ------
@@ -43,13 +67,14 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray]]:
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # tolerate a byte order mark
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text OBJ file (binary content)") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror})") from None
 
     vertices: list[list[float]] = []
+    normals: list[list[float]] = []
     faces: list[list[int]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         parts = line.split()
@@ -75,12 +100,19 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray]]:
                     index = int(token.split("/")[0])
                 except ValueError:
                     raise InputError(f"{path}:{lineno}: malformed face line {line.strip()!r}") from None
+                if index == 0:
+                    raise InputError(f"{path}:{lineno}: OBJ vertex indices start at 1, not 0")
                 # OBJ indices are 1-based; negative ones count back from the last vertex.
                 face.append(index - 1 if index > 0 else len(vertices) + index)
             if len(face) < 3:
                 raise InputError(f"{path}:{lineno}: face {len(faces)} has fewer than 3 vertices")
             faces.append(face)
-        elif tag in ("vn", "vt", "vp", "o", "g", "s", "l", "usemtl", "mtllib", "p"):
+        elif tag == "vn":
+            try:
+                normals.append([float(p) for p in parts[1:4]])
+            except ValueError:
+                raise InputError(f"{path}:{lineno}: malformed normal line {line.strip()!r}") from None
+        elif tag in ("vt", "vp", "o", "g", "s", "l", "usemtl", "mtllib", "p"):
             continue
         else:
             raise InputError(f"{path}:{lineno}: not an OBJ line: {line.strip()[:40]!r}")
@@ -94,14 +126,25 @@ def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray]]:
     for i, f in enumerate(face_arrays):
         if f.min() < 0 or f.max() >= n:
             raise InputError(f"{path}: face {i} refers to a vertex outside 1..{n}")
-    return np.asarray(vertices, dtype=np.float64), face_arrays
+    per_vertex = None
+    if len(normals) == n and all(len(v) == 3 for v in normals):
+        per_vertex = np.asarray(normals, dtype=np.float64)
+        if not np.isfinite(per_vertex).all():
+            raise InputError(f"{path}: a vertex normal has a non-finite coordinate")
+    return np.asarray(vertices, dtype=np.float64), face_arrays, per_vertex
 
 
-def format_obj(vertices: np.ndarray, faces, header: str = "") -> str:
-    """OBJ text for a polygon mesh; coordinates round-trip exactly (17 significant digits)."""
+def format_obj(vertices: np.ndarray, faces, header: str = "",
+               normals: np.ndarray | None = None) -> str:
+    """OBJ text for a polygon mesh; coordinates round-trip exactly (17 significant digits).
+    With `normals` (n, 3), one ``vn`` per vertex is written and faces refer to it."""
     lines = [f"# {row}" for row in header.splitlines()] if header else []
     lines += [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(vertices, float)]
-    lines += ["f " + " ".join(str(int(i) + 1) for i in face) for face in faces]
+    if normals is None:
+        lines += ["f " + " ".join(str(int(i) + 1) for i in face) for face in faces]
+    else:
+        lines += [f"vn {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(normals, float)]
+        lines += ["f " + " ".join(f"{int(i) + 1}//{int(i) + 1}" for i in face) for face in faces]
     return "\n".join(lines) + "\n"
 
 
@@ -124,9 +167,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             tmp_path.unlink()
 
 
-def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces, header: str = "") -> None:
-    """Write a polygon mesh as OBJ atomically, keeping vertex and face order and face sizes."""
-    text = format_obj(vertices, faces, header)
+def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces, header: str = "",
+              normals: np.ndarray | None = None) -> None:
+    """Write a polygon mesh as OBJ atomically, keeping vertex and face order and face sizes
+    (and per-vertex normals when given)."""
+    text = format_obj(vertices, faces, header, normals)
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
@@ -152,8 +197,64 @@ def _finite_or_none(obj):
     return obj
 
 
+def json_text(record: dict) -> str:
+    """JSON text of a record; numpy values become plain JSON, NaN and infinities null."""
+    return json.dumps(_finite_or_none(record), indent=2, default=_json_default,
+                      allow_nan=False) + "\n"
+
+
 def write_json(path: str | os.PathLike, record: dict) -> None:
-    """Write a JSON record atomically; numpy values become plain JSON, NaN becomes null."""
-    text = json.dumps(_finite_or_none(record), indent=2, default=_json_default, allow_nan=False)
-    with atomic_path(path) as tmp:
-        tmp.write_text(text + "\n", encoding="utf-8")
+    """Write a JSON record atomically (see `json_text`)."""
+    write_texts({Path(path): json_text(record)})
+
+
+def write_texts(files: dict) -> None:
+    """Write several text files as one step: all of them, or none.
+
+    Every file goes to a temporary file beside it first; the renames happen only after
+    all writes succeeded, and leftovers are removed on failure.
+
+    Raises
+    ------
+    InputError
+        When a file cannot be written (the message names it).
+    """
+    temporary: dict = {}
+    current = None
+    try:
+        for current, text in files.items():
+            current = Path(current)
+            check_writable(current)
+            fd, tmp = tempfile.mkstemp(prefix=f".{current.name}.", suffix=".tmp",
+                                       dir=current.parent)
+            temporary[current] = Path(tmp)
+            with os.fdopen(fd, "w", encoding="utf-8") as handle:
+                handle.write(text)
+        for current, tmp in temporary.items():
+            os.replace(tmp, current)
+    except OSError as exc:
+        raise InputError(f"{current}: cannot write ({exc.strerror or exc})") from None
+    finally:
+        for tmp in temporary.values():
+            if tmp.exists():
+                tmp.unlink()
+
+
+def check_writable(path: str | os.PathLike) -> None:
+    """Make sure `path` can be written (creating its folder), before any long work.
+
+    Raises
+    ------
+    InputError
+        When the path is a folder, or a file stands where a folder is needed, or the
+        folder is not writable.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a file")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        raise InputError(f"{path}: cannot create its folder {path.parent}") from None
+    if not os.access(path.parent, os.W_OK):
+        raise InputError(f"{path}: the folder is not writable")

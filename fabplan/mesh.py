@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .errors import InputError
-from .io import read_obj, write_obj
+from .io import parse_obj, write_obj
 
 __all__ = ["QuadMesh", "Polylines"]
 
@@ -108,6 +108,8 @@ class QuadMesh:
     vertices : (n, 3) float
     faces : sequence of vertex index sequences (any sizes >= 3), or a (f, k) int array.
     name : a label used in error messages, usually the file name.
+    normals : (n, 3) float, optional per-vertex unit normals (the tangent planes of an
+        S*-net's contact elements).
 
     Examples
     --------
@@ -119,7 +121,7 @@ class QuadMesh:
     (12, 6, (2, 5))
     """
 
-    def __init__(self, vertices, faces, *, name: str = "mesh"):
+    def __init__(self, vertices, faces, *, name: str = "mesh", normals=None):
         self.name = name
         vertices = np.array(vertices, dtype=np.float64)
         if vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -128,6 +130,12 @@ class QuadMesh:
         if bad.size:
             raise InputError(f"{name}: vertex {bad[0]} has a non-finite coordinate")
         self.vertices = vertices
+        self.normals = None
+        if normals is not None:
+            normals = np.array(normals, dtype=np.float64)
+            if normals.shape != vertices.shape or not np.isfinite(normals).all():
+                raise InputError(f"{name}: normals must be finite and one per vertex")
+            self.normals = normals
         sizes = np.array([len(f) for f in faces], dtype=np.int64)
         if sizes.size == 0:
             raise InputError(f"{name}: the mesh has no faces")
@@ -146,8 +154,8 @@ class QuadMesh:
     @classmethod
     def from_obj(cls, path: str | os.PathLike) -> "QuadMesh":
         """Read an OBJ file, keeping quads, vertex order and indices exactly."""
-        vertices, faces = read_obj(path)
-        return cls(vertices, faces, name=str(path))
+        vertices, faces, normals = parse_obj(path)
+        return cls(vertices, faces, name=str(path), normals=normals)
 
     @classmethod
     def grid(cls, points: np.ndarray, *, name: str = "grid") -> "QuadMesh":
@@ -160,17 +168,19 @@ class QuadMesh:
         ).reshape(-1, 4)
         return cls(points.reshape(-1, 3), quads, name=name)
 
-    def with_vertices(self, vertices: np.ndarray) -> "QuadMesh":
-        """The same combinatorics with new vertex positions (cached topology is shared)."""
+    def with_vertices(self, vertices: np.ndarray, normals: np.ndarray | None = None) -> "QuadMesh":
+        """The same combinatorics with new vertex positions (and normals, dropped unless
+        given); the cached topology is shared."""
         new = object.__new__(QuadMesh)
         new.__dict__.update({k: v for k, v in self.__dict__.items() if k != "vertices"})
         new.vertices = np.array(vertices, dtype=np.float64).reshape(-1, 3)
+        new.normals = None if normals is None else np.array(normals, dtype=np.float64)
         new.__dict__.pop("mean_edge_length", None)
         return new
 
     def write_obj(self, path: str | os.PathLike, header: str = "") -> None:
         """Write the mesh as OBJ atomically (quads and order kept)."""
-        write_obj(path, self.vertices, self.faces, header)
+        write_obj(path, self.vertices, self.faces, header, normals=self.normals)
 
     # ------------------------------------------------------------------ basic sizes
     @property
@@ -213,9 +223,10 @@ class QuadMesh:
         nxt_corner = np.where(local == sizes[face] - 1, ptr[face], np.arange(len(face)) + 1)
         prv_corner = np.where(local == 0, ptr[face] + sizes[face] - 1, np.arange(len(face)) - 1)
         nxt, prv = vert[nxt_corner], vert[prv_corner]
-        if np.any(nxt == vert):
-            f = int(face[np.flatnonzero(nxt == vert)[0]])
-            raise InputError(f"{self.name}: face {f} repeats a vertex")
+        by_face = np.sort(face * n + vert)
+        repeated = np.flatnonzero(by_face[1:] == by_face[:-1])
+        if repeated.size:
+            raise InputError(f"{self.name}: face {by_face[repeated[0]] // n} repeats a vertex")
         key = vert * n + nxt
         order = np.argsort(key, kind="stable")
         skey = key[order]

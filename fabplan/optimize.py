@@ -13,7 +13,7 @@ import numpy as np
 from .constraints import Closeness, CoherentOrientation, ConstantAngle, ConstantCurvature, Fairness
 from .errors import InputError, SolverError
 from .geometry import canonical_stars, fit_star_spheres
-from .io import write_json
+from .io import format_obj, json_text, write_texts
 from .measure import measure_net
 from .mesh import QuadMesh
 from .nets import get_net, net_constraints
@@ -67,8 +67,8 @@ class OptimizationResult:
         json_path = path.with_suffix(".json")
         header = (f"fabplan {self.net} net; status {self.status}; "
                   f"properties in {json_path.name}")
-        self.mesh.write_obj(path, header=header)
-        write_json(json_path, self.record())
+        obj_text = format_obj(self.mesh.vertices, self.mesh.faces, header, self.mesh.normals)
+        write_texts({path: obj_text, json_path: json_text(self.record())})
         return path, json_path
 
 
@@ -90,7 +90,10 @@ def read_fixed(spec: str | None, mesh: QuadMesh) -> np.ndarray:
     path = Path(spec)
     if not path.is_file():
         raise InputError(f"{spec}: no such file (--fix takes 'boundary' or a file of vertex ids)")
-    tokens = path.read_text().replace(",", " ").split()
+    try:
+        tokens = path.read_text(encoding="utf-8").replace(",", " ").split()
+    except (UnicodeDecodeError, OSError):
+        raise InputError(f"{spec}: not a text file of vertex ids") from None
     try:
         ids = np.array([int(t) for t in tokens], dtype=np.int64)
     except ValueError:
@@ -245,7 +248,12 @@ def read_handles(specs: list[str] | None) -> dict:
     handles: dict = {}
     for spec in specs or []:
         path = Path(spec)
-        lines = path.read_text().splitlines() if ":" not in spec and path.is_file() else [spec]
+        lines = [spec]
+        if ":" not in spec and path.is_file():
+            try:
+                lines = path.read_text(encoding="utf-8").splitlines()
+            except (UnicodeDecodeError, OSError):
+                raise InputError(f"{spec}: not a text file of handles") from None
         for line in lines:
             line = line.split("#")[0].strip()
             if not line:
