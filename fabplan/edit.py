@@ -10,7 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 from .mesh import QuadMesh
-from .optimize import build_solver, describe_unmet, solved_parameters, unmet_constraints
+from .optimize import (
+    build_solver,
+    describe_unmet,
+    solved_parameters,
+    solver_normals,
+    unmet_constraints,
+)
 from .solver import IterationRecord, SolverSettings
 
 __all__ = ["NetEditor"]
@@ -56,7 +62,7 @@ class NetEditor:
     @property
     def mesh(self) -> QuadMesh:
         """The current net."""
-        return self._mesh.with_vertices(self.solver.vertices)
+        return self._mesh.with_vertices(self.solver.vertices, normals=solver_normals(self.solver))
 
     def drag(self, targets: dict, iterations: int = 1) -> IterationRecord | None:
         """Put handles at new positions ({vertex id: (3,) float}) and run `iterations`."""

@@ -11,9 +11,11 @@ import numpy as np
 from .geometry import (
     canonical_stars,
     face_planarity,
+    fit_mannheim_spheres,
     fit_star_spheres,
     intersection_angles,
     principal_curvatures,
+    ruling_angles,
     star_planarity,
 )
 
@@ -70,6 +72,13 @@ def measure_net(mesh, *, reference=None) -> dict:
             "mean_curvature": _stats((k1 + k2) / 2),
             "star_planarity_relative": _stats(star_planarity(X, stars) / L),
         })
+    if mesh.normals is not None and len(stars):
+        mannheim = fit_mannheim_spheres(X, mesh.normals, stars)
+        record.update({
+            "mannheim_residual_relative": _stats(mannheim.residual / L),
+            "mannheim_radius": _stats(mannheim.radius),
+            "ruling_angle_deg": _stats(np.degrees(ruling_angles(X, mesh.normals, stars))),
+        })
     record["face_planarity_relative"] = _stats(face_planarity(X, mesh.quads) / L)
     if reference is not None:
         d = reference.distances(X)
@@ -102,6 +111,13 @@ def format_summary(record: dict) -> str:
             f"intersection angle: {_fmt(a, 'min', '.4f')} .. {_fmt(a, 'max', '.4f')} deg",
             f"mean curvature: {_fmt(record['mean_curvature'], 'min')} .. "
             f"{_fmt(record['mean_curvature'], 'max')}",
+        ]
+    if "mannheim_radius" in record:
+        m, a = record["mannheim_radius"], record["ruling_angle_deg"]
+        lines += [
+            f"Mannheim spheres (S*-net): residual / mean edge max "
+            f"{_fmt(record['mannheim_residual_relative'], 'max', '.3e')}, radius {_fmt(m, 'min')} .. "
+            f"{_fmt(m, 'max')}, ruling angle {_fmt(a, 'min', '.4f')} .. {_fmt(a, 'max', '.4f')} deg",
         ]
     lines.append(f"face planarity / mean edge: max {_fmt(record['face_planarity_relative'], 'max', '.3e')}")
     if "distance_to_reference" in record:

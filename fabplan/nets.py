@@ -11,8 +11,13 @@ from .constraints import (
     CoherentOrientation,
     ConstantAngle,
     ConstantCurvature,
+    ConstantMannheimRadius,
+    ContactNormals,
+    MannheimTangency,
+    NormalNormalization,
     PlanarFaces,
     PlaneNormalization,
+    RulingAngle,
     SphereCondition,
     SphereNormalization,
 )
@@ -35,6 +40,9 @@ class NetType:
         "infinite" (planar vertex stars: an A-net).
     planar_faces : every quad planar.
     coherent : spheres kept on one side of the surface.
+    dual : an S*-net: contact elements whose tangent planes touch Mannheim spheres; its
+        angle is measured between cone rulings, its radius is the Mannheim radius and
+        "zero" radius makes the five planes of a star pass through one point.
     """
 
     name: str
@@ -43,6 +51,7 @@ class NetType:
     radius: str = "none"
     planar_faces: bool = False
     coherent: bool = False
+    dual: bool = False
 
 
 NETS: dict[str, NetType] = {n.name: n for n in [
@@ -67,6 +76,19 @@ NETS: dict[str, NetType] = {n.name: n for n in [
             "(flat panels)", planar_faces=True),
     NetType("mean-curvature-spheres", "orthogonal S-net with free radii: each Meusnier sphere "
             "is the mean curvature sphere (radius 1/H)", angle="right"),
+    NetType("sstar", "general S*-net: the five tangent planes of every star touch one "
+            "oriented sphere (the Mannheim sphere)", dual=True),
+    NetType("sstar-isogonal", "S*-net whose cone rulings (Eq. 5) meet at a constant angle "
+            "(--angle, or free)", angle="param", dual=True),
+    NetType("sstar-orthogonal", "S*-net with orthogonal cone rulings; its Mannheim spheres "
+            "are the mid-curvature spheres", angle="right", dual=True),
+    NetType("sstar-const-radius", "S*-net whose Mannheim spheres share one radius "
+            "(--radius, or free)", radius="param", dual=True),
+    NetType("harmonic-mean", "orthogonal S*-net of constant Mannheim radius: constant "
+            "harmonic mean curvature, (1/k1 + 1/k2)/2 = r", angle="right", radius="param",
+            dual=True),
+    NetType("dual-anet", "S*-net of Mannheim radius 0: the five tangent planes of every "
+            "star pass through one point", radius="zero", dual=True),
 ]}
 
 
@@ -99,8 +121,8 @@ def net_constraints(net: NetType, *, angle_deg: float | None = None,
         net with the families swapped, so ``min(angle, 180 - angle)`` is used.
     radius : prescribed Meusnier radius in model units.
     length_scale : model units per normalized unit of the solver.
-    curvature_sign : side of the spheres (sign of the normal curvature) for a prescribed
-        radius.
+    curvature_sign : side of the spheres for a prescribed radius: the sign of the normal
+        curvature (S-nets) or of the Mannheim radius (S*-nets) of the start.
     """
     check_angle(angle_deg)
     check_radius(radius)
@@ -108,6 +130,8 @@ def net_constraints(net: NetType, *, angle_deg: float | None = None,
         raise InputError(f"net type {net.name!r} takes no --angle")
     if radius is not None and net.radius != "param":
         raise InputError(f"net type {net.name!r} takes no --radius")
+    if net.dual:
+        return _dual_constraints(net, angle_deg, radius, length_scale, curvature_sign)
     families = [SphereCondition(), SphereNormalization()]
     if net.angle == "right":
         families.append(ConstantAngle(0.0))
@@ -125,4 +149,21 @@ def net_constraints(net: NetType, *, angle_deg: float | None = None,
         families += [PlanarFaces(), PlaneNormalization()]
     if net.coherent:
         families.append(CoherentOrientation())
+    return families
+
+
+def _dual_constraints(net: NetType, angle_deg, radius, length_scale, side) -> list:
+    families = [ContactNormals(), NormalNormalization(), MannheimTangency()]
+    if net.angle == "right":
+        families.append(RulingAngle(0.0))
+    elif net.angle == "param":
+        cosine = None
+        if angle_deg is not None:
+            cosine = math.cos(math.radians(min(angle_deg, 180.0 - angle_deg)))
+        families.append(RulingAngle(cosine))
+    if net.radius == "zero":
+        families.append(ConstantMannheimRadius(0.0))
+    elif net.radius == "param":
+        value = None if radius is None else float(np.sign(side) or 1.0) * radius / length_scale
+        families.append(ConstantMannheimRadius(value))
     return families

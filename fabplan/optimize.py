@@ -10,9 +10,22 @@ from typing import Callable
 
 import numpy as np
 
-from .constraints import Closeness, CoherentOrientation, ConstantAngle, ConstantCurvature, Fairness
+from .constraints import (
+    Closeness,
+    CoherentOrientation,
+    ConstantAngle,
+    ConstantCurvature,
+    ConstantMannheimRadius,
+    Fairness,
+    RulingAngle,
+)
 from .errors import InputError, SolverError
-from .geometry import canonical_stars, fit_star_spheres
+from .geometry import (
+    canonical_stars,
+    fit_mannheim_spheres,
+    fit_star_spheres,
+    vertex_contact_normals,
+)
 from .io import format_obj, json_text, write_texts
 from .measure import measure_net
 from .mesh import QuadMesh
@@ -114,7 +127,12 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     check_net_input(mesh)
     preset = get_net(net)
     stars = canonical_stars(mesh.vertices, mesh.stars)
-    side = np.nanmedian(fit_star_spheres(mesh.vertices, stars).curvature)
+    if preset.dual:
+        normals = mesh.normals if mesh.normals is not None else \
+            vertex_contact_normals(mesh, mesh.vertices, stars)
+        side = np.nanmedian(fit_mannheim_spheres(mesh.vertices, normals, stars).radius)
+    else:
+        side = np.nanmedian(fit_star_spheres(mesh.vertices, stars).curvature)
     families = net_constraints(preset, angle_deg=angle, radius=radius,
                                length_scale=mesh.mean_edge_length, curvature_sign=np.sign(side))
     if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
@@ -136,6 +154,10 @@ def solved_parameters(solver: GuidedProjection) -> dict:
     its net type has them."""
     layout, parameters = solver.state.layout, {}
     for family in solver.constraints:
+        if isinstance(family, ConstantMannheimRadius) and family.radius is not None:
+            parameters["radius"] = abs(family.radius) * solver.length_scale
+        if isinstance(family, RulingAngle) and family.cosine is not None:
+            parameters["angle_deg"] = float(np.degrees(np.arccos(family.cosine)))
         if isinstance(family, ConstantAngle) and family.cosine is not None:
             parameters["angle_deg"] = float(np.degrees(np.arccos(family.cosine)))
         if isinstance(family, ConstantCurvature) and family.curvature is not None:
@@ -147,7 +169,20 @@ def solved_parameters(solver: GuidedProjection) -> dict:
     if "curvature" in layout.blocks:
         k = solver.variable("curvature")[0] / solver.length_scale
         parameters["radius"] = float(abs(1 / k)) if k != 0 else float("inf")
+    if "ruling-cosine" in layout.blocks:
+        cosine = np.clip(solver.variable("ruling-cosine")[0], -1.0, 1.0)
+        parameters["angle_deg"] = float(np.degrees(np.arccos(cosine)))
+    if "mannheim-common" in layout.blocks:
+        parameters["radius"] = float(abs(solver.variable("mannheim-common")[0]) * solver.length_scale)
     return parameters
+
+
+def solver_normals(solver: GuidedProjection) -> np.ndarray | None:
+    """(n, 3) unit normals of the contact elements of an S*-net solve, else None."""
+    if "normals" not in solver.state.layout.blocks:
+        return None
+    N = solver.variable("normals")
+    return N / np.linalg.norm(N, axis=1, keepdims=True)
 
 
 def unmet_constraints(solver: GuidedProjection) -> dict:
@@ -213,7 +248,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
                           f"{len(solver.history) - 1} iterations): "
                           f"{describe_unmet(unmet_constraints(solver))}")
     seconds = time.perf_counter() - start
-    result_mesh = mesh.with_vertices(solver.vertices)
+    result_mesh = mesh.with_vertices(solver.vertices, normals=solver_normals(solver))
     parameters = {"angle_deg": angle, "radius": radius, **solved_parameters(solver),
                   "coherent": coherent, "fixed_vertices": int(len(solver.fixed)),
                   "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)}}

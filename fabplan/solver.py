@@ -39,7 +39,8 @@ class SolverSettings:
         keeps the convergence quadratic near a solution.
     fairness_weight, closeness_weight : initial row weights of the soft families.
     fade : factor applied to the soft weights after every iteration.
-    stagnation : stop when the hard residual has not halved over this many iterations.
+    stagnation : stop when the best hard residual has not improved by 10 % over this many
+        iterations.
     backend : linear solver backend (see `fabplan.linalg`).
     """
 
@@ -49,7 +50,7 @@ class SolverSettings:
     fairness_weight: float = 1e-3
     closeness_weight: float = 1e-2
     fade: float = 0.3
-    stagnation: int = 8
+    stagnation: int = 15
     backend: str = "auto"
 
 
@@ -207,6 +208,26 @@ class GuidedProjection:
         upper = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(nfree, nfree))
         return upper, gradient[:nfree]
 
+    def _factor(self, upper: sp.csr_matrix, damping: float) -> None:
+        """Factor, adding damping when rounding makes the matrix lose definiteness."""
+        diagonal = self._pattern.diagonal
+        for _ in range(4):
+            try:
+                self._linear.factor(upper)
+                return
+            except SolverError:
+                upper.data[diagonal] += 100 * damping
+                damping *= 101
+        raise SolverError("the normal equations stay singular even with strong damping")
+
+    def _stagnant(self, hard: float) -> bool:
+        """No 10 % improvement of the best residual over the last `stagnation` iterations."""
+        window = self.settings.stagnation
+        past = [h.hard_residual for h in self.history]
+        if len(past) < window:
+            return False
+        return min(past[-window + 1:] + [hard]) > 0.9 * min(past[:-window + 1] or [np.inf])
+
     # -------------------------------------------------------------- iteration
     def _evaluate(self, weights: dict) -> tuple[list, list, dict]:
         """Weighted residuals (m,) and Jacobian values (m, k) of every family, and the
@@ -268,8 +289,7 @@ class GuidedProjection:
                 self.history.append(IterationRecord(it, measured, hard, 0.0,
                                                     time.perf_counter() - t0))
                 break
-            if it - first >= s.stagnation and \
-                    hard > 0.5 * self.history[it - s.stagnation].hard_residual:
+            if self._stagnant(hard):
                 self.status = "stagnated"
                 self.history.append(IterationRecord(it, measured, hard, 0.0,
                                                     time.perf_counter() - t0))
@@ -278,10 +298,10 @@ class GuidedProjection:
             # but fading no faster than the soft terms: otherwise fairness and closeness take
             # long steps along the solution manifold that the linearization cannot follow.
             soft = s.fade ** it if any(not c.hard for c in self.constraints) else 0.0
-            damping = max(s.epsilon * min(hard, 1.0), s.epsilon * soft, 1e-14)
+            damping = max(s.epsilon * min(hard, 1.0), s.epsilon * soft, 1e-10)
             upper, gradient = self._assemble(jacobians, residuals, damping)
             t1 = time.perf_counter()
-            self._linear.factor(upper)
+            self._factor(upper, damping)
             t2 = time.perf_counter()
             h = self._linear.solve(-gradient)
             t3 = time.perf_counter()

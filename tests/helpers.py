@@ -13,3 +13,39 @@ def noisy(mesh: QuadMesh, fraction: float, seed: int = 0) -> QuadMesh:
     d = rng.normal(size=mesh.vertices.shape)
     d *= fraction * mesh.mean_edge_length / np.linalg.norm(d, axis=1, keepdims=True)
     return mesh.with_vertices(mesh.vertices + d)
+
+
+def jet_curvatures(X: np.ndarray, faces: list, vertices: np.ndarray):
+    """Principal curvatures at the given vertices from a degree-4 height function fitted
+    to the two face rings around each vertex (25 points on a regular quad grid, for 15
+    coefficients) in a PCA frame (osculating jet, Cazals and Pouget 2003): an estimator
+    independent of fabplan's spheres.
+
+    Returns
+    -------
+    k1, k2 : (k,) float, signed with respect to `normal` (k1 <= k2).
+    normal : (k, 3) float, the unit normal of the fitted height function.
+    """
+    n = len(X)
+    adj = np.eye(n, dtype=int)
+    for face in faces:  # vertices sharing a face are neighbours
+        adj[np.ix_(face, face)] = 1
+    two_ring = (adj @ adj) > 0
+    powers = [(i, k - i) for k in range(5) for i in range(k + 1)]  # x^i y^j, degree <= 4
+    k1, k2, normals = [], [], []
+    for v in vertices:
+        P = X[two_ring[v]] - X[v]
+        _, _, vt = np.linalg.svd(P - P.mean(axis=0))
+        x, y, z = P @ vt[0], P @ vt[1], P @ vt[2]
+        coef = np.linalg.lstsq(np.column_stack([x**i * y**j for i, j in powers]), z, rcond=None)[0]
+        c = dict(zip(powers, coef, strict=True))
+        fx, fy = c[(1, 0)], c[(0, 1)]
+        fxx, fxy, fyy = 2 * c[(2, 0)], c[(1, 1)], 2 * c[(0, 2)]
+        w = np.sqrt(1 + fx * fx + fy * fy)
+        first = np.array([[1 + fx * fx, fx * fy], [fx * fy, 1 + fy * fy]])
+        second = np.array([[fxx, fxy], [fxy, fyy]]) / w
+        a, b = np.sort(np.linalg.eigvals(np.linalg.solve(first, second)).real)
+        k1.append(a)
+        k2.append(b)
+        normals.append((-fx * vt[0] - fy * vt[1] + vt[2]) / w)
+    return np.array(k1), np.array(k2), np.array(normals)

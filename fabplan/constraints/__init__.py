@@ -4,6 +4,13 @@ from .angle import ConstantAngle
 from .base import Constraint, Layout, NetState
 from .closeness import Closeness
 from .fairness import Fairness
+from .mannheim import (
+    ConstantMannheimRadius,
+    ContactNormals,
+    MannheimTangency,
+    NormalNormalization,
+    RulingAngle,
+)
 from .orientation import CoherentOrientation
 from .planarity import PlanarFaces, PlaneNormalization
 from .radius import ConstantCurvature
@@ -21,5 +28,10 @@ __all__ = [
     "PlanarFaces",
     "PlaneNormalization",
     "Fairness",
+    "ContactNormals",
+    "NormalNormalization",
+    "MannheimTangency",
+    "ConstantMannheimRadius",
+    "RulingAngle",
     "Closeness",
 ]
