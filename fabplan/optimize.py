@@ -11,6 +11,7 @@ from typing import Callable
 import numpy as np
 
 from .constraints import (
+    BoundaryGliding,
     Closeness,
     CoherentOrientation,
     ConstantAngle,
@@ -122,7 +123,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
                  radius: float | None = None, reference: ReferenceSurface | None = None,
                  fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
                  fairness: bool = True, coherent: bool = False,
-                 closeness: bool = True) -> GuidedProjection:
+                 closeness: bool = True, glide: bool = False) -> GuidedProjection:
     """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
     check_net_input(mesh)
     preset = get_net(net)
@@ -141,7 +142,13 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
         families.append(Fairness())
     if reference is None and closeness:
         reference = ReferenceSurface.from_mesh(mesh)
-    if closeness:
+    if glide:
+        # on the surface at convergence, boundary vertices on its boundary curves
+        families.append(Closeness(reference, hard=True))
+        curves = reference.boundary_curves()
+        if curves:
+            families.append(BoundaryGliding(curves, np.flatnonzero(mesh.is_boundary_vertex)))
+    elif closeness:
         families.append(Closeness(reference))
     solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings)
     solver.net = preset.name
@@ -203,7 +210,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              radius: float | None = None, reference: ReferenceSurface | None = None,
              fixed: np.ndarray | None = None, handles: dict | None = None,
              settings: SolverSettings | None = None, fairness: bool = True,
-             coherent: bool = False, closeness: bool = True,
+             coherent: bool = False, closeness: bool = True, glide: bool = False,
              progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
 
@@ -222,6 +229,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         that would cross over become planar rather than flip).
     closeness : pull towards the reference; off for form-finding from combinatorics,
         where the start positions are only a guess.
+    glide : keep the net on the reference as a constraint (not a fading pull), with its
+        boundary vertices on the reference's boundary curves: a layout that glides on a
+        design surface.
     progress : called after every iteration with its record.
 
     Returns
@@ -239,7 +249,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     start = time.perf_counter()
     solver = build_solver(mesh, net, angle=angle, radius=radius, reference=reference,
                           fixed=held, settings=settings, fairness=fairness, coherent=coherent,
-                          closeness=closeness)
+                          closeness=closeness, glide=glide)
     if handle_ids.size:
         solver.set_vertices(handle_ids, targets)
     status = solver.run(callback=progress)

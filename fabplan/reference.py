@@ -62,6 +62,11 @@ class ReferenceSurface:
         triangle = np.asarray(triangle, dtype=np.int64)
         return np.asarray(foot), self.face_normals[triangle], triangle
 
+    def boundary_curves(self) -> list:
+        """The boundary loops of the surface as closed polylines, list of (k, 3) float."""
+        loops = igl.boundary_loop_all(self.triangles)
+        return [self.vertices[np.asarray(loop)] for loop in loops if len(loop) > 2]
+
     def distances(self, points: np.ndarray) -> np.ndarray:
         """(m,) float, distance of each point from the surface."""
         foot, _, _ = self.closest_points(points)

@@ -96,3 +96,23 @@ def test_coherent_orientation_keeps_spheres_on_one_side():
     # spheres that would cross over become planes instead (curvature ~ 0)
     worst = min(spheres.curvature.max(), -spheres.curvature.min())
     assert worst <= 1e-8
+
+
+def test_gliding_keeps_the_net_on_the_design_surface_and_its_boundary():
+    from surfaces import SADDLE, quadric_grid
+
+    from fabplan.constraints.closeness import closest_points_on_polylines
+    from fabplan.reference import ReferenceSurface
+
+    design = ReferenceSurface.from_mesh(quadric_grid(SADDLE, angle_deg=80, size=91, spacing=0.1))
+    start = quadric_grid(SADDLE, angle_deg=80, size=10)
+    result = fabplan.optimize(start, "isogonal", angle=80, reference=design, glide=True)
+    assert result.converged
+    X = result.mesh.vertices
+    assert result.properties["sphere_residual_relative"]["max"] <= 1e-6
+    assert design.distances(X).max() <= 1e-6 * result.mesh.mean_edge_length
+    boundary = X[result.mesh.is_boundary_vertex]
+    foot, _ = closest_points_on_polylines(boundary, design.boundary_curves())
+    assert np.linalg.norm(foot - boundary, axis=1).max() <= 1e-6 * result.mesh.mean_edge_length
+    # the interior really moved along the surface (it is not simply the start)
+    assert np.abs(X - start.vertices).max() > 1e-3

@@ -2,7 +2,7 @@
 
 from .angle import ConstantAngle
 from .base import Constraint, Layout, NetState
-from .closeness import Closeness
+from .closeness import BoundaryGliding, Closeness
 from .fairness import Fairness
 from .mannheim import (
     ConstantMannheimRadius,
@@ -34,4 +34,5 @@ __all__ = [
     "ConstantMannheimRadius",
     "RulingAngle",
     "Closeness",
+    "BoundaryGliding",
 ]

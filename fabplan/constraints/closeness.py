@@ -10,24 +10,30 @@ import numpy as np
 
 from .base import Constraint
 
-__all__ = ["Closeness"]
+__all__ = ["Closeness", "BoundaryGliding", "closest_points_on_polylines"]
 
 
 class Closeness(Constraint):
-    """Soft term pulling the vertices onto a `fabplan.reference.ReferenceSurface`.
+    """Vertices on a `fabplan.reference.ReferenceSurface`.
 
     Parameters
     ----------
     reference : surface in model units, with ``closest_points`` (a `ReferenceSurface`).
     vertices : (k,) int, the vertices it applies to (default: all).
+    hard : False: a soft pull that fades out with the other soft terms ("closeness");
+        True: a constraint that must hold at convergence, so the net glides on the
+        surface ("surface").
     """
 
     name = "closeness"
     hard = False
 
-    def __init__(self, reference, vertices: np.ndarray | None = None):
+    def __init__(self, reference, vertices: np.ndarray | None = None, *, hard: bool = False):
         self.reference = reference
         self.vertices = vertices
+        if hard:
+            self.hard = True
+            self.name = "surface"
 
     def _ids(self, state):
         return np.arange(state.mesh.vertex_count) if self.vertices is None else self.vertices
@@ -44,3 +50,71 @@ class Closeness(Constraint):
     def evaluate(self, state):
         d = state.X[self._ids(state)] - self._foot
         return np.sum(d * self._normal, axis=1), self._normal
+
+
+def closest_points_on_polylines(points: np.ndarray, curves: list
+                                ) -> tuple[np.ndarray, np.ndarray]:
+    """Closest points on a set of polylines and the unit tangents there.
+
+    Parameters
+    ----------
+    points : (m, 3) float
+    curves : list of (k, 3) float, closed polylines (the last vertex joins the first).
+
+    Returns
+    -------
+    foot : (m, 3) float
+    tangent : (m, 3) float, unit direction of the segment holding each footpoint.
+    """
+    a = np.concatenate([c for c in curves])
+    b = np.concatenate([np.roll(c, -1, axis=0) for c in curves])
+    ab = b - a
+    length2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
+    foot = np.empty_like(points)
+    seg = np.empty(len(points), dtype=np.int64)
+    for lo in range(0, len(points), 256):  # blocks bound the (points x segments) memory
+        P = points[lo:lo + 256, None, :]
+        t = np.clip(np.sum((P - a) * ab, axis=2) / length2, 0.0, 1.0)
+        Q = a + t[..., None] * ab
+        best = np.argmin(np.sum((Q - P) ** 2, axis=2), axis=1)
+        foot[lo:lo + 256] = Q[np.arange(len(best)), best]
+        seg[lo:lo + 256] = best
+    return foot, ab[seg] / np.sqrt(length2[seg])[:, None]
+
+
+class BoundaryGliding(Constraint):
+    """Boundary vertices of the net on the boundary curves of the design surface.
+
+    Two rows per vertex: the offset from its footpoint on the nearest boundary curve,
+    measured across the curve (the vertex may slide along it). Footpoints are updated
+    every iteration.
+
+    Parameters
+    ----------
+    curves : list of (k, 3) float, closed boundary polylines of the design surface.
+    vertices : (b,) int, the net's boundary vertices.
+    """
+
+    name = "boundary"
+
+    def __init__(self, curves: list, vertices: np.ndarray):
+        self.curves = [np.asarray(c, dtype=np.float64) for c in curves]
+        self.vertices = np.asarray(vertices, dtype=np.int64)
+
+    def prepare(self, state):
+        model = state.X[self.vertices] * state.length_scale + state.origin
+        foot, tangent = closest_points_on_polylines(model, self.curves)
+        # two directions across the curve
+        helper = np.where(np.abs(tangent[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+        u = np.cross(tangent, helper)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        self._across = np.stack([u, np.cross(tangent, u)], axis=1)        # (b, 2, 3)
+        self._foot = (foot - state.origin) / state.length_scale
+
+    def columns(self, state):
+        return np.repeat(state.layout.index("vertices")[self.vertices], 2, axis=0)
+
+    def evaluate(self, state):
+        d = state.X[self.vertices] - self._foot
+        r = np.einsum("bkj,bj->bk", self._across, d).ravel()
+        return r, self._across.reshape(-1, 3)
