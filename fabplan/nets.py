@@ -130,40 +130,30 @@ def net_constraints(net: NetType, *, angle_deg: float | None = None,
         raise InputError(f"net type {net.name!r} takes no --angle")
     if radius is not None and net.radius != "param":
         raise InputError(f"net type {net.name!r} takes no --radius")
-    if net.dual:
-        return _dual_constraints(net, angle_deg, radius, length_scale, curvature_sign)
-    families = [SphereCondition(), SphereNormalization()]
+    if net.dual:   # planes touching Mannheim spheres; angles between cone rulings
+        families = [ContactNormals(), NormalNormalization(), MannheimTangency()]
+        angle_family = RulingAngle
+    else:          # vertices on Meusnier spheres; angles between osculating tangents
+        families = [SphereCondition(), SphereNormalization()]
+        angle_family = ConstantAngle
     if net.angle == "right":
-        families.append(ConstantAngle(0.0))
+        families.append(angle_family(0.0))
     elif net.angle == "param":
         cosine = None
         if angle_deg is not None:
             cosine = math.cos(math.radians(min(angle_deg, 180.0 - angle_deg)))
-        families.append(ConstantAngle(cosine))
+        families.append(angle_family(cosine))
+    side = float(np.sign(curvature_sign) or 1.0)
     if net.radius == "infinite":
         families.append(ConstantCurvature(0.0))
+    elif net.radius == "zero":
+        families.append(ConstantMannheimRadius(0.0))
+    elif net.radius == "param" and net.dual:
+        families.append(ConstantMannheimRadius(None if radius is None else side * radius / length_scale))
     elif net.radius == "param":
-        curvature = None if radius is None else float(np.sign(curvature_sign) or 1.0) * length_scale / radius
-        families.append(ConstantCurvature(curvature))
+        families.append(ConstantCurvature(None if radius is None else side * length_scale / radius))
     if net.planar_faces:
         families += [PlanarFaces(), PlaneNormalization()]
     if net.coherent:
         families.append(CoherentOrientation())
-    return families
-
-
-def _dual_constraints(net: NetType, angle_deg, radius, length_scale, side) -> list:
-    families = [ContactNormals(), NormalNormalization(), MannheimTangency()]
-    if net.angle == "right":
-        families.append(RulingAngle(0.0))
-    elif net.angle == "param":
-        cosine = None
-        if angle_deg is not None:
-            cosine = math.cos(math.radians(min(angle_deg, 180.0 - angle_deg)))
-        families.append(RulingAngle(cosine))
-    if net.radius == "zero":
-        families.append(ConstantMannheimRadius(0.0))
-    elif net.radius == "param":
-        value = None if radius is None else float(np.sign(side) or 1.0) * radius / length_scale
-        families.append(ConstantMannheimRadius(value))
     return families

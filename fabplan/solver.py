@@ -150,9 +150,8 @@ class GuidedProjection:
         """Move vertices (model units), e.g. handles dragged by a user."""
         ids, positions = np.asarray(ids), np.asarray(positions, dtype=np.float64)
         self.state.X[ids] = (positions - self.origin) / self.length_scale
-        held = np.searchsorted(self.fixed, ids)
-        on = (held < len(self.fixed)) & (self.fixed[np.minimum(held, len(self.fixed) - 1)] == ids)
-        self._held[held[on]] = positions[on]
+        held = np.isin(ids, self.fixed)
+        self._held[np.searchsorted(self.fixed, ids[held])] = positions[held]
 
     # -------------------------------------------------------------- assembly
     def _build_pattern(self) -> _Pattern:
