@@ -76,9 +76,10 @@ class _FamilyPattern:
     """Where one family's Jacobian entries land in the normal equations."""
 
     cols: np.ndarray           # (m, k) free-variable column of each entry, -1 if fixed
-    first: np.ndarray          # (p,) local entry index of each product pair
-    second: np.ndarray         # (p,) local entry index of each product pair
+    first: np.ndarray          # (p,) local entry indices of the product pairs, p <= q
+    second: np.ndarray
     slots: np.ndarray          # (m, p) position in the upper triangle, or the dummy slot
+    multiplicity: np.ndarray | None = None  # (m, p) 2 where a row repeats a variable
 
 
 @dataclass
@@ -169,19 +170,22 @@ class GuidedProjection:
         families, keys = [], [np.arange(nfree) * (nfree + 1)]
         for c in self.constraints:
             cols = col_map[np.asarray(c.columns(state))]
-            k = cols.shape[1]
-            first, second = (g.ravel() for g in np.meshgrid(np.arange(k), np.arange(k),
-                                                            indexing="ij"))
+            # J^T J is symmetric: the pairs p <= q of a row's entries fill its upper triangle
+            first, second = np.triu_indices(cols.shape[1])
             cp, cq = cols[:, first], cols[:, second]
-            valid = (cp >= 0) & (cp <= cq)
-            keys.append((cp * nfree + cq)[valid])
-            families.append(_FamilyPattern(cols, first, second, valid))
+            lo, hi = np.minimum(cp, cq), np.maximum(cp, cq)
+            valid = lo >= 0
+            keys.append((lo * nfree + hi)[valid])
+            # a row naming one variable at two entries adds their product twice
+            twice = (cp == cq) & (first != second)
+            families.append(_FamilyPattern(cols, first, second, (lo, hi, valid),
+                                           np.where(twice, 2.0, 1.0) if twice.any() else None))
         ukeys = np.unique(np.concatenate(keys))
         dummy = len(ukeys)
         for f in families:
-            cp, cq = f.cols[:, f.first], f.cols[:, f.second]
-            slots = np.full(cp.shape, dummy, dtype=np.int64)
-            slots[f.slots] = np.searchsorted(ukeys, (cp * nfree + cq)[f.slots])
+            lo, hi, valid = f.slots
+            slots = np.full(lo.shape, dummy, dtype=np.int64)
+            slots[valid] = np.searchsorted(ukeys, (lo * nfree + hi)[valid])
             f.slots = slots
         rows = ukeys // nfree
         return _Pattern(families=families, indptr=np.searchsorted(rows, np.arange(nfree + 1)),
@@ -198,8 +202,10 @@ class GuidedProjection:
         for f, J, r in zip(pat.families, jacobians, residuals, strict=True):
             if J.size == 0:
                 continue
-            data += np.bincount(f.slots.ravel(), weights=(J[:, f.first] * J[:, f.second]).ravel(),
-                                minlength=nnz + 1)
+            products = J[:, f.first] * J[:, f.second]
+            if f.multiplicity is not None:
+                products *= f.multiplicity
+            data += np.bincount(f.slots.ravel(), weights=products.ravel(), minlength=nnz + 1)
             gradient += np.bincount(np.where(f.cols < 0, nfree, f.cols).ravel(),
                                     weights=(J * r[:, None]).ravel(), minlength=nfree + 1)
         data = data[:nnz]
