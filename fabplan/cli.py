@@ -2,18 +2,20 @@
 
 Exit codes: 0 success; 2 bad input or a solver that failed (one-line message, nothing
 written); 3 the optimization stopped without converging (result written, with its
-measured residuals and status).
+measured residuals and status), or some panels fit no mold (`molds`: report written, the
+failures listed).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from . import __version__
 from .errors import FabplanError, InputError
-from .io import check_writable, write_json
+from .io import check_writable, write_json, write_texts
 from .measure import format_summary, measure_net
 from .mesh import load_mesh
 from .nets import NETS, check_angle, check_radius
@@ -102,6 +104,42 @@ def _cmd_optimize(args) -> int:
     return 0
 
 
+def _check_output_folder(folder: Path) -> None:
+    """Refuse an output folder that cannot be made or written, without creating it."""
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{folder}: exists and is not a folder")
+    existing = folder
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK):
+        raise InputError(f"{folder}: cannot write there ({existing} is not a writable folder)")
+
+
+def _cmd_molds(args) -> int:
+    from .mold_report import mold_report_files
+    from .molds import MoldSettings, plan_molds
+    from .panels import check_panels
+
+    settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=args.units,
+                            max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface)
+    settings.check()
+    out = Path(args.output)
+    _check_output_folder(out)
+    mesh = load_mesh(args.net)
+    check_panels(mesh)
+    plan = plan_molds(mesh, settings)
+    files = mold_report_files(plan, out)
+    write_texts(files)
+    print(plan.summary())
+    print(f"wrote {', '.join(str(f) for f in files)}")
+    if not plan.fits_all:
+        print(f"fabplan: warning: {plan.failures.size} panels do not fit a mold within "
+              f"{settings.tolerance_mm:g} mm; they are listed in {out / 'report.html'}",
+              file=sys.stderr)
+        return EXIT_NOT_CONVERGED
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """Usage errors as one line and exit code 2, like every other bad input."""
 
@@ -142,6 +180,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
     p.set_defaults(func=_cmd_optimize)
+
+    p = sub.add_parser("molds", help="count the molds a net's curved panels need and write a "
+                                     "report (report.html, molds.json, panels.csv)")
+    p.add_argument("net", help="quad mesh (OBJ); every face is a panel")
+    p.add_argument("--tolerance-mm", type=float, required=True, metavar="T",
+                   help="largest allowed gap between a panel and its mold, in mm")
+    p.add_argument("--units", default="m", help="unit of the net's coordinates: m (default) or mm")
+    p.add_argument("--max-mold-size", type=float, metavar="MM",
+                   help="largest mold side in mm (default: no limit)")
+    p.add_argument("--panel-surface", default="auto", choices=["auto", "smooth", "corners"],
+                   help="panel shape: smooth (follows the surface the net samples), corners "
+                        "(least curved through its corners), auto (corners for a net of flat "
+                        "faces, else smooth)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
+    p.set_defaults(func=_cmd_molds)
     return parser
 
 
