@@ -127,15 +127,9 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
     check_net_input(mesh)
     preset = get_net(net)
-    stars = canonical_stars(mesh.vertices, mesh.stars)
-    if preset.dual:
-        normals = mesh.normals if mesh.normals is not None else \
-            vertex_contact_normals(mesh, mesh.vertices, stars)
-        side = np.nanmedian(fit_mannheim_spheres(mesh.vertices, normals, stars).radius)
-    else:
-        side = np.nanmedian(fit_star_spheres(mesh.vertices, stars).curvature)
     families = net_constraints(preset, angle_deg=angle, radius=radius,
-                               length_scale=mesh.mean_edge_length, curvature_sign=np.sign(side))
+                               length_scale=mesh.mean_edge_length,
+                               curvature_sign=sphere_side(mesh, dual=preset.dual))
     if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
         families.append(CoherentOrientation())
     if fairness:
@@ -154,6 +148,22 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     solver.net = preset.name
     solver.reference = reference
     return solver
+
+
+def sphere_side(mesh: QuadMesh, *, dual: bool = False) -> float:
+    """+1 or -1: the side of the surface where most spheres of `mesh` lie, as the sign of
+    the normal curvature of its Meusnier spheres (the Mannheim radius for S*-nets).
+    Flat stars say nothing about the side and are left out."""
+    stars = canonical_stars(mesh.vertices, mesh.stars)
+    if dual:
+        normals = mesh.normals if mesh.normals is not None else \
+            vertex_contact_normals(mesh, mesh.vertices, stars)
+        value = fit_mannheim_spheres(mesh.vertices, normals, stars).radius
+        value = value[np.isfinite(value)]
+    else:
+        value = fit_star_spheres(mesh.vertices, stars).curvature
+        value = value[np.abs(value) * mesh.mean_edge_length > 1e-9]
+    return -1.0 if value.size and np.median(value) < 0 else 1.0
 
 
 def solved_parameters(solver: GuidedProjection) -> dict:

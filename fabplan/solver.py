@@ -228,7 +228,7 @@ class GuidedProjection:
     def _stagnant(self, hard: float) -> bool:
         """No 10 % improvement of the best residual over the last `stagnation` iterations."""
         window = self.settings.stagnation
-        past = [h.hard_residual for h in self.history]
+        past = [h.hard_residual for h in self.history if h.step > 0]
         if len(past) < window:
             return False
         return min(past[-window + 1:] + [hard]) > 0.9 * min(past[:-window + 1] or [np.inf])
@@ -275,7 +275,8 @@ class GuidedProjection:
             t0 = time.perf_counter()
             for c in self.constraints:
                 c.prepare(self.state)
-            residuals, jacobians, measured = self._evaluate(self._weights(it))
+            steps = sum(1 for h in self.history if h.step > 0)   # soft terms fade per step
+            residuals, jacobians, measured = self._evaluate(self._weights(steps))
             hard = max([measured[n] for n in hard_names], default=0.0)
             if not all(np.isfinite(r).all() and np.isfinite(J).all()
                        for r, J in zip(residuals, jacobians, strict=True)):
@@ -302,7 +303,7 @@ class GuidedProjection:
             # Damping proportional to the residual (stable far away, quadratic near the end),
             # but fading no faster than the soft terms: otherwise fairness and closeness take
             # long steps along the solution manifold that the linearization cannot follow.
-            soft = s.fade ** it if any(not c.hard for c in self.constraints) else 0.0
+            soft = s.fade ** steps if any(not c.hard for c in self.constraints) else 0.0
             damping = max(s.epsilon * min(hard, 1.0), s.epsilon * soft, 1e-10)
             upper, gradient = self._assemble(jacobians, residuals, damping)
             t1 = time.perf_counter()

@@ -116,3 +116,33 @@ def test_gliding_keeps_the_net_on_the_design_surface_and_its_boundary():
     assert np.linalg.norm(foot - boundary, axis=1).max() <= 1e-6 * result.mesh.mean_edge_length
     # the interior really moved along the surface (it is not simply the start)
     assert np.abs(X - start.vertices).max() > 1e-3
+
+
+def test_prescribed_radius_side_ignores_flat_stars():
+    """Regression: with most start stars flat, the median curvature was 0 and the sphere
+    side of a prescribed radius defaulted to +1 even where every curved star said -1."""
+    from fabplan.optimize import sphere_side
+
+    u, v = np.meshgrid(np.arange(-6.0, 7.0), np.arange(-6.0, 7.0), indexing="ij")
+    z = np.where(u > 2, -0.02 * (u - 2) ** 2, 0.0)      # flat for u <= 2, a dome beyond
+    mesh = fabplan.QuadMesh.grid(np.stack([u, v, z], axis=-1))
+    spheres, _ = _measured(mesh)
+    flat = np.abs(spheres.curvature) * mesh.mean_edge_length <= 1e-9
+    assert flat.mean() > 0.5 and (spheres.curvature[~flat] < 0).all()
+    assert sphere_side(mesh) == -1.0
+    assert sphere_side(mesh.with_vertices(mesh.vertices * [1, 1, -1])) == 1.0
+
+
+def test_repeated_runs_fade_soft_terms_per_step(wein99):
+    """Regression: every capped run() added a measurement record that also counted as an
+    iteration, so an editor's soft terms faded twice as fast."""
+    from fabplan.optimize import build_solver
+
+    solver = build_solver(noisy(wein99, 0.01), "snet")
+    for _ in range(3):
+        solver.run(1)
+    steps = [h for h in solver.history if h.step > 0]
+    assert len(steps) == 3
+    fade = solver.settings.fade
+    assert solver._weights(len(steps))["fairness"] == pytest.approx(
+        solver.settings.fairness_weight * fade**3)
