@@ -78,7 +78,8 @@ class _FamilyPattern:
     cols: np.ndarray           # (m, k) free-variable column of each entry, -1 if fixed
     first: np.ndarray          # (p,) local entry indices of the product pairs, p <= q
     second: np.ndarray
-    slots: np.ndarray          # (m, p) position in the upper triangle, or the dummy slot
+    slots: object              # (m, p) positions in the upper triangle (or the dummy slot);
+                               # after the build only their shape, the data live in _Pattern
     multiplicity: np.ndarray | None = None  # (m, p) 2 where a row repeats a variable
 
 
@@ -88,6 +89,8 @@ class _Pattern:
     indptr: np.ndarray         # upper triangle of J^T J + eps I, CSR (= lower, CSC)
     indices: np.ndarray
     diagonal: np.ndarray       # (nfree,) positions of the diagonal entries
+    slots: np.ndarray          # all families' slots, concatenated
+    products: np.ndarray       # buffer for all families' products, same length
 
 
 class GuidedProjection:
@@ -180,7 +183,8 @@ class GuidedProjection:
             twice = (cp == cq) & (first != second)
             families.append(_FamilyPattern(cols, first, second, (lo, hi, valid),
                                            np.where(twice, 2.0, 1.0) if twice.any() else None))
-        ukeys = np.unique(np.concatenate(keys))
+        ukeys = np.sort(np.concatenate(keys))      # sort + mask: far faster than np.unique
+        ukeys = ukeys[np.r_[True, ukeys[1:] != ukeys[:-1]]]
         dummy = len(ukeys)
         for f in families:
             lo, hi, valid = f.slots
@@ -188,27 +192,34 @@ class GuidedProjection:
             slots[valid] = np.searchsorted(ukeys, (lo * nfree + hi)[valid])
             f.slots = slots
         rows = ukeys // nfree
+        # one slot array and one product buffer for all families: a single bincount per
+        # iteration, with no per-family temporaries of the matrix's size
+        slots = np.concatenate([f.slots.ravel() for f in families])
+        for f in families:
+            f.slots = f.slots.shape        # the concatenated copy is the one kept
         return _Pattern(families=families, indptr=np.searchsorted(rows, np.arange(nfree + 1)),
                         indices=ukeys % nfree,
-                        diagonal=np.searchsorted(ukeys, np.arange(nfree) * (nfree + 1)))
+                        diagonal=np.searchsorted(ukeys, np.arange(nfree) * (nfree + 1)),
+                        slots=slots, products=np.empty(len(slots)))
 
     def _assemble(self, jacobians: list, residuals: list,
                   damping: float) -> tuple[sp.csr_matrix, np.ndarray]:
         """Upper triangle of ``J^T J + damping I`` (CSR) and the gradient ``J^T r``."""
         pat = self._pattern
         nnz, nfree = len(pat.indices), len(self.free)
-        data = np.zeros(nnz + 1)
         gradient = np.zeros(nfree + 1)
+        start = 0
         for f, J, r in zip(pat.families, jacobians, residuals, strict=True):
+            out = pat.products[start:start + int(np.prod(f.slots))].reshape(f.slots)
+            start += out.size
             if J.size == 0:
                 continue
-            products = J[:, f.first] * J[:, f.second]
+            np.multiply(J[:, f.first], J[:, f.second], out=out)
             if f.multiplicity is not None:
-                products *= f.multiplicity
-            data += np.bincount(f.slots.ravel(), weights=products.ravel(), minlength=nnz + 1)
+                out *= f.multiplicity
             gradient += np.bincount(np.where(f.cols < 0, nfree, f.cols).ravel(),
                                     weights=(J * r[:, None]).ravel(), minlength=nfree + 1)
-        data = data[:nnz]
+        data = np.bincount(pat.slots, weights=pat.products, minlength=nnz + 1)[:nnz]
         data[pat.diagonal] += damping
         upper = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(nfree, nfree))
         return upper, gradient[:nfree]
