@@ -23,23 +23,28 @@ constant angle). With ``isogonal=True`` the levels are instead found one after t
 that the discrete intersection angle (between the osculating-circle tangents, Lemma 2.12)
 is exactly ``angle_deg`` at every star. On the sphere profile every star's Meusnier sphere
 is the sphere itself, so ``rotational_snet(..., profile="sphere", isogonal=True)`` is an
-exact linear Weingarten S-net (isogonal, constant radius) of any size.
+exact linear Weingarten S-net (isogonal, constant radius) of any size, if a degenerate one.
+`rotational_weingarten_snet` builds the meridian itself, level by level, so that every star
+has one prescribed angle and one prescribed Meusnier radius: exact linear Weingarten S-nets
+of revolution that are not spheres, with positive or negative Gaussian curvature.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.optimize import brentq
+from scipy.optimize import brentq, fsolve
 
 from .errors import InputError
 from .geometry import circumcircle_tangent
 from .mesh import QuadMesh
 
-__all__ = ["Profile", "PROFILES", "rotational_snet", "height_field_grid"]
+__all__ = ["Profile", "PROFILES", "rotational_snet", "rotational_weingarten_snet",
+           "height_field_grid"]
 
 
 @dataclass(frozen=True)
@@ -97,18 +102,44 @@ PROFILES: dict[str, Profile] = {p.name: p for p in [
 ]}
 
 
-def _level_cosine(profile: Profile, s_prev, s_mid, s_next, half_step: float):
-    """Cosine of the discrete intersection angle of a star centred on level ``s_mid``.
+def _meridian_star(pa: np.ndarray, pb: np.ndarray, pc: np.ndarray, half_step: float) -> tuple:
+    """Points ``v, v1, v2, v3, v4`` of a star centred at ``phi = 0`` on meridian point ``pb``.
 
-    The star's neighbours lie on the adjacent levels at ``phi = +-half_step``; arrays
-    broadcast.
+    ``pa, pb, pc`` are ``(..., 2)`` meridian points ``(r, z)`` of the levels before, at and
+    after the centre; the neighbours lie at ``phi = +-half_step``.
     """
-    v = profile.points(s_mid, 0.0)
-    v1, v4 = profile.points(s_prev, half_step), profile.points(s_prev, -half_step)
-    v3, v2 = profile.points(s_next, -half_step), profile.points(s_next, half_step)
+    def point(p, phi):
+        return np.stack([p[..., 0] * np.cos(phi), p[..., 0] * np.sin(phi), p[..., 1]], axis=-1)
+
+    return (point(pb, 0.0), point(pa, half_step), point(pc, half_step), point(pc, -half_step),
+            point(pa, -half_step))
+
+
+def _star_cosine(v, v1, v2, v3, v4):
+    """Cosine of the discrete intersection angle (between the osculating-circle tangents)."""
     t1 = circumcircle_tangent(v, v1, v3)
     t2 = circumcircle_tangent(v, v2, v4)
     return np.sum(t1 * t2, axis=-1) / np.linalg.norm(t1, axis=-1) / np.linalg.norm(t2, axis=-1)
+
+
+def _star_curvature(v, v1, v2, v3, v4):
+    """Curvature ``1 / radius`` of the sphere of a star mirror-symmetric in the plane y = 0.
+
+    Its centre lies on that plane, equidistant from ``v, v1, v2`` (a 2 x 2 linear system).
+    """
+    rows = 2 * np.stack([(v1 - v)[..., [0, 2]], (v2 - v)[..., [0, 2]]], axis=-2)
+    rhs = np.stack([np.sum(v1 * v1 - v * v, axis=-1), np.sum(v2 * v2 - v * v, axis=-1)], axis=-1)
+    centre = np.linalg.solve(rows, rhs[..., None])[..., 0]
+    return 1 / np.hypot(centre[..., 0] - v[..., 0], centre[..., 1] - v[..., 2])
+
+
+def _level_cosine(profile: Profile, s_prev, s_mid, s_next, half_step: float):
+    """Cosine of the discrete intersection angle of a star centred on level ``s_mid``."""
+    def rz(s):
+        s = np.asarray(s, dtype=np.float64)
+        return np.stack([profile.radius(s), profile.height(s) + 0 * s], axis=-1)
+
+    return _star_cosine(*_meridian_star(rz(s_prev), rz(s_mid), rz(s_next), half_step))
 
 
 def _solve_level(f: Callable[[float], float], base: float, guess: float) -> float:
@@ -229,6 +260,104 @@ def rotational_snet(m: int, k: int, *, profile: str | Profile = "catenoid",
     phi = (i + j - (m + k - 2) / 2) * half
     points = scale * profile.points(s[j - i + m - 1], phi)
     return QuadMesh.grid(points, name=f"rotational-{profile.name}-{m}x{k}")
+
+
+def _solve_point(f: Callable[[np.ndarray], np.ndarray], guess: np.ndarray) -> np.ndarray:
+    """Root of a map of the meridian plane near `guess`; InputError when none is found."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # fsolve warns at its precision floor
+        x = fsolve(f, guess, xtol=1e-14)
+    # the conditions lose digits like 1 / step^2: 1e-8 still tells a root from a failure
+    if not (np.all(np.isfinite(x)) and np.max(np.abs(f(x))) < 1e-8 and x[0] > 0):
+        raise InputError("rotational_weingarten_snet: the profile cannot be continued (it would "
+                         "reach the axis or fold); use a smaller span_deg or another radius")
+    return x
+
+
+def rotational_weingarten_snet(m: int, k: int, *, radius: float = 1.5, angle_deg: float = 80.0,
+                               step: float | None = None, span_deg: float = 90.0,
+                               scale: float = 1.0) -> QuadMesh:
+    """An exact linear Weingarten S-net of revolution: isogonal, with one Meusnier radius.
+
+    The layout is that of `rotational_snet`, but the meridian curve is not given: it is
+    built level by level, each new meridian point ``(r, z)`` solving the two conditions at
+    the star before it: the discrete intersection angle is `angle_deg` and the Meusnier
+    sphere has radius `radius`. The middle level is the parallel ``r = 1, z = 0``, where the
+    meridian is vertical and the profile symmetric. In the smooth limit the net's normal
+    curvature ``k_parallel cos^2(a / 2) + k_meridian sin^2(a / 2)`` is ``1 / radius`` (a
+    linear Weingarten surface; the families are symmetric about the parallels). At the
+    middle parallel ``k_parallel = 1``, so the surface is barrel-shaped (positive Gaussian
+    curvature) for ``radius < 1 / cos^2(angle_deg / 2)`` and has a neck (negative) for a
+    larger radius; ``radius = 1`` gives the unit sphere.
+
+    Parameters
+    ----------
+    m, k : vertices along the two families (both at least 3).
+    radius : the Meusnier radius shared by all stars (before `scale`).
+    angle_deg : the intersection angle of every star, in (0, 180) degrees.
+    step, span_deg : as in `rotational_snet`.
+    scale : factor applied to all coordinates.
+
+    Returns
+    -------
+    QuadMesh with ``m * k`` vertices ``(i, j)`` at row ``i * k + j``, faces counter-clockwise
+    in ``(i, j)`` (normals pointing away from the axis).
+
+    Raises
+    ------
+    InputError
+        For bad sizes, angle or radius, or when the profile cannot be continued over the
+        requested span.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fabplan.generate import rotational_weingarten_snet
+    >>> from fabplan.geometry import fit_star_spheres, intersection_angles
+    >>> net = rotational_weingarten_snet(10, 10, radius=3.0, angle_deg=80.0)
+    >>> fit = fit_star_spheres(net.vertices, net.stars)
+    >>> bool(fit.residual.max() < 1e-12), bool(np.allclose(fit.radius, 3.0, rtol=1e-12))
+    (True, True)
+    >>> angles = np.degrees(intersection_angles(net.vertices, net.stars))
+    >>> bool(np.allclose(np.minimum(angles, 180 - angles), 80.0, atol=1e-9))
+    True
+    """
+    if m < 3 or k < 3:
+        raise InputError(f"rotational_weingarten_snet needs at least 3 x 3 vertices, got {m} x {k}")
+    if not 0.0 < angle_deg < 180.0:
+        raise InputError(f"angle_deg must lie strictly between 0 and 180, got {angle_deg}")
+    if not (radius > 0 and math.isfinite(radius)):
+        raise InputError(f"radius must be a positive length, got {radius}")
+    n_levels = m + k - 1
+    d = 2 * math.radians(span_deg) / (n_levels - 1) if step is None else float(step)
+    half = d / 2
+    if not 0 < half * (n_levels - 1) < 2 * math.pi:
+        raise InputError(f"rotational_weingarten_snet: the grid would cover "
+                         f"{math.degrees(half * (n_levels - 1)):.4g} degrees of longitude; it must "
+                         "be positive and below 360 (reduce step or span_deg)")
+    cosine, curvature = math.cos(math.radians(angle_deg)), 1 / radius
+
+    def conditions(pa, pb, pc):
+        star = _meridian_star(pa, pb, pc, half)
+        return np.array([_star_cosine(*star) - cosine, (_star_curvature(*star) - curvature) * radius])
+
+    P = np.full((n_levels, 2), np.nan)
+    c = (n_levels - 1) // 2
+    P[c] = (1.0, 0.0)
+    # the middle star's neighbours are mirror images in z = 0: solve for (r, dz)
+    r1, dz = _solve_point(lambda x: conditions(x * [1, -1], P[c], x),
+                          np.array([1.0, math.tan(math.radians(angle_deg) / 2) * half]))
+    P[c - 1], P[c + 1] = (r1, -dz), (r1, dz)
+    # A second-order recurrence, solved level by level (once per mesh, over levels).
+    for at in range(c + 1, n_levels - 1):
+        P[at + 1] = _solve_point(lambda x, at=at: conditions(P[at - 1], P[at], x), 2 * P[at] - P[at - 1])
+    for at in range(c - 1, 0, -1):
+        P[at - 1] = _solve_point(lambda x, at=at: conditions(x, P[at], P[at + 1]), 2 * P[at] - P[at + 1])
+    i, j = np.meshgrid(np.arange(m), np.arange(k), indexing="ij")
+    phi = (i + j - (m + k - 2) / 2) * half
+    rz = P[j - i + m - 1]
+    points = scale * np.stack([rz[..., 0] * np.cos(phi), rz[..., 0] * np.sin(phi), rz[..., 1]], axis=-1)
+    return QuadMesh.grid(points, name=f"rotational-weingarten-{m}x{k}")
 
 
 def height_field_grid(m: int, k: int, f: Callable[[np.ndarray, np.ndarray], np.ndarray], *,
