@@ -13,6 +13,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from . import report
 from .geometry import face_normals
@@ -206,6 +207,7 @@ def mold_report_html(plan: MoldPlan) -> str:
         ["mold types", ", ".join(f"{v} {k}" for k, v in r["mold_types"].items())],
         ["largest measured deviation", f"{r['max_deviation_mm']:.3f} mm"],
         ["panels that do not fit", len(r["failures"])],
+        ["panels the verification moved to new molds", len(r["reassigned_by_verification"])],
         ["Weingarten residual (rms distance from the line, 1/m)",
          None if w.get("line_residual_rms") is None else w["line_residual_rms"] * _PER_M],
         ["Weingarten residual / curvature spread", w.get("thickness")],
@@ -229,8 +231,12 @@ def mold_report_html(plan: MoldPlan) -> str:
                   None if plan.mold_shape[j, 1] == 0 else 1 / plan.mold_shape[j, 1],
                   round(float(ext[j, 0])), round(float(ext[j, 1])), int(per[j]), float(mdev[j])]
                  for j in range(plan.mold_count)]
+    rotation = Rotation.from_matrix(plan.placement[:, :3, :3] / plan.settings.mm_per_unit)
+    turn = np.degrees(rotation.as_rotvec())
     panel_rows = [[i, int(plan.mold[i]), PANEL_TYPES[plan.panel_type[i]].replace("_", " "),
                    plan.curvature[i, 0] * _PER_M, plan.curvature[i, 1] * _PER_M,
+                   "({:.2f}, {:.2f}, {:.2f})".format(*turn[i]),
+                   "({:.1f}, {:.1f}, {:.1f})".format(*plan.placement[i, :3, 3]),
                    round(float(plan.footprint_mm[i, 0])), round(float(plan.footprint_mm[i, 1])),
                    float(plan.deviation_mm[i]), plan.problem[i] or "fits"]
                   for i in range(plan.panel_count)]
@@ -263,11 +269,15 @@ def mold_report_html(plan: MoldPlan) -> str:
                               mold_rows)),
         report.html_section(
             "Panels",
-            report.html_paragraph("The 4 x 4 placement of every panel (model coordinates to "
-                                  "mold millimetres) is in molds.json and panels.csv."),
+            report.html_paragraph("Placement: the rigid motion taking the panel from model "
+                                  "coordinates onto its mold, p_mold = s R p + t with s the mm "
+                                  "per model unit, R the rotation given by its rotation vector "
+                                  "(axis times angle) and t the translation; the full 4 x 4 "
+                                  "matrices are in molds.json and panels.csv."),
             report.html_details(f"{plan.panel_count} panels (click to open)", report.html_table(
-                ["face", "mold", "type", "k1 [1/m]", "k2 [1/m]", "footprint x [mm]",
-                 "footprint y [mm]", "deviation [mm]", "status"], panel_rows,
+                ["face", "mold", "type", "k1 [1/m]", "k2 [1/m]", "rotation vector [deg]",
+                 "translation [mm]", "footprint x [mm]", "footprint y [mm]", "deviation [mm]",
+                 "status"], panel_rows,
                 bad_rows=plan.failures.tolist()))),
         report.html_section(
             "Files",

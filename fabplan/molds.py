@@ -184,12 +184,10 @@ def _offset_gap(U: np.ndarray, Z: np.ndarray, K: np.ndarray) -> tuple[np.ndarray
 class _Panels:
     """Panel data for the assignment (internal): samples in the four placement frames."""
 
-    frames: np.ndarray      # (p, 4, 3, 3) rows of the mold axes in model coordinates
     shapes: np.ndarray      # (p, 4, 2) panel curvatures in each frame (1/mm)
-    point: np.ndarray       # (p, 3) panel apex point (model units)
     U: np.ndarray           # (p, 4, s, 2) squared mold x, y of the samples (mm^2)
     Z: np.ndarray           # (p, 4, s) mold z of the samples (mm)
-    reach: np.ndarray       # (p,) curvature distance beyond which no mold can fit (1/mm)
+    reach: np.ndarray       # (p,) curvature distance beyond which molds are not tried (1/mm)
 
 
 def _frame_coordinates(points, point, frames, mm):
@@ -199,13 +197,16 @@ def _frame_coordinates(points, point, frames, mm):
 
 
 def _panel_data(points, point, frames, shapes, mm, tolerance) -> _Panels:
+    """Samples (p, s, 3) of panels with apex points (p, 3) in their placement frames
+    (p, 4, 3, 3), their shapes there (p, 4, 2) and their reach at the tolerance (mm)."""
     Q = _frame_coordinates(points, point, frames, mm)
     U, Z = Q[..., :2] ** 2, Q[..., 2]
     width = np.minimum(np.ptp(Q[:, 0, :, 0], axis=1), np.ptp(Q[:, 0, :, 1], axis=1))
-    # A pure shift leaves a gap of at least dk w^2 / 16 for a curvature error dk across a
-    # width w; four times that reach is a generous cut-off for the candidate search.
+    # A shift along the mold axis leaves a gap of about dk w^2 / 16 for a curvature error dk
+    # across a width w; molds four times farther than the tolerance allows are not tried
+    # (a generous cut: it can only cost a mold, never accept a panel that does not fit).
     reach = 64.0 * tolerance / np.maximum(width, 1e-9) ** 2
-    return _Panels(frames=frames, shapes=shapes, point=point, U=U, Z=Z, reach=reach)
+    return _Panels(shapes=shapes, U=U, Z=Z, reach=reach)
 
 
 def _cylinder_fits(U: np.ndarray, Z: np.ndarray, k1: np.ndarray, iterations: int = 80):
@@ -232,7 +233,7 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32):
 
     Molds are taken in blocks of nearby curvatures; a block is only evaluated for the
     panels whose shape in a placement lies within their reach (see `_panel_data`) of the
-    block's bounding box: farther pairs are left at infinity (they cannot fit).
+    block's bounding box: farther pairs are left at infinity (treated as not fitting).
 
     Returns
     -------
@@ -351,7 +352,6 @@ class _Stage:
     molds: np.ndarray       # (m, 2) 1/mm
     mold: np.ndarray        # (n,) mold index of each panel
     variant: np.ndarray     # (n,) placement frame of each panel
-    deviation: np.ndarray   # (n,) mm, from the assignment samples
 
 
 def _assign(data: _Panels, candidates: np.ndarray, free: int, tolerance: float,
@@ -363,7 +363,7 @@ def _assign(data: _Panels, candidates: np.ndarray, free: int, tolerance: float,
     """
     n = len(data.shapes)
     if n == 0:
-        return _Stage(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        return _Stage(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64))
     if len(candidates) == n:
         candidates = candidates[_thin_candidates(candidates[:, :max(free, 1)], data.reach)]
     dev, _ = _gap_matrix(data, candidates)
@@ -401,9 +401,8 @@ def _assign(data: _Panels, candidates: np.ndarray, free: int, tolerance: float,
         if key == state:
             break
         state = key
-    dev, var = _gap_matrix(data, molds)
-    rows = np.arange(n)
-    return _Stage(molds=molds, mold=mold, variant=var[rows, mold], deviation=dev[rows, mold])
+    _, var = _gap_matrix(data, molds)
+    return _Stage(molds=molds, mold=mold, variant=var[np.arange(n), mold])
 
 
 def _remove_molds(mold, molds, dev, var, tolerance):
@@ -509,6 +508,8 @@ class MoldPlan:
     footprint_mm : (p, 2) float, ``2 max |x|``, ``2 max |y|`` of the placed panel.
     problem : list of str or None per panel: why it does not fit, if it does not.
     weingarten : `weingarten_fit` of the panel curvatures (1/mm).
+    reassigned : (k,) int, panels the dense verification found above the tolerance on their
+        first mold, classified again and moved to new molds.
     seconds : run time.
     """
 
@@ -526,6 +527,7 @@ class MoldPlan:
     footprint_mm: np.ndarray
     problem: list
     weingarten: dict
+    reassigned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     seconds: float = 0.0
     stage_seconds: dict = field(default_factory=dict)
 
@@ -629,6 +631,7 @@ class MoldPlan:
             "max_deviation_mm": float(self.deviation_mm.max()),
             "fits_all": self.fits_all,
             "failures": self.failures.tolist(),
+            "reassigned_by_verification": self.reassigned.tolist(),
             "weingarten": self.weingarten,
             "curvature_reach_per_mm": {"median_panel": self.curvature_reach(0.5),
                                        "large_panels": self.curvature_reach(0.9)},
@@ -712,62 +715,33 @@ def plan_molds(mesh, settings: MoldSettings | None = None, **options) -> MoldPla
     data = _panel_data(points, shapes.point, frames, kk, mm, work)
     clock["panel model"] = time.perf_counter() - start
 
-    # classify: a plane, else a cylinder, fits within the working tolerance
-    plane_dev = _offset_gap(data.U[:, 0], data.Z[:, 0], np.zeros(2))[0]
-    cyl_k, cyl_dev = _cylinder_fits(data.U[:, 0], data.Z[:, 0], data.shapes[:, 0, 0])
-    panel_type = np.where(plane_dev <= work, 0, np.where(cyl_dev <= work, 1, 2))
+    panel_type, cylinder = _classify(data, work)
     clock["classification"] = time.perf_counter() - start - sum(clock.values())
-
-    n = len(panel_type)
-    mold = np.zeros(n, np.int64)
-    variant = np.zeros(n, np.int64)
-    mold_shape, mold_type = [], []
-    for t, kind in enumerate(MOLD_TYPES):
-        idx = np.flatnonzero(panel_type == t)
-        if idx.size == 0:
-            continue
-        sub = _subset(data, idx)
-        free = _FREE_DIMS[kind]
-        if kind == "plane":
-            candidates = np.zeros((1, 2))
-        elif kind == "cylinder":
-            candidates = np.column_stack([cyl_k[idx], np.zeros(idx.size)])
-        else:
-            candidates = sub.shapes[:, 0]
-        order = np.lexsort((candidates[:, 1], candidates[:, 0]))
-        stage = _assign(sub, candidates[order], free, work, settings.rounds)
-        mold[idx] = stage.mold + len(mold_shape)
-        variant[idx] = stage.variant
-        mold_shape += list(stage.molds)
-        mold_type += [t] * len(stage.molds)
-    mold_shape = np.array(mold_shape).reshape(-1, 2)
-    mold_type = np.array(mold_type, dtype=np.int64)
+    mold, variant, mold_shape, mold_type = _assign_by_type(data, panel_type, cylinder, work,
+                                                           settings.rounds)
     clock["assignment"] = time.perf_counter() - start - sum(clock.values())
 
-    # verification on dense samples; panels above the tolerance get molds of their own
+    # verification on dense samples; a panel found above the tolerance is classified again
+    # on them (it may be more curved than the assignment samples showed) and gets a new mold
     dense = panel_samples(mesh, surfaces, settings.verify_level)
     placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
     over = np.flatnonzero(deviation > tol)
     if over.size:
-        dense_data = _panel_data(dense[over], shapes.point[over], frames[over], kk[over], mm, work)
-        for t in np.unique(panel_type[over]):
-            sel = np.flatnonzero(panel_type[over] == t)
-            sub = _subset(dense_data, sel)
-            free = _FREE_DIMS[MOLD_TYPES[t]]
-            cand = sub.shapes[:, 0].copy()
-            cand[:, free:] = 0.0
-            stage = _assign(sub, cand, free, work, settings.rounds)
-            mold[over[sel]] = stage.mold + len(mold_shape)
-            variant[over[sel]] = stage.variant
-            mold_shape = np.concatenate([mold_shape, stage.molds])
-            mold_type = np.concatenate([mold_type, np.full(len(stage.molds), t)])
-        mold, mold_shape, mold_type = _drop_empty(mold, mold_shape, mold_type)
-        placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+        data = _panel_data(dense[over], shapes.point[over], frames[over], kk[over], mm, work)
+        dense_type, cylinder = _classify(data, work)
+        panel_type[over] = np.maximum(panel_type[over], dense_type)
+        new = _assign_by_type(data, panel_type[over], cylinder, work, settings.rounds)
+        mold[over] = new[0] + len(mold_shape)
+        variant[over] = new[1]
+        mold, mold_shape, mold_type = _drop_empty(mold, np.concatenate([mold_shape, new[2]]),
+                                                  np.concatenate([mold_type, new[3]]))
+        placement, _ = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
     q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
     footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
     deviation = placement_deviations(dense, placement, mold_shape[mold])
     clock["verification"] = time.perf_counter() - start - sum(clock.values())
 
+    n = len(panel_type)
     problem: list = [None] * n
     for i in np.flatnonzero(deviation > tol):
         problem[i] = f"deviates {deviation[i]:.3f} mm from its mold (tolerance {tol:g} mm)"
@@ -782,13 +756,53 @@ def plan_molds(mesh, settings: MoldSettings | None = None, **options) -> MoldPla
                     curvature=curvature, mold_type=mold_type, mold_shape=mold_shape,
                     panel_shape=kk[np.arange(n), variant], mold=mold,
                     placement=placement, deviation_mm=deviation, footprint_mm=footprint,
-                    problem=problem, weingarten=weingarten,
+                    problem=problem, weingarten=weingarten, reassigned=over,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
 
 
+def _classify(data: _Panels, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Panel types (indices into `PANEL_TYPES`): planar when the plane, else single curved
+    when the best cylinder mold fits within `tolerance` (mm), else double curved; and the
+    best cylinder curvature of every panel (1/mm)."""
+    plane = _offset_gap(data.U[:, 0], data.Z[:, 0], np.zeros(2))[0]
+    cylinder, cylinder_gap = _cylinder_fits(data.U[:, 0], data.Z[:, 0], data.shapes[:, 0, 0])
+    return np.where(plane <= tolerance, 0, np.where(cylinder_gap <= tolerance, 1, 2)), cylinder
+
+
+def _assign_by_type(data: _Panels, panel_type: np.ndarray, cylinder: np.ndarray,
+                    tolerance: float, rounds: int):
+    """Molds for panels, each type on molds of its own type (plane, cylinder, paraboloid).
+
+    Returns mold (p,) int, variant (p,) int, mold shapes (m, 2), mold types (m,) int.
+    """
+    n = len(panel_type)
+    mold = np.zeros(n, np.int64)
+    variant = np.zeros(n, np.int64)
+    shapes, types = [np.zeros((0, 2))], [np.zeros(0, np.int64)]
+    count = 0
+    for t, kind in enumerate(MOLD_TYPES):
+        idx = np.flatnonzero(panel_type == t)
+        if idx.size == 0:
+            continue
+        sub = _subset(data, idx)
+        if kind == "plane":
+            candidates = np.zeros((1, 2))
+        elif kind == "cylinder":
+            candidates = np.column_stack([cylinder[idx], np.zeros(idx.size)])
+        else:
+            candidates = sub.shapes[:, 0]
+        order = np.lexsort((candidates[:, 1], candidates[:, 0]))
+        stage = _assign(sub, candidates[order], _FREE_DIMS[kind], tolerance, rounds)
+        mold[idx] = stage.mold + count
+        variant[idx] = stage.variant
+        shapes.append(stage.molds)
+        types.append(np.full(len(stage.molds), t))
+        count += len(stage.molds)
+    return mold, variant, np.concatenate(shapes), np.concatenate(types)
+
+
 def _subset(data: _Panels, idx: np.ndarray) -> _Panels:
-    return _Panels(frames=data.frames[idx], shapes=data.shapes[idx], point=data.point[idx],
-                   U=data.U[idx], Z=data.Z[idx], reach=data.reach[idx])
+    return _Panels(shapes=data.shapes[idx], U=data.U[idx], Z=data.Z[idx], reach=data.reach[idx])
 
 
 def _drop_empty(mold, mold_shape, mold_type):
