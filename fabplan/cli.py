@@ -140,6 +140,149 @@ def _cmd_molds(args) -> int:
     return 0
 
 
+def _cmd_layout(args) -> int:
+    from .layout import glide, layout_surface, write_layout_picture
+    from .nets import get_net
+    from .surfaces import load_design
+
+    check_angle(args.angle)
+    preset = get_net(args.net)
+    if not (args.panel_size > 0 and args.panel_size < float("inf")):
+        raise InputError(f"--panel-size must be a positive length, got {args.panel_size}")
+    if args.family is not None and args.angle is not None:
+        raise InputError("--family and --angle exclude each other: the prescribed family "
+                         "decides the angle")
+    if preset.angle == "right" and args.angle not in (None, 90.0):
+        raise InputError(f"net type {preset.name!r} is orthogonal; --angle must be 90 or omitted")
+    if args.max_iter is not None and args.max_iter < 1:
+        raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
+    out = Path(args.output)
+    if out.suffix.lower() != ".obj":
+        raise InputError(f"{out}: the output must be an .obj file")
+    picture = out.with_suffix(".png")
+    family_file = args.family if args.family and Path(args.family).is_file() else None
+    _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
+    design = load_design(args.surface, triangles=args.triangles)
+    layout = layout_surface(design, args.panel_size, angle=args.angle or 90.0,
+                            family=args.family)
+    settings = SolverSettings()
+    if args.max_iter is not None:
+        settings.max_iterations = args.max_iter
+    show = (sys.stderr.isatty() or args.verbose) and not args.quiet
+
+    def progress(rec):
+        if show:
+            print(f"  iteration {rec.iteration:3d}  residual {rec.hard_residual:.3e}  "
+                  f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms", file=sys.stderr)
+
+    result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
+                   settings=settings, progress=progress)
+    title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
+             + (f", {layout.family}" if layout.family else f", {layout.angle_deg:g} deg"))
+    write_layout_picture(picture, design, result.mesh, title=title,
+                         singular_points=layout.singular_points)
+    obj_path, json_path = result.write(out)
+    props = result.properties
+    print(format_summary(props))
+    d = props["distance_to_design"]
+    rel = props["distance_to_design_relative_to_panel"]
+    print(f"distance to the design surface: max {d['max']:.3e} ({rel['max']:.2e} of the panel "
+          f"size), mean {d['mean']:.3e} ({rel['mean']:.2e})")
+    edge = props["edge_length_relative_to_panel"]
+    record = props["layout"]
+    print(f"layout: {record['quads']} quads, edges {edge['min']:.3f} .. {edge['max']:.3f} of the "
+          f"panel size; {len(record['irregular_vertices'])} irregular vertices "
+          f"{record['irregular_vertices'][:12]}{' ...' if len(record['irregular_vertices']) > 12 else ''}; "
+          f"{record['gliding_boundary_vertices']} of {record['boundary_vertices']} boundary vertices "
+          "glide on the surface boundary")
+    if len(layout.singular_points):
+        print(f"fabplan: note: the direction field is singular at {len(layout.singular_points)} "
+              f"points (umbilics or seam ends, listed in {json_path.name}); "
+              f"{record['filled_holes']} holes around them were closed with irregular vertices, "
+              f"{record['open_holes']} left open; the rest of the layout is regular",
+              file=sys.stderr)
+    params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items() if isinstance(v, float))
+    print(f"{result.net}: {result.status} after {result.iterations} iterations in "
+          f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
+          + (f" ({params})" if params else ""))
+    print(f"wrote {obj_path}, {json_path} and {picture}")
+    if not result.converged:
+        print(f"fabplan: warning: the optimization {result.status} before reaching the "
+              f"tolerance; see the residuals in {json_path}", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
+    return 0
+
+
+def _parse_sheet(text: str) -> tuple[float, float]:
+    """'2500x1250' -> (2500.0, 1250.0) millimetres."""
+    parts = text.lower().replace("*", "x").split("x")
+    try:
+        w, h = (float(p) for p in parts)
+    except ValueError:
+        raise InputError(f"--sheet must be WIDTHxHEIGHT in millimetres, e.g. 2500x1250, "
+                         f"got {text!r}") from None
+    return w, h
+
+
+def _parse_layers(specs: list | None) -> dict:
+    """['cut=LASER_CUT:1', 'engrave=MARK'] -> the layers of StripSettings, defaults kept."""
+    from .strips import StripSettings
+
+    layers = dict(StripSettings(height_mm=1, thickness_mm=0.1).layers)
+    for spec in specs or []:
+        kind, _, rest = spec.partition("=")
+        name, _, colour = rest.partition(":")
+        if kind not in layers or not name:
+            raise InputError(f"--layer must be KIND=NAME[:COLOUR] with KIND one of "
+                             f"{', '.join(layers)}, got {spec!r}")
+        try:
+            layers[kind] = (name, int(colour) if colour else layers[kind][1])
+        except ValueError:
+            raise InputError(f"--layer {spec!r}: the colour must be an AutoCAD colour index "
+                             "1-255") from None
+    return layers
+
+
+def _cmd_strips(args) -> int:
+    from .strips import StripSettings, plan_strips
+
+    settings = StripSettings(
+        height_mm=args.height, thickness_mm=args.thickness, clearance_mm=args.clearance,
+        units=args.units, tolerance_mm=args.tolerance, sheet_mm=_parse_sheet(args.sheet),
+        spacing_mm=args.spacing, margin_mm=args.margin, kerf_mm=args.kerf, end=args.end,
+        end_extension_mm=args.extension, splice=args.splice, splice_length_mm=args.splice_length,
+        labels=args.labels, label_height_mm=args.label_height, layers=_parse_layers(args.layer),
+        one_file=args.one_file)
+    settings.check()
+    out = Path(args.output)
+    _check_output_folder(out)
+    mesh = load_mesh(args.net)
+    plan = plan_strips(mesh, settings)
+    files = plan.write(out, previews=not args.no_previews)
+    s = plan.summary()
+    radius = s["radius_mm"]
+    print(f"{s['strips']} strips ({s['strips_per_family'][0]} A, {s['strips_per_family'][1]} B), "
+          f"{s['crossings']} crossings, {s['total_length_mm'] / 1000:.2f} m of strip, "
+          f"unrolled length error {s['unrolled_length_error_mm']:.1e} mm")
+    if radius:
+        print(f"arc radius {radius['median']:.1f} mm (spread {radius['spread_relative']:.2e}); "
+              f"parts {'congruent' if s['congruent'] else 'not congruent'} within "
+              f"{settings.tolerance_mm:g} mm (deviation {s['congruence_deviation_mm']:.3f} mm)")
+    else:
+        print("all strips straight")
+    print(f"twist up to {s['twist_deg_per_m']:.2f} deg/m; flat panels would lean up to "
+          f"{s['off_orthogonal_deg']:.2f} deg from orthogonal")
+    print(f"{s['parts']} parts on {s['sheets']} sheets of {settings.sheet_mm[0]:g}x"
+          f"{settings.sheet_mm[1]:g} mm, material use {100 * s['material_use']:.1f} %, "
+          f"{s['seconds']:.1f} s")
+    print(f"wrote {len(files)} files to {out}")
+    if s["junctions"]:
+        print(f"fabplan: note: {s['junctions']} vertices join more than one strip of a family "
+              "(irregular vertices): no slits there, they need node connectors; listed in "
+              f"{out / 'strips.json'}", file=sys.stderr)
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """Usage errors as one line and exit code 2, like every other bad input."""
 
@@ -195,6 +338,73 @@ def build_parser() -> argparse.ArgumentParser:
                         "faces, else smooth)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     p.set_defaults(func=_cmd_molds)
+
+    p = sub.add_parser("layout", help="lay out an S-net on a design surface and optimize it "
+                                      "gliding on the surface (OBJ + JSON + PNG)")
+    p.add_argument("surface", help="design surface: a triangle mesh (OBJ/STL/PLY/OFF) or a "
+                                   "built-in surface 'NAME[:key=value,...]' (hyperbolic-paraboloid, "
+                                   "paraboloid, torus, revolution, tower-facade, height-field, "
+                                   "bspline)")
+    p.add_argument("--net", required=True, choices=list(NETS), metavar="NAME",
+                   help="net type (see `fabplan nets`)")
+    p.add_argument("--angle", type=float,
+                   help="intersection angle of the two families in degrees (default 90)")
+    p.add_argument("--panel-size", type=float, required=True, metavar="L",
+                   help="target edge length in model units")
+    p.add_argument("--family", metavar="FILE",
+                   help="prescribe the first family: x, y or z (levels of a coordinate, e.g. "
+                        "floors; z:3.5 for levels every 3.5), or a file of polylines (OBJ "
+                        "'l' lines or 'x y z' rows with blank lines between curves)")
+    p.add_argument("--triangles", type=int, default=40000,
+                   help="triangles of a built-in surface's triangulation (default 40000)")
+    p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
+    p.add_argument("-o", "--output", required=True,
+                   help="output OBJ; its .json and .png sit beside it")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
+    p.set_defaults(func=_cmd_layout)
+
+    p = sub.add_parser("strips", help="lamella strips along the parameter lines, unrolled, "
+                                      "slit, labelled and nested on sheets (DXF + schedule)")
+    p.add_argument("net", help="the net (OBJ)")
+    p.add_argument("--height", type=float, required=True, metavar="MM",
+                   help="lamella height; the surface runs along its middle")
+    p.add_argument("--thickness", type=float, required=True, metavar="MM",
+                   help="material thickness (the slits are this plus --clearance wide)")
+    p.add_argument("--units", choices=["m", "mm"], default="m", help="model units (default m)")
+    p.add_argument("--sheet", default="2500x1250", metavar="WxH",
+                   help="sheet size in mm (default 2500x1250)")
+    p.add_argument("--spacing", type=float, default=10.0, metavar="MM",
+                   help="gap between parts (default 10)")
+    p.add_argument("--margin", type=float, default=10.0, metavar="MM",
+                   help="gap to the sheet edge (default 10)")
+    p.add_argument("--kerf", type=float, default=0.0, metavar="MM",
+                   help="cut width to compensate: outlines grow, slits shrink by half (default 0)")
+    p.add_argument("--clearance", type=float, default=0.2, metavar="MM",
+                   help="play added to the slit width (default 0.2)")
+    p.add_argument("--tolerance", type=float, default=0.1, metavar="MM",
+                   help="cutting tolerance for fitting arcs (default 0.1)")
+    p.add_argument("--end", choices=["square", "round"], default="square",
+                   help="strip ends (default square)")
+    p.add_argument("--extension", type=float, metavar="MM",
+                   help="material beyond the end crossings (default height / 2)")
+    p.add_argument("--splice", choices=["overlap", "lap"], default="overlap",
+                   help="joint of a strip split to fit the sheets (default overlap)")
+    p.add_argument("--splice-length", type=float, metavar="MM",
+                   help="length of a splice (default 2 x height)")
+    p.add_argument("--labels", choices=["stroke", "outline", "text"], default="stroke",
+                   help="engraved labels: single-stroke lines, glyph outlines or DXF TEXT "
+                        "(default stroke)")
+    p.add_argument("--label-height", type=float, metavar="MM",
+                   help="strip label height (default 0.12 x height, 3-20 mm)")
+    p.add_argument("--layer", action="append", metavar="KIND=NAME[:COLOUR]",
+                   help="layer name and colour for cut, slit or engrave (defaults CUT:1 red, "
+                        "SLIT:6 magenta, ENGRAVE:5 blue); repeatable")
+    p.add_argument("--one-file", action="store_true",
+                   help="all sheets side by side in one DXF instead of one file per sheet")
+    p.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
+    p.set_defaults(func=_cmd_strips)
     return parser
 
 

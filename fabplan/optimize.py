@@ -123,7 +123,9 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
                  radius: float | None = None, reference: ReferenceSurface | None = None,
                  fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
                  fairness: bool = True, coherent: bool = False,
-                 closeness: bool = True, glide: bool = False) -> GuidedProjection:
+                 closeness: bool = True, glide: bool = False,
+                 glide_boundary: np.ndarray | None = None,
+                 extra: tuple = ()) -> GuidedProjection:
     """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
     check_net_input(mesh)
     preset = get_net(net)
@@ -140,10 +142,13 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
         # on the surface at convergence, boundary vertices on its boundary curves
         families.append(Closeness(reference, hard=True))
         curves = reference.boundary_curves()
-        if curves:
-            families.append(BoundaryGliding(curves, np.flatnonzero(mesh.is_boundary_vertex)))
+        if glide_boundary is None:
+            glide_boundary = np.flatnonzero(mesh.is_boundary_vertex)
+        if curves and len(glide_boundary):
+            families.append(BoundaryGliding(curves, glide_boundary))
     elif closeness:
         families.append(Closeness(reference))
+    families += list(extra)
     solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings)
     solver.net = preset.name
     solver.reference = reference
@@ -221,6 +226,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              fixed: np.ndarray | None = None, handles: dict | None = None,
              settings: SolverSettings | None = None, fairness: bool = True,
              coherent: bool = False, closeness: bool = True, glide: bool = False,
+             glide_boundary: np.ndarray | None = None, extra: tuple = (),
              progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
 
@@ -242,6 +248,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     glide : keep the net on the reference as a constraint (not a fading pull), with its
         boundary vertices on the reference's boundary curves: a layout that glides on a
         design surface.
+    glide_boundary : (b,) int, the boundary vertices that glide on the reference's
+        boundary curves (default: all boundary vertices of the net).
+    extra : further constraint families to solve with (e.g. prescribed levels).
     progress : called after every iteration with its record.
 
     Returns
@@ -259,7 +268,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     start = time.perf_counter()
     solver = build_solver(mesh, net, angle=angle, radius=radius, reference=reference,
                           fixed=held, settings=settings, fairness=fairness, coherent=coherent,
-                          closeness=closeness, glide=glide)
+                          closeness=closeness, glide=glide, glide_boundary=glide_boundary,
+                          extra=extra)
     if handle_ids.size:
         solver.set_vertices(handle_ids, targets)
     status = solver.run(callback=progress)

@@ -1,0 +1,846 @@
+"""Design surfaces: parametric surfaces by name, and validated triangle meshes from files.
+
+A designer brings either a triangle mesh (OBJ, STL, PLY or OFF exported from a modeller)
+or a shape described by a few parameters. Both end up as a `DesignSurface`: a manifold,
+consistently oriented triangle mesh with area, the surface an S-net layout is computed on
+and glides on. A parametric surface also keeps its function, so the layout can take its
+principal directions from the exact fundamental forms instead of estimating them.
+
+Built-in parametric surfaces (`SURFACES`, looked up with `make_surface` or a spec string
+``"name:key=value,key=value"`` with `surface_from_spec`):
+
+=========================  =============================================================
+``hyperbolic-paraboloid``  ``z = rise (x / width) (y / depth)`` on a rectangle (K < 0)
+``paraboloid``             ``z = x^2 / (2 radius_x) + y^2 / (2 radius_y)``; equal radii
+                           put an umbilic at the apex
+``torus``                  a patch of a torus of radii ``major``, ``minor``
+``revolution``             a tower: a profile ``r(z)`` swept about the z-axis; with
+                           ``aspect != 1`` elliptic floors, with ``twist_deg`` floors
+                           turning with the height
+``tower-facade``           one face of a twisted tower, z up: a vertical hyperbolic
+                           paraboloid bent in plan and elevation
+``height-field``           ``z = f(x, y)`` from a grid of heights (bicubic spline)
+``bspline``                a tensor-product B-spline patch from a grid of control points
+=========================  =============================================================
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from .errors import InputError
+from .reference import ReferenceSurface
+
+__all__ = [
+    "ParametricSurface",
+    "DesignSurface",
+    "SURFACES",
+    "make_surface",
+    "surface_from_spec",
+    "load_design",
+    "read_triangles",
+    "hyperbolic_paraboloid",
+    "paraboloid",
+    "torus_patch",
+    "revolution",
+    "tower_facade",
+    "height_field",
+    "bspline_patch",
+]
+
+
+# ---------------------------------------------------------------------------- parametric
+
+
+@dataclass(frozen=True)
+class ParametricSurface:
+    """A surface ``(u, v) -> xyz`` on a rectangular domain.
+
+    Attributes
+    ----------
+    name : label used in messages and file headers.
+    function : vectorized ``f(u, v) -> (..., 3)`` for broadcastable float arrays.
+    domain : ``((u0, u1), (v0, v1))``.
+    parameters : the values the surface was built from (reported with results).
+    periodic_u : the surface closes up in ``u`` (``f(u0, v) == f(u1, v)``), as a tower
+        swept through 360 degrees.
+
+    Examples
+    --------
+    >>> from fabplan.surfaces import hyperbolic_paraboloid
+    >>> s = hyperbolic_paraboloid(width=2.0, depth=2.0, rise=1.0)
+    >>> s.points(np.array([2.0]), np.array([2.0])).tolist()
+    [[2.0, 2.0, 1.0]]
+    >>> k1, k2, e1, e2, n = s.principal_frames(np.array([0.0]), np.array([0.0]))
+    >>> float(k1[0]), float(k2[0])   # z = x y / 4: principal curvatures +-1/4 at the origin
+    (0.25, -0.25)
+    """
+
+    name: str
+    function: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    domain: tuple
+    parameters: dict = field(default_factory=dict)
+    periodic_u: bool = False
+
+    def points(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(..., 3) float, points of the surface at broadcastable parameters."""
+        u, v = np.broadcast_arrays(np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64))
+        return np.asarray(self.function(u, v), dtype=np.float64).reshape(u.shape + (3,))
+
+    def _steps(self) -> tuple[float, float]:
+        (u0, u1), (v0, v1) = self.domain
+        return 1e-4 * (u1 - u0), 1e-4 * (v1 - v0)
+
+    def derivatives(self, u: np.ndarray, v: np.ndarray) -> tuple:
+        """First and second partial derivatives by central differences of the exact function.
+
+        Returns
+        -------
+        fu, fv, fuu, fuv, fvv : (m, 3) float each, for (m,) parameters.
+        """
+        u, v = np.asarray(u, dtype=np.float64).ravel(), np.asarray(v, dtype=np.float64).ravel()
+        du, dv = self._steps()
+        f = self.points
+        p = f(u, v)
+        pu, mu = f(u + du, v), f(u - du, v)
+        pv, mv = f(u, v + dv), f(u, v - dv)
+        fu, fv = (pu - mu) / (2 * du), (pv - mv) / (2 * dv)
+        fuu, fvv = (pu - 2 * p + mu) / du**2, (pv - 2 * p + mv) / dv**2
+        fuv = (f(u + du, v + dv) - f(u + du, v - dv) - f(u - du, v + dv)
+               + f(u - du, v - dv)) / (4 * du * dv)
+        return fu, fv, fuu, fuv, fvv
+
+    def principal_frames(self, u: np.ndarray, v: np.ndarray) -> tuple:
+        """Principal curvatures and directions from the fundamental forms.
+
+        Returns
+        -------
+        k1, k2 : (m,) float, k1 >= k2, signed with respect to ``n`` (1/model units).
+        e1, e2 : (m, 3) float, unit principal directions of k1 and k2, ``e2 = n x e1``.
+        n : (m, 3) float, unit normal ``fu x fv / |fu x fv|``.
+        """
+        fu, fv, fuu, fuv, fvv = self.derivatives(u, v)
+        n = np.cross(fu, fv)
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        E, F, G = (np.sum(a * b, axis=1) for a, b in ((fu, fu), (fu, fv), (fv, fv)))
+        e, f, g = (np.sum(a * n, axis=1) for a in (fuu, fuv, fvv))
+        # shape operator W = I^-1 II in the (u, v) basis, eigen-decomposed in closed form
+        det = E * G - F * F
+        a = (G * e - F * f) / det
+        b = (G * f - F * g) / det
+        c = (E * f - F * e) / det
+        d = (E * g - F * f) / det
+        half_trace, disc = (a + d) / 2, np.sqrt(np.maximum(((a - d) / 2) ** 2 + b * c, 0.0))
+        k1, k2 = half_trace + disc, half_trace - disc
+        # eigenvector of k1: (b, k1 - a) or (k1 - d, c), whichever is longer
+        x1 = np.stack([b, k1 - a], axis=1)
+        x2 = np.stack([k1 - d, c], axis=1)
+        x = np.where((np.sum(x1 * x1, axis=1) >= np.sum(x2 * x2, axis=1))[:, None], x1, x2)
+        e1 = x[:, :1] * fu + x[:, 1:] * fv
+        length = np.linalg.norm(e1, axis=1, keepdims=True)
+        umbilic = length[:, 0] < 1e-300
+        e1[umbilic] = fu[umbilic]
+        e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+        e1 -= np.sum(e1 * n, axis=1, keepdims=True) * n
+        e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+        return k1, k2, e1, np.cross(n, e1), n
+
+    def triangulate(self, resolution: int | tuple[int, int] = 100) -> "DesignSurface":
+        """A triangle mesh of the surface on a regular grid of the parameter domain.
+
+        Parameters
+        ----------
+        resolution : grid cells along u and v (one number for both); each cell is split
+            into two triangles, alternating diagonals.
+
+        Returns
+        -------
+        DesignSurface with ``uv`` (n, 2) and this surface attached.
+        """
+        nu, nv = (resolution, resolution) if np.isscalar(resolution) else resolution
+        nu, nv = int(nu), int(nv)
+        if nu < 1 or nv < 1:
+            raise InputError(f"{self.name}: the triangulation needs at least 1 x 1 cells")
+        (u0, u1), (v0, v1) = self.domain
+        columns = nu if self.periodic_u else nu + 1
+        u = np.linspace(u0, u1, nu + 1)[:columns]
+        v = np.linspace(v0, v1, nv + 1)
+        U, V = np.meshgrid(u, v, indexing="ij")
+        idx = np.arange(columns * (nv + 1)).reshape(columns, nv + 1)
+        if self.periodic_u:
+            idx = np.concatenate([idx, idx[:1]], axis=0)
+        a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+        flip = ((np.arange(nu)[:, None] + np.arange(nv)[None, :]) % 2 == 1)
+        t1 = np.where(flip[..., None], np.stack([a, b, d], -1), np.stack([a, b, c], -1))
+        t2 = np.where(flip[..., None], np.stack([b, c, d], -1), np.stack([a, c, d], -1))
+        triangles = np.concatenate([t1.reshape(-1, 3), t2.reshape(-1, 3)])
+        uv = np.stack([U.ravel(), V.ravel()], axis=1)
+        return DesignSurface(self.points(U, V).reshape(-1, 3), triangles, name=self.name, uv=uv,
+                             parametric=self)
+
+    def resolution_for(self, triangles: int) -> tuple[int, int]:
+        """Grid cells (nu, nv) giving about `triangles` triangles of near-square shape."""
+        (u0, u1), (v0, v1) = self.domain
+        um, vm = (u0 + u1) / 2, (v0 + v1) / 2
+        su = np.linalg.norm(np.diff(self.points(np.linspace(u0, u1, 65), vm), axis=0), axis=1).sum()
+        sv = np.linalg.norm(np.diff(self.points(um, np.linspace(v0, v1, 65)), axis=0), axis=1).sum()
+        cells = max(triangles / 2, 1.0)
+        nu = max(2, round(math.sqrt(cells * su / sv)))
+        return nu, max(2, round(cells / nu))
+
+
+def hyperbolic_paraboloid(width: float = 10.0, depth: float = 10.0,
+                          rise: float = 3.0) -> ParametricSurface:
+    """The saddle ``z = rise (x / width) (y / depth)`` over ``[-width, width] x [-depth, depth]``.
+
+    Its Gaussian curvature is negative everywhere: no umbilics.
+    """
+    _positive(width=width, depth=depth)
+    return ParametricSurface(
+        "hyperbolic-paraboloid",
+        lambda u, v: np.stack([u, v, rise * (u / width) * (v / depth)], axis=-1),
+        ((-width, width), (-depth, depth)), dict(width=width, depth=depth, rise=rise))
+
+
+def paraboloid(radius_x: float = 10.0, radius_y: float = 10.0, width: float = 6.0,
+               depth: float = 6.0) -> ParametricSurface:
+    """The dome ``z = x^2 / (2 radius_x) + y^2 / (2 radius_y)`` over a rectangle.
+
+    ``radius_x, radius_y`` are the principal radii at the apex (signed); equal radii make
+    the apex an umbilic (the principal directions turn once around it).
+    """
+    _positive(width=width, depth=depth)
+    if radius_x == 0 or radius_y == 0:
+        raise InputError("paraboloid: the radii must be non-zero")
+    return ParametricSurface(
+        "paraboloid",
+        lambda u, v: np.stack([u, v, u * u / (2 * radius_x) + v * v / (2 * radius_y)], axis=-1),
+        ((-width, width), (-depth, depth)),
+        dict(radius_x=radius_x, radius_y=radius_y, width=width, depth=depth))
+
+
+def torus_patch(major: float = 10.0, minor: float = 4.0, u_deg: tuple = (-45.0, 45.0),
+                v_deg: tuple = (-60.0, 60.0)) -> ParametricSurface:
+    """A patch of the torus of radii ``major > minor``: ``u`` around the axis, ``v`` around
+    the tube (0 on the outer equator), both in degrees. No umbilics."""
+    _positive(major=major, minor=minor)
+    if minor >= major:
+        raise InputError("torus: the minor radius must be smaller than the major radius")
+
+    def f(u, v):
+        r = major + minor * np.cos(v)
+        return np.stack([r * np.cos(u), r * np.sin(u), minor * np.sin(v)], axis=-1)
+
+    return ParametricSurface("torus", f, (tuple(np.radians(u_deg)), tuple(np.radians(v_deg))),
+                             dict(major=major, minor=minor, u_deg=list(u_deg), v_deg=list(v_deg)))
+
+
+def revolution(profile=None, *, height: float = 40.0, radius: float = 8.0, waist: float = 0.7,
+               sweep_deg: float = 360.0, aspect: float = 1.0,
+               twist_deg: float = 0.0) -> ParametricSurface:
+    """A tower: a profile ``r(z)`` swept about the z-axis.
+
+    Parameters
+    ----------
+    profile : (k, 2) float, points ``(r, z)`` with increasing z (interpolated by a cubic
+        spline), or a vectorized callable ``r(z)`` on ``[0, height]``. Default: a hyperbolic
+        waist, ``r(z) = radius sqrt(waist^2 + (1 - waist^2) (2 z / height - 1)^2)``.
+    height, radius, waist : the default profile (model units; waist as a fraction).
+    sweep_deg : angle swept about the axis; 360 closes the tower (periodic in u).
+    aspect : y/x ratio of the floor sections (1: circles, a surface of revolution).
+    twist_deg : rotation of the floor sections from bottom to top.
+
+    Returns
+    -------
+    ParametricSurface with u the angle about the axis (radians) and v the height z.
+    """
+    if profile is None:
+        _positive(height=height, radius=radius, waist=waist)
+
+        def r_of_z(z):
+            t = 2 * z / height - 1
+            return radius * np.sqrt(waist**2 + (1 - waist**2) * t * t)
+        z0, z1 = 0.0, height
+        described = dict(height=height, radius=radius, waist=waist)
+    elif callable(profile):
+        r_of_z, z0, z1, described = profile, 0.0, height, dict(height=height, profile="callable")
+    else:
+        from scipy.interpolate import CubicSpline
+
+        pts = np.asarray(profile, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2 or np.any(np.diff(pts[:, 1]) <= 0):
+            raise InputError("revolution: the profile must be (r, z) points with increasing z")
+        if np.any(pts[:, 0] <= 0):
+            raise InputError("revolution: the profile radii must be positive")
+        r_of_z = CubicSpline(pts[:, 1], pts[:, 0]) if len(pts) > 2 else \
+            (lambda z, p=pts: np.interp(z, p[:, 1], p[:, 0]))
+        z0, z1, described = pts[0, 1], pts[-1, 1], dict(profile=pts.tolist())
+    if not 0 < sweep_deg <= 360 or aspect <= 0:
+        raise InputError("revolution: sweep_deg must lie in (0, 360] and aspect be positive")
+    twist = math.radians(twist_deg) / (z1 - z0)
+
+    def f(u, v):
+        r = r_of_z(v)
+        x, y = r * np.cos(u), aspect * r * np.sin(u)
+        turn = twist * (v - z0)
+        c, s = np.cos(turn), np.sin(turn)
+        return np.stack([c * x - s * y, s * x + c * y, v + 0 * u], axis=-1)
+
+    periodic = sweep_deg == 360
+    half = math.radians(sweep_deg) / 2
+    domain = ((0.0, 2 * math.pi) if periodic else (-half, half), (z0, z1))
+    return ParametricSurface("revolution", f, domain,
+                             dict(described, sweep_deg=sweep_deg, aspect=aspect,
+                                  twist_deg=twist_deg), periodic_u=periodic)
+
+
+def tower_facade(width: float = 12.0, height: float = 24.0, twist: float = 4.0,
+                 plan: float = 0.03, vertical: float = 0.0) -> ParametricSurface:
+    """One face of a twisted tower, standing upright (z up).
+
+    ``y = twist (2 x / width) (z / height) + plan x^2 + vertical z^2`` over ``|x| <= width/2``,
+    ``0 <= z <= height``: `twist` is the depth by which the face turns from bottom to top
+    (a vertical hyperbolic paraboloid whose floor lines are straight), `plan` and
+    `vertical` bend it in plan and in elevation (1/model units).
+    """
+    _positive(width=width, height=height)
+    return ParametricSurface(
+        "tower-facade",
+        lambda u, v: np.stack([u, twist * (2 * u / width) * (v / height) + plan * u * u
+                               + vertical * v * v, v], axis=-1),
+        ((-width / 2, width / 2), (0.0, height)),
+        dict(width=width, height=height, twist=twist, plan=plan, vertical=vertical))
+
+
+def height_field(heights, *, width: float = 20.0, depth: float = 20.0) -> ParametricSurface:
+    """A freeform height field ``z = f(x, y)``.
+
+    Parameters
+    ----------
+    heights : (m, k) float grid of heights over ``[-width/2, width/2] x [-depth/2, depth/2]``
+        (interpolated by a bicubic spline, m, k >= 4), or a vectorized callable ``f(x, y)``.
+    """
+    _positive(width=width, depth=depth)
+    if callable(heights):
+        func, described = heights, "callable"
+    else:
+        from scipy.interpolate import RectBivariateSpline
+
+        z = np.asarray(heights, dtype=np.float64)
+        if z.ndim != 2 or min(z.shape) < 4 or not np.isfinite(z).all():
+            raise InputError("height-field: heights must be a finite grid of at least 4 x 4")
+        spline = RectBivariateSpline(np.linspace(-width / 2, width / 2, z.shape[0]),
+                                     np.linspace(-depth / 2, depth / 2, z.shape[1]), z)
+
+        def func(x, y):
+            return spline.ev(x, y)
+        described = z.tolist()
+    return ParametricSurface(
+        "height-field", lambda u, v: np.stack([u, v, func(u, v) + 0 * u], axis=-1),
+        ((-width / 2, width / 2), (-depth / 2, depth / 2)),
+        dict(width=width, depth=depth, heights=described))
+
+
+def bspline_patch(control_points, degree: int = 3) -> ParametricSurface:
+    """A tensor-product B-spline patch (clamped, uniform knots) on ``[0, 1]^2``.
+
+    Parameters
+    ----------
+    control_points : (m, k, 3) float, with m, k > degree.
+    degree : polynomial degree in both directions.
+    """
+    from scipy.interpolate import BSpline
+
+    P = np.asarray(control_points, dtype=np.float64)
+    if P.ndim != 3 or P.shape[2] != 3 or min(P.shape[:2]) <= degree or not np.isfinite(P).all():
+        raise InputError(f"bspline: control points must be a finite (m, k, 3) grid with "
+                         f"m, k > degree {degree}")
+
+    def knots(count):
+        inner = np.linspace(0.0, 1.0, count - degree + 1)
+        return np.r_[np.zeros(degree), inner, np.ones(degree)]
+
+    ku, kv = knots(P.shape[0]), knots(P.shape[1])
+    eye_u, eye_v = np.eye(P.shape[0]), np.eye(P.shape[1])
+
+    def f(u, v):
+        shape = u.shape
+        bu = BSpline(ku, eye_u, degree)(np.clip(u.ravel(), 0.0, 1.0))   # (N, m)
+        bv = BSpline(kv, eye_v, degree)(np.clip(v.ravel(), 0.0, 1.0))   # (N, k)
+        return np.einsum("ni,nj,ijc->nc", bu, bv, P).reshape(shape + (3,))
+
+    return ParametricSurface("bspline", f, ((0.0, 1.0), (0.0, 1.0)),
+                             dict(control_points=P.tolist(), degree=degree))
+
+
+def _positive(**values) -> None:
+    for key, value in values.items():
+        if not (value > 0 and math.isfinite(value)):
+            raise InputError(f"{key} must be a positive number, got {value}")
+
+
+SURFACES: dict[str, Callable[..., ParametricSurface]] = {
+    "hyperbolic-paraboloid": hyperbolic_paraboloid,
+    "paraboloid": paraboloid,
+    "torus": torus_patch,
+    "revolution": revolution,
+    "tower-facade": tower_facade,
+    "height-field": height_field,
+    "bspline": bspline_patch,
+}
+
+
+def make_surface(name: str, **parameters) -> ParametricSurface:
+    """A built-in parametric surface by name (see `SURFACES`) with keyword parameters."""
+    try:
+        factory = SURFACES[name]
+    except KeyError:
+        raise InputError(f"unknown surface {name!r}; known: {', '.join(SURFACES)}") from None
+    try:
+        return factory(**parameters)
+    except TypeError as exc:
+        raise InputError(f"surface {name!r}: {exc}") from None
+
+
+def surface_from_spec(spec: str) -> ParametricSurface:
+    """A built-in surface from ``"name"`` or ``"name:key=value,key=value"``.
+
+    Values are numbers; ``heights=FILE`` (height-field), ``control_points=FILE``
+    (bspline, rows ``x y z`` with the grid shape in a ``# shape m k`` comment or m*k rows
+    of a square grid) and ``profile=FILE`` (revolution, rows ``r z``) read text files.
+
+    Examples
+    --------
+    >>> s = surface_from_spec("hyperbolic-paraboloid:width=5,rise=2")
+    >>> s.name, s.parameters["width"], s.parameters["rise"]
+    ('hyperbolic-paraboloid', 5.0, 2.0)
+    """
+    name, _, rest = spec.partition(":")
+    parameters: dict = {}
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        key, eq, value = item.partition("=")
+        if not eq:
+            raise InputError(f"surface spec {spec!r}: expected key=value, got {item!r}")
+        key = key.strip()
+        if key in ("heights", "control_points", "profile"):
+            parameters[key] = _read_grid_file(value.strip(), key)
+        elif key in ("u_deg", "v_deg"):
+            parts = value.split("..")
+            try:
+                parameters[key] = tuple(float(p) for p in parts)
+            except ValueError:
+                raise InputError(f"surface spec {spec!r}: {key} is LO..HI degrees") from None
+        else:
+            try:
+                parameters[key] = float(value)
+            except ValueError:
+                raise InputError(f"surface spec {spec!r}: {key} must be a number, got "
+                                 f"{value!r}") from None
+    return make_surface(name, **parameters)
+
+
+def _read_grid_file(path: str, key: str) -> np.ndarray:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{path}: no such file (surface parameter {key})")
+    try:
+        text = p.read_text(encoding="utf-8")
+        data = np.loadtxt(text.splitlines(), ndmin=2)
+    except (UnicodeDecodeError, ValueError):
+        raise InputError(f"{path}: not a text file of numbers (surface parameter {key})") from None
+    if key == "control_points":
+        shape = [line.split()[2:4] for line in text.splitlines() if line.startswith("# shape")]
+        if shape:
+            m, k = (int(s) for s in shape[0])
+        else:
+            m = k = int(round(math.sqrt(len(data))))
+        if data.shape[1] != 3 or m * k != len(data):
+            raise InputError(f"{path}: control points must be m*k rows 'x y z' "
+                             "(give '# shape m k' for a non-square grid)")
+        return data.reshape(m, k, 3)
+    return data
+
+
+# ---------------------------------------------------------------------------- triangle meshes
+
+
+class DesignSurface:
+    """A validated triangle mesh to lay an S-net out on.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float, model units.
+    triangles : (t, 3) int.
+    name : label for messages (the file name or the parametric surface's name).
+    uv : (n, 2) float, parameters of the vertices when triangulated from `parametric`.
+    parametric : the `ParametricSurface` the mesh samples, if any.
+
+    Raises
+    ------
+    InputError
+        When the mesh is empty, has no area, is non-manifold (an edge in more than two
+        triangles, a vertex joining separate fans) or cannot be oriented consistently.
+
+    Notes
+    -----
+    Exactly coincident vertices are welded (STL stores every triangle separately),
+    triangles without area and unreferenced vertices are dropped, the orientation is made
+    consistent, and only the largest connected piece is kept; `repairs` counts what was
+    done. Messages number vertices and triangles as in the input (from 0).
+    """
+
+    def __init__(self, vertices, triangles, *, name: str = "surface", uv=None,
+                 parametric: ParametricSurface | None = None):
+        self.name = name
+        self.parametric = parametric
+        V = np.asarray(vertices, dtype=np.float64)
+        T = np.asarray(triangles)
+        if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
+            raise InputError(f"{name}: no vertices (is this a surface?)")
+        if T.ndim != 2 or T.shape[1] != 3 or len(T) == 0:
+            raise InputError(f"{name}: no triangles (is this a surface?)")
+        T = T.astype(np.int64)
+        if T.min() < 0 or T.max() >= len(V):
+            raise InputError(f"{name}: triangle {int(np.flatnonzero((T < 0) | (T >= len(V)))[0] // 3)}"
+                             " refers to a vertex that does not exist")
+        if not np.isfinite(V).all():
+            raise InputError(f"{name}: vertex {int(np.flatnonzero(~np.isfinite(V).all(1))[0])} has a "
+                             "non-finite coordinate")
+        self.repairs: dict = {}
+        uv = None if uv is None else np.asarray(uv, dtype=np.float64)
+        # input numbers of the kept vertices and triangles, for messages
+        self._vertex_ids = np.arange(len(V))
+        self._triangle_ids = np.arange(len(T))
+        if parametric is None:
+            V, T = self._weld(V, T)
+        V, T, uv = self._clean(V, T, uv)
+        self.vertices, self.triangles, self.uv = V, T, uv
+        self._check_manifold()
+        self._orient()
+
+    # ------------------------------------------------------------------ repairs and checks
+    def _weld(self, V, T):
+        """Merge exactly coincident vertices, keeping the first of each in input order."""
+        _, first, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
+        if len(first) == len(V):
+            return V, T
+        self.repairs["welded_vertices"] = int(len(V) - len(first))
+        order = np.argsort(first)
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        self._vertex_ids = first[order]
+        return V[first[order]], rank[inverse.ravel()][T]
+
+    def _clean(self, V, T, uv):
+        P = V[T]
+        double_area = np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+        scale = float(np.ptp(V, axis=0).max())
+        if not double_area.sum() > 1e-20 * max(scale, 1e-300) ** 2 or scale == 0:
+            raise InputError(f"{self.name}: the surface has no area")
+        repeated = (T[:, 0] == T[:, 1]) | (T[:, 1] == T[:, 2]) | (T[:, 0] == T[:, 2])
+        flat = repeated | (double_area <= 1e-12 * double_area.max())
+        if flat.any():
+            self.repairs["dropped_degenerate_triangles"] = int(flat.sum())
+            T = T[~flat]
+            self._triangle_ids = self._triangle_ids[~flat]
+        # keep the largest piece (triangles connected through shared edges)
+        n_comp, label = _triangle_components(T, len(V))
+        if n_comp > 1:
+            sizes = np.bincount(label)
+            self.repairs["dropped_pieces"] = int(n_comp - 1)
+            self.repairs["dropped_piece_triangles"] = int(len(T) - sizes.max())
+            keep = label == np.argmax(sizes)
+            T, self._triangle_ids = T[keep], self._triangle_ids[keep]
+        used = np.zeros(len(V), bool)
+        used[T.ravel()] = True
+        if not used.all():
+            remap = np.cumsum(used) - 1
+            V, T = V[used], remap[T]
+            uv = None if uv is None else uv[used]
+            self._vertex_ids = self._vertex_ids[used]
+        return V, T, uv
+
+    def _check_manifold(self) -> None:
+        T, n = self.triangles, len(self.vertices)
+        a, b = T.ravel(), T[:, [1, 2, 0]].ravel()
+        key = np.minimum(a, b) * n + np.maximum(a, b)
+        order = np.argsort(key, kind="stable")
+        skey = key[order]
+        starts = np.flatnonzero(np.r_[True, skey[1:] != skey[:-1]])
+        counts = np.diff(np.r_[starts, len(skey)])
+        vid, tid = self._vertex_ids, self._triangle_ids
+        if counts.max() > 2:
+            s = starts[np.argmax(counts > 2)]
+            faces = np.sort(tid[order[s:s + counts[counts > 2][0]] // 3])
+            e = skey[s]
+            raise InputError(
+                f"{self.name}: edge ({vid[e // n]}, {vid[e % n]}) is shared by {len(faces)} "
+                f"triangles ({', '.join(str(f) for f in faces[:4])}): the surface is non-manifold")
+        # a vertex whose triangles form more than one fan (two sheets touching at a point)
+        fans = _vertex_fan_count(T, n)
+        bad = np.flatnonzero(fans > 1)
+        if bad.size:
+            raise InputError(f"{self.name}: vertex {vid[bad[0]]} joins {fans[bad[0]]} separate fans "
+                             "of triangles: the surface is non-manifold")
+
+    def _orient(self) -> None:
+        """Flip triangles so that neighbours agree, by XOR along a spanning tree."""
+        T, n = self.triangles, len(self.vertices)
+        f, g, same = _triangle_pairs(T, n)
+        flip = _tree_parity(len(T), f, g, same.astype(np.int64)).astype(bool)
+        if flip.sum() > len(T) / 2:
+            flip = ~flip  # keep the orientation most triangles of the input have
+        if flip.any():
+            T = np.where(flip[:, None], T[:, [0, 2, 1]], T)
+            self.repairs["flipped_triangles"] = int(flip.sum())
+        f, g, same = _triangle_pairs(T, n)
+        if same.any():
+            tid = self._triangle_ids
+            raise InputError(f"{self.name}: triangles {tid[f[same][0]]} and {tid[g[same][0]]} "
+                             "cannot be oriented consistently (a non-orientable surface)")
+        self.triangles = T
+
+    # ------------------------------------------------------------------ derived data
+    @cached_property
+    def reference(self) -> ReferenceSurface:
+        """The closest-point structure (libigl AABB tree) on this mesh."""
+        return ReferenceSurface(self.vertices, self.triangles)
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(t, 3) float, unit normals of the triangles."""
+        P = self.vertices[self.triangles]
+        N = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+        return N / np.linalg.norm(N, axis=1, keepdims=True)
+
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        """(t,) float, triangle areas."""
+        P = self.vertices[self.triangles]
+        return 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+
+    @property
+    def area(self) -> float:
+        return float(self.face_areas.sum())
+
+    @cached_property
+    def mean_edge_length(self) -> float:
+        P = self.vertices[self.triangles]
+        return float(np.linalg.norm(P - P[:, [1, 2, 0]], axis=2).mean())
+
+    @cached_property
+    def boundary_loops(self) -> list:
+        """list of (k,) int arrays, the boundary loops (vertex ids in order), longest first."""
+        import igl
+
+        loops = [np.asarray(loop, dtype=np.int64) for loop in igl.boundary_loop_all(self.triangles)]
+        loops = [loop for loop in loops if len(loop) > 2]
+        lengths = [self.loop_length(loop) for loop in loops]
+        return [loops[i] for i in np.argsort(lengths)[::-1]]
+
+    def loop_length(self, loop: np.ndarray) -> float:
+        P = self.vertices[loop]
+        return float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).sum())
+
+    def boundary_curves(self) -> list:
+        """The boundary loops as closed polylines, list of (k, 3) float."""
+        return [self.vertices[loop] for loop in self.boundary_loops]
+
+    @property
+    def extent(self) -> float:
+        """Diagonal of the bounding box (model units)."""
+        return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
+
+    def write(self, path: str | os.PathLike) -> None:
+        """Write the mesh atomically: OBJ by fabplan, STL/PLY/OFF through trimesh."""
+        from .io import atomic_path, write_obj
+
+        path = Path(path)
+        if path.suffix.lower() == ".obj":
+            write_obj(path, self.vertices, self.triangles, f"design surface {self.name}")
+            return
+        import trimesh
+
+        mesh = trimesh.Trimesh(self.vertices, self.triangles, process=False)
+        with atomic_path(path) as tmp:
+            mesh.export(tmp, file_type=path.suffix.lower()[1:])
+
+    def __repr__(self) -> str:
+        return (f"DesignSurface({self.name!r}, vertices={len(self.vertices)}, "
+                f"triangles={len(self.triangles)})")
+
+
+def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = None,
+                triangles: int = 40000) -> DesignSurface:
+    """A design surface from a mesh file (OBJ, STL, PLY, OFF) or a built-in surface spec.
+
+    Parameters
+    ----------
+    source : a path to an existing file, or ``"name[:key=value,...]"`` (`surface_from_spec`).
+    resolution : grid cells of the triangulation of a parametric surface.
+    triangles : approximate triangle count of that triangulation when no resolution is given.
+    """
+    path = Path(source)
+    looks_like_file = path.suffix.lower() in (".obj", ".stl", ".ply", ".off") or path.exists()
+    if not looks_like_file:
+        surface = surface_from_spec(str(source))
+        return surface.triangulate(resolution or surface.resolution_for(triangles))
+    vertices, triangles = read_triangles(path)
+    return DesignSurface(vertices, triangles, name=str(path))
+
+
+def read_triangles(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangles of a mesh file: OBJ (polygons fan-triangulated), STL, PLY, OFF.
+
+    Like `fabplan.reference.load_reference`, without building a closest-point structure
+    (the `DesignSurface` builds its own after its repairs).
+
+    Raises
+    ------
+    InputError
+        When the file is missing, empty, a folder, unreadable or holds no faces.
+    """
+    from .io import read_obj
+
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a surface file")
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: empty file (not a surface)")
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        vertices, faces = read_obj(path)
+        tris = [np.stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]], axis=1) for f in faces]
+        return vertices, np.concatenate(tris)
+    if suffix not in (".stl", ".ply", ".off"):
+        raise InputError(f"{path}: unknown surface format {suffix or '(none)'}; "
+                         "use OBJ, STL, PLY or OFF")
+    import trimesh
+
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+        vertices, faces = np.asarray(loaded.vertices), np.asarray(loaded.faces)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        raise InputError(f"{path}: cannot read as {suffix[1:].upper()} "
+                         f"({type(exc).__name__})") from None
+    if faces.ndim != 2 or len(faces) == 0:
+        raise InputError(f"{path}: no faces")
+    return vertices, faces
+
+
+# ---------------------------------------------------------------------------- topology helpers
+
+
+def _triangle_pairs(T: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Triangles sharing an edge: (f, g, same) with same = both use it in one direction."""
+    c0, c1 = _edge_corners(T, n)
+    a = T.ravel()
+    return c0 // 3, c1 // 3, a[c0] == a[c1]
+
+
+def _edge_corners(T: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The two corners (3 t + k, the corner whose outgoing half-edge it is) of every edge
+    shared by two triangles."""
+    a, b = T.ravel(), T[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+    first = np.flatnonzero(skey[1:] == skey[:-1])
+    return order[first], order[first + 1]
+
+
+def _triangle_components(T: np.ndarray, n: int) -> tuple[int, np.ndarray]:
+    f, g, _ = _triangle_pairs(T, n)
+    adj = sp.coo_matrix((np.ones(len(f)), (f, g)), shape=(len(T), len(T)))
+    return csgraph.connected_components(adj, directed=False)
+
+
+def _vertex_fan_count(T: np.ndarray, n: int) -> np.ndarray:
+    """(n,) int, number of edge-connected fans of triangles around each vertex."""
+    c0, c1 = _edge_corners(T, n)
+    a = T.ravel()
+
+    def nxt(c):
+        return 3 * (c // 3) + (c % 3 + 1) % 3
+
+    same = a[c0] == a[c1]
+    # corners at the edge's first vertex x = a[c0] and at its other end y
+    x1 = np.where(same, c1, nxt(c1))
+    y1 = np.where(same, nxt(c1), c1)
+    src = np.r_[c0, nxt(c0)]
+    dst = np.r_[x1, y1]
+    adj = sp.coo_matrix((np.ones(len(src)), (src, dst)), shape=(3 * len(T),) * 2)
+    _, label = csgraph.connected_components(adj, directed=False)
+    pairs = np.unique(np.stack([a, label], axis=1), axis=0)
+    return np.bincount(pairs[:, 0], minlength=n)
+
+
+def _tree_parity(count: int, f: np.ndarray, g: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """(count,) int 0/1 labels with ``label[g] = label[f] ^ step`` along a spanning forest.
+
+    The forest is a breadth-first tree from the first element of every component; the XOR
+    along each element's path to its root is accumulated by pointer doubling (as in
+    `fabplan.mesh.QuadMesh._face_parity`). Pairs off the tree are not checked here.
+    """
+    adj = sp.coo_matrix((np.ones(len(f)), (f, g)), shape=(count, count)).tocsr()
+    ncomp, label = csgraph.connected_components(adj, directed=False)
+    root = count
+    first = np.full(ncomp, count)
+    np.minimum.at(first, label, np.arange(count))
+    rows = np.r_[f, np.full(ncomp, root)]
+    cols = np.r_[g, first]
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count + 1,) * 2).tocsr()
+    _, pred = csgraph.breadth_first_order(graph, root, directed=False, return_predecessors=True)
+    parent = pred[:count].copy()
+    parent[(parent == root) | (parent < 0)] = -1
+    return xor_to_root(parent, _edge_values(count, f, g, step, parent))
+
+
+def _edge_values(count, f, g, value, parent) -> np.ndarray:
+    """value of the pair (parent[x], x) for every x with a parent (either order), else 0."""
+    out = np.zeros(count, np.int64)
+    key = np.r_[f * count + g, g * count + f]
+    vals = np.r_[value, value]
+    order = np.argsort(key)
+    has = parent >= 0
+    q = parent[has] * count + np.flatnonzero(has)
+    pos = np.searchsorted(key[order], q)
+    out[has] = vals[order[pos]]
+    return out
+
+
+def xor_to_root(parent: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """XOR of `step` along each element's path to its root, by pointer doubling.
+
+    Parameters
+    ----------
+    parent : (m,) int, parent of each element in a forest, -1 at roots.
+    step : (m,) int 0/1, value of the edge to the parent (ignored at roots).
+
+    Returns
+    -------
+    (m,) int 0/1
+
+    Examples
+    --------
+    >>> xor_to_root(np.array([-1, 0, 1, 2]), np.array([0, 1, 1, 1])).tolist()
+    [0, 1, 0, 1]
+    """
+    parity = np.where(parent >= 0, step, 0).astype(np.int64)
+    ptr = parent.copy()
+    while np.any(ptr >= 0):
+        act = ptr >= 0
+        parity[act] ^= parity[ptr[act]]
+        ptr[act] = ptr[ptr[act]]
+    return parity

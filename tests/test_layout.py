@@ -1,0 +1,378 @@
+"""Layouts on design surfaces: initial S-nets that glide into S-nets on the surface.
+
+Every result is measured after the solve, independently of the solver's residuals: star
+spheres refitted, distances to the design surface from its own closest-point structure,
+edge lengths against the requested panel size, angles between osculating tangents.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from fabplan.cli import main
+from fabplan.constraints.closeness import closest_points_on_polylines
+from fabplan.errors import InputError
+from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
+from fabplan.layout import (
+    LayoutSettings,
+    comb_line_field,
+    complementary_directions,
+    face_principal_frames,
+    glide,
+    layout_surface,
+    line_field_index,
+)
+from fabplan.mesh import QuadMesh
+from fabplan.surfaces import (
+    DesignSurface,
+    height_field,
+    load_design,
+    surface_from_spec,
+)
+
+
+def _facade_height(x, y):
+    """A freeform facade: a twisted saddle with a wave, negatively curved everywhere."""
+    return 0.03 * x * y + 0.5 * np.sin(0.2 * x) * np.cos(0.15 * y) + 0.004 * x * x
+
+
+def assert_snet_on_design(mesh: QuadMesh, design: DesignSurface, panel: float, *,
+                          angle: float | None = None) -> dict:
+    """The acceptance bounds of a layout; returns the measured numbers."""
+    X = mesh.vertices
+    stars = canonical_stars(X, mesh.stars)
+    spheres = fit_star_spheres(X, stars)
+    sphere = spheres.residual.max() / mesh.mean_edge_length
+    distance = design.reference.distances(X) / panel
+    e = mesh.edges
+    length = np.linalg.norm(X[e[:, 0]] - X[e[:, 1]], axis=1) / panel
+    assert sphere <= 1e-6
+    assert distance.max() <= 0.01
+    assert 0.5 <= length.min() and length.max() <= 2.0
+    measured = dict(sphere=sphere, distance=distance.max(), edges=(length.min(), length.max()))
+    if angle is not None:
+        a = np.degrees(intersection_angles(X, stars))
+        error = np.abs(a - min(angle, 180 - angle)).max()
+        assert error <= 0.05
+        measured["angle_error"] = error
+    return measured
+
+
+@pytest.fixture(scope="module")
+def hypar() -> DesignSurface:
+    return load_design("hyperbolic-paraboloid:rise=5", triangles=10000)
+
+
+@pytest.fixture(scope="module")
+def facade_stl(tmp_path_factory) -> Path:
+    """A freeform facade as a triangle mesh of more than 20k triangles, saved as STL."""
+    surface = height_field(_facade_height, width=30.0, depth=16.0)
+    design = surface.triangulate(surface.resolution_for(24000))
+    path = tmp_path_factory.mktemp("facade") / "facade.stl"
+    design.write(path)
+    return path
+
+
+# ---------------------------------------------------------------------------- acceptance
+
+
+@pytest.mark.parametrize("net, angle", [("orthogonal", None), ("isogonal", 70.0)])
+def test_hyperbolic_paraboloid_layout_glides_into_an_snet(hypar, net, angle):
+    layout = layout_surface(hypar, 1.0, angle=angle or 90.0)
+    assert len(layout.mesh.irregular_vertices) == 0 and len(layout.singular_points) == 0
+    result = glide(layout, net, angle=angle)
+    assert result.converged and result.iterations <= 20
+    assert_snet_on_design(result.mesh, hypar, 1.0, angle=angle or 90.0)
+    # gliding boundary vertices sit on the design boundary
+    X = result.mesh.vertices[layout.gliding_boundary]
+    foot, _ = closest_points_on_polylines(X, hypar.boundary_curves())
+    assert len(X) > 20 and np.linalg.norm(foot - X, axis=1).max() <= 1e-6
+    # the record carries the same distances
+    props = result.properties
+    d = hypar.reference.distances(result.mesh.vertices)
+    assert props["distance_to_design"]["max"] == pytest.approx(d.max(), abs=1e-15)
+
+
+def test_tower_of_revolution_closes_up_around_its_axis():
+    design = load_design("revolution:height=30,radius=6,waist=0.7", triangles=12000)
+    layout = layout_surface(design, 1.5, angle=75.0)
+    # one cut, shifting the grid by whole panels: the net closes up around the tower
+    assert len(layout.cuts) == 1 and layout.cuts[0][0] == 1 and any(layout.cuts[0][1:])
+    mesh = layout.mesh
+    z = mesh.vertices[mesh.is_boundary_vertex, 2]
+    assert np.all((z < 2 * 1.5) | (z > 30 - 2 * 1.5))   # boundary only at the bottom and top
+    result = glide(layout, "isogonal", angle=75.0)
+    assert result.converged
+    assert_snet_on_design(result.mesh, design, 1.5, angle=75.0)
+
+
+def test_freeform_facade_mesh_through_the_cli(facade_stl, tmp_path, capsys):
+    original = facade_stl.read_bytes()
+    out = tmp_path / "net" / "facade.obj"
+    code = main(["layout", str(facade_stl), "--net", "orthogonal", "--panel-size", "1.0",
+                 "-o", str(out)])
+    stdout, stderr = capsys.readouterr()
+    assert code == 0, stderr
+    assert stderr == ""
+    assert sorted(p.name for p in out.parent.iterdir()) == ["facade.json", "facade.obj",
+                                                           "facade.png"]
+    assert facade_stl.read_bytes() == original
+    design = load_design(facade_stl)
+    assert len(design.triangles) >= 20000 and design.repairs["welded_vertices"] > 0
+    mesh = QuadMesh.from_obj(out)
+    measured = assert_snet_on_design(mesh, design, 1.0, angle=90.0)
+    record = json.loads(out.with_suffix(".json").read_text())
+    props = record["properties"]
+    assert props["distance_to_design"]["max"] == pytest.approx(measured["distance"], abs=1e-12)
+    assert props["layout"]["design_triangles"] == len(design.triangles)
+    assert props["layout"]["quads"] == int(np.sum(mesh.face_sizes == 4)) > 400
+    assert "distance to the design surface: max" in stdout
+    import matplotlib.image
+
+    picture = matplotlib.image.imread(out.with_suffix(".png"))
+    assert picture.ndim == 3 and min(picture.shape[:2]) > 300 and picture.std() > 0.01
+
+
+def test_freeform_facade_mesh_isogonal(facade_stl):
+    design = load_design(facade_stl)
+    layout = layout_surface(design, 1.0, angle=75.0)
+    result = glide(layout, "isogonal", angle=75.0)
+    assert result.converged
+    assert_snet_on_design(result.mesh, design, 1.0, angle=75.0)
+
+
+def test_prescribed_floor_levels_get_their_complementary_family():
+    design = load_design("tower-facade", triangles=12000)
+    layout = layout_surface(design, 1.0, family="z")
+    assert layout.angle_deg is None and layout.family.startswith("z levels every")
+    result = glide(layout, "snet")
+    assert result.converged
+    assert_snet_on_design(result.mesh, design, 1.0)
+    # the prescribed family stays on the floor levels: each level's vertices at one height
+    X, level = result.mesh.vertices, layout.vertex_keys[:, 0]
+    assert np.abs(X[:, 2] - level * layout.level_step).max() <= 1e-9
+    # and the other family is the partner symmetric to the principal directions (S-net):
+    # its angle to the floors is twice the floors' angle to a principal direction, here
+    # about 45 degrees, far from the degenerate 0
+    stars = canonical_stars(X, result.mesh.stars)
+    angles = np.degrees(intersection_angles(X, stars))
+    assert 35 < angles.min() and angles.max() < 60
+
+
+def test_floors_given_as_polylines(tmp_path):
+    design = load_design("tower-facade:height=12", triangles=8000)
+    x = np.linspace(-6.0, 6.0, 25)
+    heights = [0.0, 3.0, 6.0, 9.0, 12.0]
+    lines = []
+    for z in heights:
+        y = 4.0 * (2 * x / 12.0) * (z / 12.0) + 0.03 * x * x   # on the facade
+        lines += [f"{a:.9f} {b:.9f} {z:.9f}" for a, b in zip(x, y, strict=True)] + [""]
+    floors = tmp_path / "floors.txt"
+    floors.write_text("\n".join(lines))
+    layout = layout_surface(design, 1.0, family=str(floors))
+    assert "5 polylines" in layout.family
+    result = glide(layout, "snet")
+    assert result.converged
+    assert_snet_on_design(result.mesh, design, 1.0)
+    # vertices on the levels of the polylines lie on those floors
+    per_floor = round(1 / layout.level_step)
+    level = layout.vertex_keys[:, 0]
+    on_floor = np.isfinite(level) & (np.mod(level, per_floor) == 0)
+    z = result.mesh.vertices[on_floor, 2]
+    assert on_floor.sum() > 20
+    assert np.abs(z - 3.0 * level[on_floor] / per_floor).max() <= 0.01
+
+
+def test_umbilics_give_irregular_vertices_in_the_layout_and_the_report(tmp_path, capsys):
+    out = tmp_path / "dome.obj"
+    code = main(["layout", "paraboloid:radius_x=10,radius_y=14,width=8,depth=8",
+                 "--net", "snet", "--panel-size", "0.8", "--triangles", "20000",
+                 "--max-iter", "15", "-o", str(out)])
+    stdout, stderr = capsys.readouterr()
+    assert code in (0, 3), stderr
+    assert "the direction field is singular at 2 points" in stderr
+    record = json.loads(out.with_suffix(".json").read_text())["properties"]
+    layout = record["layout"]
+    # the two umbilics of the elliptic paraboloid, lemons of index 1/2, on its long axis
+    assert sorted(layout["singular_index"]) == [0.5, 0.5]
+    assert np.allclose(np.abs(np.array(layout["singular_points"])[:, 0]), 6.27, atol=0.15)
+    assert layout["seam_edges"] > 0 and all(c[0] == -1 for c in layout["cuts"])
+    mesh = QuadMesh.from_obj(out)
+    assert len(layout["irregular_vertices"]) > 0
+    assert layout["irregular_vertices"] == mesh.irregular_vertices.tolist()
+    assert record["irregular_vertices"] == layout["irregular_vertices"]
+    assert f"{len(layout['irregular_vertices'])} irregular vertices" in stdout
+
+
+def test_a_field_turning_around_a_point_does_not_crash():
+    """At the apex of a paraboloid of revolution every direction is principal and the
+    field turns once around it: the layout leaves a hole there and says so."""
+    design = load_design("paraboloid", triangles=10000)
+    layout = layout_surface(design, 0.8)
+    # one whole turn, found at the apex (or split into two half turns next to it)
+    assert layout.singular_index.sum() == 1.0
+    assert np.linalg.norm(layout.singular_points, axis=1).max() < 0.5
+    assert layout.filled_holes + layout.open_holes == 1
+    mesh = layout.mesh   # no face within a panel of the apex: it is left out
+    centroids = np.array([mesh.vertices[f].mean(axis=0) for f in mesh.faces])
+    assert np.linalg.norm(centroids, axis=1).min() > 0.8
+
+
+# ---------------------------------------------------------------------------- bad input
+
+
+def _assert_refused(code, capsys, folder: Path, *fragments: str) -> None:
+    out, err = capsys.readouterr()
+    assert code == 2, err
+    assert err.startswith("fabplan: error: ") and err.count("\n") == 1
+    assert out == "" and "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in err, err
+    assert not list(folder.glob("out*"))
+
+
+@pytest.mark.parametrize("name, content, fragment", [
+    ("notes.obj", b"hello, these are notes\n", "not an OBJ line"),
+    ("points.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no faces"),
+    ("picture.stl", bytes(range(256)) * 4, "picture.stl"),
+    ("empty.ply", b"", "empty file"),
+    ("flat.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\n", "no area"),
+    ("fin.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n",
+     "edge (0, 1) is shared by 3 triangles (0, 1, 2): the surface is non-manifold"),
+])
+def test_bad_surfaces_are_refused_in_one_line(tmp_path, capsys, name, content, fragment):
+    path = tmp_path / name
+    path.write_bytes(content)
+    code = main(["layout", str(path), "--net", "snet", "--panel-size", "1",
+                 "-o", str(tmp_path / "out.obj")])
+    _assert_refused(code, capsys, tmp_path, fragment)
+    assert path.read_bytes() == content
+
+
+def test_a_moebius_strip_cannot_be_oriented(tmp_path, capsys):
+    k = 24
+    t = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    rows = []
+    for s in (-0.3, 0.3):
+        rows.append(np.stack([(1 + s * np.cos(t / 2)) * np.cos(t), (1 + s * np.cos(t / 2)) * np.sin(t),
+                              s * np.sin(t / 2)], axis=1))
+    V = np.concatenate(rows)
+    i = np.arange(k)
+    j = (i + 1) % k
+    a, b, c, d = i, j, k + j, k + i
+    # the last quad closes the strip with a half twist: inner and outer rows swap
+    b[-1], c[-1] = k + 0, 0
+    T = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    path = tmp_path / "moebius.obj"
+    path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in V)
+                    + "".join(f"f {p + 1} {q + 1} {r + 1}\n" for p, q, r in T))
+    code = main(["layout", str(path), "--net", "snet", "--panel-size", "0.1",
+                 "-o", str(tmp_path / "out.obj")])
+    _assert_refused(code, capsys, tmp_path, "cannot be oriented consistently")
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--panel-size", "40"], "panel size 40 is too large for the surface"),
+    (["--panel-size", "0"], "--panel-size must be a positive length"),
+    (["--panel-size", "1", "--angle", "200"], "--angle must lie strictly between 0 and 180"),
+    (["--panel-size", "1", "--family", "z", "--angle", "60"], "exclude each other"),
+    (["--panel-size", "1", "--family", "missing.txt"], "not x, y, z nor a file of polylines"),
+])
+def test_bad_layout_options_are_refused(tmp_path, capsys, args, fragment):
+    code = main(["layout", "hyperbolic-paraboloid", "--net", "snet", "--triangles", "2000",
+                 *args, "-o", str(tmp_path / "out.obj")])
+    _assert_refused(code, capsys, tmp_path, fragment)
+
+
+@pytest.mark.parametrize("spec, fragment", [
+    ("saddle", "unknown surface 'saddle'; known: hyperbolic-paraboloid"),
+    ("torus:minor=12", "the minor radius must be smaller than the major radius"),
+    ("paraboloid:width=wide", "width must be a number"),
+    ("bspline:control_points=nothing.txt", "nothing.txt: no such file"),
+])
+def test_bad_surface_specs_are_refused(tmp_path, capsys, spec, fragment):
+    code = main(["layout", spec, "--net", "snet", "--panel-size", "1",
+                 "-o", str(tmp_path / "out.obj")])
+    _assert_refused(code, capsys, tmp_path, fragment)
+
+
+# ---------------------------------------------------------------------------- building blocks
+
+
+def test_complementary_direction_is_symmetric_to_the_principal_directions():
+    rng = np.random.default_rng(4)
+    angle = rng.uniform(0, np.pi, 50)
+    t = np.stack([np.cos(angle), np.sin(angle), 0 * angle], axis=1)
+    e1 = np.tile([[np.cos(0.3), np.sin(0.3), 0.0]], (50, 1))
+    s = complementary_directions(t, e1)
+    assert np.allclose(np.linalg.norm(s, axis=1), 1.0)
+    # same angle to e1 on the other side: equal normal curvature by Euler's formula
+    cross_t = np.cross(e1, t)[:, 2]
+    cross_s = np.cross(e1, s)[:, 2]
+    assert np.allclose(np.sum(t * e1, axis=1), np.sum(s * e1, axis=1))
+    assert np.allclose(cross_t, -cross_s)
+    assert np.allclose(complementary_directions(t, -e1), s)
+
+
+def test_analytic_and_estimated_principal_directions_agree():
+    surface = surface_from_spec("hyperbolic-paraboloid:rise=5")
+    analytic = surface.triangulate(surface.resolution_for(20000))
+    mesh = DesignSurface(analytic.vertices, analytic.triangles, name="same mesh")
+    k1a, k2a, e1a = face_principal_frames(analytic)
+    k1m, k2m, e1m = face_principal_frames(mesh)
+    inner = np.abs(analytic.vertices[analytic.triangles].mean(axis=1)[:, :2]).max(axis=1) < 8
+    assert np.abs(k1m - k1a)[inner].max() <= 0.02 * np.abs(k1a).max()
+    cosine = np.clip(np.abs(np.sum(e1a * e1m, axis=1)), 0.0, 1.0)
+    assert np.degrees(np.arccos(cosine[inner])).max() < 2.0
+
+
+def test_combing_restores_a_sign_scrambled_field():
+    design = surface_from_spec("torus").triangulate(40)
+    _, _, e1 = face_principal_frames(design)
+    rng = np.random.default_rng(0)
+    scrambled = e1 * rng.choice([-1.0, 1.0], size=len(e1))[:, None]
+    combed, seam = comb_line_field(design, scrambled)
+    reference, reference_seam = comb_line_field(design, e1)
+    assert len(seam) == len(reference_seam) == 0
+    # the same field up to one global sign
+    agree = np.sum(combed * reference, axis=1)
+    assert np.allclose(np.abs(agree), 1.0) and np.all(np.sign(agree) == np.sign(agree[0]))
+
+
+def test_field_index_finds_umbilics():
+    lemons = load_design("paraboloid:radius_x=10,radius_y=14,width=8,depth=8", triangles=8000)
+    _, _, e1 = face_principal_frames(lemons)
+    combed, seam = comb_line_field(lemons, e1)
+    index = line_field_index(lemons, combed)
+    found = np.flatnonzero(np.nan_to_num(index) != 0)
+    assert index[found].tolist() == [0.5, 0.5]
+    # the seam of the combed field joins them to the boundary: odd degree at each umbilic
+    degree = np.bincount(seam.ravel(), minlength=len(index))
+    assert np.all(degree[found] % 2 == 1)
+
+
+def test_stl_is_welded_and_a_flipped_triangle_is_repaired(tmp_path):
+    surface = surface_from_spec("hyperbolic-paraboloid")
+    design = surface.triangulate(12)
+    T = design.triangles.copy()
+    T[7] = T[7][[0, 2, 1]]
+    path = tmp_path / "flipped.stl"   # written as a modeller would, flipped triangle and all
+    trimesh.Trimesh(design.vertices, T, process=False).export(path)
+    loaded = load_design(path)
+    assert loaded.repairs["welded_vertices"] == 3 * len(T) - len(design.vertices)
+    assert len(loaded.vertices) == len(design.vertices)
+    assert loaded.repairs["flipped_triangles"] == 1
+    assert np.allclose(loaded.area, design.area)
+
+
+def test_layout_settings_change_what_is_kept():
+    design = load_design("hyperbolic-paraboloid", triangles=4000)
+    strict = layout_surface(design, 1.0, settings=LayoutSettings(boundary_snap=0.0))
+    assert len(strict.gliding_boundary) <= len(layout_surface(design, 1.0).gliding_boundary)
+    with pytest.raises(InputError, match="bisector must be"):
+        layout_surface(design, 1.0, settings=LayoutSettings(bisector="mean"))
