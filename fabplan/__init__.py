@@ -14,6 +14,7 @@ from .edit import NetEditor
 from .errors import FabplanError, InputError, SolverError
 from .measure import measure_net
 from .mesh import QuadMesh, load_mesh
+from .molds import MoldPlan, MoldSettings, plan_molds
 from .nets import NETS, get_net
 from .optimize import OptimizationResult, optimize
 from .reference import ReferenceSurface, load_reference
@@ -28,6 +29,9 @@ __all__ = [
     "QuadMesh",
     "load_mesh",
     "measure_net",
+    "plan_molds",
+    "MoldSettings",
+    "MoldPlan",
     "NETS",
     "get_net",
     "optimize",

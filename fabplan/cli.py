@@ -43,8 +43,8 @@ def _cmd_measure(args) -> int:
     reference = load_reference(args.reference) if args.reference else None
     record = measure_net(mesh, reference=reference)
     record["file"] = str(args.net)
+    write_json(out, record)           # the file first: the terminal may go away
     print(format_summary(record))
-    write_json(out, record)
     print(f"wrote {out}")
     return 0
 
@@ -420,6 +420,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("fabplan: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader of our output went away (e.g. `| head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

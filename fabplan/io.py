@@ -148,6 +148,10 @@ def format_obj(vertices: np.ndarray, faces, header: str = "",
     return "\n".join(lines) + "\n"
 
 
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
+
 @contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside `path`; rename it onto `path` only if the block succeeds.
@@ -158,6 +162,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_UMASK)
     tmp_path = Path(tmp)
     try:
         yield tmp_path
@@ -228,6 +233,7 @@ def write_texts(files: dict) -> None:
             fd, tmp = tempfile.mkstemp(prefix=f".{current.name}.", suffix=".tmp",
                                        dir=current.parent)
             temporary[current] = Path(tmp)
+            os.chmod(tmp, 0o666 & ~_UMASK)   # mkstemp makes 0600; outputs are for sharing
             with os.fdopen(fd, "w", encoding="utf-8") as handle:
                 handle.write(text)
         for current, tmp in temporary.items():
