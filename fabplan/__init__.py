@@ -19,6 +19,7 @@ from .nets import NETS, get_net
 from .optimize import OptimizationResult, optimize
 from .reference import ReferenceSurface, load_reference
 from .solver import GuidedProjection, SolverSettings
+from .strips import StripSettings, build_strips, plan_strips
 
 __version__ = "0.1.0"
 
@@ -41,6 +42,9 @@ __all__ = [
     "load_reference",
     "GuidedProjection",
     "SolverSettings",
+    "StripSettings",
+    "build_strips",
+    "plan_strips",
     "data_path",
 ]
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from pathlib import Path
 
 from . import __version__
@@ -256,6 +257,7 @@ def _cmd_strips(args) -> int:
     settings.check()
     out = Path(args.output)
     _check_output_folder(out)
+    started = time.perf_counter()
     mesh = load_mesh(args.net)
     plan = plan_strips(mesh, settings)
     files = plan.write(out, previews=not args.no_previews)
@@ -273,9 +275,9 @@ def _cmd_strips(args) -> int:
     print(f"twist up to {s['twist_deg_per_m']:.2f} deg/m; flat panels would lean up to "
           f"{s['off_orthogonal_deg']:.2f} deg from orthogonal")
     print(f"{s['parts']} parts on {s['sheets']} sheets of {settings.sheet_mm[0]:g}x"
-          f"{settings.sheet_mm[1]:g} mm, material use {100 * s['material_use']:.1f} %, "
-          f"{s['seconds']:.1f} s")
-    print(f"wrote {len(files)} files to {out}")
+          f"{settings.sheet_mm[1]:g} mm, material use {100 * s['material_use']:.1f} %")
+    print(f"wrote {len(files)} files to {out} in {time.perf_counter() - started:.1f} s "
+          f"(planning {s['seconds']:.1f} s, files checked by reading them back)")
     if s["junctions"]:
         print(f"fabplan: note: {s['junctions']} vertices join more than one strip of a family "
               "(irregular vertices): no slits there, they need node connectors; listed in "
