@@ -67,6 +67,21 @@ def _output_path(args) -> Path:
     return out
 
 
+def _solver_options(args) -> tuple:
+    """Solver settings from --max-iter, and a progress printer for a terminal (or -v)."""
+    settings = SolverSettings()
+    if args.max_iter is not None:
+        settings.max_iterations = args.max_iter
+    show = (sys.stderr.isatty() or args.verbose) and not args.quiet
+
+    def progress(rec):
+        if show:
+            print(f"  iteration {rec.iteration:3d}  residual {rec.hard_residual:.3e}  "
+                  f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms", file=sys.stderr)
+
+    return settings, progress
+
+
 def _cmd_optimize(args) -> int:
     check_angle(args.angle)
     check_radius(args.radius)
@@ -78,15 +93,7 @@ def _cmd_optimize(args) -> int:
     reference = load_reference(args.reference) if args.reference else None
     fixed = read_fixed(args.fix, mesh)
     handles = read_handles(args.handle)
-    settings = SolverSettings()
-    if args.max_iter is not None:
-        settings.max_iterations = args.max_iter
-    show = (sys.stderr.isatty() or args.verbose) and not args.quiet
-
-    def progress(rec):
-        if show:
-            print(f"  iteration {rec.iteration:3d}  residual {rec.hard_residual:.3e}  "
-                  f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms", file=sys.stderr)
+    settings, progress = _solver_options(args)
 
     result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                       reference=reference, fixed=fixed, handles=handles, settings=settings,
@@ -166,15 +173,7 @@ def _cmd_layout(args) -> int:
     design = load_design(args.surface, triangles=args.triangles)
     layout = layout_surface(design, args.panel_size, angle=args.angle or 90.0,
                             family=args.family)
-    settings = SolverSettings()
-    if args.max_iter is not None:
-        settings.max_iterations = args.max_iter
-    show = (sys.stderr.isatty() or args.verbose) and not args.quiet
-
-    def progress(rec):
-        if show:
-            print(f"  iteration {rec.iteration:3d}  residual {rec.hard_residual:.3e}  "
-                  f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms", file=sys.stderr)
+    settings, progress = _solver_options(args)
 
     result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
                    settings=settings, progress=progress)

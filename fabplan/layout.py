@@ -49,8 +49,8 @@ from scipy.spatial import cKDTree
 from .constraints import Constraint
 from .errors import InputError
 from .linalg import SparseSPDSolver
-from .mesh import QuadMesh
-from .surfaces import DesignSurface, _edge_corners, _edge_values, xor_to_root
+from .mesh import QuadMesh, xor_to_root
+from .surfaces import DesignSurface, _edge_corners, _edge_values
 
 __all__ = [
     "LayoutSettings",

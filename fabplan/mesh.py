@@ -26,7 +26,7 @@ from scipy.sparse import csgraph
 from .errors import InputError
 from .io import parse_obj, write_obj
 
-__all__ = ["QuadMesh", "Polylines"]
+__all__ = ["QuadMesh", "Polylines", "xor_to_root"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,32 @@ def _pointer_jump(successor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         steps = steps + np.where(moving, steps[end], 0)
         end = nxt
     return end, steps
+
+
+def xor_to_root(parent: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """XOR of `step` along each element's path to its root, by pointer doubling.
+
+    Parameters
+    ----------
+    parent : (m,) int, parent of each element in a forest, -1 at roots.
+    step : (m,) int 0/1, value of the edge to the parent (ignored at roots).
+
+    Returns
+    -------
+    (m,) int 0/1
+
+    Examples
+    --------
+    >>> xor_to_root(np.array([-1, 0, 1, 2]), np.array([0, 1, 1, 1])).tolist()
+    [0, 1, 0, 1]
+    """
+    parity = np.where(parent >= 0, step, 0).astype(np.int64)
+    ptr = parent.copy()
+    while np.any(ptr >= 0):
+        act = ptr >= 0
+        parity[act] ^= parity[ptr[act]]
+        ptr[act] = ptr[ptr[act]]
+    return parity
 
 
 def _break_cycles(successor: np.ndarray) -> np.ndarray:
@@ -325,14 +351,7 @@ class QuadMesh:
         q = np.arange(nf)[has] + parent[has] * (nf + 1)
         pos = np.searchsorted(key_pf[order], q)
         step[has] = flip[order[pos]]
-        # XOR along the path to the root by pointer doubling
-        parity = step.copy()
-        ptr = parent.copy()
-        while np.any(ptr >= 0):
-            act = ptr >= 0
-            parity[act] ^= parity[ptr[act]]
-            ptr[act] = ptr[ptr[act]]
-        return parity
+        return xor_to_root(parent, step)
 
     @cached_property
     def edge_family(self) -> np.ndarray:

@@ -38,6 +38,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .errors import InputError
+from .mesh import xor_to_root
 from .reference import ReferenceSurface
 
 __all__ = [
@@ -818,29 +819,3 @@ def _edge_values(count, f, g, value, parent) -> np.ndarray:
     pos = np.searchsorted(key[order], q)
     out[has] = vals[order[pos]]
     return out
-
-
-def xor_to_root(parent: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """XOR of `step` along each element's path to its root, by pointer doubling.
-
-    Parameters
-    ----------
-    parent : (m,) int, parent of each element in a forest, -1 at roots.
-    step : (m,) int 0/1, value of the edge to the parent (ignored at roots).
-
-    Returns
-    -------
-    (m,) int 0/1
-
-    Examples
-    --------
-    >>> xor_to_root(np.array([-1, 0, 1, 2]), np.array([0, 1, 1, 1])).tolist()
-    [0, 1, 0, 1]
-    """
-    parity = np.where(parent >= 0, step, 0).astype(np.int64)
-    ptr = parent.copy()
-    while np.any(ptr >= 0):
-        act = ptr >= 0
-        parity[act] ^= parity[ptr[act]]
-        ptr[act] = ptr[ptr[act]]
-    return parity
