@@ -1,8 +1,8 @@
 """The guided-projection solver (Algorithm 1): regularized Gauss-Newton on constraint families.
 
 Every iteration linearizes all residuals, solves ``(J^T J + eps I) h = -J^T r`` and steps.
-The Jacobian's sparsity pattern is fixed for the whole run: it is analysed once, and each
-iteration only refills values (one `np.bincount`) and refactors numerically.
+The sparsity pattern of the normal equations is fixed for the whole run: it is analysed
+once, and each iteration only refills values (one `np.bincount`) and refactors numerically.
 Coordinates are normalized (centroid at the origin, mean edge length 1) so that weights,
 tolerances and the regularization mean the same on every net.
 """
@@ -38,7 +38,7 @@ class SolverSettings:
         residual (Levenberg-Marquardt with damping proportional to the residual), which
         keeps the convergence quadratic near a solution.
     fairness_weight, closeness_weight : initial row weights of the soft families.
-    fade : factor applied to the soft weights after every iteration.
+    fade : factor applied to the soft weights after every step.
     stagnation : stop when the best hard residual has not improved by 10 % over this many
         iterations.
     backend : linear solver backend (see `fabplan.linalg`).
@@ -75,11 +75,10 @@ class IterationRecord:
 class _FamilyPattern:
     """Where one family's Jacobian entries land in the normal equations."""
 
-    cols: np.ndarray           # (m, k) free-variable column of each entry, -1 if fixed
+    gradient_cols: np.ndarray  # (m, k) free-variable column of each entry, nfree if fixed
     first: np.ndarray          # (p,) local entry indices of the product pairs, p <= q
     second: np.ndarray
-    slots: object              # (m, p) positions in the upper triangle (or the dummy slot);
-                               # after the build only their shape, the data live in _Pattern
+    shape: tuple               # (m, p): the family's block in the shared product buffer
     multiplicity: np.ndarray | None = None  # (m, p) 2 where a row repeats a variable
 
 
@@ -162,42 +161,35 @@ class GuidedProjection:
         """Fix the sparsity of the normal equations once for the whole run.
 
         Row ``i`` of ``J`` contributes ``J[i, p] J[i, q]`` to entry ``(p, q)`` of ``J^T J``;
-        each family's products are mapped once to their slots in the upper triangle, so
-        every iteration assembles ``J^T J`` with one `np.bincount` per family, keeping
-        exact zeros as entries (the factorization's symbolic analysis stays valid).
+        every product is mapped once to its slot in the upper triangle, so each iteration
+        assembles ``J^T J`` with a single `np.bincount` over all families, keeping exact
+        zeros as entries (the factorization's symbolic analysis stays valid).
         """
         state = self.state
         nfree = len(self.free)
         col_map = np.full(state.layout.size, -1)
         col_map[self.free] = np.arange(nfree)
-        families, keys = [], [np.arange(nfree) * (nfree + 1)]
+        families, pair_keys = [], []
         for c in self.constraints:
             cols = col_map[np.asarray(c.columns(state))]
             # J^T J is symmetric: the pairs p <= q of a row's entries fill its upper triangle
             first, second = np.triu_indices(cols.shape[1])
             cp, cq = cols[:, first], cols[:, second]
             lo, hi = np.minimum(cp, cq), np.maximum(cp, cq)
-            valid = lo >= 0
-            keys.append((lo * nfree + hi)[valid])
+            # -1 marks a pair on a held variable: it has no slot
+            pair_keys.append(np.where(lo >= 0, lo * nfree + hi, -1))
             # a row naming one variable at two entries adds their product twice
             twice = (cp == cq) & (first != second)
-            families.append(_FamilyPattern(cols, first, second, (lo, hi, valid),
-                                           np.where(twice, 2.0, 1.0) if twice.any() else None))
-        ukeys = np.sort(np.concatenate(keys))      # sort + mask: far faster than np.unique
-        ukeys = ukeys[np.r_[True, ukeys[1:] != ukeys[:-1]]]
-        dummy = len(ukeys)
-        for f in families:
-            lo, hi, valid = f.slots
-            slots = np.full(lo.shape, dummy, dtype=np.int64)
-            slots[valid] = np.searchsorted(ukeys, (lo * nfree + hi)[valid])
-            f.slots = slots
-        rows = ukeys // nfree
-        # one slot array and one product buffer for all families: a single bincount per
-        # iteration, with no per-family temporaries of the matrix's size
-        slots = np.concatenate([f.slots.ravel() for f in families])
-        for f in families:
-            f.slots = f.slots.shape        # the concatenated copy is the one kept
-        return _Pattern(families=families, indptr=np.searchsorted(rows, np.arange(nfree + 1)),
+            families.append(_FamilyPattern(
+                np.where(cols < 0, nfree, cols), first, second, cp.shape,
+                np.where(twice, 2.0, 1.0) if twice.any() else None))
+        keys = np.concatenate([k.ravel() for k in pair_keys])
+        ukeys = np.sort(np.concatenate([keys[keys >= 0], np.arange(nfree) * (nfree + 1)]))
+        ukeys = ukeys[np.r_[True, ukeys[1:] != ukeys[:-1]]]   # far faster than np.unique
+        # one slot array for all families (held pairs go to a dummy slot past the end)
+        slots = np.where(keys >= 0, np.searchsorted(ukeys, keys), len(ukeys))
+        return _Pattern(families=families,
+                        indptr=np.searchsorted(ukeys // nfree, np.arange(nfree + 1)),
                         indices=ukeys % nfree,
                         diagonal=np.searchsorted(ukeys, np.arange(nfree) * (nfree + 1)),
                         slots=slots, products=np.empty(len(slots)))
@@ -210,15 +202,15 @@ class GuidedProjection:
         gradient = np.zeros(nfree + 1)
         start = 0
         for f, J, r in zip(pat.families, jacobians, residuals, strict=True):
-            out = pat.products[start:start + int(np.prod(f.slots))].reshape(f.slots)
+            out = pat.products[start:start + int(np.prod(f.shape))].reshape(f.shape)
             start += out.size
             if J.size == 0:
                 continue
             np.multiply(J[:, f.first], J[:, f.second], out=out)
             if f.multiplicity is not None:
                 out *= f.multiplicity
-            gradient += np.bincount(np.where(f.cols < 0, nfree, f.cols).ravel(),
-                                    weights=(J * r[:, None]).ravel(), minlength=nfree + 1)
+            gradient += np.bincount(f.gradient_cols.ravel(), weights=(J * r[:, None]).ravel(),
+                                    minlength=nfree + 1)
         data = np.bincount(pat.slots, weights=pat.products, minlength=nnz + 1)[:nnz]
         data[pat.diagonal] += damping
         upper = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(nfree, nfree))
