@@ -46,7 +46,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
-from .constraints import Constraint
+from .constraints import FamilyLevels
 from .errors import InputError
 from .linalg import SparseSPDSolver
 from .mesh import QuadMesh, xor_to_root
@@ -65,7 +65,6 @@ __all__ = [
     "prescribed_family",
     "integrate_directions",
     "extract_quads",
-    "FamilyLevels",
     "glide",
     "write_layout_picture",
 ]
@@ -1336,51 +1335,6 @@ def _value_at(design: DesignSurface, value: np.ndarray, points: np.ndarray) -> n
 # ---------------------------------------------------------------------------- gliding
 
 
-class FamilyLevels(Constraint):
-    """Vertices on prescribed level sets of a function on the design surface (hard).
-
-    One row per vertex: the distance from the level set through its footpoint, measured
-    along the function's gradient, ``g^ . (x - p) + (f(p) - level) / |g|``; footpoints are
-    updated every iteration (the function is linear on each design triangle).
-
-    Parameters
-    ----------
-    design : the `DesignSurface` (its closest-point structure).
-    value : (n_design,) float, the function on the design vertices.
-    vertices : (k,) int, net vertices held on levels.
-    levels : (k,) float, their levels.
-    """
-
-    name = "levels"
-    hard = True
-
-    def __init__(self, design: DesignSurface, value: np.ndarray, vertices: np.ndarray,
-                 levels: np.ndarray):
-        self.design = design
-        self.value = np.asarray(value, dtype=np.float64)
-        self.vertices = np.asarray(vertices, dtype=np.int64)
-        self.levels = np.asarray(levels, dtype=np.float64)
-        self.gradient = _gradient_vectors(design, self.value)
-
-    def prepare(self, state):
-        model = state.X[self.vertices] * state.length_scale + state.origin
-        foot, _, tri = self.design.reference.closest_points(model)
-        at_foot = _value_at(self.design, self.value, foot)
-        g = self.gradient[tri]
-        norm = np.maximum(np.linalg.norm(g, axis=1), 1e-300)
-        self._direction = g / norm[:, None]
-        self._offset = (at_foot - self.levels) / norm / state.length_scale
-        self._foot = (foot - state.origin) / state.length_scale
-
-    def columns(self, state):
-        return state.layout.index("vertices")[self.vertices]
-
-    def evaluate(self, state):
-        d = state.X[self.vertices] - self._foot
-        return np.sum(d * self._direction, axis=1) + self._offset, self._direction
-
-
-
 def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,
           radius: float | None = None, settings=None, fixed: np.ndarray | None = None,
           progress=None):
@@ -1405,7 +1359,7 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     extra = ()
     if layout.prescribed is not None:
         on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
-        extra = (FamilyLevels(design, layout.prescribed, on_level,
+        extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
                               layout.vertex_keys[on_level, 0]),)
     result = optimize(mesh, net, angle=angle, radius=radius, reference=design.reference,
                       fixed=fixed, settings=settings, glide=True,

@@ -136,7 +136,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
         families.append(CoherentOrientation())
     if fairness:
         families.append(Fairness())
-    if reference is None and closeness:
+    if reference is None and (closeness or glide):
         reference = ReferenceSurface.from_mesh(mesh)
     if glide:
         # on the surface at convergence, boundary vertices on its boundary curves

@@ -4,6 +4,7 @@ from .angle import ConstantAngle
 from .base import Constraint, Layout, NetState
 from .closeness import BoundaryGliding, Closeness
 from .fairness import Fairness
+from .levels import FamilyLevels
 from .mannheim import (
     ConstantMannheimRadius,
     ContactNormals,
@@ -28,6 +29,7 @@ __all__ = [
     "PlanarFaces",
     "PlaneNormalization",
     "Fairness",
+    "FamilyLevels",
     "ContactNormals",
     "NormalNormalization",
     "MannheimTangency",
