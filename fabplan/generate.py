@@ -184,6 +184,19 @@ def _isogonal_levels(profile: Profile, levels: np.ndarray, half_step: float,
     return s
 
 
+def _levels_and_half_step(name: str, m: int, k: int, span_deg: float,
+                          step: float | None) -> tuple[int, float]:
+    """Number of levels of an (m, k) diagonal net and half its longitude step (radians)."""
+    n_levels = m + k - 1
+    d = 2 * math.radians(span_deg) / (n_levels - 1) if step is None else float(step)
+    half = d / 2
+    if not 0 < half * (n_levels - 1) < 2 * math.pi:
+        raise InputError(f"{name}: the grid would cover {math.degrees(half * (n_levels - 1)):.4g}"
+                         " degrees of longitude; it must be positive and below 360 (reduce step or "
+                         "span_deg)")
+    return n_levels, half
+
+
 def rotational_snet(m: int, k: int, *, profile: str | Profile = "catenoid",
                     step: float | None = None, span_deg: float = 90.0, angle_deg: float = 90.0,
                     isogonal: bool = False, scale: float = 1.0) -> QuadMesh:
@@ -236,13 +249,7 @@ def rotational_snet(m: int, k: int, *, profile: str | Profile = "catenoid",
         raise InputError(f"rotational_snet needs at least 2 x 2 vertices, got {m} x {k}")
     if not 0.0 < angle_deg < 180.0:
         raise InputError(f"angle_deg must lie strictly between 0 and 180, got {angle_deg}")
-    n_levels = m + k - 1
-    d = 2 * math.radians(span_deg) / (n_levels - 1) if step is None else float(step)
-    half = d / 2
-    if not 0 < half * (n_levels - 1) < 2 * math.pi:
-        raise InputError(f"rotational_snet: the grid would cover {math.degrees(half * (n_levels - 1)):.4g}"
-                         " degrees of longitude; it must be positive and below 360 (reduce step or "
-                         "span_deg)")
+    n_levels, half = _levels_and_half_step("rotational_snet", m, k, span_deg, step)
     aspect = math.tan(math.radians(angle_deg) / 2)
     level = np.arange(n_levels) - (n_levels - 1) / 2
     s_table, u_table = profile.conformal_table()
@@ -328,13 +335,7 @@ def rotational_weingarten_snet(m: int, k: int, *, radius: float = 1.5, angle_deg
         raise InputError(f"angle_deg must lie strictly between 0 and 180, got {angle_deg}")
     if not (radius > 0 and math.isfinite(radius)):
         raise InputError(f"radius must be a positive length, got {radius}")
-    n_levels = m + k - 1
-    d = 2 * math.radians(span_deg) / (n_levels - 1) if step is None else float(step)
-    half = d / 2
-    if not 0 < half * (n_levels - 1) < 2 * math.pi:
-        raise InputError(f"rotational_weingarten_snet: the grid would cover "
-                         f"{math.degrees(half * (n_levels - 1)):.4g} degrees of longitude; it must "
-                         "be positive and below 360 (reduce step or span_deg)")
+    n_levels, half = _levels_and_half_step("rotational_weingarten_snet", m, k, span_deg, step)
     cosine, curvature = math.cos(math.radians(angle_deg)), 1 / radius
 
     def conditions(pa, pb, pc):
