@@ -284,6 +284,57 @@ def _cmd_strips(args) -> int:
     return 0
 
 
+def _cmd_study(args) -> int:
+    from .study import run_study
+    from .study_report import check_output_folder, write_study
+    from .study_spec import read_study, resolve_study
+
+    show = not args.quiet
+
+    def say(message: str) -> None:
+        if show:
+            print(message, file=sys.stderr, flush=True)
+
+    out = Path(args.output)
+    study = read_study(resolve_study(args.study))
+    check_output_folder(out)
+    result = run_study(study, progress=say)
+    files = write_study(result, out, progress=say)
+    for c in result.ranked():
+        if c.failed:
+            print(f"  {c.name:<28} failed: {c.error}")
+            continue
+        m = c.metrics
+        print(f"{c.rank:>2} {c.name:<28} {'feasible' if c.feasible else 'not feasible':<12} "
+              f"molds {m['molds']['count']:>4}  panels {m['panels']:>5}  deviation "
+              f"{m['deviation_mm']['max']:8.1f} mm  cost {c.cost:9.0f}")
+    print(result.recommendation)
+    print(f"wrote {files[0]} (and study.json, candidates.csv, candidates/) in "
+          f"{result.seconds:.0f} s")
+    return 0
+
+
+def _cmd_templates(args) -> int:
+    from .study_spec import copy_template, template_names, template_summary
+
+    if args.name is None:
+        names = template_names()
+        width = max(map(len, names), default=0)
+        for name in names:
+            print(f"{name:<{width}}  {template_summary(name)}")
+        print("run one with `fabplan study NAME -o DIR`; copy one with "
+              "`fabplan templates NAME -o my-study.toml`")
+        return 0
+    if args.output is None:
+        from .study_spec import template_path
+
+        print(template_path(args.name).read_text(encoding="utf-8"), end="")
+        return 0
+    for path in copy_template(args.name, args.output):
+        print(f"wrote {path}")
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """Usage errors as one line and exit code 2, like every other bad input."""
 
@@ -406,6 +457,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
     p.set_defaults(func=_cmd_strips)
+
+    p = sub.add_parser("study", help="facade feasibility study: run the candidate nets of a "
+                       "design, judge them against the fabrication limits, recommend one")
+    p.add_argument("study", help="study file (TOML, see docs/study-file.md) or a template "
+                   "name (see `fabplan templates`)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR",
+                   help="folder for report.html, study.json, candidates.csv and candidates/")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=_cmd_study)
+
+    p = sub.add_parser("templates", help="list the study templates, print or copy one")
+    p.add_argument("name", nargs="?", help="template to print (or copy with -o)")
+    p.add_argument("-o", "--output", metavar="FILE",
+                   help="copy the template here (a .toml file or a folder) to start a study")
+    p.set_defaults(func=_cmd_templates)
     return parser
 
 

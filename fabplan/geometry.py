@@ -25,6 +25,7 @@ __all__ = [
     "principal_curvatures",
     "principal_directions",
     "face_planarity",
+    "kink_angles",
     "star_planarity",
     "circumcircle_tangent",
     "face_normals",
@@ -242,6 +243,27 @@ def face_planarity(X: np.ndarray, quads: np.ndarray) -> np.ndarray:
     if len(quads) == 0:
         return np.zeros(0)
     return _plane_distances(X[quads])
+
+
+def kink_angles(X: np.ndarray, mesh) -> np.ndarray:
+    """(i,) float, angle in radians between the normals of the two faces at every interior
+    edge of `mesh` (0 where neighbouring panels continue each other smoothly).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fabplan.mesh import QuadMesh
+    >>> X = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 1], [0, 1, 0], [1, 1, 0], [2, 1, 1.0]])
+    >>> mesh = QuadMesh(X, [[0, 1, 4, 3], [1, 2, 5, 4]])
+    >>> np.degrees(kink_angles(X, mesh)).round(6)
+    array([45.])
+    """
+    pairs = mesh.interior_edge_faces
+    if len(pairs) == 0:
+        return np.zeros(0)
+    n = face_normals(X, mesh)
+    cos = np.sum(n[pairs[:, 0]] * n[pairs[:, 1]], axis=1)
+    return np.arccos(np.clip(cos, -1.0, 1.0))
 
 
 def star_planarity(X: np.ndarray, stars: np.ndarray) -> np.ndarray:

@@ -286,6 +286,13 @@ class QuadMesh:
         return np.unique(pairs, axis=0)
 
     @cached_property
+    def interior_edge_faces(self) -> np.ndarray:
+        """(i, 2) int, the two faces on either side of every interior edge."""
+        c = self._corners
+        corner = np.flatnonzero(c["twin"] > np.arange(len(c["twin"])))
+        return np.stack([c["face"][corner], c["face"][c["twin"][corner]]], axis=1)
+
+    @cached_property
     def mean_edge_length(self) -> float:
         e = self.edges
         return float(np.linalg.norm(self.vertices[e[:, 0]] - self.vertices[e[:, 1]], axis=1).mean())

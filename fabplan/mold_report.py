@@ -20,7 +20,7 @@ from .geometry import face_normals
 from .io import json_text, write_texts
 from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
 
-__all__ = ["explain_mold_count", "mold_report_html", "mold_report_files", "write_mold_report"]
+__all__ = ["explain_mold_count", "mold_figure", "mold_report_html", "mold_report_files", "write_mold_report"]
 
 _PER_M = 1000.0  # curvatures are stored per mm; the pictures and tables show them per m
 
@@ -67,6 +67,37 @@ def _mold_colors(plan: MoldPlan) -> np.ndarray:
     return report.distinct_colors(max(plan.mold_count, 1))
 
 
+def _facade_view(mesh) -> tuple:
+    """Face normals and the viewing frame of the facade pictures."""
+    X = mesh.vertices
+    normals = face_normals(X, mesh)
+    tri = mesh.triangles()
+    tri_face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes - 2)
+    areas = np.bincount(tri_face, 0.5 * np.linalg.norm(
+        np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]), axis=1),
+        minlength=len(mesh.face_sizes))
+    return normals, report.view_frame(X, normals, areas)
+
+
+def mold_figure(plan: MoldPlan, *, title: str | None = None) -> str:
+    """Data URI of the facade with its panels coloured by mold (failures red)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    mesh = plan.mesh
+    normals, view = _facade_view(mesh)
+    colors = _mold_colors(plan)[plan.mold]
+    fail = plan.failures
+    colors[fail] = (0.85, 0.1, 0.1, 1.0)
+    fig, ax = plt.subplots(figsize=(9, 7))
+    report.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
+    ax.set_title(title or (f"{plan.panel_count} panels on {plan.mold_count} molds: one colour "
+                           "per mold" + (f" ({fail.size} failures in red)" if fail.size else "")))
+    return report.figure_to_data_uri(fig)
+
+
 def _facade_figures(plan: MoldPlan) -> tuple[str, str]:
     """Data URIs of the facade coloured by mold and of its curvature isolines."""
     import matplotlib
@@ -75,25 +106,13 @@ def _facade_figures(plan: MoldPlan) -> tuple[str, str]:
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
+    by_mold = mold_figure(plan)
     mesh = plan.mesh
     X = mesh.vertices
     faces = mesh.faces
-    normals = face_normals(X, mesh)
+    normals, view = _facade_view(mesh)
     tri = mesh.triangles()
     tri_face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes - 2)
-    areas = np.bincount(tri_face, 0.5 * np.linalg.norm(
-        np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]), axis=1),
-        minlength=len(faces))
-    view = report.view_frame(X, normals, areas)
-
-    colors = _mold_colors(plan)[plan.mold]
-    fail = plan.failures
-    colors[fail] = (0.85, 0.1, 0.1, 1.0)
-    fig, ax = plt.subplots(figsize=(9, 7))
-    report.draw_mesh(ax, X, faces, colors, view, normals=normals)
-    ax.set_title(f"{plan.panel_count} panels on {plan.mold_count} molds: one colour per mold"
-                 + (f" ({fail.size} failures in red)" if fail.size else ""))
-    by_mold = report.figure_to_data_uri(fig)
 
     fig, ax = plt.subplots(figsize=(9, 7))
     grey = np.tile((0.88, 0.88, 0.88, 1.0), (len(faces), 1))

@@ -1,0 +1,418 @@
+"""The files of a facade study: ``report.html``, ``study.json``, ``candidates.csv`` and,
+per candidate, the net (OBJ + measured JSON), its molds (CSV, JSON) and strips (DXF).
+
+The output folder is built beside its destination and moved into place only when every
+file is written: a failed run leaves no partial folder. The schema of ``study.json`` is
+``docs/study-schema.md``; every number of the report is in it.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import io
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import report
+from .errors import InputError
+from .io import json_text, write_texts
+from .study import CandidateResult, StudyResult
+
+__all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA"]
+
+STUDY_SCHEMA = "fabplan-study/1"
+
+
+# ---------------------------------------------------------------------------- records
+def _candidate_record(c: CandidateResult, outputs: dict) -> dict:
+    return {
+        "name": c.name,
+        "net": c.candidate.net,
+        "description": c.candidate.describe(),
+        "baseline": c.candidate.baseline,
+        "requested": {"angle_deg": c.candidate.angle, "radius": c.candidate.radius},
+        "feasible": c.feasible,
+        "reasons": c.reasons,
+        "error": c.error,
+        "checks": c.checks,
+        "metrics": c.metrics,
+        "cost": c.cost,
+        "cost_terms": c.cost_terms,
+        "rank": c.rank,
+        "outputs": outputs,
+    }
+
+
+def study_record(result: StudyResult, outputs: dict | None = None) -> dict:
+    """The ``study.json`` record (schema ``docs/study-schema.md``)."""
+    outputs = outputs or {}
+    design = result.design
+    return {
+        "schema": STUDY_SCHEMA,
+        "study": result.study.record(),
+        "design": {"label": result.study.design.label, "source": result.study.design.source,
+                   "triangles": int(len(design.triangles)), "area": float(design.area),
+                   "units": result.study.design.units},
+        "recommended": result.recommended,
+        "recommendation": result.recommendation,
+        "candidates": [_candidate_record(c, outputs.get(c.name, {})) for c in result.candidates],
+        "seconds": result.seconds,
+    }
+
+
+_CSV_COLUMNS = ["rank", "name", "net", "feasible", "cost", "molds", "panels", "planar",
+                "single_curved", "double_curved", "deviation_max_mm", "deviation_p95_mm",
+                "planarity_max_mm", "kink_max_deg", "angle_min_deg", "angle_max_deg",
+                "radius_min", "radius_max", "sheets", "strips_congruent", "seconds", "reasons"]
+
+
+def _row(c: CandidateResult) -> dict:
+    m = c.metrics
+    if c.failed:
+        return {"name": c.name, "net": c.candidate.net, "feasible": "no",
+                "reasons": "; ".join(c.reasons), "seconds": _num(m.get("seconds", {}).get("total"))}
+    types = m["molds"]["panel_types"]
+    angle, radius, strips = m["intersection_angle_deg"], m["meusnier_radius"], m["strips"]
+    return {
+        "rank": c.rank, "name": c.name, "net": c.candidate.net,
+        "feasible": "yes" if c.feasible else "no", "cost": _num(c.cost),
+        "molds": m["molds"]["count"], "panels": m["panels"],
+        "planar": types.get("planar", 0), "single_curved": types.get("single_curved", 0),
+        "double_curved": types.get("double_curved", 0),
+        "deviation_max_mm": _num(m["deviation_mm"]["max"]),
+        "deviation_p95_mm": _num(m["deviation_mm"]["p95"]),
+        "planarity_max_mm": _num(m["planarity_mm"]["max"]),
+        "kink_max_deg": _num(m["kink_deg"]["max"]),
+        "angle_min_deg": _num(angle and angle["min"]), "angle_max_deg": _num(angle and angle["max"]),
+        "radius_min": _num(radius and radius["min"]), "radius_max": _num(radius and radius["max"]),
+        "sheets": strips["sheets"] if strips else "",
+        "strips_congruent": ("yes" if strips["congruent"] else "no") if strips else "",
+        "seconds": _num(m["seconds"]["total"]), "reasons": "; ".join(c.reasons),
+    }
+
+
+def _num(value) -> str:
+    return "" if value is None else f"{value:.6g}"
+
+
+def candidates_csv(result: StudyResult) -> str:
+    """``candidates.csv``: one row per candidate in rank order."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=_CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for c in result.ranked():
+        writer.writerow(_row(c))
+    return buffer.getvalue()
+
+
+# ---------------------------------------------------------------------------- pictures
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _view(mesh):
+    from .mold_report import _facade_view
+
+    return _facade_view(mesh)
+
+
+def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: float) -> str:
+    """Data URI: the net's panels coloured by their distance from the design (mm)."""
+    plt = _plt()
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    mesh = c.net.mesh
+    d = design.reference.distances(mesh.vertices) * mm_per_unit
+    owner = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+    face_d = np.bincount(owner, d[mesh.face_indices], minlength=len(mesh.face_sizes)) / mesh.face_sizes
+    top = max(limit_mm, float(d.max()), 1e-9)
+    norm = Normalize(0.0, top)
+    cmap = colormaps["viridis"]
+    colors = cmap(norm(face_d))
+    normals, view = _view(mesh)
+    fig, ax = plt.subplots(figsize=(8, 6))
+    report.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8)
+    bar.set_label("distance from the design [mm]")
+    bar.ax.axhline(limit_mm, color="#c0392b", lw=2)
+    ax.set_title(f"{c.name}: deviation from the design, max {d.max():.1f} mm "
+                 f"(limit {limit_mm:g} mm, red line)")
+    return report.figure_to_data_uri(fig)
+
+
+def comparison_figure(result: StudyResult) -> str:
+    """Data URI: molds and deviation of every measured candidate, limits marked."""
+    plt = _plt()
+    done = [c for c in result.ranked() if not c.failed]
+    limits = result.study.limits
+    names = [c.name for c in done]
+    colors = ["#2e8b57" if c.feasible else "#c0392b" for c in done]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 0.45 * len(done) + 1.8))
+    y = np.arange(len(done))
+    molds = [c.metrics["molds"]["count"] for c in done]
+    left.barh(y, molds, color=colors)
+    left.set_yticks(y, names)
+    left.invert_yaxis()
+    left.set_xlabel("molds")
+    if limits.max_molds is not None:
+        left.axvline(limits.max_molds, color="black", ls="--", lw=1, label="limit")
+        left.legend(loc="lower right")
+    for yi, n in zip(y, molds, strict=True):
+        left.text(n, yi, f" {n}", va="center", fontsize=8)
+    dev = [c.metrics["deviation_mm"]["max"] for c in done]
+    right.barh(y, dev, color=colors)
+    right.set_yticks(y, [""] * len(done))
+    right.invert_yaxis()
+    right.axvline(limits.max_deviation_mm, color="black", ls="--", lw=1, label="limit")
+    right.set_xlabel("largest deviation from the design [mm]")
+    right.legend(loc="lower right")
+    for yi, v in zip(y, dev, strict=True):
+        right.text(v, yi, f" {v:.1f}", va="center", fontsize=8)
+    fig.suptitle("Candidates in rank order (green: feasible, red: not)")
+    fig.tight_layout()
+    return report.figure_to_data_uri(fig)
+
+
+def _png_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+# ---------------------------------------------------------------------------- HTML
+def _fmt_range(r: dict | None, digits: int = 4) -> str:
+    if not r:
+        return ""
+    return f"{report.format_value(r['min'], digits)} .. {report.format_value(r['max'], digits)}"
+
+
+def _comparison_table(result: StudyResult) -> str:
+    rows, bad = [], []
+    for c in result.ranked():
+        m = c.metrics
+        if c.failed:
+            rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "",
+                         "", "", c.reasons[0]])
+            bad.append(len(rows) - 1)
+            continue
+        s = m["strips"]
+        rows.append([
+            c.rank, c.name, c.candidate.describe(), "yes" if c.feasible else "no",
+            m["molds"]["count"], m["panels"], f"{m['deviation_mm']['max']:.1f}",
+            f"{m['planarity_mm']['max']:.2f}", f"{m['kink_deg']['max']:.2f}",
+            _fmt_range(m["intersection_angle_deg"]), _fmt_range(m["meusnier_radius"]),
+            "" if s is None else f"{s['sheets']}{' (congruent)' if s['congruent'] else ''}",
+            f"{c.cost:.0f}"])
+        if not c.feasible:
+            bad.append(len(rows) - 1)
+    return report.html_table(
+        ["rank", "candidate", "net", "feasible", "molds", "panels", "max deviation [mm]",
+         "planarity [mm]", "max kink [deg]", "angle [deg]", "Meusnier radius",
+         "strip sheets", "cost"], rows, caption="All candidates, best first", bad_rows=bad)
+
+
+def _limits_table(result: StudyResult) -> str:
+    from dataclasses import asdict
+
+    rows = [[k, report.format_value(v)] for k, v in asdict(result.study.limits).items()
+            if v is not None and v is not False]
+    return report.html_table(["limit", "value"], rows, caption="Fabrication limits")
+
+
+def _cost_table(result: StudyResult) -> str:
+    from dataclasses import asdict
+
+    rows = [[k.replace("_", " "), report.format_value(v)]
+            for k, v in asdict(result.study.cost).items()]
+    return report.html_table(["per", "cost units"], rows, caption="Cost weights")
+
+
+def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict) -> str:
+    head = f"{c.rank}. {c.name}" if c.rank else c.name
+    if c.failed:
+        return report.html_section(head, report.html_paragraph(
+            f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
+    m = c.metrics
+    verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(
+        ck["text"] for ck in c.checks if ck["ok"] != c.feasible or c.feasible)
+    checks = report.html_table(
+        ["limit", "measured", "bound", "met", "what was measured"],
+        [[ck["limit"], report.format_value(ck["measured"]), report.format_value(ck["bound"]),
+          "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks],
+        caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
+    types = m["molds"]["panel_types"]
+    facts = [
+        ["net", c.candidate.describe()],
+        ["solve", f"{m['status']} after {m['iterations']} iterations"],
+        ["solved parameters", ", ".join(f"{k} {v:.6g}" for k, v in m["parameters"].items()
+                                        if isinstance(v, float)) or "-"],
+        ["panels", f"{m['panels']} ({m['quads']} quads, {m['other_faces']} other; "
+                   f"{m['irregular_vertices']} irregular vertices)"],
+        ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in types.items())],
+        ["edge length", _fmt_range(m["edge_length"])],
+        ["panel area", _fmt_range(m["panel_area"])],
+        ["deviation from the design [mm]", f"max {m['deviation_mm']['max']:.2f}, mean "
+                                           f"{m['deviation_mm']['mean']:.2f}, 95 % "
+                                           f"{m['deviation_mm']['p95']:.2f}"],
+        ["molds", f"{m['molds']['count']} ({m['molds']['molds_per_sqrt_panels']:.2f} x sqrt of "
+                  f"the panel count), largest panel gap {m['molds']['max_deviation_mm']:.2f} mm"],
+        ["sphere residual (max, of an edge)", report.format_value(m["sphere_residual_relative_max"])],
+        ["seconds", ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())],
+    ]
+    if m["strips"]:
+        s = m["strips"]
+        facts.append(["strips", f"{s['strips']} strips, {s['parts']} parts on {s['sheets']} "
+                      f"sheets ({100 * s['material_use']:.0f} % material use); "
+                      + ("straight" if s["straight"] else f"radius {_fmt_range(s['radius_mm'], 5)} mm")
+                      + ("; congruent" if s["congruent"] else "")])
+    parts = [report.html_paragraph(verdict, cls="note" if c.feasible else "fail"),
+             report.html_table(["quantity", "value"], facts, caption="Measured"), checks]
+    captions = {"net": "The net on the design surface (grey)",
+                "deviation": "Deviation heat map",
+                "molds": "Panels coloured by mold",
+                "sheet": "First strip sheet (as cut: red outline, magenta slits, blue labels)"}
+    for key, caption in captions.items():
+        if key in pictures:
+            parts.append(report.html_figure(pictures[key], caption))
+    parts.append(report.html_paragraph(
+        "Files: " + ", ".join(f"{k}: {v}" for k, v in outputs.items() if not isinstance(v, list))))
+    return report.html_section(head, *parts)
+
+
+def study_html(result: StudyResult, pictures: dict, outputs: dict) -> str:
+    """The self-contained ``report.html``."""
+    study = result.study
+    sub = (f"Design {study.design.label}, panel size {study.panel_size:g} {study.design.units}, "
+           f"{len(result.candidates)} candidates, run in {result.seconds:.0f} s")
+    parts = []
+    if study.description:
+        parts.append(report.html_paragraph(study.description))
+    parts.append(report.html_section(
+        "Recommendation", report.html_paragraph(result.recommendation,
+                                                cls="note" if result.recommended else "fail")))
+    overview = [_comparison_table(result)]
+    if "comparison" in pictures:
+        overview.append(report.html_figure(pictures["comparison"],
+                                           "Molds and deviation of each candidate"))
+    overview += [_limits_table(result), _cost_table(result), report.html_paragraph(
+        "Cost = the weights times molds, panels by type, strip sheets and the largest "
+        "deviation in mm; feasible candidates rank first, by cost.")]
+    parts.append(report.html_section("Comparison", *overview))
+    for c in result.ranked():
+        parts.append(_candidate_section(c, pictures.get(c.name, {}), outputs.get(c.name, {})))
+    return report.html_page(f"Facade study: {study.name}", parts, subtitle=sub)
+
+
+# ---------------------------------------------------------------------------- writing
+def check_output_folder(folder: Path) -> None:
+    """Refuse a folder that cannot hold a study: not a folder, not writable, or holding
+    other files than an earlier study's (a study replaces the whole folder)."""
+    folder = Path(folder)
+    if folder.exists():
+        if not folder.is_dir():
+            raise InputError(f"{folder}: exists and is not a folder")
+        if any(folder.iterdir()) and not (folder / "study.json").is_file():
+            raise InputError(f"{folder}: the folder is not empty and holds no earlier study "
+                             "(a study replaces its output folder); choose another folder")
+    existing = folder
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK):
+        raise InputError(f"{folder}: cannot write there ({existing} is not a writable folder)")
+
+
+def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say) -> tuple:
+    from .dxf import preview_png, sheet_document
+    from .layout import write_layout_picture
+
+    study = result.study
+    folder.mkdir(parents=True)
+    net_obj, net_json = c.net.write(folder / "net.obj")
+    write_texts({folder / "molds.csv": c.molds.panels_csv(),
+                 folder / "molds.json": json_text(c.molds.record())})
+    outputs = {"net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
+               "molds_json": "molds.json", "picture": "net.png"}
+    title = f"{c.name}: {c.candidate.describe()}"
+    write_layout_picture(folder / "net.png", result.design, c.net.mesh, title=title,
+                         singular_points=c.layout.singular_points if c.layout else None)
+    pictures = {"net": _png_uri(folder / "net.png"),
+                "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
+                                              study.design.mm_per_unit)}
+    from .mold_report import mold_figure
+
+    pictures["molds"] = mold_figure(c.molds, title=f"{c.name}: {c.molds.panel_count} panels on "
+                                    f"{c.molds.mold_count} molds (one colour per mold)")
+    if c.strips is not None:
+        files = c.strips.write(folder / "strips", previews=False)
+        layout, settings = c.strips.layout, c.strips.strips.settings
+        sheet = layout.sheets[0]
+        preview = folder / "strips" / "sheet-preview.png"
+        preview_png(sheet_document(layout, [sheet], settings), preview, settings.sheet_mm,
+                    title=f"{c.name}: sheet 1 of {len(layout.sheets)}")
+        pictures["sheet"] = _png_uri(preview)
+        outputs["strips_dxf"] = sorted(f"strips/{f.name}" for f in files if f.suffix == ".dxf")
+        outputs["strips_schedule"] = "strips/strips.csv"
+        outputs["strips_preview"] = "strips/sheet-preview.png"
+    say(f"    wrote {c.name}")
+    return {k: (f"candidates/{c.name}/{v}" if isinstance(v, str) else
+                [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
+
+
+def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
+    """Write every file of a study into `out_dir` (replacing an earlier study there).
+
+    Returns
+    -------
+    list of Path: ``report.html``, ``study.json``, ``candidates.csv`` (the candidate
+    folders are listed in ``study.json``).
+    """
+    say = progress or (lambda message: None)
+    out_dir = Path(out_dir)
+    check_output_folder(out_dir)
+    existing = out_dir.parent
+    while not existing.exists():
+        existing = existing.parent
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=existing))
+    try:
+        outputs, pictures = {}, {}
+        for c in result.candidates:
+            if not c.failed:
+                outputs[c.name], pictures[c.name] = _candidate_files(
+                    c, tmp / "candidates" / c.name, result, say)
+        if any(not c.failed for c in result.candidates):
+            pictures["comparison"] = comparison_figure(result)
+        record = study_record(result, outputs)
+        write_texts({tmp / "study.json": json_text(record),
+                     tmp / "candidates.csv": candidates_csv(result),
+                     tmp / "report.html": study_html(result, pictures, outputs)})
+        os.chmod(tmp, 0o777 & ~_umask())
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        old = None
+        if out_dir.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old.", dir=out_dir.parent))
+            os.replace(out_dir, old / "previous")
+        os.replace(tmp, out_dir)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except OSError as exc:
+        raise InputError(f"{out_dir}: cannot write ({exc.strerror or exc})") from None
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return [out_dir / "report.html", out_dir / "study.json", out_dir / "candidates.csv"]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

@@ -1,0 +1,329 @@
+"""Facade studies: the study file, the run, the verdicts, the files, the CLI.
+
+A small study on a saddle runs once per module (about 10 s) and the tests read what it
+wrote: every verdict must trace to a number in ``study.json``, the files must be real
+(nets that reload with the measured residuals, DXF that reads back, a report with its
+pictures embedded), and a limit changed in the study file must flip the verdict for the
+right reason.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import ezdxf
+import numpy as np
+import pytest
+
+from fabplan.cli import main
+from fabplan.errors import InputError, SolverError
+from fabplan.geometry import canonical_stars, fit_star_spheres
+from fabplan.mesh import load_mesh
+from fabplan.study import run_study, verdict
+from fabplan.study_spec import parse_study, read_study, template_names, template_path
+
+STUDY = """\
+[study]
+name = "Saddle test"
+description = "A small saddle canopy with three candidates."
+max_iterations = 80
+
+[design]
+surface = "hyperbolic-paraboloid"
+parameters = {{ width = 4, depth = 4, rise = 1.2 }}
+triangles = 4000
+
+[panels]
+size = 0.7
+
+[limits]
+max_deviation_mm = {deviation}
+mold_tolerance_mm = 1.5
+max_kink_deg = 20
+
+[strips]
+height_mm = 60
+thickness_mm = 3
+sheet_mm = [1200, 600]
+
+[[candidates]]
+net = "isogonal"
+angle = 80
+
+[[candidates]]
+net = "const-radius"
+"""
+
+CANDIDATE_KEYS = {"name", "net", "feasible", "reasons", "metrics", "outputs"}
+
+
+def _write_study(folder: Path, deviation: float) -> Path:
+    path = folder / "saddle.toml"
+    path.write_text(STUDY.format(deviation=deviation), encoding="utf-8")
+    return path
+
+
+@pytest.fixture(scope="module")
+def study_run(tmp_path_factory):
+    """The saddle study run through the CLI: (study file, output folder, study.json)."""
+    folder = tmp_path_factory.mktemp("study")
+    path = _write_study(folder, 200)
+    out = folder / "out"
+    assert main(["study", str(path), "-o", str(out), "-q"]) == 0
+    return path, out, json.loads((out / "study.json").read_text(encoding="utf-8"))
+
+
+def _candidate(record: dict, name: str) -> dict:
+    return next(c for c in record["candidates"] if c["name"] == name)
+
+
+# ---------------------------------------------------------------------------- study file
+def test_sweeps_expand_into_named_candidates():
+    study = parse_study(STUDY.format(deviation=50).replace(
+        "angle = 80", "angle = { from = 60, to = 90, step = 10 }"))
+    assert [c.name for c in study.candidates] == [
+        "baseline", "isogonal-60", "isogonal-70", "isogonal-80", "isogonal-90", "const-radius"]
+    assert study.candidates[0].baseline and study.candidates[0].net == "snet"
+    assert [c.angle for c in study.candidates[1:5]] == [60, 70, 80, 90]
+
+
+def test_auto_candidates_cover_the_rationalizations():
+    text = STUDY.format(deviation=50).split("[[candidates]]")[0]
+    nets = {c.net for c in parse_study(text).candidates}
+    assert {"snet", "isogonal", "linear-weingarten", "const-radius", "char-conjugate",
+            "cmc"} <= nets
+
+
+@pytest.mark.parametrize("change, fragment", [
+    (("max_deviation_mm = 50", "max_deviaton_mm = 50"), "limits.max_deviaton_mm is not a known "
+                                                        "key (did you mean 'max_deviation_mm'?)"),
+    (("size = 0.7", "size = \"big\""), "panels.size must be a positive number"),
+    (("net = \"const-radius\"", "net = \"const-radios\""), "candidates[1].net must be one of"),
+    (("surface = \"hyperbolic-paraboloid\"", "surface = \"hypar\""), "design.surface is 'hypar'"),
+    (("rise = 1.2", "rise = 1.2, wdth = 3"), "design.parameters do not describe a surface"),
+    (("angle = 80", "angle = 200"), "candidates[0].angle must lie strictly between 0 and 180"),
+    (("net = \"const-radius\"", "net = \"const-radius\"\nangle = 70"),
+     "candidates[1].angle does not apply to net type 'const-radius'"),
+    (("net = \"const-radius\"", "net = \"sstar\""), "candidates[1].net is the S*-net type"),
+    (("mold_tolerance_mm = 1.5", "mold_tolerance_mm = -1"), "limits.mold_tolerance_mm must be "
+                                                            "a positive number"),
+    (("mold_tolerance_mm = 1.5\n", ""), "limits.mold_tolerance_mm is missing"),
+    (("sheet_mm = [1200, 600]", "sheet_mm = 1200"), "strips.sheet_mm must be [width, height]"),
+    (("[panels]", "[panels\n"), "not a valid TOML study file"),
+])
+def test_a_bad_study_file_is_refused_naming_the_key(change, fragment):
+    text = STUDY.format(deviation=50).replace(*change)
+    with pytest.raises(InputError) as info:
+        parse_study(text)
+    assert fragment in str(info.value)
+
+
+def test_a_missing_design_file_is_named(tmp_path):
+    text = STUDY.format(deviation=50).replace(
+        'surface = "hyperbolic-paraboloid"\nparameters = { width = 4, depth = 4, rise = 1.2 }',
+        'file = "facade.stl"')
+    path = tmp_path / "s.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(InputError, match=r"design.file names 'facade.stl', which does not exist"):
+        read_study(path)
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["study", "no-such-template", "-o", "OUT"], "unknown template 'no-such-template'"),
+    (["study", "missing.toml", "-o", "OUT"], "missing.toml: no such study file"),
+    (["study", "BAD", "-o", "OUT"], "candidates[1].net must be one of"),
+])
+def test_the_cli_refuses_bad_studies_without_leaving_a_folder(tmp_path, capsys, monkeypatch,
+                                                               argv, fragment):
+    monkeypatch.chdir(tmp_path)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(STUDY.format(deviation=50).replace('net = "const-radius"', 'net = "nope"'),
+                   encoding="utf-8")
+    argv = [str(bad) if a == "BAD" else str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith("fabplan: error: ") and err.count("\n") == 1 and fragment in err
+    assert "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_every_template_is_a_valid_study_listed_by_the_cli(capsys):
+    names = template_names()
+    assert {"stadium", "pavilion", "tower", "canopy"} <= set(names)
+    for name in names:
+        study = read_study(template_path(name))
+        assert study.candidates[0].baseline and len(study.candidates) >= 2
+        assert study.description
+    assert main(["templates"]) == 0
+    listed = capsys.readouterr().out
+    for name in names:
+        assert re.search(rf"^{name}\s+\S", listed, re.M)
+
+
+def test_a_template_is_copied_to_start_a_study(tmp_path, capsys):
+    target = tmp_path / "mine.toml"
+    assert main(["templates", "canopy", "-o", str(target)]) == 0
+    study = read_study(target)
+    assert study.candidates == read_study(template_path("canopy")).candidates
+    assert main(["templates", "canopy", "-o", str(target)]) == 2     # never overwrites
+    assert "exists" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------- the run
+def test_study_json_lists_every_candidate_with_its_evidence(study_run):
+    _, out, record = study_run
+    assert record["schema"] == "fabplan-study/1"
+    names = [c["name"] for c in record["candidates"]]
+    assert names == ["baseline", "isogonal-80", "const-radius"]
+    for c in record["candidates"]:
+        assert CANDIDATE_KEYS <= set(c)
+        assert c["error"] is None, c["error"]
+        assert c["reasons"] and all(isinstance(r, str) and r for r in c["reasons"])
+        m = c["metrics"]
+        assert m["panels"] > 20 and 0.7 < m["coverage"] <= 1.0
+        assert m["deviation_mm"]["mean"] <= m["deviation_mm"]["p95"] <= m["deviation_mm"]["max"]
+    assert record["recommended"] in names
+    assert _candidate(record, record["recommended"])["feasible"]
+
+
+def test_gliding_candidates_lie_on_the_design_and_meet_their_type(study_run):
+    _, out, record = study_run
+    for name in ("baseline", "isogonal-80"):
+        m = _candidate(record, name)["metrics"]
+        assert m["converged"]
+        assert m["deviation_mm"]["max"] < 1e-3                  # on the design, in mm
+        assert m["sphere_residual_relative_max"] < 1e-6
+    angle = _candidate(record, "isogonal-80")["metrics"]["intersection_angle_deg"]
+    assert abs(angle["min"] - 80) < 0.05 and abs(angle["max"] - 80) < 0.05
+
+
+def test_every_verdict_traces_to_a_measured_number(study_run):
+    """The checks in study.json are recomputed from its metrics and limits."""
+    path, _, record = study_run
+    limits = read_study(path).limits
+    for c in record["candidates"]:
+        m = c["metrics"]
+        assert verdict(m, limits) == c["checks"]
+        by_limit = {ck["limit"]: ck for ck in c["checks"]}
+        assert by_limit["max_deviation_mm"]["measured"] == m["deviation_mm"]["max"]
+        assert by_limit["max_kink_deg"]["measured"] == m["kink_deg"]["max"]
+        assert by_limit["mold_tolerance_mm"]["measured"] == m["molds"]["max_deviation_mm"]
+        for ck in c["checks"]:
+            assert f"{ck['bound']:g}" in ck["text"]
+        assert c["feasible"] == all(ck["ok"] for ck in c["checks"])
+
+
+def test_candidate_files_are_real(study_run):
+    _, out, record = study_run
+    for c in record["candidates"]:
+        outputs = c["outputs"]
+        mesh = load_mesh(out / outputs["net"])
+        measured = json.loads((out / outputs["measured"]).read_text(encoding="utf-8"))
+        assert mesh.vertex_count == c["metrics"]["vertices"]
+        spheres = fit_star_spheres(mesh.vertices, canonical_stars(mesh.vertices, mesh.stars))
+        residual = spheres.residual.max() / mesh.mean_edge_length
+        assert residual == pytest.approx(measured["properties"]["sphere_residual_relative"]["max"],
+                                         rel=1e-3, abs=1e-12)
+        rows = (out / outputs["molds_csv"]).read_text(encoding="utf-8").strip().splitlines()
+        assert len(rows) - 1 == c["metrics"]["panels"]
+        molds = {int(r.split(",")[1]) for r in rows[1:]}
+        assert len(molds) == c["metrics"]["molds"]["count"]
+
+
+def test_lamella_candidates_get_strips_that_read_back(study_run):
+    _, out, record = study_run
+    c = _candidate(record, "const-radius")
+    strips = c["metrics"]["strips"]
+    assert strips is not None and strips["sheets"] == len(c["outputs"]["strips_dxf"]) >= 1
+    assert strips["unrolled_length_error_mm"] < 1e-6
+    for name in c["outputs"]["strips_dxf"]:
+        doc = ezdxf.readfile(out / name)
+        auditor = doc.audit()
+        assert not auditor.has_errors
+        assert len(doc.modelspace().query("LWPOLYLINE")) > 0
+    assert _candidate(record, "isogonal-80")["metrics"]["strips"] is None   # not a lamella net
+
+
+def test_the_report_embeds_a_picture_per_candidate(study_run):
+    _, out, record = study_run
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert "http://" not in html and "https://" not in html                 # offline
+    images = re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]{200,})"', html)
+    assert len(images) >= 3 * len(record["candidates"]) + 1
+    assert record["recommendation"].split(".")[0] in html.replace("&#x27;", "'")
+    csv_rows = (out / "candidates.csv").read_text(encoding="utf-8").strip().splitlines()
+    assert len(csv_rows) == 1 + len(record["candidates"])
+
+
+def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path):
+    """Lower max_deviation_mm below what const-radius measured: it alone becomes
+    infeasible, because of its deviation; the numbers stay the same (deterministic)."""
+    _, _, record = study_run
+    before = _candidate(record, "const-radius")
+    measured = before["metrics"]["deviation_mm"]["max"]
+    assert before["feasible"] and measured > 0.01
+    path = _write_study(tmp_path, round(measured / 2, 6))
+    assert main(["study", str(path), "-o", str(tmp_path / "out"), "-q"]) == 0
+    again = json.loads((tmp_path / "out" / "study.json").read_text(encoding="utf-8"))
+    after = _candidate(again, "const-radius")
+    assert not after["feasible"]
+    failed = [ck for ck in after["checks"] if not ck["ok"]]
+    assert [ck["limit"] for ck in failed] == ["max_deviation_mm"]
+    assert after["reasons"] == [failed[0]["text"]] and f"{measured:.1f} mm" in after["reasons"][0]
+    for name in ("baseline", "isogonal-80", "const-radius"):
+        a, b = _candidate(record, name)["metrics"], _candidate(again, name)["metrics"]
+        a, b = ({k: v for k, v in m.items() if k != "seconds"} for m in (a, b))
+        assert a == b
+    assert again["recommended"] != "const-radius"
+
+
+def test_a_failing_candidate_is_reported_and_the_study_goes_on(monkeypatch):
+    import importlib
+
+    module = importlib.import_module("fabplan.optimize")   # the package re-exports the function
+    real = module.optimize
+
+    def broken(mesh, net, **kw):
+        if net == "const-radius":
+            raise SolverError("the solver diverged at iteration 3: residual 1e9")
+        return real(mesh, net, **kw)
+
+    monkeypatch.setattr(module, "optimize", broken)
+    text = re.sub(r"\[strips\].*?\n\n", "", STUDY.format(deviation=200), flags=re.S)
+    study = parse_study(text.replace('net = "isogonal"\nangle = 80', 'net = "cmc"'))
+    result = run_study(study)
+    failed = next(c for c in result.candidates if c.name == "const-radius")
+    assert failed.failed and not failed.feasible and failed.rank is None
+    assert failed.reasons == ["the solver diverged at iteration 3: residual 1e9"]
+    cmc = next(c for c in result.candidates if c.name == "cmc")
+    assert not cmc.failed and cmc.rank is not None
+    assert result.recommended is not None and result.recommended != "const-radius"
+
+
+def test_an_existing_folder_of_other_files_is_not_replaced(tmp_path, capsys):
+    path = _write_study(tmp_path, 50)
+    keep = tmp_path / "out"
+    keep.mkdir()
+    (keep / "notes.txt").write_text("mine", encoding="utf-8")
+    assert main(["study", str(path), "-o", str(keep), "-q"]) == 2
+    assert "not empty" in capsys.readouterr().err
+    assert [p.name for p in keep.iterdir()] == ["notes.txt"]
+
+
+def test_kinks_and_coverage_are_measured_on_the_net(study_run):
+    _, out, record = study_run
+    c = _candidate(record, "baseline")
+    mesh = load_mesh(out / c["outputs"]["net"])
+    X = mesh.vertices
+    pairs = mesh.interior_edge_faces
+    normals = []
+    for f in mesh.faces:                       # independent: plane fit per face
+        P = X[f] - X[f].mean(axis=0)
+        normals.append(np.linalg.svd(P)[2][2])
+    normals = np.array(normals)
+    cos = np.abs(np.sum(normals[pairs[:, 0]] * normals[pairs[:, 1]], axis=1))
+    kink = np.degrees(np.arccos(np.clip(cos, -1, 1))).max()
+    assert kink == pytest.approx(c["metrics"]["kink_deg"]["max"], abs=0.2)
