@@ -14,6 +14,7 @@ from .constraints import (
     BoundaryGliding,
     Closeness,
     CoherentOrientation,
+    EdgeCollapseBarrier,
     ConstantAngle,
     ConstantCurvature,
     ConstantMannheimRadius,
@@ -136,6 +137,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
         families.append(CoherentOrientation())
     if fairness:
         families.append(Fairness())
+    families.append(EdgeCollapseBarrier())
     if reference is None and (closeness or glide):
         reference = ReferenceSurface.from_mesh(mesh)
     if glide:

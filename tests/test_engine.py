@@ -146,3 +146,24 @@ def test_repeated_runs_fade_soft_terms_per_step(wein99):
     fade = solver.settings.fade
     assert solver._weights(len(steps))["fairness"] == pytest.approx(
         solver.settings.fairness_weight * fade**3)
+
+
+def test_a_gliding_snet_keeps_its_edges_regression(wein99):
+    """Gliding on a slightly stretched copy of the Weingarten net once collapsed an
+    interior edge to 1e-13 (a star with a collapsed edge is on a sphere trivially)."""
+    from fabplan.optimize import optimize
+    from fabplan.reference import ReferenceSurface
+    from fabplan.solver import SolverSettings
+
+    X = wein99.vertices - wein99.vertices.mean(axis=0)
+    design = wein99.with_vertices(X * np.array([1 / 1.06, 1.06, 1.0]))
+    reference = ReferenceSurface(design.vertices, design.triangles())
+    result = optimize(design, "snet", reference=reference, glide=True,
+                      settings=SolverSettings(max_iterations=100))
+    assert result.converged
+    E = design.edges
+    start = np.linalg.norm(design.vertices[E[:, 0]] - design.vertices[E[:, 1]], axis=1)
+    Y = result.mesh.vertices
+    end = np.linalg.norm(Y[E[:, 0]] - Y[E[:, 1]], axis=1)
+    assert (end / start).min() >= 0.25 - 1e-9
+    assert result.properties["sphere_residual_relative"]["max"] <= 1e-6

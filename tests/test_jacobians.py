@@ -22,6 +22,7 @@ from fabplan.constraints import (
     ConstantCurvature,
     ConstantMannheimRadius,
     ContactNormals,
+    EdgeCollapseBarrier,
     Fairness,
     FamilyLevels,
     MannheimTangency,
@@ -57,6 +58,8 @@ FAMILIES = {
     "radius-free": lambda: [SphereCondition(), ConstantCurvature(None)],
     "orientation": lambda: [SphereCondition(), CoherentOrientation()],
     "fairness": lambda: [Fairness()],
+    # every edge shorter than 1.5 times its start length: the barrier is active everywhere
+    "edge-collapse": lambda: [EdgeCollapseBarrier(1.5)],
     "closeness": lambda: [Closeness(_reference())],
     "levels": lambda: [FamilyLevels(_reference(), _reference().vertices[:, 0],
                                     np.arange(64), np.zeros(64))],

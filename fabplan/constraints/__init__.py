@@ -3,6 +3,7 @@
 from .angle import ConstantAngle
 from .base import Constraint, Layout, NetState
 from .closeness import BoundaryGliding, Closeness
+from .collapse import EdgeCollapseBarrier
 from .fairness import Fairness
 from .levels import FamilyLevels
 from .mannheim import (
@@ -29,6 +30,7 @@ __all__ = [
     "PlanarFaces",
     "PlaneNormalization",
     "Fairness",
+    "EdgeCollapseBarrier",
     "FamilyLevels",
     "ContactNormals",
     "NormalNormalization",

@@ -1,0 +1,46 @@
+"""A barrier against collapsing edges.
+
+A star whose edge has shrunk to a point lies on a sphere trivially (four points always
+do), so an S-net solve can slide into such degenerate "solutions". Every edge must keep
+at least a fraction of its starting length; the residual is one-sided, zero (with a zero
+Jacobian row) while the edge is long enough, so it only acts where a collapse begins.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Constraint
+
+__all__ = ["EdgeCollapseBarrier"]
+
+
+class EdgeCollapseBarrier(Constraint):
+    """``L_e / L_e(start) >= fraction`` for every edge e (a one-sided hard constraint).
+
+    Parameters
+    ----------
+    fraction : smallest allowed length of an edge relative to its length at the start.
+    """
+
+    name = "edge-collapse"
+
+    def __init__(self, fraction: float = 0.25):
+        self.fraction = float(fraction)
+
+    def columns(self, state):
+        self._edges = state.mesh.edges
+        X = state.X
+        start = np.linalg.norm(X[self._edges[:, 0]] - X[self._edges[:, 1]], axis=1)
+        self._start = np.maximum(start, 1e-12)
+        V = state.layout.index("vertices")[self._edges]       # (e, 2, 3)
+        return V.reshape(-1, 6)
+
+    def evaluate(self, state):
+        X = state.X
+        d = X[self._edges[:, 0]] - X[self._edges[:, 1]]
+        length = np.maximum(np.linalg.norm(d, axis=1), 1e-15)
+        r = self.fraction - length / self._start
+        active = r > 0
+        g = d / (length * self._start)[:, None] * active[:, None]   # d(L/L0)/da
+        return np.where(active, r, 0.0), np.concatenate([-g, g], axis=1)
