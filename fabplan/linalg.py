@@ -18,7 +18,7 @@ import scipy.sparse.linalg as spla
 
 from .errors import FabplanError, SolverError
 
-__all__ = ["SparseSPDSolver", "available_backends"]
+__all__ = ["SparseSPDSolver", "available_backends", "solve_spd_columns"]
 
 
 def available_backends() -> list[str]:
@@ -82,3 +82,24 @@ class SparseSPDSolver:
             cholmod.solve(self._factor, x)
             return np.asarray(x).ravel()
         return self._factor.solve(b)
+
+
+def solve_spd_columns(system: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
+    """Solve a sparse SPD system for the columns of `rhs` (one factorization).
+
+    Parameters
+    ----------
+    system : (m, m) sparse, symmetric positive definite (both triangles stored).
+    rhs : (m, k) float, right-hand sides.
+
+    Returns
+    -------
+    x : (m, k) float, ``system @ x == rhs``.
+    """
+    upper = sp.triu(system, format="csr")
+    upper.sum_duplicates()
+    upper.sort_indices()
+    solver = SparseSPDSolver()
+    solver.factor(upper)
+    return np.stack([solver.solve(np.ascontiguousarray(rhs[:, k])) for k in range(rhs.shape[1])],
+                    axis=1)

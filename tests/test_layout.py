@@ -16,17 +16,15 @@ import trimesh
 
 from fabplan.cli import main
 from fabplan.constraints.closeness import closest_points_on_polylines
-from fabplan.errors import InputError
-from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
-from fabplan.layout import (
-    LayoutSettings,
+from fabplan.directions import (
     comb_line_field,
     complementary_directions,
     face_principal_frames,
-    glide,
-    layout_surface,
     line_field_index,
 )
+from fabplan.errors import InputError
+from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
+from fabplan.layout import LayoutSettings, glide, layout_surface
 from fabplan.mesh import QuadMesh
 from fabplan.surfaces import (
     DesignSurface,
