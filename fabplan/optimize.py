@@ -14,10 +14,10 @@ from .constraints import (
     BoundaryGliding,
     Closeness,
     CoherentOrientation,
-    EdgeCollapseBarrier,
     ConstantAngle,
     ConstantCurvature,
     ConstantMannheimRadius,
+    EdgeCollapseBarrier,
     Fairness,
     RulingAngle,
 )
