@@ -24,7 +24,7 @@ from .surfaces import DesignSurface
 if TYPE_CHECKING:
     from .layout import LayoutSettings
 
-__all__ = ["extract_quads"]
+__all__ = ["extract_quads", "fill_boundary_cells"]
 
 
 @dataclass
@@ -292,3 +292,129 @@ def _fill_holes(vertices: np.ndarray, faces: list, design: DesignSurface, panel_
             count += 1
         filled += 1
     return np.concatenate(new_vertices), new_faces, filled, left_open
+
+
+def fill_boundary_cells(vertices: np.ndarray, quads: np.ndarray, keys: np.ndarray,
+                        design: DesignSurface, panel_size: float, *, passes: int = 2,
+                        min_edge: float = 0.25, max_edge: float = 2.2,
+                        snap: float = 0.4) -> tuple:
+    """Close the staircase along the design boundary with quads whose outer corners lie
+    on the boundary curve.
+
+    Only lattice cells with all four corners on the surface become quads, so a layout
+    ends up to one panel short of the design boundary, in steps. Here every missing
+    cell next to the layout that has three corners (a notch of the staircase) or two
+    corners along one edge gets its missing corners predicted (parallelograms, or one
+    more step outwards), and where such a corner falls outside the surface it is moved
+    to the nearest point of the boundary curve. The new quads must keep their edges
+    between `min_edge` and `max_edge` panel sizes and face the way the surface does.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float; quads : (q, 4) int, corners ``(i, j), (i+1, j), (i+1, j+1),
+        (i, j+1)`` of their lattice cell; keys : (n, 2) int, lattice keys of the vertices.
+    design : the surface, with its boundary curves.
+    panel_size : target edge length.
+    passes : rounds (a convex corner of the boundary is closed in the second).
+    snap : a predicted corner moves at most this many panel sizes to the boundary curve
+        (farther, the quad would be too far from a parallelogram to make a good star).
+
+    Returns
+    -------
+    vertices (n', 3), quads (q', 4), keys (n', 2), and the number of quads added.
+    """
+    from .constraints.closeness import closest_points_on_polylines
+
+    curves = design.boundary_curves()
+    h = panel_size
+    added = 0
+    if not curves or len(quads) == 0:
+        return vertices, quads, keys, added
+    corner = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
+    for _ in range(passes):
+        table = _KeyTable(keys, vertices, np.arange(len(keys)))
+        cells = np.unique((keys[:, None, :] - corner[None]).reshape(-1, 2), axis=0)
+        done = np.unique(keys[quads[:, 0]], axis=0)
+        cells = cells[~_rows_in(cells, done)]
+        ids = np.stack([_lookup(table, cells + c) for c in corner], axis=1)   # (c, 4), -1 missing
+        present = ids >= 0
+        count = present.sum(axis=1)
+        predicted_key, predicted_pos = [], []
+        # notches: the missing corner completes the parallelogram of the other three
+        notch = np.flatnonzero(count == 3)
+        if notch.size:
+            miss = np.argmin(present[notch], axis=1)
+            a, o, b = (ids[notch, (miss + k) % 4] for k in (1, 2, 3))
+            predicted_key.append(cells[notch] + corner[miss])
+            predicted_pos.append(vertices[a] + vertices[b] - vertices[o])
+        # edge cells: two corners along one cell edge, the cell beyond them missing
+        for side in range(4):
+            p, q = side, (side + 1) % 4
+            rows = np.flatnonzero((count == 2) & present[:, p] & present[:, q])
+            if rows.size == 0:
+                continue
+            inward = corner[p] - corner[(p + 3) % 4]     # from the missing side to p
+            for k, m in ((p, (p + 3) % 4), (q, (q + 1) % 4)):
+                inner = _lookup(table, cells[rows] + corner[k] + inward)
+                ok = inner >= 0
+                v = ids[rows[ok], k]
+                predicted_key.append(cells[rows[ok]] + corner[m])
+                predicted_pos.append(2 * vertices[v] - vertices[inner[ok]])
+        if not predicted_key:
+            break
+        pk, inverse = np.unique(np.concatenate(predicted_key), axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        pos = np.zeros((len(pk), 3))
+        np.add.at(pos, inverse, np.concatenate(predicted_pos))
+        pos /= np.bincount(inverse, minlength=len(pk))[:, None]
+        # a corner is new only where it falls off the surface: its closest point on the
+        # surface is then on the boundary curve, where it goes
+        on_surface, _, _ = design.reference.closest_points(pos)
+        foot, _ = closest_points_on_polylines(pos, curves)
+        outside = np.linalg.norm(on_surface - foot, axis=1) <= 1e-6 * h
+        outside &= np.linalg.norm(foot - pos, axis=1) <= snap * h
+        if not outside.any():
+            break
+        new_keys, new_pos = pk[outside], foot[outside]
+        base = len(vertices)
+        vertices = np.vstack([vertices, new_pos])
+        keys = np.vstack([keys, new_keys])
+        table = _KeyTable(keys, vertices, np.arange(len(keys)))
+        ids = np.stack([_lookup(table, cells + c) for c in corner], axis=1)
+        full = (ids >= 0).all(axis=1) & (ids >= base).any(axis=1)
+        candidate = ids[full]
+        Q = vertices[candidate]
+        edge = np.linalg.norm(Q - np.roll(Q, -1, axis=1), axis=2)
+        centre, _, tri = design.reference.closest_points(Q.mean(axis=1))
+        facing = np.sum(np.cross(Q[:, 2] - Q[:, 0], Q[:, 3] - Q[:, 1])
+                        * design.face_normals[tri], axis=1) > 0
+        good = (edge.min(axis=1) >= min_edge * h) & (edge.max(axis=1) <= max_edge * h) & facing
+        if not good.any():
+            vertices, keys = vertices[:base], keys[:base]
+            break
+        quads = np.vstack([quads, candidate[good]])
+        added += int(good.sum())
+        used, quads = _clean_quads(vertices, quads)
+        vertices, keys = vertices[used], keys[used]
+    return vertices, quads, keys, added
+
+
+def _lookup(table: _KeyTable, key: np.ndarray) -> np.ndarray:
+    """(m,) int, the vertex with each key (the first when a key repeats), or -1."""
+    k = key - table.base
+    valid = (k[:, 1] >= 0) & (k[:, 1] < table.width) & (k[:, 0] >= 0)
+    code = k[:, 0] * table.width + k[:, 1]
+    at = np.clip(np.searchsorted(table.code, code), 0, len(table.code) - 1)
+    hit = valid & (table.code[at] == code)
+    return np.where(hit, table.ids[at], -1)
+
+
+def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(m,) bool, which rows of `rows` (m, 2) int appear in `table` (t, 2) int."""
+    if len(table) == 0:
+        return np.zeros(len(rows), bool)
+    lo = np.minimum(rows.min(axis=0), table.min(axis=0))
+    width = int(max(rows[:, 1].max(), table[:, 1].max()) - lo[1]) + 1
+    code = (rows[:, 0] - lo[0]) * width + (rows[:, 1] - lo[1])
+    known = (table[:, 0] - lo[0]) * width + (table[:, 1] - lo[1])
+    return np.isin(code, known)

@@ -45,7 +45,7 @@ import igl
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .constraints import FamilyLevels
+from .constraints import EdgeCollapseBarrier, FamilyLevels
 from .directions import (
     _gradient_vectors,
     _whole_turns,
@@ -57,7 +57,7 @@ from .directions import (
     snet_directions,
 )
 from .errors import InputError
-from .extraction import _clean_quads, _fill_holes, extract_quads
+from .extraction import _clean_quads, _fill_holes, extract_quads, fill_boundary_cells
 from .mesh import QuadMesh
 from .parametrization import (
     _boundary_circulation,
@@ -95,6 +95,8 @@ class LayoutSettings:
     min_edge, max_edge : extracted quads with an edge outside this range are dropped.
     fill_holes_up_to : interior holes bounded by at most this many edges are closed with
         a fan around a new (irregular) vertex; larger holes stay open.
+    boundary_min_edge : quads added along the design boundary (closing the staircase of
+        whole lattice cells, see `fill_boundary_cells`) keep their edges at least this long.
     boundary_snap : boundary vertices of the layout within this distance of the design
         boundary glide on it; the others stay free on the surface.
     offsets : trial shifts of the integer grid per direction (offsets**2 trials); the
@@ -108,6 +110,7 @@ class LayoutSettings:
     min_edge: float = 0.4
     max_edge: float = 2.2
     fill_holes_up_to: int = 24
+    boundary_min_edge: float = 0.6
     boundary_snap: float = 0.75
     offsets: int = 2
 
@@ -341,6 +344,9 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         if best is None or len(quads) > len(best[1]):
             best = (verts[used], quads, keys[used], off)
     verts, quads, keys, off = best
+    if prescribed is None and len(quads):
+        verts, quads, keys, _ = fill_boundary_cells(
+            verts, quads, keys, design, h, min_edge=s.boundary_min_edge, max_edge=s.max_edge)
     lap("extraction")
     if len(quads) == 0:
         raise InputError(f"{design.name}: no quad could be laid out at panel size {h:g} "
@@ -444,6 +450,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
         extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
                               layout.vertex_keys[on_level, 0]),)
+    # panels no shorter than half the panel size (where they start longer), with a margin
+    extra += (EdgeCollapseBarrier(minimum=0.51 * layout.panel_size, name="edge-length"),)
     result = optimize(mesh, net, angle=angle, radius=radius, reference=design.reference,
                       fixed=fixed, settings=settings, glide=True,
                       glide_boundary=layout.gliding_boundary, extra=extra, progress=progress)

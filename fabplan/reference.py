@@ -62,6 +62,24 @@ class ReferenceSurface:
         triangle = np.asarray(triangle, dtype=np.int64)
         return np.asarray(foot), self.face_normals[triangle], triangle
 
+    def on_boundary(self, foot: np.ndarray, triangle: np.ndarray, *,
+                    tolerance: float = 1e-9) -> np.ndarray:
+        """(m,) bool, which footpoints (from `closest_points`) lie on a boundary edge.
+
+        A point off the surface beyond its boundary has its footpoint there; elsewhere the
+        footpoint is where the surface normal through the point meets the surface.
+        """
+        if not hasattr(self, "_boundary_sides"):
+            T = self.triangles
+            sides = np.stack([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]], axis=1)   # opposite corner k
+            key = np.sort(sides, axis=2).reshape(-1, 2)
+            _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+            self._boundary_sides = (count[inverse.ravel()] == 1).reshape(-1, 3)
+        T = self.vertices[self.triangles[triangle]]
+        bary = igl.barycentric_coordinates(np.ascontiguousarray(foot, dtype=np.float64),
+                                           T[:, 0].copy(), T[:, 1].copy(), T[:, 2].copy())
+        return np.any((bary <= tolerance) & self._boundary_sides[triangle], axis=1)
+
     def boundary_curves(self) -> list:
         """The boundary loops of the surface as closed polylines, list of (k, 3) float."""
         loops = igl.boundary_loop_all(self.triangles)

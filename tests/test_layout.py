@@ -374,3 +374,31 @@ def test_layout_settings_change_what_is_kept():
     assert len(strict.gliding_boundary) <= len(layout_surface(design, 1.0).gliding_boundary)
     with pytest.raises(InputError, match="bisector must be"):
         layout_surface(design, 1.0, settings=LayoutSettings(bisector="mean"))
+
+
+def _panel_area(mesh: QuadMesh) -> float:
+    X, tri = mesh.vertices, mesh.triangles()
+    return float(0.5 * np.linalg.norm(np.cross(X[tri[:, 1]] - X[tri[:, 0]],
+                                               X[tri[:, 2]] - X[tri[:, 0]]), axis=1).sum())
+
+
+@pytest.mark.parametrize("spec, angle", [("hyperbolic-paraboloid:width=8,depth=8,rise=2.5", 80.0),
+                                         ("tower-facade", 90.0)])
+def test_the_boundary_staircase_is_closed_on_the_boundary_curve(spec, angle):
+    """Lattice cells cut by the design boundary become quads with their outer corners on
+    the boundary curve: the net covers the design up to small corner gaps, and every
+    vertex (also those outside the gliding set) ends on the surface."""
+    from fabplan.layout import LayoutSettings
+
+    design = load_design(spec, triangles=12000)
+    panel = 1.2
+    filled = layout_surface(design, panel, angle=angle)
+    plain = layout_surface(design, panel, angle=angle,
+                           settings=LayoutSettings(boundary_min_edge=10.0))   # nothing passes
+    result = glide(filled, "isogonal", angle=angle)
+    assert result.converged
+    covered = _panel_area(result.mesh) / design.area
+    assert covered >= 0.93
+    assert covered >= _panel_area(plain.mesh) / design.area + 0.03
+    assert_snet_on_design(result.mesh, design, panel, angle=angle)
+    assert design.reference.distances(result.mesh.vertices).max() <= 1e-8 * panel

@@ -2,6 +2,9 @@
 
 Footpoints and their normals are recomputed at the start of every iteration, so the
 linear residual ``n_k . (v_k - p_k)`` lets the net glide along the surface (section 4.2).
+Where a vertex has left the surface over its boundary, its footpoint lies on the
+boundary and the offset has a part along the surface too: a second row pulls that part
+back (it is zero, with a zero Jacobian row, while the footpoint is inside).
 """
 
 from __future__ import annotations
@@ -40,16 +43,24 @@ class Closeness(Constraint):
 
     def prepare(self, state):
         model = state.X[self._ids(state)] * state.length_scale + state.origin
-        foot, normal, _ = self.reference.closest_points(model)
+        foot, normal, triangle = self.reference.closest_points(model)
         self._foot = (foot - state.origin) / state.length_scale
         self._normal = normal
+        # beyond the boundary: the direction from the footpoint along the surface
+        d = model - foot
+        along = d - np.sum(d * normal, axis=1, keepdims=True) * normal
+        length = np.linalg.norm(along, axis=1, keepdims=True)
+        outside = (length > 1e-9 * state.length_scale) & \
+            self.reference.on_boundary(foot, triangle)[:, None]
+        self._outward = np.where(outside, along / np.where(outside, length, 1.0), 0.0)
 
     def columns(self, state):
-        return state.layout.index("vertices")[self._ids(state)]
+        return np.repeat(state.layout.index("vertices")[self._ids(state)], 2, axis=0)
 
     def evaluate(self, state):
         d = state.X[self._ids(state)] - self._foot
-        return np.sum(d * self._normal, axis=1), self._normal
+        rows = np.stack([self._normal, self._outward], axis=1)          # (k, 2, 3)
+        return np.einsum("kij,kj->ki", rows, d).ravel(), rows.reshape(-1, 3)
 
 
 def closest_points_on_polylines(points: np.ndarray, curves: list

@@ -16,23 +16,34 @@ __all__ = ["EdgeCollapseBarrier"]
 
 
 class EdgeCollapseBarrier(Constraint):
-    """``L_e / L_e(start) >= fraction`` for every edge e (a one-sided hard constraint).
+    """``L_e >= b_e`` for every edge e (a one-sided hard constraint), with the bound
+    ``b_e = max(fraction * L_e(start), minimum)``, never above the start length.
 
     Parameters
     ----------
     fraction : smallest allowed length of an edge relative to its length at the start.
+    minimum : smallest allowed length in model units (e.g. half the panel size of a
+        layout), or None.
+    name : family name (two barriers in one solve need two names).
     """
 
     name = "edge-collapse"
 
-    def __init__(self, fraction: float = 0.25):
+    def __init__(self, fraction: float = 0.25, minimum: float | None = None, *,
+                 name: str = "edge-collapse"):
         self.fraction = float(fraction)
+        self.minimum = minimum
+        self.name = name
 
     def columns(self, state):
         self._edges = state.mesh.edges
         X = state.X
-        start = np.linalg.norm(X[self._edges[:, 0]] - X[self._edges[:, 1]], axis=1)
-        self._start = np.maximum(start, 1e-12)
+        start = np.maximum(np.linalg.norm(X[self._edges[:, 0]] - X[self._edges[:, 1]], axis=1),
+                           1e-12)
+        bound = self.fraction * start
+        if self.minimum is not None:
+            bound = np.minimum(np.maximum(bound, self.minimum / state.length_scale), start)
+        self._bound = bound
         V = state.layout.index("vertices")[self._edges]       # (e, 2, 3)
         return V.reshape(-1, 6)
 
@@ -40,7 +51,7 @@ class EdgeCollapseBarrier(Constraint):
         X = state.X
         d = X[self._edges[:, 0]] - X[self._edges[:, 1]]
         length = np.maximum(np.linalg.norm(d, axis=1), 1e-15)
-        r = self.fraction - length / self._start
+        r = 1.0 - length / self._bound          # in units of the bound
         active = r > 0
-        g = d / (length * self._start)[:, None] * active[:, None]   # d(L/L0)/da
+        g = d / (length * self._bound)[:, None] * active[:, None]   # d(L/b)/da
         return np.where(active, r, 0.0), np.concatenate([-g, g], axis=1)
