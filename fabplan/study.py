@@ -29,6 +29,7 @@ import numpy as np
 from .errors import FabplanError
 from .geometry import face_planarity, kink_angles
 from .molds import PANEL_TYPES
+from .nets import get_net
 from .study_spec import Candidate, CostWeights, Limits, Study
 
 __all__ = [
@@ -36,6 +37,7 @@ __all__ = [
     "StudyResult",
     "run_study",
     "measure_candidate",
+    "start_angle",
     "verdict",
     "candidate_cost",
     "rank_candidates",
@@ -178,7 +180,9 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
 
     seconds: dict = {}
     clock = time.perf_counter()
-    angle = candidate.layout_angle
+    angle = start_angle(candidate, design)
+    if angle != 90.0:
+        say(f"    layout at {angle:g} deg")
     if angle not in layouts:
         layouts[angle] = layout_surface(design, study.panel_size, angle=angle)
     layout = layouts[angle]
@@ -227,6 +231,49 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
                            layout=layout)
+
+
+def start_angle(candidate: Candidate, design) -> float:
+    """Intersection angle (degrees) of the layout a candidate starts from.
+
+    The candidate's own angle when it has one, else its ``start_angle``; else, for a
+    characteristic conjugate net, the angle of the conjugate directions symmetric to the
+    principal ones, ``2 atan(sqrt(k1 / k2))`` (area-weighted median over the design where
+    K > 0); for a linear Weingarten net of free angle, the angle whose Euler formula
+    ``k1 cos^2 + k2 sin^2`` matches the line ``a k1 + b k2 = c`` fitted to the design's
+    curvatures, ``2 atan(sqrt(b / a))``; 90 degrees otherwise. A start far from the angle
+    the net ends at makes the solve shear the whole net, and a closed or constrained
+    layout cannot absorb that without leaving the design.
+    """
+    if candidate.angle is not None:
+        return float(candidate.angle)
+    if candidate.start_angle is not None:
+        return float(candidate.start_angle)
+    preset = get_net(candidate.net)
+    if not (preset.planar_faces or (preset.angle == "param" and preset.radius == "param")):
+        return 90.0
+    from .directions import face_principal_frames
+    from .molds import weingarten_fit
+
+    k1, k2, _ = face_principal_frames(design)
+    area = design.face_areas
+    if preset.planar_faces:
+        ratio = np.divide(k1, k2, out=np.full(len(k1), -1.0), where=k2 != 0)
+        ok = ratio > 0
+        if area[ok].sum() < 0.5 * area.sum():
+            return 90.0
+        angles = 2 * np.degrees(np.arctan(np.sqrt(ratio[ok])))
+        return round(_weighted_median(angles, area[ok]), 1)
+    line = weingarten_fit(k1, k2)["line"]
+    if line is None or line["a"] * line["b"] <= 0:
+        return 90.0
+    return round(float(2 * np.degrees(np.arctan(np.sqrt(line["b"] / line["a"])))), 1)
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
 
 
 # ---------------------------------------------------------------------------- measuring
@@ -396,6 +443,12 @@ def verdict(metrics: dict, limits: Limits) -> list:
                 "max_strip_radius_mm", limits.max_strip_radius_mm, r,
                 r <= limits.max_strip_radius_mm,
                 f"largest strip radius {_mm(r)} (limit at most {limits.max_strip_radius_mm:g} mm)"))
+        if limits.congruent_strips:
+            ok = strips["congruent"]
+            checks.append(_check(
+                "congruent_strips", True, ok, ok,
+                ("all strip parts are congruent" if ok else "the strip parts are not congruent")
+                + f" (largest difference {strips['congruence_deviation_mm']:.2f} mm)"))
         if limits.max_sheets is not None:
             n = strips["sheets"]
             checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,

@@ -147,8 +147,8 @@ def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: f
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8)
     bar.set_label("distance from the design [mm]")
     bar.ax.axhline(limit_mm, color="#c0392b", lw=2)
-    ax.set_title(f"{c.name}: deviation from the design, max {d.max():.1f} mm "
-                 f"(limit {limit_mm:g} mm, red line)")
+    ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm "
+                 f"(limit {limit_mm:g} mm: red line on the scale)")
     return report.figure_to_data_uri(fig)
 
 
@@ -224,7 +224,10 @@ def _comparison_table(result: StudyResult) -> str:
 def _limits_table(result: StudyResult) -> str:
     from dataclasses import asdict
 
-    rows = [[k, report.format_value(v)] for k, v in asdict(result.study.limits).items()
+    limits = asdict(result.study.limits)
+    if not limits["planar_panels"]:
+        del limits["planarity_tolerance_mm"]
+    rows = [[k, report.format_value(v)] for k, v in limits.items()
             if v is not None and v is not False]
     return report.html_table(["limit", "value"], rows, caption="Fabrication limits")
 

@@ -104,6 +104,8 @@ class Limits:
     min_strip_radius_mm, max_strip_radius_mm : range of the arc radii of the unrolled
         lamella strips (a straight strip has an infinite radius).
     max_sheets : most sheets of strip material.
+    congruent_strips : every strip must be cut from one circle (or line): all parts
+        congruent within the cutting tolerance, so one bending form or jig serves all.
     min_coverage : smallest fraction of the design's area the panels must cover (the
         layout may leave gaps of up to one panel along the boundary).
     max_sphere_residual : largest sphere residual (relative to the mean edge) for a net to
@@ -119,6 +121,7 @@ class Limits:
     min_strip_radius_mm: float | None = None
     max_strip_radius_mm: float | None = None
     max_sheets: int | None = None
+    congruent_strips: bool = False
     min_coverage: float | None = None
     max_sphere_residual: float = 1e-6
 
@@ -180,6 +183,9 @@ class Candidate:
     angle : intersection angle in degrees, or None (free, or fixed by the type).
     radius : Meusnier radius in model units, or None (free).
     baseline : the unrationalized reference (a general S-net on the design).
+    start_angle : intersection angle of the layout the candidate starts from (degrees);
+        None: the candidate's angle, or one suited to the design (see
+        `fabplan.study.start_angle`).
     """
 
     name: str
@@ -187,11 +193,7 @@ class Candidate:
     angle: float | None = None
     radius: float | None = None
     baseline: bool = False
-
-    @property
-    def layout_angle(self) -> float:
-        """Intersection angle of the layout the candidate starts from."""
-        return 90.0 if self.angle is None else self.angle
+    start_angle: float | None = None
 
     @property
     def glides(self) -> bool:
@@ -462,6 +464,7 @@ def _limits(t: _Table) -> Limits:
         min_strip_radius_mm=t.number("min_strip_radius_mm", unit="mm"),
         max_strip_radius_mm=t.number("max_strip_radius_mm", unit="mm"),
         max_sheets=t.number("max_sheets", integer=True),
+        congruent_strips=t.boolean("congruent_strips"),
         min_coverage=t.number("min_coverage"),
         max_sphere_residual=t.number("max_sphere_residual", 1e-6),
     )
@@ -560,6 +563,9 @@ def _candidates(value, file: str) -> tuple:
         angles = _values(t, "angle", "degrees")
         radii = _values(t, "radius", "model units")
         label = t.text("name")
+        start = t.number("start_angle", unit="degrees")
+        if start is not None and not 0 < start < 180:
+            t.fail("start_angle", f"must lie strictly between 0 and 180 degrees, got {start:g}")
         t.done()
         if angles != [None] and preset.angle != "param":
             t.fail("angle", f"does not apply to net type {net!r} (its angle is "
@@ -575,7 +581,7 @@ def _candidates(value, file: str) -> tuple:
                 name = _name(net, a, r) if (label is None or sweep) else label
                 if label is not None and sweep:
                     name = label + name[len(net):]
-                out.append(Candidate(name, net, a, r))
+                out.append(Candidate(name, net, a, r, start_angle=start))
     names = [c.name for c in out]
     for c in out:
         if names.count(c.name) > 1:

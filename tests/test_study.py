@@ -327,3 +327,25 @@ def test_kinks_and_coverage_are_measured_on_the_net(study_run):
     cos = np.abs(np.sum(normals[pairs[:, 0]] * normals[pairs[:, 1]], axis=1))
     kink = np.degrees(np.arccos(np.clip(cos, -1, 1))).max()
     assert kink == pytest.approx(c["metrics"]["kink_deg"]["max"], abs=0.2)
+
+
+def test_char_conjugate_starts_at_the_conjugate_angle_of_the_design():
+    """On a barrel (K > 0) the layout starts where the conjugate directions symmetric to
+    the principal ones meet, measured independently from the parametric surface."""
+    from fabplan.study import start_angle
+    from fabplan.study_spec import Candidate
+    from fabplan.surfaces import load_design
+
+    profile = template_path("tower").parent / "tower-profile.txt"
+    design = load_design(f"revolution:profile={profile}", triangles=4000)
+    angle = start_angle(Candidate("c", "char-conjugate"), design)
+    uv = design.uv
+    k1, k2, *_ = design.parametric.principal_frames(uv[:, 0], uv[:, 1])
+    ratio = np.minimum(k1, k2) / np.maximum(k1, k2)      # both negative or both positive
+    expected = 2 * np.degrees(np.arctan(np.sqrt(np.median(ratio[ratio > 0]))))
+    # which of the two supplementary angles depends on the side the normals point to
+    assert min(abs(angle - expected), abs(angle - (180 - expected))) <= 1.5
+    assert abs(angle - 90) > 10
+    assert start_angle(Candidate("c", "char-conjugate", start_angle=70), design) == 70
+    assert start_angle(Candidate("c", "isogonal", angle=65), design) == 65
+    assert start_angle(Candidate("c", "snet"), design) == 90
