@@ -323,7 +323,7 @@ class _Table:
 
 
 def _suggest(word: str, options) -> str:
-    close = difflib.get_close_matches(str(word), [str(o) for o in options], n=1)
+    close = difflib.get_close_matches(str(word), [str(o) for o in options], n=1, cutoff=0.7)
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
