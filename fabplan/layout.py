@@ -110,7 +110,7 @@ class LayoutSettings:
     min_edge: float = 0.4
     max_edge: float = 2.2
     fill_holes_up_to: int = 24
-    boundary_min_edge: float = 0.6
+    boundary_min_edge: float = 0.75
     boundary_snap: float = 0.75
     offsets: int = 2
 
