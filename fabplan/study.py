@@ -523,9 +523,9 @@ def recommend(results: list, limits: Limits) -> tuple[str | None, str]:
                      f"against {base.cost:.0f} for the baseline.")
     if m.get("strips"):
         s = m["strips"]
+        shape = ", all straight" if s["straight"] else ", all congruent" if s["congruent"] else ""
         words.append(f"Its {s['strips']} lamellas are cut as {s['parts']} parts on "
-                     f"{s['sheets']} sheets" + (", all congruent" if s["congruent"] else "")
-                     + ".")
+                     f"{s['sheets']} sheets{shape}.")
     if limits.planar_panels:
         words.append(f"Its panels are planar within {m['planarity_mm']['max']:.2f} mm.")
     others = [r for r in feasible[1:]]
