@@ -73,13 +73,16 @@ class IterationRecord:
 
 @dataclass
 class _FamilyPattern:
-    """Where one family's Jacobian entries land in the normal equations."""
+    """Where one family's Jacobian entries land in the normal equations.
+
+    A row with ``k`` entries gives the ``k (k + 1) / 2`` products of its entry pairs
+    ``i <= j``; they are stored pair-major, ``(p, m)``, so that the pairs of entry ``i``
+    come out of one broadcast multiply of column ``i`` with columns ``i..k-1``.
+    """
 
     gradient_cols: np.ndarray  # (m, k) free-variable column of each entry, nfree if fixed
-    first: np.ndarray          # (p,) local entry indices of the product pairs, p <= q
-    second: np.ndarray
-    shape: tuple               # (m, p): the family's block in the shared product buffer
-    multiplicity: np.ndarray | None = None  # (m, p) 2 where a row repeats a variable
+    shape: tuple               # (p, m): the family's block in the shared product buffer
+    multiplicity: np.ndarray | None = None  # (p, m) 2 where a row repeats a variable
 
 
 @dataclass
@@ -90,6 +93,58 @@ class _Pattern:
     diagonal: np.ndarray       # (nfree,) positions of the diagonal entries
     slots: np.ndarray          # all families' slots, concatenated
     products: np.ndarray       # buffer for all families' products, same length
+
+
+def _rank(keys: np.ndarray, bound: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted distinct keys and the position of every key among them.
+
+    Parameters
+    ----------
+    keys : (n,) int64, values in ``[0, bound)``.
+    bound : exclusive upper bound of the keys.
+
+    Returns
+    -------
+    distinct : (u,) int64, the sorted distinct keys.
+    position : (n,) int64, ``distinct[position] == keys``.
+
+    Each key is packed with its index into one int64 and sorted (``np.sort`` is far
+    faster than ``argsort`` or a search of tens of millions of keys); when key and index
+    need more than 63 bits the keys are sorted in ranges of their high bits.
+
+    Examples
+    --------
+    >>> distinct, position = _rank(np.array([7, 3, 7, 0]), 8)
+    >>> distinct.tolist(), position.tolist()
+    ([0, 3, 7], [2, 1, 2, 0])
+    """
+    keys = np.asarray(keys, dtype=np.int64)
+    n = len(keys)
+    index_bits = max(1, (n - 1).bit_length())
+    key_bits = max(1, (int(bound) - 1).bit_length())
+    low_bits = min(key_bits, 63 - index_bits)
+    position = np.empty(n, dtype=np.int64)
+    distinct, found = [], 0
+    high = keys >> low_bits
+    for part in range(int(high.max()) + 1 if n else 0):
+        mine = np.flatnonzero(high == part) if low_bits < key_bits else slice(None)
+        packed = (keys[mine] - (part << low_bits)) << index_bits
+        packed |= np.arange(len(packed))
+        packed.sort()
+        low = packed >> index_bits
+        new = np.empty(len(low), dtype=bool)
+        new[:1] = True
+        np.not_equal(low[1:], low[:-1], out=new[1:])
+        starts = np.flatnonzero(new)
+        rank = np.repeat(np.arange(found, found + len(starts)), np.diff(np.r_[starts, len(low)]))
+        order = packed & ((1 << index_bits) - 1)
+        if isinstance(mine, slice):
+            position[order] = rank
+        else:
+            position[mine[order]] = rank
+        distinct.append(low[starts] + (part << low_bits))
+        found += len(starts)
+    return (np.concatenate(distinct) if distinct else np.zeros(0, dtype=np.int64)), position
 
 
 class GuidedProjection:
@@ -132,11 +187,16 @@ class GuidedProjection:
         free[layout.index("vertices")[self.fixed].ravel()] = False
         self.free = np.flatnonzero(free)
         self.history: list[IterationRecord] = []
-        self._linear = SparseSPDSolver(self.settings.backend)
+        self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free))
         self._pattern: _Pattern | None = None
         self.status = "not started"
 
     # -------------------------------------------------------------- results
+    @property
+    def linear_solver(self) -> str:
+        """Name of the sparse backend solving the normal equations (`fabplan.linalg`)."""
+        return self._linear.backend
+
     @property
     def vertices(self) -> np.ndarray:
         """(n, 3) float, current vertex positions in model units (held vertices exactly as
@@ -174,24 +234,30 @@ class GuidedProjection:
             cols = col_map[np.asarray(c.columns(state))]
             # J^T J is symmetric: the pairs p <= q of a row's entries fill its upper triangle
             first, second = np.triu_indices(cols.shape[1])
-            cp, cq = cols[:, first], cols[:, second]
+            cp, cq = cols.T[first], cols.T[second]            # (p, m), pair-major
             lo, hi = np.minimum(cp, cq), np.maximum(cp, cq)
             # -1 marks a pair on a held variable: it has no slot
             pair_keys.append(np.where(lo >= 0, lo * nfree + hi, -1))
             # a row naming one variable at two entries adds their product twice
-            twice = (cp == cq) & (first != second)
+            twice = (cp == cq) & (first != second)[:, None]
             families.append(_FamilyPattern(
-                np.where(cols < 0, nfree, cols), first, second, cp.shape,
+                np.where(cols < 0, nfree, cols), cp.shape,
                 np.where(twice, 2.0, 1.0) if twice.any() else None))
-        keys = np.concatenate([k.ravel() for k in pair_keys])
-        ukeys = np.sort(np.concatenate([keys[keys >= 0], np.arange(nfree) * (nfree + 1)]))
-        ukeys = ukeys[np.r_[True, ukeys[1:] != ukeys[:-1]]]   # far faster than np.unique
-        # one slot array for all families (held pairs go to a dummy slot past the end)
-        slots = np.where(keys >= 0, np.searchsorted(ukeys, keys), len(ukeys))
+        diagonal_keys = np.arange(nfree) * (nfree + 1)
+        keys = np.concatenate([diagonal_keys] + [k.ravel() for k in pair_keys])
+        held = keys < 0
+        if held.any():
+            ukeys, ranks = _rank(keys[~held], nfree * nfree)
+            # held pairs go to a dummy slot past the end
+            slots = np.full(len(keys), len(ukeys))
+            slots[~held] = ranks
+        else:
+            ukeys, slots = _rank(keys, nfree * nfree)
+        slots = slots[nfree:]
         return _Pattern(families=families,
                         indptr=np.searchsorted(ukeys // nfree, np.arange(nfree + 1)),
                         indices=ukeys % nfree,
-                        diagonal=np.searchsorted(ukeys, np.arange(nfree) * (nfree + 1)),
+                        diagonal=np.searchsorted(ukeys, diagonal_keys),
                         slots=slots, products=np.empty(len(slots)))
 
     def _assemble(self, jacobians: list, residuals: list,
@@ -206,7 +272,11 @@ class GuidedProjection:
             start += out.size
             if J.size == 0:
                 continue
-            np.multiply(J[:, f.first], J[:, f.second], out=out)
+            columns = np.ascontiguousarray(J.T)
+            k, pair = len(columns), 0
+            for i in range(k):     # entries of a row, not rows: k <= 16 broadcast multiplies
+                np.multiply(columns[i], columns[i:], out=out[pair:pair + k - i])
+                pair += k - i
             if f.multiplicity is not None:
                 out *= f.multiplicity
             gradient += np.bincount(f.gradient_cols.ravel(), weights=(J * r[:, None]).ravel(),
