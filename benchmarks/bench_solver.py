@@ -117,12 +117,12 @@ def _median(values: list[float]) -> float | None:
     return values[mid] if len(values) % 2 else (values[mid - 1] + values[mid]) / 2
 
 
-def run_case(name: str, profile: bool = False, max_iterations: int | None = None) -> dict:
+def run_case(name: str, profile: bool = False, max_iterations: int | None = None,
+             backend: str = "auto") -> dict:
     """Generate, perturb and optimize one case in this process; the record of the run."""
     import numpy as np
 
     import fabplan
-    from fabplan.linalg import SparseSPDSolver
     from fabplan.solver import SolverSettings
 
     t0 = time.perf_counter()
@@ -130,7 +130,7 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
     start = _noisy(net, NOISE, SEED)
     setup_seconds = time.perf_counter() - t0
     before_gb = _peak_gb()
-    settings = SolverSettings()
+    settings = SolverSettings(backend=backend)
     if max_iterations is not None:
         settings.max_iterations = max_iterations
     profiler = cProfile.Profile() if profile else None
@@ -149,7 +149,7 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
         "net": NET,
         "vertices": net.vertex_count,
         "stars": int(len(net.stars)),
-        "backend": SparseSPDSolver(settings.backend).backend,
+        "backend": result.linear_solver,
         "status": result.status,
         "iterations": result.iterations,
         "median_iteration_seconds": _median([h["seconds"] for h in steps]),
@@ -191,8 +191,8 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
 
 # ---------------------------------------------------------------------------- driver side
 def run_in_subprocess(name: str, profile: bool, max_iterations: int | None,
-                      timeout: float | None) -> dict:
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", name]
+                      timeout: float | None, backend: str = "auto") -> dict:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--backend", backend]
     if profile:
         cmd.append("--worker-profile")
     if max_iterations is not None:
@@ -300,13 +300,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="also run these cases under cProfile (e.g. wein99 weingarten-173x173)")
     parser.add_argument("--max-iterations", type=int, default=None)
     parser.add_argument("--timeout", type=float, default=None, help="seconds per case")
+    parser.add_argument("--backend", default="auto",
+                        help="linear solver backend: auto, pardiso, cholmod or superlu")
     parser.add_argument("--output", type=Path, default=None, help="JSON file to write")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--worker-profile", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
 
     if args.worker:
-        record = run_case(args.worker, args.worker_profile, args.max_iterations)
+        record = run_case(args.worker, args.worker_profile, args.max_iterations, args.backend)
         print(json.dumps(record))
         return 0
 
@@ -320,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
     records = []
     for name in names:
         print(f"running {name} ...", flush=True)
-        records.append(run_in_subprocess(name, False, args.max_iterations, args.timeout))
+        records.append(run_in_subprocess(name, False, args.max_iterations, args.timeout, args.backend))
         r = records[-1]
         print(f"  {r['status']}, {r.get('iterations')} iterations, "
               f"{_fmt(r.get('median_iteration_seconds'), '.3f')} s/iteration, "
@@ -328,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     profiles = {}
     for name in args.profile:
         print(f"profiling {name} ...", flush=True)
-        r = run_in_subprocess(name, True, args.max_iterations, args.timeout)
+        r = run_in_subprocess(name, True, args.max_iterations, args.timeout, args.backend)
         if "profile" in r:
             profiles[name] = r["profile"]
             stamp = datetime.date.today().isoformat()

@@ -2,15 +2,25 @@
 
 The normal equations of the solver keep one sparsity pattern for a whole run, so the
 fill-reducing ordering and the symbolic factorization are computed once and only the
-numeric factorization is repeated. Backends, fastest first:
+numeric factorization is repeated. Backends:
 
+- ``pardiso``: Intel MKL's PARDISO, multi-threaded, when the MKL runtime is installed
+  (``pip install "fabplan[pardiso]"``, x86-64 Linux and Windows); "auto" takes it for
+  systems of at least `PARDISO_MIN_UNKNOWNS` unknowns, where its threads pay off;
 - ``cholmod``: SuiteSparse's supernodal CHOLMOD as shipped in the cvxopt wheels (a
-  default dependency: pip alone installs it on Linux, macOS and Windows);
+  default dependency: pip alone installs it on Linux, macOS and Windows), single-threaded;
 - ``superlu``: scipy's SuperLU with a symmetric minimum-degree ordering, the fallback
   when cvxopt cannot be imported.
 """
 
 from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import functools
+import glob
+import os
+import sys
 
 import numpy as np
 import scipy.sparse as sp
@@ -18,16 +28,91 @@ import scipy.sparse.linalg as spla
 
 from .errors import FabplanError, SolverError
 
-__all__ = ["SparseSPDSolver", "available_backends", "solve_spd_columns"]
+__all__ = ["SparseSPDSolver", "available_backends", "solve_spd_columns", "PARDISO_MIN_UNKNOWNS"]
+
+# Below this many unknowns CHOLMOD on one core factors the solver's systems faster than
+# PARDISO on two (thread start-up and its larger analysis); see benchmarks/README.md.
+PARDISO_MIN_UNKNOWNS = 100_000
 
 
 def available_backends() -> list[str]:
-    """Names of the installed backends, fastest first."""
+    """Names of the installed backends."""
+    names = ["pardiso"] if _mkl_runtime() is not None else []
     try:
         import cvxopt.cholmod  # noqa: F401
     except ImportError:
-        return ["superlu"]
-    return ["cholmod", "superlu"]
+        return names + ["superlu"]
+    return names + ["cholmod", "superlu"]
+
+
+@functools.lru_cache(maxsize=1)
+def _mkl_runtime() -> ctypes.CDLL | None:
+    """MKL's single dynamic library (from the ``mkl`` wheel), or None when not installed."""
+    found = ctypes.util.find_library("mkl_rt")
+    candidates = [found] if found else []
+    for pattern in ("lib/libmkl_rt.so*", "Library/bin/mkl_rt*.dll", "lib/libmkl_rt*.dylib"):
+        candidates += sorted(glob.glob(os.path.join(sys.prefix, pattern)), key=len)
+    for path in candidates:
+        try:
+            return ctypes.CDLL(path)
+        except OSError:
+            continue
+    return None
+
+
+class _Pardiso:
+    """PARDISO for one real SPD sparsity pattern (upper triangle, CSR, 0-based)."""
+
+    _PHASES = {"analysis": 11, "numeric": 22, "solve": 33, "release": -1}
+
+    def __init__(self, upper: sp.csr_matrix):
+        self._call = _mkl_runtime().pardiso
+        self._call.restype = None
+        self.n = upper.shape[0]
+        self.indptr = np.ascontiguousarray(upper.indptr, dtype=np.int32)
+        self.indices = np.ascontiguousarray(upper.indices, dtype=np.int32)
+        self.handle = np.zeros(64, dtype=np.int64)        # PARDISO's internal pointers
+        self.iparm = np.zeros(64, dtype=np.int32)
+        self.iparm[0] = 1      # these parameters, not the defaults
+        self.iparm[1] = 2      # METIS nested dissection
+        self.iparm[34] = 1     # 0-based indices
+        self.data = np.zeros(len(self.indices))
+        self._run("analysis")
+
+    def _run(self, phase: str, b: np.ndarray | None = None) -> np.ndarray:
+        b = np.zeros(self.n) if b is None else np.ascontiguousarray(b, dtype=np.float64)
+        x = np.zeros_like(b)
+        error = ctypes.c_int32(0)
+
+        def integer(value):
+            return ctypes.byref(ctypes.c_int32(value))
+
+        def pointer(array):
+            return array.ctypes.data_as(ctypes.c_void_p)
+
+        self._call(pointer(self.handle), integer(1), integer(1), integer(2),
+                   integer(self._PHASES[phase]), integer(self.n), pointer(self.data),
+                   pointer(self.indptr), pointer(self.indices), None, integer(1),
+                   pointer(self.iparm), integer(0), pointer(b), pointer(x), ctypes.byref(error))
+        if error.value == -4:
+            raise SolverError("the normal equations are not positive definite")
+        if error.value:
+            raise SolverError(f"PARDISO failed in its {phase} phase (error {error.value})")
+        return x
+
+    def factor(self, data: np.ndarray) -> None:
+        self.data[:] = data
+        self._run("numeric")
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        return self._run("solve", b)
+
+    def __del__(self):
+        if self.handle.any():      # free PARDISO's memory; nothing to report at exit
+            try:
+                self._run("release")
+            except Exception:  # noqa: BLE001
+                pass
 
 
 class SparseSPDSolver:
@@ -38,14 +123,17 @@ class SparseSPDSolver:
 
     Parameters
     ----------
-    backend : "auto", "cholmod" or "superlu".
+    backend : "auto", "pardiso", "cholmod" or "superlu".
+    unknowns : size of the systems, for "auto": PARDISO from `PARDISO_MIN_UNKNOWNS`
+        on, when installed; CHOLMOD otherwise.
     """
 
-    def __init__(self, backend: str = "auto"):
+    def __init__(self, backend: str = "auto", unknowns: int | None = None):
         names = available_backends()
         if backend == "auto":
-            backend = names[0]
-        if backend not in ("cholmod", "superlu"):
+            small = unknowns is None or unknowns < PARDISO_MIN_UNKNOWNS
+            backend = [b for b in names if not (b == "pardiso" and small)][0]
+        if backend not in ("pardiso", "cholmod", "superlu"):
             raise FabplanError(f"unknown linear solver backend {backend!r}")
         if backend not in names:
             raise FabplanError(f"linear solver backend {backend!r} is not installed")
@@ -55,7 +143,11 @@ class SparseSPDSolver:
 
     def factor(self, upper: sp.csr_matrix) -> None:
         """Numeric factorization; the symbolic analysis runs on the first call only."""
-        if self.backend == "cholmod":
+        if self.backend == "pardiso":
+            if self._factor is None:
+                self._factor = _Pardiso(upper)
+            self._factor.factor(upper.data)
+        elif self.backend == "cholmod":
             from cvxopt import cholmod, matrix, spmatrix
 
             if self._matrix is None:
@@ -75,6 +167,8 @@ class SparseSPDSolver:
                                      options=dict(SymmetricMode=True))
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        if self.backend == "pardiso":
+            return self._factor.solve(b)
         if self.backend == "cholmod":
             from cvxopt import cholmod, matrix
 
@@ -99,7 +193,7 @@ def solve_spd_columns(system: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
     upper = sp.triu(system, format="csr")
     upper.sum_duplicates()
     upper.sort_indices()
-    solver = SparseSPDSolver()
+    solver = SparseSPDSolver(unknowns=upper.shape[0])
     solver.factor(upper)
     return np.stack([solver.solve(np.ascontiguousarray(rhs[:, k])) for k in range(rhs.shape[1])],
                     axis=1)

@@ -59,6 +59,7 @@ class OptimizationResult:
     seconds: float
     history: list = field(default_factory=list)
     properties: dict = field(default_factory=dict)
+    linear_solver: str = ""    # the sparse backend that solved the normal equations
 
     @property
     def converged(self) -> bool:
@@ -72,6 +73,7 @@ class OptimizationResult:
             "status": self.status,
             "iterations": self.iterations,
             "seconds": self.seconds,
+            "linear_solver": self.linear_solver,
             "properties": self.properties,
             "history": self.history,
         }
@@ -291,6 +293,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         status=status,
         iterations=sum(1 for h in solver.history if h.step > 0),
         seconds=seconds,
+        linear_solver=solver.linear_solver,
         history=[h.as_dict() for h in solver.history],
         properties=measure_net(result_mesh, reference=solver.reference),
     )
