@@ -49,7 +49,7 @@ class SolverSettings:
     epsilon: float = 1e-3
     fairness_weight: float = 1e-3
     closeness_weight: float = 1e-2
-    fade: float = 0.3
+    fade: float = 0.1
     stagnation: int = 15
     backend: str = "auto"
 

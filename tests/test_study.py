@@ -184,7 +184,8 @@ def test_study_json_lists_every_candidate_with_its_evidence(study_run):
         assert c["reasons"] and all(isinstance(r, str) and r for r in c["reasons"])
         m = c["metrics"]
         assert m["panels"] > 20 and 0.7 < m["coverage"] <= 1.0
-        assert m["deviation_mm"]["mean"] <= m["deviation_mm"]["p95"] <= m["deviation_mm"]["max"]
+        # (not mean <= p95: a few panels can carry the whole mean)
+        assert max(m["deviation_mm"]["mean"], m["deviation_mm"]["p95"]) <= m["deviation_mm"]["max"]
     assert record["recommended"] in names
     assert _candidate(record, record["recommended"])["feasible"]
 
