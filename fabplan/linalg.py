@@ -30,9 +30,10 @@ from .errors import FabplanError, SolverError
 
 __all__ = ["SparseSPDSolver", "available_backends", "solve_spd_columns", "PARDISO_MIN_UNKNOWNS"]
 
-# Below this many unknowns CHOLMOD on one core factors the solver's systems faster than
-# PARDISO on two (thread start-up and its larger analysis); see benchmarks/README.md.
-PARDISO_MIN_UNKNOWNS = 100_000
+# From about this size on PARDISO on two cores refactors the solver's systems faster than
+# CHOLMOD on one (measured: 0.13 against 0.22 s at 79k unknowns, on par at 14k, where
+# thread start-up eats the gain); see benchmarks/README.md.
+PARDISO_MIN_UNKNOWNS = 50_000
 
 
 def available_backends() -> list[str]:
