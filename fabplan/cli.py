@@ -106,7 +106,9 @@ def _cmd_optimize(args) -> int:
           f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
     print(f"wrote {obj_path} and {json_path}")
     if not result.converged:
-        print(f"fabplan: warning: the optimization {result.status} before reaching the "
+        stopped = ("stopped at the iteration cap" if result.status == "iteration cap" else
+                   f"stopped ({result.status})")
+        print(f"fabplan: warning: the optimization {stopped} before reaching the "
               f"tolerance; see the residuals in {json_path}", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
@@ -162,6 +164,12 @@ def _cmd_layout(args) -> int:
                          "decides the angle")
     if preset.angle == "right" and args.angle not in (None, 90.0):
         raise InputError(f"net type {preset.name!r} is orthogonal; --angle must be 90 or omitted")
+    if args.family is not None and preset.angle != "none":
+        raise InputError(f"--family and net type {preset.name!r} exclude each other: a prescribed "
+                         "family decides the angle, which this net type fixes (use snet, "
+                         "const-radius, anet or char-conjugate)")
+    if not 100 <= args.triangles <= 5_000_000:
+        raise InputError(f"--triangles must lie between 100 and 5000000, got {args.triangles}")
     if args.max_iter is not None and args.max_iter < 1:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
     out = Path(args.output)
@@ -177,8 +185,10 @@ def _cmd_layout(args) -> int:
 
     result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
                    settings=settings, progress=progress)
+    angle = result.parameters.get("angle_deg")
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
-             + (f", {layout.family}" if layout.family else f", {layout.angle_deg:g} deg"))
+             + (f", {layout.family}" if layout.family else
+                f", {angle:.4g} deg" if isinstance(angle, float) else ""))
     write_layout_picture(picture, design, result.mesh, title=title,
                          singular_points=layout.singular_points)
     obj_path, json_path = result.write(out)
@@ -190,8 +200,9 @@ def _cmd_layout(args) -> int:
           f"size), mean {d['mean']:.3e} ({rel['mean']:.2e})")
     edge = props["edge_length_relative_to_panel"]
     record = props["layout"]
-    print(f"layout: {record['quads']} quads, edges {edge['min']:.3f} .. {edge['max']:.3f} of the "
-          f"panel size; {len(record['irregular_vertices'])} irregular vertices "
+    print(f"net: {record['quads']} quads covering {100 * props['coverage']:.1f} % of the design, "
+          f"edges {edge['min']:.3f} .. {edge['max']:.3f} of the panel size; "
+          f"{len(record['irregular_vertices'])} irregular vertices "
           f"{record['irregular_vertices'][:12]}{' ...' if len(record['irregular_vertices']) > 12 else ''}; "
           f"{record['gliding_boundary_vertices']} of {record['boundary_vertices']} boundary vertices "
           "glide on the surface boundary")
@@ -206,11 +217,28 @@ def _cmd_layout(args) -> int:
           f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
           + (f" ({params})" if params else ""))
     print(f"wrote {obj_path}, {json_path} and {picture}")
+    for warning in layout_warnings(props):
+        print(f"fabplan: warning: {warning}", file=sys.stderr)
     if not result.converged:
-        print(f"fabplan: warning: the optimization {result.status} before reaching the "
+        stopped = ("stopped at the iteration cap" if result.status == "iteration cap" else
+                   f"stopped ({result.status})")
+        print(f"fabplan: warning: the optimization {stopped} before reaching the "
               f"tolerance; see the residuals in {json_path}", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
+
+
+def layout_warnings(properties: dict) -> list:
+    """What a user should know about a layout's measured result, in plain words."""
+    out = []
+    coverage = properties["coverage"]
+    if coverage < 0.9:
+        out.append(f"the net covers only {100 * coverage:.0f} % of the design surface")
+    edge = properties["edge_length_relative_to_panel"]
+    if edge["min"] < 0.5 or edge["max"] > 2.0:
+        out.append(f"edges range over {edge['min']:.2f} .. {edge['max']:.2f} of the panel size "
+                   "(more than a factor 2 from it)")
+    return out
 
 
 def _parse_sheet(text: str) -> tuple[float, float]:
@@ -391,8 +419,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     p.set_defaults(func=_cmd_molds)
 
+    from .surfaces import SURFACES, describe_surface_parameters
+
     p = sub.add_parser("layout", help="lay out an S-net on a design surface and optimize it "
-                                      "gliding on the surface (OBJ + JSON + PNG)")
+                                      "gliding on the surface (OBJ + JSON + PNG)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="built-in surfaces and their parameters (defaults):\n" + "\n".join(
+                           f"  {name}: {describe_surface_parameters(name)}" for name in SURFACES))
     p.add_argument("surface", help="design surface: a triangle mesh (OBJ/STL/PLY/OFF) or a "
                                    "built-in surface 'NAME[:key=value,...]' (hyperbolic-paraboloid, "
                                    "paraboloid, torus, revolution, tower-facade, height-field, "
@@ -403,7 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="intersection angle of the two families in degrees (default 90)")
     p.add_argument("--panel-size", type=float, required=True, metavar="L",
                    help="target edge length in model units")
-    p.add_argument("--family", metavar="FILE",
+    p.add_argument("--family", metavar="x|y|z[:STEP]|FILE",
                    help="prescribe the first family: x, y or z (levels of a coordinate, e.g. "
                         "floors; z:3.5 for levels every 3.5), or a file of polylines (OBJ "
                         "'l' lines or 'x y z' rows with blank lines between curves)")

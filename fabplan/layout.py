@@ -436,7 +436,9 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     Returns
     -------
     `fabplan.optimize.OptimizationResult`, whose properties also hold
-    ``distance_to_design`` (model units) and ``distance_to_design_relative_to_panel``.
+    ``distance_to_design`` (model units), ``distance_to_design_relative_to_panel``,
+    ``edge_length_relative_to_panel`` and ``coverage`` (area of the net's faces over
+    the design's area).
     """
     from .nets import get_net
     from .optimize import optimize
@@ -465,6 +467,7 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         "min": float(length.min() / layout.panel_size),
         "max": float(length.max() / layout.panel_size),
         "mean": float(length.mean() / layout.panel_size)}
+    result.properties["coverage"] = float(result.mesh.face_areas.sum() / design.area)
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size
     return result

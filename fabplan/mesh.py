@@ -237,6 +237,28 @@ class QuadMesh:
         first = idx[ptr[face]]
         return np.stack([first, idx[ptr[face] + k + 1], idx[ptr[face] + k + 2]], axis=1)
 
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        """(f,) float, area of every face: its vector area's length, ``|sum p_i x p_i+1| / 2``
+        (exact for planar faces; for a skew quad the area of its projection on the
+        best plane, independent of the diagonal a triangulation would choose).
+
+        Examples
+        --------
+        >>> QuadMesh([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], [[0, 1, 2, 3]]).face_areas
+        array([2.])
+        """
+        X = self.vertices
+        sizes, idx = self.face_sizes, self.face_indices
+        nxt = np.arange(len(idx)) + 1
+        ends = np.cumsum(sizes)
+        nxt[ends - 1] = ends - sizes
+        vector = np.cross(X[idx], X[idx[nxt]])
+        face = np.repeat(np.arange(len(sizes)), sizes)
+        total = np.stack([np.bincount(face, vector[:, k], minlength=len(sizes)) for k in range(3)],
+                         axis=1)
+        return 0.5 * np.linalg.norm(total, axis=1)
+
     # ------------------------------------------------------------------ corners
     @cached_property
     def _corners(self) -> dict:

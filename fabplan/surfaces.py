@@ -46,6 +46,7 @@ __all__ = [
     "DesignSurface",
     "SURFACES",
     "make_surface",
+    "surface_parameters",
     "surface_from_spec",
     "load_design",
     "read_triangles",
@@ -400,16 +401,60 @@ SURFACES: dict[str, Callable[..., ParametricSurface]] = {
 }
 
 
+REQUIRED = object()   # marks a surface parameter without a default
+
+# the parameters that name a text file in a surface spec (see `surface_from_spec`)
+FILE_PARAMETERS = {"heights": "FILE of a height grid", "control_points": "FILE of x y z rows",
+                   "profile": "FILE of r z rows"}
+
+
+def surface_parameters(name: str) -> dict:
+    """The parameters of a built-in surface: name -> default (`REQUIRED` where none).
+
+    Examples
+    --------
+    >>> surface_parameters("paraboloid")
+    {'radius_x': 10.0, 'radius_y': 10.0, 'width': 6.0, 'depth': 6.0}
+    >>> surface_parameters("height-field")["heights"] is REQUIRED
+    True
+    """
+    import inspect
+
+    return {p.name: (REQUIRED if p.default is inspect.Parameter.empty else p.default)
+            for p in inspect.signature(SURFACES[name]).parameters.values()}
+
+
+def describe_surface_parameters(name: str) -> str:
+    """``key=default`` for every parameter of a built-in surface, for messages and help.
+
+    Examples
+    --------
+    >>> describe_surface_parameters("torus")
+    'major=10, minor=4, u_deg=-45..45, v_deg=-60..60'
+    """
+    def shown(key, value):
+        if key in FILE_PARAMETERS:
+            return FILE_PARAMETERS[key] + ("" if value is REQUIRED else " (optional)")
+        if isinstance(value, tuple):
+            return "..".join(f"{v:g}" for v in value)
+        return "?" if value is REQUIRED else f"{value:g}"
+
+    return ", ".join(f"{k}={shown(k, v)}" for k, v in surface_parameters(name).items())
+
+
 def make_surface(name: str, **parameters) -> ParametricSurface:
     """A built-in parametric surface by name (see `SURFACES`) with keyword parameters."""
-    try:
-        factory = SURFACES[name]
-    except KeyError:
-        raise InputError(f"unknown surface {name!r}; known: {', '.join(SURFACES)}") from None
-    try:
-        return factory(**parameters)
-    except TypeError as exc:
-        raise InputError(f"surface {name!r}: {exc}") from None
+    if name not in SURFACES:
+        raise InputError(f"unknown surface {name!r}; known: {', '.join(SURFACES)}")
+    known = surface_parameters(name)
+    unknown = [k for k in parameters if k not in known]
+    missing = [k for k, v in known.items() if v is REQUIRED and k not in parameters]
+    if unknown or missing:
+        what = (f"has no parameter {unknown[0]!r}" if unknown else f"needs {missing[0]}="
+                f"{FILE_PARAMETERS.get(missing[0], 'VALUE')}")
+        raise InputError(f"surface {name!r} {what}; its parameters: "
+                         f"{describe_surface_parameters(name)}")
+    return SURFACES[name](**parameters)
 
 
 def surface_from_spec(spec: str) -> ParametricSurface:
@@ -553,13 +598,26 @@ class DesignSurface:
             self.repairs["dropped_degenerate_triangles"] = int(flat.sum())
             T = T[~flat]
             self._triangle_ids = self._triangle_ids[~flat]
-        # keep the largest piece (triangles connected through shared edges)
+        # keep the largest piece (triangles connected through shared edges); only crumbs
+        # (at most 1 % of the area) are dropped, anything larger is a second design
         n_comp, label = _triangle_components(T, len(V))
         if n_comp > 1:
-            sizes = np.bincount(label)
+            area = np.bincount(label, weights=double_area[~flat])
+            main = int(np.argmax(area))
+            if area.sum() - area[main] > 0.01 * area.sum():
+                other = int(np.argsort(-area)[1])
+                shared = np.intersect1d(T[label == main].ravel(), T[label == other].ravel())
+                if shared.size:
+                    raise InputError(
+                        f"{self.name}: vertex {self._vertex_ids[shared[0]]} joins two sheets of "
+                        "triangles that share no edge: the surface is non-manifold")
+                raise InputError(
+                    f"{self.name}: the surface has {n_comp} separate pieces (the largest is "
+                    f"{100 * area[main] / area.sum():.0f} % of the area): lay out one piece "
+                    "per file")
             self.repairs["dropped_pieces"] = int(n_comp - 1)
-            self.repairs["dropped_piece_triangles"] = int(len(T) - sizes.max())
-            keep = label == np.argmax(sizes)
+            self.repairs["dropped_piece_triangles"] = int(np.sum(label != main))
+            keep = label == main
             T, self._triangle_ids = T[keep], self._triangle_ids[keep]
         used = np.zeros(len(V), bool)
         used[T.ravel()] = True

@@ -242,6 +242,11 @@ def _assert_refused(code, capsys, folder: Path, *fragments: str) -> None:
     ("flat.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\n", "no area"),
     ("fin.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n",
      "edge (0, 1) is shared by 3 triangles (0, 1, 2): the surface is non-manifold"),
+    # two sheets touching at one vertex: formerly the smaller one was dropped silently
+    ("bowtie.obj", b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv -1 0 0\nv -1 -1 0\nv 0 -1 0\n"
+     b"f 1 2 3\nf 1 3 4\nf 1 5 6\nf 1 6 7\n", "vertex 0 joins two sheets"),
+    ("two.obj", b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 3 0 0\nv 4 0 0\nv 4 1 0\nv 3 1 0\n"
+     b"f 1 2 3\nf 1 3 4\nf 5 6 7\nf 5 7 8\n", "2 separate pieces (the largest is 50 % of the area)"),
 ])
 def test_bad_surfaces_are_refused_in_one_line(tmp_path, capsys, name, content, fragment):
     path = tmp_path / name
@@ -280,6 +285,7 @@ def test_a_moebius_strip_cannot_be_oriented(tmp_path, capsys):
     (["--panel-size", "1", "--angle", "200"], "--angle must lie strictly between 0 and 180"),
     (["--panel-size", "1", "--family", "z", "--angle", "60"], "exclude each other"),
     (["--panel-size", "1", "--family", "missing.txt"], "not x, y, z nor a file of polylines"),
+    (["--panel-size", "1", "--triangles", "-5"], "--triangles must lie between 100"),
 ])
 def test_bad_layout_options_are_refused(tmp_path, capsys, args, fragment):
     code = main(["layout", "hyperbolic-paraboloid", "--net", "snet", "--triangles", "2000",
@@ -292,6 +298,9 @@ def test_bad_layout_options_are_refused(tmp_path, capsys, args, fragment):
     ("torus:minor=12", "the minor radius must be smaller than the major radius"),
     ("paraboloid:width=wide", "width must be a number"),
     ("bspline:control_points=nothing.txt", "nothing.txt: no such file"),
+    ("paraboloid:radius=5", "surface 'paraboloid' has no parameter 'radius'; its parameters: "
+     "radius_x=10, radius_y=10, width=6, depth=6"),
+    ("height-field", "surface 'height-field' needs heights=FILE"),
 ])
 def test_bad_surface_specs_are_refused(tmp_path, capsys, spec, fragment):
     code = main(["layout", spec, "--net", "snet", "--panel-size", "1",
@@ -402,3 +411,40 @@ def test_the_boundary_staircase_is_closed_on_the_boundary_curve(spec, angle):
     assert covered >= _panel_area(plain.mesh) / design.area + 0.03
     assert_snet_on_design(result.mesh, design, panel, angle=angle)
     assert design.reference.distances(result.mesh.vertices).max() <= 1e-8 * panel
+
+
+def test_a_prescribed_family_with_a_fixed_angle_net_is_refused(tmp_path, capsys):
+    code = main(["layout", "tower-facade", "--net", "orthogonal", "--family", "z",
+                 "--panel-size", "1", "--triangles", "2000", "-o", str(tmp_path / "out.obj")])
+    _assert_refused(code, capsys, tmp_path, "--family and net type 'orthogonal' exclude each other")
+
+
+def test_a_crumb_of_a_few_triangles_is_dropped_and_counted():
+    big = trimesh.creation.box().subdivide().subdivide()
+    top = big.vertices[:, 2] > 0.49
+    faces = big.faces[top[big.faces].all(axis=1)]
+    crumb = np.array([[5.0, 5.0, 0.0], [5.01, 5.0, 0.0], [5.0, 5.01, 0.0]])
+    V = np.vstack([big.vertices, crumb])
+    T = np.vstack([faces, [[len(big.vertices), len(big.vertices) + 1, len(big.vertices) + 2]]])
+    design = DesignSurface(V, T, name="with-crumb")
+    assert design.repairs["dropped_pieces"] == 1 and design.repairs["dropped_piece_triangles"] == 1
+    assert len(design.triangles) == len(faces)
+
+
+def test_low_coverage_is_measured_and_warned_about(tmp_path, capsys):
+    """A dome whose apex is a rotationally symmetric umbilic: the S-net's spirals close in
+    on it and leave a hole; the net's share of the design is measured and reported."""
+    out = tmp_path / "dome.obj"
+    main(["layout", "paraboloid", "--net", "snet", "--panel-size", "0.8", "--triangles", "20000",
+          "-q", "-o", str(out)])
+    _, err = capsys.readouterr()
+    props = json.loads(out.with_suffix(".json").read_text())["properties"]
+    X = QuadMesh.from_obj(out).vertices
+    design = load_design("paraboloid", triangles=20000)
+    faces = QuadMesh.from_obj(out).faces
+    area = sum(0.5 * np.linalg.norm(np.cross(X[f[2]] - X[f[0]], X[f[3]] - X[f[1]])) for f in faces)
+    assert props["coverage"] == pytest.approx(area / design.area, rel=1e-3)
+    if props["coverage"] < 0.9:
+        assert f"covers only {100 * props['coverage']:.0f} % of the design" in err
+    else:
+        assert "covers only" not in err
