@@ -238,6 +238,15 @@ def layout_warnings(properties: dict) -> list:
     if edge["min"] < 0.5 or edge["max"] > 2.0:
         out.append(f"edges range over {edge['min']:.2f} .. {edge['max']:.2f} of the panel size "
                    "(more than a factor 2 from it)")
+    angle = properties.get("intersection_angle_deg") or {}
+    if angle.get("min") is not None and (angle["min"] < 20 or angle["max"] > 160):
+        out.append(f"the families meet at {angle['min']:.1f} .. {angle['max']:.1f} deg: some "
+                   "panels are nearly degenerate")
+    off = properties["distance_to_design_relative_to_panel"]["max"]
+    if off > 0.01:
+        coarse = properties.get("design_chord_error", 0.0) > 0.5 * properties["distance_to_design"]["max"]
+        out.append(f"the net is up to {100 * off:.1f} % of a panel off the design surface"
+                   + (" (its triangulation is too coarse: raise --triangles)" if coarse else ""))
     return out
 
 

@@ -458,7 +458,7 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
                       fixed=fixed, settings=settings, glide=True,
                       glide_boundary=layout.gliding_boundary, extra=extra, progress=progress)
     X = result.mesh.vertices
-    d = design.reference.distances(X)
+    d = design.distances(X)
     length = np.linalg.norm(X[result.mesh.edges[:, 0]] - X[result.mesh.edges[:, 1]], axis=1)
     result.properties["distance_to_design"] = {"max": float(d.max()), "mean": float(d.mean())}
     result.properties["distance_to_design_relative_to_panel"] = {
@@ -467,6 +467,10 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         "min": float(length.min() / layout.panel_size),
         "max": float(length.max() / layout.panel_size),
         "mean": float(length.mean() / layout.panel_size)}
+    result.properties["distance_measured_to"] = (
+        "the exact parametric surface" if design.parametric is not None else
+        "the design's triangle mesh")
+    result.properties["design_chord_error"] = design.chord_error
     result.properties["coverage"] = float(result.mesh.face_areas.sum() / design.area)
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size

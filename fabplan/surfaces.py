@@ -33,6 +33,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Callable
 
+import igl
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
@@ -155,6 +156,38 @@ class ParametricSurface:
         e1 -= np.sum(e1 * n, axis=1, keepdims=True) * n
         e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
         return k1, k2, e1, np.cross(n, e1), n
+
+    def closest_parameters(self, points: np.ndarray, start: np.ndarray, *,
+                           iterations: int = 8) -> np.ndarray:
+        """(m, 2) float, parameters of the surface points closest to `points`: Gauss-Newton
+        on ``|f(u, v) - p|^2`` from `start` (m, 2), kept in the domain (``u`` wraps where
+        the surface is periodic).
+
+        Examples
+        --------
+        >>> from fabplan.surfaces import paraboloid
+        >>> s = paraboloid(radius_x=2.0, radius_y=2.0)
+        >>> uv = s.closest_parameters(np.array([[1.0, 0.0, 1.0]]), np.array([[0.5, 0.1]]))
+        >>> np.round(s.points(uv[:, 0], uv[:, 1]), 4).tolist()   # x^3 + 4 x = 8 on z = x^2 / 4
+        [[1.3647, 0.0, 0.4656]]
+        """
+        P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        uv = np.array(start, dtype=np.float64).reshape(-1, 2)
+        (u0, u1), (v0, v1) = self.domain
+        for _ in range(iterations):
+            fu, fv, *_ = self.derivatives(uv[:, 0], uv[:, 1])
+            r = self.points(uv[:, 0], uv[:, 1]) - P
+            a, b, c = (np.sum(x * y, axis=1) for x, y in ((fu, fu), (fu, fv), (fv, fv)))
+            gu, gv = np.sum(fu * r, axis=1), np.sum(fv * r, axis=1)
+            det = np.maximum(a * c - b * b, 1e-300)
+            uv[:, 0] -= (c * gu - b * gv) / det
+            uv[:, 1] -= (a * gv - b * gu) / det
+            if self.periodic_u:
+                uv[:, 0] = u0 + np.mod(uv[:, 0] - u0, u1 - u0)
+            else:
+                uv[:, 0] = np.clip(uv[:, 0], u0, u1)
+            uv[:, 1] = np.clip(uv[:, 1], v0, v1)
+        return uv
 
     def triangulate(self, resolution: int | tuple[int, int] = 100) -> "DesignSurface":
         """A triangle mesh of the surface on a regular grid of the parameter domain.
@@ -669,6 +702,48 @@ class DesignSurface:
         self.triangles = T
 
     # ------------------------------------------------------------------ derived data
+    def distances(self, points: np.ndarray) -> np.ndarray:
+        """(m,) float, distance of each point from the design.
+
+        For a parametric design the distance is to the exact surface: its closest point is
+        found by Gauss-Newton from the one on the triangulation (which alone would measure
+        to the chords, off the surface by up to the triangulation's chord error). Elsewhere
+        it is the distance to the triangle mesh.
+        """
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        foot, _, tri = self.reference.closest_points(points)
+        if self.parametric is None or self.uv is None:
+            return np.linalg.norm(foot - points, axis=1)
+        corners = self.vertices[self.triangles[tri]]
+        bary = igl.barycentric_coordinates(foot, corners[:, 0].copy(), corners[:, 1].copy(),
+                                           corners[:, 2].copy())
+        start = np.einsum("mk,mkj->mj", bary, self._triangle_uv(tri))
+        uv = self.parametric.closest_parameters(points, start)
+        return np.linalg.norm(self.parametric.points(uv[:, 0], uv[:, 1]) - points, axis=1)
+
+    def _triangle_uv(self, tri: np.ndarray) -> np.ndarray:
+        """(m, 3, 2) float, parameters of the corners of triangles `tri`, a triangle across
+        the seam of a periodic surface unwrapped to one side of it."""
+        uv = self.uv[self.triangles[tri]].copy()
+        if self.parametric.periodic_u:
+            (u0, u1), _ = self.parametric.domain
+            period = u1 - u0
+            uv[..., 0] += period * (uv[..., 0] - uv[:, :1, 0] < -period / 2)
+            uv[..., 0] -= period * (uv[..., 0] - uv[:, :1, 0] > period / 2)
+        return uv
+
+    @cached_property
+    def chord_error(self) -> float:
+        """Largest distance of a triangle centre from the exact surface (0 for a mesh
+        design): about how far the triangulation of a parametric design is off it."""
+        if self.parametric is None or self.uv is None:
+            return 0.0
+        tri = np.arange(len(self.triangles))
+        centre = self.vertices[self.triangles].mean(axis=1)
+        uv = self.parametric.closest_parameters(centre, self._triangle_uv(tri).mean(axis=1))
+        return float(np.linalg.norm(self.parametric.points(uv[:, 0], uv[:, 1]) - centre,
+                                    axis=1).max())
+
     @cached_property
     def reference(self) -> ReferenceSurface:
         """The closest-point structure (libigl AABB tree) on this mesh."""

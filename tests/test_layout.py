@@ -46,7 +46,7 @@ def assert_snet_on_design(mesh: QuadMesh, design: DesignSurface, panel: float, *
     stars = canonical_stars(X, mesh.stars)
     spheres = fit_star_spheres(X, stars)
     sphere = spheres.residual.max() / mesh.mean_edge_length
-    distance = design.reference.distances(X) / panel
+    distance = design.distances(X) / panel
     e = mesh.edges
     length = np.linalg.norm(X[e[:, 0]] - X[e[:, 1]], axis=1) / panel
     assert sphere <= 1e-6
@@ -90,10 +90,12 @@ def test_hyperbolic_paraboloid_layout_glides_into_an_snet(hypar, net, angle):
     X = result.mesh.vertices[layout.gliding_boundary]
     foot, _ = closest_points_on_polylines(X, hypar.boundary_curves())
     assert len(X) > 20 and np.linalg.norm(foot - X, axis=1).max() <= 1e-6
-    # the record carries the same distances
+    # the record carries the same distances, to the exact surface: the net is on the
+    # triangulation, whose chords are off the hyperbolic paraboloid
     props = result.properties
-    d = hypar.reference.distances(result.mesh.vertices)
-    assert props["distance_to_design"]["max"] == pytest.approx(d.max(), abs=1e-15)
+    X = result.mesh.vertices
+    assert props["distance_to_design"]["max"] == pytest.approx(hypar.distances(X).max(), abs=1e-15)
+    assert hypar.reference.distances(X).max() <= 1e-9 < props["distance_to_design"]["max"]
 
 
 def test_tower_of_revolution_closes_up_around_its_axis():
@@ -448,3 +450,21 @@ def test_low_coverage_is_measured_and_warned_about(tmp_path, capsys):
         assert f"covers only {100 * props['coverage']:.0f} % of the design" in err
     else:
         assert "covers only" not in err
+
+
+def test_distance_to_a_parametric_design_is_measured_to_the_exact_surface(tmp_path, capsys):
+    """A net glided on a 200-triangle torus lies on the chords; measured against the exact
+    torus it is off by the chord error, and the user is told to refine the triangulation."""
+    out = tmp_path / "torus.obj"
+    main(["layout", "torus", "--net", "snet", "--panel-size", "1.5", "--triangles", "200",
+          "-q", "-o", str(out)])
+    _, err = capsys.readouterr()
+    props = json.loads(out.with_suffix(".json").read_text())["properties"]
+    X = QuadMesh.from_obj(out).vertices
+    # independent measure: distance to the torus of radii 10 and 4 about the z-axis
+    ring = np.hypot(X[:, 0], X[:, 1]) - 10.0
+    exact = np.abs(np.hypot(ring, X[:, 2]) - 4.0)
+    assert props["distance_measured_to"] == "the exact parametric surface"
+    assert props["distance_to_design"]["max"] == pytest.approx(exact.max(), rel=1e-6)
+    assert exact.max() > 0.01 * 1.5
+    assert "raise --triangles" in err
