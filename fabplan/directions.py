@@ -339,6 +339,15 @@ def prescribed_family(design: DesignSurface, spec: str, panel_size: float, e1: n
     t /= np.maximum(norm, 1e-300)
     s = complementary_directions(t, e1)
     s /= np.maximum(np.linalg.norm(s, axis=1, keepdims=True), 1e-300)
+    # a family along a principal direction is its own mirror image: no partner crosses it
+    crossing = np.linalg.norm(np.cross(t, s), axis=1)      # sine of their angle
+    area = design.face_areas
+    if np.sum(area * (crossing < math.sin(math.radians(10)))) > 0.5 * area.sum():
+        raise InputError(
+            f"--family {spec}: the prescribed curves follow a principal direction over most of "
+            f"{design.name} (as the floors of a surface of revolution do), so the S-net partner "
+            "family would run along them; prescribe curves that cross the principal directions, "
+            "or lay out without --family")
     # change of the function per unit length along the partner family: the level spacing
     rate = np.abs(np.sum(g * s, axis=1))
     rate = float(np.median(rate[rate > 0])) if np.any(rate > 0) else 1.0

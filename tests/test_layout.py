@@ -468,3 +468,11 @@ def test_distance_to_a_parametric_design_is_measured_to_the_exact_surface(tmp_pa
     assert props["distance_to_design"]["max"] == pytest.approx(exact.max(), rel=1e-6)
     assert exact.max() > 0.01 * 1.5
     assert "raise --triangles" in err
+
+
+def test_floors_of_a_surface_of_revolution_have_no_partner_family(tmp_path, capsys):
+    """The floor levels of a tower of revolution are lines of curvature: the reflection in
+    the principal directions maps them onto themselves, so no S-net partner crosses them."""
+    code = main(["layout", "revolution", "--net", "snet", "--family", "z", "--panel-size", "1",
+                 "--triangles", "4000", "-o", str(tmp_path / "out.obj")])
+    _assert_refused(code, capsys, tmp_path, "follow a principal direction")
