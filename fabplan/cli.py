@@ -151,7 +151,7 @@ def _cmd_molds(args) -> int:
 
 
 def _cmd_layout(args) -> int:
-    from .layout import glide, layout_surface, write_layout_picture
+    from .layout import glide, layout_angle, layout_surface, write_layout_picture
     from .nets import get_net
     from .surfaces import load_design
 
@@ -179,8 +179,8 @@ def _cmd_layout(args) -> int:
     family_file = args.family if args.family and Path(args.family).is_file() else None
     _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
     design = load_design(args.surface, triangles=args.triangles)
-    layout = layout_surface(design, args.panel_size, angle=args.angle or 90.0,
-                            family=args.family)
+    start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
+    layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
     settings, progress = _solver_options(args)
 
     result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
@@ -224,6 +224,11 @@ def _cmd_layout(args) -> int:
                    f"stopped ({result.status})")
         print(f"fabplan: warning: the optimization {stopped} before reaching the "
               f"tolerance; see the residuals in {json_path}", file=sys.stderr)
+        if preset.radius == "param" or preset.planar_faces:
+            print(f"fabplan: note: {preset.name} nets exist on special surfaces only; held on "
+                  f"this design the net cannot become one. `fabplan optimize {obj_path} --net "
+                  f"{preset.name} --reference {args.surface}` lets it leave the design a little "
+                  "(`fabplan study` measures how far)", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
 

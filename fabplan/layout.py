@@ -73,6 +73,7 @@ __all__ = [
     "LayoutSettings",
     "SurfaceLayout",
     "layout_surface",
+    "layout_angle",
     "glide",
     "write_layout_picture",
 ]
@@ -422,6 +423,56 @@ def _value_at(design: DesignSurface, value: np.ndarray, points: np.ndarray) -> n
 
 
 # ---------------------------------------------------------------------------- gliding
+
+
+def layout_angle(net: str, design: DesignSurface, angle: float | None = None) -> float:
+    """Intersection angle (degrees) of the layout a net type should start from.
+
+    The given `angle` when there is one. Else, for a characteristic conjugate net, the
+    angle of the conjugate directions symmetric to the principal ones,
+    ``2 atan(sqrt(k1 / k2))`` (area-weighted median where K > 0); for an A-net (planar
+    vertex stars: the families follow the asymptotic directions), ``2 atan(sqrt(-k1 /
+    k2))`` where K < 0; for a linear Weingarten net of free angle, the angle whose Euler
+    formula ``k1 cos^2 + k2 sin^2`` matches the line ``a k1 + b k2 = c`` fitted to the
+    design's curvatures, ``2 atan(sqrt(b / a))``; 90 degrees otherwise (and where the
+    surface does not have the curvature the formula needs). A start far from the angle
+    the net ends at makes the solve shear the whole net.
+
+    Examples
+    --------
+    >>> from fabplan.surfaces import load_design
+    >>> saddle = load_design("hyperbolic-paraboloid", triangles=2000)
+    >>> layout_angle("anet", saddle)      # z = k x y: asymptotic lines along x and y
+    90.0
+    >>> layout_angle("isogonal", saddle, 70.0)
+    70.0
+    """
+    from .molds import weingarten_fit
+    from .nets import get_net
+
+    if angle is not None:
+        return float(angle)
+    preset = get_net(net)
+    asymptotic = preset.radius == "infinite" and preset.angle != "right"
+    weingarten = preset.angle == "param" and preset.radius == "param"
+    if not (preset.planar_faces or asymptotic or weingarten):
+        return 90.0
+    k1, k2, _ = face_principal_frames(design)
+    area = design.face_areas
+    if weingarten:
+        line = weingarten_fit(k1, k2)["line"]
+        if line is None or line["a"] * line["b"] <= 0:
+            return 90.0
+        return round(float(2 * np.degrees(np.arctan(np.sqrt(line["b"] / line["a"])))), 1)
+    ratio = np.divide(k1, k2, out=np.zeros(len(k1)), where=k2 != 0)
+    ratio = ratio if preset.planar_faces else -ratio
+    ok = ratio > 0
+    if area[ok].sum() < 0.5 * area.sum():
+        return 90.0
+    angles = 2 * np.degrees(np.arctan(np.sqrt(ratio[ok])))
+    order = np.argsort(angles)
+    cumulative = np.cumsum(area[ok][order])
+    return round(float(angles[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])]), 1)
 
 
 def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,
