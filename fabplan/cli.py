@@ -41,7 +41,7 @@ def _cmd_measure(args) -> int:
     out = Path(args.output) if args.output else Path(args.net).with_suffix(".measure.json")
     _check_outputs([out], [args.net, args.reference])
     mesh = load_mesh(args.net)
-    reference = load_reference(args.reference) if args.reference else None
+    reference = _reference(args.reference)
     record = measure_net(mesh, reference=reference)
     record["file"] = str(args.net)
     write_json(out, record)           # the file first: the terminal may go away
@@ -82,6 +82,17 @@ def _solver_options(args) -> tuple:
     return settings, progress
 
 
+def _reference(spec: str | None):
+    """A reference surface from a mesh file or a built-in surface spec (`fabplan layout`)."""
+    if spec is None:
+        return None
+    if Path(spec).exists() or Path(spec).suffix.lower() in (".obj", ".stl", ".ply", ".off"):
+        return load_reference(spec)
+    from .surfaces import load_design
+
+    return load_design(spec).reference
+
+
 def _cmd_optimize(args) -> int:
     check_angle(args.angle)
     check_radius(args.radius)
@@ -90,7 +101,7 @@ def _cmd_optimize(args) -> int:
     out = _output_path(args)
     mesh = load_mesh(args.input)
     check_net_input(mesh)
-    reference = load_reference(args.reference) if args.reference else None
+    reference = _reference(args.reference)
     fixed = read_fixed(args.fix, mesh)
     handles = read_handles(args.handle)
     settings, progress = _solver_options(args)
@@ -405,7 +416,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="net type (see `fabplan nets`)")
     p.add_argument("--angle", type=float, help="intersection angle in degrees (isogonal types)")
     p.add_argument("--radius", type=float, help="Meusnier radius in model units")
-    p.add_argument("--reference", help="surface to stay close to (default: the input)")
+    p.add_argument("--reference", help="surface to stay close to: a mesh file or a built-in "
+                                       "surface as for `fabplan layout` (default: the input)")
     p.add_argument("--fix", help="'boundary' or a file of vertex ids to hold in place")
     p.add_argument("--handle", action="append", metavar="ID:X,Y,Z",
                    help="move vertex ID to (X, Y, Z) and hold it there; repeatable, or a file "

@@ -476,3 +476,19 @@ def test_floors_of_a_surface_of_revolution_have_no_partner_family(tmp_path, caps
     code = main(["layout", "revolution", "--net", "snet", "--family", "z", "--panel-size", "1",
                  "--triangles", "4000", "-o", str(tmp_path / "out.obj")])
     _assert_refused(code, capsys, tmp_path, "follow a principal direction")
+
+
+def test_a_net_type_that_changes_the_surface_is_pointed_to_optimize(tmp_path, capsys):
+    """Held on a twisted facade, a linear Weingarten net cannot form (exit 3, with the way
+    out); optimized with the facade as a reference surface (a built-in spec) it does."""
+    first = tmp_path / "glide.obj"
+    code = main(["layout", "tower-facade", "--net", "linear-weingarten", "--panel-size", "1",
+                 "--triangles", "6000", "-q", "-o", str(first)])
+    _, err = capsys.readouterr()
+    assert code == 3 and "exist on special surfaces only" in err
+    second = tmp_path / "free.obj"
+    code = main(["optimize", str(first), "--net", "linear-weingarten", "--reference",
+                 "tower-facade", "-q", "-o", str(second)])
+    props = json.loads(second.with_suffix(".json").read_text())["properties"]
+    assert code == 0 and props["sphere_residual_relative"]["max"] <= 1e-6
+    assert props["distance_to_reference"]["max"] <= 0.1
