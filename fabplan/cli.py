@@ -217,6 +217,14 @@ def _cmd_layout(args) -> int:
           f"{record['irregular_vertices'][:12]}{' ...' if len(record['irregular_vertices']) > 12 else ''}; "
           f"{record['gliding_boundary_vertices']} of {record['boundary_vertices']} boundary vertices "
           "glide on the surface boundary")
+    if len(layout.turning_points):
+        where = ", ".join(f"({', '.join(f'{c:.4g}' for c in p)})" for p in layout.turning_points[:3])
+        print(f"fabplan: warning: the principal directions turn by up to "
+              f"{layout.turning_deg.max():.0f} deg within one panel at {len(layout.turning_points)} "
+              f"place{'s' if len(layout.turning_points) > 1 else ''} ({where}"
+              f"{', ...' if len(layout.turning_points) > 3 else ''}: umbilics or near-umbilics): "
+              "no net of this panel size follows them there; a smaller panel size or a smoother "
+              "design does", file=sys.stderr)
     if len(layout.singular_points):
         print(f"fabplan: note: the direction field is singular at {len(layout.singular_points)} "
               f"points (umbilics or seam ends, listed in {json_path.name}); "

@@ -32,6 +32,7 @@ __all__ = [
     "smooth_line_field",
     "comb_line_field",
     "line_field_index",
+    "direction_turning",
     "snet_directions",
     "complementary_directions",
     "prescribed_family",
@@ -221,6 +222,34 @@ def line_field_index(design: DesignSurface, e1: np.ndarray) -> np.ndarray:
     index = np.round((total + defect) / np.pi) / 2
     index[open_corner] = np.nan
     return index
+
+
+def direction_turning(design: DesignSurface, e1: np.ndarray, length: float) -> np.ndarray:
+    """(t,) float, how far a line field turns over `length` around each triangle (degrees).
+
+    The angle between the lines of neighbouring triangles per unit distance of their
+    centroids, averaged over a triangle's edges and then over about half of `length`
+    around it (so that a single odd triangle does not count), times `length`.
+
+    An S-net's lines follow directions symmetric to the principal ones; where those turn
+    by tens of degrees within one panel (near an umbilic, or a near-umbilic where
+    ``|k1 - k2|`` almost vanishes without the field becoming singular) no net of that
+    panel size can follow them.
+    """
+    _, _, f, g = _face_adjacency(design)
+    t = len(e1)
+    centroid = design.vertices[design.triangles].mean(axis=1)
+    spacing = np.maximum(np.linalg.norm(centroid[f] - centroid[g], axis=1), 1e-300)
+    angle = np.arccos(np.clip(np.abs(np.sum(e1[f] * e1[g], axis=1)), 0.0, 1.0))
+    rate = np.bincount(f, angle / spacing, t) + np.bincount(g, angle / spacing, t)
+    edges = np.bincount(f, minlength=t) + np.bincount(g, minlength=t)
+    rate = rate / np.maximum(edges, 1)
+    # averaging over neighbours spreads like a diffusion: (radius / spacing)^2 steps
+    adjacency = sp.coo_matrix((np.ones(2 * len(f)), (np.r_[f, g], np.r_[g, f])), shape=(t, t))
+    adjacency = (sp.diags(1.0 / np.maximum(edges, 1)) @ adjacency).tocsr()
+    for _ in range(int(min(200, (0.5 * length / float(np.median(spacing))) ** 2))):
+        rate = 0.5 * (rate + adjacency @ rate)
+    return np.degrees(rate * length)
 
 
 def _whole_turns(V: np.ndarray, singular: np.ndarray, index: np.ndarray,

@@ -43,13 +43,17 @@ from pathlib import Path
 
 import igl
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
 from .constraints import EdgeCollapseBarrier, FamilyLevels
 from .directions import (
+    _face_adjacency,
     _gradient_vectors,
     _whole_turns,
     comb_line_field,
+    direction_turning,
     face_principal_frames,
     line_field_index,
     prescribed_family,
@@ -102,6 +106,8 @@ class LayoutSettings:
         boundary glide on it; the others stay free on the surface.
     offsets : trial shifts of the integer grid per direction (offsets**2 trials); the
         extraction with the most quads is kept.
+    max_turning_deg : the direction field turning faster than this per panel is reported
+        (`SurfaceLayout.turning_points`).
     """
 
     bisector: str = "max"
@@ -114,6 +120,7 @@ class LayoutSettings:
     boundary_min_edge: float = 0.75
     boundary_snap: float = 0.75
     offsets: int = 2
+    max_turning_deg: float = 30.0
 
 
 @dataclass
@@ -144,6 +151,10 @@ class SurfaceLayout:
     family : description of the prescribed family, or None.
     level_step : level k of the prescribed family is where its function equals
         ``k * level_step`` (see `prescribed_family`), or None.
+    turning_points, turning_deg : (k, 3), (k,) float, where the direction field turns
+        faster than `LayoutSettings.max_turning_deg` per panel (umbilics and near-umbilics,
+        `fabplan.directions.direction_turning`), and how fast: a net of this panel size
+        cannot follow it there.
     seconds : time per stage.
     """
 
@@ -163,6 +174,8 @@ class SurfaceLayout:
     prescribed: np.ndarray | None = None
     family: str | None = None
     level_step: float | None = None
+    turning_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    turning_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seconds: dict = field(default_factory=dict)
 
     def record(self) -> dict:
@@ -182,6 +195,8 @@ class SurfaceLayout:
             "irregular_vertices": mesh.irregular_vertices.tolist(),
             "singular_points": self.singular_points.tolist(),
             "singular_index": self.singular_index.tolist(),
+            "fast_turning_points": self.turning_points.tolist(),
+            "fast_turning_deg_per_panel": self.turning_deg.tolist(),
             "seam_edges": int(self.seam_edges),
             "cuts": [list(map(int, c)) for c in self.cuts],
             "filled_holes": int(self.filled_holes),
@@ -252,6 +267,7 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     e1, seam = comb_line_field(design, e1)
     index = line_field_index(design, e1)
     singular = np.flatnonzero(np.nan_to_num(index) != 0)
+    turning = _turning_spots(design, direction_turning(design, e1, h), s.max_turning_deg, h)
     lap("combing")
 
     mu = s.scale_weight
@@ -372,7 +388,30 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         cuts=[(int(sign), *np.round(shift, 6).tolist()) for sign, shift in transitions],
         filled_holes=filled, open_holes=opened,
         gliding_boundary=gliding, vertex_keys=vertex_keys,
-        prescribed=prescribed, family=description, level_step=level_step, seconds=seconds)
+        prescribed=prescribed, family=description, level_step=level_step,
+        turning_points=turning[0], turning_deg=turning[1], seconds=seconds)
+
+
+def _turning_spots(design: DesignSurface, turning: np.ndarray, limit: float,
+                   panel_size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where the field turns faster than `limit` degrees per panel: one point per
+    connected patch of such triangles (its fastest one), and that patch's turning."""
+    fast = np.flatnonzero(turning > limit)
+    if fast.size == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    _, _, f, g = _face_adjacency(design)
+    both = np.isin(f, fast) & np.isin(g, fast)
+    graph = sp.coo_matrix((np.ones(int(both.sum())), (f[both], g[both])),
+                          shape=(len(turning),) * 2)
+    _, label = csgraph.connected_components(graph, directed=False)
+    patch = label[fast]
+    order = np.lexsort((-turning[fast], patch))
+    first = order[np.r_[True, patch[order][1:] != patch[order][:-1]]]
+    # patches smaller than a tenth of a panel are noise of the curvature estimate
+    area = np.bincount(patch, weights=design.face_areas[fast])[patch[first]]
+    peak = fast[first[area >= 0.1 * panel_size**2]]
+    centroid = design.vertices[design.triangles[peak]].mean(axis=1)
+    return centroid, turning[peak]
 
 
 def _near_design_boundary(mesh: QuadMesh, design: DesignSurface, radius: float,

@@ -492,3 +492,28 @@ def test_a_net_type_that_changes_the_surface_is_pointed_to_optimize(tmp_path, ca
     props = json.loads(second.with_suffix(".json").read_text())["properties"]
     assert code == 0 and props["sphere_residual_relative"]["max"] <= 1e-6
     assert props["distance_to_reference"]["max"] <= 0.1
+
+
+def _wavy_height(x, y):
+    """A wavy facade of mixed curvature, 30 x 15, with three near-umbilics inside: points
+    where |k1 - k2| drops to a few hundredths of its median without the principal
+    directions becoming singular, so that they turn fast around them."""
+    x, y = x + 15.0, y + 7.5
+    u, w = x - 15.0, y - 7.5
+    return 0.02 * u * w + 0.6 * np.sin(0.25 * x) * np.cos(0.2 * y) + 0.003 * u * u
+
+
+def test_fast_turning_principal_directions_are_found_and_reported():
+    wavy = height_field(_wavy_height, width=30.0, depth=15.0).triangulate((120, 60))
+    layout = layout_surface(wavy, 1.0)
+    # the near-umbilics, located independently: minima of |k1 - k2| on a fine grid
+    expected = np.array([[2.45, 4.75], [27.55, 4.7], [22.7, 11.0]]) - [15.0, 7.5]
+    found = layout.turning_points[:, :2]
+    assert len(found) == 3
+    gap = np.linalg.norm(found[:, None] - expected[None], axis=2).min(axis=0)
+    assert gap.max() < 1.5 and (layout.turning_deg > 30).all()
+    record = layout.record()
+    assert len(record["fast_turning_points"]) == 3
+    # a facade of the same size whose principal directions turn slowly has none
+    calm = height_field(_facade_height, width=30.0, depth=16.0).triangulate((120, 60))
+    assert len(layout_surface(calm, 1.0).turning_points) == 0
