@@ -242,13 +242,16 @@ def _clean_quads(vertices: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, n
 
 
 def _fill_holes(vertices: np.ndarray, faces: list, design: DesignSurface, panel_size: float,
-                max_edges: int) -> tuple[np.ndarray, list, int, int]:
+                max_edges: int, *, poles: np.ndarray | None = None,
+                max_pole_edges: int = 64) -> tuple[np.ndarray, list, int, int]:
     """Close the interior holes of a layout (around singularities of the field).
 
     Holes bounded by 4 or 6 edges become one or two quads; larger ones a fan of quads
     (and one triangle when odd) around a new vertex on the surface. Holes more than
-    `max_edges` long stay open; loops near the design boundary are the layout's own
-    boundary and are not touched.
+    `max_edges` long stay open, except around one of the `poles` (points the field turns
+    a whole turn around, where the net's spirals close in: up to `max_pole_edges`, the
+    fan's centre is then the pole's many-valent vertex); loops near the design boundary
+    are the layout's own boundary and are not touched.
 
     Returns
     -------
@@ -273,7 +276,13 @@ def _fill_holes(vertices: np.ndarray, faces: list, design: DesignSurface, panel_
         elif len(loops) == 1:
             continue
         m = len(loop)
-        if m > max_edges:
+        limit = max_edges
+        if poles is not None and len(poles):
+            centre = vertices[loop].mean(axis=0)
+            radius = np.linalg.norm(vertices[loop] - centre, axis=1).min()
+            if np.linalg.norm(poles - centre, axis=1).min() < radius:
+                limit = max_pole_edges
+        if m > limit:
             left_open += 1
             continue
         if (int(loop[0]), int(loop[1])) in forward:

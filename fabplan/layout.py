@@ -380,7 +380,8 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         faces += list(notches)
     else:
         notches = np.zeros((0, 3), np.int64)
-    verts, faces, filled, opened = _fill_holes(verts, faces, design, h, s.fill_holes_up_to)
+    verts, faces, filled, opened = _fill_holes(verts, faces, design, h, s.fill_holes_up_to,
+                                               poles=V[whole_turns] if prescribed is None else None)
     vertex_keys = np.full((len(verts), 2), np.nan)
     vertex_keys[:len(keys)] = keys
     mesh = QuadMesh(verts, faces, name=f"layout-{Path(design.name).stem}")

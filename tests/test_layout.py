@@ -226,16 +226,20 @@ def test_umbilics_give_irregular_vertices_in_the_layout_and_the_report(tmp_path,
 
 def test_a_field_turning_around_a_point_does_not_crash():
     """At the apex of a paraboloid of revolution every direction is principal and the
-    field turns once around it: the layout leaves a hole there and says so."""
+    field turns once around it: the net's spirals close in, the layout leaves them out
+    within two panels and closes the hole with a fan around one many-valent vertex."""
     design = load_design("paraboloid", triangles=10000)
     layout = layout_surface(design, 0.8)
     # one whole turn, found at the apex (or split into two half turns next to it)
     assert layout.singular_index.sum() == 1.0
     assert np.linalg.norm(layout.singular_points, axis=1).max() < 0.5
-    assert layout.filled_holes + layout.open_holes == 1
-    mesh = layout.mesh   # no face within a panel of the apex: it is left out
-    centroids = np.array([mesh.vertices[f].mean(axis=0) for f in mesh.faces])
-    assert np.linalg.norm(centroids, axis=1).min() > 0.8
+    assert layout.filled_holes == 1 and layout.open_holes == 0
+    mesh = layout.mesh
+    pole = np.argmin(np.linalg.norm(mesh.vertices, axis=1))
+    assert np.linalg.norm(mesh.vertices[pole]) < 0.2 and mesh.valence[pole] >= 8
+    assert pole in mesh.irregular_vertices
+    # and the direction field is reported as turning too fast there
+    assert np.linalg.norm(layout.turning_points, axis=1).min() < 0.5
 
 
 # ---------------------------------------------------------------------------- bad input
