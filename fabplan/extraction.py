@@ -24,7 +24,7 @@ from .surfaces import DesignSurface
 if TYPE_CHECKING:
     from .layout import LayoutSettings
 
-__all__ = ["extract_quads", "fill_boundary_cells", "close_boundary_notches"]
+__all__ = ["extract_quads", "fill_boundary_cells"]
 
 
 @dataclass
@@ -406,56 +406,6 @@ def fill_boundary_cells(vertices: np.ndarray, quads: np.ndarray, keys: np.ndarra
         used, quads = _clean_quads(vertices, quads)
         vertices, keys = vertices[used], keys[used]
     return vertices, quads, keys, added
-
-
-def close_boundary_notches(vertices: np.ndarray, quads: np.ndarray, keys: np.ndarray,
-                           design: DesignSurface, panel_size: float, *,
-                           near: float = 0.3) -> np.ndarray:
-    """Triangles that close the notches a lattice leaves along the design boundary.
-
-    Where the lattice meets the boundary at an angle (a diagonal grid against a straight
-    edge) the layout ends in teeth: cells of which three corners lie on the surface and
-    the fourth beyond its boundary. When both corners next to the missing one lie on the
-    boundary, the surface part of the cell is the triangle of the three: a boundary
-    panel as a diagrid ends in.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float; quads : (q, 4) int, corners ``(i, j), (i+1, j), (i+1, j+1),
-        (i, j+1)`` of their lattice cell; keys : (n, 2) int, lattice keys of the vertices.
-    design : the surface, with its boundary curves.
-    panel_size : target edge length.
-    near : the two corners must be within this many panel sizes of the boundary curve.
-
-    Returns
-    -------
-    triangles : (k, 3) int, counter-clockwise like the quads.
-    """
-    from .constraints.closeness import closest_points_on_polylines
-
-    curves = design.boundary_curves()
-    none = np.zeros((0, 3), np.int64)
-    if not curves or len(quads) == 0:
-        return none
-    h = panel_size
-    corner = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
-    table = _KeyTable(keys, vertices, np.arange(len(keys)))
-    cells = np.unique((keys[:, None, :] - corner[None]).reshape(-1, 2), axis=0)
-    cells = cells[~_rows_in(cells, np.unique(keys[quads[:, 0]], axis=0))]
-    ids = np.stack([_lookup(table, cells + c) for c in corner], axis=1)
-    notch = np.flatnonzero((ids >= 0).sum(axis=1) == 3)
-    if notch.size == 0:
-        return none
-    miss = np.argmin(ids[notch] >= 0, axis=1)
-    tri = np.stack([ids[notch, (miss + k) % 4] for k in (1, 2, 3)], axis=1)
-    foot, _ = closest_points_on_polylines(vertices, curves)
-    on_boundary = np.linalg.norm(foot - vertices, axis=1) <= near * h
-    ok = on_boundary[tri[:, 0]] & on_boundary[tri[:, 2]]
-    # the triangle must lie on the surface: its centre's closest point is not on the edge
-    centre = vertices[tri].mean(axis=1)
-    on_surface, _, _ = design.reference.closest_points(centre)
-    ok &= np.linalg.norm(on_surface - centre, axis=1) <= 0.05 * h
-    return tri[ok]
 
 
 def _lookup(table: _KeyTable, key: np.ndarray) -> np.ndarray:

@@ -61,13 +61,7 @@ from .directions import (
     snet_directions,
 )
 from .errors import InputError
-from .extraction import (
-    _clean_quads,
-    _fill_holes,
-    close_boundary_notches,
-    extract_quads,
-    fill_boundary_cells,
-)
+from .extraction import _clean_quads, _fill_holes, extract_quads, fill_boundary_cells
 from .mesh import QuadMesh
 from .parametrization import (
     _boundary_circulation,
@@ -375,11 +369,6 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         raise InputError(f"{design.name}: no quad could be laid out at panel size {h:g} "
                          "(too large for the surface, or a degenerate direction field)")
     faces = list(quads)
-    if prescribed is None and len(quads):
-        notches = close_boundary_notches(verts, quads, keys, design, h)
-        faces += list(notches)
-    else:
-        notches = np.zeros((0, 3), np.int64)
     verts, faces, filled, opened = _fill_holes(verts, faces, design, h, s.fill_holes_up_to,
                                                poles=V[whole_turns] if prescribed is None else None)
     vertex_keys = np.full((len(verts), 2), np.nan)
@@ -391,9 +380,6 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     lap("holes")
     gliding = _near_design_boundary(mesh, design, s.boundary_snap * h, prescribed,
                                     vertex_keys[:, 0])
-    # the corners of a notch's triangle stay free: held on the boundary as well, they
-    # would fix the lattice's rows to the boundary curve, more than an S-net can follow
-    gliding = np.setdiff1d(gliding, notches[:, [0, 2]])
     lap("boundary")
     return SurfaceLayout(
         mesh=mesh, design=design, panel_size=h,
@@ -447,9 +433,10 @@ def _near_design_boundary(mesh: QuadMesh, design: DesignSurface, radius: float,
         return np.zeros(0, np.int64)
     foot, tangent = closest_points_on_polylines(mesh.vertices[boundary], curves)
     near = np.linalg.norm(foot - mesh.vertices[boundary], axis=1) <= radius
-    # concave corners of the layout's boundary would flatten their faces onto the
-    # boundary curve: they stay free on the surface
-    near &= _corner_angles(mesh)[boundary] <= np.radians(200.0)
+    # concave corners of the layout's boundary (three faces or more) would flatten their
+    # faces onto the boundary curve: they stay free on the surface
+    faces_at = np.bincount(mesh.face_indices, minlength=mesh.vertex_count)
+    near &= faces_at[boundary] <= 2
     if prescribed is not None:
         # sliding along the boundary by at most the radius must reach the vertex's level
         # (linearly): a boundary running along a level set is not glided on
@@ -465,20 +452,6 @@ def _near_design_boundary(mesh: QuadMesh, design: DesignSurface, radius: float,
         near &= ~np.isfinite(level) | ((np.abs(at_foot - level) <= slope * radius)
                                        & (slope >= 0.3 * rate))
     return boundary[near]
-
-
-def _corner_angles(mesh: QuadMesh) -> np.ndarray:
-    """(n,) float, the sum of the face angles at every vertex (radians): 2 pi inside a
-    smooth net, about pi along a straight boundary, more at a concave boundary corner."""
-    T = mesh.triangles()      # a fan of each face covers its whole angle at each corner
-    X = mesh.vertices
-    total = np.zeros(mesh.vertex_count)
-    for k in range(3):
-        a, b, c = X[T[:, k]], X[T[:, (k + 1) % 3]], X[T[:, (k + 2) % 3]]
-        u, v = b - a, c - a
-        angle = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.sum(u * v, axis=1))
-        total += np.bincount(T[:, k], weights=angle, minlength=mesh.vertex_count)
-    return total
 
 
 def _value_at(design: DesignSurface, value: np.ndarray, points: np.ndarray) -> np.ndarray:
