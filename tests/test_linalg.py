@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from helpers import noisy
 
 import fabplan
 from fabplan.errors import SolverError
 from fabplan.linalg import PARDISO_MIN_UNKNOWNS, SparseSPDSolver, available_backends
 from fabplan.solver import SolverSettings
-from helpers import noisy
 
 BACKENDS = available_backends()
 
