@@ -470,7 +470,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("templates", help="list the study templates, print or copy one")
     p.add_argument("name", nargs="?", help="template to print (or copy with -o)")
     p.add_argument("-o", "--output", metavar="FILE",
-                   help="copy the template here (a .toml file or a folder) to start a study")
+                   help="copy the template here: a .toml file, or a folder (an existing one, "
+                        "or a path ending in /) that gets NAME.toml")
     p.set_defaults(func=_cmd_templates)
     return parser
 

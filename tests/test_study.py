@@ -103,7 +103,20 @@ def test_auto_candidates_cover_the_rationalizations():
     (("net = \"const-radius\"", "net = \"const-radios\""), "candidates[1].net must be one of"),
     (("surface = \"hyperbolic-paraboloid\"", "surface = \"hypar\""), "design.surface is 'hypar'"),
     (("rise = 1.2", "rise = 1.2, wdth = 3"), "design.parameters do not describe a surface"),
-    (("angle = 80", "angle = 200"), "candidates[0].angle must lie strictly between 0 and 180"),
+    (("angle = 80", "angle = 200"), "candidates[0].angle must lie in (0, 90] degrees, got 200"),
+    (("angle = 80", "angle = 120"), "candidates[0].angle must lie in (0, 90] degrees, got 120: an "
+                                    "isogonal net of angle a is the same net as one of 180 - a "
+                                    "with the families swapped (ask for 60)"),
+    (("angle = 80", "angle = { from = 80, to = 100, step = 10 }"),
+     "candidates[0].angle must lie in (0, 90] degrees, got 100"),
+    (("angle = 80", "angle = 0"), "candidates[0].angle must be"),
+    (("[panels]", "[panel]"), "study: [panel] is not a known table (did you mean [panels]?)"),
+    (("[limits]", "[limts]"), "[limts] is not a known table (did you mean [limits]?)"),
+    (("triangles = 4000", "triangles = 4000\nresolution = 3"), "design.resolution is not a known key"),
+    (("sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = 0"),
+     "strips.congruence_tolerance_mm must be a positive number (mm), got 0"),
+    (("sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = \"fine\""),
+     "strips.congruence_tolerance_mm must be a positive number (mm)"),
     (("net = \"const-radius\"", "net = \"const-radius\"\nangle = 70"),
      "candidates[1].angle does not apply to net type 'const-radius'"),
     (("net = \"const-radius\"", "net = \"sstar\""), "candidates[1].net is the S*-net type"),
@@ -170,6 +183,20 @@ def test_a_template_is_copied_to_start_a_study(tmp_path, capsys):
     assert study.candidates == read_study(template_path("canopy")).candidates
     assert main(["templates", "canopy", "-o", str(target)]) == 2     # never overwrites
     assert "exists" in capsys.readouterr().err
+
+
+def test_templates_copied_to_a_folder_keep_their_name(tmp_path):
+    """`-o newdir/` (trailing slash) wrote newdir.toml; a folder gets NAME.toml in it."""
+    assert main(["templates", "pavilion", "-o", str(tmp_path / "newdir") + "/"]) == 0
+    assert (tmp_path / "newdir" / "pavilion.toml").is_file()
+    assert not (tmp_path / "newdir.toml").exists()
+    (tmp_path / "there").mkdir()
+    assert main(["templates", "tower", "-o", str(tmp_path / "there")]) == 0
+    assert read_study(tmp_path / "there" / "tower.toml").candidates == \
+        read_study(template_path("tower")).candidates
+    assert (tmp_path / "there" / "tower-profile.txt").is_file()   # the file it refers to
+    assert main(["templates", "pavilion", "-o", str(tmp_path / "plain")]) == 0
+    assert (tmp_path / "plain.toml").is_file()                     # no slash: a file name
 
 
 # ---------------------------------------------------------------------------- the run
