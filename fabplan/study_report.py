@@ -246,8 +246,8 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict) -> str
         return report.html_section(head, report.html_paragraph(
             f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
     m = c.metrics
-    verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(
-        ck["text"] for ck in c.checks if ck["ok"] != c.feasible or c.feasible)
+    # reasons: what a feasible candidate meets, or the checks an infeasible one fails
+    verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
     checks = report.html_table(
         ["limit", "measured", "bound", "met", "what was measured"],
         [[ck["limit"], report.format_value(ck["measured"]), report.format_value(ck["bound"]),

@@ -9,6 +9,8 @@ right reason.
 
 from __future__ import annotations
 
+import dataclasses
+import html
 import json
 import re
 from pathlib import Path
@@ -21,7 +23,8 @@ from fabplan.cli import main
 from fabplan.errors import InputError, SolverError
 from fabplan.geometry import canonical_stars, fit_star_spheres
 from fabplan.mesh import load_mesh
-from fabplan.study import run_study, verdict
+from fabplan.study import _reasons, run_study, verdict
+from fabplan.study_report import study_html
 from fabplan.study_spec import parse_study, read_study, template_names, template_path
 
 STUDY = """\
@@ -377,3 +380,28 @@ def test_char_conjugate_starts_at_the_conjugate_angle_of_the_design():
     assert start_angle(Candidate("c", "char-conjugate", start_angle=70), design) == 70
     assert start_angle(Candidate("c", "isogonal", angle=65), design) == 65
     assert start_angle(Candidate("c", "snet"), design) == 90
+
+
+def test_infeasible_verdict_boxes_name_the_failed_checks():
+    """Every "Not feasible" box listed the checks the candidate passed, not the failing one."""
+    text = re.sub(r"\[strips\].*?\n\n", "", STUDY.format(deviation=200), flags=re.S)
+    result = run_study(parse_study(text))
+    by_name = {c.name: c for c in result.candidates}
+    limits = dataclasses.replace(
+        result.study.limits, max_deviation_mm=by_name["const-radius"].metrics["deviation_mm"]["max"] / 2,
+        max_kink_deg=by_name["isogonal-80"].metrics["kink_deg"]["max"] - 0.01)
+    for c in result.candidates:                       # judged again under tighter limits
+        c.checks = verdict(c.metrics, limits)
+        c.feasible = all(ck["ok"] for ck in c.checks)
+        c.reasons = _reasons(c.checks, c.feasible)
+    page = study_html(result, {}, {})
+    infeasible = [c for c in result.candidates if not c.feasible]
+    assert {c.name for c in infeasible} >= {"const-radius", "isogonal-80"}
+    for c in infeasible:
+        section = re.search(rf"<h2>(?:\d+\. )?{re.escape(c.name)}</h2>(.*?)</section>", page, re.S)
+        box = html.unescape(re.search(r'<p class="fail">(.*?)</p>', section.group(1), re.S).group(1))
+        assert box.startswith("Not feasible: ")
+        failed = [ck["text"] for ck in c.checks if not ck["ok"]]
+        assert failed
+        for ck in c.checks:
+            assert (ck["text"] in box) is (not ck["ok"])
