@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import csv
 import io
+import math
 import os
 import shutil
 import tempfile
@@ -126,30 +127,172 @@ def _view(mesh):
     return _facade_view(mesh)
 
 
+def _agreeing_normal(normals: np.ndarray, areas: np.ndarray) -> np.ndarray | None:
+    """The area-weighted mean normal when the faces agree on a side (a roof, a facade
+    patch), else None (a closed ring or barrel)."""
+    mean = np.nansum(normals * areas[:, None], axis=0)
+    if np.linalg.norm(mean) <= 0.3 * areas.sum():
+        return None
+    return mean / np.linalg.norm(mean)
+
+
+def _face_areas(mesh) -> np.ndarray:
+    X = mesh.vertices
+    tri = mesh.triangles()
+    owner = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes - 2)
+    area = 0.5 * np.linalg.norm(np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]),
+                                axis=1)
+    return np.bincount(owner, area, minlength=len(mesh.face_sizes))
+
+
+def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Face normals and a viewing frame for a heat map that must show `point`.
+
+    An open surface whose faces agree on a side is seen from that side (as the mold
+    pictures); a closed one (a ring, a barrel) from the side of `point`, so that the
+    worst point is not hidden behind the near wall.
+    """
+    normals, view = _view(mesh)
+    if _agreeing_normal(normals, _face_areas(mesh)) is None:
+        X = mesh.vertices
+        out = point - X.mean(axis=0)
+        out[2] = 0.0
+        if np.linalg.norm(out) > 1e-9 * np.ptp(X, axis=0).max():
+            view = report.view_frame(X, out[None, :], np.ones(1))
+    return normals, view
+
+
 def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: float) -> str:
-    """Data URI: the net's panels coloured by their distance from the design (mm)."""
+    """Data URI: the net coloured by its distance from the design (mm) at every vertex.
+
+    The distance is measured at the vertices and interpolated linearly across the
+    triangles of each panel (Gouraud shading), so the largest value shows at its vertex;
+    that vertex is circled and labelled. Faces are drawn far to near in depth layers with
+    their edges, so nearer panels hide farther ones.
+    """
     plt = _plt()
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
+    from matplotlib.collections import PolyCollection
     from matplotlib.colors import Normalize
 
     mesh = c.net.mesh
-    d = design.reference.distances(mesh.vertices) * mm_per_unit
-    owner = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
-    face_d = np.bincount(owner, d[mesh.face_indices], minlength=len(mesh.face_sizes)) / mesh.face_sizes
+    X = mesh.vertices
+    d = design.reference.distances(X) * mm_per_unit
+    worst = int(np.argmax(d))
+    _, view = deviation_view(mesh, X[worst])
+    P = X @ view.T
+    sizes = mesh.face_sizes
+    owner = np.repeat(np.arange(len(sizes)), sizes)
+    depth = np.bincount(owner, P[mesh.face_indices, 2], minlength=len(sizes)) / sizes
+    layers = 40
+    layer = np.empty(len(sizes), np.int64)
+    layer[np.argsort(depth, kind="stable")] = np.arange(len(sizes)) * layers // len(sizes)
+    tri = mesh.triangles()
+    tri_layer = np.repeat(layer, sizes - 2)
+    polys = np.split(P[mesh.face_indices, :2], mesh.face_indptr[1:-1])
     top = max(limit_mm, float(d.max()), 1e-9)
     norm = Normalize(0.0, top)
     cmap = colormaps["viridis"]
-    colors = cmap(norm(face_d))
-    normals, view = _view(mesh)
     fig, ax = plt.subplots(figsize=(8, 6))
-    report.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
+    for k in range(layers):
+        ids = np.flatnonzero(tri_layer == k)
+        if ids.size == 0:
+            continue
+        ax.tripcolor(P[:, 0], P[:, 1], tri[ids], d, shading="gouraud", cmap=cmap, norm=norm,
+                     zorder=2 * k)
+        ax.add_collection(PolyCollection([polys[f] for f in np.flatnonzero(layer == k)],
+                                         facecolors="none", edgecolors=(0.1, 0.1, 0.1, 0.5),
+                                         linewidths=0.2, zorder=2 * k + 1))
+    ax.plot(P[worst, 0], P[worst, 1], "o", ms=14, mfc="none", mec="#c0392b", mew=2.2,
+            zorder=2 * layers + 2)
+    # the label points inwards, so that it stays inside the picture
+    right = P[worst, 0] > 0.5 * (P[:, 0].min() + P[:, 0].max())
+    above = P[worst, 1] > 0.5 * (P[:, 1].min() + P[:, 1].max())
+    ax.annotate(f"max {d[worst]:.1f} mm", (P[worst, 0], P[worst, 1]),
+                xytext=(-14 if right else 14, -14 if above else 14), textcoords="offset points",
+                ha="right" if right else "left", va="top" if above else "bottom",
+                color="#c0392b", fontsize=10, fontweight="bold", zorder=2 * layers + 3,
+                bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#c0392b", "alpha": 0.85})
+    pad = 0.03 * np.ptp(P[:, :2], axis=0).max()      # the circle must not be cut at an edge
+    ax.set_xlim(P[:, 0].min() - pad, P[:, 0].max() + pad)
+    ax.set_ylim(P[:, 1].min() - pad, P[:, 1].max() + pad)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8)
-    bar.set_label("distance from the design [mm]")
+    bar.set_label("distance from the design at the vertices [mm]")
     bar.ax.axhline(limit_mm, color="#c0392b", lw=2)
-    ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm "
-                 f"(limit {limit_mm:g} mm: red line on the scale)")
+    ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm (circled), "
+                 f"limit {limit_mm:g} mm (red line on the scale)")
     return report.figure_to_data_uri(fig)
+
+
+def net_view_angles(design) -> tuple[float, float]:
+    """Elevation and azimuth (degrees, matplotlib's ``view_init``) of the net picture.
+
+    A roof (faces agreeing on a side within 45 degrees of vertical) is seen from 20
+    degrees above the horizon, 75 degrees off the diagonal of its plan, so that its rise
+    shows against its span (from above, as a cladding layout is usually drawn, a saddle
+    looks flat); a facade patch from its side, 20 degrees up; a closed surface (a ring, a
+    barrel) from 20 degrees up.
+    """
+    n = _agreeing_normal(design.face_normals, design.face_areas)
+    if n is None:
+        return 20.0, -60.0
+    if abs(n[2]) >= math.cos(math.radians(45)):
+        span = np.ptp(design.vertices, axis=0)
+        return 20.0, float(np.degrees(np.arctan2(span[1], span[0]))) - 75.0
+    return 20.0, float(np.degrees(np.arctan2(n[1], n[0]))) + 25.0
+
+
+def net_picture(path: Path, design, mesh, *, title: str = "",
+                singular_points: np.ndarray | None = None) -> Path:
+    """A PNG of the net on the design surface, axes to scale (atomically written).
+
+    The design is drawn light grey with its boundary black, the net's faces blue with
+    their edges, irregular vertices red and singular points of the layout's direction
+    field orange; the view is `net_view_angles`.
+    """
+    plt = _plt()
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from .io import atomic_path
+
+    fig = plt.figure(figsize=(8, 7), dpi=110)
+    ax = fig.add_subplot(projection="3d")
+    T = design.triangles
+    if len(T) > 30000:  # a coarser sample of the surface keeps the picture quick
+        T = T[:: int(math.ceil(len(T) / 30000))]
+    ax.add_collection3d(Poly3DCollection(design.vertices[T], facecolor=(0.85, 0.85, 0.85, 0.35),
+                                         edgecolor="none"))
+    for curve in design.boundary_curves():
+        loop = np.vstack([curve, curve[:1]])
+        ax.plot(loop[:, 0], loop[:, 1], loop[:, 2], color="black", lw=0.8)
+    ax.add_collection3d(Poly3DCollection([mesh.vertices[f] for f in mesh.faces],
+                                         facecolor=(0.55, 0.7, 0.95, 0.9),
+                                         edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4))
+    irregular = mesh.vertices[mesh.irregular_vertices]
+    if len(irregular):
+        ax.scatter(*irregular.T, color="red", s=18, depthshade=False, label="irregular vertices")
+    if singular_points is not None and len(singular_points):
+        ax.scatter(*np.asarray(singular_points).T, color="orange", s=12, depthshade=False,
+                   label="field singularities")
+    elevation, azimuth = net_view_angles(design)
+    ax.view_init(elev=elevation, azim=azimuth)
+    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
+    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
+    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
+        getattr(ax, f"set_{axis}lim")(a, b)
+    ax.set_box_aspect(span)                       # equal scale on all three axes
+    ax.set_axis_off()
+    if title:
+        ax.set_title(title, fontsize=9)
+    if len(irregular) or (singular_points is not None and len(singular_points)):
+        ax.legend(loc="lower left", fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def comparison_figure(result: StudyResult) -> str:
@@ -336,7 +479,6 @@ def check_output_folder(folder: Path) -> None:
 
 def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say) -> tuple:
     from .dxf import preview_png, sheet_document
-    from .layout import write_layout_picture
 
     study = result.study
     folder.mkdir(parents=True)
@@ -346,8 +488,8 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say)
     outputs = {"net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
                "molds_json": "molds.json", "picture": "net.png"}
     title = f"{c.name}: {c.candidate.describe()}"
-    write_layout_picture(folder / "net.png", result.design, c.net.mesh, title=title,
-                         singular_points=c.layout.singular_points if c.layout else None)
+    net_picture(folder / "net.png", result.design, c.net.mesh, title=title,
+                singular_points=c.layout.singular_points if c.layout else None)
     pictures = {"net": _png_uri(folder / "net.png"),
                 "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
                                               study.design.mm_per_unit)}

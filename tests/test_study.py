@@ -69,13 +69,30 @@ def _write_study(folder: Path, deviation: float) -> Path:
 
 
 @pytest.fixture(scope="module")
-def study_run(tmp_path_factory):
-    """The saddle study run through the CLI: (study file, output folder, study.json)."""
+def study_result(tmp_path_factory):
+    """The saddle study run and written as `fabplan study` does: (study file, output
+    folder, study.json, StudyResult, progress lines).
+
+    The output folder holds an earlier study (a study.json and a file of that run) before:
+    the new study must replace it as a whole."""
+    from fabplan.study_report import write_study
+
     folder = tmp_path_factory.mktemp("study")
     path = _write_study(folder, 200)
     out = folder / "out"
-    assert main(["study", str(path), "-o", str(out), "-q"]) == 0
-    return path, out, json.loads((out / "study.json").read_text(encoding="utf-8"))
+    out.mkdir()
+    (out / "study.json").write_text("{}", encoding="utf-8")
+    (out / "left-over.csv").write_text("of the earlier run", encoding="utf-8")
+    lines: list = []
+    result = run_study(read_study(path), progress=lines.append)
+    write_study(result, out, progress=lines.append)
+    return path, out, json.loads((out / "study.json").read_text(encoding="utf-8")), result, lines
+
+
+@pytest.fixture(scope="module")
+def study_run(study_result):
+    """(study file, output folder, study.json) of the saddle study."""
+    return study_result[:3]
 
 
 def _candidate(record: dict, name: str) -> dict:
@@ -358,6 +375,40 @@ def test_kinks_and_coverage_are_measured_on_the_net(study_run):
     cos = np.abs(np.sum(normals[pairs[:, 0]] * normals[pairs[:, 1]], axis=1))
     kink = np.degrees(np.arccos(np.clip(cos, -1, 1))).max()
     assert kink == pytest.approx(c["metrics"]["kink_deg"]["max"], abs=0.2)
+
+
+def test_the_heat_map_shows_the_peak_deviation_at_its_vertex(study_result):
+    """Panels were coloured by the mean of their corners: the peak never showed."""
+
+    import base64
+    import io
+
+    import matplotlib.image as mpimg
+    from matplotlib import colormaps
+
+    from fabplan.study_report import deviation_figure
+
+
+    result = study_result[3]
+    c = next(c for c in result.candidates if c.name == "const-radius")
+    uri = deviation_figure(c, result.design, 1e-3, result.study.design.mm_per_unit)
+    image = mpimg.imread(io.BytesIO(base64.b64decode(uri.split(",", 1)[1])), format="png")
+    picture = image[:, : int(0.85 * image.shape[1]), :3]           # left of the colour bar
+    top = np.array(colormaps["viridis"](1.0)[:3])                  # the colour of the maximum
+    near = np.linalg.norm(picture - top, axis=2) < 0.1
+    assert near.sum() >= 3
+
+
+def test_a_roof_is_seen_from_low_enough_to_show_its_rise(study_result):
+    """The canopy's saddle looked flat (seen from 60 degrees up)."""
+    from fabplan.study_report import net_view_angles
+    from fabplan.surfaces import load_design
+
+    elevation, _ = net_view_angles(study_result[3].design)
+    assert 10 <= elevation <= 30
+    tower = load_design(f"revolution:profile={template_path('tower').parent / 'tower-profile.txt'}",
+                        triangles=2000)
+    assert net_view_angles(tower)[0] <= 30
 
 
 def test_char_conjugate_starts_at_the_conjugate_angle_of_the_design():
