@@ -430,8 +430,13 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict) -> str
     for key, caption in captions.items():
         if key in pictures:
             parts.append(report.html_figure(pictures[key], caption))
-    parts.append(report.html_paragraph(
-        "Files: " + ", ".join(f"{k}: {v}" for k, v in outputs.items() if not isinstance(v, list))))
+    links = []
+    for key, value in outputs.items():
+        for i, href in enumerate(value if isinstance(value, list) else [value]):
+            links.append((Path(href).name if i else f"{key.replace('_', ' ')}: {Path(href).name}",
+                          href))
+    if links:
+        parts.append(report.html_links("Files", links))
     return report.html_section(head, *parts)
 
 

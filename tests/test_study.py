@@ -295,6 +295,21 @@ def test_lamella_candidates_get_strips_that_read_back(study_run):
     assert _candidate(record, "isogonal-80")["metrics"]["strips"] is None   # not a lamella net
 
 
+def test_the_report_links_every_file_relatively(study_run):
+    """The Files list was plain text; it links each file relative to report.html."""
+    _, out, record = study_run
+    page = (out / "report.html").read_text(encoding="utf-8")
+    hrefs = re.findall(r'<a href="([^"]+)"', page)
+    expected = set()
+    for c in record["candidates"]:
+        for value in c["outputs"].values():
+            expected.update(value if isinstance(value, list) else [value])
+    assert expected and set(hrefs) == expected
+    for href in hrefs:
+        assert not href.startswith(("/", "file:")) and ":" not in href
+        assert (out / href).is_file()
+
+
 def test_the_report_embeds_a_picture_per_candidate(study_run):
     _, out, record = study_run
     html = (out / "report.html").read_text(encoding="utf-8")
