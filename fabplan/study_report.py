@@ -15,6 +15,7 @@ import math
 import os
 import shutil
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,8 @@ import numpy as np
 from . import report
 from .errors import InputError
 from .io import json_text, write_texts
-from .study import CandidateResult, StudyResult
+from .report import counted
+from .study import CandidateResult, StudyResult, molds_text
 
 __all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA"]
 
@@ -30,15 +32,18 @@ STUDY_SCHEMA = "fabplan-study/1"
 
 
 # ---------------------------------------------------------------------------- records
-def _candidate_record(c: CandidateResult, outputs: dict) -> dict:
+def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None) -> dict:
     return {
         "name": c.name,
         "net": c.candidate.net,
         "description": c.candidate.describe(),
         "baseline": c.candidate.baseline,
+        "recommended": c.name == recommended,
         "requested": {"angle_deg": c.candidate.angle, "radius": c.candidate.radius},
         "feasible": c.feasible,
         "reasons": c.reasons,
+        "same_net_as": c.same_net_as,
+        "notes": c.notes,
         "error": c.error,
         "checks": c.checks,
         "metrics": c.metrics,
@@ -49,20 +54,32 @@ def _candidate_record(c: CandidateResult, outputs: dict) -> dict:
     }
 
 
-def study_record(result: StudyResult, outputs: dict | None = None) -> dict:
-    """The ``study.json`` record (schema ``docs/study-schema.md``)."""
+def study_record(result: StudyResult, outputs: dict | None = None, *,
+                 seconds_total: float | None = None) -> dict:
+    """The ``study.json`` record (schema ``docs/study-schema.md``).
+
+    `seconds_total` is the wall time including writing the files (`write_study` measures
+    it); without it, the run time.
+    """
     outputs = outputs or {}
     design = result.design
+    triangles = int(len(design.triangles))
+    study = result.study.record()
+    if study["design"]["triangles"] is None:          # a design file: its own triangles
+        study["design"]["triangles"] = triangles
     return {
         "schema": STUDY_SCHEMA,
-        "study": result.study.record(),
+        "study": study,
         "design": {"label": result.study.design.label, "source": result.study.design.source,
-                   "triangles": int(len(design.triangles)), "area": float(design.area),
-                   "units": result.study.design.units},
+                   "triangles": triangles, "area": float(design.area),
+                   "size": result.design_size, "units": result.study.design.units},
         "recommended": result.recommended,
         "recommendation": result.recommendation,
-        "candidates": [_candidate_record(c, outputs.get(c.name, {})) for c in result.candidates],
-        "seconds": result.seconds,
+        "sheets_charged": result.sheets_charged,
+        "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended)
+                       for c in result.candidates],
+        "seconds_run": result.seconds_run,
+        "seconds_total": result.seconds_run if seconds_total is None else seconds_total,
     }
 
 
@@ -308,7 +325,7 @@ def comparison_figure(result: StudyResult) -> str:
     left.barh(y, molds, color=colors)
     left.set_yticks(y, names)
     left.invert_yaxis()
-    left.set_xlabel("molds")
+    left.set_xlabel("molds (for the curved panels; flat panels need none)")
     if limits.max_molds is not None:
         left.axvline(limits.max_molds, color="black", ls="--", lw=1, label="limit")
         left.legend(loc="lower right")
@@ -333,10 +350,60 @@ def _png_uri(path: Path) -> str:
 
 
 # ---------------------------------------------------------------------------- HTML
+#: Radii beyond this multiple of the design's size are shown as infinite: the stars (or
+#: strips) are planar (straight) to within what a computation can tell.
+INFINITE_RADIUS_FACTOR = 1e4
+
+
 def _fmt_range(r: dict | None, digits: int = 4) -> str:
     if not r:
         return ""
     return f"{report.format_value(r['min'], digits)} .. {report.format_value(r['max'], digits)}"
+
+
+def radius_text(r: dict | float | None, unit: str, beyond: float, infinite: str) -> str:
+    """A radius or a ``{min, max}`` range of radii with its unit; values above `beyond`
+    (or infinite, or None) are `infinite`.
+
+    Examples
+    --------
+    >>> radius_text({"min": 3.558e9, "max": 1.033e16}, "m", 2.8e5, "infinite (planar stars)")
+    'infinite (planar stars)'
+    >>> radius_text({"min": 12.25, "max": 3e9}, "m", 2.8e5, "infinite")
+    '12.25 m .. infinite'
+    >>> radius_text({"min": 12.25, "max": 73548.6}, "m", 2.8e5, "infinite")
+    '12.25 .. 73549 m'
+    >>> radius_text({"min": 97.0512, "max": 97.0498}, "m", 2.8e5, "infinite")
+    '97.05 m'
+    >>> radius_text(2e11, "m", 1e5, "infinite"), radius_text(None, "mm", 1e8, "infinite (straight)")
+    ('infinite', 'infinite (straight)')
+    """
+    def big(v):
+        return v is None or not math.isfinite(v) or abs(v) > beyond
+
+    def text(v):          # 4 significant digits, but no exponent for a large radius
+        return f"{v:.0f}" if v >= 1e4 else report.format_value(v)
+
+    if r is None or not isinstance(r, dict):
+        return infinite if big(r) else f"{text(abs(r))} {unit}"
+    lo, hi = sorted((r["min"], r["max"]), key=lambda v: (big(v), abs(v)))
+    if big(lo):
+        return infinite
+    if big(hi):
+        return f"{text(abs(lo))} {unit} .. {infinite}"
+    if text(abs(lo)) == text(abs(hi)):
+        return f"{text(abs(lo))} {unit}"
+    return f"{text(abs(lo))} .. {text(abs(hi))} {unit}"
+
+
+def _meusnier_text(result: StudyResult, r) -> str:
+    return radius_text(r, result.study.design.units, INFINITE_RADIUS_FACTOR * result.design_size,
+                       "infinite (planar stars)")
+
+
+def _strip_radius_text(result: StudyResult, r) -> str:
+    beyond = INFINITE_RADIUS_FACTOR * result.design_size * result.study.design.mm_per_unit
+    return radius_text(r, "mm", beyond, "infinite (straight)")
 
 
 def _comparison_table(result: StudyResult) -> str:
@@ -345,23 +412,24 @@ def _comparison_table(result: StudyResult) -> str:
         m = c.metrics
         if c.failed:
             rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "",
-                         "", "", c.reasons[0]])
+                         "", "", "", c.reasons[0]])
             bad.append(len(rows) - 1)
             continue
         s = m["strips"]
         rows.append([
             c.rank, c.name, c.candidate.describe(), "yes" if c.feasible else "no",
-            m["molds"]["count"], m["panels"], f"{m['deviation_mm']['max']:.1f}",
-            f"{m['planarity_mm']['max']:.2f}", f"{m['kink_deg']['max']:.2f}",
-            _fmt_range(m["intersection_angle_deg"]), _fmt_range(m["meusnier_radius"]),
+            m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
+            f"{m['deviation_mm']['max']:.1f}", f"{m['planarity_mm']['max']:.2f}",
+            f"{m['kink_deg']['max']:.2f}", _fmt_range(m["intersection_angle_deg"]),
+            _meusnier_text(result, m["meusnier_radius"]) if m["meusnier_radius"] else "",
             "" if s is None else f"{s['sheets']}{' (congruent)' if s['congruent'] else ''}",
-            f"{c.cost:.0f}"])
+            f"{c.cost:.0f}", f"the same net as {c.same_net_as}" if c.same_net_as else ""])
         if not c.feasible:
             bad.append(len(rows) - 1)
     return report.html_table(
         ["rank", "candidate", "net", "feasible", "molds", "panels", "max deviation [mm]",
          "planarity [mm]", "max kink [deg]", "angle [deg]", "Meusnier radius",
-         "strip sheets", "cost"], rows, caption="All candidates, best first", bad_rows=bad)
+         "strip sheets", "cost", "note"], rows, caption="All candidates, best first", bad_rows=bad)
 
 
 def _limits_table(result: StudyResult) -> str:
@@ -370,6 +438,8 @@ def _limits_table(result: StudyResult) -> str:
     limits = asdict(result.study.limits)
     if not limits["planar_panels"]:
         del limits["planarity_tolerance_mm"]
+    if not limits["congruent_strips"]:
+        del limits["congruence_tolerance_mm"]
     rows = [[k, report.format_value(v)] for k, v in limits.items()
             if v is not None and v is not False]
     return report.html_table(["limit", "value"], rows, caption="Fabrication limits")
@@ -383,49 +453,85 @@ def _cost_table(result: StudyResult) -> str:
     return report.html_table(["per", "cost units"], rows, caption="Cost weights")
 
 
-def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict) -> str:
+def cost_line(result: StudyResult) -> str:
+    """How the cost is made up, in words (as charged in this study)."""
+    measured = [c for c in result.candidates if not c.failed]
+    with_strips = [c for c in measured if c.metrics.get("strips")]
+    text = ("Cost = the weights times the molds (of the curved panels: flat panels need "
+            "none), the panels by type, ")
+    if result.sheets_charged:
+        text += "the strip sheets "
+    text += "and the largest deviation in mm; feasible candidates rank first, by cost."
+    if with_strips and not result.sheets_charged:
+        text += (f" Strip sheets are reported but not charged: only {len(with_strips)} of "
+                 f"{len(measured)} candidates {'gets' if len(with_strips) == 1 else 'get'} "
+                 "strips, and charging them would make those "
+                 "look dearer than candidates that were not asked for strips.")
+    return text
+
+
+def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
+                       result: StudyResult) -> str:
     head = f"{c.rank}. {c.name}" if c.rank else c.name
     if c.failed:
         return report.html_section(head, report.html_paragraph(
             f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
     m = c.metrics
-    # reasons: what a feasible candidate meets, or the checks an infeasible one fails
     verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
+    if c.notes:
+        verdict += " Note: " + "; ".join(c.notes) + "."
     checks = report.html_table(
         ["limit", "measured", "bound", "met", "what was measured"],
         [[ck["limit"], report.format_value(ck["measured"]), report.format_value(ck["bound"]),
           "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks],
         caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
     types = m["molds"]["panel_types"]
+    parameters = []
+    for k, v in m["parameters"].items():
+        if not isinstance(v, float):
+            continue
+        parameters.append(f"radius {_meusnier_text(result, v)}" if k == "radius" else
+                          f"angle {v:.6g} deg" if k == "angle_deg" else f"{k} {v:.6g}")
+    molds = m["molds"]
     facts = [
         ["net", c.candidate.describe()],
         ["solve", f"{m['status']} after {m['iterations']} iterations"],
-        ["solved parameters", ", ".join(f"{k} {v:.6g}" for k, v in m["parameters"].items()
-                                        if isinstance(v, float)) or "-"],
+        ["solved parameters", ", ".join(parameters) or "-"],
         ["panels", f"{m['panels']} ({m['quads']} quads, {m['other_faces']} other; "
                    f"{m['irregular_vertices']} irregular vertices)"],
         ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in types.items())],
         ["edge length", _fmt_range(m["edge_length"])],
         ["panel area", _fmt_range(m["panel_area"])],
+        ["Meusnier radius", _meusnier_text(result, m["meusnier_radius"])
+         if m["meusnier_radius"] else "-"],
         ["deviation from the design [mm]", f"max {m['deviation_mm']['max']:.2f}, mean "
                                            f"{m['deviation_mm']['mean']:.2f}, 95 % "
                                            f"{m['deviation_mm']['p95']:.2f}"],
-        ["molds", f"{m['molds']['count']} ({m['molds']['molds_per_sqrt_panels']:.2f} x sqrt of "
-                  f"the panel count), largest panel gap {m['molds']['max_deviation_mm']:.2f} mm"],
+        ["molds", (molds_text(molds) if molds["count"] == 0 else
+                   f"{molds_text(molds)} for the curved panels "
+                   f"({molds['molds_per_sqrt_panels']:.2f} x sqrt of the panel count)")
+         + f"; largest gap of a panel to its mold (flat panels: to a plane) "
+           f"{molds['max_deviation_mm']:.2f} mm"],
         ["sphere residual (max, of an edge)", report.format_value(m["sphere_residual_relative_max"])],
         ["seconds", ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())],
     ]
     if m["strips"]:
         s = m["strips"]
-        facts.append(["strips", f"{s['strips']} strips, {s['parts']} parts on {s['sheets']} "
-                      f"sheets ({100 * s['material_use']:.0f} % material use); "
-                      + ("straight" if s["straight"] else f"radius {_fmt_range(s['radius_mm'], 5)} mm")
-                      + ("; congruent" if s["congruent"] else "")])
+        shape = "all straight (so all congruent)" if s["straight"] else (
+            f"arc radius {_strip_radius_text(result, s['radius_mm'])}; the parts differ from "
+            f"one common arc by up to {s['congruence_deviation_mm']:.3g} mm"
+            + (" (congruent)" if s["congruent"] else " (not congruent)"))
+        facts.append(["strips", f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} "
+                      f"on {counted(s['sheets'], 'sheet')} ({100 * s['material_use']:.0f} % "
+                      f"material use); {shape}"])
     parts = [report.html_paragraph(verdict, cls="note" if c.feasible else "fail"),
              report.html_table(["quantity", "value"], facts, caption="Measured"), checks]
-    captions = {"net": "The net on the design surface (grey)",
-                "deviation": "Deviation heat map",
-                "molds": "Panels coloured by mold",
+    captions = {"net": "The net on the design surface (grey), axes to scale",
+                "deviation": "Deviation heat map: the distance of the net from the design, "
+                             "measured at every vertex and interpolated across the panels; "
+                             "the largest is circled and labelled",
+                "molds": "Panels coloured by mold" + (" (all flat: no molds)"
+                                                      if molds["count"] == 0 else ""),
                 "sheet": "First strip sheet (as cut: red outline, magenta slits, blue labels)"}
     for key, caption in captions.items():
         if key in pictures:
@@ -440,11 +546,14 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict) -> str
     return report.html_section(head, *parts)
 
 
-def study_html(result: StudyResult, pictures: dict, outputs: dict) -> str:
-    """The self-contained ``report.html``."""
+def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
+               seconds_total: float | None = None) -> str:
+    """The self-contained ``report.html`` (links to the candidates' files are relative)."""
     study = result.study
+    seconds = result.seconds_run if seconds_total is None else seconds_total
     sub = (f"Design {study.design.label}, panel size {study.panel_size:g} {study.design.units}, "
-           f"{len(result.candidates)} candidates, run in {result.seconds:.0f} s")
+           f"{len(result.candidates)} candidates, run in {seconds:.0f} s"
+           + (" including writing the files" if seconds_total is not None else ""))
     parts = []
     if study.description:
         parts.append(report.html_paragraph(study.description))
@@ -455,19 +564,24 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict) -> str:
     if "comparison" in pictures:
         overview.append(report.html_figure(pictures["comparison"],
                                            "Molds and deviation of each candidate"))
-    overview += [_limits_table(result), _cost_table(result), report.html_paragraph(
-        "Cost = the weights times molds, panels by type, strip sheets and the largest "
-        "deviation in mm; feasible candidates rank first, by cost.")]
+    overview += [_limits_table(result), _cost_table(result),
+                 report.html_paragraph(cost_line(result))]
     parts.append(report.html_section("Comparison", *overview))
     for c in result.ranked():
-        parts.append(_candidate_section(c, pictures.get(c.name, {}), outputs.get(c.name, {})))
+        parts.append(_candidate_section(c, pictures.get(c.name, {}), outputs.get(c.name, {}),
+                                        result))
     return report.html_page(f"Facade study: {study.name}", parts, subtitle=sub)
 
 
 # ---------------------------------------------------------------------------- writing
 def check_output_folder(folder: Path) -> None:
-    """Refuse a folder that cannot hold a study: not a folder, not writable, or holding
-    other files than an earlier study's (a study replaces the whole folder)."""
+    """Refuse a folder that cannot hold a study.
+
+    A study replaces its whole output folder. A folder that does not exist yet, an empty
+    one, or one that holds an earlier study (a ``study.json``) is therefore accepted and
+    replaced as a whole, so that a study can be re-run into its folder; a file, an
+    unwritable place, or a folder of other files is refused.
+    """
     folder = Path(folder)
     if folder.exists():
         if not folder.is_dir():
@@ -482,7 +596,11 @@ def check_output_folder(folder: Path) -> None:
         raise InputError(f"{folder}: cannot write there ({existing} is not a writable folder)")
 
 
-def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say) -> tuple:
+def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
+                     twin: Path | None = None) -> tuple:
+    """Write one candidate's files into `folder`; `twin` is the folder of the earlier
+    candidate whose net (and strip plan) this one shares, if any: its checked strip files
+    are copied rather than made and read back a second time."""
     from .dxf import preview_png, sheet_document
 
     study = result.study
@@ -500,10 +618,17 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say)
                                               study.design.mm_per_unit)}
     from .mold_report import mold_figure
 
-    pictures["molds"] = mold_figure(c.molds, title=f"{c.name}: {c.molds.panel_count} panels on "
-                                    f"{c.molds.mold_count} molds (one colour per mold)")
+    molds = c.metrics["molds"]
+    pictures["molds"] = mold_figure(c.molds, title=f"{c.name}: {counted(c.molds.panel_count, 'panel')}"
+                                    + (", all flat: no molds" if molds["count"] == 0 else
+                                       f", {counted(molds['count'], 'mold')} for the curved "
+                                       "ones (one colour per mold)"))
     if c.strips is not None:
-        files = c.strips.write(folder / "strips", previews=False)
+        if twin is not None and (twin / "strips").is_dir():
+            shutil.copytree(twin / "strips", folder / "strips")
+            files = sorted((folder / "strips").iterdir())
+        else:
+            files = c.strips.write(folder / "strips", previews=False)
         layout, settings = c.strips.layout, c.strips.strips.settings
         sheet = layout.sheets[0]
         preview = folder / "strips" / "sheet-preview.png"
@@ -519,7 +644,12 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say)
 
 
 def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
-    """Write every file of a study into `out_dir` (replacing an earlier study there).
+    """Write every file of a study into `out_dir`, replacing the folder as a whole.
+
+    `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
+    The time recorded as ``seconds_total`` (and shown in the report) is the run time
+    plus writing every file up to the last three (``study.json``, ``candidates.csv``,
+    ``report.html``), which must hold it.
 
     Returns
     -------
@@ -527,6 +657,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
     folders are listed in ``study.json``).
     """
     say = progress or (lambda message: None)
+    clock = time.perf_counter()
     out_dir = Path(out_dir)
     check_output_folder(out_dir)
     existing = out_dir.parent
@@ -535,16 +666,22 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=existing))
     try:
         outputs, pictures = {}, {}
+        by_name = {c.name: c for c in result.candidates}
         for c in result.candidates:
             if not c.failed:
+                twin = by_name.get(c.same_net_as)
+                shared = twin is not None and twin.strips is not None and twin.strips is c.strips
                 outputs[c.name], pictures[c.name] = _candidate_files(
-                    c, tmp / "candidates" / c.name, result, say)
+                    c, tmp / "candidates" / c.name, result, say,
+                    twin=tmp / "candidates" / twin.name if shared else None)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
-        record = study_record(result, outputs)
+        total = result.seconds_run + time.perf_counter() - clock
+        record = study_record(result, outputs, seconds_total=total)
         write_texts({tmp / "study.json": json_text(record),
                      tmp / "candidates.csv": candidates_csv(result),
-                     tmp / "report.html": study_html(result, pictures, outputs)})
+                     tmp / "report.html": study_html(result, pictures, outputs,
+                                                     seconds_total=total)})
         os.chmod(tmp, 0o777 & ~_umask())
         out_dir.parent.mkdir(parents=True, exist_ok=True)
         old = None
