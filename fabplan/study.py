@@ -588,7 +588,7 @@ def verdict(metrics: dict, limits: Limits) -> list:
             checks.append(_check(
                 "congruent_strips", tol, d, ok,
                 ("all strip parts are congruent" if ok else "the strip parts are not congruent")
-                + f" (they differ from one common arc by up to {_mm_digits(d)}; congruence "
+                + f" (they differ from one common arc {_differ_by(d)}; congruence "
                 f"tolerance {tol:g} mm)"))
         if limits.max_sheets is not None:
             n = strips["sheets"]
@@ -606,19 +606,19 @@ def _mm(value: float) -> str:
     return "infinite (straight)" if math.isinf(value) else f"{value:.0f} mm"
 
 
-def _mm_digits(value: float) -> str:
-    """A small length in mm with the digits it needs.
+def _differ_by(value: float) -> str:
+    """How much strip parts differ (mm), in words with the digits it needs.
 
     Examples
     --------
-    >>> [_mm_digits(v) for v in (0.0, 3e-12, 0.0123, 4.5)]
-    ['0 mm', 'under 0.001 mm', '0.012 mm', '4.50 mm']
+    >>> [_differ_by(v) for v in (0.0, 3e-12, 0.0123, 4.5)]
+    ['by 0 mm', 'by less than 0.001 mm', 'by up to 0.012 mm', 'by up to 4.50 mm']
     """
     if value == 0:
-        return "0 mm"
+        return "by 0 mm"
     if value < 0.001:
-        return "under 0.001 mm"
-    return f"{value:.2g} mm" if value < 0.1 else f"{value:.2f} mm"
+        return "by less than 0.001 mm"
+    return f"by up to {value:.2g} mm" if value < 0.1 else f"by up to {value:.2f} mm"
 
 
 def _reasons(checks: list, feasible: bool) -> list:
@@ -747,11 +747,11 @@ def _achievements(best: CandidateResult, base: CandidateResult | None, study: St
         elif s["congruence_deviation_mm"] <= tol:
             radius = s["radius_mm"]
             shape = (f"all congruent: pieces of one arc of radius {radius['median']:.0f} mm, "
-                     f"differing from it by at most {_mm_digits(s['congruence_deviation_mm'])} "
+                     f"differing from it {_differ_by(s['congruence_deviation_mm'])} "
                      f"(tolerance {tol:g} mm)")
         else:
-            shape = (f"not congruent (they differ from one common arc by up to "
-                     f"{_mm_digits(s['congruence_deviation_mm'])})")
+            shape = (f"not congruent (they differ from one common arc "
+                     f"{_differ_by(s['congruence_deviation_mm'])})")
         sheets = counted(s["sheets"], "sheet")
         if b is not None and b.get("strips"):
             sheets += f" (the baseline: {b['strips']['sheets']})"
