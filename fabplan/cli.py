@@ -356,22 +356,27 @@ def _cmd_study(args) -> int:
         if show:
             print(message, file=sys.stderr, flush=True)
 
+    started = time.perf_counter()
     out = Path(args.output)
     study = read_study(resolve_study(args.study))
     check_output_folder(out)
     result = run_study(study, progress=say)
+    writing = time.perf_counter()
     files = write_study(result, out, progress=say)
+    done = time.perf_counter()
     for c in result.ranked():
         if c.failed:
             print(f"  {c.name:<28} failed: {c.error}")
             continue
         m = c.metrics
+        note = f"  (the same net as {c.same_net_as})" if c.same_net_as else ""
         print(f"{c.rank:>2} {c.name:<28} {'feasible' if c.feasible else 'not feasible':<12} "
               f"molds {m['molds']['count']:>4}  panels {m['panels']:>5}  deviation "
-              f"{m['deviation_mm']['max']:8.1f} mm  cost {c.cost:9.0f}")
+              f"{m['deviation_mm']['max']:8.1f} mm  cost {c.cost:9.0f}{note}")
     print(result.recommendation)
     print(f"wrote {files[0]} (and study.json, candidates.csv, candidates/) in "
-          f"{result.seconds:.0f} s")
+          f"{done - started:.0f} s: {result.seconds_run:.0f} s to run the candidates, "
+          f"{done - writing:.0f} s to write the files")
     return 0
 
 
@@ -526,18 +531,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_strips)
 
     p = sub.add_parser("study", help="facade feasibility study: run the candidate nets of a "
-                       "design, judge them against the fabrication limits, recommend one")
+                       "design, judge them against the fabrication limits, recommend one",
+                       description="Run a facade feasibility study and write its report. "
+                       "The output folder is replaced as a whole when it is empty or holds an "
+                       "earlier study (a study.json), so a study can be re-run into its "
+                       "folder; a folder of other files, or a file, is refused.")
     p.add_argument("study", help="study file (TOML, see docs/study-file.md) or a template "
                    "name (see `fabplan templates`)")
     p.add_argument("-o", "--output", required=True, metavar="DIR",
-                   help="folder for report.html, study.json, candidates.csv and candidates/")
+                   help="folder for report.html, study.json, candidates.csv and candidates/; "
+                        "an empty folder or one holding an earlier study is replaced")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)
 
     p = sub.add_parser("templates", help="list the study templates, print or copy one")
     p.add_argument("name", nargs="?", help="template to print (or copy with -o)")
     p.add_argument("-o", "--output", metavar="FILE",
-                   help="copy the template here (a .toml file or a folder) to start a study")
+                   help="copy the template here: a .toml file, or a folder (an existing one, "
+                        "or a path ending in /) that gets NAME.toml")
     p.set_defaults(func=_cmd_templates)
     return parser
 

@@ -33,6 +33,8 @@ __all__ = [
     "html_figure",
     "html_details",
     "format_value",
+    "counted",
+    "html_links",
     "distinct_colors",
     "view_frame",
     "draw_mesh",
@@ -94,6 +96,17 @@ def format_value(value, digits: int = 4) -> str:
     return str(value)
 
 
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """A count with its noun in the right number.
+
+    Examples
+    --------
+    >>> counted(1, "mold"), counted(0, "mold"), counted(3, "sheet"), counted(2, "box", "boxes")
+    ('1 mold', '0 molds', '3 sheets', '2 boxes')
+    """
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
 def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str | None = None,
                digits: int = 4, bad_rows: Iterable[int] = ()) -> str:
     """An HTML table; numbers are right-aligned and formatted by `format_value`.
@@ -131,6 +144,22 @@ def html_paragraph(text: str, *, cls: str | None = None) -> str:
     """A paragraph of escaped text (``cls``: ``"note"`` or ``"fail"`` for a framed box)."""
     attr = f' class="{cls}"' if cls else ""
     return f"<p{attr}>{html.escape(text)}</p>"
+
+
+def html_links(label: str, links: Sequence[tuple[str, str]]) -> str:
+    """A paragraph of links: `label` then ``(text, href)`` pairs (hrefs relative to the
+    page, so that a report folder can be moved or shared as a whole).
+
+    Examples
+    --------
+    >>> html_links("Files", [("net.obj", "candidates/a b/net.obj")])
+    '<p>Files: <a href="candidates/a%20b/net.obj">net.obj</a></p>'
+    """
+    from urllib.parse import quote
+
+    items = ", ".join(f'<a href="{html.escape(quote(href))}">{html.escape(text)}</a>'
+                      for text, href in links)
+    return f"<p>{html.escape(label)}: {items}</p>"
 
 
 def html_figure(uri: str, caption: str, *, alt: str | None = None) -> str:

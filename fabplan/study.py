@@ -21,27 +21,35 @@ from __future__ import annotations
 import math
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 
 from .errors import FabplanError
 from .geometry import face_planarity, kink_angles
-from .molds import PANEL_TYPES
+from .molds import MOLD_TYPES, PANEL_TYPES
 from .nets import get_net
+from .report import counted
 from .study_spec import Candidate, CostWeights, Limits, Study
 
 __all__ = [
     "CandidateResult",
     "StudyResult",
     "run_study",
+    "judge_study",
     "measure_candidate",
+    "mold_metrics",
+    "molds_text",
+    "same_net",
+    "earlier_same_net",
     "start_angle",
     "verdict",
     "candidate_cost",
     "rank_candidates",
     "recommend",
+    "is_lamella_study",
+    "SAME_NET_TOLERANCE",
 ]
 
 
@@ -59,6 +67,9 @@ class CandidateResult:
     reasons : the verdict in plain words (the failed checks, or what was met).
     cost, cost_terms : the ranking cost and its parts (None for a failed candidate).
     rank : 1 for the best candidate.
+    same_net_as : name of an earlier candidate that ended at the same net (see
+        `same_net`), or None.
+    notes : remarks beside the verdict (that it is the same net as another candidate).
     net, molds, strips, layout : the objects behind the metrics (for the files).
     """
 
@@ -71,6 +82,8 @@ class CandidateResult:
     cost: float | None = None
     cost_terms: dict = field(default_factory=dict)
     rank: int | None = None
+    same_net_as: str | None = None
+    notes: list = field(default_factory=list)
     net: object = None
     molds: object = None
     strips: object = None
@@ -96,7 +109,10 @@ class StudyResult:
     candidates : `CandidateResult` in the order of the study file (baseline first).
     recommended : name of the recommended candidate, or None when none is feasible.
     recommendation : the recommendation in plain words.
-    seconds : wall time of the run.
+    sheets_charged : whether strip sheets enter the cost (only when every measured
+        candidate has strips, see `judge_study`).
+    seconds_run : wall time from loading the design to the last verdict (writing the
+        files is not included: `fabplan.study_report.write_study` adds it).
     """
 
     study: Study
@@ -104,11 +120,17 @@ class StudyResult:
     candidates: list
     recommended: str | None
     recommendation: str
-    seconds: float
+    sheets_charged: bool = False
+    seconds_run: float = 0.0
 
     @property
     def baseline(self) -> CandidateResult:
         return next(c for c in self.candidates if c.candidate.baseline)
+
+    @property
+    def design_size(self) -> float:
+        """Diagonal of the design's bounding box (model units)."""
+        return design_size(self.design)
 
     def ranked(self) -> list:
         """Measured candidates in rank order, then the failed ones."""
@@ -145,7 +167,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None) ->
         say(f"[{i}/{count}] {candidate.name}: {candidate.describe()}")
         clock = time.perf_counter()
         try:
-            result = _run_candidate(study, design, candidate, layouts, starts, say)
+            result = _run_candidate(study, design, candidate, layouts, starts, results, say)
         except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             reason = str(exc) if isinstance(exc, FabplanError) else \
                 f"{type(exc).__name__}: {exc} ({_where(exc)})"
@@ -153,15 +175,81 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None) ->
             say(f"    failed: {reason}")
         result.metrics.setdefault("seconds", {})["total"] = time.perf_counter() - clock
         results.append(result)
+    return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+
+
+def judge_study(study: Study, design, results: list, *, seconds_run: float = 0.0) -> StudyResult:
+    """Checks, verdicts, costs, ranks and the recommendation of measured candidates.
+
+    A pure function of the candidates' metrics and the study's limits and weights: judging
+    the same results under other limits (``dataclasses.replace(study, limits=...)``) needs
+    no new run. The given `results` are left unchanged; the returned `StudyResult` holds
+    judged copies.
+
+    Strip sheets enter the cost only when every measured candidate has strips: with
+    ``[strips] nets = "auto"`` only the lamella nets get strips, and charging their sheets
+    would make them look dearer than nets that are not asked for strips at all.
+    """
+    measured = [r for r in results if not r.failed]
+    charge_sheets = bool(measured) and all(r.metrics.get("strips") for r in measured)
+    judged = []
     for r in results:
-        if not r.failed:
-            r.checks = verdict(r.metrics, study.limits)
-            r.feasible = all(c["ok"] for c in r.checks)
-            r.reasons = _reasons(r.checks, r.feasible)
-            r.cost, r.cost_terms = candidate_cost(r.metrics, study.cost)
-    rank_candidates(results)
-    recommended, text = recommend(results, study.limits)
-    return StudyResult(study, design, results, recommended, text, time.perf_counter() - start)
+        if r.failed:
+            judged.append(replace(r, checks=[], feasible=False, cost=None, cost_terms={},
+                                  rank=None, notes=[]))
+            continue
+        checks = verdict(r.metrics, study.limits)
+        feasible = all(c["ok"] for c in checks)
+        cost, terms = candidate_cost(r.metrics, study.cost, charge_sheets=charge_sheets)
+        notes = [f"the same net as {r.same_net_as} (the same panels, every vertex within "
+                 f"{SAME_NET_TOLERANCE:g} of the panel size of it; its molds and strips are "
+                 f"those of {r.same_net_as}): not a separate option"] if r.same_net_as else []
+        judged.append(replace(r, checks=checks, feasible=feasible,
+                              reasons=_reasons(checks, feasible), cost=cost, cost_terms=terms,
+                              rank=None, notes=notes))
+    rank_candidates(judged)
+    recommended, text = recommend(judged, study, sheets_charged=charge_sheets)
+    return StudyResult(study, design, judged, recommended, text, sheets_charged=charge_sheets,
+                       seconds_run=seconds_run)
+
+
+#: Two candidates end at the same net when they share the combinatorics and every vertex
+#: lies within this fraction of the panel size of its counterpart.
+SAME_NET_TOLERANCE = 1e-6
+
+
+def same_net(a, b, tolerance: float) -> bool:
+    """Whether two meshes are the same net: the same faces (same vertex order) and every
+    vertex within `tolerance` (model units) of its counterpart.
+
+    Examples
+    --------
+    >>> from fabplan.mesh import QuadMesh
+    >>> X = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    >>> a, b = QuadMesh(X, [[0, 1, 2, 3]]), QuadMesh(X + 1e-9, [[0, 1, 2, 3]])
+    >>> same_net(a, b, 1e-6), same_net(a, QuadMesh(X, [[1, 2, 3, 0]]), 1e-6)
+    (True, False)
+    """
+    if a.vertex_count != b.vertex_count or not np.array_equal(a.face_sizes, b.face_sizes):
+        return False
+    if not np.array_equal(a.face_indices, b.face_indices):
+        return False
+    return bool(np.abs(a.vertices - b.vertices).max(initial=0.0) <= tolerance)
+
+
+def earlier_same_net(mesh, earlier: list, panel_size: float) -> CandidateResult | None:
+    """The first of the `earlier` candidates that ended at the net `mesh` (within
+    `SAME_NET_TOLERANCE` of the panel size), not counting those that are themselves the
+    net of another; None when there is none."""
+    return next((r for r in earlier if not r.failed and r.net is not None and
+                 r.same_net_as is None and
+                 same_net(r.net.mesh, mesh, SAME_NET_TOLERANCE * panel_size)), None)
+
+
+def design_size(design) -> float:
+    """Diagonal of the bounding box of a design's vertices (model units)."""
+    X = np.asarray(design.vertices, dtype=np.float64)
+    return float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
 
 
 def _where(exc: BaseException) -> str:
@@ -171,7 +259,7 @@ def _where(exc: BaseException) -> str:
 
 
 def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, starts: dict,
-                   say) -> CandidateResult:
+                   earlier: list, say) -> CandidateResult:
     from .layout import glide, layout_surface
     from .molds import MoldSettings, plan_molds
     from .optimize import optimize
@@ -207,30 +295,38 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
                        progress=report)
     seconds["optimize"] = time.perf_counter() - clock
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
+    # the same net as an earlier candidate (CMC on a saddle ending at the minimal surface):
+    # its molds and strips are that candidate's, not planned and written a second time
+    twin = earlier_same_net(net.mesh, earlier, study.panel_size)
+    if twin is not None:
+        say(f"    the same net as {twin.name}: its molds and strips are reused")
 
     clock = time.perf_counter()
     units = study.design.units
-    molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=study.limits.mold_tolerance_mm,
-                                              units=units))
+    molds = twin.molds if twin is not None else plan_molds(
+        net.mesh, MoldSettings(tolerance_mm=study.limits.mold_tolerance_mm, units=units))
     seconds["molds"] = time.perf_counter() - clock
-    say(f"    {molds.mold_count} molds for {molds.panel_count} panels "
+    say(f"    {molds_text(mold_metrics(molds))} for {counted(molds.panel_count, 'panel')} "
         f"({seconds['molds']:.1f} s)")
 
     strips = None
-    if study.strips is not None and study.strips.wanted(candidate.net):
+    wanted = study.strips is not None and study.strips.wanted(candidate.net)
+    if wanted and twin is not None and twin.strips is not None:
+        strips = twin.strips
+    elif wanted:
         clock = time.perf_counter()
         options = study.strips
         strips = plan_strips(net.mesh, StripSettings(
             height_mm=options.height_mm, thickness_mm=options.thickness_mm, units=units,
-            sheet_mm=options.sheet_mm))
+            sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm))
         seconds["strips"] = time.perf_counter() - clock
         s = strips.summary()
-        say(f"    {s['strips']} strips, {s['parts']} parts on {s['sheets']} sheets "
-            f"({seconds['strips']:.1f} s)")
+        say(f"    {counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
+            f"{counted(s['sheets'], 'sheet')} ({seconds['strips']:.1f} s)")
     metrics = measure_candidate(net, design, molds, strips, mm_per_unit=study.design.mm_per_unit)
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
-                           layout=layout)
+                           layout=layout, same_net_as=twin.name if twin is not None else None)
 
 
 def start_angle(candidate: Candidate, design) -> float:
@@ -314,7 +410,6 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict
     planarity = face_planarity(X, mesh.quads) * mm_per_unit
     kinks = np.degrees(kink_angles(X, mesh))
     residual = props.get("sphere_residual_relative", {}).get("max")
-    plan = molds.record()
     metrics = {
         "status": net.status,
         "converged": net.converged,
@@ -336,16 +431,7 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict
         "kink_deg": _range(kinks) or {"min": 0.0, "max": 0.0, "mean": 0.0},
         "intersection_angle_deg": _pick(props.get("intersection_angle_deg")),
         "meusnier_radius": _pick(props.get("meusnier_radius")),
-        "molds": {
-            "count": plan["mold_count"],
-            "fits_all": plan["fits_all"],
-            "failures": len(plan["failures"]),
-            "max_deviation_mm": plan["max_deviation_mm"],
-            "molds_per_sqrt_panels": plan["molds_per_sqrt_panels"],
-            "panel_types": plan["panel_types"],
-            "mold_types": plan["mold_types"],
-            "panels_per_mold_max": plan["panels_per_mold"]["max"],
-        },
+        "molds": mold_metrics(molds),
         "strips": None,
     }
     if strips is not None:
@@ -368,6 +454,53 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict
             "unrolled_length_error_mm": s["unrolled_length_error_mm"],
         }
     return metrics
+
+
+def mold_metrics(plan) -> dict:
+    """The mold numbers of a study: only curved panels need a mold.
+
+    A flat panel is cut from flat stock (glass, sheet) and needs no mold, so `count` is
+    the number of molds of the single and double curved panels; the plane "mold" that a
+    `fabplan.molds.MoldPlan` assigns to its flat panels is not counted.
+
+    Parameters
+    ----------
+    plan : `fabplan.molds.MoldPlan`.
+
+    Returns
+    -------
+    dict: ``count`` (molds of the curved panels), ``all_panels_flat``, ``fits_all``,
+    ``failures``, ``max_deviation_mm`` (largest panel-to-mold gap, flat panels measured
+    against a plane), ``molds_per_sqrt_panels`` (``count / sqrt(panels)``),
+    ``panel_types``, ``mold_types`` (the plane type counts the plane flat panels are
+    checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any).
+    """
+    curved = np.asarray(plan.mold_type) > 0
+    count = int(curved.sum())
+    per_mold = plan.panels_per_mold
+    panels = plan.panel_count
+    return {
+        "count": count,
+        "all_panels_flat": count == 0,
+        "fits_all": bool(plan.fits_all),
+        "failures": int(plan.failures.size),
+        "max_deviation_mm": float(np.max(plan.deviation_mm)),
+        "molds_per_sqrt_panels": count / math.sqrt(panels),
+        "panel_types": {t: int(np.sum(plan.panel_type == i)) for i, t in enumerate(PANEL_TYPES)},
+        "mold_types": {t: int(np.sum(plan.mold_type == i)) for i, t in enumerate(MOLD_TYPES)},
+        "panels_per_mold_max": int(per_mold[curved].max()) if count else 0,
+    }
+
+
+def molds_text(molds: dict) -> str:
+    """The molds of a candidate in words: ``"no molds: all panels flat"`` or ``"12 molds"``.
+
+    Examples
+    --------
+    >>> molds_text({"count": 0}), molds_text({"count": 1}), molds_text({"count": 12})
+    ('no molds: all panels flat', '1 mold', '12 molds')
+    """
+    return "no molds: all panels flat" if molds["count"] == 0 else counted(molds["count"], "mold")
 
 
 def _pick(stats: dict | None) -> dict | None:
@@ -400,7 +533,8 @@ def verdict(metrics: dict, limits: Limits) -> list:
     dev = metrics["deviation_mm"]["max"]
     checks.append(_check(
         "max_deviation_mm", limits.max_deviation_mm, dev, dev <= limits.max_deviation_mm,
-        f"deviates at most {dev:.1f} mm from the design (limit {limits.max_deviation_mm:g} mm)"))
+        f"the net deviates up to {dev:.1f} mm from the design (limit "
+        f"{limits.max_deviation_mm:g} mm)"))
     molds = metrics["molds"]
     checks.append(_check(
         "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"],
@@ -410,24 +544,27 @@ def verdict(metrics: dict, limits: Limits) -> list:
         f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
     if limits.max_molds is not None:
         n = molds["count"]
+        needs = "it needs no molds: all panels are flat" if n == 0 else \
+            f"its curved panels need {counted(n, 'mold')}"
         checks.append(_check("max_molds", limits.max_molds, n, n <= limits.max_molds,
-                             f"needs {_count(n, 'mold')} (limit {limits.max_molds})"))
+                             f"{needs} (limit {limits.max_molds})"))
     if limits.planar_panels:
         p = metrics["planarity_mm"]["max"]
         checks.append(_check(
             "planarity_tolerance_mm", limits.planarity_tolerance_mm, p,
             p <= limits.planarity_tolerance_mm,
-            f"panels planar within {p:.2f} mm (planar panels required, tolerance "
-            f"{limits.planarity_tolerance_mm:g} mm)"))
+            (f"the panels are planar within {p:.2f} mm" if p <= limits.planarity_tolerance_mm
+             else f"the panels are up to {p:.2f} mm out of plane")
+            + f" (planar panels required: tolerance {limits.planarity_tolerance_mm:g} mm)"))
     if limits.min_coverage is not None:
         cov = metrics["coverage"]
         checks.append(_check("min_coverage", limits.min_coverage, cov, cov >= limits.min_coverage,
-                             f"panels cover {100 * cov:.1f} % of the design (limit at least "
+                             f"the panels cover {100 * cov:.1f} % of the design (limit at least "
                              f"{100 * limits.min_coverage:g} %)"))
     if limits.max_kink_deg is not None:
         k = metrics["kink_deg"]["max"]
         checks.append(_check("max_kink_deg", limits.max_kink_deg, k, k <= limits.max_kink_deg,
-                             f"largest kink between neighbouring panels {k:.2f} deg (limit "
+                             f"the largest kink between neighbouring panels is {k:.2f} deg (limit "
                              f"{limits.max_kink_deg:g} deg)"))
     strips = metrics.get("strips")
     if strips is not None:
@@ -436,23 +573,28 @@ def verdict(metrics: dict, limits: Limits) -> list:
             checks.append(_check(
                 "min_strip_radius_mm", limits.min_strip_radius_mm, r,
                 r >= limits.min_strip_radius_mm,
-                f"smallest strip radius {_mm(r)} (limit at least {limits.min_strip_radius_mm:g} mm)"))
+                f"the smallest strip radius is {_mm(r)} (limit at least "
+                f"{limits.min_strip_radius_mm:g} mm)"))
         if limits.max_strip_radius_mm is not None:
             r = strips["max_radius_mm"]
             checks.append(_check(
                 "max_strip_radius_mm", limits.max_strip_radius_mm, r,
                 r <= limits.max_strip_radius_mm,
-                f"largest strip radius {_mm(r)} (limit at most {limits.max_strip_radius_mm:g} mm)"))
+                f"the largest strip radius is {_mm(r)} (limit at most "
+                f"{limits.max_strip_radius_mm:g} mm)"))
         if limits.congruent_strips:
-            ok = strips["congruent"]
+            d, tol = strips["congruence_deviation_mm"], limits.congruence_tolerance_mm
+            ok = d <= tol
             checks.append(_check(
-                "congruent_strips", True, ok, ok,
+                "congruent_strips", tol, d, ok,
                 ("all strip parts are congruent" if ok else "the strip parts are not congruent")
-                + f" (largest difference {strips['congruence_deviation_mm']:.2f} mm)"))
+                + f" (they differ from one common arc {_differ_by(d)}; congruence "
+                f"tolerance {tol:g} mm)"))
         if limits.max_sheets is not None:
             n = strips["sheets"]
             checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,
-                                 f"strips nested on {n} sheets (limit {limits.max_sheets})"))
+                                 f"the strips nest on {counted(n, 'sheet')} (limit "
+                                 f"{limits.max_sheets})"))
     return checks
 
 
@@ -464,14 +606,42 @@ def _mm(value: float) -> str:
     return "infinite (straight)" if math.isinf(value) else f"{value:.0f} mm"
 
 
+def _differ_by(value: float) -> str:
+    """How much strip parts differ (mm), in words with the digits it needs.
+
+    Examples
+    --------
+    >>> [_differ_by(v) for v in (0.0, 3e-12, 0.0123, 4.5)]
+    ['by 0 mm', 'by less than 0.001 mm', 'by up to 0.012 mm', 'by up to 4.50 mm']
+    """
+    if value == 0:
+        return "by 0 mm"
+    if value < 0.001:
+        return "by less than 0.001 mm"
+    return f"by up to {value:.2g} mm" if value < 0.1 else f"by up to {value:.2f} mm"
+
+
 def _reasons(checks: list, feasible: bool) -> list:
     if feasible:
         return [f"meets all {len(checks)} limits: " + "; ".join(c["text"] for c in checks)]
     return [c["text"] for c in checks if not c["ok"]]
 
 
-def candidate_cost(metrics: dict, weights: CostWeights) -> tuple[float, dict]:
-    """The ranking cost of a candidate and its terms (see `CostWeights`)."""
+def candidate_cost(metrics: dict, weights: CostWeights, *,
+                   charge_sheets: bool = True) -> tuple[float, dict]:
+    """The ranking cost of a candidate and its terms (see `CostWeights`).
+
+    Molds are counted for the curved panels only (`mold_metrics`). With `charge_sheets`
+    false the sheets term is 0: strip sheets are then reported, not charged (see
+    `judge_study`).
+
+    Examples
+    --------
+    >>> m = {"molds": {"count": 2, "panel_types": {"planar": 10}}, "coverage": 1.0,
+    ...      "strips": {"sheets": 3}, "deviation_mm": {"max": 5.0}}
+    >>> candidate_cost(m, CostWeights())[0], candidate_cost(m, CostWeights(), charge_sheets=False)[0]
+    (230.0, 215.0)
+    """
     types = metrics["molds"]["panel_types"]
     strips = metrics.get("strips")
     # panels are counted for the whole design: a net with gaps must not look cheaper
@@ -481,7 +651,7 @@ def candidate_cost(metrics: dict, weights: CostWeights) -> tuple[float, dict]:
         "flat panels": weights.flat_panel * types.get(PANEL_TYPES[0], 0) * whole,
         "single curved panels": weights.single_curved_panel * types.get(PANEL_TYPES[1], 0) * whole,
         "double curved panels": weights.double_curved_panel * types.get(PANEL_TYPES[2], 0) * whole,
-        "sheets": weights.sheet * (strips["sheets"] if strips else 0),
+        "sheets": weights.sheet * strips["sheets"] if strips and charge_sheets else 0.0,
         "deviation": weights.deviation_mm * metrics["deviation_mm"]["max"],
     }
     return float(sum(terms.values())), terms
@@ -496,8 +666,26 @@ def rank_candidates(results: list) -> None:
         r.rank = i
 
 
-def recommend(results: list, limits: Limits) -> tuple[str | None, str]:
-    """The recommended candidate (cheapest feasible) and why, in plain words."""
+def is_lamella_study(study: Study) -> bool:
+    """Whether a study is about lamella strips rather than panels: every candidate gets
+    strips (``[strips] nets = "all"``) or a strip limit is set."""
+    limits = study.limits
+    return study.strips is not None and (
+        study.strips.nets == "all" or limits.congruent_strips or limits.max_sheets is not None
+        or limits.min_strip_radius_mm is not None or limits.max_strip_radius_mm is not None)
+
+
+def recommend(results: list, study: Study, *,
+              sheets_charged: bool = True) -> tuple[str | None, str]:
+    """The recommended candidate (the cheapest feasible one) and why, in plain words.
+
+    The text says first what decides the study: when the baseline fails a limit, which one
+    (measured against the limit). Then what the recommended candidate achieves: its strips
+    and sheets in a lamella study (`is_lamella_study`), its molds in a panel study, planar
+    panels where they are required; then its deviation and its cost against the
+    baseline's. A candidate that ended at the same net as an earlier one is named as that
+    net, not as another option.
+    """
     base = next((r for r in results if r.candidate.baseline and not r.failed), None)
     feasible = sorted((r for r in results if r.feasible), key=lambda r: r.rank)
     if not feasible:
@@ -509,38 +697,102 @@ def recommend(results: list, limits: Limits) -> tuple[str | None, str]:
                       f"({best.candidate.describe()}), which fails: "
                       + "; ".join(best.reasons) + ".")
     best = feasible[0]
-    m = best.metrics
+    limits = study.limits
     words = [f"Recommended: {best.name} ({best.candidate.describe()})."]
+    said = None                        # a candidate whose failure is already told
     if best.candidate.baseline:
-        words.append("The general S-net on the design is the cheapest feasible candidate: no "
-                     "rationalization saves enough to pay for its deviation.")
-    elif base is not None:
-        b = base.metrics
-        words.append(f"It needs {_count(m['molds']['count'], 'mold')} where the baseline needs "
-                     f"{b['molds']['count']}" + _saving(m['molds']['count'], b['molds']['count'])
-                     + f", deviates at most {m['deviation_mm']['max']:.1f} mm from the design "
-                     f"(limit {limits.max_deviation_mm:g} mm) and costs {best.cost:.0f} units "
-                     f"against {base.cost:.0f} for the baseline.")
-    if m.get("strips"):
-        s = m["strips"]
-        shape = ", all straight" if s["straight"] else ", all congruent" if s["congruent"] else ""
-        words.append(f"Its {s['strips']} lamellas are cut as {s['parts']} parts on "
-                     f"{s['sheets']} sheets{shape}.")
-    if limits.planar_panels:
-        words.append(f"Its panels are planar within {m['planarity_mm']['max']:.2f} mm.")
-    others = [r for r in feasible[1:]]
+        words.append("The general S-net on the design meets every limit, and no other "
+                     "candidate that does is cheaper.")
+    elif base is not None and not base.feasible:
+        failed = [c["text"] for c in base.checks if not c["ok"]]
+        words.append("The baseline, a general S-net on the design, does not meet the limits: "
+                     + "; ".join(failed) + ".")
+        said = base
+    if best.same_net_as:
+        words.append(f"It ends at the same net as {best.same_net_as}.")
+    words += _achievements(best, None if best.candidate.baseline else base, study)
+    m = best.metrics
+    words.append(f"It deviates at most {m['deviation_mm']['max']:.1f} mm from the design "
+                 f"(limit {limits.max_deviation_mm:g} mm).")
+    if base is not None and not best.candidate.baseline:
+        words.append(_cost_sentence(best, base))
+    with_strips = [r for r in results if not r.failed and r.metrics.get("strips")]
+    measured = [r for r in results if not r.failed]
+    if with_strips and not sheets_charged:
+        words.append(f"Strip sheets are reported but not charged: only {len(with_strips)} of "
+                     f"{len(measured)} candidates {'gets' if len(with_strips) == 1 else 'get'} "
+                     "strips.")
+    others = feasible[1:]
     if others:
-        words.append("Also feasible: " + ", ".join(f"{r.name} ({r.cost:.0f})" for r in others)
-                     + ".")
-    infeasible = [r for r in results if not r.feasible]
+        words.append("Also feasible: " + ", ".join(_also(r) for r in others) + ".")
+    infeasible = [r for r in results if not r.feasible and r is not said]
     if infeasible:
-        words.append("Not feasible: " + "; ".join(f"{r.name}: {r.reasons[0]}" for r in infeasible)
-                     + ".")
+        words.append("Not feasible: " + "; ".join(
+            f"{r.name}: {r.reasons[0]}" + (f" (the same net as {r.same_net_as})"
+                                            if r.same_net_as else "")
+            for r in infeasible) + ".")
     return best.name, " ".join(words)
 
 
-def _count(n: int, noun: str) -> str:
-    return f"{n} {noun}" + ("" if n == 1 else "s")
+def _achievements(best: CandidateResult, base: CandidateResult | None, study: Study) -> list:
+    """What the recommended candidate achieves that the study asks for, in sentences."""
+    m, limits = best.metrics, study.limits
+    b = base.metrics if base is not None else None
+    words = []
+    s = m.get("strips")
+    if is_lamella_study(study) and s:
+        tol = limits.congruence_tolerance_mm
+        if s["straight"]:
+            shape = "all straight"
+        elif s["congruence_deviation_mm"] <= tol:
+            radius = s["radius_mm"]
+            shape = (f"all congruent: pieces of one arc of radius {radius['median']:.0f} mm, "
+                     f"differing from it {_differ_by(s['congruence_deviation_mm'])} "
+                     f"(tolerance {tol:g} mm)")
+        else:
+            shape = (f"not congruent (they differ from one common arc "
+                     f"{_differ_by(s['congruence_deviation_mm'])})")
+        sheets = counted(s["sheets"], "sheet")
+        if b is not None and b.get("strips"):
+            sheets += f" (the baseline: {b['strips']['sheets']})"
+        words.append(f"Its {counted(s['strips'], 'lamella')} are cut as "
+                     f"{counted(s['parts'], 'part')}, {shape}, nested on {sheets}.")
+        if limits.min_strip_radius_mm is not None and not s["straight"]:
+            words.append(f"The smallest arc radius is {s['min_radius_mm']:.0f} mm (limit at least "
+                         f"{limits.min_strip_radius_mm:g} mm).")
+    else:
+        molds, panels = m["molds"], m["panels"]
+        if molds["count"] == 0:
+            text = f"It needs no molds: all its {counted(panels, 'panel')} are flat"
+        else:
+            text = f"It needs {counted(molds['count'], 'mold')} for its {counted(panels, 'panel')}"
+        if limits.max_molds is not None:
+            text += f" (limit {limits.max_molds})"
+        if b is not None:
+            bm = b["molds"]["count"]
+            text += (f", where the baseline needs {'none' if bm == 0 else counted(bm, 'mold')} "
+                     f"for its {b['panels']}") + (_saving(molds["count"], bm)
+                                                  if molds["count"] else "")
+        words.append(text + ".")
+    if limits.planar_panels:
+        words.append(f"Its panels are planar within {m['planarity_mm']['max']:.2f} mm "
+                     f"(tolerance {limits.planarity_tolerance_mm:g} mm).")
+    return words
+
+
+def _cost_sentence(best: CandidateResult, base: CandidateResult) -> str:
+    if best.cost <= base.cost:
+        less = 100 * (base.cost - best.cost) / base.cost if base.cost > 0 else 0.0
+        return (f"It costs {best.cost:.0f} units against {base.cost:.0f} for the baseline "
+                f"({less:.0f} % less).")
+    return (f"It costs {best.cost:.0f} units, more than the {base.cost:.0f} of the baseline, "
+            "which does not meet the limits.")
+
+
+def _also(r: CandidateResult) -> str:
+    if r.same_net_as:
+        return f"{r.name} (the same net as {r.same_net_as})"
+    return f"{r.name} (cost {r.cost:.0f})"
 
 
 def _saving(n: int, base: int) -> str:

@@ -11,9 +11,11 @@ from __future__ import annotations
 import base64
 import csv
 import io
+import math
 import os
 import shutil
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +23,8 @@ import numpy as np
 from . import report
 from .errors import InputError
 from .io import json_text, write_texts
-from .study import CandidateResult, StudyResult
+from .report import counted
+from .study import CandidateResult, StudyResult, molds_text
 
 __all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA"]
 
@@ -29,15 +32,18 @@ STUDY_SCHEMA = "fabplan-study/1"
 
 
 # ---------------------------------------------------------------------------- records
-def _candidate_record(c: CandidateResult, outputs: dict) -> dict:
+def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None) -> dict:
     return {
         "name": c.name,
         "net": c.candidate.net,
         "description": c.candidate.describe(),
         "baseline": c.candidate.baseline,
+        "recommended": c.name == recommended,
         "requested": {"angle_deg": c.candidate.angle, "radius": c.candidate.radius},
         "feasible": c.feasible,
         "reasons": c.reasons,
+        "same_net_as": c.same_net_as,
+        "notes": c.notes,
         "error": c.error,
         "checks": c.checks,
         "metrics": c.metrics,
@@ -48,20 +54,32 @@ def _candidate_record(c: CandidateResult, outputs: dict) -> dict:
     }
 
 
-def study_record(result: StudyResult, outputs: dict | None = None) -> dict:
-    """The ``study.json`` record (schema ``docs/study-schema.md``)."""
+def study_record(result: StudyResult, outputs: dict | None = None, *,
+                 seconds_total: float | None = None) -> dict:
+    """The ``study.json`` record (schema ``docs/study-schema.md``).
+
+    `seconds_total` is the wall time including writing the files (`write_study` measures
+    it); without it, the run time.
+    """
     outputs = outputs or {}
     design = result.design
+    triangles = int(len(design.triangles))
+    study = result.study.record()
+    if study["design"]["triangles"] is None:          # a design file: its own triangles
+        study["design"]["triangles"] = triangles
     return {
         "schema": STUDY_SCHEMA,
-        "study": result.study.record(),
+        "study": study,
         "design": {"label": result.study.design.label, "source": result.study.design.source,
-                   "triangles": int(len(design.triangles)), "area": float(design.area),
-                   "units": result.study.design.units},
+                   "triangles": triangles, "area": float(design.area),
+                   "size": result.design_size, "units": result.study.design.units},
         "recommended": result.recommended,
         "recommendation": result.recommendation,
-        "candidates": [_candidate_record(c, outputs.get(c.name, {})) for c in result.candidates],
-        "seconds": result.seconds,
+        "sheets_charged": result.sheets_charged,
+        "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended)
+                       for c in result.candidates],
+        "seconds_run": result.seconds_run,
+        "seconds_total": result.seconds_run if seconds_total is None else seconds_total,
     }
 
 
@@ -126,30 +144,172 @@ def _view(mesh):
     return _facade_view(mesh)
 
 
+def _agreeing_normal(normals: np.ndarray, areas: np.ndarray) -> np.ndarray | None:
+    """The area-weighted mean normal when the faces agree on a side (a roof, a facade
+    patch), else None (a closed ring or barrel)."""
+    mean = np.nansum(normals * areas[:, None], axis=0)
+    if np.linalg.norm(mean) <= 0.3 * areas.sum():
+        return None
+    return mean / np.linalg.norm(mean)
+
+
+def _face_areas(mesh) -> np.ndarray:
+    X = mesh.vertices
+    tri = mesh.triangles()
+    owner = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes - 2)
+    area = 0.5 * np.linalg.norm(np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]),
+                                axis=1)
+    return np.bincount(owner, area, minlength=len(mesh.face_sizes))
+
+
+def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Face normals and a viewing frame for a heat map that must show `point`.
+
+    An open surface whose faces agree on a side is seen from that side (as the mold
+    pictures); a closed one (a ring, a barrel) from the side of `point`, so that the
+    worst point is not hidden behind the near wall.
+    """
+    normals, view = _view(mesh)
+    if _agreeing_normal(normals, _face_areas(mesh)) is None:
+        X = mesh.vertices
+        out = point - X.mean(axis=0)
+        out[2] = 0.0
+        if np.linalg.norm(out) > 1e-9 * np.ptp(X, axis=0).max():
+            view = report.view_frame(X, out[None, :], np.ones(1))
+    return normals, view
+
+
 def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: float) -> str:
-    """Data URI: the net's panels coloured by their distance from the design (mm)."""
+    """Data URI: the net coloured by its distance from the design (mm) at every vertex.
+
+    The distance is measured at the vertices and interpolated linearly across the
+    triangles of each panel (Gouraud shading), so the largest value shows at its vertex;
+    that vertex is circled and labelled. Faces are drawn far to near in depth layers with
+    their edges, so nearer panels hide farther ones.
+    """
     plt = _plt()
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
+    from matplotlib.collections import PolyCollection
     from matplotlib.colors import Normalize
 
     mesh = c.net.mesh
-    d = design.reference.distances(mesh.vertices) * mm_per_unit
-    owner = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
-    face_d = np.bincount(owner, d[mesh.face_indices], minlength=len(mesh.face_sizes)) / mesh.face_sizes
+    X = mesh.vertices
+    d = design.reference.distances(X) * mm_per_unit
+    worst = int(np.argmax(d))
+    _, view = deviation_view(mesh, X[worst])
+    P = X @ view.T
+    sizes = mesh.face_sizes
+    owner = np.repeat(np.arange(len(sizes)), sizes)
+    depth = np.bincount(owner, P[mesh.face_indices, 2], minlength=len(sizes)) / sizes
+    layers = 40
+    layer = np.empty(len(sizes), np.int64)
+    layer[np.argsort(depth, kind="stable")] = np.arange(len(sizes)) * layers // len(sizes)
+    tri = mesh.triangles()
+    tri_layer = np.repeat(layer, sizes - 2)
+    polys = np.split(P[mesh.face_indices, :2], mesh.face_indptr[1:-1])
     top = max(limit_mm, float(d.max()), 1e-9)
     norm = Normalize(0.0, top)
     cmap = colormaps["viridis"]
-    colors = cmap(norm(face_d))
-    normals, view = _view(mesh)
     fig, ax = plt.subplots(figsize=(8, 6))
-    report.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
+    for k in range(layers):
+        ids = np.flatnonzero(tri_layer == k)
+        if ids.size == 0:
+            continue
+        ax.tripcolor(P[:, 0], P[:, 1], tri[ids], d, shading="gouraud", cmap=cmap, norm=norm,
+                     zorder=2 * k)
+        ax.add_collection(PolyCollection([polys[f] for f in np.flatnonzero(layer == k)],
+                                         facecolors="none", edgecolors=(0.1, 0.1, 0.1, 0.5),
+                                         linewidths=0.2, zorder=2 * k + 1))
+    ax.plot(P[worst, 0], P[worst, 1], "o", ms=14, mfc="none", mec="#c0392b", mew=2.2,
+            zorder=2 * layers + 2)
+    # the label points inwards, so that it stays inside the picture
+    right = P[worst, 0] > 0.5 * (P[:, 0].min() + P[:, 0].max())
+    above = P[worst, 1] > 0.5 * (P[:, 1].min() + P[:, 1].max())
+    ax.annotate(f"max {d[worst]:.1f} mm", (P[worst, 0], P[worst, 1]),
+                xytext=(-14 if right else 14, -14 if above else 14), textcoords="offset points",
+                ha="right" if right else "left", va="top" if above else "bottom",
+                color="#c0392b", fontsize=10, fontweight="bold", zorder=2 * layers + 3,
+                bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#c0392b", "alpha": 0.85})
+    pad = 0.03 * np.ptp(P[:, :2], axis=0).max()      # the circle must not be cut at an edge
+    ax.set_xlim(P[:, 0].min() - pad, P[:, 0].max() + pad)
+    ax.set_ylim(P[:, 1].min() - pad, P[:, 1].max() + pad)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8)
-    bar.set_label("distance from the design [mm]")
+    bar.set_label("distance from the design at the vertices [mm]")
     bar.ax.axhline(limit_mm, color="#c0392b", lw=2)
-    ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm "
-                 f"(limit {limit_mm:g} mm: red line on the scale)")
+    ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm (circled), "
+                 f"limit {limit_mm:g} mm (red line on the scale)")
     return report.figure_to_data_uri(fig)
+
+
+def net_view_angles(design) -> tuple[float, float]:
+    """Elevation and azimuth (degrees, matplotlib's ``view_init``) of the net picture.
+
+    A roof (faces agreeing on a side within 45 degrees of vertical) is seen from 20
+    degrees above the horizon, 75 degrees off the diagonal of its plan, so that its rise
+    shows against its span (from above, as a cladding layout is usually drawn, a saddle
+    looks flat); a facade patch from its side, 20 degrees up; a closed surface (a ring, a
+    barrel) from 20 degrees up.
+    """
+    n = _agreeing_normal(design.face_normals, design.face_areas)
+    if n is None:
+        return 20.0, -60.0
+    if abs(n[2]) >= math.cos(math.radians(45)):
+        span = np.ptp(design.vertices, axis=0)
+        return 20.0, float(np.degrees(np.arctan2(span[1], span[0]))) - 75.0
+    return 20.0, float(np.degrees(np.arctan2(n[1], n[0]))) + 25.0
+
+
+def net_picture(path: Path, design, mesh, *, title: str = "",
+                singular_points: np.ndarray | None = None) -> Path:
+    """A PNG of the net on the design surface, axes to scale (atomically written).
+
+    The design is drawn light grey with its boundary black, the net's faces blue with
+    their edges, irregular vertices red and singular points of the layout's direction
+    field orange; the view is `net_view_angles`.
+    """
+    plt = _plt()
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from .io import atomic_path
+
+    fig = plt.figure(figsize=(8, 7), dpi=110)
+    ax = fig.add_subplot(projection="3d")
+    T = design.triangles
+    if len(T) > 30000:  # a coarser sample of the surface keeps the picture quick
+        T = T[:: int(math.ceil(len(T) / 30000))]
+    ax.add_collection3d(Poly3DCollection(design.vertices[T], facecolor=(0.85, 0.85, 0.85, 0.35),
+                                         edgecolor="none"))
+    for curve in design.boundary_curves():
+        loop = np.vstack([curve, curve[:1]])
+        ax.plot(loop[:, 0], loop[:, 1], loop[:, 2], color="black", lw=0.8)
+    ax.add_collection3d(Poly3DCollection([mesh.vertices[f] for f in mesh.faces],
+                                         facecolor=(0.55, 0.7, 0.95, 0.9),
+                                         edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4))
+    irregular = mesh.vertices[mesh.irregular_vertices]
+    if len(irregular):
+        ax.scatter(*irregular.T, color="red", s=18, depthshade=False, label="irregular vertices")
+    if singular_points is not None and len(singular_points):
+        ax.scatter(*np.asarray(singular_points).T, color="orange", s=12, depthshade=False,
+                   label="field singularities")
+    elevation, azimuth = net_view_angles(design)
+    ax.view_init(elev=elevation, azim=azimuth)
+    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
+    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
+    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
+        getattr(ax, f"set_{axis}lim")(a, b)
+    ax.set_box_aspect(span)                       # equal scale on all three axes
+    ax.set_axis_off()
+    if title:
+        ax.set_title(title, fontsize=9)
+    if len(irregular) or (singular_points is not None and len(singular_points)):
+        ax.legend(loc="lower left", fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def comparison_figure(result: StudyResult) -> str:
@@ -165,7 +325,7 @@ def comparison_figure(result: StudyResult) -> str:
     left.barh(y, molds, color=colors)
     left.set_yticks(y, names)
     left.invert_yaxis()
-    left.set_xlabel("molds")
+    left.set_xlabel("molds (for the curved panels; flat panels need none)")
     if limits.max_molds is not None:
         left.axvline(limits.max_molds, color="black", ls="--", lw=1, label="limit")
         left.legend(loc="lower right")
@@ -190,10 +350,60 @@ def _png_uri(path: Path) -> str:
 
 
 # ---------------------------------------------------------------------------- HTML
+#: Radii beyond this multiple of the design's size are shown as infinite: the stars (or
+#: strips) are planar (straight) to within what a computation can tell.
+INFINITE_RADIUS_FACTOR = 1e4
+
+
 def _fmt_range(r: dict | None, digits: int = 4) -> str:
     if not r:
         return ""
     return f"{report.format_value(r['min'], digits)} .. {report.format_value(r['max'], digits)}"
+
+
+def radius_text(r: dict | float | None, unit: str, beyond: float, infinite: str) -> str:
+    """A radius or a ``{min, max}`` range of radii with its unit; values above `beyond`
+    (or infinite, or None) are `infinite`.
+
+    Examples
+    --------
+    >>> radius_text({"min": 3.558e9, "max": 1.033e16}, "m", 2.8e5, "infinite (planar stars)")
+    'infinite (planar stars)'
+    >>> radius_text({"min": 12.25, "max": 3e9}, "m", 2.8e5, "infinite")
+    '12.25 m .. infinite'
+    >>> radius_text({"min": 12.25, "max": 73548.6}, "m", 2.8e5, "infinite")
+    '12.25 .. 73549 m'
+    >>> radius_text({"min": 97.0512, "max": 97.0498}, "m", 2.8e5, "infinite")
+    '97.05 m'
+    >>> radius_text(2e11, "m", 1e5, "infinite"), radius_text(None, "mm", 1e8, "infinite (straight)")
+    ('infinite', 'infinite (straight)')
+    """
+    def big(v):
+        return v is None or not math.isfinite(v) or abs(v) > beyond
+
+    def text(v):          # 4 significant digits, but no exponent for a large radius
+        return f"{v:.0f}" if v >= 1e4 else report.format_value(v)
+
+    if r is None or not isinstance(r, dict):
+        return infinite if big(r) else f"{text(abs(r))} {unit}"
+    lo, hi = sorted((r["min"], r["max"]), key=lambda v: (big(v), abs(v)))
+    if big(lo):
+        return infinite
+    if big(hi):
+        return f"{text(abs(lo))} {unit} .. {infinite}"
+    if text(abs(lo)) == text(abs(hi)):
+        return f"{text(abs(lo))} {unit}"
+    return f"{text(abs(lo))} .. {text(abs(hi))} {unit}"
+
+
+def _meusnier_text(result: StudyResult, r) -> str:
+    return radius_text(r, result.study.design.units, INFINITE_RADIUS_FACTOR * result.design_size,
+                       "infinite (planar stars)")
+
+
+def _strip_radius_text(result: StudyResult, r) -> str:
+    beyond = INFINITE_RADIUS_FACTOR * result.design_size * result.study.design.mm_per_unit
+    return radius_text(r, "mm", beyond, "infinite (straight)")
 
 
 def _comparison_table(result: StudyResult) -> str:
@@ -202,23 +412,24 @@ def _comparison_table(result: StudyResult) -> str:
         m = c.metrics
         if c.failed:
             rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "",
-                         "", "", c.reasons[0]])
+                         "", "", "", c.reasons[0]])
             bad.append(len(rows) - 1)
             continue
         s = m["strips"]
         rows.append([
             c.rank, c.name, c.candidate.describe(), "yes" if c.feasible else "no",
-            m["molds"]["count"], m["panels"], f"{m['deviation_mm']['max']:.1f}",
-            f"{m['planarity_mm']['max']:.2f}", f"{m['kink_deg']['max']:.2f}",
-            _fmt_range(m["intersection_angle_deg"]), _fmt_range(m["meusnier_radius"]),
+            m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
+            f"{m['deviation_mm']['max']:.1f}", f"{m['planarity_mm']['max']:.2f}",
+            f"{m['kink_deg']['max']:.2f}", _fmt_range(m["intersection_angle_deg"]),
+            _meusnier_text(result, m["meusnier_radius"]) if m["meusnier_radius"] else "",
             "" if s is None else f"{s['sheets']}{' (congruent)' if s['congruent'] else ''}",
-            f"{c.cost:.0f}"])
+            f"{c.cost:.0f}", f"the same net as {c.same_net_as}" if c.same_net_as else ""])
         if not c.feasible:
             bad.append(len(rows) - 1)
     return report.html_table(
         ["rank", "candidate", "net", "feasible", "molds", "panels", "max deviation [mm]",
          "planarity [mm]", "max kink [deg]", "angle [deg]", "Meusnier radius",
-         "strip sheets", "cost"], rows, caption="All candidates, best first", bad_rows=bad)
+         "strip sheets", "cost", "note"], rows, caption="All candidates, best first", bad_rows=bad)
 
 
 def _limits_table(result: StudyResult) -> str:
@@ -227,6 +438,8 @@ def _limits_table(result: StudyResult) -> str:
     limits = asdict(result.study.limits)
     if not limits["planar_panels"]:
         del limits["planarity_tolerance_mm"]
+    if not limits["congruent_strips"]:
+        del limits["congruence_tolerance_mm"]
     rows = [[k, report.format_value(v)] for k, v in limits.items()
             if v is not None and v is not False]
     return report.html_table(["limit", "value"], rows, caption="Fabrication limits")
@@ -240,63 +453,107 @@ def _cost_table(result: StudyResult) -> str:
     return report.html_table(["per", "cost units"], rows, caption="Cost weights")
 
 
-def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict) -> str:
+def cost_line(result: StudyResult) -> str:
+    """How the cost is made up, in words (as charged in this study)."""
+    measured = [c for c in result.candidates if not c.failed]
+    with_strips = [c for c in measured if c.metrics.get("strips")]
+    text = ("Cost = the weights times the molds (of the curved panels: flat panels need "
+            "none), the panels by type, ")
+    if result.sheets_charged:
+        text += "the strip sheets "
+    text += "and the largest deviation in mm; feasible candidates rank first, by cost."
+    if with_strips and not result.sheets_charged:
+        text += (f" Strip sheets are reported but not charged: only {len(with_strips)} of "
+                 f"{len(measured)} candidates {'gets' if len(with_strips) == 1 else 'get'} "
+                 "strips, and charging them would make those "
+                 "look dearer than candidates that were not asked for strips.")
+    return text
+
+
+def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
+                       result: StudyResult) -> str:
     head = f"{c.rank}. {c.name}" if c.rank else c.name
     if c.failed:
         return report.html_section(head, report.html_paragraph(
             f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
     m = c.metrics
-    verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(
-        ck["text"] for ck in c.checks if ck["ok"] != c.feasible or c.feasible)
+    verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
+    if c.notes:
+        verdict += " Note: " + "; ".join(c.notes) + "."
     checks = report.html_table(
         ["limit", "measured", "bound", "met", "what was measured"],
         [[ck["limit"], report.format_value(ck["measured"]), report.format_value(ck["bound"]),
           "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks],
         caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
     types = m["molds"]["panel_types"]
+    parameters = []
+    for k, v in m["parameters"].items():
+        if not isinstance(v, float):
+            continue
+        parameters.append(f"radius {_meusnier_text(result, v)}" if k == "radius" else
+                          f"angle {v:.6g} deg" if k == "angle_deg" else f"{k} {v:.6g}")
+    molds = m["molds"]
     facts = [
         ["net", c.candidate.describe()],
         ["solve", f"{m['status']} after {m['iterations']} iterations"],
-        ["solved parameters", ", ".join(f"{k} {v:.6g}" for k, v in m["parameters"].items()
-                                        if isinstance(v, float)) or "-"],
+        ["solved parameters", ", ".join(parameters) or "-"],
         ["panels", f"{m['panels']} ({m['quads']} quads, {m['other_faces']} other; "
                    f"{m['irregular_vertices']} irregular vertices)"],
         ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in types.items())],
         ["edge length", _fmt_range(m["edge_length"])],
         ["panel area", _fmt_range(m["panel_area"])],
+        ["Meusnier radius", _meusnier_text(result, m["meusnier_radius"])
+         if m["meusnier_radius"] else "-"],
         ["deviation from the design [mm]", f"max {m['deviation_mm']['max']:.2f}, mean "
                                            f"{m['deviation_mm']['mean']:.2f}, 95 % "
                                            f"{m['deviation_mm']['p95']:.2f}"],
-        ["molds", f"{m['molds']['count']} ({m['molds']['molds_per_sqrt_panels']:.2f} x sqrt of "
-                  f"the panel count), largest panel gap {m['molds']['max_deviation_mm']:.2f} mm"],
+        ["molds", (molds_text(molds) if molds["count"] == 0 else
+                   f"{molds_text(molds)} for the curved panels "
+                   f"({molds['molds_per_sqrt_panels']:.2f} x sqrt of the panel count)")
+         + f"; largest gap of a panel to its mold (flat panels: to a plane) "
+           f"{molds['max_deviation_mm']:.2f} mm"],
         ["sphere residual (max, of an edge)", report.format_value(m["sphere_residual_relative_max"])],
         ["seconds", ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())],
     ]
     if m["strips"]:
         s = m["strips"]
-        facts.append(["strips", f"{s['strips']} strips, {s['parts']} parts on {s['sheets']} "
-                      f"sheets ({100 * s['material_use']:.0f} % material use); "
-                      + ("straight" if s["straight"] else f"radius {_fmt_range(s['radius_mm'], 5)} mm")
-                      + ("; congruent" if s["congruent"] else "")])
+        shape = "all straight (so all congruent)" if s["straight"] else (
+            f"arc radius {_strip_radius_text(result, s['radius_mm'])}; the parts differ from "
+            f"one common arc by up to {s['congruence_deviation_mm']:.3g} mm"
+            + (" (congruent)" if s["congruent"] else " (not congruent)"))
+        facts.append(["strips", f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} "
+                      f"on {counted(s['sheets'], 'sheet')} ({100 * s['material_use']:.0f} % "
+                      f"material use); {shape}"])
     parts = [report.html_paragraph(verdict, cls="note" if c.feasible else "fail"),
              report.html_table(["quantity", "value"], facts, caption="Measured"), checks]
-    captions = {"net": "The net on the design surface (grey)",
-                "deviation": "Deviation heat map",
-                "molds": "Panels coloured by mold",
+    captions = {"net": "The net on the design surface (grey), axes to scale",
+                "deviation": "Deviation heat map: the distance of the net from the design, "
+                             "measured at every vertex and interpolated across the panels; "
+                             "the largest is circled and labelled",
+                "molds": "Panels coloured by mold" + (" (all flat: no molds)"
+                                                      if molds["count"] == 0 else ""),
                 "sheet": "First strip sheet (as cut: red outline, magenta slits, blue labels)"}
     for key, caption in captions.items():
         if key in pictures:
             parts.append(report.html_figure(pictures[key], caption))
-    parts.append(report.html_paragraph(
-        "Files: " + ", ".join(f"{k}: {v}" for k, v in outputs.items() if not isinstance(v, list))))
+    links = []
+    for key, value in outputs.items():
+        for i, href in enumerate(value if isinstance(value, list) else [value]):
+            links.append((Path(href).name if i else f"{key.replace('_', ' ')}: {Path(href).name}",
+                          href))
+    if links:
+        parts.append(report.html_links("Files", links))
     return report.html_section(head, *parts)
 
 
-def study_html(result: StudyResult, pictures: dict, outputs: dict) -> str:
-    """The self-contained ``report.html``."""
+def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
+               seconds_total: float | None = None) -> str:
+    """The self-contained ``report.html`` (links to the candidates' files are relative)."""
     study = result.study
+    seconds = result.seconds_run if seconds_total is None else seconds_total
     sub = (f"Design {study.design.label}, panel size {study.panel_size:g} {study.design.units}, "
-           f"{len(result.candidates)} candidates, run in {result.seconds:.0f} s")
+           f"{len(result.candidates)} candidates, run in {seconds:.0f} s"
+           + (" including writing the files" if seconds_total is not None else ""))
     parts = []
     if study.description:
         parts.append(report.html_paragraph(study.description))
@@ -307,19 +564,24 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict) -> str:
     if "comparison" in pictures:
         overview.append(report.html_figure(pictures["comparison"],
                                            "Molds and deviation of each candidate"))
-    overview += [_limits_table(result), _cost_table(result), report.html_paragraph(
-        "Cost = the weights times molds, panels by type, strip sheets and the largest "
-        "deviation in mm; feasible candidates rank first, by cost.")]
+    overview += [_limits_table(result), _cost_table(result),
+                 report.html_paragraph(cost_line(result))]
     parts.append(report.html_section("Comparison", *overview))
     for c in result.ranked():
-        parts.append(_candidate_section(c, pictures.get(c.name, {}), outputs.get(c.name, {})))
+        parts.append(_candidate_section(c, pictures.get(c.name, {}), outputs.get(c.name, {}),
+                                        result))
     return report.html_page(f"Facade study: {study.name}", parts, subtitle=sub)
 
 
 # ---------------------------------------------------------------------------- writing
 def check_output_folder(folder: Path) -> None:
-    """Refuse a folder that cannot hold a study: not a folder, not writable, or holding
-    other files than an earlier study's (a study replaces the whole folder)."""
+    """Refuse a folder that cannot hold a study.
+
+    A study replaces its whole output folder. A folder that does not exist yet, an empty
+    one, or one that holds an earlier study (a ``study.json``) is therefore accepted and
+    replaced as a whole, so that a study can be re-run into its folder; a file, an
+    unwritable place, or a folder of other files is refused.
+    """
     folder = Path(folder)
     if folder.exists():
         if not folder.is_dir():
@@ -334,9 +596,12 @@ def check_output_folder(folder: Path) -> None:
         raise InputError(f"{folder}: cannot write there ({existing} is not a writable folder)")
 
 
-def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say) -> tuple:
+def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
+                     twin: Path | None = None) -> tuple:
+    """Write one candidate's files into `folder`; `twin` is the folder of the earlier
+    candidate whose net (and strip plan) this one shares, if any: its checked strip files
+    are copied rather than made and read back a second time."""
     from .dxf import preview_png, sheet_document
-    from .layout import write_layout_picture
 
     study = result.study
     folder.mkdir(parents=True)
@@ -346,17 +611,24 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say)
     outputs = {"net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
                "molds_json": "molds.json", "picture": "net.png"}
     title = f"{c.name}: {c.candidate.describe()}"
-    write_layout_picture(folder / "net.png", result.design, c.net.mesh, title=title,
-                         singular_points=c.layout.singular_points if c.layout else None)
+    net_picture(folder / "net.png", result.design, c.net.mesh, title=title,
+                singular_points=c.layout.singular_points if c.layout else None)
     pictures = {"net": _png_uri(folder / "net.png"),
                 "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
                                               study.design.mm_per_unit)}
     from .mold_report import mold_figure
 
-    pictures["molds"] = mold_figure(c.molds, title=f"{c.name}: {c.molds.panel_count} panels on "
-                                    f"{c.molds.mold_count} molds (one colour per mold)")
+    molds = c.metrics["molds"]
+    pictures["molds"] = mold_figure(c.molds, title=f"{c.name}: {counted(c.molds.panel_count, 'panel')}"
+                                    + (", all flat: no molds" if molds["count"] == 0 else
+                                       f", {counted(molds['count'], 'mold')} for the curved "
+                                       "ones (one colour per mold)"))
     if c.strips is not None:
-        files = c.strips.write(folder / "strips", previews=False)
+        if twin is not None and (twin / "strips").is_dir():
+            shutil.copytree(twin / "strips", folder / "strips")
+            files = sorted((folder / "strips").iterdir())
+        else:
+            files = c.strips.write(folder / "strips", previews=False)
         layout, settings = c.strips.layout, c.strips.strips.settings
         sheet = layout.sheets[0]
         preview = folder / "strips" / "sheet-preview.png"
@@ -372,7 +644,12 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say)
 
 
 def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
-    """Write every file of a study into `out_dir` (replacing an earlier study there).
+    """Write every file of a study into `out_dir`, replacing the folder as a whole.
+
+    `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
+    The time recorded as ``seconds_total`` (and shown in the report) is the run time
+    plus writing every file up to the last three (``study.json``, ``candidates.csv``,
+    ``report.html``), which must hold it.
 
     Returns
     -------
@@ -380,6 +657,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
     folders are listed in ``study.json``).
     """
     say = progress or (lambda message: None)
+    clock = time.perf_counter()
     out_dir = Path(out_dir)
     check_output_folder(out_dir)
     existing = out_dir.parent
@@ -388,16 +666,22 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=existing))
     try:
         outputs, pictures = {}, {}
+        by_name = {c.name: c for c in result.candidates}
         for c in result.candidates:
             if not c.failed:
+                twin = by_name.get(c.same_net_as)
+                shared = twin is not None and twin.strips is not None and twin.strips is c.strips
                 outputs[c.name], pictures[c.name] = _candidate_files(
-                    c, tmp / "candidates" / c.name, result, say)
+                    c, tmp / "candidates" / c.name, result, say,
+                    twin=tmp / "candidates" / twin.name if shared else None)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
-        record = study_record(result, outputs)
+        total = result.seconds_run + time.perf_counter() - clock
+        record = study_record(result, outputs, seconds_total=total)
         write_texts({tmp / "study.json": json_text(record),
                      tmp / "candidates.csv": candidates_csv(result),
-                     tmp / "report.html": study_html(result, pictures, outputs)})
+                     tmp / "report.html": study_html(result, pictures, outputs,
+                                                     seconds_total=total)})
         os.chmod(tmp, 0o777 & ~_umask())
         out_dir.parent.mkdir(parents=True, exist_ok=True)
         old = None

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +54,9 @@ __all__ = [
 #: Net types that exist on every surface: they glide on the design exactly.
 GLIDING_NETS = ("snet", "isogonal", "orthogonal", "mean-curvature-spheres")
 
+#: The tables of a study file.
+TABLES = ("study", "design", "panels", "limits", "strips", "cost", "candidates")
+
 #: The candidates ``net = "auto"`` stands for (the baseline is always added).
 AUTO_CANDIDATES = (
     ("isogonal", None, None),
@@ -73,14 +77,15 @@ class DesignSpec:
         ``"name:key=value,..."`` (see `fabplan.surfaces`).
     label : what the report calls it.
     parameters : parameters of a built-in surface (for the record).
-    triangles : triangles of the design mesh a built-in surface is sampled with.
+    triangles : triangles of the design mesh a built-in surface is sampled with (about);
+        None for a design file, which keeps its own triangles.
     units : model units, ``"m"`` or ``"mm"``.
     """
 
     source: str
     label: str
     parameters: dict
-    triangles: int = 20000
+    triangles: int | None = 20000
     units: str = "m"
 
     @property
@@ -105,7 +110,10 @@ class Limits:
         lamella strips (a straight strip has an infinite radius).
     max_sheets : most sheets of strip material.
     congruent_strips : every strip must be cut from one circle (or line): all parts
-        congruent within the cutting tolerance, so one bending form or jig serves all.
+        congruent within `congruence_tolerance_mm`, so one bending form or jig serves all.
+    congruence_tolerance_mm : how far a strip part may differ from the common arc and
+        still count as congruent (from ``[strips] congruence_tolerance_mm``; it is also
+        the cutting tolerance the strips are planned with).
     min_coverage : smallest fraction of the design's area the panels must cover (the
         layout may leave gaps of up to one panel along the boundary).
     max_sphere_residual : largest sphere residual (relative to the mean edge) for a net to
@@ -122,6 +130,7 @@ class Limits:
     max_strip_radius_mm: float | None = None
     max_sheets: int | None = None
     congruent_strips: bool = False
+    congruence_tolerance_mm: float = 0.1
     min_coverage: float | None = None
     max_sphere_residual: float = 1e-6
 
@@ -135,12 +144,17 @@ class StripOptions:
     height_mm, thickness_mm, sheet_mm : strip height, material thickness, sheet size.
     nets : ``"auto"`` (nets whose lamellas unroll onto circles or lines: constant radius,
         CMC, linear Weingarten and the A-nets), ``"all"``, or a list of net types.
+    congruence_tolerance_mm : cutting tolerance of the strips
+        (`fabplan.strips.StripSettings.tolerance_mm`): parts that differ from one common
+        arc by at most this much are congruent, and runs of nodes within it of one circle
+        are cut as one arc.
     """
 
     height_mm: float
     thickness_mm: float
     sheet_mm: tuple[float, float] = (2500.0, 1250.0)
     nets: tuple | str = "auto"
+    congruence_tolerance_mm: float = 0.1
 
     def wanted(self, net: str) -> bool:
         if self.nets == "all":
@@ -315,6 +329,17 @@ class _Table:
             self.fail(key, f"must be true or false, got {value!r}")
         return value
 
+    def only(self, tables) -> None:
+        """Refuse top-level tables other than `tables` before anything else is read, so
+        that a misspelt table (``[panel]``) is named, not reported as missing keys."""
+        for key in self.data:
+            if key not in tables:
+                header = {t: f"[[{t}]]" if t == "candidates" else f"[{t}]" for t in tables}
+                close = difflib.get_close_matches(key, tables, n=1, cutoff=0.7)
+                hint = f" (did you mean {header[close[0]]}?)" if close else \
+                    f"; the tables are {', '.join(header.values())}"
+                raise InputError(f"{self.file}: [{key}] is not a known table{hint}")
+
     def done(self) -> None:
         """Refuse keys nobody asked for (a typo must not silently drop a limit)."""
         for key in self.data:
@@ -377,6 +402,7 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{file}: not a valid TOML study file: {exc}") from None
     top = _Table(data, "", file)
+    top.only(TABLES)
     folder = path.parent if path else Path.cwd()
 
     meta = _Table(top.get("study", {}), "study", file)
@@ -390,8 +416,9 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     panels.done()
 
     design = _design(_Table(top.get("design", None) or {}, "design", file), folder)
-    limits = _limits(_Table(top.get("limits", None) or {}, "limits", file))
     strips = _strips(_Table(top.get("strips"), "strips", file)) if top.has("strips") else None
+    limits = _limits(_Table(top.get("limits", None) or {}, "limits", file),
+                     congruence_tolerance_mm=strips.congruence_tolerance_mm if strips else 0.1)
     cost = _cost(_Table(top.get("cost", {}), "cost", file))
     candidates = _candidates(top.get("candidates", "auto"), file)
     top.done()
@@ -408,7 +435,6 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
         t.fail("surface", "or design.file: give exactly one (a built-in surface name or a "
                "triangle-mesh file)")
     units = t.text("units", "m", choices=("m", "mm"))
-    triangles = t.number("triangles", 20000, integer=True)
     parameters = t.get("parameters", {})
     if not isinstance(parameters, dict):
         t.fail("parameters", "must be a table of surface parameters")
@@ -418,8 +444,12 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
         source = (folder / file).resolve()
         if not source.is_file():
             t.fail("file", f"names {file!r}, which does not exist (looked in {folder})")
+        if t.has("triangles"):
+            t.fail("triangles", "belongs to a built-in surface; a design file keeps its own "
+                   "triangles")
         t.done()
-        return DesignSpec(str(source), Path(file).name, {}, triangles, units)
+        return DesignSpec(str(source), Path(file).name, {}, None, units)
+    triangles = t.number("triangles", 20000, integer=True)
     if surface not in SURFACES:
         t.fail("surface", f"is {surface!r}, not a built-in surface; known: {', '.join(SURFACES)}"
                + _suggest(surface, SURFACES))
@@ -453,7 +483,7 @@ def _check_surface(spec: str, t: _Table) -> None:
         t.fail("parameters", f"do not describe a surface: {exc}")
 
 
-def _limits(t: _Table) -> Limits:
+def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
     limits = Limits(
         max_deviation_mm=t.number("max_deviation_mm", required=True, unit="mm"),
         mold_tolerance_mm=t.number("mold_tolerance_mm", required=True, unit="mm"),
@@ -465,6 +495,7 @@ def _limits(t: _Table) -> Limits:
         max_strip_radius_mm=t.number("max_strip_radius_mm", unit="mm"),
         max_sheets=t.number("max_sheets", integer=True),
         congruent_strips=t.boolean("congruent_strips"),
+        congruence_tolerance_mm=congruence_tolerance_mm,
         min_coverage=t.number("min_coverage"),
         max_sphere_residual=t.number("max_sphere_residual", 1e-6),
     )
@@ -496,7 +527,9 @@ def _strips(t: _Table) -> StripOptions:
         t.fail("nets", f"must be \"auto\", \"all\" or a list of net types, got {nets!r}")
     options = StripOptions(height_mm=t.number("height_mm", required=True, unit="mm"),
                            thickness_mm=t.number("thickness_mm", required=True, unit="mm"),
-                           sheet_mm=(float(sheet[0]), float(sheet[1])), nets=nets)
+                           sheet_mm=(float(sheet[0]), float(sheet[1])), nets=nets,
+                           congruence_tolerance_mm=t.number("congruence_tolerance_mm", 0.1,
+                                                            unit="mm"))
     t.done()
     return options
 
@@ -573,8 +606,11 @@ def _candidates(value, file: str) -> tuple:
         if radii != [None] and preset.radius != "param":
             t.fail("radius", f"does not apply to net type {net!r}")
         for a in angles:
-            if a is not None and not 0 < a < 180:
-                t.fail("angle", f"must lie strictly between 0 and 180 degrees, got {a:g}")
+            if a is not None and not 0 < a <= 90:
+                t.fail("angle", f"must lie in (0, 90] degrees, got {a:g}: an isogonal net of "
+                       f"angle a is the same net as one of 180 - a with the families swapped "
+                       f"(ask for {180 - a:g})" if 90 < a < 180 else
+                       f"must lie in (0, 90] degrees, got {a:g}")
         sweep = len(angles) * len(radii) > 1
         for a in angles:
             for r in radii:
@@ -660,10 +696,12 @@ def copy_template(name: str, destination: str | Path) -> list:
     from .io import write_texts
 
     source = template_path(name)
+    folder = str(destination).endswith(("/", os.sep)) or Path(destination).is_dir()
     destination = Path(destination)
-    if destination.suffix.lower() != ".toml":
-        destination = destination / source.name if destination.is_dir() else \
-            destination.with_suffix(".toml")
+    if folder:
+        destination = destination / source.name
+    elif destination.suffix.lower() != ".toml":
+        destination = destination.with_suffix(".toml")
     study = read_study(source)
     files = {destination: source.read_text(encoding="utf-8")}
     referenced = [Path(study.design.source)] if Path(study.design.source).is_file() else []

@@ -4,11 +4,14 @@ A small study on a saddle runs once per module (about 10 s) and the tests read w
 wrote: every verdict must trace to a number in ``study.json``, the files must be real
 (nets that reload with the measured residuals, DXF that reads back, a report with its
 pictures embedded), and a limit changed in the study file must flip the verdict for the
-right reason.
+right reason. Judging is a pure function of the metrics (`judge_study`), so other limits
+are tried on the same run without solving again.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import html
 import json
 import re
 from pathlib import Path
@@ -20,9 +23,11 @@ import pytest
 from fabplan.cli import main
 from fabplan.errors import InputError, SolverError
 from fabplan.geometry import canonical_stars, fit_star_spheres
-from fabplan.mesh import load_mesh
-from fabplan.study import run_study, verdict
-from fabplan.study_spec import parse_study, read_study, template_names, template_path
+from fabplan.mesh import QuadMesh, load_mesh
+from fabplan.molds import plan_molds
+from fabplan.study import candidate_cost, judge_study, mold_metrics, run_study, same_net, verdict
+from fabplan.study_report import check_output_folder, study_html, study_record
+from fabplan.study_spec import CostWeights, parse_study, read_study, template_names, template_path
 
 STUDY = """\
 [study]
@@ -66,13 +71,30 @@ def _write_study(folder: Path, deviation: float) -> Path:
 
 
 @pytest.fixture(scope="module")
-def study_run(tmp_path_factory):
-    """The saddle study run through the CLI: (study file, output folder, study.json)."""
+def study_result(tmp_path_factory):
+    """The saddle study run and written as `fabplan study` does: (study file, output
+    folder, study.json, StudyResult, progress lines).
+
+    The output folder holds an earlier study (a study.json and a file of that run) before:
+    the new study must replace it as a whole."""
+    from fabplan.study_report import write_study
+
     folder = tmp_path_factory.mktemp("study")
     path = _write_study(folder, 200)
     out = folder / "out"
-    assert main(["study", str(path), "-o", str(out), "-q"]) == 0
-    return path, out, json.loads((out / "study.json").read_text(encoding="utf-8"))
+    out.mkdir()
+    (out / "study.json").write_text("{}", encoding="utf-8")
+    (out / "left-over.csv").write_text("of the earlier run", encoding="utf-8")
+    lines: list = []
+    result = run_study(read_study(path), progress=lines.append)
+    write_study(result, out, progress=lines.append)
+    return path, out, json.loads((out / "study.json").read_text(encoding="utf-8")), result, lines
+
+
+@pytest.fixture(scope="module")
+def study_run(study_result):
+    """(study file, output folder, study.json) of the saddle study."""
+    return study_result[:3]
 
 
 def _candidate(record: dict, name: str) -> dict:
@@ -103,7 +125,20 @@ def test_auto_candidates_cover_the_rationalizations():
     (("net = \"const-radius\"", "net = \"const-radios\""), "candidates[1].net must be one of"),
     (("surface = \"hyperbolic-paraboloid\"", "surface = \"hypar\""), "design.surface is 'hypar'"),
     (("rise = 1.2", "rise = 1.2, wdth = 3"), "design.parameters do not describe a surface"),
-    (("angle = 80", "angle = 200"), "candidates[0].angle must lie strictly between 0 and 180"),
+    (("angle = 80", "angle = 200"), "candidates[0].angle must lie in (0, 90] degrees, got 200"),
+    (("angle = 80", "angle = 120"), "candidates[0].angle must lie in (0, 90] degrees, got 120: an "
+                                    "isogonal net of angle a is the same net as one of 180 - a "
+                                    "with the families swapped (ask for 60)"),
+    (("angle = 80", "angle = { from = 80, to = 100, step = 10 }"),
+     "candidates[0].angle must lie in (0, 90] degrees, got 100"),
+    (("angle = 80", "angle = 0"), "candidates[0].angle must be"),
+    (("[panels]", "[panel]"), "study: [panel] is not a known table (did you mean [panels]?)"),
+    (("[limits]", "[limts]"), "[limts] is not a known table (did you mean [limits]?)"),
+    (("triangles = 4000", "triangles = 4000\nresolution = 3"), "design.resolution is not a known key"),
+    (("sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = 0"),
+     "strips.congruence_tolerance_mm must be a positive number (mm), got 0"),
+    (("sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = \"fine\""),
+     "strips.congruence_tolerance_mm must be a positive number (mm)"),
     (("net = \"const-radius\"", "net = \"const-radius\"\nangle = 70"),
      "candidates[1].angle does not apply to net type 'const-radius'"),
     (("net = \"const-radius\"", "net = \"sstar\""), "candidates[1].net is the S*-net type"),
@@ -172,6 +207,20 @@ def test_a_template_is_copied_to_start_a_study(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err
 
 
+def test_templates_copied_to_a_folder_keep_their_name(tmp_path):
+    """`-o newdir/` (trailing slash) wrote newdir.toml; a folder gets NAME.toml in it."""
+    assert main(["templates", "pavilion", "-o", str(tmp_path / "newdir") + "/"]) == 0
+    assert (tmp_path / "newdir" / "pavilion.toml").is_file()
+    assert not (tmp_path / "newdir.toml").exists()
+    (tmp_path / "there").mkdir()
+    assert main(["templates", "tower", "-o", str(tmp_path / "there")]) == 0
+    assert read_study(tmp_path / "there" / "tower.toml").candidates == \
+        read_study(template_path("tower")).candidates
+    assert (tmp_path / "there" / "tower-profile.txt").is_file()   # the file it refers to
+    assert main(["templates", "pavilion", "-o", str(tmp_path / "plain")]) == 0
+    assert (tmp_path / "plain.toml").is_file()                     # no slash: a file name
+
+
 # ---------------------------------------------------------------------------- the run
 def test_study_json_lists_every_candidate_with_its_evidence(study_run):
     _, out, record = study_run
@@ -188,6 +237,20 @@ def test_study_json_lists_every_candidate_with_its_evidence(study_run):
         assert max(m["deviation_mm"]["mean"], m["deviation_mm"]["p95"]) <= m["deviation_mm"]["max"]
     assert record["recommended"] in names
     assert _candidate(record, record["recommended"])["feasible"]
+    flags = {c["name"]: c["recommended"] for c in record["candidates"]}
+    assert all(isinstance(v, bool) for v in flags.values())
+    assert [n for n, v in flags.items() if v] == [record["recommended"]]
+
+
+def test_study_json_records_run_and_total_seconds(study_run):
+    """`seconds` used to leave out writing the files (canopy: 27 s claimed, 100 s wall)."""
+    _, out, record = study_run
+    assert "seconds" not in record
+    assert 0 < record["seconds_run"] < record["seconds_total"]
+    html_text = (out / "report.html").read_text(encoding="utf-8")
+    assert f"run in {record['seconds_total']:.0f} s including writing the files" in html_text
+    per_candidate = sum(c["metrics"]["seconds"]["total"] for c in record["candidates"])
+    assert per_candidate <= record["seconds_run"]
 
 
 def test_gliding_candidates_lie_on_the_design_and_meet_their_type(study_run):
@@ -217,6 +280,16 @@ def test_every_verdict_traces_to_a_measured_number(study_run):
         assert c["feasible"] == all(ck["ok"] for ck in c["checks"])
 
 
+def test_counts_are_written_in_words_with_the_right_number(study_result):
+    """"1 molds" in the terminal lines and picture titles."""
+    _, out, _, _, lines = study_result
+    page = (out / "report.html").read_text(encoding="utf-8")
+    text = " ".join(lines) + " " + page
+    assert re.search(r"\b1 mold\b", text)          # the saddle's S-nets need one mold
+    assert not re.search(r"\b1 (molds|panels|sheets|strips|parts|lamellas)\b", text)
+    assert not re.search(r"\b(0|[2-9]|\d\d+) (mold|panel|sheet|strip|part)\b(?!-)", text)
+
+
 def test_candidate_files_are_real(study_run):
     _, out, record = study_run
     for c in record["candidates"]:
@@ -230,8 +303,8 @@ def test_candidate_files_are_real(study_run):
                                          rel=1e-3, abs=1e-12)
         rows = (out / outputs["molds_csv"]).read_text(encoding="utf-8").strip().splitlines()
         assert len(rows) - 1 == c["metrics"]["panels"]
-        molds = {int(r.split(",")[1]) for r in rows[1:]}
-        assert len(molds) == c["metrics"]["molds"]["count"]
+        curved = {int(r.split(",")[1]) for r in rows[1:] if r.split(",")[2] != "planar"}
+        assert len(curved) == c["metrics"]["molds"]["count"]       # flat panels need none
 
 
 def test_lamella_candidates_get_strips_that_read_back(study_run):
@@ -248,6 +321,21 @@ def test_lamella_candidates_get_strips_that_read_back(study_run):
     assert _candidate(record, "isogonal-80")["metrics"]["strips"] is None   # not a lamella net
 
 
+def test_the_report_links_every_file_relatively(study_run):
+    """The Files list was plain text; it links each file relative to report.html."""
+    _, out, record = study_run
+    page = (out / "report.html").read_text(encoding="utf-8")
+    hrefs = re.findall(r'<a href="([^"]+)"', page)
+    expected = set()
+    for c in record["candidates"]:
+        for value in c["outputs"].values():
+            expected.update(value if isinstance(value, list) else [value])
+    assert expected and set(hrefs) == expected
+    for href in hrefs:
+        assert not href.startswith(("/", "file:")) and ":" not in href
+        assert (out / href).is_file()
+
+
 def test_the_report_embeds_a_picture_per_candidate(study_run):
     _, out, record = study_run
     html = (out / "report.html").read_text(encoding="utf-8")
@@ -259,7 +347,7 @@ def test_the_report_embeds_a_picture_per_candidate(study_run):
     assert len(csv_rows) == 1 + len(record["candidates"])
 
 
-def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path):
+def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, capsys):
     """Lower max_deviation_mm below what const-radius measured: it alone becomes
     infeasible, because of its deviation; the numbers stay the same (deterministic)."""
     _, _, record = study_run
@@ -267,8 +355,15 @@ def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path):
     measured = before["metrics"]["deviation_mm"]["max"]
     assert before["feasible"] and measured > 0.01
     path = _write_study(tmp_path, round(measured / 2, 6))
+    (tmp_path / "out").mkdir()                      # an empty folder is used as it is
     assert main(["study", str(path), "-o", str(tmp_path / "out"), "-q"]) == 0
     again = json.loads((tmp_path / "out" / "study.json").read_text(encoding="utf-8"))
+    # the last line states the whole time, including writing the files
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    total, run, write = map(int, re.search(r"in (\d+) s: (\d+) s to run the candidates, "
+                                           r"(\d+) s to write the files$", last).groups())
+    assert abs(total - (run + write)) <= 1 and write >= 1
+    assert total >= round(again["seconds_total"]) >= round(again["seconds_run"])
     after = _candidate(again, "const-radius")
     assert not after["feasible"]
     failed = [ck for ck in after["checks"] if not ck["ok"]]
@@ -293,15 +388,23 @@ def test_a_failing_candidate_is_reported_and_the_study_goes_on(monkeypatch):
         return real(mesh, net, **kw)
 
     monkeypatch.setattr(module, "optimize", broken)
-    text = re.sub(r"\[strips\].*?\n\n", "", STUDY.format(deviation=200), flags=re.S)
+    text = STUDY.format(deviation=200).replace("sheet_mm = [1200, 600]",
+                                               "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = 0.05")
     study = parse_study(text.replace('net = "isogonal"\nangle = 80', 'net = "cmc"'))
+    assert study.limits.congruence_tolerance_mm == study.strips.congruence_tolerance_mm == 0.05
     result = run_study(study)
     failed = next(c for c in result.candidates if c.name == "const-radius")
     assert failed.failed and not failed.feasible and failed.rank is None
     assert failed.reasons == ["the solver diverged at iteration 3: residual 1e9"]
+    # a failed candidate's metrics hold only the time until it failed (as the schema says)
+    assert set(failed.metrics) == {"seconds"} and set(failed.metrics["seconds"]) == {"total"}
     cmc = next(c for c in result.candidates if c.name == "cmc")
     assert not cmc.failed and cmc.rank is not None
+    assert cmc.strips.strips.settings.tolerance_mm == 0.05        # passed to the strip planning
     assert result.recommended is not None and result.recommended != "const-radius"
+    record = study_record(result)
+    assert record["study"]["limits"]["congruence_tolerance_mm"] == 0.05
+    assert _candidate(record, "const-radius")["metrics"] == failed.metrics
 
 
 def test_an_existing_folder_of_other_files_is_not_replaced(tmp_path, capsys):
@@ -312,6 +415,26 @@ def test_an_existing_folder_of_other_files_is_not_replaced(tmp_path, capsys):
     assert main(["study", str(path), "-o", str(keep), "-q"]) == 2
     assert "not empty" in capsys.readouterr().err
     assert [p.name for p in keep.iterdir()] == ["notes.txt"]
+    (tmp_path / "file").write_text("mine", encoding="utf-8")
+    assert main(["study", str(path), "-o", str(tmp_path / "file"), "-q"]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+    assert (tmp_path / "file").read_text(encoding="utf-8") == "mine"
+
+
+def test_an_empty_folder_or_an_earlier_study_is_replaced(study_run, tmp_path, capsys):
+    """Re-running a study into its folder replaces it (documented, also in --help)."""
+    _, out, record = study_run
+    assert not (out / "left-over.csv").exists()           # the earlier study's file is gone
+    assert record["schema"] == "fabplan-study/1"           # and its study.json replaced
+    (tmp_path / "empty").mkdir()
+    check_output_folder(tmp_path / "empty")
+    check_output_folder(out)
+    check_output_folder(tmp_path / "new" / "deeper")
+    with pytest.raises(SystemExit):
+        main(["study", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "replaced as a whole when it is empty or holds an earlier study" in help_text
+    assert "a folder of other files, or a file, is refused" in help_text
 
 
 def test_kinks_and_coverage_are_measured_on_the_net(study_run):
@@ -328,6 +451,40 @@ def test_kinks_and_coverage_are_measured_on_the_net(study_run):
     cos = np.abs(np.sum(normals[pairs[:, 0]] * normals[pairs[:, 1]], axis=1))
     kink = np.degrees(np.arccos(np.clip(cos, -1, 1))).max()
     assert kink == pytest.approx(c["metrics"]["kink_deg"]["max"], abs=0.2)
+
+
+def test_the_heat_map_shows_the_peak_deviation_at_its_vertex(study_result):
+    """Panels were coloured by the mean of their corners: the peak never showed."""
+
+    import base64
+    import io
+
+    import matplotlib.image as mpimg
+    from matplotlib import colormaps
+
+    from fabplan.study_report import deviation_figure
+
+
+    result = study_result[3]
+    c = next(c for c in result.candidates if c.name == "const-radius")
+    uri = deviation_figure(c, result.design, 1e-3, result.study.design.mm_per_unit)
+    image = mpimg.imread(io.BytesIO(base64.b64decode(uri.split(",", 1)[1])), format="png")
+    picture = image[:, : int(0.85 * image.shape[1]), :3]           # left of the colour bar
+    top = np.array(colormaps["viridis"](1.0)[:3])                  # the colour of the maximum
+    near = np.linalg.norm(picture - top, axis=2) < 0.1
+    assert near.sum() >= 3
+
+
+def test_a_roof_is_seen_from_low_enough_to_show_its_rise(study_result):
+    """The canopy's saddle looked flat (seen from 60 degrees up)."""
+    from fabplan.study_report import net_view_angles
+    from fabplan.surfaces import load_design
+
+    elevation, _ = net_view_angles(study_result[3].design)
+    assert 10 <= elevation <= 30
+    tower = load_design(f"revolution:profile={template_path('tower').parent / 'tower-profile.txt'}",
+                        triangles=2000)
+    assert net_view_angles(tower)[0] <= 30
 
 
 def test_char_conjugate_starts_at_the_conjugate_angle_of_the_design():
@@ -350,3 +507,176 @@ def test_char_conjugate_starts_at_the_conjugate_angle_of_the_design():
     assert start_angle(Candidate("c", "char-conjugate", start_angle=70), design) == 70
     assert start_angle(Candidate("c", "isogonal", angle=65), design) == 65
     assert start_angle(Candidate("c", "snet"), design) == 90
+
+
+# ---------------------------------------------------------------------------- judging
+def _rejudge(result, **limits):
+    """The same measured candidates judged under other limits (no new run)."""
+    study = dataclasses.replace(result.study,
+                                limits=dataclasses.replace(result.study.limits, **limits))
+    return judge_study(study, result.design, result.candidates)
+
+
+def _verdict_box(page: str, name: str) -> str:
+    """The text of the verdict box of candidate `name` in a report."""
+    section = re.search(rf"<h2>(?:\d+\. )?{re.escape(name)}</h2>(.*?)</section>", page, re.S)
+    box = re.search(r'<p class="(?:note|fail)">(.*?)</p>', section.group(1), re.S)
+    return html.unescape(box.group(1))
+
+
+def test_infeasible_verdict_boxes_name_the_failed_checks(study_result):
+    """Every "Not feasible" box listed the checks the candidate passed, not the failing one."""
+    result = study_result[3]
+    by_name = {c.name: c for c in result.candidates}
+    deviation = by_name["const-radius"].metrics["deviation_mm"]["max"]
+    kink = by_name["isogonal-80"].metrics["kink_deg"]["max"]
+    judged = _rejudge(result, max_deviation_mm=deviation / 2, max_kink_deg=kink - 0.01)
+    page = study_html(judged, {}, {})
+    infeasible = [c for c in judged.candidates if not c.feasible]
+    assert {c.name for c in infeasible} >= {"const-radius", "isogonal-80"}
+    for c in infeasible:
+        box = _verdict_box(page, c.name)
+        assert box.startswith("Not feasible: ")
+        failed = [ck["text"] for ck in c.checks if not ck["ok"]]
+        passed = [ck["text"] for ck in c.checks if ck["ok"]]
+        assert failed and c.reasons == failed
+        for text in failed:
+            assert text in box
+        for text in passed:
+            assert text not in box
+    for c in judged.candidates:
+        if c.feasible:
+            box = _verdict_box(page, c.name)
+            assert box.startswith("Feasible: ") and all(ck["text"] in box for ck in c.checks)
+    # judging again left the run's own verdicts alone
+    assert all(c.feasible for c in result.candidates)
+
+
+def test_sheets_are_charged_only_when_every_candidate_has_strips(study_result):
+    """With nets = "auto" only const-radius got strips: its sheets (24 here) made it look
+    dearer than candidates with the same molds and panels."""
+    _, _, record, result, _ = study_result
+    assert record["sheets_charged"] is False and result.sheets_charged is False
+    lamella = _candidate(record, "const-radius")
+    assert lamella["metrics"]["strips"]["sheets"] > 0
+    assert lamella["cost_terms"]["sheets"] == 0
+    assert lamella["cost"] == pytest.approx(sum(lamella["cost_terms"].values()))
+    page = html.unescape((study_result[1] / "report.html").read_text(encoding="utf-8"))
+    assert "Strip sheets are reported but not charged: only 1 of 3 candidates gets strips" in page
+    assert "not charged" in record["recommendation"]
+    # every candidate with strips: now they are charged
+    strips = result.candidates[2].metrics["strips"]
+    same = [dataclasses.replace(c, metrics={**c.metrics, "strips": strips})
+            for c in result.candidates]
+    judged = judge_study(result.study, result.design, same)
+    assert judged.sheets_charged
+    weight = result.study.cost.sheet
+    for before, after in zip(result.candidates, judged.candidates, strict=True):
+        assert after.cost_terms["sheets"] == weight * strips["sheets"] > 0
+        assert after.cost == pytest.approx(before.cost + weight * strips["sheets"])
+    assert "not charged" not in judged.recommendation
+
+
+def test_candidate_cost_charges_sheets_only_when_asked():
+    metrics = {"molds": {"count": 3, "panel_types": {"planar": 10, "double_curved": 5}},
+               "coverage": 0.5, "strips": {"sheets": 7}, "deviation_mm": {"max": 2.0}}
+    w = CostWeights()
+    charged, terms = candidate_cost(metrics, w)
+    free, free_terms = candidate_cost(metrics, w, charge_sheets=False)
+    assert terms["sheets"] == 35 and free_terms["sheets"] == 0
+    assert charged - free == pytest.approx(35)
+    assert free == pytest.approx(300 + (10 + 4 * 5) / 0.5 + 2)
+
+
+def test_congruence_check_is_judged_on_its_tolerance(study_result):
+    """The check had a hidden tolerance (0.1 mm); its measured value was a bool."""
+    c = study_result[3].candidates[2]
+    strips = {**c.metrics["strips"], "congruence_deviation_mm": 0.3, "congruent": False}
+    metrics = {**c.metrics, "strips": strips}
+    limits = study_result[3].study.limits
+    for tol, ok in ((0.1, False), (0.5, True)):
+        checks = verdict(metrics, dataclasses.replace(limits, congruent_strips=True,
+                                                      congruence_tolerance_mm=tol))
+        check = next(ck for ck in checks if ck["limit"] == "congruent_strips")
+        assert (check["bound"], check["measured"], check["ok"]) == (tol, 0.3, ok)
+        assert f"{tol:g} mm" in check["text"] and "0.30 mm" in check["text"]
+        assert ("not congruent" in check["text"]) is (not ok)
+
+
+def test_study_file_congruence_tolerance_defaults_and_is_recorded(study_run):
+    _, _, record = study_run
+    assert record["study"]["strips"]["congruence_tolerance_mm"] == 0.1
+    assert record["study"]["limits"]["congruence_tolerance_mm"] == 0.1
+    study = parse_study(STUDY.format(deviation=50).replace(
+        "sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = 0.4"))
+    assert study.strips.congruence_tolerance_mm == study.limits.congruence_tolerance_mm == 0.4
+
+
+def test_a_candidate_that_ends_at_an_earlier_net_is_named_so(study_result):
+    """CMC on the canopy converged to the minimal surface and was shown as a saving."""
+    result = study_result[3]
+    iso = next(c for c in result.candidates if c.name == "isogonal-80")
+    assert iso.same_net_as is None
+    assert same_net(iso.net.mesh, iso.net.mesh.with_vertices(iso.net.mesh.vertices + 1e-9),
+                    1e-6 * result.study.panel_size)
+    assert not same_net(iso.net.mesh, iso.net.mesh.with_vertices(iso.net.mesh.vertices + 1e-5),
+                        1e-6 * result.study.panel_size)
+    twin = dataclasses.replace(iso, candidate=dataclasses.replace(iso.candidate, name="iso-again"),
+                               same_net_as="isogonal-80")
+    judged = judge_study(result.study, result.design, [*result.candidates, twin])
+    again = next(c for c in judged.candidates if c.name == "iso-again")
+    assert any("the same net as isogonal-80" in n for n in again.notes)
+    assert "iso-again (the same net as isogonal-80)" in judged.recommendation
+    assert "the same net as isogonal-80" in _verdict_box(study_html(judged, {}, {}), "iso-again")
+    # the run found no twins among the saddle's three different nets
+    assert [c.same_net_as for c in result.candidates] == [None, None, None]
+
+
+def test_flat_panels_need_no_mold():
+    """The tower's planar glass was said to need 1 mold and charged 100 units for it."""
+    u, v = np.meshgrid(np.linspace(0, 4, 5), np.linspace(0, 3, 4), indexing="ij")
+    flat = QuadMesh.grid(np.stack([u, v, 0 * u], axis=-1))
+    plan = plan_molds(flat, tolerance_mm=1.0, units="m")
+    assert plan.mold_count == 1                        # the plane the flat panels lie on
+    m = mold_metrics(plan)
+    assert m["count"] == 0 and m["all_panels_flat"] and m["panel_types"]["planar"] == 12
+    saddle = QuadMesh.grid(np.stack([u, v, 0.3 * (u - 2) * (v - 1.5)], axis=-1))
+    curved = mold_metrics(plan_molds(saddle, tolerance_mm=1.0, units="m"))
+    assert curved["count"] >= 1 and not curved["all_panels_flat"]
+    metrics = {"molds": m, "coverage": 1.0, "strips": None, "deviation_mm": {"max": 0.0},
+               "sphere_residual_relative_max": 0.0, "converged": True, "status": "converged",
+               "iterations": 1, "planarity_mm": {"max": 0.0}, "kink_deg": {"max": 0.0}}
+    cost, terms = candidate_cost(metrics, CostWeights())
+    assert terms["molds"] == 0 and cost == pytest.approx(12)
+    limits = parse_study(STUDY.format(deviation=50).replace(
+        "max_kink_deg = 20", "max_kink_deg = 20\nmax_molds = 1")).limits
+    check = next(ck for ck in verdict(metrics, limits) if ck["limit"] == "max_molds")
+    assert check["ok"] and check["measured"] == 0
+    assert check["text"] == "it needs no molds: all panels are flat (limit 1)"
+
+
+def test_a_design_file_records_its_own_triangle_count(tmp_path):
+    """study.design.triangles said 20000 for a file of 7832 triangles."""
+    from fabplan.surfaces import load_design
+
+    u, v = np.meshgrid(np.linspace(-2, 2, 9), np.linspace(-2, 2, 7), indexing="ij")
+    X = np.stack([u, v, 0.1 * u * v], axis=-1).reshape(-1, 3)
+    ids = np.arange(63).reshape(9, 7)
+    quads = np.stack([ids[:-1, :-1], ids[1:, :-1], ids[1:, 1:], ids[:-1, 1:]], -1).reshape(-1, 4)
+    lines = [f"v {x} {y} {z}" for x, y, z in X]
+    lines += [f"f {a + 1} {b + 1} {c + 1}\nf {a + 1} {c + 1} {d + 1}" for a, b, c, d in quads]
+    (tmp_path / "facade.obj").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    text = STUDY.format(deviation=50).replace(
+        'surface = "hyperbolic-paraboloid"\nparameters = { width = 4, depth = 4, rise = 1.2 }\n'
+        'triangles = 4000', 'file = "facade.obj"')
+    (tmp_path / "s.toml").write_text(text, encoding="utf-8")
+    study = read_study(tmp_path / "s.toml")
+    assert study.design.triangles is None
+    design = load_design(study.design.source)
+    record = study_record(judge_study(study, design, []))
+    assert record["study"]["design"]["triangles"] == record["design"]["triangles"] == 96
+    (tmp_path / "s.toml").write_text(text.replace('file = "facade.obj"',
+                                                  'file = "facade.obj"\ntriangles = 5000'),
+                                     encoding="utf-8")
+    with pytest.raises(InputError, match="design.triangles belongs to a built-in surface"):
+        read_study(tmp_path / "s.toml")

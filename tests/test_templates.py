@@ -1,22 +1,35 @@
 """Every bundled template runs as it is and shows what it is for (read from study.json).
 
-- stadium: a linear Weingarten candidate is feasible and needs far fewer molds than the
-  baseline, within the deviation limit;
-- pavilion: a constant-radius candidate has congruent strips (one arc radius) that read
-  back from their DXF files, where the baseline's are not congruent;
-- tower: the characteristic conjugate candidate has planar panels, the baseline not;
-- canopy: the minimal candidate is a minimal surface within the deviation limit.
+What is checked (the README's template table quotes the measured numbers, these tests the
+claims that must hold whatever the exact numbers):
+
+- stadium: a linear Weingarten candidate is feasible and needs at most 0.7 times the
+  baseline's molds and at most half its molds per panel, within the deviation limit; it
+  is recommended, and the recommendation says first which limit the baseline fails;
+- pavilion: a constant-radius candidate is feasible with congruent strips (one arc
+  radius) that read back from their DXF files, where the baseline's are not congruent;
+  the recommendation leads with the baseline's congruence failure and the strips, not
+  with molds;
+- tower: the characteristic conjugate candidate has planar panels and needs no molds
+  (and pays none), the baseline's quads are more than 10 times the tolerance out of plane;
+- canopy: the minimal candidate is a minimal surface within the deviation limit with
+  straight lamellas; CMC ends at the same net and is named so; the description's sizes
+  are the design's.
 """
 
 from __future__ import annotations
 
+import html
 import json
+import re
 
 import ezdxf
+import numpy as np
 import pytest
 
 from fabplan.cli import main
 from fabplan.study_spec import read_study, template_names, template_path
+from fabplan.surfaces import load_design
 
 
 def _run(name: str, folder) -> dict:
@@ -36,6 +49,21 @@ def _baseline(record: dict) -> dict:
     return next(c for c in record["candidates"] if c["baseline"])
 
 
+def _sentences(text: str) -> list:
+    return re.split(r"(?<=[.)])\s+(?=[A-Z])", text)
+
+
+def _baseline_failure_comes_first(record: dict) -> None:
+    """The recommendation's second sentence names the limit the baseline fails, with the
+    measured number against the limit, before anything about the recommended candidate."""
+    base = _baseline(record)
+    assert not base["feasible"]
+    second = _sentences(record["recommendation"])[1]
+    assert second.startswith("The baseline")
+    for check in base["checks"]:
+        assert (check["text"] in second) is (not check["ok"])
+
+
 def test_stadium_linear_weingarten_needs_far_fewer_molds(tmp_path):
     record = _run("stadium", tmp_path / "stadium")
     limits = read_study(template_path("stadium")).limits
@@ -48,6 +76,10 @@ def test_stadium_linear_weingarten_needs_far_fewer_molds(tmp_path):
     per_panel = best["molds"]["count"] / best["panels"]
     assert per_panel <= 0.5 * base["molds"]["count"] / base["panels"]
     assert record["recommended"] in {c["name"] for c in feasible}
+    _baseline_failure_comes_first(record)
+    chosen = next(c for c in record["candidates"] if c["recommended"])["metrics"]
+    assert (f"It needs {chosen['molds']['count']} molds for its {chosen['panels']} panels"
+            in record["recommendation"])
 
 
 def test_pavilion_constant_radius_strips_are_congruent(tmp_path):
@@ -63,10 +95,19 @@ def test_pavilion_constant_radius_strips_are_congruent(tmp_path):
     for name in c["outputs"]["strips_dxf"]:
         doc = ezdxf.readfile(out / name)
         assert not doc.audit().has_errors
+    # a lamella study: the recommendation is about strips, not about molds
+    _baseline_failure_comes_first(record)
+    text = record["recommendation"]
+    chosen = next(c for c in record["candidates"] if c["recommended"])["metrics"]["strips"]
+    assert f"Its {chosen['strips']} lamellas are cut as {chosen['parts']} parts, all congruent" \
+        in text and f"nested on {chosen['sheets']} sheets" in text
+    assert "mold" not in text
+    assert record["sheets_charged"] is True          # every candidate has strips
 
 
 def test_tower_characteristic_conjugate_panels_are_planar(tmp_path):
-    record = _run("tower", tmp_path / "tower")
+    out = tmp_path / "tower"
+    record = _run("tower", out)
     limits = read_study(template_path("tower")).limits
     c = _by_net(record, "char-conjugate")[0]
     assert c["feasible"]
@@ -75,13 +116,46 @@ def test_tower_characteristic_conjugate_panels_are_planar(tmp_path):
     assert base["metrics"]["planarity_mm"]["max"] > 10 * limits.planarity_tolerance_mm
     assert not base["feasible"]
     assert any(ck["limit"] == "planarity_tolerance_mm" and not ck["ok"] for ck in base["checks"])
+    # flat glass needs no mold and is charged none
+    molds = c["metrics"]["molds"]
+    assert molds["count"] == 0 and molds["all_panels_flat"]
+    assert molds["panel_types"]["planar"] == c["metrics"]["panels"]
+    assert c["cost_terms"]["molds"] == 0
+    assert base["metrics"]["molds"]["count"] > 0 and base["cost_terms"]["molds"] > 0
+    _baseline_failure_comes_first(record)
+    assert "It needs no molds: all its" in record["recommendation"]
+    page = html.unescape((out / "report.html").read_text(encoding="utf-8"))
+    section = page[page.index(f"<h2>{c['rank']}. {c['name']}</h2>"):]
+    section = section[:section.index("</section>")]
+    assert "no molds: all panels flat" in section and "(all flat: no molds)" in section
+    assert "<td>none (all flat)</td>" in page
 
 
 def test_canopy_minimal_surface_within_the_limit(tmp_path):
-    record = _run("canopy", tmp_path / "canopy")
+    out = tmp_path / "canopy"
+    record = _run("canopy", out)
     c = _by_net(record, "minimal")[0]
     assert c["feasible"] and c["metrics"]["converged"]
     assert c["metrics"]["strips"]["straight"]               # A-net lamellas unroll straight
+    assert record["recommended"] == c["name"]
+    # CMC on a saddle converges to the minimal surface: the same net, not another saving
+    cmc = _by_net(record, "cmc")[0]
+    assert cmc["same_net_as"] == c["name"]
+    assert f"{cmc['name']} (the same net as {c['name']})" in record["recommendation"]
+    page = html.unescape((out / "report.html").read_text(encoding="utf-8"))
+    assert "infinite (planar stars)" in page
+    assert not re.search(r"\d\.\d+e\+\d+ \.\. ", page)        # no radii like 3.558e+09 .. 1e+16
+    _baseline_failure_comes_first(record)
+
+
+def test_canopy_description_states_the_design_sizes():
+    """It said "rise 4 m" for a saddle whose corners are 4 m above and below the centre."""
+    study = read_study(template_path("canopy"))
+    span = np.ptp(load_design(study.design.source, triangles=2000).vertices, axis=0)
+    description = " ".join(study.description.split())
+    assert f"{span[0]:.0f} x {span[1]:.0f} m" in description
+    assert f"{span[2] / 2:.0f} m above and below the centre" in description
+    assert f"({span[2]:.0f} m from the low to the high corners)" in description
 
 
 @pytest.mark.parametrize("name", ["stadium", "pavilion", "tower", "canopy"])
