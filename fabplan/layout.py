@@ -510,9 +510,13 @@ def layout_angle(net: str, design: DesignSurface, angle: float | None = None) ->
     if area[ok].sum() < 0.5 * area.sum():
         return 90.0
     angles = 2 * np.degrees(np.arctan(np.sqrt(ratio[ok])))
-    order = np.argsort(angles)
-    cumulative = np.cumsum(area[ok][order])
-    return round(float(angles[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])]), 1)
+    return round(_weighted_median(angles, area[ok]), 1)
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
 
 
 def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,

@@ -29,7 +29,6 @@ import numpy as np
 from .errors import FabplanError
 from .geometry import face_planarity, kink_angles
 from .molds import MOLD_TYPES, PANEL_TYPES
-from .nets import get_net
 from .report import counted
 from .study_spec import Candidate, CostWeights, Limits, Study
 
@@ -330,46 +329,14 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
 
 
 def start_angle(candidate: Candidate, design) -> float:
-    """Intersection angle (degrees) of the layout a candidate starts from.
+    """Intersection angle (degrees) of the layout a candidate starts from: the
+    candidate's own angle, else its ``start_angle``, else the natural one of its net
+    type on the design (`fabplan.layout.layout_angle`)."""
+    from .layout import layout_angle
 
-    The candidate's own angle when it has one, else its ``start_angle``; else, for a
-    characteristic conjugate net, the angle of the conjugate directions symmetric to the
-    principal ones, ``2 atan(sqrt(k1 / k2))`` (area-weighted median over the design where
-    K > 0); for a linear Weingarten net of free angle, the angle whose Euler formula
-    ``k1 cos^2 + k2 sin^2`` matches the line ``a k1 + b k2 = c`` fitted to the design's
-    curvatures, ``2 atan(sqrt(b / a))``; 90 degrees otherwise. A start far from the angle
-    the net ends at makes the solve shear the whole net, and a closed or constrained
-    layout cannot absorb that without leaving the design.
-    """
-    if candidate.angle is not None:
-        return float(candidate.angle)
-    if candidate.start_angle is not None:
+    if candidate.start_angle is not None and candidate.angle is None:
         return float(candidate.start_angle)
-    preset = get_net(candidate.net)
-    if not (preset.planar_faces or (preset.angle == "param" and preset.radius == "param")):
-        return 90.0
-    from .directions import face_principal_frames
-    from .molds import weingarten_fit
-
-    k1, k2, _ = face_principal_frames(design)
-    area = design.face_areas
-    if preset.planar_faces:
-        ratio = np.divide(k1, k2, out=np.full(len(k1), -1.0), where=k2 != 0)
-        ok = ratio > 0
-        if area[ok].sum() < 0.5 * area.sum():
-            return 90.0
-        angles = 2 * np.degrees(np.arctan(np.sqrt(ratio[ok])))
-        return round(_weighted_median(angles, area[ok]), 1)
-    line = weingarten_fit(k1, k2)["line"]
-    if line is None or line["a"] * line["b"] <= 0:
-        return 90.0
-    return round(float(2 * np.degrees(np.arctan(np.sqrt(line["b"] / line["a"])))), 1)
-
-
-def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
-    order = np.argsort(values)
-    cumulative = np.cumsum(weights[order])
-    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+    return layout_angle(candidate.net, design, candidate.angle)
 
 
 # ---------------------------------------------------------------------------- measuring
@@ -399,13 +366,9 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict
     mesh = net.mesh
     X = mesh.vertices
     props = net.properties
-    deviation = design.reference.distances(X) * mm_per_unit
+    deviation = design.distances(X) * mm_per_unit     # to the exact surface if parametric
     edges = np.linalg.norm(X[mesh.edges[:, 0]] - X[mesh.edges[:, 1]], axis=1)
-    tri = mesh.triangles()
-    tri_face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes - 2)
-    tri_area = 0.5 * np.linalg.norm(np.cross(X[tri[:, 1]] - X[tri[:, 0]],
-                                             X[tri[:, 2]] - X[tri[:, 0]]), axis=1)
-    area = np.bincount(tri_face, tri_area, minlength=len(mesh.face_sizes))
+    area = mesh.face_areas
     coverage = float(area.sum() / design.area)
     planarity = face_planarity(X, mesh.quads) * mm_per_unit
     kinks = np.degrees(kink_angles(X, mesh))

@@ -28,6 +28,7 @@ from fabplan.molds import plan_molds
 from fabplan.study import candidate_cost, judge_study, mold_metrics, run_study, same_net, verdict
 from fabplan.study_report import check_output_folder, study_html, study_record
 from fabplan.study_spec import CostWeights, parse_study, read_study, template_names, template_path
+from fabplan.surfaces import load_design
 
 STUDY = """\
 [study]
@@ -255,10 +256,13 @@ def test_study_json_records_run_and_total_seconds(study_run):
 
 def test_gliding_candidates_lie_on_the_design_and_meet_their_type(study_run):
     _, out, record = study_run
+    # held on the design's triangulation: off the exact saddle by at most its chord error
+    design = load_design("hyperbolic-paraboloid:width=4,depth=4,rise=1.2", triangles=4000)
+    chord_mm = 1000 * design.chord_error
     for name in ("baseline", "isogonal-80"):
         m = _candidate(record, name)["metrics"]
         assert m["converged"]
-        assert m["deviation_mm"]["max"] < 1e-3                  # on the design, in mm
+        assert m["deviation_mm"]["max"] <= 1.5 * chord_mm
         assert m["sphere_residual_relative_max"] < 1e-6
     angle = _candidate(record, "isogonal-80")["metrics"]["intersection_angle_deg"]
     assert abs(angle["min"] - 80) < 0.05 and abs(angle["max"] - 80) < 0.05
