@@ -38,6 +38,7 @@ __all__ = [
     "run_study",
     "judge_study",
     "measure_candidate",
+    "vertex_deviation_mm",
     "mold_metrics",
     "molds_text",
     "same_net",
@@ -348,6 +349,12 @@ def _range(values: np.ndarray) -> dict | None:
     return {"min": float(v.min()), "max": float(v.max()), "mean": float(v.mean())}
 
 
+def vertex_deviation_mm(mesh, design, mm_per_unit: float) -> np.ndarray:
+    """(n,) float, distance of every vertex of a net from the design in mm (to the exact
+    surface of a built-in design, to the triangle mesh of a design file)."""
+    return design.distances(mesh.vertices) * mm_per_unit
+
+
 def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict:
     """Everything a verdict and a report need, measured on the solved net.
 
@@ -366,7 +373,7 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict
     mesh = net.mesh
     X = mesh.vertices
     props = net.properties
-    deviation = design.distances(X) * mm_per_unit     # to the exact surface if parametric
+    deviation = vertex_deviation_mm(mesh, design, mm_per_unit)
     edges = np.linalg.norm(X[mesh.edges[:, 0]] - X[mesh.edges[:, 1]], axis=1)
     area = mesh.face_areas
     coverage = float(area.sum() / design.area)

@@ -24,7 +24,7 @@ from . import report
 from .errors import InputError
 from .io import json_text, write_texts
 from .report import counted
-from .study import CandidateResult, StudyResult, molds_text
+from .study import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
 
 __all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA"]
 
@@ -195,7 +195,7 @@ def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: f
 
     mesh = c.net.mesh
     X = mesh.vertices
-    d = design.reference.distances(X) * mm_per_unit
+    d = vertex_deviation_mm(mesh, design, mm_per_unit)
     worst = int(np.argmax(d))
     _, view = deviation_view(mesh, X[worst])
     P = X @ view.T

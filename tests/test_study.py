@@ -684,3 +684,19 @@ def test_a_design_file_records_its_own_triangle_count(tmp_path):
                                      encoding="utf-8")
     with pytest.raises(InputError, match="design.triangles belongs to a built-in surface"):
         read_study(tmp_path / "s.toml")
+
+
+def test_heat_map_and_metrics_measure_the_same_deviation(study_result):
+    """The heat map measured to the design's triangulation, the metrics to the exact
+    surface: the circled maximum (331.3 mm) differed from the table's (328.6 mm)."""
+    from fabplan.study import vertex_deviation_mm
+    from fabplan.study_report import deviation_figure
+
+    result = study_result[3]
+    c = next(c for c in result.candidates if c.name == "const-radius")
+    d = vertex_deviation_mm(c.net.mesh, result.design, result.study.design.mm_per_unit)
+    assert d.max() == c.metrics["deviation_mm"]["max"]
+    exact = result.design.distances(c.net.mesh.vertices) * result.study.design.mm_per_unit
+    assert np.array_equal(d, exact)
+    assert deviation_figure(c, result.design, 1e-3, result.study.design.mm_per_unit).startswith(
+        "data:image/png;base64,")
