@@ -223,8 +223,9 @@ def _cmd_layout(args) -> int:
               f"{layout.turning_deg.max():.0f} deg within one panel at {len(layout.turning_points)} "
               f"place{'s' if len(layout.turning_points) > 1 else ''} ({where}"
               f"{', ...' if len(layout.turning_points) > 3 else ''}: umbilics or near-umbilics): "
-              "no net of this panel size follows them there; a smaller panel size or a smoother "
-              "design does", file=sys.stderr)
+              "the net's lines cannot follow them there, and the solve is likely to stagnate "
+              "or fold; a design without these near-umbilics (its curvature smoothed there) "
+              "avoids it", file=sys.stderr)
     if len(layout.singular_points):
         print(f"fabplan: note: the direction field is singular at {len(layout.singular_points)} "
               f"points (umbilics or seam ends, listed in {json_path.name}); "
@@ -258,6 +259,9 @@ def layout_warnings(properties: dict) -> list:
     coverage = properties["coverage"]
     if coverage < 0.9:
         out.append(f"the net covers only {100 * coverage:.0f} % of the design surface")
+    elif coverage > 1.05:
+        out.append(f"the net folds over itself: its panels add up to {100 * coverage:.0f} % of "
+                   "the design's area")
     edge = properties["edge_length_relative_to_panel"]
     if edge["min"] < 0.5 or edge["max"] > 2.0:
         out.append(f"edges range over {edge['min']:.2f} .. {edge['max']:.2f} of the panel size "
