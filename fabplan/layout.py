@@ -80,6 +80,8 @@ __all__ = [
     "layout_angle",
     "glide",
     "write_layout_picture",
+    "net_view_angles",
+    "agreeing_normal",
 ]
 
 
@@ -575,12 +577,40 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
 # ---------------------------------------------------------------------------- picture
 
 
+def agreeing_normal(normals: np.ndarray, areas: np.ndarray) -> np.ndarray | None:
+    """The area-weighted mean normal when the faces agree on a side (a roof, a facade
+    patch), else None (a closed ring or barrel)."""
+    mean = np.nansum(normals * areas[:, None], axis=0)
+    if np.linalg.norm(mean) <= 0.3 * areas.sum():
+        return None
+    return mean / np.linalg.norm(mean)
+
+
+def net_view_angles(design) -> tuple[float, float]:
+    """Elevation and azimuth (degrees, matplotlib's ``view_init``) of the net picture.
+
+    A roof (faces agreeing on a side within 45 degrees of vertical) is seen from 20
+    degrees above the horizon, 75 degrees off the diagonal of its plan, so that its rise
+    shows against its span (from above, as a cladding layout is usually drawn, a saddle
+    looks flat); a facade patch from its side, 20 degrees up; a closed surface (a ring, a
+    barrel) from 20 degrees up.
+    """
+    n = agreeing_normal(design.face_normals, design.face_areas)
+    if n is None:
+        return 20.0, -60.0
+    if abs(n[2]) >= math.cos(math.radians(45)):
+        span = np.ptp(design.vertices, axis=0)
+        return 20.0, float(np.degrees(np.arctan2(span[1], span[0]))) - 75.0
+    return 20.0, float(np.degrees(np.arctan2(n[1], n[0]))) + 25.0
+
+
 def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: QuadMesh, *,
                          title: str = "", singular_points: np.ndarray | None = None) -> Path:
-    """A PNG of the net on the design surface (atomically written).
+    """A PNG of the net on the design surface, axes to scale (atomically written).
 
-    The design surface is drawn light grey (its boundary black), the net's faces blue with
-    their edges, irregular vertices red and singular points of the direction field orange.
+    The design is drawn light grey with its boundary black, the net's faces blue with
+    their edges, irregular vertices red and singular points of the layout's direction
+    field orange; the view is `net_view_angles`.
     """
     import matplotlib
 
@@ -590,8 +620,7 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
 
     from .io import atomic_path
 
-    path = Path(path)
-    fig = plt.figure(figsize=(8, 8), dpi=110)
+    fig = plt.figure(figsize=(8, 7), dpi=110)
     ax = fig.add_subplot(projection="3d")
     T = design.triangles
     if len(T) > 30000:  # a coarser sample of the surface keeps the picture quick
@@ -601,8 +630,8 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     for curve in design.boundary_curves():
         loop = np.vstack([curve, curve[:1]])
         ax.plot(loop[:, 0], loop[:, 1], loop[:, 2], color="black", lw=0.8)
-    faces = [mesh.vertices[f] for f in mesh.faces]
-    ax.add_collection3d(Poly3DCollection(faces, facecolor=(0.55, 0.7, 0.95, 0.9),
+    ax.add_collection3d(Poly3DCollection([mesh.vertices[f] for f in mesh.faces],
+                                         facecolor=(0.55, 0.7, 0.95, 0.9),
                                          edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4))
     irregular = mesh.vertices[mesh.irregular_vertices]
     if len(irregular):
@@ -610,20 +639,13 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     if singular_points is not None and len(singular_points):
         ax.scatter(*np.asarray(singular_points).T, color="orange", s=12, depthshade=False,
                    label="field singularities")
-    # look at the surface from the side its normals face (tilted a little), if they agree
-    mean = np.sum(design.face_normals * design.face_areas[:, None], axis=0)
-    if np.linalg.norm(mean) > 0.3 * design.area:
-        n = mean / np.linalg.norm(mean)
-        elev = float(np.degrees(np.arcsin(np.clip(n[2], -1, 1))))
-        azim = float(np.degrees(np.arctan2(n[1], n[0])))
-        ax.view_init(elev=float(np.clip(elev, -60, 60)) if abs(elev) < 80 else 60.0,
-                     azim=azim + 25.0)
+    elevation, azimuth = net_view_angles(design)
+    ax.view_init(elev=elevation, azim=azimuth)
     lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
-    centre, half = (lo + hi) / 2, (hi - lo).max() / 2
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_zlim(centre[2] - half, centre[2] + half)
-    ax.set_box_aspect((1, 1, 1))
+    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
+    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
+        getattr(ax, f"set_{axis}lim")(a, b)
+    ax.set_box_aspect(span)                       # equal scale on all three axes
     ax.set_axis_off()
     if title:
         ax.set_title(title, fontsize=9)

@@ -23,6 +23,7 @@ import numpy as np
 from . import report
 from .errors import InputError
 from .io import json_text, write_texts
+from .layout import agreeing_normal, write_layout_picture
 from .report import counted
 from .study import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
 
@@ -144,24 +145,6 @@ def _view(mesh):
     return _facade_view(mesh)
 
 
-def _agreeing_normal(normals: np.ndarray, areas: np.ndarray) -> np.ndarray | None:
-    """The area-weighted mean normal when the faces agree on a side (a roof, a facade
-    patch), else None (a closed ring or barrel)."""
-    mean = np.nansum(normals * areas[:, None], axis=0)
-    if np.linalg.norm(mean) <= 0.3 * areas.sum():
-        return None
-    return mean / np.linalg.norm(mean)
-
-
-def _face_areas(mesh) -> np.ndarray:
-    X = mesh.vertices
-    tri = mesh.triangles()
-    owner = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes - 2)
-    area = 0.5 * np.linalg.norm(np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]),
-                                axis=1)
-    return np.bincount(owner, area, minlength=len(mesh.face_sizes))
-
-
 def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Face normals and a viewing frame for a heat map that must show `point`.
 
@@ -170,7 +153,7 @@ def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     worst point is not hidden behind the near wall.
     """
     normals, view = _view(mesh)
-    if _agreeing_normal(normals, _face_areas(mesh)) is None:
+    if agreeing_normal(normals, mesh.face_areas) is None:
         X = mesh.vertices
         out = point - X.mean(axis=0)
         out[2] = 0.0
@@ -242,74 +225,6 @@ def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: f
     ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm (circled), "
                  f"limit {limit_mm:g} mm (red line on the scale)")
     return report.figure_to_data_uri(fig)
-
-
-def net_view_angles(design) -> tuple[float, float]:
-    """Elevation and azimuth (degrees, matplotlib's ``view_init``) of the net picture.
-
-    A roof (faces agreeing on a side within 45 degrees of vertical) is seen from 20
-    degrees above the horizon, 75 degrees off the diagonal of its plan, so that its rise
-    shows against its span (from above, as a cladding layout is usually drawn, a saddle
-    looks flat); a facade patch from its side, 20 degrees up; a closed surface (a ring, a
-    barrel) from 20 degrees up.
-    """
-    n = _agreeing_normal(design.face_normals, design.face_areas)
-    if n is None:
-        return 20.0, -60.0
-    if abs(n[2]) >= math.cos(math.radians(45)):
-        span = np.ptp(design.vertices, axis=0)
-        return 20.0, float(np.degrees(np.arctan2(span[1], span[0]))) - 75.0
-    return 20.0, float(np.degrees(np.arctan2(n[1], n[0]))) + 25.0
-
-
-def net_picture(path: Path, design, mesh, *, title: str = "",
-                singular_points: np.ndarray | None = None) -> Path:
-    """A PNG of the net on the design surface, axes to scale (atomically written).
-
-    The design is drawn light grey with its boundary black, the net's faces blue with
-    their edges, irregular vertices red and singular points of the layout's direction
-    field orange; the view is `net_view_angles`.
-    """
-    plt = _plt()
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
-    from .io import atomic_path
-
-    fig = plt.figure(figsize=(8, 7), dpi=110)
-    ax = fig.add_subplot(projection="3d")
-    T = design.triangles
-    if len(T) > 30000:  # a coarser sample of the surface keeps the picture quick
-        T = T[:: int(math.ceil(len(T) / 30000))]
-    ax.add_collection3d(Poly3DCollection(design.vertices[T], facecolor=(0.85, 0.85, 0.85, 0.35),
-                                         edgecolor="none"))
-    for curve in design.boundary_curves():
-        loop = np.vstack([curve, curve[:1]])
-        ax.plot(loop[:, 0], loop[:, 1], loop[:, 2], color="black", lw=0.8)
-    ax.add_collection3d(Poly3DCollection([mesh.vertices[f] for f in mesh.faces],
-                                         facecolor=(0.55, 0.7, 0.95, 0.9),
-                                         edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4))
-    irregular = mesh.vertices[mesh.irregular_vertices]
-    if len(irregular):
-        ax.scatter(*irregular.T, color="red", s=18, depthshade=False, label="irregular vertices")
-    if singular_points is not None and len(singular_points):
-        ax.scatter(*np.asarray(singular_points).T, color="orange", s=12, depthshade=False,
-                   label="field singularities")
-    elevation, azimuth = net_view_angles(design)
-    ax.view_init(elev=elevation, azim=azimuth)
-    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
-    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
-    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
-        getattr(ax, f"set_{axis}lim")(a, b)
-    ax.set_box_aspect(span)                       # equal scale on all three axes
-    ax.set_axis_off()
-    if title:
-        ax.set_title(title, fontsize=9)
-    if len(irregular) or (singular_points is not None and len(singular_points)):
-        ax.legend(loc="lower left", fontsize=8)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-    plt.close(fig)
-    return path
 
 
 def comparison_figure(result: StudyResult) -> str:
@@ -611,7 +526,7 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
     outputs = {"net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
                "molds_json": "molds.json", "picture": "net.png"}
     title = f"{c.name}: {c.candidate.describe()}"
-    net_picture(folder / "net.png", result.design, c.net.mesh, title=title,
+    write_layout_picture(folder / "net.png", result.design, c.net.mesh, title=title,
                 singular_points=c.layout.singular_points if c.layout else None)
     pictures = {"net": _png_uri(folder / "net.png"),
                 "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,

@@ -481,7 +481,7 @@ def test_the_heat_map_shows_the_peak_deviation_at_its_vertex(study_result):
 
 def test_a_roof_is_seen_from_low_enough_to_show_its_rise(study_result):
     """The canopy's saddle looked flat (seen from 60 degrees up)."""
-    from fabplan.study_report import net_view_angles
+    from fabplan.layout import net_view_angles
     from fabplan.surfaces import load_design
 
     elevation, _ = net_view_angles(study_result[3].design)
