@@ -589,18 +589,18 @@ def agreeing_normal(normals: np.ndarray, areas: np.ndarray) -> np.ndarray | None
 def net_view_angles(design) -> tuple[float, float]:
     """Elevation and azimuth (degrees, matplotlib's ``view_init``) of the net picture.
 
-    A roof (faces agreeing on a side within 45 degrees of vertical) is seen from 20
-    degrees above the horizon, 75 degrees off the diagonal of its plan, so that its rise
-    shows against its span (from above, as a cladding layout is usually drawn, a saddle
-    looks flat); a facade patch from its side, 20 degrees up; a closed surface (a ring, a
-    barrel) from 20 degrees up.
+    A roof (faces agreeing on a side within 45 degrees of vertical) is seen from 30
+    degrees above the horizon, 75 degrees off the diagonal of its plan, so that both its
+    rise and its net show (from above, as a cladding layout is usually drawn, a saddle
+    looks flat; from lower, the far half of the net is lost); a facade patch from its
+    side, 20 degrees up; a closed surface (a ring, a barrel) from 20 degrees up.
     """
     n = agreeing_normal(design.face_normals, design.face_areas)
     if n is None:
         return 20.0, -60.0
     if abs(n[2]) >= math.cos(math.radians(45)):
         span = np.ptp(design.vertices, axis=0)
-        return 20.0, float(np.degrees(np.arctan2(span[1], span[0]))) - 75.0
+        return 30.0, float(np.degrees(np.arctan2(span[1], span[0]))) - 75.0
     return 20.0, float(np.degrees(np.arctan2(n[1], n[0]))) + 25.0
 
 
