@@ -272,7 +272,8 @@ def layout_warnings(properties: dict) -> list:
                    "panels are nearly degenerate")
     off = properties["distance_to_design_relative_to_panel"]["max"]
     if off > 0.01:
-        coarse = properties.get("design_chord_error", 0.0) > 0.5 * properties["distance_to_design"]["max"]
+        chord = properties.get("design_chord_error") or 0.0
+        coarse = chord > 0.5 * properties["distance_to_design"]["max"]
         out.append(f"the net is up to {100 * off:.1f} % of a panel off the design surface"
                    + (" (its triangulation is too coarse: raise --triangles)" if coarse else ""))
     return out

@@ -249,9 +249,10 @@ def _fill_holes(vertices: np.ndarray, faces: list, design: DesignSurface, panel_
     Holes bounded by 4 or 6 edges become one or two quads; larger ones a fan of quads
     (and one triangle when odd) around a new vertex on the surface. Holes more than
     `max_edges` long stay open, except around one of the `poles` (points the field turns
-    a whole turn around, where the net's spirals close in: up to `max_pole_edges`, the
-    fan's centre is then the pole's many-valent vertex); loops near the design boundary
-    are the layout's own boundary and are not touched.
+    a whole turn around, where the net's spirals close in: up to `max_pole_edges`; the
+    fan's centre, the surface point nearest to the hole's centroid, becomes one
+    many-valent vertex); loops near the design boundary are the layout's own boundary and
+    are not touched.
 
     Returns
     -------

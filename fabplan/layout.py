@@ -155,8 +155,8 @@ class SurfaceLayout:
         ``k * level_step`` (see `prescribed_family`), or None.
     turning_points, turning_deg : (k, 3), (k,) float, where the direction field turns
         faster than `LayoutSettings.max_turning_deg` per panel (umbilics and near-umbilics,
-        `fabplan.directions.direction_turning`), and how fast: a net of this panel size
-        cannot follow it there.
+        `fabplan.directions.direction_turning`), and how fast: the net's lines cannot
+        follow it there.
     seconds : time per stage.
     """
 
@@ -567,7 +567,10 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     result.properties["distance_measured_to"] = (
         "the exact parametric surface" if design.parametric is not None else
         "the design's triangle mesh")
-    result.properties["design_chord_error"] = design.chord_error
+    # the triangulation's chord error tells why a net is off the exact surface; it costs
+    # a closest-point search per triangle, so it is measured only when that matters
+    off = d.max() > 0.01 * layout.panel_size and design.parametric is not None
+    result.properties["design_chord_error"] = design.chord_error if off else None
     result.properties["coverage"] = float(result.mesh.face_areas.sum() / design.area)
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size
@@ -620,6 +623,7 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
 
     from .io import atomic_path
 
+    path = Path(path)
     fig = plt.figure(figsize=(8, 7), dpi=110)
     ax = fig.add_subplot(projection="3d")
     T = design.triangles

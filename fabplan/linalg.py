@@ -31,8 +31,9 @@ from .errors import FabplanError, SolverError
 __all__ = ["SparseSPDSolver", "available_backends", "solve_spd_columns", "PARDISO_MIN_UNKNOWNS"]
 
 # From about this size on PARDISO on two cores refactors the solver's systems faster than
-# CHOLMOD on one (measured: 0.13 against 0.22 s at 79k unknowns, on par at 14k, where
-# thread start-up eats the gain); see benchmarks/README.md.
+# CHOLMOD on one (median refactorization 0.17 against 0.25 s at 79k unknowns in
+# benchmarks/results/solver-2026-12-01*.json; on par on the bundled net's 14k, where
+# thread start-up eats the gain).
 PARDISO_MIN_UNKNOWNS = 50_000
 
 
@@ -49,15 +50,21 @@ def available_backends() -> list[str]:
 @functools.lru_cache(maxsize=1)
 def _mkl_runtime() -> ctypes.CDLL | None:
     """MKL's single dynamic library (from the ``mkl`` wheel), or None when not installed."""
+    import site
+
     found = ctypes.util.find_library("mkl_rt")
     candidates = [found] if found else []
-    for pattern in ("lib/libmkl_rt.so*", "Library/bin/mkl_rt*.dll", "lib/libmkl_rt*.dylib"):
-        candidates += sorted(glob.glob(os.path.join(sys.prefix, pattern)), key=len)
+    for root in (sys.prefix, site.getuserbase()):          # a venv, or pip install --user
+        for pattern in ("lib/libmkl_rt.so*", "Library/bin/mkl_rt*.dll"):
+            candidates += sorted(glob.glob(os.path.join(root, pattern)), key=len)
     for path in candidates:
         try:
-            return ctypes.CDLL(path)
+            library = ctypes.CDLL(path)
         except OSError:
             continue
+        # 32-bit indices (LP64), whatever MKL_INTERFACE_LAYER says
+        library.MKL_Set_Interface_Layer(ctypes.c_int(0))
+        return library
     return None
 
 
@@ -70,6 +77,9 @@ class _Pardiso:
         self._call = _mkl_runtime().pardiso
         self._call.restype = None
         self.n = upper.shape[0]
+        if upper.nnz >= 2**31 - 1:
+            raise SolverError(f"the normal equations have {upper.nnz} entries, more than "
+                              "PARDISO's 32-bit indices hold; use the cholmod backend")
         self.indptr = np.ascontiguousarray(upper.indptr, dtype=np.int32)
         self.indices = np.ascontiguousarray(upper.indices, dtype=np.int32)
         self.handle = np.zeros(64, dtype=np.int64)        # PARDISO's internal pointers
@@ -97,6 +107,8 @@ class _Pardiso:
                    pointer(self.iparm), integer(0), pointer(b), pointer(x), ctypes.byref(error))
         if error.value == -4:
             raise SolverError("the normal equations are not positive definite")
+        if error.value == -2:
+            raise SolverError("PARDISO ran out of memory (use the cholmod backend)")
         if error.value:
             raise SolverError(f"PARDISO failed in its {phase} phase (error {error.value})")
         return x

@@ -240,8 +240,9 @@ class QuadMesh:
     @cached_property
     def face_areas(self) -> np.ndarray:
         """(f,) float, area of every face: its vector area's length, ``|sum p_i x p_i+1| / 2``
-        (exact for planar faces; for a skew quad the area of its projection on the
-        best plane, independent of the diagonal a triangulation would choose).
+        (exact for planar faces; for a skew face the area of its projection on the
+        plane normal to that vector, independent of the diagonal a triangulation would
+        choose).
 
         Examples
         --------

@@ -71,6 +71,8 @@ class CandidateResult:
         `same_net`), or None.
     notes : remarks beside the verdict (that it is the same net as another candidate).
     net, molds, strips, layout : the objects behind the metrics (for the files).
+    deviation_mm : (n,) float, distance of every net vertex from the design (mm), which
+        the deviation metrics and the heat map are made of.
     """
 
     candidate: Candidate
@@ -83,6 +85,7 @@ class CandidateResult:
     cost_terms: dict = field(default_factory=dict)
     rank: int | None = None
     same_net_as: str | None = None
+    deviation_mm: np.ndarray | None = None
     notes: list = field(default_factory=list)
     net: object = None
     molds: object = None
@@ -323,10 +326,13 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
         s = strips.summary()
         say(f"    {counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
             f"{counted(s['sheets'], 'sheet')} ({seconds['strips']:.1f} s)")
-    metrics = measure_candidate(net, design, molds, strips, mm_per_unit=study.design.mm_per_unit)
+    deviation = vertex_deviation_mm(net.mesh, design, study.design.mm_per_unit)
+    metrics = measure_candidate(net, design, molds, strips, mm_per_unit=study.design.mm_per_unit,
+                                deviation_mm=deviation)
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
-                           layout=layout, same_net_as=twin.name if twin is not None else None)
+                           layout=layout, same_net_as=twin.name if twin is not None else None,
+                           deviation_mm=deviation)
 
 
 def start_angle(candidate: Candidate, design) -> float:
@@ -355,7 +361,8 @@ def vertex_deviation_mm(mesh, design, mm_per_unit: float) -> np.ndarray:
     return design.distances(mesh.vertices) * mm_per_unit
 
 
-def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict:
+def measure_candidate(net, design, molds, strips, *, mm_per_unit: float,
+                      deviation_mm: np.ndarray | None = None) -> dict:
     """Everything a verdict and a report need, measured on the solved net.
 
     Parameters
@@ -364,6 +371,8 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict
     design : the `DesignSurface` (deviation is measured to it).
     molds : the `MoldPlan` of the net; strips : its `StripPlan` or None.
     mm_per_unit : millimetres per model unit.
+    deviation_mm : (n,) float, the vertices' distances from the design (mm), when already
+        measured (`vertex_deviation_mm`).
 
     Returns
     -------
@@ -373,7 +382,7 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float) -> dict
     mesh = net.mesh
     X = mesh.vertices
     props = net.properties
-    deviation = vertex_deviation_mm(mesh, design, mm_per_unit)
+    deviation = vertex_deviation_mm(mesh, design, mm_per_unit) if deviation_mm is None else deviation_mm
     edges = np.linalg.norm(X[mesh.edges[:, 0]] - X[mesh.edges[:, 1]], axis=1)
     area = mesh.face_areas
     coverage = float(area.sum() / design.area)

@@ -81,6 +81,8 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
                        for c in result.candidates],
         "seconds_run": result.seconds_run,
         "seconds_total": result.seconds_run if seconds_total is None else seconds_total,
+        # fabplan-study/1 readers knew the run time as `seconds`: the same as seconds_total
+        "seconds": result.seconds_run if seconds_total is None else seconds_total,
     }
 
 
@@ -178,7 +180,7 @@ def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: f
 
     mesh = c.net.mesh
     X = mesh.vertices
-    d = vertex_deviation_mm(mesh, design, mm_per_unit)
+    d = c.deviation_mm if c.deviation_mm is not None else vertex_deviation_mm(mesh, design, mm_per_unit)
     worst = int(np.argmax(d))
     _, view = deviation_view(mesh, X[worst])
     P = X @ view.T

@@ -174,19 +174,32 @@ class ParametricSurface:
         P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         uv = np.array(start, dtype=np.float64).reshape(-1, 2)
         (u0, u1), (v0, v1) = self.domain
+        du, dv = self._steps()
+
+        def inside(w):
+            u = u0 + np.mod(w[:, 0] - u0, u1 - u0) if self.periodic_u else np.clip(w[:, 0], u0, u1)
+            return np.stack([u, np.clip(w[:, 1], v0, v1)], axis=1)
+
+        uv = inside(uv)
+        best = np.sum((self.points(uv[:, 0], uv[:, 1]) - P) ** 2, axis=1)
         for _ in range(iterations):
-            fu, fv, *_ = self.derivatives(uv[:, 0], uv[:, 1])
-            r = self.points(uv[:, 0], uv[:, 1]) - P
+            u, v = uv[:, 0], uv[:, 1]
+            fu = (self.points(u + du, v) - self.points(u - du, v)) / (2 * du)
+            fv = (self.points(u, v + dv) - self.points(u, v - dv)) / (2 * dv)
+            r = self.points(u, v) - P
             a, b, c = (np.sum(x * y, axis=1) for x, y in ((fu, fu), (fu, fv), (fv, fv)))
             gu, gv = np.sum(fu * r, axis=1), np.sum(fv * r, axis=1)
             det = np.maximum(a * c - b * b, 1e-300)
-            uv[:, 0] -= (c * gu - b * gv) / det
-            uv[:, 1] -= (a * gv - b * gu) / det
-            if self.periodic_u:
-                uv[:, 0] = u0 + np.mod(uv[:, 0] - u0, u1 - u0)
-            else:
-                uv[:, 0] = np.clip(uv[:, 0], u0, u1)
-            uv[:, 1] = np.clip(uv[:, 1], v0, v1)
+            step = np.stack([(c * gu - b * gv) / det, (a * gv - b * gu) / det], axis=1)
+            # a step that does not bring the point closer is halved, up to three times
+            for _ in range(4):
+                trial = inside(uv - step)
+                distance = np.sum((self.points(trial[:, 0], trial[:, 1]) - P) ** 2, axis=1)
+                better = distance < best
+                uv[better], best[better] = trial[better], distance[better]
+                if better.all():
+                    break
+                step[~better] *= 0.5
         return uv
 
     def triangulate(self, resolution: int | tuple[int, int] = 100) -> "DesignSurface":
@@ -510,14 +523,15 @@ def surface_from_spec(spec: str) -> ParametricSurface:
         if not eq:
             raise InputError(f"surface spec {spec!r}: expected key=value, got {item!r}")
         key = key.strip()
-        if key in ("heights", "control_points", "profile"):
+        if key in FILE_PARAMETERS:
             parameters[key] = _read_grid_file(value.strip(), key)
         elif key in ("u_deg", "v_deg"):
             parts = value.split("..")
             try:
-                parameters[key] = tuple(float(p) for p in parts)
+                lo, hi = (float(p) for p in parts)
             except ValueError:
                 raise InputError(f"surface spec {spec!r}: {key} is LO..HI degrees") from None
+            parameters[key] = (lo, hi)
         else:
             try:
                 parameters[key] = float(value)
@@ -717,11 +731,11 @@ class DesignSurface:
         corners = self.vertices[self.triangles[tri]]
         bary = igl.barycentric_coordinates(foot, corners[:, 0].copy(), corners[:, 1].copy(),
                                            corners[:, 2].copy())
-        start = np.einsum("mk,mkj->mj", bary, self._triangle_uv(tri))
+        start = np.einsum("mk,mkj->mj", bary, self.triangle_uv(tri))
         uv = self.parametric.closest_parameters(points, start)
         return np.linalg.norm(self.parametric.points(uv[:, 0], uv[:, 1]) - points, axis=1)
 
-    def _triangle_uv(self, tri: np.ndarray) -> np.ndarray:
+    def triangle_uv(self, tri: np.ndarray) -> np.ndarray:
         """(m, 3, 2) float, parameters of the corners of triangles `tri`, a triangle across
         the seam of a periodic surface unwrapped to one side of it."""
         uv = self.uv[self.triangles[tri]].copy()
@@ -740,7 +754,7 @@ class DesignSurface:
         if self.parametric is None or self.uv is None:
             return 0.0
         tri = np.arange(len(self.triangles))
-        X, UV = self.vertices[self.triangles], self._triangle_uv(tri)
+        X, UV = self.vertices[self.triangles], self.triangle_uv(tri)
         weights = np.array([[1, 1, 1], [1, 1, 0], [0, 1, 1], [1, 0, 1]]) / \
             np.array([[3], [2], [2], [2]])
         points = np.einsum("sk,tkj->tsj", weights, X).reshape(-1, 3)

@@ -307,6 +307,7 @@ def test_bad_layout_options_are_refused(tmp_path, capsys, args, fragment):
     ("paraboloid:radius=5", "surface 'paraboloid' has no parameter 'radius'; its parameters: "
      "radius_x=10, radius_y=10, width=6, depth=6"),
     ("height-field", "surface 'height-field' needs heights=FILE"),
+    ("torus:u_deg=5", "u_deg is LO..HI degrees"),     # was a traceback (one number)
 ])
 def test_bad_surface_specs_are_refused(tmp_path, capsys, spec, fragment):
     code = main(["layout", spec, "--net", "snet", "--panel-size", "1",
@@ -521,3 +522,23 @@ def test_fast_turning_principal_directions_are_found_and_reported():
     # a facade of the same size whose principal directions turn slowly has none
     calm = height_field(_facade_height, width=30.0, depth=16.0).triangulate((120, 60))
     assert len(layout_surface(calm, 1.0).turning_points) == 0
+
+
+def test_closest_points_on_a_parametric_design_never_move_away():
+    """Gauss-Newton steps were taken unchecked: inside a tower one point came out at
+    14.6 where the surface is at most 9.7 away. Now a step that does not bring the point
+    closer is halved, and the result is checked against the torus's own distance."""
+    design = load_design("revolution:height=30,radius=6,waist=0.7", triangles=4000)
+    inside = np.array([[0.5, 0.3, 15.0], [0.0, 0.0, 2.0], [1.0, -1.0, 28.0]])
+    d = design.distances(inside)
+    mesh_d = design.reference.distances(inside)
+    assert np.all(d <= mesh_d + design.chord_error + 1e-9)
+    torus = load_design("torus", triangles=4000)
+    rng = np.random.default_rng(0)
+    foot = torus.vertices[rng.integers(0, len(torus.vertices), 50)]
+    points = foot + 0.3 * rng.normal(size=foot.shape)
+    ring = np.hypot(points[:, 0], points[:, 1]) - 10.0
+    exact = np.abs(np.hypot(ring, points[:, 2]) - 4.0)
+    # inside the patch the distance to the patch is the distance to the whole torus
+    assert np.all(torus.distances(points) >= exact - 1e-9)
+    assert np.median(torus.distances(points) - exact) < 1e-9
