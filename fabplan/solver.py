@@ -243,22 +243,16 @@ class GuidedProjection:
             families.append(_FamilyPattern(
                 np.where(cols < 0, nfree, cols), cp.shape,
                 np.where(twice, 2.0, 1.0) if twice.any() else None))
-        diagonal_keys = np.arange(nfree) * (nfree + 1)
-        keys = np.concatenate([diagonal_keys] + [k.ravel() for k in pair_keys])
-        held = keys < 0
-        if held.any():
-            ukeys, ranks = _rank(keys[~held], nfree * nfree)
-            # held pairs go to a dummy slot past the end
-            slots = np.full(len(keys), len(ukeys))
-            slots[~held] = ranks
-        else:
-            ukeys, slots = _rank(keys, nfree * nfree)
-        slots = slots[nfree:]
+        # the diagonal first (always present), then every family's pairs
+        keys = np.concatenate([np.arange(nfree) * (nfree + 1)] + [k.ravel() for k in pair_keys])
+        valid = keys >= 0
+        ukeys, ranks = _rank(keys if valid.all() else keys[valid], nfree * nfree)
+        slots = np.full(len(keys), len(ukeys))   # held pairs: a dummy slot past the end
+        slots[valid] = ranks
         return _Pattern(families=families,
                         indptr=np.searchsorted(ukeys // nfree, np.arange(nfree + 1)),
-                        indices=ukeys % nfree,
-                        diagonal=np.searchsorted(ukeys, diagonal_keys),
-                        slots=slots, products=np.empty(len(slots)))
+                        indices=ukeys % nfree, diagonal=slots[:nfree],
+                        slots=slots[nfree:], products=np.empty(len(keys) - nfree))
 
     def _assemble(self, jacobians: list, residuals: list,
                   damping: float) -> tuple[sp.csr_matrix, np.ndarray]:
