@@ -69,14 +69,8 @@ def _mold_colors(plan: MoldPlan) -> np.ndarray:
 
 def _facade_view(mesh) -> tuple:
     """Face normals and the viewing frame of the facade pictures."""
-    X = mesh.vertices
-    normals = face_normals(X, mesh)
-    tri = mesh.triangles()
-    tri_face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes - 2)
-    areas = np.bincount(tri_face, 0.5 * np.linalg.norm(
-        np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]]), axis=1),
-        minlength=len(mesh.face_sizes))
-    return normals, report.view_frame(X, normals, areas)
+    normals = face_normals(mesh.vertices, mesh)
+    return normals, report.view_frame(mesh.vertices, normals, mesh.face_areas)
 
 
 def mold_figure(plan: MoldPlan, *, title: str | None = None) -> str:

@@ -133,7 +133,7 @@ class StudyResult:
     @property
     def design_size(self) -> float:
         """Diagonal of the design's bounding box (model units)."""
-        return design_size(self.design)
+        return self.design.extent
 
     def ranked(self) -> list:
         """Measured candidates in rank order, then the failed ones."""
@@ -247,12 +247,6 @@ def earlier_same_net(mesh, earlier: list, panel_size: float) -> CandidateResult 
     return next((r for r in earlier if not r.failed and r.net is not None and
                  r.same_net_as is None and
                  same_net(r.net.mesh, mesh, SAME_NET_TOLERANCE * panel_size)), None)
-
-
-def design_size(design) -> float:
-    """Diagonal of the bounding box of a design's vertices (model units)."""
-    X = np.asarray(design.vertices, dtype=np.float64)
-    return float(np.linalg.norm(X.max(axis=0) - X.min(axis=0)))
 
 
 def _where(exc: BaseException) -> str:
