@@ -82,6 +82,13 @@ def _solver_options(args) -> tuple:
     return settings, progress
 
 
+def _warn_not_converged(result, json_path: Path) -> None:
+    stopped = ("stopped at the iteration cap" if result.status == "iteration cap" else
+               f"stopped ({result.status})")
+    print(f"fabplan: warning: the optimization {stopped} before reaching the tolerance; see "
+          f"the residuals in {json_path}", file=sys.stderr)
+
+
 def _reference(spec: str | None):
     """A reference surface from a mesh file or a built-in surface spec (`fabplan layout`)."""
     if spec is None:
@@ -117,10 +124,7 @@ def _cmd_optimize(args) -> int:
           f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
     print(f"wrote {obj_path} and {json_path}")
     if not result.converged:
-        stopped = ("stopped at the iteration cap" if result.status == "iteration cap" else
-                   f"stopped ({result.status})")
-        print(f"fabplan: warning: the optimization {stopped} before reaching the "
-              f"tolerance; see the residuals in {json_path}", file=sys.stderr)
+        _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
     return 0
 
@@ -240,10 +244,7 @@ def _cmd_layout(args) -> int:
     for warning in layout_warnings(props):
         print(f"fabplan: warning: {warning}", file=sys.stderr)
     if not result.converged:
-        stopped = ("stopped at the iteration cap" if result.status == "iteration cap" else
-                   f"stopped ({result.status})")
-        print(f"fabplan: warning: the optimization {stopped} before reaching the "
-              f"tolerance; see the residuals in {json_path}", file=sys.stderr)
+        _warn_not_converged(result, json_path)
         if preset.radius == "param" or preset.planar_faces:
             print(f"fabplan: note: {preset.name} nets exist on special surfaces only; held on "
                   f"this design the net cannot become one. `fabplan optimize {obj_path} --net "
