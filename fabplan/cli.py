@@ -246,8 +246,8 @@ def _cmd_layout(args) -> int:
     if not result.converged:
         _warn_not_converged(result, json_path)
         if preset.radius == "param" or preset.planar_faces:
-            print(f"fabplan: note: {preset.name} nets exist on special surfaces only; held on "
-                  f"this design the net cannot become one. `fabplan optimize {obj_path} --net "
+            print(f"fabplan: note: {preset.name} nets exist on special surfaces only; held this "
+                  f"close to the design the net cannot become one. `fabplan optimize {obj_path} --net "
                   f"{preset.name} --reference {args.surface}` lets it leave the design a little "
                   "(`fabplan study` measures how far)", file=sys.stderr)
         return EXIT_NOT_CONVERGED

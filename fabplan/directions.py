@@ -2,10 +2,11 @@
 field, its singularities, and the two directions of an S-net.
 
 Principal directions per triangle come from the exact fundamental forms of a parametric
-surface or from libigl's per-vertex estimate. The traceless part of the shape operator,
-weighted by the anisotropy ``|k1 - k2|``, is smoothed and then combed into consistent
-signs; where combing conflicts the field has a seam, whose end points and the points the
-field turns around are its singularities (`line_field_index`). The S-net directions are
+surface or from libigl's per-vertex estimate. They are smoothed, weighted by the
+anisotropy ``|k1 - k2|``, as a line field or as a cross field (`smooth_direction_field`)
+and then combed into consistent signs; where combing conflicts the field has a seam,
+whose end points and the points the field turns around are its singularities
+(`line_field_index`). The S-net directions are
 symmetric to the principal directions (`snet_directions`); with a prescribed first
 family (`prescribed_family`) the partner is its reflection in them
 (`complementary_directions`, Proposition 2.11).
@@ -29,7 +30,8 @@ from .surfaces import DesignSurface, _edge_corners, _edge_values
 
 __all__ = [
     "face_principal_frames",
-    "smooth_line_field",
+    "smooth_direction_field",
+    "comb_cross_field",
     "comb_line_field",
     "line_field_index",
     "direction_turning",
@@ -95,51 +97,100 @@ def _face_adjacency(design: DesignSurface) -> tuple[np.ndarray, np.ndarray, np.n
     return c0, c1, c0 // 3, c1 // 3
 
 
-def smooth_line_field(design: DesignSurface, e1: np.ndarray, weight: np.ndarray,
-                      length: float) -> tuple[np.ndarray, np.ndarray]:
-    """Smooth a line field per triangle, weighted by confidence.
+def _edge_transport(design: DesignSurface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Interior edges as triangle pairs (f, g) and the discrete Levi-Civita connection:
+    an angle ``a`` in f's frame (`_face_frames`) is ``a + rotation`` in g's (the angle to
+    the shared edge is kept), (e,) float in radians."""
+    c0, _, f, g = _face_adjacency(design)
+    T, V = design.triangles, design.vertices
+    b1, b2, _ = _face_frames(design)
+    edge = V[T[:, [1, 2, 0]].ravel()[c0]] - V[T.ravel()[c0]]
 
-    Minimizes ``sum_f w_f |X_f - D_f|^2 + kappa sum_(f,g) |X_f - X_g|^2`` over 3x3 tensors,
-    with ``D_f = e1 e1^T - e2 e2^T`` (sign-free) and ``kappa`` giving a smoothing radius of
-    `length`; one sparse factorization, six right-hand sides.
+    def edge_angle(face):
+        return np.arctan2(np.sum(edge * b2[face], axis=1), np.sum(edge * b1[face], axis=1))
+
+    return f, g, edge_angle(g) - edge_angle(f)
+
+
+def smooth_direction_field(design: DesignSurface, e1: np.ndarray, weight: np.ndarray,
+                           length: float, *, symmetry: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Smooth a field of directions with a `symmetry`-fold ambiguity, weighted by
+    confidence: a line field (2, the principal directions) or a cross field (4, the
+    principal directions and their normals taken as one).
+
+    Every triangle's directions are one complex number ``z = exp(i symmetry a)`` (a, the
+    angle in the triangle's frame); minimizes ``sum_f w_f |z_f - d_f|^2 + kappa
+    sum_(f,g) |r_fg z_f - z_g|^2`` (r_fg, the parallel transport across the shared edge;
+    kappa gives a smoothing radius of `length`): one sparse factorization. As a cross
+    field, the principal directions turning a quarter turn across a region of small
+    ``|k1 - k2|`` (a near-umbilic) need not turn at all: both ends are the same cross.
 
     Parameters
     ----------
     design : the surface.
     e1 : (t, 3) float, unit directions in the triangle planes.
-    weight : (t,) float >= 0, confidence (e.g. ``|k1 - k2|``), normalized internally.
+    weight : (t,) float >= 0, confidence (e.g. ``|k1 - k2|`` times area), normalized
+        internally.
     length : smoothing length (model units); 0 keeps the field.
+    symmetry : 2 or 4.
 
     Returns
     -------
-    e1 : (t, 3) float, smoothed unit directions in the triangle planes.
+    e1 : (t, 3) float, one unit direction of the smoothed field per triangle (a cross
+        field is then combed into a line field with `comb_cross_field`).
     coherence : (t,) float in [0, 1], how well the neighbourhood agrees (0 at a
         singularity of the smoothed field).
     """
-    b1, b2, n = _face_frames(design)
-    e2 = np.cross(n, e1)
-    D = e1[:, :, None] * e1[:, None, :] - e2[:, :, None] * e2[:, None, :]
+    b1, b2, _ = _face_frames(design)
+    t = len(e1)
+    angle = symmetry * np.arctan2(np.sum(e1 * b2, axis=1), np.sum(e1 * b1, axis=1))
+    z = np.stack([np.cos(angle), np.sin(angle)], axis=1)
     if length > 0:
-        _, _, f, g = _face_adjacency(design)
-        t = len(e1)
+        f, g, rotation = _edge_transport(design)
         centroid = design.vertices[design.triangles].mean(axis=1)
         spacing = float(np.linalg.norm(centroid[f] - centroid[g], axis=1).mean())
         kappa = (length / spacing) ** 2
         w = np.asarray(weight, dtype=np.float64)
         w = w / max(float(np.median(w[w > 0])) if np.any(w > 0) else 1.0, 1e-300)
         w = np.clip(w, 1e-3, 4.0)
-        adj = sp.coo_matrix((np.ones(len(f)), (f, g)), shape=(t, t))
-        adj = (adj + adj.T).tocsr()
-        lap = sp.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
-        system = (sp.diags(w) + kappa * lap).tocsr()
-        rhs = (D * w[:, None, None]).reshape(t, 9)[:, [0, 1, 2, 4, 5, 8]]
-        sol = solve_spd_columns(system, rhs)
-        D = sol[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(t, 3, 3)
-    a = np.einsum("ti,tij,tj->t", b1, D, b1) - np.einsum("ti,tij,tj->t", b2, D, b2)
-    b = 2 * np.einsum("ti,tij,tj->t", b1, D, b2)
-    theta = 0.5 * np.arctan2(b, a)
-    coherence = np.clip(0.5 * np.hypot(a, b), 0.0, 1.0)
+        # |R z_f - z_g|^2 in real pairs: blocks R^T R = I on the diagonal, -R and -R^T off it
+        c, s = np.cos(symmetry * rotation), np.sin(symmetry * rotation)
+        R = np.stack([c, -s, s, c], axis=1).reshape(-1, 2, 2)          # (e, 2, 2)
+        i, j = np.meshgrid([0, 1], [0, 1], indexing="ij")
+        rows = (2 * g[:, None, None] + i).ravel()
+        cols = (2 * f[:, None, None] + j).ravel()
+        off = sp.coo_matrix((-kappa * R.ravel(), (rows, cols)), shape=(2 * t, 2 * t))
+        degree = np.bincount(np.r_[f, g], minlength=t).astype(np.float64)
+        system = (off + off.T + sp.diags(np.repeat(w + kappa * degree, 2))).tocsr()
+        z = solve_spd_columns(system, (z * w[:, None]).reshape(-1, 1)).reshape(t, 2)
+    theta = np.arctan2(z[:, 1], z[:, 0]) / symmetry
+    coherence = np.clip(np.hypot(z[:, 0], z[:, 1]), 0.0, 1.0)
     return np.cos(theta)[:, None] * b1 + np.sin(theta)[:, None] * b2, coherence
+
+
+def comb_cross_field(design: DesignSurface, d: np.ndarray) -> np.ndarray:
+    """One direction of a cross field per triangle, chosen so that neighbours agree as
+    lines: a quarter turn where they would meet at more than 45 degrees, by XOR along a
+    minimum spanning tree (as `comb_line_field` does for signs).
+
+    Parameters
+    ----------
+    design : the surface.
+    d : (t, 3) float, one unit direction of the cross in every triangle plane.
+
+    Returns
+    -------
+    (t, 3) float, the cross's line field: ``d`` or ``n x d`` per triangle (combable with
+    `comb_line_field` wherever the cross field has no quarter-turn singularity).
+    """
+    _, _, f, g = _face_adjacency(design)
+    t = len(d)
+    dot = np.abs(np.sum(d[f] * d[g], axis=1))
+    agreement = np.maximum(dot, np.sqrt(np.maximum(1.0 - dot * dot, 0.0)))
+    parent = _spanning_parent(t, f, g, 1.0 - agreement + 1e-9)
+    step = _edge_values(t, f, g, (dot < math.sqrt(0.5)).astype(np.int64), parent)
+    quarter = xor_to_root(parent, step).astype(bool)
+    return np.where(quarter[:, None], np.cross(design.face_normals, d), d)
 
 
 def comb_line_field(design: DesignSurface, e1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,13 +235,14 @@ def _spanning_parent(count: int, f: np.ndarray, g: np.ndarray, weight: np.ndarra
     return parent
 
 
-def line_field_index(design: DesignSurface, e1: np.ndarray) -> np.ndarray:
-    """(n,) float, index of a line field around every interior vertex (turns: multiples of
-    1/2; 0 where regular, NaN on the boundary).
+def line_field_index(design: DesignSurface, e1: np.ndarray, *, symmetry: int = 2) -> np.ndarray:
+    """(n,) float, index of a line field (or, with ``symmetry=4``, a cross field given by
+    one of its directions) around every interior vertex (turns: multiples of
+    1/symmetry; 0 where regular, NaN on the boundary).
 
     The rotation of the field across each edge around the vertex is measured against the
-    edge itself (discrete parallel transport), reduced modulo a half turn, summed, and
-    corrected by the angle defect.
+    edge itself (discrete parallel transport), reduced modulo ``1/symmetry`` turn, summed,
+    and corrected by the angle defect.
     """
     V, T = design.vertices, design.triangles
     n, t = len(V), len(T)
@@ -215,11 +267,12 @@ def line_field_index(design: DesignSurface, e1: np.ndarray) -> np.ndarray:
     has = nxt >= 0
     delta = np.zeros(3 * t)
     delta[has] = A[nxt[has]] - B[has]
-    delta = delta - np.pi * np.round(delta / np.pi)
+    period = 2 * np.pi / symmetry
+    delta = delta - period * np.round(delta / period)
     open_corner = np.bincount(vert, weights=(~has).astype(float), minlength=n) > 0
     total = np.bincount(vert, weights=delta, minlength=n)
     defect = 2 * np.pi - np.bincount(vert, weights=gamma, minlength=n)
-    index = np.round((total + defect) / np.pi) / 2
+    index = np.round((total + defect) / period) / symmetry
     index[open_corner] = np.nan
     return index
 

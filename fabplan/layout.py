@@ -5,10 +5,11 @@ The steps follow section 4.3 of the paper, with the degrees of freedom of sectio
 1. Principal directions per triangle (`fabplan.directions`): from the exact fundamental
    forms of a parametric surface, or from libigl's per-vertex estimate
    (Rusinkiewicz-style quadric fitting) averaged as shape operators over each triangle.
-2. A smooth line field (`fabplan.directions`): the traceless part of the shape operator,
-   weighted by the anisotropy ``|k1 - k2|``, is smoothed over a length of about half a
-   panel (near umbilics the surroundings decide), then combed into a consistent sign by
-   XOR along a minimum spanning tree of the triangle adjacency (pointer doubling, as in
+2. A smooth line field (`fabplan.directions`): the principal directions, weighted by the
+   anisotropy ``|k1 - k2|``, are smoothed over a length of about half a panel (near
+   umbilics the surroundings decide); for orthogonal nets as a cross field, over a
+   longer length where needed (`_smoothed_directions`). The field is then combed into a
+   consistent sign by XOR along a minimum spanning tree of the triangle adjacency (pointer doubling, as in
    `fabplan.mesh.QuadMesh._face_parity`). Where the combing conflicts the field has a
    seam; its end points and points where the field turns around are its singularities.
 3. S-net directions (`fabplan.directions`): the pair symmetric to the principal
@@ -29,8 +30,9 @@ The steps follow section 4.3 of the paper, with the degrees of freedom of sectio
    closed by a fan of quads around a new vertex: these are the irregular vertices
    (fairness only in the solve).
 
-`glide` then optimizes the layout into a net of a given type with its vertices held on
-the design surface and its boundary vertices near the surface boundary held on it.
+`glide` then optimizes the layout into a net of a given type with its vertices held
+within a small tolerance of the design surface, its boundary vertices near the surface
+boundary held on it, and its edges within 0.5 - 2 panel sizes.
 """
 
 from __future__ import annotations
@@ -47,17 +49,18 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
-from .constraints import EdgeCollapseBarrier, FamilyLevels
+from .constraints import EdgeLengthRange, FamilyLevels
 from .directions import (
     _face_adjacency,
     _gradient_vectors,
     _whole_turns,
+    comb_cross_field,
     comb_line_field,
     direction_turning,
     face_principal_frames,
     line_field_index,
     prescribed_family,
-    smooth_line_field,
+    smooth_direction_field,
     snet_directions,
 )
 from .errors import InputError
@@ -85,6 +88,11 @@ __all__ = [
 ]
 
 
+# how far a gliding net may leave the design, in panel sizes: half of the 1 % a layout is
+# judged by (measured: 0.2-0.3 % used on a facade with near-umbilics)
+SURFACE_TOLERANCE = 0.005
+
+
 @dataclass
 class LayoutSettings:
     """Numbers that steer the layout (lengths in panel sizes unless stated).
@@ -94,6 +102,9 @@ class LayoutSettings:
     bisector : the principal direction bisecting the angle between the families, "max"
         (the larger principal curvature) or "min". Irrelevant at 90 degrees.
     smoothing : smoothing length of the direction field.
+    max_smoothing : orthogonal nets smooth the directions as a cross field, over
+        `smoothing` doubled up to this length until the field has no quarter-turn
+        singularity (see `_smoothed_directions`).
     scale_weight : weight of uniform spacing against alignment with the directions in
         the integration (alignment has weight 1): smaller values follow the directions
         more closely and let the spacing vary.
@@ -114,6 +125,7 @@ class LayoutSettings:
 
     bisector: str = "max"
     smoothing: float = 0.5
+    max_smoothing: float = 4.0
     scale_weight: float = 0.1
     curvature_radius: int = 5
     min_edge: float = 0.4
@@ -153,6 +165,8 @@ class SurfaceLayout:
     family : description of the prescribed family, or None.
     level_step : level k of the prescribed family is where its function equals
         ``k * level_step`` (see `prescribed_family`), or None.
+    direction_symmetry : 4 when the directions were smoothed as a cross field, 2 as a
+        line field; `smoothing` the smoothing length (panel sizes).
     turning_points, turning_deg : (k, 3), (k,) float, where the direction field turns
         faster than `LayoutSettings.max_turning_deg` per panel (umbilics and near-umbilics,
         `fabplan.directions.direction_turning`), and how fast: the net's lines cannot
@@ -178,6 +192,8 @@ class SurfaceLayout:
     level_step: float | None = None
     turning_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     turning_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    direction_symmetry: int = 2
+    smoothing: float = 0.5
     seconds: dict = field(default_factory=dict)
 
     def record(self) -> dict:
@@ -199,6 +215,8 @@ class SurfaceLayout:
             "singular_index": self.singular_index.tolist(),
             "fast_turning_points": self.turning_points.tolist(),
             "fast_turning_deg_per_panel": self.turning_deg.tolist(),
+            "direction_field": "cross" if self.direction_symmetry == 4 else "line",
+            "smoothing_panels": self.smoothing,
             "seam_edges": int(self.seam_edges),
             "cuts": [list(map(int, c)) for c in self.cuts],
             "filled_holes": int(self.filled_holes),
@@ -264,7 +282,9 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     if s.bisector == "min":
         e1 = np.cross(normal, e1)
     lap("principal_directions")
-    e1, _ = smooth_line_field(design, e1, np.abs(k1 - k2) * design.face_areas, s.smoothing * h)
+    e1, symmetry, smoothing = _smoothed_directions(
+        design, e1, np.abs(k1 - k2) * design.face_areas, h, s,
+        cross=family is None and angle == 90.0)
     lap("smoothing")
     e1, seam = comb_line_field(design, e1)
     index = line_field_index(design, e1)
@@ -392,7 +412,38 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         filled_holes=filled, open_holes=opened,
         gliding_boundary=gliding, vertex_keys=vertex_keys,
         prescribed=prescribed, family=description, level_step=level_step,
-        turning_points=turning[0], turning_deg=turning[1], seconds=seconds)
+        turning_points=turning[0], turning_deg=turning[1], direction_symmetry=symmetry,
+        smoothing=smoothing, seconds=seconds)
+
+
+def _smoothed_directions(design: DesignSurface, e1: np.ndarray, weight: np.ndarray,
+                         panel_size: float, s: LayoutSettings, *, cross: bool
+                         ) -> tuple[np.ndarray, int, float]:
+    """The principal directions smoothed for the layout: as a cross field where the net
+    allows it, else as a line field.
+
+    An orthogonal S-net is the same net with its two families swapped, so its directions
+    are a cross field: across a near-umbilic the principal directions may turn by a
+    quarter turn without the net's lines turning at all. The cross field is smoothed over
+    `LayoutSettings.smoothing` panels, doubled up to `max_smoothing`, until it has no
+    quarter-turn singularity (which the lattice cannot follow; four of them surround a
+    dome's apex); failing that, and for other nets, the line field is smoothed.
+
+    Returns
+    -------
+    e1 : (t, 3) float, the smoothed line field (uncombed).
+    symmetry : 4 for a cross field, 2 for a line field.
+    smoothing : the smoothing length used (panel sizes).
+    """
+    length = s.smoothing
+    while cross and length <= s.max_smoothing:
+        d, _ = smooth_direction_field(design, e1, weight, length * panel_size, symmetry=4)
+        index = line_field_index(design, d, symmetry=4)
+        if np.all(np.nan_to_num(2 * index) == np.round(np.nan_to_num(2 * index))):
+            return comb_cross_field(design, d), 4, length
+        length *= 2
+    d, _ = smooth_direction_field(design, e1, weight, s.smoothing * panel_size, symmetry=2)
+    return d, 2, s.smoothing
 
 
 def _turning_spots(design: DesignSurface, turning: np.ndarray, limit: float,
@@ -523,12 +574,15 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
 
 def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,
           radius: float | None = None, settings=None, fixed: np.ndarray | None = None,
-          progress=None):
+          surface_tolerance: float = SURFACE_TOLERANCE, progress=None):
     """Optimize a layout into a net of type `net` while it glides on the design surface.
 
-    The vertices are held on the design surface (point-to-plane distance to footpoints
-    recomputed every iteration, a hard constraint), the layout's boundary vertices near
-    the design boundary on the boundary curves; everything else is `fabplan.optimize`.
+    The vertices are held within `surface_tolerance` panel sizes of the design surface
+    (point-to-plane distance to footpoints recomputed every iteration, a hard
+    constraint), the layout's boundary vertices near the design boundary on the boundary
+    curves; everything else is `fabplan.optimize`. The tolerance is what lets an exact
+    S-net form on a curved design: held at zero distance the vertices could only slide.
+    Nets with a prescribed family are held on the surface (its levels are read there).
 
     Returns
     -------
@@ -545,15 +599,19 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         raise InputError(f"net type {net!r}: layouts are computed for S-nets; optimize the "
                          "S-net first and then the S*-net with `fabplan optimize`")
     extra = ()
+    # a prescribed family's levels are read on the surface: its nets are held on it
+    tolerance = 0.0 if layout.prescribed is not None else surface_tolerance
     if layout.prescribed is not None:
         on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
         extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
                               layout.vertex_keys[on_level, 0]),)
-    # panels no shorter than half the panel size (where they start longer), with a margin
-    extra += (EdgeCollapseBarrier(minimum=0.51 * layout.panel_size, name="edge-length"),)
+    # edges within 0.5 - 2 panel sizes (the shorter ones at their start length), with a margin
+    extra += (EdgeLengthRange(0.51 * layout.panel_size, 1.99 * layout.panel_size),)
     result = optimize(mesh, net, angle=angle, radius=radius, reference=design.reference,
                       fixed=fixed, settings=settings, glide=True,
-                      glide_boundary=layout.gliding_boundary, extra=extra, progress=progress)
+                      glide_boundary=layout.gliding_boundary,
+                      surface_tolerance=tolerance * layout.panel_size, extra=extra,
+                      progress=progress)
     X = result.mesh.vertices
     d = design.distances(X)
     length = np.linalg.norm(X[result.mesh.edges[:, 0]] - X[result.mesh.edges[:, 1]], axis=1)

@@ -127,7 +127,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
                  fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
                  fairness: bool = True, coherent: bool = False,
                  closeness: bool = True, glide: bool = False,
-                 glide_boundary: np.ndarray | None = None,
+                 glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
                  extra: tuple = ()) -> GuidedProjection:
     """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
     check_net_input(mesh)
@@ -144,7 +144,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
         reference = ReferenceSurface.from_mesh(mesh)
     if glide:
         # on the surface at convergence, boundary vertices on its boundary curves
-        families.append(Closeness(reference, hard=True))
+        families.append(Closeness(reference, hard=True, tolerance=surface_tolerance))
         curves = reference.boundary_curves()
         if glide_boundary is None:
             glide_boundary = np.flatnonzero(mesh.is_boundary_vertex)
@@ -230,8 +230,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              fixed: np.ndarray | None = None, handles: dict | None = None,
              settings: SolverSettings | None = None, fairness: bool = True,
              coherent: bool = False, closeness: bool = True, glide: bool = False,
-             glide_boundary: np.ndarray | None = None, extra: tuple = (),
-             progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
+             glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
+             extra: tuple = (), progress: Callable[[IterationRecord], None] | None = None
+             ) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
 
     Parameters
@@ -254,6 +255,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         design surface.
     glide_boundary : (b,) int, the boundary vertices that glide on the reference's
         boundary curves (default: all boundary vertices of the net).
+    surface_tolerance : with `glide`, how far the vertices may leave the reference
+        (model units; 0 holds them on it).
     extra : further constraint families to solve with (e.g. prescribed levels).
     progress : called after every iteration with its record.
 
@@ -273,7 +276,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     solver = build_solver(mesh, net, angle=angle, radius=radius, reference=reference,
                           fixed=held, settings=settings, fairness=fairness, coherent=coherent,
                           closeness=closeness, glide=glide, glide_boundary=glide_boundary,
-                          extra=extra)
+                          surface_tolerance=surface_tolerance, extra=extra)
     if handle_ids.size:
         solver.set_vertices(handle_ids, targets)
     status = solver.run(callback=progress)

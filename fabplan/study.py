@@ -631,10 +631,17 @@ def candidate_cost(metrics: dict, weights: CostWeights, *,
 
 
 def rank_candidates(results: list) -> None:
-    """Set `rank`: feasible candidates by cost, then the others by failed checks, cost."""
+    """Set `rank`: feasible candidates by cost, then the others by failed checks, cost. A
+    candidate that ended at the net of another ranks right after it (their costs differ by
+    rounding only)."""
     done = [r for r in results if not r.failed]
-    order = sorted(done, key=lambda r: (not r.feasible,
-                                        sum(not c["ok"] for c in r.checks), r.cost))
+    named = {r.name: r for r in done}
+
+    def key(r):
+        twin = named.get(r.same_net_as, r)
+        return (not r.feasible, sum(not c["ok"] for c in r.checks), twin.cost, twin is not r)
+
+    order = sorted(done, key=key)
     for i, r in enumerate(order, 1):
         r.rank = i
 

@@ -679,10 +679,14 @@ def template_summary(name: str) -> str:
 
 
 def resolve_study(source: str) -> Path:
-    """A study file path from a path or a template name."""
+    """A study file path from a path or a template name (a folder of the same name, such as
+    an earlier study's output, does not hide the template)."""
     path = Path(source)
-    if path.suffix.lower() == ".toml" or path.exists():
+    if path.suffix.lower() == ".toml" or path.is_file():
         return path
+    if path.is_dir() and source not in template_names():
+        raise InputError(f"{source}: a folder, not a study file (a .toml file or a template "
+                         f"name: {', '.join(template_names())})")
     return template_path(source)
 
 

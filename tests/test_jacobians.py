@@ -23,6 +23,7 @@ from fabplan.constraints import (
     ConstantMannheimRadius,
     ContactNormals,
     EdgeCollapseBarrier,
+    EdgeLengthRange,
     Fairness,
     FamilyLevels,
     MannheimTangency,
@@ -60,7 +61,9 @@ FAMILIES = {
     "fairness": lambda: [Fairness()],
     # every edge shorter than 1.5 times its start length: the barrier is active everywhere
     "edge-collapse": lambda: [EdgeCollapseBarrier(1.5)],
+    "edge-length-range": lambda: [EdgeLengthRange(0.05, 5.0)],
     "closeness": lambda: [Closeness(_reference())],
+    "surface-band": lambda: [Closeness(_reference(), hard=True, tolerance=0.02)],
     "levels": lambda: [FamilyLevels(_reference(), _reference().vertices[:, 0],
                                     np.arange(64), np.zeros(64))],
     "planar-faces": lambda: [PlanarFaces()],

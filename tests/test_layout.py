@@ -24,7 +24,7 @@ from fabplan.directions import (
 )
 from fabplan.errors import InputError
 from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
-from fabplan.layout import LayoutSettings, glide, layout_surface
+from fabplan.layout import SURFACE_TOLERANCE, LayoutSettings, glide, layout_surface
 from fabplan.mesh import QuadMesh
 from fabplan.surfaces import (
     DesignSurface,
@@ -90,12 +90,12 @@ def test_hyperbolic_paraboloid_layout_glides_into_an_snet(hypar, net, angle):
     X = result.mesh.vertices[layout.gliding_boundary]
     foot, _ = closest_points_on_polylines(X, hypar.boundary_curves())
     assert len(X) > 20 and np.linalg.norm(foot - X, axis=1).max() <= 1e-6
-    # the record carries the same distances, to the exact surface: the net is on the
-    # triangulation, whose chords are off the hyperbolic paraboloid
+    # the record carries the same distances, to the exact surface; the net stays within
+    # the gliding band of the triangulation it glided on
     props = result.properties
     X = result.mesh.vertices
     assert props["distance_to_design"]["max"] == pytest.approx(hypar.distances(X).max(), abs=1e-15)
-    assert hypar.reference.distances(X).max() <= 1e-9 < props["distance_to_design"]["max"]
+    assert hypar.reference.distances(X).max() <= SURFACE_TOLERANCE * 1.0 * (1 + 1e-6)
 
 
 def test_tower_of_revolution_closes_up_around_its_axis():
@@ -212,9 +212,12 @@ def test_umbilics_give_irregular_vertices_in_the_layout_and_the_report(tmp_path,
 def test_a_field_turning_around_a_point_does_not_crash():
     """At the apex of a paraboloid of revolution every direction is principal and the
     field turns once around it: the net's spirals close in, the layout leaves them out
-    within two panels and closes the hole with a fan around one many-valent vertex."""
+    within two panels and closes the hole with a fan around one many-valent vertex. (As a
+    cross field the turn splits into four quarter-turn singularities no lattice follows:
+    the line field is kept.)"""
     design = load_design("paraboloid", triangles=10000)
     layout = layout_surface(design, 0.8)
+    assert layout.direction_symmetry == 2
     # one whole turn, found at the apex (or split into two half turns next to it)
     assert layout.singular_index.sum() == 1.0
     assert np.linalg.norm(layout.singular_points, axis=1).max() < 0.5
@@ -417,7 +420,7 @@ def test_the_boundary_staircase_is_closed_on_the_boundary_curve(spec, angle):
     assert covered >= 0.93
     assert covered >= _panel_area(plain.mesh) / design.area + 0.03
     assert_snet_on_design(result.mesh, design, panel, angle=angle)
-    assert design.reference.distances(result.mesh.vertices).max() <= 1e-8 * panel
+    assert design.reference.distances(result.mesh.vertices).max() <= SURFACE_TOLERANCE * panel * (1 + 1e-6)
 
 
 def test_a_prescribed_family_with_a_fixed_angle_net_is_refused(tmp_path, capsys):
@@ -484,16 +487,16 @@ def test_floors_of_a_surface_of_revolution_have_no_partner_family(tmp_path, caps
 
 
 def test_a_net_type_that_changes_the_surface_is_pointed_to_optimize(tmp_path, capsys):
-    """Held on a twisted facade, a linear Weingarten net cannot form (exit 3, with the way
-    out); optimized with the facade as a reference surface (a built-in spec) it does."""
+    """Held near a dome, a linear Weingarten net cannot form (exit 3, with the way out);
+    optimized with the dome as a reference surface (a built-in spec) it does."""
     first = tmp_path / "glide.obj"
-    code = main(["layout", "tower-facade", "--net", "linear-weingarten", "--panel-size", "1",
+    code = main(["layout", "paraboloid", "--net", "linear-weingarten", "--panel-size", "1",
                  "--triangles", "6000", "-q", "-o", str(first)])
     _, err = capsys.readouterr()
     assert code == 3 and "exist on special surfaces only" in err
     second = tmp_path / "free.obj"
     code = main(["optimize", str(first), "--net", "linear-weingarten", "--reference",
-                 "tower-facade", "-q", "-o", str(second)])
+                 "paraboloid", "-q", "-o", str(second)])
     props = json.loads(second.with_suffix(".json").read_text())["properties"]
     assert code == 0 and props["sphere_residual_relative"]["max"] <= 1e-6
     assert props["distance_to_reference"]["max"] <= 0.1
@@ -509,8 +512,11 @@ def _wavy_height(x, y):
 
 
 def test_fast_turning_principal_directions_are_found_and_reported():
+    """At 70 degrees the net's directions are the principal ones turned by 35 degrees: a
+    line field, which turns fast around the near-umbilics, and the layout says where."""
     wavy = height_field(_wavy_height, width=30.0, depth=15.0).triangulate((120, 60))
-    layout = layout_surface(wavy, 1.0)
+    layout = layout_surface(wavy, 1.0, angle=70.0)
+    assert layout.direction_symmetry == 2
     # the near-umbilics, located independently: minima of |k1 - k2| on a fine grid
     expected = np.array([[2.45, 4.75], [27.55, 4.7], [22.7, 11.0]]) - [15.0, 7.5]
     found = layout.turning_points[:, :2]
@@ -518,10 +524,30 @@ def test_fast_turning_principal_directions_are_found_and_reported():
     gap = np.linalg.norm(found[:, None] - expected[None], axis=2).min(axis=0)
     assert gap.max() < 1.5 and (layout.turning_deg > 30).all()
     record = layout.record()
-    assert len(record["fast_turning_points"]) == 3
+    assert len(record["fast_turning_points"]) == 3 and record["direction_field"] == "line"
     # a facade of the same size whose principal directions turn slowly has none
     calm = height_field(_facade_height, width=30.0, depth=16.0).triangulate((120, 60))
-    assert len(layout_surface(calm, 1.0).turning_points) == 0
+    assert len(layout_surface(calm, 1.0, angle=70.0).turning_points) == 0
+
+
+@pytest.mark.parametrize("panel", [1.0, 0.6])
+def test_a_facade_with_near_umbilics_gets_an_orthogonal_snet(tmp_path, panel):
+    """Across the near-umbilics of the wavy facade the principal directions turn by a
+    quarter turn within two panels, which no lattice follows as a line field; as a cross
+    field they need not turn at all, and the net forms within the acceptance bounds
+    (it stagnated at 87 % coverage before, and folded at panel 0.4)."""
+    surface = height_field(_wavy_height, width=30.0, depth=15.0)
+    path = tmp_path / "wavy.stl"
+    surface.triangulate(surface.resolution_for(24000)).write(path)
+    design = load_design(path)
+    assert len(design.triangles) >= 20000 and design.parametric is None
+    layout = layout_surface(design, panel)
+    assert layout.direction_symmetry == 4 and len(layout.turning_points) == 0
+    result = glide(layout, "snet")
+    assert result.converged
+    measured = assert_snet_on_design(result.mesh, design, panel)
+    assert measured["distance"] <= SURFACE_TOLERANCE * (1 + 1e-6)
+    assert result.properties["coverage"] >= 0.97
 
 
 def test_closest_points_on_a_parametric_design_never_move_away():

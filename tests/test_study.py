@@ -700,3 +700,33 @@ def test_heat_map_and_metrics_measure_the_same_deviation(study_result):
     assert np.array_equal(d, exact)
     assert deviation_figure(c, result.design, 1e-3, result.study.design.mm_per_unit).startswith(
         "data:image/png;base64,")
+
+
+def test_a_candidate_that_is_another_net_ranks_right_after_it():
+    """CMC on a saddle ends at the minimal net; their costs differed by 1e-8 and the copy
+    was recommended over the net it copies."""
+    from types import SimpleNamespace
+
+    from fabplan.study import rank_candidates
+
+    def result(name, cost, twin=None):
+        return SimpleNamespace(name=name, failed=False, feasible=True, checks=[], cost=cost,
+                               same_net_as=twin, rank=None)
+
+    minimal, cmc, other = result("minimal", 2001.5577149), result("cmc", 2001.5577148, "minimal"), \
+        result("isogonal", 2001.6)
+    rank_candidates([cmc, other, minimal])
+    assert (minimal.rank, cmc.rank, other.rank) == (1, 2, 3)
+
+
+def test_an_output_folder_named_like_a_template_does_not_hide_it(tmp_path, monkeypatch):
+    """`fabplan study canopy -o canopy` twice: the second run read the folder as the
+    study file and said "no such study file"."""
+    from fabplan.study_spec import resolve_study, template_path
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "canopy").mkdir()
+    assert resolve_study("canopy") == template_path("canopy")
+    (tmp_path / "mine").mkdir()
+    with pytest.raises(InputError, match="mine: a folder, not a study file"):
+        resolve_study("mine")

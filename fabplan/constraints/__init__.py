@@ -3,7 +3,7 @@
 from .angle import ConstantAngle
 from .base import Constraint, Layout, NetState
 from .closeness import BoundaryGliding, Closeness
-from .collapse import EdgeCollapseBarrier
+from .collapse import EdgeCollapseBarrier, EdgeLengthRange
 from .fairness import Fairness
 from .levels import FamilyLevels
 from .mannheim import (
@@ -31,6 +31,7 @@ __all__ = [
     "PlaneNormalization",
     "Fairness",
     "EdgeCollapseBarrier",
+    "EdgeLengthRange",
     "FamilyLevels",
     "ContactNormals",
     "NormalNormalization",

@@ -5,6 +5,11 @@ linear residual ``n_k . (v_k - p_k)`` lets the net glide along the surface (sect
 Where a vertex has left the surface over its boundary, its footpoint lies on the
 boundary and the offset has a part along the surface too: a second row pulls that part
 back (it is zero, with a zero Jacobian row, while the footpoint is inside).
+
+As a hard constraint the distance may be held within a band ``|n . (v - p)| <= tol``
+instead of at zero: ``n . (v - p) = tol sin(s)`` with one auxiliary variable per vertex.
+A net that must be an S-net exactly gains the freedom to leave a curved design by a
+fraction of its tolerance (near-umbilics, boundaries), where at zero it could only slide.
 """
 
 from __future__ import annotations
@@ -26,17 +31,25 @@ class Closeness(Constraint):
     hard : False: a soft pull that fades out with the other soft terms ("closeness");
         True: a constraint that must hold at convergence, so the net glides on the
         surface ("surface").
+    tolerance : with `hard`, the distance allowed off the surface (model units).
     """
 
     name = "closeness"
     hard = False
 
-    def __init__(self, reference, vertices: np.ndarray | None = None, *, hard: bool = False):
+    def __init__(self, reference, vertices: np.ndarray | None = None, *, hard: bool = False,
+                 tolerance: float = 0.0):
         self.reference = reference
         self.vertices = vertices
         if hard:
             self.hard = True
             self.name = "surface"
+        if tolerance < 0 or (tolerance > 0 and not hard):
+            raise ValueError("a distance tolerance applies to the hard constraint only")
+        self.tolerance = float(tolerance)
+
+    def declare(self, state):
+        return {"surface-band": (len(self._ids(state)),)} if self.tolerance > 0 else {}
 
     def _ids(self, state):
         return np.arange(state.mesh.vertex_count) if self.vertices is None else self.vertices
@@ -55,12 +68,23 @@ class Closeness(Constraint):
         self._outward = np.where(outside, along / np.where(outside, length, 1.0), 0.0)
 
     def columns(self, state):
-        return np.repeat(state.layout.index("vertices")[self._ids(state)], 2, axis=0)
+        ids = state.layout.index("vertices")[self._ids(state)]
+        if self.tolerance > 0:
+            ids = np.concatenate([ids, state.layout.index("surface-band")[:, None]], axis=1)
+        return np.repeat(ids, 2, axis=0)
 
     def evaluate(self, state):
         d = state.X[self._ids(state)] - self._foot
         rows = np.stack([self._normal, self._outward], axis=1)          # (k, 2, 3)
-        return np.einsum("kij,kj->ki", rows, d).ravel(), rows.reshape(-1, 3)
+        r = np.einsum("kij,kj->ki", rows, d)
+        if self.tolerance <= 0:
+            return r.ravel(), rows.reshape(-1, 3)
+        band = state.layout.view(state.x, "surface-band")
+        tol = self.tolerance / state.length_scale
+        r[:, 0] -= tol * np.sin(band)
+        slack = np.zeros((len(band), 2, 1))
+        slack[:, 0, 0] = -tol * np.cos(band)
+        return r.ravel(), np.concatenate([rows, slack], axis=2).reshape(-1, 4)
 
 
 def closest_points_on_polylines(points: np.ndarray, curves: list
