@@ -230,7 +230,7 @@ def _spanning_parent(count: int, f: np.ndarray, g: np.ndarray, weight: np.ndarra
     cols = np.r_[tree.col, first]
     full = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count + 1,) * 2).tocsr()
     _, pred = csgraph.breadth_first_order(full, root, directed=False, return_predecessors=True)
-    parent = pred[:count].copy()
+    parent = pred[:count].astype(np.int64)
     parent[(parent == root) | (parent < 0)] = -1
     return parent
 

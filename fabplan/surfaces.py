@@ -955,13 +955,15 @@ def _tree_parity(count: int, f: np.ndarray, g: np.ndarray, step: np.ndarray) -> 
     cols = np.r_[g, first]
     graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count + 1,) * 2).tocsr()
     _, pred = csgraph.breadth_first_order(graph, root, directed=False, return_predecessors=True)
-    parent = pred[:count].copy()
+    parent = pred[:count].astype(np.int64)
     parent[(parent == root) | (parent < 0)] = -1
     return xor_to_root(parent, _edge_values(count, f, g, step, parent))
 
 
 def _edge_values(count, f, g, value, parent) -> np.ndarray:
     """value of the pair (parent[x], x) for every x with a parent (either order), else 0."""
+    # int64 keys: count**2 overflows 32 bits from 46,341 elements on
+    f, g, parent = (np.asarray(a, np.int64) for a in (f, g, parent))
     out = np.zeros(count, np.int64)
     key = np.r_[f * count + g, g * count + f]
     vals = np.r_[value, value]
