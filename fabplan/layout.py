@@ -383,7 +383,7 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         if best is None or len(quads) > len(best[1]):
             best = (verts[used], quads, keys[used], off)
     verts, quads, keys, off = best
-    if prescribed is None and len(quads):
+    if len(quads):
         verts, quads, keys, _ = fill_boundary_cells(
             verts, quads, keys, design, h, min_edge=s.boundary_min_edge, max_edge=s.max_edge)
     lap("extraction")

@@ -153,9 +153,12 @@ def test_prescribed_floor_levels_get_their_complementary_family():
     result = glide(layout, "snet")
     assert result.converged
     assert_snet_on_design(result.mesh, design, 1.0)
-    # the prescribed family stays on the floor levels: each level's vertices at one height
+    # the prescribed family stays on the floor levels: each level's vertices at one height,
+    # also the corners added on the boundary curve to close the staircase (93 % covered,
+    # 88 % without them)
     X, level = result.mesh.vertices, layout.vertex_keys[:, 0]
     assert np.abs(X[:, 2] - level * layout.level_step).max() <= 1e-9
+    assert result.properties["coverage"] >= 0.92
     # and the other family is the partner symmetric to the principal directions (S-net):
     # its angle to the floors is twice the floors' angle to a principal direction, here
     # about 45 degrees, far from the degenerate 0
