@@ -25,8 +25,8 @@ from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .linalg import solve_spd_columns
-from .mesh import xor_to_root
-from .surfaces import DesignSurface, _edge_corners, _edge_values
+from .mesh import forest_parents, tree_parity
+from .surfaces import DesignSurface, _edge_corners
 
 __all__ = [
     "face_principal_frames",
@@ -141,6 +141,8 @@ def smooth_direction_field(design: DesignSurface, e1: np.ndarray, weight: np.nda
     coherence : (t,) float in [0, 1], how well the neighbourhood agrees (0 at a
         singularity of the smoothed field).
     """
+    if symmetry not in (2, 4):
+        raise ValueError(f"symmetry must be 2 (a line field) or 4 (a cross field), got {symmetry}")
     b1, b2, _ = _face_frames(design)
     t = len(e1)
     angle = symmetry * np.arctan2(np.sum(e1 * b2, axis=1), np.sum(e1 * b1, axis=1))
@@ -188,8 +190,7 @@ def comb_cross_field(design: DesignSurface, d: np.ndarray) -> np.ndarray:
     dot = np.abs(np.sum(d[f] * d[g], axis=1))
     agreement = np.maximum(dot, np.sqrt(np.maximum(1.0 - dot * dot, 0.0)))
     parent = _spanning_parent(t, f, g, 1.0 - agreement + 1e-9)
-    step = _edge_values(t, f, g, (dot < math.sqrt(0.5)).astype(np.int64), parent)
-    quarter = xor_to_root(parent, step).astype(bool)
+    quarter = tree_parity(t, f, g, (dot < math.sqrt(0.5)).astype(np.int64), parent).astype(bool)
     return np.where(quarter[:, None], np.cross(design.face_normals, d), d)
 
 
@@ -207,8 +208,7 @@ def comb_line_field(design: DesignSurface, e1: np.ndarray) -> tuple[np.ndarray, 
     t = len(e1)
     dot = np.sum(e1[f] * e1[g], axis=1)
     parent = _spanning_parent(t, f, g, 1.0 - np.abs(dot) + 1e-9)
-    step = _edge_values(t, f, g, (dot < 0).astype(np.int64), parent)
-    sign = 1 - 2 * xor_to_root(parent, step)
+    sign = 1 - 2 * tree_parity(t, f, g, (dot < 0).astype(np.int64), parent)
     e1 = e1 * sign[:, None]
     flips = np.sum(e1[f] * e1[g], axis=1) < 0
     T = design.triangles
@@ -222,17 +222,7 @@ def _spanning_parent(count: int, f: np.ndarray, g: np.ndarray, weight: np.ndarra
     (f, g) with positive weights, -1 at the roots (one per component)."""
     graph = sp.coo_matrix((weight, (f, g)), shape=(count, count)).tocsr()
     tree = csgraph.minimum_spanning_tree(graph).tocoo()
-    ncomp, label = csgraph.connected_components(tree, directed=False)
-    root = count
-    first = np.full(ncomp, count)
-    np.minimum.at(first, label, np.arange(count))
-    rows = np.r_[tree.row, np.full(ncomp, root)]
-    cols = np.r_[tree.col, first]
-    full = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count + 1,) * 2).tocsr()
-    _, pred = csgraph.breadth_first_order(full, root, directed=False, return_predecessors=True)
-    parent = pred[:count].astype(np.int64)
-    parent[(parent == root) | (parent < 0)] = -1
-    return parent
+    return forest_parents(count, tree.row, tree.col)
 
 
 def line_field_index(design: DesignSurface, e1: np.ndarray, *, symmetry: int = 2) -> np.ndarray:

@@ -101,6 +101,49 @@ def xor_to_root(parent: np.ndarray, step: np.ndarray) -> np.ndarray:
     return parity
 
 
+def forest_parents(count: int, f: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """(count,) int64, parent of every element in a breadth-first spanning forest of the
+    pairs (f, g), rooted at the first element of every component; -1 at the roots."""
+    f, g = np.asarray(f, np.int64), np.asarray(g, np.int64)
+    adj = sp.coo_matrix((np.ones(len(f)), (f, g)), shape=(count, count)).tocsr()
+    ncomp, label = csgraph.connected_components(adj, directed=False)
+    root = count  # a virtual node joined to one element of every component
+    first = np.full(ncomp, count)
+    np.minimum.at(first, label, np.arange(count))
+    rows, cols = np.r_[f, np.full(ncomp, root)], np.r_[g, first]
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count + 1,) * 2).tocsr()
+    _, pred = csgraph.breadth_first_order(graph, root, directed=False, return_predecessors=True)
+    # scipy's predecessors are int32: keys like parent * count overflow from 46,341 on
+    parent = pred[:count].astype(np.int64)
+    parent[(parent == root) | (parent < 0)] = -1
+    return parent
+
+
+def tree_edge_values(count: int, f: np.ndarray, g: np.ndarray, value: np.ndarray,
+                     parent: np.ndarray) -> np.ndarray:
+    """(count,) int64, `value` of the pair (parent[x], x) for every x with a parent (the pair
+    given in either order), else 0."""
+    f, g, parent = (np.asarray(a, np.int64) for a in (f, g, parent))
+    out = np.zeros(count, np.int64)
+    key = np.r_[f * count + g, g * count + f]
+    vals = np.r_[value, value]
+    order = np.argsort(key)
+    has = parent >= 0
+    pos = np.searchsorted(key[order], parent[has] * count + np.flatnonzero(has))
+    out[has] = vals[order[pos]]
+    return out
+
+
+def tree_parity(count: int, f: np.ndarray, g: np.ndarray, step: np.ndarray,
+                parent: np.ndarray | None = None) -> np.ndarray:
+    """(count,) int 0/1 labels with ``label[g] = label[f] ^ step`` along a spanning forest
+    (`forest_parents` unless `parent` is given), by pointer doubling. Pairs off the
+    forest are not checked here."""
+    if parent is None:
+        parent = forest_parents(count, f, g)
+    return xor_to_root(parent, tree_edge_values(count, f, g, step, parent))
+
+
 def _break_cycles(successor: np.ndarray) -> np.ndarray:
     """Cut every cycle of a successor map at its smallest element (its predecessor points to -1)."""
     successor = successor.copy()
@@ -360,28 +403,7 @@ class QuadMesh:
         f, g = c["face"][inner], c["face"][c["twin"][inner]]
         # parity of the step f -> g: r_g = r_f + j_f + j_g (mod 2)
         flip = (c["local"][inner] + c["local"][c["twin"][inner]]) % 2
-        root = nf  # a virtual node joined to one face of every component
-        adj = sp.coo_matrix((np.ones(len(f)), (f, g)), shape=(nf, nf)).tocsr()
-        ncomp, label = csgraph.connected_components(adj, directed=False)
-        first_face = np.full(ncomp, nf)
-        np.minimum.at(first_face, label, np.arange(nf))
-        rows = np.concatenate([f, np.full(ncomp, root)])
-        cols = np.concatenate([g, first_face])
-        graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(nf + 1, nf + 1)).tocsr()
-        _, pred = csgraph.breadth_first_order(graph, root, directed=False,
-                                              return_predecessors=True)
-        parent = pred[:nf].copy()
-        parent[parent == root] = -1
-        parent[parent < 0] = -1
-        # parity of each tree edge (parent -> face), looked up through the corner pairs
-        step = np.zeros(nf, np.int64)
-        key_pf = f * (nf + 1) + g
-        order = np.argsort(key_pf)
-        has = parent >= 0
-        q = np.arange(nf)[has] + parent[has] * (nf + 1)
-        pos = np.searchsorted(key_pf[order], q)
-        step[has] = flip[order[pos]]
-        return xor_to_root(parent, step)
+        return tree_parity(nf, f, g, flip)
 
     @cached_property
     def edge_family(self) -> np.ndarray:

@@ -39,7 +39,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from .errors import InputError
-from .mesh import xor_to_root
+from .mesh import tree_parity
 from .reference import ReferenceSurface
 
 __all__ = [
@@ -702,7 +702,7 @@ class DesignSurface:
         """Flip triangles so that neighbours agree, by XOR along a spanning tree."""
         T, n = self.triangles, len(self.vertices)
         f, g, same = _triangle_pairs(T, n)
-        flip = _tree_parity(len(T), f, g, same.astype(np.int64)).astype(bool)
+        flip = tree_parity(len(T), f, g, same.astype(np.int64)).astype(bool)
         if flip.sum() > len(T) / 2:
             flip = ~flip  # keep the orientation most triangles of the input have
         if flip.any():
@@ -938,38 +938,3 @@ def _vertex_fan_count(T: np.ndarray, n: int) -> np.ndarray:
     pairs = np.unique(np.stack([a, label], axis=1), axis=0)
     return np.bincount(pairs[:, 0], minlength=n)
 
-
-def _tree_parity(count: int, f: np.ndarray, g: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """(count,) int 0/1 labels with ``label[g] = label[f] ^ step`` along a spanning forest.
-
-    The forest is a breadth-first tree from the first element of every component; the XOR
-    along each element's path to its root is accumulated by pointer doubling (as in
-    `fabplan.mesh.QuadMesh._face_parity`). Pairs off the tree are not checked here.
-    """
-    adj = sp.coo_matrix((np.ones(len(f)), (f, g)), shape=(count, count)).tocsr()
-    ncomp, label = csgraph.connected_components(adj, directed=False)
-    root = count
-    first = np.full(ncomp, count)
-    np.minimum.at(first, label, np.arange(count))
-    rows = np.r_[f, np.full(ncomp, root)]
-    cols = np.r_[g, first]
-    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count + 1,) * 2).tocsr()
-    _, pred = csgraph.breadth_first_order(graph, root, directed=False, return_predecessors=True)
-    parent = pred[:count].astype(np.int64)
-    parent[(parent == root) | (parent < 0)] = -1
-    return xor_to_root(parent, _edge_values(count, f, g, step, parent))
-
-
-def _edge_values(count, f, g, value, parent) -> np.ndarray:
-    """value of the pair (parent[x], x) for every x with a parent (either order), else 0."""
-    # int64 keys: count**2 overflows 32 bits from 46,341 elements on
-    f, g, parent = (np.asarray(a, np.int64) for a in (f, g, parent))
-    out = np.zeros(count, np.int64)
-    key = np.r_[f * count + g, g * count + f]
-    vals = np.r_[value, value]
-    order = np.argsort(key)
-    has = parent >= 0
-    q = parent[has] * count + np.flatnonzero(has)
-    pos = np.searchsorted(key[order], q)
-    out[has] = vals[order[pos]]
-    return out

@@ -116,3 +116,20 @@ def test_constraint_jacobian_matches_finite_differences(name):
         error = np.abs(numeric - analytic).max()
         assert error <= TOLERANCE * max(scale, 1.0), \
             f"{name}: block {block!r}, error {error:.3g} of {scale:.3g}"
+
+
+def test_edge_length_range_starts_off_its_stationary_points():
+    """A slack that starts at a bound has a vanishing derivative, and Gauss-Newton then
+    holds the edge at its start length: every edge must start strictly inside its range,
+    also those starting outside the range or on its lower bound."""
+    mesh = noisy(quadric_grid(DOME, angle_deg=70, size=8), 0.05, seed=11)
+    X = mesh.vertices
+    length = np.linalg.norm(X[mesh.edges[:, 0]] - X[mesh.edges[:, 1]], axis=1)
+    family = EdgeLengthRange(np.median(length), 1.05 * np.median(length))
+    solver = GuidedProjection(mesh, [family])
+    r, J = family.evaluate(solver.state)
+    assert (length < family.minimum).any() and (length > family.maximum).any()
+    assert np.abs(J[:, -1]).min() > 0.04                          # d r / d angle = -cos
+    inside = (length >= family.minimum) & (length <= family.maximum)
+    assert np.abs(r[inside]).max() < 1e-12 and np.abs(r[length < family.minimum]).max() < 2e-3
+    assert (r[length > family.maximum] > 0).all()                 # pulled into the range

@@ -17,10 +17,12 @@ import trimesh
 from fabplan.cli import main
 from fabplan.constraints.closeness import closest_points_on_polylines
 from fabplan.directions import (
+    comb_cross_field,
     comb_line_field,
     complementary_directions,
     face_principal_frames,
     line_field_index,
+    smooth_direction_field,
 )
 from fabplan.errors import InputError
 from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
@@ -577,11 +579,52 @@ def test_tree_edge_values_do_not_overflow_on_large_designs():
     """Keys ``parent * count + child`` overflowed 32 bits from 46,341 triangles on (scipy
     returns int32 predecessors): on a 50k-triangle facade the cross field was combed
     wrong across 6,786 of 74,533 edges."""
-    from fabplan.surfaces import _edge_values
+    from fabplan.mesh import tree_edge_values
 
     count = 60000
     child = np.arange(1, count)
     parent = np.r_[-1, child - 1].astype(np.int32)          # a chain, 32-bit as from scipy
     value = (child % 3 == 0).astype(np.int64)
-    out = _edge_values(count, child - 1, child, value, parent)
+    out = tree_edge_values(count, child - 1, child, value, parent)
     assert np.array_equal(out[1:], value) and out[0] == 0
+
+
+def _flat_disk(seed: int = 0) -> DesignSurface:
+    """A flat disk of radius 5 whose triangles start at random corners (random frames)."""
+    surface = height_field(lambda x, y: 0 * x, width=10.0, depth=10.0)
+    design = surface.triangulate((40, 40))
+    V = design.vertices
+    keep = np.linalg.norm(V[design.triangles].mean(axis=1)[:, :2], axis=1) < 5.0
+    T = design.triangles[keep]
+    shift = np.random.default_rng(seed).integers(0, 3, len(T))
+    T = np.take_along_axis(T, (np.arange(3) + shift[:, None]) % 3, axis=1)
+    used, T = np.unique(T, return_inverse=True)
+    return DesignSurface(V[used], T.reshape(-1, 3), name="disk")
+
+
+@pytest.mark.parametrize("symmetry", [2, 4])
+def test_a_constant_field_survives_smoothing_in_any_frames(symmetry):
+    disk = _flat_disk()
+    d = np.tile([np.cos(0.3), np.sin(0.3), 0.0], (len(disk.triangles), 1))
+    if symmetry == 4:            # the cross scrambled by quarter turns, as a cross it is one
+        quarter = np.random.default_rng(1).integers(0, 2, len(d)).astype(bool)
+        d[quarter] = np.cross(disk.face_normals[quarter], d[quarter])
+    out, coherence = smooth_direction_field(disk, d, np.ones(len(d)), 2.0, symmetry=symmetry)
+    if symmetry == 4:
+        out = comb_cross_field(disk, out)
+        assert np.allclose(np.abs(np.sum(out * d, axis=1)) + np.abs(
+            np.sum(np.cross(out, d) * disk.face_normals, axis=1)), 1.0, atol=1e-6)
+    lines = np.abs(np.sum(out * out[0], axis=1))
+    assert lines.min() > 1 - 1e-9 and coherence.min() > 1 - 1e-6
+
+
+@pytest.mark.parametrize("turns", [1, -1, 2])
+def test_a_cross_field_turning_a_quarter_around_a_point_has_index_a_quarter(turns):
+    disk = _flat_disk()
+    c = disk.vertices[disk.triangles].mean(axis=1)
+    theta = turns * np.arctan2(c[:, 1], c[:, 0]) / 4
+    d = np.stack([np.cos(theta), np.sin(theta), 0 * theta], axis=1)
+    index = line_field_index(disk, d, symmetry=4)
+    inner = np.flatnonzero(np.nan_to_num(index) != 0)
+    assert len(inner) == 1 and index[inner[0]] == turns / 4
+    assert np.linalg.norm(disk.vertices[inner[0], :2]) < 0.5

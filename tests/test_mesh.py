@@ -601,3 +601,22 @@ def test_bad_obj_file_names_file_and_line(tmp_path):
 def test_face_repeating_a_vertex_at_non_consecutive_corners_is_rejected():
     with pytest.raises(InputError, match="face 1 repeats a vertex"):
         _build_and_inspect(SQUARE, [[0, 1, 2, 3], [1, 4, 1, 5]])
+
+
+def test_families_on_a_mesh_of_more_than_46341_faces():
+    """The face parity's keys ``parent * (faces + 1) + face`` overflowed 32 bits (scipy's
+    predecessors are int32): on a 230 x 230 grid whose faces start at random corners the
+    two families got mixed up (half the stars had their first family across the grid)."""
+    m = 230
+    i, j = np.meshgrid(np.arange(m + 1), np.arange(m + 1), indexing="ij")
+    X = np.stack([i.ravel(), j.ravel(), np.zeros(i.size)], axis=1).astype(float)
+    v = (i[:-1, :-1] * (m + 1) + j[:-1, :-1]).ravel()
+    faces = np.stack([v, v + m + 1, v + m + 2, v + 1], axis=1)
+    shift = np.random.default_rng(3).integers(0, 4, len(faces))
+    faces = np.take_along_axis(faces, (np.arange(4) + shift[:, None]) % 4, axis=1)
+    mesh = QuadMesh(X, faces)
+    stars = mesh.stars
+    assert len(stars) == (m - 1) ** 2
+    # the first family (v1, v3) of every star runs along one and the same grid direction
+    along_i = np.abs(X[stars[:, 1], 0] - X[stars[:, 0], 0]) > 0.5
+    assert along_i.all() or not along_i.any()

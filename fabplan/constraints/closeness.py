@@ -8,8 +8,8 @@ back (it is zero, with a zero Jacobian row, while the footpoint is inside).
 
 As a hard constraint the distance may be held within a band ``|n . (v - p)| <= tol``
 instead of at zero: ``n . (v - p) = tol sin(s)`` with one auxiliary variable per vertex.
-A net that must be an S-net exactly gains the freedom to leave a curved design by a
-fraction of its tolerance (near-umbilics, boundaries), where at zero it could only slide.
+A net that must be an S-net exactly gains the freedom to leave a curved design by up
+to the tolerance (near-umbilics, boundaries), where at zero it could only slide.
 """
 
 from __future__ import annotations
@@ -44,7 +44,9 @@ class Closeness(Constraint):
         if hard:
             self.hard = True
             self.name = "surface"
-        if tolerance < 0 or (tolerance > 0 and not hard):
+        if not tolerance >= 0:
+            raise ValueError(f"the distance tolerance must be >= 0, got {tolerance}")
+        if tolerance > 0 and not hard:
             raise ValueError("a distance tolerance applies to the hard constraint only")
         self.tolerance = float(tolerance)
 

@@ -58,18 +58,19 @@ class EdgeCollapseBarrier(Constraint):
 
 
 class EdgeLengthRange(Constraint):
-    """``lo <= L_e <= hi`` for every edge e, as equalities with slack variables:
-    ``L_e / lo - 1 = s_e^2`` and ``1 - L_e / hi = t_e^2``.
+    """``lo <= L_e <= hi`` for every edge e, as one smooth equality with an auxiliary
+    angle per edge: ``L_e = m + r sin(s_e)`` (m, r: centre and half-width of the range).
 
     The one-sided `EdgeCollapseBarrier` switches rows on and off as edges cross the
     bound, and Gauss-Newton chatters where many edges sit on it (a layout whose lines
-    converge near a near-umbilic); the slack keeps every row smooth, at two variables per
-    edge, so it is used where the edges' range is part of the requirement (layouts).
+    converge near a near-umbilic); here every row stays smooth, at one variable per edge,
+    so it is used where the edges' range is part of the requirement (layouts).
 
     Parameters
     ----------
-    minimum, maximum : allowed edge lengths in model units; an edge starting shorter
-        than `minimum` keeps its start length as its bound.
+    minimum, maximum : allowed edge lengths in model units. An edge that starts shorter
+        than `minimum` gets its start length as its lower bound (it may not shrink); one
+        that starts longer than `maximum` is pulled into the range.
     name : family name.
     """
 
@@ -83,36 +84,29 @@ class EdgeLengthRange(Constraint):
         self.name = name
 
     def declare(self, state):
-        return {f"{self.name}-slack": (len(state.mesh.edges), 2)}
+        return {f"{self.name}-angle": (len(state.mesh.edges),)}
 
     def initialize(self, state):
         self._edges = state.mesh.edges
-        length = self._lengths(state)
-        self._lo = np.minimum(self.minimum / state.length_scale, length)
-        self._hi = np.full(len(length), self.maximum / state.length_scale)
-        # slacks start where they satisfy the rows (zero for an edge outside the range)
-        slack = np.stack([np.sqrt(np.maximum(length / self._lo - 1.0, 0.0)),
-                          np.sqrt(np.maximum(1.0 - length / self._hi, 0.0))], axis=1)
-        state.layout.view(state.x, f"{self.name}-slack")[:] = slack
-
-    def _lengths(self, state):
         X = state.X
-        return np.linalg.norm(X[self._edges[:, 0]] - X[self._edges[:, 1]], axis=1)
+        length = np.linalg.norm(X[self._edges[:, 0]] - X[self._edges[:, 1]], axis=1)
+        lo = np.minimum(self.minimum / state.length_scale, length)
+        hi = np.full(len(length), self.maximum / state.length_scale)
+        self._centre, self._half = 0.5 * (hi + lo), 0.5 * (hi - lo)
+        # an edge on a bound starts just inside it: at sin(s) = +-1 the angle's derivative
+        # vanishes and Gauss-Newton could not move it off the bound again
+        where = np.clip((length - self._centre) / self._half, -0.999, 0.999)
+        state.layout.view(state.x, f"{self.name}-angle")[:] = np.arcsin(where)
 
     def columns(self, state):
         V = state.layout.index("vertices")[self._edges].reshape(-1, 6)       # (e, 6)
-        S = state.layout.index(f"{self.name}-slack")                        # (e, 2)
-        return np.stack([np.c_[V, S[:, 0]], np.c_[V, S[:, 1]]], axis=1).reshape(-1, 7)
+        return np.c_[V, state.layout.index(f"{self.name}-angle")]
 
     def evaluate(self, state):
         X = state.X
         d = X[self._edges[:, 0]] - X[self._edges[:, 1]]
         length = np.maximum(np.linalg.norm(d, axis=1), 1e-15)
-        s = state.layout.view(state.x, f"{self.name}-slack")
-        unit = d / length[:, None]
-        r = np.stack([length / self._lo - 1.0 - s[:, 0] ** 2,
-                      1.0 - length / self._hi - s[:, 1] ** 2], axis=1)
-        g_lo, g_hi = unit / self._lo[:, None], -unit / self._hi[:, None]
-        J = np.stack([np.c_[g_lo, -g_lo, -2 * s[:, 0]], np.c_[g_hi, -g_hi, -2 * s[:, 1]]],
-                     axis=1)
-        return r.ravel(), J.reshape(-1, 7)
+        s = state.layout.view(state.x, f"{self.name}-angle")
+        r = (length - self._centre) / self._half - np.sin(s)          # in half-widths
+        g = d / (length * self._half)[:, None]
+        return r, np.c_[g, -g, -np.cos(s)]
