@@ -289,18 +289,12 @@ def direction_turning(design: DesignSurface, e1: np.ndarray, length: float) -> n
     >>> float(np.percentile(direction_turning(tube, e1, 2.0), 95)) < 1.0
     True
     """
-    c0, _, f, g = _face_adjacency(design)
+    f, g, rotation = _edge_transport(design)
     T, V = design.triangles, design.vertices
     t = len(e1)
-    edge = V[T[:, [1, 2, 0]].ravel()[c0]] - V[T.ravel()[c0]]
-    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
-    normal = design.face_normals
-
-    def angle_to_edge(face):
-        return np.arctan2(np.sum(np.cross(edge, e1[face]) * normal[face], axis=1),
-                          np.sum(edge * e1[face], axis=1))
-
-    turn = angle_to_edge(f) - angle_to_edge(g)
+    b1, b2, _ = _face_frames(design)
+    angle = np.arctan2(np.sum(e1 * b2, axis=1), np.sum(e1 * b1, axis=1))
+    turn = angle[g] - angle[f] - rotation
     turn = np.abs(turn - np.pi * np.round(turn / np.pi))          # lines: modulo a half turn
     centroid = V[T].mean(axis=1)
     spacing = np.maximum(np.linalg.norm(centroid[f] - centroid[g], axis=1), 1e-300)

@@ -9,9 +9,10 @@ The steps follow section 4.3 of the paper, with the degrees of freedom of sectio
    anisotropy ``|k1 - k2|``, are smoothed over a length of about half a panel (near
    umbilics the surroundings decide); for orthogonal nets as a cross field, over a
    longer length where needed (`_smoothed_directions`). The field is then combed into a
-   consistent sign by XOR along a minimum spanning tree of the triangle adjacency (pointer doubling, as in
-   `fabplan.mesh.QuadMesh._face_parity`). Where the combing conflicts the field has a
-   seam; its end points and points where the field turns around are its singularities.
+   consistent sign by XOR along a minimum spanning tree of the triangle adjacency
+   (pointer doubling, `fabplan.mesh.tree_parity`). Where the combing conflicts the field
+   has a seam; its end points and points where the field turns around are its
+   singularities.
 3. S-net directions (`fabplan.directions`): the pair symmetric to the principal
    directions at the requested angle, ``t1,2 = cos(a/2) e1 +- sin(a/2) e2`` (90 degrees:
    45 degrees off the principal directions). In the second mode one family is prescribed

@@ -446,17 +446,21 @@ def test_a_crumb_of_a_few_triangles_is_dropped_and_counted():
     assert len(design.triangles) == len(faces)
 
 
+def _layout_cli(out: Path, capsys, *args: str) -> tuple[dict, QuadMesh, str]:
+    """`fabplan layout ARGS --net snet -q -o OUT`: the measured properties, the net and
+    the warnings."""
+    main(["layout", *args, "--net", "snet", "-q", "-o", str(out)])
+    _, err = capsys.readouterr()
+    return json.loads(out.with_suffix(".json").read_text())["properties"], QuadMesh.from_obj(out), err
+
+
 def test_low_coverage_is_measured_and_warned_about(tmp_path, capsys):
     """A dome whose apex is a rotationally symmetric umbilic: the S-net's spirals close in
     on it and leave a hole; the net's share of the design is measured and reported."""
-    out = tmp_path / "dome.obj"
-    main(["layout", "paraboloid", "--net", "snet", "--panel-size", "0.8", "--triangles", "20000",
-          "-q", "-o", str(out)])
-    _, err = capsys.readouterr()
-    props = json.loads(out.with_suffix(".json").read_text())["properties"]
-    X = QuadMesh.from_obj(out).vertices
+    props, net, err = _layout_cli(tmp_path / "dome.obj", capsys, "paraboloid", "--panel-size",
+                                  "0.8", "--triangles", "20000")
+    X, faces = net.vertices, net.faces
     design = load_design("paraboloid", triangles=20000)
-    faces = QuadMesh.from_obj(out).faces
     area = sum(0.5 * np.linalg.norm(np.cross(X[f[2]] - X[f[0]], X[f[3]] - X[f[1]])) for f in faces)
     assert props["coverage"] == pytest.approx(area / design.area, rel=1e-3)
     if props["coverage"] < 0.9:
@@ -466,14 +470,11 @@ def test_low_coverage_is_measured_and_warned_about(tmp_path, capsys):
 
 
 def test_distance_to_a_parametric_design_is_measured_to_the_exact_surface(tmp_path, capsys):
-    """A net glided on a 200-triangle torus lies on the chords; measured against the exact
+    """A net glided on a 200-triangle torus follows its chords; measured against the exact
     torus it is off by the chord error, and the user is told to refine the triangulation."""
-    out = tmp_path / "torus.obj"
-    main(["layout", "torus", "--net", "snet", "--panel-size", "1.5", "--triangles", "200",
-          "-q", "-o", str(out)])
-    _, err = capsys.readouterr()
-    props = json.loads(out.with_suffix(".json").read_text())["properties"]
-    X = QuadMesh.from_obj(out).vertices
+    props, net, err = _layout_cli(tmp_path / "torus.obj", capsys, "torus", "--panel-size", "1.5",
+                                  "--triangles", "200")
+    X = net.vertices
     # independent measure: distance to the torus of radii 10 and 4 about the z-axis
     ring = np.hypot(X[:, 0], X[:, 1]) - 10.0
     exact = np.abs(np.hypot(ring, X[:, 2]) - 4.0)
