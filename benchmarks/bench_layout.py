@@ -43,10 +43,11 @@ from pathlib import Path
 
 import numpy as np
 
-import fabplan.constraints.closeness as closeness
-from fabplan.layout import glide, layout_surface
-from fabplan.reference import ReferenceSurface
-from fabplan.surfaces import height_field, load_design
+import fabplan.solve.constraints.closeness as closeness
+from fabplan.design.load import load_design
+from fabplan.design.parametric import height_field
+from fabplan.layout.surface_layout import glide, layout_surface
+from fabplan.solve.reference import ReferenceSurface
 
 RESULTS = Path(__file__).resolve().parent / "results"
 WIDTH, DEPTH = 30.0, 16.0

@@ -12,7 +12,7 @@ process) is its own. Cases:
 - ``wein99``: the bundled 1,732-vertex linear Weingarten net, every vertex moved by
   seeded noise of 1% of the mean edge, optimized with ``linear-weingarten``.
 - ``weingarten-MxM`` (one per ``--sizes`` entry, ``M = round(sqrt(size))``): an exact
-  linear Weingarten net of revolution from `fabplan.generate.rotational_weingarten_snet`
+  linear Weingarten net of revolution from `fabplan.net.generate.rotational_weingarten_snet`
   (angle 80 degrees like the bundled net's 80.2, Meusnier radius 3 at a unit neck:
   negative Gaussian curvature, like most of the bundled net), perturbed the same way and
   optimized with ``linear-weingarten``. A rotational S-net on a given profile is not
@@ -92,7 +92,7 @@ def _noisy(mesh, fraction: float, seed: int):
 
 def _build(name: str):
     import fabplan
-    from fabplan.generate import rotational_snet, rotational_weingarten_snet
+    from fabplan.net.generate import rotational_snet, rotational_weingarten_snet
 
     if name == "wein99":
         return fabplan.QuadMesh.from_obj(fabplan.data_path("wein99.obj"))
@@ -123,7 +123,7 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
     import numpy as np
 
     import fabplan
-    from fabplan.solver import SolverSettings
+    from fabplan.solve.solver import SolverSettings
 
     t0 = time.perf_counter()
     net = _build(name)

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 import fabplan
-from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
+from fabplan.net.geometry import canonical_stars, fit_star_spheres, intersection_angles
 
 # Unit vectors to the vertices of a regular tetrahedron (the four tube axes).
 TETRAHEDRON = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) / np.sqrt(3)

@@ -25,7 +25,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 import fabplan
-from fabplan.geometry import canonical_stars, intersection_angles, star_planarity
+from fabplan.net.geometry import canonical_stars, intersection_angles, star_planarity
 
 # Form-finding needs the fairness term to hold the interior together until the net has
 # nearly found its shape: strong fairness fading slowly. With the library defaults

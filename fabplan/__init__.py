@@ -1,6 +1,12 @@
 """fabplan: from a freeform design to molds, strips and panels with principal symmetric meshes.
 
-The main objects are re-exported here::
+The package reads as its data flow; each stage is a subpackage that imports only the
+stages below it::
+
+    design -> layout -> net -> solve (optimize, measure) -> fabricate -> study -> report
+
+The main objects are re-exported here and imported on first use, so that ``import
+fabplan`` stays cheap for a host program::
 
     import fabplan
     mesh = fabplan.QuadMesh.from_obj(fabplan.data_path("wein99.obj"))
@@ -8,45 +14,106 @@ The main objects are re-exported here::
     result.properties["sphere_residual_relative"]["max"]
 """
 
-from pathlib import Path
+from __future__ import annotations
 
-from .edit import NetEditor
+import importlib
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
 from .errors import FabplanError, InputError, SolverError
-from .measure import measure_net
-from .mesh import QuadMesh, load_mesh
-from .molds import MoldPlan, MoldSettings, plan_molds
-from .nets import NETS, get_net
-from .optimize import OptimizationResult, optimize
-from .reference import ReferenceSurface, load_reference
-from .solver import GuidedProjection, SolverSettings
-from .strips import StripSettings, build_strips, plan_strips
 
 __version__ = "0.1.0"
+
+# public name -> the module that owns it
+_EXPORTS = {
+    "QuadMesh": "fabplan.net.mesh",
+    "load_mesh": "fabplan.net.mesh",
+    "measure_net": "fabplan.net.measure",
+    "NETS": "fabplan.solve.net_types",
+    "get_net": "fabplan.solve.net_types",
+    "optimize": "fabplan.solve.optimize",
+    "OptimizationResult": "fabplan.solve.optimize",
+    "NetEditor": "fabplan.solve.edit",
+    "ReferenceSurface": "fabplan.solve.reference",
+    "load_reference": "fabplan.solve.reference",
+    "GuidedProjection": "fabplan.solve.solver",
+    "SolverSettings": "fabplan.solve.solver",
+    "DesignSurface": "fabplan.design.mesh_surface",
+    "load_design": "fabplan.design.load",
+    "layout_surface": "fabplan.layout.surface_layout",
+    "glide": "fabplan.layout.surface_layout",
+    "plan_molds": "fabplan.fabricate.molds",
+    "MoldSettings": "fabplan.fabricate.molds",
+    "MoldPlan": "fabplan.fabricate.molds",
+    "StripSettings": "fabplan.fabricate.strips",
+    "build_strips": "fabplan.fabricate.strips",
+    "plan_strips": "fabplan.fabricate.strip_plan",
+    "StripPlan": "fabplan.fabricate.strip_plan",
+    "read_study": "fabplan.study.spec",
+    "run_study": "fabplan.study.run",
+}
 
 __all__ = [
     "FabplanError",
     "InputError",
     "SolverError",
+    "data_path",
     "QuadMesh",
     "load_mesh",
     "measure_net",
-    "plan_molds",
-    "MoldSettings",
-    "MoldPlan",
     "NETS",
     "get_net",
     "optimize",
-    "NetEditor",
     "OptimizationResult",
+    "NetEditor",
     "ReferenceSurface",
     "load_reference",
     "GuidedProjection",
     "SolverSettings",
+    "DesignSurface",
+    "load_design",
+    "layout_surface",
+    "glide",
+    "plan_molds",
+    "MoldSettings",
+    "MoldPlan",
     "StripSettings",
     "build_strips",
     "plan_strips",
-    "data_path",
+    "StripPlan",
+    "read_study",
+    "run_study",
 ]
+
+if TYPE_CHECKING:  # what a type checker and an IDE see; at run time `__getattr__` imports
+    from .design.load import load_design
+    from .design.mesh_surface import DesignSurface
+    from .fabricate.molds import MoldPlan, MoldSettings, plan_molds
+    from .fabricate.strip_plan import StripPlan, plan_strips
+    from .fabricate.strips import StripSettings, build_strips
+    from .layout.surface_layout import glide, layout_surface
+    from .net.measure import measure_net
+    from .net.mesh import QuadMesh, load_mesh
+    from .solve.edit import NetEditor
+    from .solve.net_types import NETS, get_net
+    from .solve.optimize import OptimizationResult, optimize
+    from .solve.reference import ReferenceSurface, load_reference
+    from .solve.solver import GuidedProjection, SolverSettings
+    from .study.run import run_study
+    from .study.spec import read_study
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'fabplan' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
 
 
 def data_path(name: str) -> Path:

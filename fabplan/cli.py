@@ -16,13 +16,14 @@ from pathlib import Path
 
 from . import __version__
 from .errors import FabplanError, InputError
-from .io import check_writable, write_json, write_texts
-from .measure import format_summary, measure_net
-from .mesh import load_mesh
-from .nets import NETS, check_angle, check_radius
-from .optimize import check_net_input, optimize, read_fixed, read_handles
-from .reference import load_reference
-from .solver import SolverSettings
+from .io.output import check_output_file, check_output_folder
+from .io.records import write_json
+from .net.measure import format_summary, measure_net
+from .net.mesh import load_mesh
+from .solve.net_types import NETS, check_angle, check_radius
+from .solve.optimize import check_net_input, optimize, read_fixed, read_handles
+from .solve.reference import load_reference
+from .solve.solver import SolverSettings
 
 __all__ = ["main"]
 
@@ -56,7 +57,7 @@ def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
     for out in outputs:
         if out.resolve() in protected:
             raise InputError(f"{out}: refusing to overwrite the input file")
-        check_writable(out)
+        check_output_file(out)
 
 
 def _output_path(args) -> Path:
@@ -95,7 +96,7 @@ def _reference(spec: str | None):
         return None
     if Path(spec).exists() or Path(spec).suffix.lower() in (".obj", ".stl", ".ply", ".off"):
         return load_reference(spec)
-    from .surfaces import load_design
+    from .design.load import load_design
 
     return load_design(spec).reference
 
@@ -129,32 +130,20 @@ def _cmd_optimize(args) -> int:
     return 0
 
 
-def _check_output_folder(folder: Path) -> None:
-    """Refuse an output folder that cannot be made or written, without creating it."""
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"{folder}: exists and is not a folder")
-    existing = folder
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir() or not os.access(existing, os.W_OK):
-        raise InputError(f"{folder}: cannot write there ({existing} is not a writable folder)")
-
-
 def _cmd_molds(args) -> int:
-    from .mold_report import mold_report_files
-    from .molds import MoldSettings, plan_molds
-    from .panels import check_panels
+    from .fabricate.mold_report import write_mold_report
+    from .fabricate.molds import MoldSettings, plan_molds
+    from .fabricate.panels import check_panels
 
     settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=args.units,
                             max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface)
     settings.check()
     out = Path(args.output)
-    _check_output_folder(out)
+    check_output_folder(out)
     mesh = load_mesh(args.net)
     check_panels(mesh)
     plan = plan_molds(mesh, settings)
-    files = mold_report_files(plan, out)
-    write_texts(files)
+    files = write_mold_report(plan, out)
     print(plan.summary())
     print(f"wrote {', '.join(str(f) for f in files)}")
     if not plan.fits_all:
@@ -166,9 +155,10 @@ def _cmd_molds(args) -> int:
 
 
 def _cmd_layout(args) -> int:
-    from .layout import glide, layout_angle, layout_surface, write_layout_picture
-    from .nets import get_net
-    from .surfaces import load_design
+    from .design.load import load_design
+    from .layout.picture import write_layout_picture
+    from .layout.surface_layout import glide, layout_angle, layout_surface
+    from .solve.net_types import get_net
 
     check_angle(args.angle)
     preset = get_net(args.net)
@@ -293,7 +283,7 @@ def _parse_sheet(text: str) -> tuple[float, float]:
 
 def _parse_layers(specs: list | None) -> dict:
     """['cut=LASER_CUT:1', 'engrave=MARK'] -> the layers of StripSettings, defaults kept."""
-    from .strips import StripSettings
+    from .fabricate.strips import StripSettings
 
     layers = dict(StripSettings(height_mm=1, thickness_mm=0.1).layers)
     for spec in specs or []:
@@ -311,7 +301,8 @@ def _parse_layers(specs: list | None) -> dict:
 
 
 def _cmd_strips(args) -> int:
-    from .strips import StripSettings, plan_strips
+    from .fabricate.strip_plan import plan_strips
+    from .fabricate.strips import StripSettings
 
     settings = StripSettings(
         height_mm=args.height, thickness_mm=args.thickness, clearance_mm=args.clearance,
@@ -322,7 +313,7 @@ def _cmd_strips(args) -> int:
         one_file=args.one_file)
     settings.check()
     out = Path(args.output)
-    _check_output_folder(out)
+    check_output_folder(out)
     started = time.perf_counter()
     mesh = load_mesh(args.net)
     plan = plan_strips(mesh, settings)
@@ -352,9 +343,9 @@ def _cmd_strips(args) -> int:
 
 
 def _cmd_study(args) -> int:
-    from .study import run_study
-    from .study_report import check_output_folder, write_study
-    from .study_spec import read_study, resolve_study
+    from .study.report import check_output_folder, write_study
+    from .study.run import run_study
+    from .study.spec import read_study, resolve_study
 
     show = not args.quiet
 
@@ -387,7 +378,7 @@ def _cmd_study(args) -> int:
 
 
 def _cmd_templates(args) -> int:
-    from .study_spec import copy_template, template_names, template_summary
+    from .study.spec import copy_template, template_names, template_summary
 
     if args.name is None:
         names = template_names()
@@ -398,7 +389,7 @@ def _cmd_templates(args) -> int:
               "`fabplan templates NAME -o my-study.toml`")
         return 0
     if args.output is None:
-        from .study_spec import template_path
+        from .study.spec import template_path
 
         print(template_path(args.name).read_text(encoding="utf-8"), end="")
         return 0
@@ -464,7 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     p.set_defaults(func=_cmd_molds)
 
-    from .surfaces import SURFACES, describe_surface_parameters
+    from .design.parametric import SURFACES, describe_surface_parameters
 
     p = sub.add_parser("layout", help="lay out an S-net on a design surface and optimize it "
                                       "gliding on the surface (OBJ + JSON + PNG)",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import fabplan
-from fabplan.mesh import QuadMesh
+from fabplan.net.mesh import QuadMesh
 
 
 @pytest.fixture(scope="session")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fabplan.mesh import QuadMesh
+from fabplan.net.mesh import QuadMesh
 
 
 def noisy(mesh: QuadMesh, fraction: float, seed: int = 0) -> QuadMesh:

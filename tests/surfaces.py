@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabplan.mesh import QuadMesh
+from fabplan.net.mesh import QuadMesh
 
 __all__ = ["Quadric", "DOME", "SADDLE", "quadric_grid"]
 

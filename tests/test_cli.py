@@ -21,10 +21,10 @@ from helpers import noisy
 
 import fabplan
 from fabplan.cli import main
-from fabplan.constraints.angle import ConstantAngle
-from fabplan.io import read_obj, write_obj
-from fabplan.mesh import QuadMesh
-from fabplan.nets import NETS
+from fabplan.io.obj import read_obj, write_obj
+from fabplan.net.mesh import QuadMesh
+from fabplan.solve.constraints.angle import ConstantAngle
+from fabplan.solve.net_types import NETS
 
 BASE_NETS = ["snet", "isogonal", "orthogonal", "const-radius", "cmc", "linear-weingarten"]
 

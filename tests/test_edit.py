@@ -8,8 +8,8 @@ import pytest
 
 import fabplan
 from fabplan.cli import main
-from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
-from fabplan.optimize import read_handles
+from fabplan.net.geometry import canonical_stars, fit_star_spheres, intersection_angles, star_normals
+from fabplan.solve.optimize import read_handles
 
 
 def _check_linear_weingarten(mesh):
@@ -27,7 +27,7 @@ def handle(wein99):
     """An interior vertex and a target half an edge off the surface."""
     vid = int(np.flatnonzero(~wein99.is_boundary_vertex)[600])
     stars = canonical_stars(wein99.vertices, wein99.stars)
-    normal = fabplan.geometry.star_normals(wein99.vertices, stars)[wein99.star_of_vertex[vid]]
+    normal = star_normals(wein99.vertices, stars)[wein99.star_of_vertex[vid]]
     return vid, wein99.vertices[vid] + 0.5 * wein99.mean_edge_length * normal
 
 

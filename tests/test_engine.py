@@ -7,7 +7,7 @@ import pytest
 from helpers import jet_curvatures, noisy
 
 import fabplan
-from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
+from fabplan.net.geometry import canonical_stars, fit_star_spheres, intersection_angles
 
 
 def _measured(mesh):
@@ -101,8 +101,8 @@ def test_coherent_orientation_keeps_spheres_on_one_side():
 def test_gliding_keeps_the_net_on_the_design_surface_and_its_boundary():
     from surfaces import SADDLE, quadric_grid
 
-    from fabplan.constraints.closeness import closest_points_on_polylines
-    from fabplan.reference import ReferenceSurface
+    from fabplan.solve.constraints.closeness import closest_points_on_polylines
+    from fabplan.solve.reference import ReferenceSurface
 
     design = ReferenceSurface.from_mesh(quadric_grid(SADDLE, angle_deg=80, size=91, spacing=0.1))
     start = quadric_grid(SADDLE, angle_deg=80, size=10)
@@ -121,7 +121,7 @@ def test_gliding_keeps_the_net_on_the_design_surface_and_its_boundary():
 def test_prescribed_radius_side_ignores_flat_stars():
     """Regression: with most start stars flat, the median curvature was 0 and the sphere
     side of a prescribed radius defaulted to +1 even where every curved star said -1."""
-    from fabplan.optimize import sphere_side
+    from fabplan.solve.optimize import sphere_side
 
     u, v = np.meshgrid(np.arange(-6.0, 7.0), np.arange(-6.0, 7.0), indexing="ij")
     z = np.where(u > 2, -0.02 * (u - 2) ** 2, 0.0)      # flat for u <= 2, a dome beyond
@@ -136,7 +136,7 @@ def test_prescribed_radius_side_ignores_flat_stars():
 def test_repeated_runs_fade_soft_terms_per_step(wein99):
     """Regression: every capped run() added a measurement record that also counted as an
     iteration, so an editor's soft terms faded twice as fast."""
-    from fabplan.optimize import build_solver
+    from fabplan.solve.optimize import build_solver
 
     solver = build_solver(noisy(wein99, 0.01), "snet")
     for _ in range(3):
@@ -151,9 +151,9 @@ def test_repeated_runs_fade_soft_terms_per_step(wein99):
 def test_a_gliding_snet_keeps_its_edges_regression(wein99):
     """Gliding on a slightly stretched copy of the Weingarten net once collapsed an
     interior edge to 1e-13 (a star with a collapsed edge is on a sphere trivially)."""
-    from fabplan.optimize import optimize
-    from fabplan.reference import ReferenceSurface
-    from fabplan.solver import SolverSettings
+    from fabplan.solve.optimize import optimize
+    from fabplan.solve.reference import ReferenceSurface
+    from fabplan.solve.solver import SolverSettings
 
     X = wein99.vertices - wein99.vertices.mean(axis=0)
     design = wein99.with_vertices(X * np.array([1 / 1.06, 1.06, 1.0]))

@@ -15,13 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabplan.geometry import (
-    canonical_stars,
-    fit_star_spheres,
-    intersection_angles,
-    star_planarity,
-)
-from fabplan.mesh import QuadMesh
+from fabplan.net.geometry import canonical_stars, fit_star_spheres, intersection_angles, star_planarity
+from fabplan.net.mesh import QuadMesh
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

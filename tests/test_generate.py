@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 from fabplan.errors import InputError
-from fabplan.generate import (
+from fabplan.net.generate import (
     PROFILES,
     Profile,
     height_field_grid,
     rotational_snet,
     rotational_weingarten_snet,
 )
-from fabplan.geometry import (
+from fabplan.net.geometry import (
     canonical_stars,
     fit_star_spheres,
     intersection_angles,

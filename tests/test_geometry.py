@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabplan.geometry import (
+from fabplan.net.geometry import (
     canonical_stars,
     circumcircle_tangent,
     face_planarity,
@@ -23,7 +23,7 @@ from fabplan.geometry import (
     star_normals,
     star_planarity,
 )
-from fabplan.mesh import QuadMesh
+from fabplan.net.mesh import QuadMesh
 
 RNG_SEED = 20240611
 

@@ -15,7 +15,7 @@ import pytest
 from helpers import noisy
 from surfaces import DOME, quadric_grid
 
-from fabplan.constraints import (
+from fabplan.solve.constraints import (
     Closeness,
     CoherentOrientation,
     ConstantAngle,
@@ -34,8 +34,8 @@ from fabplan.constraints import (
     SphereCondition,
     SphereNormalization,
 )
-from fabplan.reference import ReferenceSurface
-from fabplan.solver import GuidedProjection
+from fabplan.solve.reference import ReferenceSurface
+from fabplan.solve.solver import GuidedProjection
 
 STEP = 1e-6
 # The cosine between Eq. 5 rulings has large second derivatives on a noisy grid: its
@@ -97,12 +97,12 @@ def test_constraint_jacobian_matches_finite_differences(name):
     assert r0.shape == (len(columns),)
     x0 = state.x.copy()
     rng = np.random.default_rng(5)
-    layout = state.layout
+    blocks = state.blocks
     read = np.unique(columns)
-    for block in layout.blocks:
-        declared = np.isin(layout.index(block), read).any()
+    for block in blocks.blocks:
+        declared = np.isin(blocks.index(block), read).any()
         direction = np.zeros_like(x0)
-        direction[layout.index(block).ravel()] = rng.normal(size=layout.index(block).size)
+        direction[blocks.index(block).ravel()] = rng.normal(size=blocks.index(block).size)
         step = STEP / 100 if name in FINE_STEP else STEP
         state.x[:] = x0 + step * direction
         forward, _ = family.evaluate(state)

@@ -15,8 +15,11 @@ import pytest
 import trimesh
 
 from fabplan.cli import main
-from fabplan.constraints.closeness import closest_points_on_polylines
-from fabplan.directions import (
+from fabplan.design.load import load_design
+from fabplan.design.mesh_surface import DesignSurface
+from fabplan.design.parametric import height_field, surface_from_spec
+from fabplan.errors import InputError
+from fabplan.layout.directions import (
     comb_cross_field,
     comb_line_field,
     complementary_directions,
@@ -24,16 +27,11 @@ from fabplan.directions import (
     line_field_index,
     smooth_direction_field,
 )
-from fabplan.errors import InputError
-from fabplan.geometry import canonical_stars, fit_star_spheres, intersection_angles
-from fabplan.layout import SURFACE_TOLERANCE, LayoutSettings, glide, layout_surface
-from fabplan.mesh import QuadMesh
-from fabplan.surfaces import (
-    DesignSurface,
-    height_field,
-    load_design,
-    surface_from_spec,
-)
+from fabplan.layout.settings import SURFACE_TOLERANCE, LayoutSettings
+from fabplan.layout.surface_layout import glide, layout_surface
+from fabplan.net.geometry import canonical_stars, fit_star_spheres, intersection_angles
+from fabplan.net.mesh import QuadMesh
+from fabplan.solve.constraints.closeness import closest_points_on_polylines
 
 
 def _facade_height(x, y):
@@ -412,7 +410,7 @@ def test_the_boundary_staircase_is_closed_on_the_boundary_curve(spec, angle):
     """Lattice cells cut by the design boundary become quads with their outer corners on
     the boundary curve: the net covers the design up to small corner gaps, and every
     vertex (also those outside the gliding set) ends on the surface."""
-    from fabplan.layout import LayoutSettings
+    from fabplan.layout.settings import LayoutSettings
 
     design = load_design(spec, triangles=12000)
     panel = 1.2
@@ -580,7 +578,7 @@ def test_tree_edge_values_do_not_overflow_on_large_designs():
     """Keys ``parent * count + child`` overflowed 32 bits from 46,341 triangles on (scipy
     returns int32 predecessors): on a 50k-triangle facade the cross field was combed
     wrong across 6,786 of 74,533 edges."""
-    from fabplan.mesh import tree_edge_values
+    from fabplan.net.forest import tree_edge_values
 
     count = 60000
     child = np.arange(1, count)

@@ -7,8 +7,8 @@ from helpers import noisy
 
 import fabplan
 from fabplan.errors import SolverError
-from fabplan.linalg import PARDISO_MIN_UNKNOWNS, SparseSPDSolver, available_backends
-from fabplan.solver import SolverSettings
+from fabplan.solve.linalg import PARDISO_MIN_UNKNOWNS, SparseSPDSolver, available_backends
+from fabplan.solve.solver import SolverSettings
 
 BACKENDS = available_backends()
 

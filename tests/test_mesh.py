@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from fabplan.errors import InputError
-from fabplan.io import read_obj, write_obj
-from fabplan.mesh import QuadMesh
+from fabplan.io.obj import read_obj, write_obj
+from fabplan.net.mesh import QuadMesh
 
 # ---------------------------------------------------------------------------- builders
 

@@ -19,11 +19,12 @@ import pytest
 import fabplan
 from fabplan.cli import main
 from fabplan.errors import InputError
-from fabplan.generate import height_field_grid
-from fabplan.mesh import QuadMesh
-from fabplan.mold_report import explain_mold_count, mold_report_files
-from fabplan.molds import MoldSettings, plan_molds, weingarten_fit
-from fabplan.report import isoline_segments
+from fabplan.fabricate.mold_report import explain_mold_count, mold_report_files
+from fabplan.fabricate.molds import MoldSettings, plan_molds
+from fabplan.net.generate import height_field_grid
+from fabplan.net.mesh import QuadMesh
+from fabplan.net.weingarten import weingarten_fit
+from fabplan.report.figures import isoline_segments
 
 WEIN99 = fabplan.data_path("wein99.obj")
 # the bundled Weingarten net stretched by a volume-preserving affine map: same faces, panel

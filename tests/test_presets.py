@@ -24,7 +24,7 @@ import pytest
 from surfaces import DOME, SADDLE, Quadric, quadric_grid
 
 import fabplan
-from fabplan.geometry import (
+from fabplan.net.geometry import (
     canonical_stars,
     face_planarity,
     fit_star_spheres,

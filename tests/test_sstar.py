@@ -18,11 +18,12 @@ from helpers import jet_curvatures
 from surfaces import DOME, SADDLE, Quadric, quadric_grid
 
 import fabplan
-from fabplan.geometry import (
+from fabplan.net.geometry import (
     canonical_stars,
     fit_mannheim_spheres,
     osculating_tangents,
     ruling_angles,
+    vertex_contact_normals,
 )
 
 TOLERANCE_RELATIVE = 1e-6      # x mean edge: planes tangent to the Mannheim sphere
@@ -86,7 +87,7 @@ def _contact(mesh):
 
 def _start_normals(start):
     stars = canonical_stars(start.vertices, start.stars)
-    return fabplan.geometry.vertex_contact_normals(start, start.vertices, stars)
+    return vertex_contact_normals(start, start.vertices, stars)
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, id=c.label) for c in CASES])

@@ -2,7 +2,7 @@
 
 Fixture nets (model units: metres):
 - ``const_net``: an exact linear Weingarten S-net of revolution whose Meusnier spheres all
-  have radius 15 m (`fabplan.generate.rotational_weingarten_snet`, scaled by 10);
+  have radius 15 m (`fabplan.net.generate.rotational_weingarten_snet`, scaled by 10);
 - ``anet``: an A-net on a catenoid (asymptotic lines, curved in space), from a rotational
   S-net at 90 degrees optimized with the ``anet`` preset;
 - the bundled Weingarten net ``wein99`` (Meusnier radius about 20.12, staircase boundary).
@@ -31,19 +31,14 @@ from ezdxf.math import bulge_to_arc
 
 import fabplan
 from fabplan.cli import main
-from fabplan.dxf import check_sheet, segment_problems
 from fabplan.errors import FabplanError, InputError
-from fabplan.generate import rotational_snet, rotational_weingarten_snet
-from fabplan.geometry import fit_star_spheres
-from fabplan.mesh import QuadMesh
-from fabplan.nesting import Layout, Placement, Sheet, check_layout
-from fabplan.strips import (
-    StripSettings,
-    build_strips,
-    fit_arc_runs,
-    plan_strips,
-    strip_polylines,
-)
+from fabplan.fabricate.dxf import check_sheet, segment_problems
+from fabplan.fabricate.nesting import Nesting, Placement, Sheet, check_nesting
+from fabplan.fabricate.strip_plan import plan_strips
+from fabplan.fabricate.strips import StripSettings, build_strips, fit_arc_runs, strip_polylines
+from fabplan.net.generate import rotational_snet, rotational_weingarten_snet
+from fabplan.net.geometry import fit_star_spheres
+from fabplan.net.mesh import QuadMesh
 
 R_MM = 15000.0           # Meusnier radius of const_net, mm
 H_MM = 100.0             # lamella height
@@ -472,14 +467,14 @@ def test_check_sheet_refuses_overlapping_outlines(tmp_path):
         check_sheet(tmp_path / "bad.dxf", settings)
 
 
-def test_check_layout_refuses_overlapping_parts(text_run):
+def test_check_nesting_refuses_overlapping_parts(text_run):
     plan, _, _ = text_run
     settings = plan.strips.settings
     twice = [Placement(0, 0.0, (500.0, 500.0)), Placement(1, 0.0, (500.0, 500.0))]
-    layout = Layout(sheets=[Sheet(1, settings.sheet_mm, twice)], parts=plan.parts,
+    layout = Nesting(sheets=[Sheet(1, settings.sheet_mm, twice)], parts=plan.parts,
                     settings=settings)
     with pytest.raises(FabplanError, match="closer than the spacing|margin"):
-        check_layout(layout)
+        check_nesting(layout)
 
 
 # ---------------------------------------------------------------------- pictures

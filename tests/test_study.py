@@ -21,14 +21,14 @@ import numpy as np
 import pytest
 
 from fabplan.cli import main
+from fabplan.design.load import load_design
 from fabplan.errors import InputError, SolverError
-from fabplan.geometry import canonical_stars, fit_star_spheres
-from fabplan.mesh import QuadMesh, load_mesh
-from fabplan.molds import plan_molds
-from fabplan.study import candidate_cost, judge_study, mold_metrics, run_study, same_net, verdict
-from fabplan.study_report import check_output_folder, study_html, study_record
-from fabplan.study_spec import CostWeights, parse_study, read_study, template_names, template_path
-from fabplan.surfaces import load_design
+from fabplan.fabricate.molds import plan_molds
+from fabplan.net.geometry import canonical_stars, fit_star_spheres
+from fabplan.net.mesh import QuadMesh, load_mesh
+from fabplan.study.report import check_output_folder, study_html, study_record
+from fabplan.study.run import candidate_cost, judge_study, mold_metrics, run_study, same_net, verdict
+from fabplan.study.spec import CostWeights, parse_study, read_study, template_names, template_path
 
 STUDY = """\
 [study]
@@ -78,7 +78,7 @@ def study_result(tmp_path_factory):
 
     The output folder holds an earlier study (a study.json and a file of that run) before:
     the new study must replace it as a whole."""
-    from fabplan.study_report import write_study
+    from fabplan.study.report import write_study
 
     folder = tmp_path_factory.mktemp("study")
     path = _write_study(folder, 200)
@@ -383,7 +383,7 @@ def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, 
 def test_a_failing_candidate_is_reported_and_the_study_goes_on(monkeypatch):
     import importlib
 
-    module = importlib.import_module("fabplan.optimize")   # the package re-exports the function
+    module = importlib.import_module("fabplan.solve.optimize")   # the package re-exports the function
     real = module.optimize
 
     def broken(mesh, net, **kw):
@@ -466,7 +466,7 @@ def test_the_heat_map_shows_the_peak_deviation_at_its_vertex(study_result):
     import matplotlib.image as mpimg
     from matplotlib import colormaps
 
-    from fabplan.study_report import deviation_figure
+    from fabplan.study.report import deviation_figure
 
 
     result = study_result[3]
@@ -481,8 +481,8 @@ def test_the_heat_map_shows_the_peak_deviation_at_its_vertex(study_result):
 
 def test_a_roof_is_seen_from_low_enough_to_show_its_rise(study_result):
     """The canopy's saddle looked flat (seen from 60 degrees up)."""
-    from fabplan.layout import net_view_angles
-    from fabplan.surfaces import load_design
+    from fabplan.design.load import load_design
+    from fabplan.report.figures import net_view_angles
 
     elevation, _ = net_view_angles(study_result[3].design)
     assert 10 <= elevation <= 30
@@ -494,9 +494,9 @@ def test_a_roof_is_seen_from_low_enough_to_show_its_rise(study_result):
 def test_char_conjugate_starts_at_the_conjugate_angle_of_the_design():
     """On a barrel (K > 0) the layout starts where the conjugate directions symmetric to
     the principal ones meet, measured independently from the parametric surface."""
-    from fabplan.study import start_angle
-    from fabplan.study_spec import Candidate
-    from fabplan.surfaces import load_design
+    from fabplan.design.load import load_design
+    from fabplan.study.run import start_angle
+    from fabplan.study.spec import Candidate
 
     profile = template_path("tower").parent / "tower-profile.txt"
     design = load_design(f"revolution:profile={profile}", triangles=4000)
@@ -661,7 +661,7 @@ def test_flat_panels_need_no_mold():
 
 def test_a_design_file_records_its_own_triangle_count(tmp_path):
     """study.design.triangles said 20000 for a file of 7832 triangles."""
-    from fabplan.surfaces import load_design
+    from fabplan.design.load import load_design
 
     u, v = np.meshgrid(np.linspace(-2, 2, 9), np.linspace(-2, 2, 7), indexing="ij")
     X = np.stack([u, v, 0.1 * u * v], axis=-1).reshape(-1, 3)
@@ -689,8 +689,8 @@ def test_a_design_file_records_its_own_triangle_count(tmp_path):
 def test_heat_map_and_metrics_measure_the_same_deviation(study_result):
     """The heat map measured to the design's triangulation, the metrics to the exact
     surface: the circled maximum (331.3 mm) differed from the table's (328.6 mm)."""
-    from fabplan.study import vertex_deviation_mm
-    from fabplan.study_report import deviation_figure
+    from fabplan.study.report import deviation_figure
+    from fabplan.study.run import vertex_deviation_mm
 
     result = study_result[3]
     c = next(c for c in result.candidates if c.name == "const-radius")
@@ -707,7 +707,7 @@ def test_a_candidate_that_is_another_net_ranks_right_after_it():
     was recommended over the net it copies."""
     from types import SimpleNamespace
 
-    from fabplan.study import rank_candidates
+    from fabplan.study.run import rank_candidates
 
     def result(name, cost, twin=None):
         return SimpleNamespace(name=name, failed=False, feasible=True, checks=[], cost=cost,
@@ -722,7 +722,7 @@ def test_a_candidate_that_is_another_net_ranks_right_after_it():
 def test_an_output_folder_named_like_a_template_does_not_hide_it(tmp_path, monkeypatch):
     """`fabplan study canopy -o canopy` twice: the second run read the folder as the
     study file and said "no such study file"."""
-    from fabplan.study_spec import resolve_study, template_path
+    from fabplan.study.spec import resolve_study, template_path
 
     monkeypatch.chdir(tmp_path)
     (tmp_path / "canopy").mkdir()

@@ -28,8 +28,8 @@ import numpy as np
 import pytest
 
 from fabplan.cli import main
-from fabplan.study_spec import read_study, template_names, template_path
-from fabplan.surfaces import load_design
+from fabplan.design.load import load_design
+from fabplan.study.spec import read_study, template_names, template_path
 
 
 def _run(name: str, folder) -> dict:

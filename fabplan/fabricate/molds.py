@@ -1,0 +1,767 @@
+"""Mold reduction: how many molds the curved panels of a net need, verified panel by panel.
+
+A doubly curved panel is hot-bent on a mold. On a Weingarten surface both principal
+curvatures are constant along one family of curves, so the panels along such a curve can
+share a mold, and about ``sqrt(N)`` molds serve ``N`` panels (paper, section 3.5). This
+module counts the molds a net really needs at a stated tolerance:
+
+1. Panel model (`fabplan.panels`): every face is a quadratic surface patch with its
+   principal curvatures and frame; it is *planar* when a plane, *single curved* when a
+   cylinder and otherwise *double curved* fits it within the tolerance.
+2. Molds: every mold is the surface ``z = (k1 x^2 + k2 y^2) / 2`` in mold coordinates
+   (millimetres): a *plane* (``k1 = k2 = 0``), a *cylinder* (``k2 = 0``; the parabolic
+   cylinder, which differs from the circular one of radius ``1 / k1`` by about
+   ``k1^3 x^4 / 8`` over a panel) or a *paraboloid*. Each panel type gets molds of its own
+   type. A panel is placed on a mold by a rigid motion that takes its principal frame to
+   the mold's axes (in one of the four principal placements of
+   `fabplan.panels.placement_frames`) and shifts it along the mold axis to even out the
+   gap; its deviation is the largest vertical gap between panel and mold, an upper bound of
+   the distance. For fixed placement frames that gap is piecewise linear and convex in the
+   mold curvatures, so it is computed exactly for every (panel, mold) pair, not estimated.
+3. Assignment: a greedy set cover of the panels by candidate molds (the panels' own
+   shapes), then rounds of refitting every mold's curvatures to its panels (a small linear
+   program minimizing the largest deviation), reassigning panels to their closest mold and
+   removing molds whose panels all fit elsewhere. Everything is sorted and deterministic.
+4. Verification: every panel is sampled again, densely, placed by its exported 4 x 4
+   matrix and measured against its mold; panels found above the tolerance get molds of
+   their own; a panel that fits no mold (or exceeds the largest mold size) is reported as
+   a failure, never dropped.
+5. Weingarten evidence: how close the panels' ``(k1, k2)`` lie to a line
+   ``a k1 + b k2 = c`` (and to a conic), against the curvature difference one mold absorbs.
+
+Model coordinates are in the net's units (``units``: ``"m"`` or ``"mm"``); every
+fabrication output (mold curvatures, sizes, placements, deviations) is in millimetres.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import linprog
+
+from ..errors import InputError
+from ..net.weingarten import weingarten_fit
+from .panels import (
+    SURFACE_MODELS,
+    check_panels,
+    fit_panel_surfaces,
+    panel_samples,
+    panel_shapes,
+    placement_frames,
+    surface_model,
+)
+
+__all__ = [
+    "UNITS",
+    "PANEL_TYPES",
+    "MOLD_TYPES",
+    "MoldSettings",
+    "MoldPlan",
+    "plan_molds",
+    "mold_heights",
+    "placement_deviations",
+]
+
+UNITS = {"m": 1000.0, "mm": 1.0}
+"""Millimetres per model unit for each accepted ``units`` name."""
+
+PANEL_TYPES = ("planar", "single_curved", "double_curved")
+MOLD_TYPES = ("plane", "cylinder", "paraboloid")
+_FREE_DIMS = {"plane": 0, "cylinder": 1, "paraboloid": 2}  # mold curvatures that are fitted
+
+
+@dataclass
+class MoldSettings:
+    """What a mold plan is asked for.
+
+    Attributes
+    ----------
+    tolerance_mm : largest allowed gap between a panel and its mold (mm), > 0.
+    units : unit of the net's coordinates, ``"m"`` or ``"mm"``.
+    max_mold_size_mm : largest mold side (mm); a panel whose footprint on its mold is
+        larger is a failure. None: no limit.
+    panel_surface : ``"auto"``, ``"smooth"`` or ``"corners"`` (see `fabplan.panels`).
+    cover_level : sample grid steps per fan-triangle side while assigning (60 points on a
+        quad at 4).
+    verify_level : the same for the verification (364 points on a quad at 12).
+    reserve : fraction of the tolerance kept in reserve while assigning, for what lies
+        between the assignment samples; the verification uses the full tolerance.
+    rounds : cap on the refit / reassign / remove rounds.
+    """
+
+    tolerance_mm: float = 5.0
+    units: str = "m"
+    max_mold_size_mm: float | None = None
+    panel_surface: str = "auto"
+    cover_level: int = 4
+    verify_level: int = 12
+    reserve: float = 0.01
+    rounds: int = 8
+
+    def check(self) -> None:
+        """Refuse impossible settings with a one-line `InputError`."""
+        t = self.tolerance_mm
+        if not isinstance(t, (int, float)) or not math.isfinite(t) or t <= 0:
+            raise InputError(f"the tolerance must be a positive number of millimetres, got {t}")
+        if self.units not in UNITS:
+            raise InputError(f"unknown units {self.units!r}: use " + " or ".join(UNITS))
+        s = self.max_mold_size_mm
+        if s is not None and not (math.isfinite(s) and s > 0):
+            raise InputError(f"the largest mold size must be a positive number of millimetres, got {s}")
+        if self.panel_surface not in ("auto",) + SURFACE_MODELS:
+            raise InputError(f"unknown panel surface {self.panel_surface!r}: use auto, smooth or corners")
+        if self.cover_level < 1 or self.verify_level < 1:
+            raise InputError("the sample levels must be at least 1")
+
+    @property
+    def mm_per_unit(self) -> float:
+        return UNITS[self.units]
+
+    @property
+    def working_tolerance_mm(self) -> float:
+        return self.tolerance_mm * (1.0 - self.reserve)
+
+
+# ----------------------------------------------------------------------------- gaps
+def mold_heights(xy: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """Height of the mold surface ``z = (k1 x^2 + k2 y^2) / 2`` at mold-plane points.
+
+    Parameters
+    ----------
+    xy : (..., s, 2) float, mold coordinates (mm).
+    shape : (..., 2) float, ``(k1, k2)`` (1/mm).
+
+    Returns
+    -------
+    (..., s) float, mm.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mold_heights(np.array([[1000.0, 0.0], [0.0, 500.0]]), np.array([0.001, -0.002]))
+    array([ 500., -250.])
+    """
+    return 0.5 * (shape[..., None, 0] * xy[..., 0] ** 2 + shape[..., None, 1] * xy[..., 1] ** 2)
+
+
+def placement_deviations(points: np.ndarray, placements: np.ndarray,
+                         shapes: np.ndarray) -> np.ndarray:
+    """Largest vertical gap between placed panels and their molds.
+
+    Parameters
+    ----------
+    points : (p, s, 3) float, samples of each panel in model coordinates.
+    placements : (p, 4, 4) float, homogeneous matrices taking model coordinates to mold
+        coordinates (mm).
+    shapes : (p, 2) float, ``(k1, k2)`` of each panel's mold (1/mm).
+
+    Returns
+    -------
+    (p,) float, mm: ``max |z - (k1 x^2 + k2 y^2) / 2|`` over each panel's placed samples,
+    an upper bound of their distance from the mold surface.
+    """
+    q = np.einsum("pij,psj->psi", placements[:, :3, :3], points) + placements[:, None, :3, 3]
+    return np.abs(q[..., 2] - mold_heights(q[..., :2], shapes)).max(axis=1)
+
+
+def _offset_gap(U: np.ndarray, Z: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Deviation and best shift along the mold axis for fixed placement frames.
+
+    U : (..., s, 2) squared mold coordinates ``(x^2, y^2)``; Z : (..., s) heights;
+    K : (..., 2) mold curvatures. Returns (deviation, shift), each (...,), mm.
+    """
+    r = Z - 0.5 * (U[..., 0] * K[..., None, 0] + U[..., 1] * K[..., None, 1])
+    hi, lo = r.max(axis=-1), r.min(axis=-1)
+    return 0.5 * (hi - lo), 0.5 * (hi + lo)
+
+
+# ----------------------------------------------------------------------------- the panels
+@dataclass
+class _Panels:
+    """Panel data for the assignment (internal): samples in the four placement frames."""
+
+    shapes: np.ndarray      # (p, 4, 2) panel curvatures in each frame (1/mm)
+    U: np.ndarray           # (p, 4, s, 2) squared mold x, y of the samples (mm^2)
+    Z: np.ndarray           # (p, 4, s) mold z of the samples (mm)
+    reach: np.ndarray       # (p,) curvature distance beyond which molds are not tried (1/mm)
+
+
+def _frame_coordinates(points, point, frames, mm):
+    """(p, v, s, 3) mold coordinates (mm) of samples (p, s, 3) in frames (p, v, 3, 3)."""
+    d = points - point[:, None, :]
+    return mm * np.einsum("pvij,psj->pvsi", frames, d)
+
+
+def _panel_data(points, point, frames, shapes, mm, tolerance) -> _Panels:
+    """Samples (p, s, 3) of panels with apex points (p, 3) in their placement frames
+    (p, 4, 3, 3), their shapes there (p, 4, 2) and their reach at the tolerance (mm)."""
+    Q = _frame_coordinates(points, point, frames, mm)
+    U, Z = Q[..., :2] ** 2, Q[..., 2]
+    width = np.minimum(np.ptp(Q[:, 0, :, 0], axis=1), np.ptp(Q[:, 0, :, 1], axis=1))
+    # A shift along the mold axis leaves a gap of about dk w^2 / 16 for a curvature error dk
+    # across a width w; molds four times farther than the tolerance allows are not tried
+    # (a generous cut: it can only cost a mold, never accept a panel that does not fit).
+    reach = 64.0 * tolerance / np.maximum(width, 1e-9) ** 2
+    return _Panels(shapes=shapes, U=U, Z=Z, reach=reach)
+
+
+def _cylinder_fits(U: np.ndarray, Z: np.ndarray, k1: np.ndarray, iterations: int = 80):
+    """Best ``K1`` of a cylinder mold ``(K1, 0)`` for each panel (frame F0), by golden
+    section on the convex gap. Returns (K1, deviation), each (p,)."""
+    span = 2.0 * np.abs(k1) + 1e-9
+    lo, hi = k1 - span, k1 + span
+    g = (math.sqrt(5) - 1) / 2
+
+    def gap(K1):
+        return _offset_gap(U, Z, np.stack([K1, np.zeros_like(K1)], -1))[0]
+
+    for _ in range(iterations):
+        a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+        left = gap(a) < gap(b)
+        hi, lo = np.where(left, b, hi), np.where(left, lo, a)
+    K1 = 0.5 * (lo + hi)
+    return K1, gap(K1)
+
+
+# ----------------------------------------------------------------------------- gaps and cover
+def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32):
+    """Exact gaps of every panel on every mold, in the best of the four placements.
+
+    Molds are taken in blocks of nearby curvatures; a block is only evaluated for the
+    panels whose shape in a placement lies within their reach (see `_panel_data`) of the
+    block's bounding box: farther pairs are left at infinity (treated as not fitting).
+
+    Returns
+    -------
+    deviation : (p, m) float, mm, inf where not evaluated.
+    variant : (p, m) int, the placement frame that gives it.
+    """
+    p = len(data.shapes)
+    m = len(molds)
+    deviation = np.full((p, m), np.inf)
+    variant = np.zeros((p, m), np.int64)
+    order = np.lexsort((molds[:, 1], molds[:, 0]))
+    for start in range(0, m, chunk):
+        cols = order[start:start + chunk]
+        K = molds[cols]
+        lo, hi = K.min(axis=0), K.max(axis=0)
+        for v in range(4):
+            shape = data.shapes[:, v]
+            gap = np.maximum(np.maximum(lo - shape, shape - hi), 0.0).max(axis=1)
+            rows = np.flatnonzero(gap <= data.reach)
+            if rows.size == 0:
+                continue
+            U, Z = data.U[rows, v], data.Z[rows, v]
+            r = Z[..., None] - 0.5 * (U[..., 0, None] * K[:, 0] + U[..., 1, None] * K[:, 1])
+            dev = 0.5 * (r.max(axis=1) - r.min(axis=1))              # (rows, chunk)
+            block = deviation[np.ix_(rows, cols)]
+            better = dev < block
+            deviation[np.ix_(rows, cols)] = np.where(better, dev, block)
+            variant[np.ix_(rows, cols)] = np.where(better, v, variant[np.ix_(rows, cols)])
+    return deviation, variant
+
+
+def _greedy_cover(fits: np.ndarray) -> np.ndarray:
+    """Columns of `fits` (p, c) bool chosen greedily, the one covering most uncovered rows
+    first (lowest index on ties), until every coverable row is covered."""
+    A = fits.T.astype(np.float32)
+    uncovered = fits.any(axis=1).astype(np.float32)
+    chosen = []
+    while uncovered.any():
+        best = int(np.argmax(A @ uncovered))
+        chosen.append(best)
+        uncovered[fits[:, best]] = 0.0
+    return np.array(chosen, dtype=np.int64)
+
+
+def _refit(U: np.ndarray, Z: np.ndarray, K: np.ndarray, free: int, reach: float) -> np.ndarray:
+    """Mold curvatures minimizing the largest gap of its panels (fixed frames, each panel
+    with its own shift along the mold axis).
+
+    A linear program in (K, shifts, gap) over the samples that are highest or lowest for
+    some curvature near `K` (within `reach`), with samples found violating the result added
+    until none does (cutting planes): a few small programs instead of one over all samples.
+
+    U : (q, s, 2), Z : (q, s) of the mold's panels in their frames; K : (2,) start.
+    """
+    if free == 0:
+        return K
+    q = len(Z)
+    scale = max(float(U.max()), 1e-12)
+    steps = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]], float) * 0.25 * reach
+    steps[:, free:] = 0.0
+    active = np.zeros(Z.shape, bool)
+    for d in steps:
+        _mark_extremes(active, U, Z, K + d)
+    best = K
+    for _ in range(20):
+        p, s = np.nonzero(active)
+        u, z = U[p, s, :free] / scale, Z[p, s]
+        m = len(p)
+        ones = np.ones(m)
+        Ku = sp.csr_matrix(0.5 * u)
+        C = sp.csr_matrix((ones, (np.arange(m), p)), shape=(m, q))
+        T = sp.csr_matrix(ones[:, None])
+        # z - u.k/2 - c_p <= t and -(z - u.k/2 - c_p) <= t; variables [k (free), c (q), t]
+        A = sp.vstack([sp.hstack([-Ku, -C, -T]), sp.hstack([Ku, C, -T])]).tocsr()
+        cost = np.zeros(free + q + 1)
+        cost[-1] = 1.0
+        bounds = [(None, None)] * (free + q) + [(0, None)]
+        res = linprog(cost, A_ub=A, b_ub=np.concatenate([-z, z]), bounds=bounds, method="highs")
+        if res.status != 0:
+            return best
+        best = np.zeros(2)
+        best[:free] = res.x[:free] / scale
+        before = active.sum()
+        _mark_extremes(active, U, Z, best)
+        if active.sum() == before:
+            break
+    return best
+
+
+def _mark_extremes(active: np.ndarray, U: np.ndarray, Z: np.ndarray, K: np.ndarray) -> None:
+    """Mark in `active` (q, s) each panel's highest and lowest sample above the mold K."""
+    r = Z - 0.5 * (U[..., 0] * K[0] + U[..., 1] * K[1])
+    rows = np.arange(len(Z))
+    active[rows, r.argmax(axis=1)] = True
+    active[rows, r.argmin(axis=1)] = True
+
+
+def _thin_candidates(K: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """Indices of candidate molds, one per grid cell of their own scale.
+
+    A candidate from a panel of reach ``r`` (see `_panel_data`) falls in a cell of side
+    about ``r / 64`` (a power of two, so cells of different scales nest): moving a mold
+    that far changes its gaps by about a sixteenth of the tolerance, so candidates closer
+    than that cover nearly the same panels. The first candidate of every cell is kept.
+    """
+    cell = 2.0 ** np.floor(np.log2(np.maximum(reach, 1e-300) / 64.0))
+    key = np.column_stack([np.log2(cell), np.floor(K / cell[:, None])])
+    _, first = np.unique(key, axis=0, return_index=True)
+    return np.sort(first)
+
+
+@dataclass
+class _Stage:
+    """The molds of one type and the assignment of that type's panels (internal)."""
+
+    molds: np.ndarray       # (m, 2) 1/mm
+    mold: np.ndarray        # (n,) mold index of each panel
+    variant: np.ndarray     # (n,) placement frame of each panel
+
+
+def _assign(data: _Panels, candidates: np.ndarray, free: int, tolerance: float,
+            rounds: int) -> _Stage:
+    """Cover the panels by molds, then refit, reassign and remove molds until stable.
+
+    ``candidates`` (c, 2): one candidate mold per panel (its own shape), thinned here by
+    `_thin_candidates`, or the only mold of a plane.
+    """
+    n = len(data.shapes)
+    if n == 0:
+        return _Stage(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if len(candidates) == n:
+        candidates = candidates[_thin_candidates(candidates[:, :max(free, 1)], data.reach)]
+    dev, _ = _gap_matrix(data, candidates)
+    fits = dev <= tolerance
+    molds = candidates[_greedy_cover(fits)]
+    # a panel that no candidate fits gets a mold of its own shape (refitted below)
+    alone = np.flatnonzero(~fits.any(axis=1))
+    if alone.size:
+        own = data.shapes[alone, 0].copy()
+        own[:, free:] = 0.0
+        molds = np.concatenate([molds, own])
+    mold = np.full(n, -1)
+    state = None
+    refitted: set = set()  # (mold, members, placements) already refitted: a refit is a fixpoint
+    for _ in range(max(rounds, 1)):
+        dev, var = _gap_matrix(data, molds)
+        rows = np.arange(n)
+        # every panel to its closest mold; a panel stays unless another fits strictly better
+        best = np.argmin(dev, axis=1)
+        stay = (mold >= 0) & (dev[rows, np.maximum(mold, 0)] <= dev[rows, best])
+        mold = np.where(stay, mold, best)
+        mold, molds, dev, var = _remove_molds(mold, molds, dev, var, tolerance)
+        variant, deviation = var[rows, mold], dev[rows, mold]
+        for j in range(len(molds)):
+            members = np.flatnonzero(mold == j)
+            key = (molds[j].tobytes(), members.tobytes(), variant[members].tobytes())
+            if key in refitted:
+                continue
+            U, Z = data.U[members, variant[members]], data.Z[members, variant[members]]
+            new = _refit(U, Z, molds[j], free, float(np.median(data.reach[members])))
+            if _offset_gap(U, Z, new)[0].max() <= deviation[members].max():
+                molds[j] = new
+            refitted.add((molds[j].tobytes(), members.tobytes(), variant[members].tobytes()))
+        key = (len(molds), mold.tobytes())
+        if key == state:
+            break
+        state = key
+    _, var = _gap_matrix(data, molds)
+    return _Stage(molds=molds, mold=mold, variant=var[np.arange(n), mold])
+
+
+def _remove_molds(mold, molds, dev, var, tolerance):
+    """Drop molds (fewest panels first) whose panels all fit another remaining mold, moving
+    each of them to its closest remaining mold."""
+    alive = np.ones(len(molds), bool)
+    fits = dev <= tolerance
+    counts = np.bincount(mold, minlength=len(molds))
+    for j in np.lexsort((np.arange(len(molds)), counts)):
+        members = np.flatnonzero(mold == j)
+        others = alive.copy()
+        others[j] = False
+        if members.size and not np.all((fits[members] & others).any(axis=1)):
+            continue
+        if members.size:
+            d = np.where(others, dev[members], np.inf)
+            mold[members] = np.argmin(d, axis=1)
+        alive[j] = False
+    renumber = np.cumsum(alive) - 1
+    return renumber[mold], molds[alive].copy(), dev[:, alive], var[:, alive]
+
+
+# ----------------------------------------------------------------------------- the plan
+@dataclass
+class MoldPlan:
+    """The molds of a net and every panel's placement on its mold, as measured.
+
+    Attributes
+    ----------
+    mesh : the net (`fabplan.mesh.QuadMesh`).
+    settings : the `MoldSettings` used.
+    panel_surface : the panel surface model used (``"smooth"`` or ``"corners"``).
+    panel_type : (p,) int, index into `PANEL_TYPES`.
+    curvature : (p, 2) float, signed principal curvatures ``k1 >= k2`` of every panel
+        with respect to its face normal (1/mm).
+    mold_type : (m,) int, index into `MOLD_TYPES`.
+    mold_shape : (m, 2) float, ``(k1, k2)`` of every mold (1/mm).
+    panel_shape : (p, 2) float, every panel's own ``(k1, k2)`` in its placement frame on its
+        mold (1/mm): what its mold's curvatures approximate.
+    mold : (p,) int, the mold of every panel.
+    placement : (p, 4, 4) float, model coordinates -> mold coordinates (mm); the upper
+        left block is ``mm_per_unit`` times a rotation.
+    deviation_mm : (p,) float, largest gap between the densely sampled panel and its
+        mold, measured through `placement`.
+    footprint_mm : (p, 2) float, ``2 max |x|``, ``2 max |y|`` of the placed panel.
+    problem : list of str or None per panel: why it does not fit, if it does not.
+    weingarten : `weingarten_fit` of the panel curvatures (1/mm).
+    reassigned : (k,) int, panels the dense verification found above the tolerance on their
+        first mold, classified again and moved to new molds.
+    seconds : run time.
+    """
+
+    mesh: object
+    settings: MoldSettings
+    panel_surface: str
+    panel_type: np.ndarray
+    curvature: np.ndarray
+    mold_type: np.ndarray
+    mold_shape: np.ndarray
+    panel_shape: np.ndarray
+    mold: np.ndarray
+    placement: np.ndarray
+    deviation_mm: np.ndarray
+    footprint_mm: np.ndarray
+    problem: list
+    weingarten: dict
+    reassigned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    seconds: float = 0.0
+    stage_seconds: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ derived numbers
+    @property
+    def panel_count(self) -> int:
+        return len(self.mold)
+
+    @property
+    def mold_count(self) -> int:
+        return len(self.mold_shape)
+
+    @property
+    def failures(self) -> np.ndarray:
+        """(k,) int, faces that do not fit their mold."""
+        return np.array([i for i, p in enumerate(self.problem) if p], dtype=np.int64)
+
+    @property
+    def fits_all(self) -> bool:
+        return self.failures.size == 0
+
+    @property
+    def panels_per_mold(self) -> np.ndarray:
+        """(m,) int"""
+        return np.bincount(self.mold, minlength=self.mold_count)
+
+    def mold_extent_mm(self) -> np.ndarray:
+        """(m, 2) float, the rectangle centred on each mold's apex that holds its panels."""
+        ext = np.zeros((self.mold_count, 2))
+        np.maximum.at(ext, self.mold, self.footprint_mm)
+        return ext
+
+    def mold_deviation_mm(self) -> np.ndarray:
+        """(m,) float, the largest deviation of a mold's panels."""
+        dev = np.zeros(self.mold_count)
+        np.maximum.at(dev, self.mold, self.deviation_mm)
+        return dev
+
+    def panel_width_mm(self, quantile: float = 0.5) -> float:
+        """A quantile of the panels' widths (the smaller side of their footprints), mm."""
+        return float(np.quantile(np.min(self.footprint_mm, axis=1), quantile))
+
+    def curvature_reach(self, quantile: float = 0.5) -> float:
+        """Curvature difference (1/mm) one mold absorbs for a panel of the given width
+        quantile: a pure shift leaves a gap of ``dk w^2 / 16`` over a panel of width ``w``,
+        so larger panels (higher quantiles) absorb less."""
+        w = self.panel_width_mm(quantile)
+        return 16.0 * self.settings.tolerance_mm / w**2 if w > 0 else math.inf
+
+    def record(self) -> dict:
+        """The JSON record (``molds.json``; schema in ``docs/molds-schema.md``)."""
+        mm = self.settings.mm_per_unit
+        types, counts = np.unique(self.panel_type, return_counts=True)
+        per = self.panels_per_mold
+        ext, mdev = self.mold_extent_mm(), self.mold_deviation_mm()
+        molds = []
+        for j in range(self.mold_count):
+            k1, k2 = (float(v) for v in self.mold_shape[j])
+            molds.append({
+                "id": j,
+                "type": MOLD_TYPES[self.mold_type[j]],
+                "k1": k1,
+                "k2": k2,
+                "radius1_mm": 1.0 / k1 if k1 else None,
+                "radius2_mm": 1.0 / k2 if k2 else None,
+                "size_mm": [float(ext[j, 0]), float(ext[j, 1])],
+                "panel_count": int(per[j]),
+                "max_deviation_mm": float(mdev[j]),
+            })
+        panels = []
+        for i in range(self.panel_count):
+            panels.append({
+                "face": i,
+                "mold": int(self.mold[i]),
+                "type": PANEL_TYPES[self.panel_type[i]],
+                "k1": float(self.curvature[i, 0]),
+                "k2": float(self.curvature[i, 1]),
+                "placement": self.placement[i].tolist(),
+                "deviation_mm": float(self.deviation_mm[i]),
+                "footprint_mm": [float(v) for v in self.footprint_mm[i]],
+                "fits": self.problem[i] is None,
+                "problem": self.problem[i],
+            })
+        n = self.panel_count
+        return {
+            "schema": "fabplan-molds/1",
+            "net": str(getattr(self.mesh, "name", "")),
+            "units": self.settings.units,
+            "mm_per_unit": mm,
+            "tolerance_mm": float(self.settings.tolerance_mm),
+            "max_mold_size_mm": self.settings.max_mold_size_mm,
+            "panel_surface": self.panel_surface,
+            "panel_count": n,
+            "mold_count": self.mold_count,
+            "curved_mold_count": int(np.sum(self.mold_type > 0)),
+            "molds_per_sqrt_panels": self.mold_count / math.sqrt(n),
+            "panel_types": {t: int(counts[types == i].sum()) for i, t in enumerate(PANEL_TYPES)},
+            "mold_types": {t: int(np.sum(self.mold_type == i)) for i, t in enumerate(MOLD_TYPES)},
+            "panels_per_mold": {"min": int(per.min()), "median": float(np.median(per)),
+                                "mean": float(per.mean()), "max": int(per.max())},
+            "max_deviation_mm": float(self.deviation_mm.max()),
+            "fits_all": self.fits_all,
+            "failures": self.failures.tolist(),
+            "reassigned_by_verification": self.reassigned.tolist(),
+            "weingarten": self.weingarten,
+            "curvature_reach_per_mm": {"median_panel": self.curvature_reach(0.5),
+                                       "large_panels": self.curvature_reach(0.9)},
+            "seconds": self.seconds,
+            "molds": molds,
+            "panels": panels,
+        }
+
+    def panels_csv(self) -> str:
+        """``panels.csv``: one row per panel (placement flattened row by row)."""
+        head = ["face", "mold", "type", "k1_per_mm", "k2_per_mm", "deviation_mm",
+                "footprint_x_mm", "footprint_y_mm", "fits"]
+        head += [f"m{r}{c}" for r in range(4) for c in range(4)]
+        lines = [",".join(head)]
+        for i in range(self.panel_count):
+            row = [str(i), str(int(self.mold[i])), PANEL_TYPES[self.panel_type[i]],
+                   f"{self.curvature[i, 0]:.9g}", f"{self.curvature[i, 1]:.9g}",
+                   f"{self.deviation_mm[i]:.4f}", f"{self.footprint_mm[i, 0]:.1f}",
+                   f"{self.footprint_mm[i, 1]:.1f}", "yes" if self.problem[i] is None else "no"]
+            row += [f"{v:.12g}" for v in self.placement[i].ravel()]
+            lines.append(",".join(row))
+        return "\n".join(lines) + "\n"
+
+    def summary(self) -> str:
+        """A few lines for the terminal."""
+        r = self.record()
+        t = r["panel_types"]
+        w = self.weingarten
+        lines = [
+            f"{r['panel_count']} panels ({t['planar']} planar, {t['single_curved']} single curved, "
+            f"{t['double_curved']} double curved) at {r['tolerance_mm']:g} mm",
+            f"{r['mold_count']} molds ({r['mold_types']['plane']} plane, "
+            f"{r['mold_types']['cylinder']} cylinder, {r['mold_types']['paraboloid']} paraboloid); "
+            f"M / sqrt(N) = {r['molds_per_sqrt_panels']:.2f}",
+            f"largest deviation {r['max_deviation_mm']:.3f} mm; "
+            + ("every panel fits its mold" if self.fits_all else
+               f"{len(r['failures'])} panels do not fit (faces {r['failures'][:10]})"),
+        ]
+        if w.get("thickness") is not None:
+            lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
+                         f"line a k1 + b k2 = c, {w['thickness']:.3f} of the curvature spread")
+        return "\n".join(lines)
+
+
+def plan_molds(mesh, settings: MoldSettings | None = None, **options) -> MoldPlan:
+    """Find few molds that fit every panel of a net, and verify every panel on its mold.
+
+    Parameters
+    ----------
+    mesh : `fabplan.mesh.QuadMesh` (faces of any size).
+    settings : `MoldSettings`; or give its fields as keyword options
+        (``plan_molds(mesh, tolerance_mm=5, units="m")``).
+
+    Returns
+    -------
+    MoldPlan
+
+    Raises
+    ------
+    InputError
+        For impossible settings, a net without faces or with a degenerate face.
+    """
+    start = time.perf_counter()
+    if settings is None:
+        settings = MoldSettings(**options)
+    elif options:
+        raise InputError("give either settings or keyword options, not both")
+    settings.check()
+    check_panels(mesh)
+    mm = settings.mm_per_unit
+    tol = settings.tolerance_mm
+    work = settings.working_tolerance_mm
+    clock = {}
+
+    model = surface_model(mesh, tol / mm, settings.panel_surface)
+    surfaces = fit_panel_surfaces(mesh, model)
+    shapes = panel_shapes(surfaces)
+    frames, kk = placement_frames(shapes)
+    kk = kk / mm
+    points = panel_samples(mesh, surfaces, settings.cover_level)
+    data = _panel_data(points, shapes.point, frames, kk, mm, work)
+    clock["panel model"] = time.perf_counter() - start
+
+    panel_type, cylinder = _classify(data, work)
+    clock["classification"] = time.perf_counter() - start - sum(clock.values())
+    mold, variant, mold_shape, mold_type = _assign_by_type(data, panel_type, cylinder, work,
+                                                           settings.rounds)
+    clock["assignment"] = time.perf_counter() - start - sum(clock.values())
+
+    # verification on dense samples; a panel found above the tolerance is classified again
+    # on them (it may be more curved than the assignment samples showed) and gets a new mold
+    dense = panel_samples(mesh, surfaces, settings.verify_level)
+    placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+    over = np.flatnonzero(deviation > tol)
+    if over.size:
+        data = _panel_data(dense[over], shapes.point[over], frames[over], kk[over], mm, work)
+        dense_type, cylinder = _classify(data, work)
+        panel_type[over] = np.maximum(panel_type[over], dense_type)
+        new = _assign_by_type(data, panel_type[over], cylinder, work, settings.rounds)
+        mold[over] = new[0] + len(mold_shape)
+        variant[over] = new[1]
+        mold, mold_shape, mold_type = _drop_empty(mold, np.concatenate([mold_shape, new[2]]),
+                                                  np.concatenate([mold_type, new[3]]))
+        placement, _ = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+    q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
+    footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
+    deviation = placement_deviations(dense, placement, mold_shape[mold])
+    clock["verification"] = time.perf_counter() - start - sum(clock.values())
+
+    n = len(panel_type)
+    problem: list = [None] * n
+    for i in np.flatnonzero(deviation > tol):
+        problem[i] = f"deviates {deviation[i]:.3f} mm from its mold (tolerance {tol:g} mm)"
+    if settings.max_mold_size_mm is not None:
+        limit = settings.max_mold_size_mm
+        for i in np.flatnonzero(footprint.max(axis=1) > limit):
+            problem[i] = (f"needs a mold of {footprint[i, 0]:.0f} x {footprint[i, 1]:.0f} mm, "
+                          f"larger than the largest mold ({limit:g} mm)")
+    curvature = np.column_stack([shapes.k1, shapes.k2]) / mm
+    weingarten = weingarten_fit(curvature[:, 0], curvature[:, 1])
+    return MoldPlan(mesh=mesh, settings=settings, panel_surface=model, panel_type=panel_type,
+                    curvature=curvature, mold_type=mold_type, mold_shape=mold_shape,
+                    panel_shape=kk[np.arange(n), variant], mold=mold,
+                    placement=placement, deviation_mm=deviation, footprint_mm=footprint,
+                    problem=problem, weingarten=weingarten, reassigned=over,
+                    seconds=time.perf_counter() - start, stage_seconds=clock)
+
+
+def _classify(data: _Panels, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Panel types (indices into `PANEL_TYPES`): planar when the plane, else single curved
+    when the best cylinder mold fits within `tolerance` (mm), else double curved; and the
+    best cylinder curvature of every panel (1/mm)."""
+    plane = _offset_gap(data.U[:, 0], data.Z[:, 0], np.zeros(2))[0]
+    cylinder, cylinder_gap = _cylinder_fits(data.U[:, 0], data.Z[:, 0], data.shapes[:, 0, 0])
+    return np.where(plane <= tolerance, 0, np.where(cylinder_gap <= tolerance, 1, 2)), cylinder
+
+
+def _assign_by_type(data: _Panels, panel_type: np.ndarray, cylinder: np.ndarray,
+                    tolerance: float, rounds: int):
+    """Molds for panels, each type on molds of its own type (plane, cylinder, paraboloid).
+
+    Returns mold (p,) int, variant (p,) int, mold shapes (m, 2), mold types (m,) int.
+    """
+    n = len(panel_type)
+    mold = np.zeros(n, np.int64)
+    variant = np.zeros(n, np.int64)
+    shapes, types = [np.zeros((0, 2))], [np.zeros(0, np.int64)]
+    count = 0
+    for t, kind in enumerate(MOLD_TYPES):
+        idx = np.flatnonzero(panel_type == t)
+        if idx.size == 0:
+            continue
+        sub = _subset(data, idx)
+        if kind == "plane":
+            candidates = np.zeros((1, 2))
+        elif kind == "cylinder":
+            candidates = np.column_stack([cylinder[idx], np.zeros(idx.size)])
+        else:
+            candidates = sub.shapes[:, 0]
+        order = np.lexsort((candidates[:, 1], candidates[:, 0]))
+        stage = _assign(sub, candidates[order], _FREE_DIMS[kind], tolerance, rounds)
+        mold[idx] = stage.mold + count
+        variant[idx] = stage.variant
+        shapes.append(stage.molds)
+        types.append(np.full(len(stage.molds), t))
+        count += len(stage.molds)
+    return mold, variant, np.concatenate(shapes), np.concatenate(types)
+
+
+def _subset(data: _Panels, idx: np.ndarray) -> _Panels:
+    return _Panels(shapes=data.shapes[idx], U=data.U[idx], Z=data.Z[idx], reach=data.reach[idx])
+
+
+def _drop_empty(mold, mold_shape, mold_type):
+    used = np.bincount(mold, minlength=len(mold_shape)) > 0
+    renumber = np.cumsum(used) - 1
+    return renumber[mold], mold_shape[used], mold_type[used]
+
+
+def _place(points, point, frames, variant, shape, mm):
+    """Placement matrices (frame of the chosen variant, shift evening out the gap) and the
+    resulting deviations, for samples (p, s, 3) and mold shapes (p, 2)."""
+    R = frames[np.arange(len(variant)), variant]                     # (p, 3, 3)
+    Q = mm * np.einsum("pij,psj->psi", R, points - point[:, None, :])
+    dev, shift = _offset_gap(Q[..., :2] ** 2, Q[..., 2], shape)
+    placement = np.zeros((len(variant), 4, 4))
+    placement[:, :3, :3] = mm * R
+    placement[:, :3, 3] = -mm * np.einsum("pij,pj->pi", R, point)
+    placement[:, 2, 3] -= shift
+    placement[:, 3, 3] = 1.0
+    return placement, dev

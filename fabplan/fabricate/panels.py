@@ -1,0 +1,355 @@
+"""Panels of a net: the surface each face stands for, its principal frame and its samples.
+
+Every face of a net is a panel. Its shape is a quadratic height field in the face's own
+frame (origin at the mean of its corners, ``z`` along its Newell normal)::
+
+    z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2) / 2
+
+fitted by weighted least squares, and its outline is the face's polygon projected into the
+face plane and lifted onto that surface. Two surface models differ only in the points the
+fit sees:
+
+``smooth``
+    the panel's corners (weight `CORNER_WEIGHT`, so the panel passes through them) and the
+    corners of every face that shares a vertex with it (weight 1): the panel follows the
+    smooth surface the net samples (its osculating paraboloid), and neighbouring panels meet
+    at the net's vertices. This is the panel of a curved-panel facade (Weingarten S-nets).
+``corners``
+    the panel's corners only, with the least curvature that passes through them: a planar
+    face gives a flat panel, a twisted quad its hyperbolic paraboloid. This is the panel of
+    a planar-quad (or ruled) paneling.
+
+`surface_model` picks ``corners`` for a net whose faces are all flat within the tolerance
+(its panels are meant to be cut flat) and ``smooth`` otherwise.
+
+Distances are in model units, curvatures in inverse model units; the principal curvatures
+are signed with respect to the face normal (positive when the panel bends towards it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import InputError
+from ..net.geometry import face_normals, face_planarity
+
+__all__ = [
+    "CORNER_WEIGHT",
+    "SURFACE_MODELS",
+    "PanelSurfaces",
+    "PanelShapes",
+    "check_panels",
+    "surface_model",
+    "panel_neighbourhoods",
+    "fit_panel_surfaces",
+    "panel_shapes",
+    "panel_samples",
+    "placement_frames",
+]
+
+CORNER_WEIGHT = 1.0e6
+"""Least-squares weight of a panel's own corners against 1 for its neighbours' vertices."""
+
+SURFACE_MODELS = ("smooth", "corners")
+
+_RIDGE = 1.0e-9  # relative weight pulling undetermined curvature terms to zero
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _face_of_corner(mesh) -> np.ndarray:
+    return np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+
+
+def _corner_means(mesh) -> np.ndarray:
+    """(f, 3) mean of each face's corners."""
+    face = _face_of_corner(mesh)
+    X = mesh.vertices[mesh.face_indices]
+    total = np.stack([np.bincount(face, X[:, d], minlength=len(mesh.face_sizes)) for d in range(3)], 1)
+    return total / mesh.face_sizes[:, None]
+
+
+def check_panels(mesh) -> None:
+    """Refuse a net with a degenerate face, naming it (`QuadMesh` already refuses a mesh
+    without faces).
+
+    Raises
+    ------
+    InputError
+        When a face has (almost) no area: its corners coincide or lie on one line.
+    """
+    X = mesh.vertices
+    face = _face_of_corner(mesh)
+    ptr, sizes = mesh.face_indptr, mesh.face_sizes
+    local = np.arange(len(face)) - ptr[face]
+    nxt = mesh.face_indices[np.where(local == sizes[face] - 1, ptr[face], np.arange(len(face)) + 1)]
+    cross = np.cross(X[mesh.face_indices], X[nxt])
+    area2 = np.zeros((len(sizes), 3))
+    np.add.at(area2, face, cross)
+    area = 0.5 * np.linalg.norm(area2, axis=1)
+    edge = np.linalg.norm(X[nxt] - X[mesh.face_indices], axis=1)
+    perimeter = np.bincount(face, edge, minlength=len(sizes))
+    bad = np.flatnonzero(~(area > 1e-9 * perimeter**2))
+    if bad.size:
+        raise InputError(f"{mesh.name}: face {bad[0]} is degenerate (zero area: its corners "
+                         "coincide or lie on a line); remove or repair it")
+
+
+def surface_model(mesh, tolerance: float, model: str = "auto") -> str:
+    """The panel surface model to use: ``model`` itself, or for ``"auto"`` ``"corners"`` when
+    every face lies within `tolerance` (model units) of a plane and ``"smooth"`` otherwise.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fabplan.net.generate import height_field_grid
+    >>> flat = height_field_grid(4, 4, lambda x, y: 0 * x)
+    >>> surface_model(flat, 0.001), surface_model(flat, 0.001, "smooth")
+    ('corners', 'smooth')
+    """
+    if model not in ("auto",) + SURFACE_MODELS:
+        raise InputError(f"unknown panel surface model {model!r}: use auto, smooth or corners")
+    if model != "auto":
+        return model
+    X = mesh.vertices
+    flat = True
+    for k in np.unique(mesh.face_sizes):  # one batch per face size (3, 4, 5 ...)
+        if k == 3:
+            continue
+        starts = mesh.face_indptr[:-1][mesh.face_sizes == k]
+        polys = mesh.face_indices[starts[:, None] + np.arange(k)]
+        flat &= bool(np.all(face_planarity(X, polys) <= tolerance))
+    return "corners" if flat else "smooth"
+
+
+def panel_neighbourhoods(mesh, model: str = "smooth") -> tuple[np.ndarray, np.ndarray]:
+    """The vertices each panel's surface is fitted to.
+
+    Returns
+    -------
+    vertices : (f, m) int, padded with the face's first corner.
+    weight : (f, m) float, `CORNER_WEIGHT` for the face's corners, 1 for the other vertices
+        of faces sharing a vertex with it (``smooth`` only), 0 for padding.
+    """
+    nf, n = len(mesh.face_sizes), mesh.vertex_count
+    face = _face_of_corner(mesh)
+    incidence = sp.csr_matrix((np.ones(len(face)), (face, mesh.face_indices)), shape=(nf, n))
+    if model == "smooth":
+        reach = (incidence @ (incidence.T @ incidence)).tocsr()
+    else:
+        reach = incidence.copy()
+    reach.sort_indices()
+    counts = np.diff(reach.indptr)
+    m = int(counts.max())
+    row = np.repeat(np.arange(nf), counts)
+    col = np.arange(len(row)) - reach.indptr[row]
+    vertices = np.repeat(mesh.face_indices[mesh.face_indptr[:-1]][:, None], m, axis=1)
+    vertices[row, col] = reach.indices
+    weight = np.zeros((nf, m))
+    is_corner = np.asarray(incidence[row, reach.indices]).ravel() > 0
+    weight[row, col] = np.where(is_corner, CORNER_WEIGHT, 1.0)
+    return vertices, weight
+
+
+@dataclass(frozen=True)
+class PanelSurfaces:
+    """The quadratic surface of every panel, in its face frame.
+
+    Attributes
+    ----------
+    origin : (f, 3) float, mean of the face's corners (model units).
+    frame : (f, 3, 3) float, rows: face x-axis, y-axis and unit Newell normal.
+    scale : (f,) float, RMS distance of the corners from `origin`; the coefficients are
+        those of the surface in coordinates divided by it.
+    coefficients : (f, 6) float, ``(c0, c1, c2, a, b, c)`` of
+        ``z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2) / 2`` in scaled coordinates.
+    corners : (f, k_max, 2) float, the corners projected into the face plane (scaled), padded
+        by repeating the last corner.
+    model : the surface model, ``"smooth"`` or ``"corners"``.
+    """
+
+    origin: np.ndarray
+    frame: np.ndarray
+    scale: np.ndarray
+    coefficients: np.ndarray
+    corners: np.ndarray
+    model: str
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """(f, s) scaled heights of the surfaces at scaled plane points ``xy`` (f, s, 2)."""
+        c = self.coefficients[:, None, :]
+        x, y = xy[..., 0], xy[..., 1]
+        return (c[..., 0] + c[..., 1] * x + c[..., 2] * y
+                + 0.5 * (c[..., 3] * x * x + 2 * c[..., 4] * x * y + c[..., 5] * y * y))
+
+    def to_model(self, xyz: np.ndarray) -> np.ndarray:
+        """(f, s, 3) model coordinates of scaled face-frame points (f, s, 3)."""
+        return self.origin[:, None, :] + self.scale[:, None, None] * (xyz @ self.frame)
+
+
+def fit_panel_surfaces(mesh, model: str = "smooth") -> PanelSurfaces:
+    """Fit the quadratic surface of every panel (see the module notes).
+
+    Parameters
+    ----------
+    mesh : `fabplan.mesh.QuadMesh`, faces of any size; check it with `check_panels` first.
+    model : ``"smooth"`` or ``"corners"``.
+
+    Returns
+    -------
+    PanelSurfaces
+    """
+    if model not in SURFACE_MODELS:
+        raise InputError(f"unknown panel surface model {model!r}: use smooth or corners")
+    X = mesh.vertices
+    sizes, ptr = mesh.face_sizes, mesh.face_indptr
+    nf = len(sizes)
+    normal = face_normals(X, mesh)
+    origin = _corner_means(mesh)
+    first = X[mesh.face_indices[ptr[:-1]]] - origin
+    xaxis = _unit(first - np.sum(first * normal, axis=1, keepdims=True) * normal)
+    frame = np.stack([xaxis, np.cross(normal, xaxis), normal], axis=1)
+    face = _face_of_corner(mesh)
+    d2 = np.sum((X[mesh.face_indices] - origin[face]) ** 2, axis=1)
+    scale = np.sqrt(np.bincount(face, d2, minlength=nf) / sizes)
+
+    vertices, weight = panel_neighbourhoods(mesh, model)
+    P = np.einsum("fmj,fij->fmi", X[vertices] - origin[:, None, :], frame) / scale[:, None, None]
+    x, y, z = P[..., 0], P[..., 1], P[..., 2]
+    A = np.stack([np.ones_like(x), x, y, 0.5 * x * x, x * y, 0.5 * y * y], axis=2)
+    AtW = A.transpose(0, 2, 1) * weight[:, None, :]
+    normal_matrix = AtW @ A
+    # A tiny ridge on the curvature terms settles what the points leave free (a lone quad
+    # of the corners model): the least-curved surface through the corners.
+    ridge = _RIDGE * weight.sum(axis=1)[:, None] * np.array([0, 0, 0, 1, 1, 1.0])
+    normal_matrix[:, np.arange(6), np.arange(6)] += ridge
+    coefficients = np.linalg.solve(normal_matrix, (AtW @ z[..., None]))[..., 0]
+
+    k_max = int(sizes.max())
+    slot = np.minimum(np.arange(k_max), sizes[:, None] - 1)
+    corner_ids = mesh.face_indices[ptr[:-1, None] + slot]
+    corners = np.einsum("fkj,fij->fki", X[corner_ids] - origin[:, None, :], frame)[..., :2]
+    corners = corners / scale[:, None, None]
+    return PanelSurfaces(origin=origin, frame=frame, scale=scale, coefficients=coefficients,
+                         corners=corners, model=model)
+
+
+@dataclass(frozen=True)
+class PanelShapes:
+    """Principal curvatures and frame of every panel surface at the point over its centre.
+
+    Attributes
+    ----------
+    point : (f, 3) float, the surface point over the mean of the corners (model units).
+    normal : (f, 3) float, unit surface normal there, on the side of the face normal.
+    k1, k2 : (f,) float, principal curvatures, ``k1 >= k2`` (inverse model units).
+    e1, e2 : (f, 3) float, unit principal directions; ``(e1, e2, normal)`` is right-handed.
+    """
+
+    point: np.ndarray
+    normal: np.ndarray
+    k1: np.ndarray
+    k2: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+
+
+def panel_shapes(surfaces: PanelSurfaces) -> PanelShapes:
+    """Principal curvatures and directions of the panel surfaces (first and second
+    fundamental forms of the height field at the face centre)."""
+    c0, c1, c2, a, b, c = surfaces.coefficients.T
+    h = surfaces.scale
+    F = surfaces.frame
+    first = np.stack([np.stack([1 + c1 * c1, c1 * c2], -1), np.stack([c1 * c2, 1 + c2 * c2], -1)], -2)
+    w = np.sqrt(1 + c1 * c1 + c2 * c2)
+    second = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2) / (w * h)[:, None, None]
+    # generalized symmetric eigenproblem II v = k I v through the Cholesky factor of I
+    L = np.linalg.cholesky(first)
+    Linv = np.linalg.inv(L)
+    k, y = np.linalg.eigh(Linv @ second @ Linv.transpose(0, 2, 1))
+    v = Linv.transpose(0, 2, 1) @ y  # columns: parameter directions of k2, k1
+    t1 = v[:, 0, 1, None] * np.stack([np.ones_like(c1), 0 * c1, c1], -1) \
+        + v[:, 1, 1, None] * np.stack([0 * c1, np.ones_like(c1), c2], -1)
+    e1 = _unit(np.einsum("fi,fij->fj", t1, F))
+    normal = _unit(np.einsum("fi,fij->fj", np.stack([-c1, -c2, np.ones_like(c1)], -1), F))
+    e1 = _unit(e1 - np.sum(e1 * normal, axis=1, keepdims=True) * normal)
+    # an eigenvector's sign is arbitrary: point e1 along the face's first edge
+    e1 *= np.where(np.sum(e1 * F[:, 0], axis=1) < 0, -1.0, 1.0)[:, None]
+    e2 = np.cross(normal, e1)
+    point = surfaces.origin + (h * c0)[:, None] * F[:, 2]
+    return PanelShapes(point=point, normal=normal, k1=k[:, 1], k2=k[:, 0], e1=e1, e2=e2)
+
+
+def _fan_weights(level: int) -> np.ndarray:
+    """(t, 2) barycentric weights (of corner j, corner j+1) of a triangular grid with
+    `level` steps per side; the third vertex is the face centre."""
+    i, j = np.meshgrid(np.arange(level + 1), np.arange(level + 1), indexing="ij")
+    keep = i + j <= level
+    return np.stack([i[keep], j[keep]], axis=1) / level
+
+
+def panel_samples(mesh, surfaces: PanelSurfaces, level: int) -> np.ndarray:
+    """Points spread over every panel: its outline and interior on its surface.
+
+    Each face is split into a fan of triangles from the mean of its corners; every triangle
+    gets a grid with `level` steps per side (corners and the outline included), lifted
+    onto the panel surface.
+
+    Returns
+    -------
+    (f, s, 3) float model coordinates; faces with fewer samples than the largest repeat
+    their first sample (so maxima and minima over a panel are unchanged).
+    """
+    sizes = mesh.face_sizes
+    B = _fan_weights(level)
+    k_max = int(sizes.max())
+    s = k_max * len(B)
+    corners = surfaces.corners
+    nxt = np.minimum(np.arange(k_max) + 1, k_max - 1)
+    nxt = np.where(np.arange(k_max)[None, :] + 1 >= sizes[:, None], 0, nxt[None, :])
+    # (f, k_max, t, 2) points b * P_j + c * P_{j+1}
+    P_next = np.take_along_axis(corners, nxt[..., None], axis=1)
+    xy = B[None, None, :, :1] * corners[:, :, None, :] + B[None, None, :, 1:] * P_next[:, :, None, :]
+    valid = np.arange(k_max)[None, :] < sizes[:, None]
+    xy = np.where(valid[:, :, None, None], xy, xy[:, :1, :1, :])
+    xy = xy.reshape(len(sizes), s, 2)
+    z = surfaces.height(xy)
+    return surfaces.to_model(np.concatenate([xy, z[..., None]], axis=2))
+
+
+def placement_frames(shapes: PanelShapes) -> tuple[np.ndarray, np.ndarray]:
+    """The four principal placements of every panel on a mold ``z = (K1 x^2 + K2 y^2) / 2``.
+
+    The canonical frame ``F0`` puts the panel's point at the mold apex with its larger
+    curvature in magnitude along x and a non-negative mean curvature (the panel is turned
+    over when its mean curvature is negative). The variants are F0 turned a quarter about
+    z (``F1``), turned over about x (``F2``), and both (``F3``); a half turn about z maps
+    every mold onto itself, so these four are all principal placements.
+
+    Returns
+    -------
+    frames : (f, 4, 3, 3) float, rows: the mold x, y, z axes in model coordinates.
+    shapes : (f, 4, 2) float, the panel's ``(K1, K2)`` in each frame: ``(k1, k2)``,
+        ``(k2, k1)``, ``(-k1, -k2)``, ``(-k2, -k1)`` of its canonical curvatures.
+    """
+    flip = (shapes.k1 + shapes.k2) < 0
+    a = np.where(flip[:, None], shapes.e2, shapes.e1)
+    b = np.where(flip[:, None], shapes.e1, shapes.e2)
+    c = np.where(flip[:, None], -shapes.normal, shapes.normal)
+    k1 = np.where(flip, -shapes.k2, shapes.k1)
+    k2 = np.where(flip, -shapes.k1, shapes.k2)
+    frames = np.stack([
+        np.stack([a, b, c], 1),
+        np.stack([b, -a, c], 1),
+        np.stack([a, -b, -c], 1),
+        np.stack([b, a, -c], 1),
+    ], axis=1)
+    kk = np.stack([np.stack([k1, k2], -1), np.stack([k2, k1], -1),
+                   np.stack([-k1, -k2], -1), np.stack([-k2, -k1], -1)], axis=1)
+    return frames, kk

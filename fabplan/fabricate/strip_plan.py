@@ -1,0 +1,235 @@
+"""The whole strip job: strips, parts on sheets, and their files (DXF sheets, schedule).
+
+Data flow: `fabplan.fabricate.strips` builds the lamellas of a net, `.nesting` cuts them
+into parts and nests the parts on sheets, `.dxf` draws and checks one sheet; this module
+runs the three and writes every file of a plan as one output transaction.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..io.output import output_folder
+from ..io.records import json_text
+from ..net.mesh import QuadMesh
+from .dxf import check_sheet, preview_png, sheet_document
+from .nesting import Nesting, congruence, make_parts, nest_parts
+from .strips import StripSet, StripSettings, build_strips
+
+__all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan"]
+
+
+@dataclass
+class StripPlan:
+    """Strips, parts and sheets of one run, ready to write.
+
+    Attributes
+    ----------
+    strips : the StripSet.
+    parts : list of `fabplan.fabricate.nesting.Part`.
+    nesting : the `Nesting` of the parts on sheets.
+    seconds : wall time of the planning.
+    """
+
+    strips: StripSet
+    parts: list
+    nesting: Nesting
+    seconds: float = 0.0
+
+    def summary(self) -> dict:
+        """Everything measured, for the JSON schedule and the facade study."""
+        rec = self.strips.summary()
+        rec.update(congruence(self.parts, self.strips))
+        rec.update(self.nesting.summary())
+        rec["seconds"] = self.seconds
+        return rec
+
+    def write(self, out_dir, *, name: str = "strips", previews: bool = True) -> list:
+        """Write DXF sheets, the schedule (CSV, JSON) and preview PNGs into `out_dir`.
+
+        Everything is built in a temporary folder beside `out_dir`, every DXF is read back
+        and audited there, and only then are the files moved into place: a failed run
+        leaves no partial output. Files of an earlier run listed in ``NAME.json`` are
+        replaced. Returns the written paths.
+        """
+        return write_plan(self, out_dir, name=name, previews=previews)
+
+
+def plan_strips(mesh: QuadMesh, settings: StripSettings) -> StripPlan:
+    """Build the strips of a net, split them into parts that fit the sheets and nest them.
+
+    Parameters
+    ----------
+    mesh : the net.
+    settings : strip, sheet and file options.
+
+    Returns
+    -------
+    StripPlan; call ``.write(out_dir)`` for the files and ``.summary()`` for the numbers.
+
+    Raises
+    ------
+    InputError
+        Bad settings, a net without polylines, a sheet too small for a part, crossings too
+        close for their slits or splices.
+    """
+    t0 = time.perf_counter()
+    strips = build_strips(mesh, settings)
+    parts = make_parts(strips, settings)
+    nesting = nest_parts(parts, settings)
+    return StripPlan(strips=strips, parts=parts, nesting=nesting,
+                     seconds=time.perf_counter() - t0)
+
+
+def schedule_rows(plan: StripPlan) -> list:
+    """One dict per strip: id, family, lengths, radius, crossings, parts and sheets."""
+    sheets_of_part = {}
+    for sheet in plan.nesting.sheets:
+        for p in sheet.placements:
+            sheets_of_part[p.part] = sheet.index
+    parts_of_strip: dict = {}
+    for i, part in enumerate(plan.parts):
+        parts_of_strip.setdefault(part.strip, []).append(i)
+    rows = []
+    for k, strip in enumerate(plan.strips.strips):
+        crossings = sorted(c.id for c, _ in plan.strips.crossings_of_strip[k])
+        parts = parts_of_strip.get(k, [])
+        rows.append({
+            "strip": strip.id,
+            "family": strip.family,
+            "length_mm": round(strip.length_mm, 2),
+            "cut_length_mm": round(strip.cut_length_mm, 2),
+            "radius_mm": round(strip.radius_mm, 2) if math.isfinite(strip.radius_mm) else "inf",
+            "crossings": len(crossings),
+            "crossing_ids": " ".join(str(c) for c in crossings),
+            "parts": len(parts),
+            "sheets": " ".join(str(s) for s in sorted({sheets_of_part[i] for i in parts})),
+            "twist_deg_per_m": round(strip.twist_deg_per_m, 3),
+            "off_orthogonal_deg": round(strip.off_orthogonal_deg, 3),
+            "boundary_lean_deg": round(strip.lean_deg, 3),
+        })
+    return rows
+
+
+def _schedule_csv(rows: list, header: str) -> str:
+    buf = io.StringIO()
+    buf.write(header)
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def _plan_record(plan: StripPlan, files: list, sheet_files: dict) -> dict:
+    s = plan.strips.settings
+    sheet_of_part = {}
+    for sheet in plan.nesting.sheets:
+        for p in sheet.placements:
+            sheet_of_part[p.part] = (sheet.index, p)
+    parts = []
+    for i, part in enumerate(plan.parts):
+        sheet, placement = sheet_of_part[i]
+        parts.append({
+            "id": part.id, "strip": plan.strips.strips[part.strip].id, "index": part.index,
+            "count": part.count, "s_start_mm": part.s_range[0], "s_end_mm": part.s_range[1],
+            "sheet": sheet, "file": sheet_files[sheet], "angle_deg": placement.angle_deg,
+            "offset_mm": list(placement.offset),
+            "slits": [{"crossing": c, "s_mm": sv, "from": side}
+                      for c, sv, side in part.slit_crossings],
+            "splices": [{"id": sid, "s_start_mm": z0, "s_end_mm": z1}
+                        for sid, z0, z1 in part.splices],
+            "area_mm2": part.area_mm2,
+        })
+    strips = plan.strips.strips
+    return {
+        "units": "millimetres; arc lengths s along each strip's reference curve (its mid-line, "
+                 "at the surface), from its first node",
+        "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(s).items()},
+        "summary": plan.summary(),
+        "files": files,
+        "strips": [dict(row, vertices=[int(v) for v in strip.vertices],
+                        runs=[{"start": r.start, "stop": r.stop, "radius_mm": r.radius_mm,
+                               "deviation_mm": r.deviation_mm, "fitted": r.fitted}
+                              for r in strip.runs])
+                   for row, strip in zip(schedule_rows(plan), strips, strict=True)],
+        "crossings": [{"id": c.id, "vertex": c.vertex,
+                       "strips": [strips[c.strips[0]].id, strips[c.strips[1]].id],
+                       "s_mm": list(c.s_mm), "angle_deg": c.angle_deg} for c in plan.strips.crossings],
+        "junctions": [int(v) for v in plan.strips.junctions],
+        "parts": parts,
+    }
+
+
+def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "strips",
+               previews: bool = True) -> list[Path]:
+    """Write the DXF sheets, schedule (CSV and JSON) and preview PNGs of a plan.
+
+    All files are built and checked (`check_sheet`) in a staging folder first, then moved
+    into `out_dir` (`fabplan.io.output.output_folder`); on any failure nothing is left
+    behind. Files of an earlier run with the same `name` (listed in its JSON) are removed.
+
+    Returns
+    -------
+    list of Path, the files written.
+    """
+    out_dir = Path(out_dir)
+    settings = plan.strips.settings
+    layout = plan.nesting
+    W, H = settings.sheet_mm
+    with output_folder(out_dir) as tmp:
+        files: list[str] = []
+        sheet_files: dict = {}
+        digits = max(3, len(str(len(layout.sheets))))
+        for sheet in layout.sheets:
+            if settings.one_file and not previews:
+                continue
+            doc = sheet_document(layout, [sheet], settings)
+            stem = f"{name}-sheet-{sheet.index:0{digits}d}"
+            if not settings.one_file:
+                doc.saveas(tmp / f"{stem}.dxf")
+                doc = check_sheet(tmp / f"{stem}.dxf", settings).doc
+                files.append(f"{stem}.dxf")
+                sheet_files[sheet.index] = f"{stem}.dxf"
+            if previews:
+                title = (f"sheet {sheet.index} of {len(layout.sheets)}: "
+                         f"{', '.join(layout.parts[p.part].id for p in sheet.placements)}")
+                preview_png(doc, tmp / f"{stem}.png", (W, H), title=title)
+                files.append(f"{stem}.png")
+        if settings.one_file:
+            doc = sheet_document(layout, layout.sheets, settings)
+            doc.saveas(tmp / f"{name}-sheets.dxf")
+            check_sheet(tmp / f"{name}-sheets.dxf", settings, len(layout.sheets))
+            files.insert(0, f"{name}-sheets.dxf")
+            sheet_files = {s.index: f"{name}-sheets.dxf" for s in layout.sheets}
+        rows = schedule_rows(plan)
+        summary = plan.summary()
+        header = (f"# fabplan strip schedule: {summary['strips']} strips, {summary['sheets']} "
+                  f"sheets of {W:g}x{H:g} mm; lengths and radii in millimetres\n")
+        (tmp / f"{name}.csv").write_text(_schedule_csv(rows, header), encoding="utf-8")
+        files += [f"{name}.csv", f"{name}.json"]
+        record = _plan_record(plan, files, sheet_files)
+        (tmp / f"{name}.json").write_text(json_text(record), encoding="utf-8")
+        stale = _stale_files(out_dir, name, files)
+    for target in stale:
+        target.unlink(missing_ok=True)
+    return [out_dir / f for f in files]
+
+
+def _stale_files(out_dir: Path, name: str, files: list[str]) -> list[Path]:
+    """The files of an earlier run named `name` that this run does not write."""
+    old = out_dir / f"{name}.json"
+    if not old.is_file():
+        return []
+    try:
+        listed = json.loads(old.read_text(encoding="utf-8")).get("files", [])
+    except (ValueError, OSError, AttributeError):
+        listed = []
+    targets = [out_dir / Path(str(f)).name for f in listed]
+    return [t for t in targets if t.is_file() and t.name not in files]

@@ -1,0 +1,142 @@
+"""OBJ quad meshes, read and written with quads kept exactly.
+
+trimesh and most OBJ loaders triangulate polygons silently, so fabplan reads OBJ itself:
+vertex order, face order and face sizes come back exactly as written.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .output import write_texts
+
+__all__ = ["read_obj", "parse_obj", "write_obj", "format_obj"]
+
+
+def read_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Read vertices and polygonal faces from an OBJ file (see `parse_obj`).
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+    faces : list of (k,) int arrays, 0-based vertex indices in file order.
+    """
+    vertices, faces, _ = parse_obj(path)
+    return vertices, faces
+
+
+def parse_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray], np.ndarray | None]:
+    """Read vertices, polygonal faces and per-vertex normals from an OBJ file.
+
+    Parameters
+    ----------
+    path : path of the OBJ file.
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+    faces : list of (k,) int arrays, 0-based vertex indices in file order.
+    normals : (n, 3) float64 when the file has one ``vn`` line per vertex (in vertex
+        order, as fabplan writes the contact elements of S*-nets), else None.
+
+    Raises
+    ------
+    InputError
+        When the file is missing, unreadable, not an OBJ, or has bad coordinates or
+        indices; the message names the file and line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # tolerate a byte order mark
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text OBJ file (binary content)") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+
+    vertices: list[list[float]] = []
+    normals: list[list[float]] = []
+    faces: list[list[int]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        tag = parts[0]
+        if tag == "v":
+            try:
+                xyz = [float(p) for p in parts[1:4]]
+            except ValueError:
+                raise InputError(f"{path}:{lineno}: malformed vertex line {line.strip()!r}") from None
+            if len(xyz) != 3:
+                raise InputError(f"{path}:{lineno}: vertex needs 3 coordinates")
+            if not all(math.isfinite(c) for c in xyz):
+                raise InputError(
+                    f"{path}:{lineno}: vertex {len(vertices)} has a non-finite coordinate"
+                )
+            vertices.append(xyz)
+        elif tag == "f":
+            face = []
+            for token in parts[1:]:
+                try:
+                    index = int(token.split("/")[0])
+                except ValueError:
+                    raise InputError(f"{path}:{lineno}: malformed face line {line.strip()!r}") from None
+                if index == 0:
+                    raise InputError(f"{path}:{lineno}: OBJ vertex indices start at 1, not 0")
+                # OBJ indices are 1-based; negative ones count back from the last vertex.
+                face.append(index - 1 if index > 0 else len(vertices) + index)
+            if len(face) < 3:
+                raise InputError(f"{path}:{lineno}: face {len(faces)} has fewer than 3 vertices")
+            faces.append(face)
+        elif tag == "vn":
+            try:
+                normals.append([float(p) for p in parts[1:4]])
+            except ValueError:
+                raise InputError(f"{path}:{lineno}: malformed normal line {line.strip()!r}") from None
+        elif tag in ("vt", "vp", "o", "g", "s", "l", "usemtl", "mtllib", "p"):
+            continue
+        else:
+            raise InputError(f"{path}:{lineno}: not an OBJ line: {line.strip()[:40]!r}")
+
+    if not vertices:
+        raise InputError(f"{path}: no vertices (is this an OBJ file?)")
+    if not faces:
+        raise InputError(f"{path}: no faces")
+    n = len(vertices)
+    face_arrays = [np.asarray(f, dtype=np.int64) for f in faces]
+    for i, f in enumerate(face_arrays):
+        if f.min() < 0 or f.max() >= n:
+            raise InputError(f"{path}: face {i} refers to a vertex outside 1..{n}")
+    per_vertex = None
+    if len(normals) == n and all(len(v) == 3 for v in normals):
+        per_vertex = np.asarray(normals, dtype=np.float64)
+        if not np.isfinite(per_vertex).all():
+            raise InputError(f"{path}: a vertex normal has a non-finite coordinate")
+    return np.asarray(vertices, dtype=np.float64), face_arrays, per_vertex
+
+
+def format_obj(vertices: np.ndarray, faces, header: str = "",
+               normals: np.ndarray | None = None) -> str:
+    """OBJ text for a polygon mesh; coordinates round-trip exactly (17 significant digits).
+    With `normals` (n, 3), one ``vn`` per vertex is written and faces refer to it."""
+    lines = [f"# {row}" for row in header.splitlines()] if header else []
+    lines += [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(vertices, float)]
+    if normals is None:
+        lines += ["f " + " ".join(str(int(i) + 1) for i in face) for face in faces]
+    else:
+        lines += [f"vn {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(normals, float)]
+        lines += ["f " + " ".join(f"{int(i) + 1}//{int(i) + 1}" for i in face) for face in faces]
+    return "\n".join(lines) + "\n"
+
+
+def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces, header: str = "",
+              normals: np.ndarray | None = None) -> None:
+    """Write a polygon mesh as OBJ atomically, keeping vertex and face order and face sizes
+    (and per-vertex normals when given)."""
+    write_texts({Path(path): format_obj(vertices, faces, header, normals)})

@@ -1,0 +1,63 @@
+"""The picture of a net on its design surface (layouts and studies)."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..design.mesh_surface import DesignSurface
+from ..io.output import atomic_path
+from ..net.mesh import QuadMesh
+from ..report.figures import net_view_angles, new_figure
+
+__all__ = ["write_layout_picture"]
+
+
+def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: QuadMesh, *,
+                         title: str = "", singular_points: np.ndarray | None = None) -> Path:
+    """A PNG of the net on the design surface, axes to scale (atomically written).
+
+    The design is drawn light grey with its boundary black, the net's faces blue with
+    their edges, irregular vertices red and singular points of the layout's direction
+    field orange; the view is `net_view_angles`.
+    """
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    path = Path(path)
+    fig = new_figure((8, 7))
+    ax = fig.add_subplot(projection="3d")
+    T = design.triangles
+    if len(T) > 30000:  # a coarser sample of the surface keeps the picture quick
+        T = T[:: int(math.ceil(len(T) / 30000))]
+    ax.add_collection3d(Poly3DCollection(design.vertices[T], facecolor=(0.85, 0.85, 0.85, 0.35),
+                                         edgecolor="none"))
+    for curve in design.boundary_curves():
+        loop = np.vstack([curve, curve[:1]])
+        ax.plot(loop[:, 0], loop[:, 1], loop[:, 2], color="black", lw=0.8)
+    ax.add_collection3d(Poly3DCollection([mesh.vertices[f] for f in mesh.faces],
+                                         facecolor=(0.55, 0.7, 0.95, 0.9),
+                                         edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4))
+    irregular = mesh.vertices[mesh.irregular_vertices]
+    if len(irregular):
+        ax.scatter(*irregular.T, color="red", s=18, depthshade=False, label="irregular vertices")
+    if singular_points is not None and len(singular_points):
+        ax.scatter(*np.asarray(singular_points).T, color="orange", s=12, depthshade=False,
+                   label="field singularities")
+    elevation, azimuth = net_view_angles(design)
+    ax.view_init(elev=elevation, azim=azimuth)
+    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
+    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
+    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
+        getattr(ax, f"set_{axis}lim")(a, b)
+    ax.set_box_aspect(span)                       # equal scale on all three axes
+    ax.set_axis_off()
+    if title:
+        ax.set_title(title, fontsize=9)
+    if len(irregular) or (singular_points is not None and len(singular_points)):
+        ax.legend(loc="lower left", fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    return path

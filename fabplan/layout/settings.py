@@ -1,0 +1,56 @@
+"""The numbers that steer a layout."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["LayoutSettings", "SURFACE_TOLERANCE"]
+
+
+# how far a gliding net may leave the design, in panel sizes: half of the 1 % a layout is
+# judged by (measured: up to 0.45 % used on a facade with near-umbilics)
+SURFACE_TOLERANCE = 0.005
+
+
+@dataclass
+class LayoutSettings:
+    """Numbers that steer the layout (lengths in panel sizes unless stated).
+
+    Attributes
+    ----------
+    bisector : the principal direction bisecting the angle between the families, "max"
+        (the larger principal curvature) or "min". Irrelevant at 90 degrees.
+    smoothing : smoothing length of the direction field.
+    max_smoothing : orthogonal nets smooth the directions as a cross field, over
+        `smoothing` doubled up to this length until the field has no quarter-turn
+        singularity (see `_smoothed_directions`).
+    scale_weight : weight of uniform spacing against alignment with the directions in
+        the integration (alignment has weight 1): smaller values follow the directions
+        more closely and let the spacing vary.
+    curvature_radius : neighbourhood of libigl's curvature estimate (in mean edges of
+        the design mesh), for triangle meshes.
+    min_edge, max_edge : extracted quads with an edge outside this range are dropped.
+    fill_holes_up_to : interior holes bounded by at most this many edges are closed with
+        a fan around a new (irregular) vertex; larger holes stay open.
+    boundary_min_edge : quads added along the design boundary (closing the staircase of
+        whole lattice cells, see `fill_boundary_cells`) keep their edges at least this long.
+    boundary_snap : boundary vertices of the layout within this distance of the design
+        boundary glide on it; the others stay free on the surface.
+    offsets : trial shifts of the integer grid per direction (offsets**2 trials); the
+        extraction with the most quads is kept.
+    max_turning_deg : the direction field turning faster than this per panel is reported
+        (`SurfaceLayout.turning_points`).
+    """
+
+    bisector: str = "max"
+    smoothing: float = 0.5
+    max_smoothing: float = 4.0
+    scale_weight: float = 0.1
+    curvature_radius: int = 5
+    min_edge: float = 0.4
+    max_edge: float = 2.2
+    fill_holes_up_to: int = 24
+    boundary_min_edge: float = 0.75
+    boundary_snap: float = 0.75
+    offsets: int = 2
+    max_turning_deg: float = 30.0

@@ -1,0 +1,628 @@
+"""From a design surface to an initial S-net: directions, parametrization, quad extraction.
+
+The steps follow section 4.3 of the paper, with the degrees of freedom of section 2.1.11:
+
+1. Principal directions per triangle (`fabplan.directions`): from the exact fundamental
+   forms of a parametric surface, or from libigl's per-vertex estimate
+   (Rusinkiewicz-style quadric fitting) averaged as shape operators over each triangle.
+2. A smooth line field (`fabplan.directions`): the principal directions, weighted by the
+   anisotropy ``|k1 - k2|``, are smoothed over a length of about half a panel (near
+   umbilics the surroundings decide); for orthogonal nets as a cross field, over a
+   longer length where needed (`_smoothed_directions`). The field is then combed into a
+   consistent sign by XOR along a minimum spanning tree of the triangle adjacency
+   (pointer doubling, `fabplan.mesh.tree_parity`). Where the combing conflicts the field
+   has a seam; its end points and points where the field turns around are its
+   singularities.
+3. S-net directions (`fabplan.directions`): the pair symmetric to the principal
+   directions at the requested angle, ``t1,2 = cos(a/2) e1 +- sin(a/2) e2`` (90 degrees:
+   45 degrees off the principal directions). In the second mode one family is prescribed
+   (a function whose level sets are, e.g., the floor levels of a tower) and its partner
+   direction is the reflection of its tangent in the principal directions (Proposition
+   2.11), ``s = 2 (t . e1) e1 - t``.
+4. A global parametrization ``(phi, psi)`` (`fabplan.parametrization`): sparse least
+   squares for the gradients (isolines of phi along t1, of psi along t2, spacing one
+   panel), with the alignment weighted above the spacing. Boundary loops around which the
+   field turns (a tower) are cut open and get an integer jump, so the grid closes up.
+5. Extraction (`fabplan.extraction`): the integer points of the parametrization, located
+   triangle by triangle (barycentric test, vectorized over candidate points), become
+   vertices; unit squares whose corners and centre exist become quads (oriented with the
+   surface). Quads that fold or stretch (near singularities and seams) are dropped, the
+   largest piece is kept, pinched vertices are separated, and small interior holes are
+   closed by a fan of quads around a new vertex: these are the irregular vertices
+   (fairness only in the solve).
+
+`glide` then optimizes the layout into a net of a given type with its vertices held
+within a small tolerance of the design surface, its boundary vertices near the surface
+boundary held on it, and its edges within 0.5 - 2 panel sizes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import igl
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+from scipy.spatial import cKDTree
+
+from ..design.mesh_surface import DesignSurface
+from ..errors import InputError
+from ..net.mesh import QuadMesh
+from ..solve.constraints import EdgeLengthRange, FamilyLevels
+from .directions import (
+    comb_cross_field,
+    comb_line_field,
+    direction_turning,
+    face_adjacency,
+    face_principal_frames,
+    find_whole_turns,
+    gradient_vectors,
+    line_field_index,
+    prescribed_family,
+    smooth_direction_field,
+    snet_directions,
+)
+from .extraction import clean_quads, extract_quads, fill_boundary_cells, fill_holes
+from .parametrization import (
+    boundary_circulation,
+    cut_mesh,
+    cut_paths,
+    directional_derivatives,
+    gradient_target,
+    integrate_directions,
+)
+from .settings import SURFACE_TOLERANCE, LayoutSettings
+
+__all__ = ["SurfaceLayout", "layout_surface", "layout_angle", "glide"]
+
+
+@dataclass
+class SurfaceLayout:
+    """An initial S-net on a design surface and what was found on the way.
+
+    Attributes
+    ----------
+    mesh : the extracted quad-dominant mesh (vertices on the design surface).
+    design : the `DesignSurface`.
+    panel_size : target edge length (model units).
+    angle_deg : intersection angle of the two families (None when one is prescribed).
+    parameters : (t, 3, 2) float, ``(phi, psi)`` at the corners of every design triangle
+        (integer values are the mesh lines).
+    singular_points : (k, 3) float, points of the design surface where the direction field
+        is singular (umbilics, seam ends), with their `singular_index` (k,) in turns.
+    seam_edges : number of design edges across which the combed field flips.
+    cuts : transitions ``(sign, jump_phi, jump_psi)`` across the cuts: sign 1 for a
+        boundary loop cut open (the grid closes up with an integer shift), -1 for a seam of
+        the line field (parameters ``c - p``).
+    filled_holes, open_holes : interior holes closed with irregular vertices / left open.
+    gliding_boundary : (b,) int, boundary vertices of `mesh` close enough to the design
+        boundary to glide on it.
+    vertex_keys : (n, 2) float, the integer parameters ``(phi, psi)`` of every mesh vertex
+        (NaN for vertices added in holes).
+    prescribed : (n_design,) float, the prescribed family's function on the design
+        vertices (its integer levels are the first family), or None.
+    family : description of the prescribed family, or None.
+    level_step : level k of the prescribed family is where its function equals
+        ``k * level_step`` (see `prescribed_family`), or None.
+    direction_symmetry : 4 when the directions were smoothed as a cross field, 2 as a
+        line field; `smoothing` the smoothing length (panel sizes).
+    turning_points, turning_deg : (k, 3), (k,) float, where the direction field turns
+        faster than `LayoutSettings.max_turning_deg` per panel (umbilics and near-umbilics,
+        `fabplan.directions.direction_turning`), and how fast: the net's lines cannot
+        follow it there.
+    seconds : time per stage.
+    """
+
+    mesh: QuadMesh
+    design: DesignSurface
+    panel_size: float
+    angle_deg: float | None
+    parameters: np.ndarray
+    singular_points: np.ndarray
+    singular_index: np.ndarray
+    seam_edges: int
+    cuts: list
+    filled_holes: int
+    open_holes: int
+    gliding_boundary: np.ndarray
+    vertex_keys: np.ndarray
+    prescribed: np.ndarray | None = None
+    family: str | None = None
+    level_step: float | None = None
+    turning_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    turning_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    direction_symmetry: int = 2
+    smoothing: float = 0.5
+    seconds: dict = field(default_factory=dict)
+
+    def record(self) -> dict:
+        """JSON-ready summary (written with the optimized net)."""
+        mesh = self.mesh
+        return {
+            "design": self.design.name,
+            "design_triangles": int(len(self.design.triangles)),
+            "design_repairs": dict(self.design.repairs),
+            "panel_size": self.panel_size,
+            "angle_deg": self.angle_deg,
+            "prescribed_family": self.family,
+            "level_step": self.level_step,
+            "quads": int(np.sum(mesh.face_sizes == 4)),
+            "other_faces": int(np.sum(mesh.face_sizes != 4)),
+            "vertices": int(mesh.vertex_count),
+            "irregular_vertices": mesh.irregular_vertices.tolist(),
+            "singular_points": self.singular_points.tolist(),
+            "singular_index": self.singular_index.tolist(),
+            "fast_turning_points": self.turning_points.tolist(),
+            "fast_turning_deg_per_panel": self.turning_deg.tolist(),
+            "direction_field": "cross" if self.direction_symmetry == 4 else "line",
+            "smoothing_panels": self.smoothing,
+            "seam_edges": int(self.seam_edges),
+            "cuts": [list(map(int, c)) for c in self.cuts],
+            "filled_holes": int(self.filled_holes),
+            "open_holes": int(self.open_holes),
+            "gliding_boundary_vertices": int(len(self.gliding_boundary)),
+            "boundary_vertices": int(mesh.is_boundary_vertex.sum()),
+            "seconds": self.seconds,
+        }
+
+
+# ---------------------------------------------------------------------------- pipeline
+
+
+def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 90.0,
+                   family: str | None = None,
+                   settings: LayoutSettings | None = None) -> SurfaceLayout:
+    """Lay out an initial S-net on a design surface.
+
+    Parameters
+    ----------
+    design : the surface.
+    panel_size : target edge length (model units).
+    angle : intersection angle of the two families in degrees (ignored with `family`).
+    family : a prescribed first family (see `prescribed_family`); the second family is
+        the complementary one that makes an S-net.
+    settings : `LayoutSettings`.
+
+    Returns
+    -------
+    SurfaceLayout
+
+    Raises
+    ------
+    InputError
+        For a panel size that is not positive or too large for the surface, an angle
+        outside (0, 180), or a layout without a single regular vertex.
+    """
+    s = settings or LayoutSettings()
+    h = float(panel_size)
+    _check_layout_request(design, h, angle, s)
+    seconds: dict = {}
+    clock = time.perf_counter()
+
+    def lap(name):
+        nonlocal clock
+        now = time.perf_counter()
+        seconds[name] = round(now - clock, 4)
+        clock = now
+
+    V = design.vertices
+    normal = design.face_normals
+    k1, k2, e1 = face_principal_frames(design, radius=s.curvature_radius)
+    if s.bisector == "min":
+        e1 = np.cross(normal, e1)
+    lap("principal_directions")
+    e1, symmetry, smoothing = _smoothed_directions(
+        design, e1, np.abs(k1 - k2) * design.face_areas, h, s,
+        cross=family is None and angle == 90.0)
+    lap("smoothing")
+    e1, seam = comb_line_field(design, e1)
+    index = line_field_index(design, e1)
+    singular = np.flatnonzero(np.nan_to_num(index) != 0)
+    turning = _turning_spots(design, direction_turning(design, e1, h), s.max_turning_deg, h)
+    lap("combing")
+    whole_turns, turn_starts = find_whole_turns(V, singular, index[singular], h)
+    fields = _gradient_fields(design, e1, np.abs(k1 - k2), h, angle, family, whole_turns, s)
+    lap("directions")
+    cut = _cut_open(design, fields, seam, e1, turn_starts)
+    lap("cuts")
+    P2, transitions = _integrate(design, fields, cut)
+    lap("integration")
+    verts, quads, keys, off = _extract(design, P2, transitions, h, s, cut.seams,
+                                       fields.prescribed is not None, whole_turns)
+    lap("extraction")
+    if len(quads) == 0:
+        raise InputError(f"{design.name}: no quad could be laid out at panel size {h:g} "
+                         "(too large for the surface, or a degenerate direction field)")
+    faces = list(quads)
+    verts, faces, filled, opened = fill_holes(
+        verts, faces, design, h, s.fill_holes_up_to,
+        poles=V[whole_turns] if fields.prescribed is None else None)
+    vertex_keys = np.full((len(verts), 2), np.nan)
+    vertex_keys[:len(keys)] = keys
+    mesh = QuadMesh(verts, faces, name=f"layout-{Path(design.name).stem}")
+    if len(mesh.stars) == 0:
+        raise InputError(f"{design.name}: panel size {h:g} is too large for the surface (the "
+                         "layout has no interior vertex with four quads)")
+    lap("holes")
+    gliding = _near_design_boundary(mesh, design, s.boundary_snap * h, fields.prescribed,
+                                    vertex_keys[:, 0])
+    lap("boundary")
+    return SurfaceLayout(
+        mesh=mesh, design=design, panel_size=h,
+        angle_deg=None if family is not None else float(angle),
+        parameters=P2 + np.asarray(off), singular_points=V[singular],
+        singular_index=index[singular], seam_edges=len(seam),
+        cuts=[(int(sign), *np.round(shift, 6).tolist()) for sign, shift in transitions],
+        filled_holes=filled, open_holes=opened,
+        gliding_boundary=gliding, vertex_keys=vertex_keys,
+        prescribed=fields.prescribed, family=fields.description, level_step=fields.level_step,
+        turning_points=turning[0], turning_deg=turning[1], direction_symmetry=symmetry,
+        smoothing=smoothing, seconds=seconds)
+
+
+def _check_layout_request(design: DesignSurface, h: float, angle: float,
+                          s: LayoutSettings) -> None:
+    """Refuse a panel size, angle or setting that cannot give a layout."""
+    if not (h > 0 and math.isfinite(h)):
+        raise InputError(f"--panel-size must be a positive length, got {h}")
+    if not 0 < angle < 180:
+        raise InputError(f"--angle must lie strictly between 0 and 180 degrees, got {angle}")
+    if s.bisector not in ("max", "min"):
+        raise InputError(f"bisector must be 'max' or 'min', got {s.bisector!r}")
+    expected = design.area / (h * h * math.sin(math.radians(angle)))
+    if expected < 9:
+        raise InputError(f"{design.name}: panel size {h:g} is too large for the surface (area "
+                         f"{design.area:.4g}: about {expected:.1f} panels; at most "
+                         f"{math.sqrt(design.area / 9):.4g} gives a 3 x 3 patch)")
+
+
+@dataclass
+class _GradientFields:
+    """What the parametrization integrates: per parameter, rows (direction, value, weight)
+    of prescribed directional derivatives, the target gradients of both parameters, and
+    the prescribed family's function (or None)."""
+
+    rows: dict
+    targets: list
+    prescribed: np.ndarray | None = None
+    description: str | None = None
+    level_step: float | None = None
+
+
+def _gradient_fields(design: DesignSurface, e1: np.ndarray, anisotropy: np.ndarray, h: float,
+                     angle: float, family: str | None, whole_turns: np.ndarray,
+                     s: LayoutSettings) -> _GradientFields:
+    """The directional derivatives the two parameters should have on every triangle."""
+    V, T, normal = design.vertices, design.triangles, design.face_normals
+    mu = s.scale_weight
+    area = design.face_areas / design.face_areas.mean()
+    # near umbilics every direction is nearly symmetric to the principal ones: alignment
+    # counts less there, and hardly at all within two panels of a point the field turns
+    # around (a rotationally symmetric umbilic, where the grid would shrink to a point)
+    confidence = np.clip(anisotropy / max(float(np.median(anisotropy)), 1e-300), 0.1, 1.0)
+    if whole_turns.size and family is None:
+        centroid = V[T].mean(axis=1)
+        near, _ = cKDTree(V[whole_turns]).query(centroid, distance_upper_bound=2 * h)
+        area = np.where(np.isfinite(near), 1e-3 * area, area)
+    if family is None:
+        t1, t2 = snet_directions(e1, normal, angle)
+        align = confidence * area
+        rows = {
+            "phi": [(h * t1, np.zeros(len(T)), align), (h * t2, np.ones(len(T)), mu * area)],
+            "psi": [(h * t2, np.zeros(len(T)), align), (h * t1, np.ones(len(T)), mu * area)],
+        }
+        targets = [gradient_target(normal, t1, t2) / h, gradient_target(normal, t2, t1) / h]
+        return _GradientFields(rows, targets)
+    prescribed, t, s_dir, description, level_step = prescribed_family(design, family, h, e1)
+    rows = {"psi": [(h * s_dir, np.zeros(len(T)), area), (h * t, np.ones(len(T)), mu * area)]}
+    targets = [np.zeros_like(t), gradient_target(normal, s_dir, t, clip=True) / h]
+    return _GradientFields(rows, targets, prescribed, description, level_step)
+
+
+def _cut_open(design: DesignSurface, fields: _GradientFields, seam: np.ndarray, e1: np.ndarray,
+              turn_starts: list):
+    """Cut the design open along the boundary loops around which the field turns, the
+    seams of the line field and the whole-turn umbilics (`cut_mesh`)."""
+    loops = design.boundary_loops
+    paths: list = []
+    starts: list = []
+    if len(loops) > 1:
+        circulation = boundary_circulation(design, loops, fields.targets)
+        starts = [loops[i] for i in range(1, len(loops)) if np.abs(circulation[i]).max() >= 0.5]
+    if fields.prescribed is None:
+        # a field turning a whole turn around a point (a rotationally symmetric umbilic)
+        # gets a cut like a hole, with a shift of the grid across it
+        starts += [np.array([v]) for v in turn_starts]
+    if starts:
+        avoid = np.zeros(len(design.vertices), bool)
+        avoid[seam.ravel()] = True
+        paths = cut_paths(design, starts, avoid)
+    return cut_mesh(design, paths, seam if fields.prescribed is None else np.zeros((0, 2), np.int64), e1)
+
+
+def _integrate(design: DesignSurface, fields: _GradientFields, cut) -> tuple[np.ndarray, list]:
+    """The parameters ``(phi, psi)`` at the corners of every triangle, (t, 3, 2), and the
+    transitions ``(sign, jump)`` across the cuts."""
+    S, njump = cut.substitution()
+    Tc, Xc = cut.triangles, design.vertices[cut.copy_vertex]
+    values, constants = {}, {}
+    for name, rows in fields.rows.items():
+        x = integrate_directions(Xc, Tc, S, rows, njump)
+        if njump:
+            # integer jumps make the integer grid match across the cuts and seams
+            fixed = np.round(x[-njump:])
+            shift = S[:, -njump:] @ fixed
+            moved = [(d, v - directional_derivatives(Xc, Tc, shift, d), w) for d, v, w in rows]
+            x = np.r_[integrate_directions(Xc, Tc, S[:, :-njump].tocsr(), moved), fixed]
+        values[name] = S @ x
+        constants[name] = x[len(x) - njump:]
+    if fields.prescribed is not None:
+        values["phi"] = fields.prescribed[cut.copy_vertex]
+        constants["phi"] = np.zeros(njump)
+    P2 = np.stack([values["phi"][Tc], values["psi"][Tc]], axis=-1)     # (t, 3, 2)
+    e0, e1p = P2[:, 1] - P2[:, 0], P2[:, 2] - P2[:, 0]
+    if np.sum(design.face_areas * np.sign(e0[:, 0] * e1p[:, 1] - e0[:, 1] * e1p[:, 0])) < 0:
+        P2[..., 1] *= -1
+        constants["psi"] = -constants["psi"]
+    jumps = np.stack([constants["phi"], constants["psi"]], axis=1).astype(np.int64)
+    transitions = [(1, j) for j in jumps[:cut.paths] if np.any(j)] + \
+        [(-1, c) for c in jumps[cut.paths:]]
+    return P2, transitions
+
+
+def _extract(design: DesignSurface, P2: np.ndarray, transitions: list, h: float,
+             s: LayoutSettings, seams: int, prescribed: bool, whole_turns: np.ndarray) -> tuple:
+    """The quads of the integer lattice, tried at several shifts of the grid (the one with
+    the most quads is kept), with the boundary staircase closed.
+
+    Returns
+    -------
+    vertices (n, 3), quads (q, 4), keys (n, 2) the lattice parameters, and the shift used.
+    """
+    V, T = design.vertices, design.triangles
+    best = None
+    # a seam maps phi to c - phi: only half-integer shifts keep the lattice on itself
+    count = 2 if seams else s.offsets
+    shifts = np.arange(count) / count
+    trials = [(a, b) for a in shifts for b in shifts]
+    if prescribed:
+        trials = [(0.0, b) for b in shifts]
+    X3 = V[T]
+    for off in trials:
+        moved = [(sign, shift + (2 * np.asarray(off) if sign < 0 else 0)) for sign, shift in transitions]
+        verts, quads, keys = extract_quads(P2 + np.asarray(off), X3, design.face_normals, h, moved, s)
+        if whole_turns.size and len(quads):
+            # the grid degenerates towards a point the field turns around: leave a hole
+            gap, _ = cKDTree(V[whole_turns]).query(verts[quads].mean(axis=1))
+            quads = quads[gap > 2 * h]
+        used, quads = clean_quads(verts, quads)
+        if best is None or len(quads) > len(best[1]):
+            best = (verts[used], quads, keys[used], off)
+    verts, quads, keys, off = best
+    if len(quads):
+        verts, quads, keys, _ = fill_boundary_cells(
+            verts, quads, keys, design, h, min_edge=s.boundary_min_edge, max_edge=s.max_edge)
+    return verts, quads, keys, off
+
+
+def _smoothed_directions(design: DesignSurface, e1: np.ndarray, weight: np.ndarray,
+                         panel_size: float, s: LayoutSettings, *, cross: bool
+                         ) -> tuple[np.ndarray, int, float]:
+    """The principal directions smoothed for the layout: as a cross field where the net
+    allows it, else as a line field.
+
+    An orthogonal S-net is the same net with its two families swapped, so its directions
+    are a cross field: across a near-umbilic the principal directions may turn by a
+    quarter turn without the net's lines turning at all. The cross field is smoothed over
+    `LayoutSettings.smoothing` panels, doubled up to `max_smoothing`, until it has no
+    quarter-turn singularity (which the lattice cannot follow; four of them surround a
+    dome's apex); failing that, and for other nets, the line field is smoothed.
+
+    Returns
+    -------
+    e1 : (t, 3) float, the smoothed line field (uncombed).
+    symmetry : 4 for a cross field, 2 for a line field.
+    smoothing : the smoothing length used (panel sizes).
+    """
+    length = s.smoothing
+    while cross and length <= s.max_smoothing:
+        d, _ = smooth_direction_field(design, e1, weight, length * panel_size, symmetry=4)
+        index = line_field_index(design, d, symmetry=4)
+        if np.all(np.nan_to_num(2 * index) == np.round(np.nan_to_num(2 * index))):
+            return comb_cross_field(design, d), 4, length
+        length *= 2
+    d, _ = smooth_direction_field(design, e1, weight, s.smoothing * panel_size, symmetry=2)
+    return d, 2, s.smoothing
+
+
+def _turning_spots(design: DesignSurface, turning: np.ndarray, limit: float,
+                   panel_size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where the field turns faster than `limit` degrees per panel: one point per
+    connected patch of such triangles (its fastest one), and that patch's turning."""
+    fast = np.flatnonzero(turning > limit)
+    if fast.size == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    _, _, f, g = face_adjacency(design)
+    both = np.isin(f, fast) & np.isin(g, fast)
+    graph = sp.coo_matrix((np.ones(int(both.sum())), (f[both], g[both])),
+                          shape=(len(turning),) * 2)
+    _, label = csgraph.connected_components(graph, directed=False)
+    patch = label[fast]
+    order = np.lexsort((-turning[fast], patch))
+    first = order[np.r_[True, patch[order][1:] != patch[order][:-1]]]
+    # patches smaller than a tenth of a panel are noise of the curvature estimate
+    area = np.bincount(patch, weights=design.face_areas[fast])[patch[first]]
+    peak = fast[first[area >= 0.1 * panel_size**2]]
+    centroid = design.vertices[design.triangles[peak]].mean(axis=1)
+    return centroid, turning[peak]
+
+
+def _near_design_boundary(mesh: QuadMesh, design: DesignSurface, radius: float,
+                          prescribed: np.ndarray | None = None,
+                          levels: np.ndarray | None = None) -> np.ndarray:
+    """(b,) int, boundary vertices of the layout within `radius` of the design boundary,
+    at most two faces each.
+
+    With a prescribed family (`prescribed` on the design vertices, `levels` per layout
+    vertex), a vertex only glides where its level reaches the boundary near it (within a
+    quarter level), so that gliding and staying on its level do not contradict.
+    """
+    from ..solve.constraints.closeness import closest_points_on_polylines
+
+    boundary = np.flatnonzero(mesh.is_boundary_vertex)
+    curves = design.boundary_curves()
+    if not curves or boundary.size == 0:
+        return np.zeros(0, np.int64)
+    foot, tangent = closest_points_on_polylines(mesh.vertices[boundary], curves)
+    near = np.linalg.norm(foot - mesh.vertices[boundary], axis=1) <= radius
+    # concave corners of the layout's boundary (three faces or more) would flatten their
+    # faces onto the boundary curve: they stay free on the surface
+    faces_at = np.bincount(mesh.face_indices, minlength=mesh.vertex_count)
+    near &= faces_at[boundary] <= 2
+    if prescribed is not None:
+        # sliding along the boundary by at most the radius must reach the vertex's level
+        # (linearly): a boundary running along a level set is not glided on
+        step = 0.1 * radius
+        at_foot = _value_at(design, prescribed, foot)
+        ahead = _value_at(design, prescribed, foot + step * tangent)
+        behind = _value_at(design, prescribed, foot - step * tangent)
+        slope = np.abs(ahead - behind) / (2 * step)
+        # ... crossing the levels, not running along one (where a level may never meet it)
+        _, _, tri = design.reference.closest_points(foot)
+        rate = np.linalg.norm(gradient_vectors(design, prescribed)[tri], axis=1)
+        level = levels[boundary]
+        near &= ~np.isfinite(level) | ((np.abs(at_foot - level) <= slope * radius)
+                                       & (slope >= 0.3 * rate))
+    return boundary[near]
+
+
+def _value_at(design: DesignSurface, value: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(m,) float, a function on the design vertices interpolated at the closest points."""
+    foot, _, tri = design.reference.closest_points(points)
+    V, T = design.vertices, design.triangles[tri]
+    bary = igl.barycentric_coordinates(foot, V[T[:, 0]], V[T[:, 1]], V[T[:, 2]])
+    return np.sum(bary * value[T], axis=1)
+
+
+# ---------------------------------------------------------------------------- gliding
+
+
+def layout_angle(net: str, design: DesignSurface, angle: float | None = None) -> float:
+    """Intersection angle (degrees) of the layout a net type should start from.
+
+    The given `angle` when there is one. Else, for a characteristic conjugate net, the
+    angle of the conjugate directions symmetric to the principal ones,
+    ``2 atan(sqrt(k1 / k2))`` (area-weighted median where K > 0); for an A-net (planar
+    vertex stars: the families follow the asymptotic directions), ``2 atan(sqrt(-k1 /
+    k2))`` where K < 0; for a linear Weingarten net of free angle, the angle whose Euler
+    formula ``k1 cos^2 + k2 sin^2`` matches the line ``a k1 + b k2 = c`` fitted to the
+    design's curvatures, ``2 atan(sqrt(b / a))``; 90 degrees otherwise (and where the
+    surface does not have the curvature the formula needs). A start far from the angle
+    the net ends at makes the solve shear the whole net.
+
+    Examples
+    --------
+    >>> from fabplan.design.load import load_design
+    >>> saddle = load_design("hyperbolic-paraboloid", triangles=2000)
+    >>> layout_angle("anet", saddle)      # z = k x y: asymptotic lines along x and y
+    90.0
+    >>> layout_angle("isogonal", saddle, 70.0)
+    70.0
+    """
+    from ..net.weingarten import weingarten_fit
+    from ..solve.net_types import get_net
+
+    if angle is not None:
+        return float(angle)
+    preset = get_net(net)
+    asymptotic = preset.radius == "infinite" and preset.angle != "right"
+    weingarten = preset.angle == "param" and preset.radius == "param"
+    if not (preset.planar_faces or asymptotic or weingarten):
+        return 90.0
+    k1, k2, _ = face_principal_frames(design)
+    area = design.face_areas
+    if weingarten:
+        line = weingarten_fit(k1, k2)["line"]
+        if line is None or line["a"] * line["b"] <= 0:
+            return 90.0
+        return round(float(2 * np.degrees(np.arctan(np.sqrt(line["b"] / line["a"])))), 1)
+    ratio = np.divide(k1, k2, out=np.zeros(len(k1)), where=k2 != 0)
+    ratio = ratio if preset.planar_faces else -ratio
+    ok = ratio > 0
+    if area[ok].sum() < 0.5 * area.sum():
+        return 90.0
+    angles = 2 * np.degrees(np.arctan(np.sqrt(ratio[ok])))
+    return round(_weighted_median(angles, area[ok]), 1)
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+
+
+def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,
+          radius: float | None = None, settings=None, fixed: np.ndarray | None = None,
+          surface_tolerance: float = SURFACE_TOLERANCE, progress=None):
+    """Optimize a layout into a net of type `net` while it glides on the design surface.
+
+    The vertices are held within `surface_tolerance` panel sizes of the design surface
+    (point-to-plane distance to footpoints recomputed every iteration, a hard
+    constraint), the layout's boundary vertices near the design boundary on the boundary
+    curves; everything else is `fabplan.optimize`. The tolerance is what lets an exact
+    S-net form on a curved design: held at zero distance the vertices could only slide.
+    Nets with a prescribed family are held on the surface (its levels are read there).
+
+    Returns
+    -------
+    `fabplan.optimize.OptimizationResult`, whose properties also hold
+    ``distance_to_design`` (model units), ``distance_to_design_relative_to_panel``,
+    ``edge_length_relative_to_panel`` and ``coverage`` (area of the net's faces over
+    the design's area).
+    """
+    from ..solve.net_types import get_net
+    from ..solve.optimize import optimize
+
+    mesh, design = layout.mesh, layout.design
+    if get_net(net).dual:
+        raise InputError(f"net type {net!r}: layouts are computed for S-nets; optimize the "
+                         "S-net first and then the S*-net with `fabplan optimize`")
+    extra = ()
+    # a prescribed family's levels are read on the surface: its nets are held on it
+    tolerance = 0.0 if layout.prescribed is not None else surface_tolerance
+    if layout.prescribed is not None:
+        on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
+        extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
+                              layout.vertex_keys[on_level, 0]),)
+    # edges within 0.5 - 2 panel sizes (the shorter ones at their start length), with a margin
+    extra += (EdgeLengthRange(0.51 * layout.panel_size, 1.99 * layout.panel_size),)
+    result = optimize(mesh, net, angle=angle, radius=radius, reference=design.reference,
+                      fixed=fixed, settings=settings, glide=True,
+                      glide_boundary=layout.gliding_boundary,
+                      surface_tolerance=tolerance * layout.panel_size, extra=extra,
+                      progress=progress)
+    X = result.mesh.vertices
+    d = design.distances(X)
+    length = np.linalg.norm(X[result.mesh.edges[:, 0]] - X[result.mesh.edges[:, 1]], axis=1)
+    result.properties["distance_to_design"] = {"max": float(d.max()), "mean": float(d.mean())}
+    result.properties["distance_to_design_relative_to_panel"] = {
+        "max": float(d.max() / layout.panel_size), "mean": float(d.mean() / layout.panel_size)}
+    result.properties["edge_length_relative_to_panel"] = {
+        "min": float(length.min() / layout.panel_size),
+        "max": float(length.max() / layout.panel_size),
+        "mean": float(length.mean() / layout.panel_size)}
+    result.properties["distance_measured_to"] = (
+        "the exact parametric surface" if design.parametric is not None else
+        "the design's triangle mesh")
+    # the triangulation's chord error tells why a net is off the exact surface; it costs
+    # a closest-point search per triangle, so it is measured only when that matters
+    off = d.max() > 0.01 * layout.panel_size and design.parametric is not None
+    result.properties["design_chord_error"] = design.chord_error if off else None
+    result.properties["coverage"] = float(result.mesh.face_areas.sum() / design.area)
+    result.properties["layout"] = layout.record()
+    result.parameters["panel_size"] = layout.panel_size
+    return result

@@ -1,0 +1,244 @@
+"""Pictures for reports: figures outside pyplot, colours, views and mesh drawings.
+
+Mesh pictures are orthographic views drawn with the painter's algorithm (faces sorted by
+depth), so lines drawn on a surface (isolines, edges) are hidden behind nearer faces.
+Figures are made with `new_figure`, never through pyplot: fabplan never switches a host
+program's matplotlib backend.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "new_figure",
+    "png_bytes",
+    "figure_to_data_uri",
+    "distinct_colors",
+    "agreeing_normal",
+    "net_view_angles",
+    "view_frame",
+    "draw_mesh",
+    "rgba",
+    "isoline_segments",
+]
+
+
+def new_figure(figsize: tuple[float, float] = (8.0, 6.0), *, dpi: int = 110) -> "Figure":
+    """A matplotlib Figure with its own Agg canvas, outside pyplot.
+
+    pyplot and the host's backend are left alone, so a Jupyter or Rhino session that
+    imports fabplan keeps its own; the figure is freed with its last reference.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, dpi=dpi)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def png_bytes(fig: "Figure", *, dpi: int = 110, tight: bool = True) -> bytes:
+    """The PNG of a figure."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight" if tight else None,
+                facecolor="white")
+    return buffer.getvalue()
+
+
+def figure_to_data_uri(fig: "Figure", *, dpi: int = 110) -> str:
+    """PNG of a matplotlib figure as a ``data:image/png;base64,...`` URI."""
+    return "data:image/png;base64," + base64.b64encode(png_bytes(fig, dpi=dpi)).decode("ascii")
+
+
+# ----------------------------------------------------------------------------- colours
+def distinct_colors(n: int) -> np.ndarray:
+    """(n, 4) RGBA colours, neighbours in the sequence clearly different (tab20 up to 20,
+    then hues spaced by the golden angle with alternating lightness)."""
+    import matplotlib.colors as mcolors
+    from matplotlib import colormaps
+
+    if n <= 20:
+        return colormaps["tab20"](np.arange(n) % 20)
+    i = np.arange(n)
+    hue = (i * 0.618033988749895) % 1.0
+    sat = np.where(i % 3 == 0, 0.75, np.where(i % 3 == 1, 0.55, 0.9))
+    val = np.where(i % 2 == 0, 0.9, 0.7)
+    rgb = mcolors.hsv_to_rgb(np.stack([hue, sat, val], axis=1))
+    return np.column_stack([rgb, np.ones(n)])
+
+
+# ----------------------------------------------------------------------------- mesh drawings
+def view_frame(X: np.ndarray, normals: np.ndarray, areas: np.ndarray, *,
+               lift: float = 0.35) -> np.ndarray:
+    """A viewing frame that looks at the side of a surface most faces turn to.
+
+    Parameters
+    ----------
+    X : (n, 3) float, vertices (their principal axes give the view of a closed surface).
+    normals : (f, 3) float, unit face normals; areas : (f,) float.
+    lift : how far the eye is raised above the mean normal (towards +z).
+
+    Returns
+    -------
+    (3, 3) float, rows: screen right, screen up, towards the viewer.
+    """
+    towards = np.nansum(normals * areas[:, None], axis=0)
+    if np.linalg.norm(towards) < 1e-9 * max(float(areas.sum()), 1e-300):
+        _, _, vt = np.linalg.svd(X - X.mean(axis=0))
+        towards = vt[2]
+    towards = towards / np.linalg.norm(towards)
+    up_world = np.array([0.0, 0.0, 1.0])
+    if abs(towards @ up_world) > 0.95:
+        up_world = np.array([0.0, 1.0, 0.0])
+    towards = towards + lift * up_world
+    towards /= np.linalg.norm(towards)
+    right = np.cross(up_world, towards)
+    right /= np.linalg.norm(right)
+    return np.stack([right, np.cross(towards, right), towards])
+
+
+def draw_mesh(ax, X: np.ndarray, faces: list, face_colors: np.ndarray, view: np.ndarray, *,
+              normals: np.ndarray | None = None, edge_color="#333333", edge_width: float = 0.15,
+              lines: np.ndarray | None = None, line_faces: np.ndarray | None = None,
+              line_colors=None, line_width: float = 0.9, layers: int = 40) -> None:
+    """Draw a polygon mesh in an orthographic view, nearer faces over farther ones.
+
+    Parameters
+    ----------
+    ax : a matplotlib Axes (2-d).
+    X : (n, 3) float, vertices; faces : list of (k,) int arrays.
+    face_colors : (f, 4) RGBA; shaded by the angle to the viewer when `normals` is given.
+    view : (3, 3) rows right, up, towards the viewer (see `view_frame`).
+    lines : optional (s, 2, 3) segments on the surface, drawn over the face they lie on
+        (`line_faces` (s,) int) and hidden by nearer faces.
+    line_colors : one colour or (s, 4) RGBA.
+    layers : number of depth layers the drawing is split into for the hiding.
+    """
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    P = X @ view.T
+    sizes = np.array([len(f) for f in faces])
+    flat = np.concatenate(faces)
+    owner = np.repeat(np.arange(len(faces)), sizes)
+    depth = np.bincount(owner, P[flat, 2], minlength=len(faces)) / sizes
+    colors = np.array(face_colors, dtype=float)
+    if normals is not None:
+        shade = 0.55 + 0.45 * np.abs(normals @ view[2])
+        colors[:, :3] *= shade[:, None]
+    order = np.argsort(depth, kind="stable")
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    layer = rank * layers // max(len(order), 1)
+    polys = np.split(P[flat, :2], np.cumsum(sizes)[:-1])
+    if lines is not None and len(lines):
+        seg_layer = layer[line_faces]
+        if line_colors is None or isinstance(line_colors, (str, tuple)):
+            seg_colors = np.tile(rgba(line_colors), (len(lines), 1))
+        else:
+            seg_colors = np.asarray(line_colors, float)
+        seg2d = lines @ view[:2].T
+    for k in range(layers):
+        ids = order[layer[order] == k]
+        if ids.size:
+            ax.add_collection(PolyCollection([polys[i] for i in ids], facecolors=colors[ids],
+                                             edgecolors=edge_color, linewidths=edge_width,
+                                             zorder=2 * k))
+        if lines is not None and len(lines):
+            sel = seg_layer == k
+            if sel.any():
+                ax.add_collection(LineCollection(seg2d[sel], colors=seg_colors[sel],
+                                                 linewidths=line_width, zorder=2 * k + 1))
+    ax.set_xlim(P[:, 0].min(), P[:, 0].max())
+    ax.set_ylim(P[:, 1].min(), P[:, 1].max())
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+
+
+def rgba(color) -> tuple:
+    """RGBA tuple of any matplotlib colour specification (black for None)."""
+    from matplotlib.colors import to_rgba
+
+    return to_rgba("black" if color is None else color)
+
+
+def isoline_segments(X: np.ndarray, triangles: np.ndarray, values: np.ndarray,
+                     levels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Isolines of a piecewise linear function on a triangle mesh (marching triangles).
+
+    Parameters
+    ----------
+    X : (n, 3) float; triangles : (t, 3) int; values : (n,) float at the vertices;
+    levels : (l,) float.
+
+    Returns
+    -------
+    segments : (s, 2, 3) float; triangle : (s,) int, the triangle each lies in;
+    level : (s,) int, index into `levels`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    >>> seg, tri, lev = isoline_segments(X, np.array([[0, 1, 2]]), X[:, 0], np.array([0.5]))
+    >>> seg.round(3).tolist()
+    [[[0.5, 0.0, 0.0], [0.5, 0.5, 0.0]]]
+    """
+    values = np.asarray(values, float)
+    segments, owner, which = [], [], []
+    edges = np.array([[0, 1], [1, 2], [2, 0]])
+    for i, level in enumerate(np.asarray(levels, float)):
+        f = values[triangles] - level
+        f = np.where(f == 0, 1e-300, f)  # a vertex on the level counts as above it
+        a, b = f[:, edges[:, 0]], f[:, edges[:, 1]]
+        cross = (a * b) < 0                                   # (t, 3)
+        hit = np.flatnonzero(cross.sum(axis=1) == 2)
+        if hit.size == 0:
+            continue
+        # the interpolation parameter of edges without a crossing is never used
+        t = np.where(cross[hit], a[hit] / np.where(cross[hit], a[hit] - b[hit], 1.0), 0.0)
+        pa = X[triangles[hit][:, edges[:, 0]]]
+        pb = X[triangles[hit][:, edges[:, 1]]]
+        pts = pa + t[..., None] * (pb - pa)                    # (h, 3, 3)
+        pick = np.argsort(~cross[hit], axis=1, kind="stable")[:, :2]
+        segments.append(np.take_along_axis(pts, pick[..., None], axis=1))
+        owner.append(hit)
+        which.append(np.full(hit.size, i))
+    if not segments:
+        return np.zeros((0, 2, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(segments), np.concatenate(owner), np.concatenate(which)
+
+
+def agreeing_normal(normals: np.ndarray, areas: np.ndarray) -> np.ndarray | None:
+    """The area-weighted mean normal when the faces agree on a side (a roof, a facade
+    patch), else None (a closed ring or barrel)."""
+    mean = np.nansum(normals * areas[:, None], axis=0)
+    if np.linalg.norm(mean) <= 0.3 * areas.sum():
+        return None
+    return mean / np.linalg.norm(mean)
+
+
+def net_view_angles(design) -> tuple[float, float]:
+    """Elevation and azimuth (degrees, matplotlib's ``view_init``) of the net picture.
+
+    A roof (faces agreeing on a side within 45 degrees of vertical) is seen from 30
+    degrees above the horizon, 75 degrees off the diagonal of its plan, so that both its
+    rise and its net show (from above, as a cladding layout is usually drawn, a saddle
+    looks flat; from lower, the far half of the net is lost); a facade patch from its
+    side, 20 degrees up; a closed surface (a ring, a barrel) from 20 degrees up.
+    """
+    n = agreeing_normal(design.face_normals, design.face_areas)
+    if n is None:
+        return 20.0, -60.0
+    if abs(n[2]) >= math.cos(math.radians(45)):
+        span = np.ptp(design.vertices, axis=0)
+        return 30.0, float(np.degrees(np.arctan2(span[1], span[0]))) - 75.0
+    return 20.0, float(np.degrees(np.arctan2(n[1], n[0]))) + 25.0

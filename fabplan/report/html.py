@@ -1,0 +1,163 @@
+"""Self-contained HTML pages: page, sections, tables, figures, counts and values.
+
+Reports are single HTML files that open offline: pictures are PNG images embedded as
+``data:`` URIs, styles are inline, nothing is fetched. The helpers are generic so that
+every report-writing module (molds, strips, facade studies) builds its page the same way::
+
+    from fabplan.report import figures, html
+    page = html.html_page("Title", [
+        html.html_section("Summary", html.html_table(["quantity", "value"], rows)),
+        html.html_figure(figures.figure_to_data_uri(fig), "caption"),
+    ])
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from typing import Iterable, Sequence
+
+import numpy as np
+
+__all__ = [
+    "html_page",
+    "html_section",
+    "html_paragraph",
+    "html_table",
+    "html_figure",
+    "html_details",
+    "format_value",
+    "counted",
+    "html_links",
+]
+
+_STYLE = """
+body { font-family: system-ui, -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif;
+       margin: 2em auto; max-width: 1200px; padding: 0 1em; color: #222; line-height: 1.45; }
+h1 { font-size: 1.7em; margin-bottom: 0.2em; }
+h2 { font-size: 1.3em; margin-top: 1.8em; border-bottom: 1px solid #ccc; padding-bottom: 0.2em; }
+p.subtitle { color: #555; margin-top: 0; }
+table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.92em; }
+caption { text-align: left; font-weight: 600; padding: 0.3em 0; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; }
+th { background: #f0f0f0; position: sticky; top: 0; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+tr.bad td { background: #fde2e2; }
+figure { margin: 1.2em 0; }
+figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { color: #444; font-size: 0.92em; margin-top: 0.3em; }
+details summary { cursor: pointer; font-weight: 600; margin: 0.6em 0; }
+.note { background: #f6f8fa; border-left: 4px solid #7a9cc6; padding: 0.6em 1em; }
+.fail { background: #fde2e2; border-left: 4px solid #c0392b; padding: 0.6em 1em; }
+"""
+
+
+def format_value(value, digits: int = 4) -> str:
+    """Text of a table cell: numbers with `digits` significant digits, None as an en dash.
+
+    Examples
+    --------
+    >>> format_value(3.14159), format_value(12), format_value(None), format_value(True)
+    ('3.142', '12', '–', 'yes')
+    """
+    if value is None:
+        return "–"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        if not math.isfinite(value):
+            return "–"
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """A count with its noun in the right number.
+
+    Examples
+    --------
+    >>> counted(1, "mold"), counted(0, "mold"), counted(3, "sheet"), counted(2, "box", "boxes")
+    ('1 mold', '0 molds', '3 sheets', '2 boxes')
+    """
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str | None = None,
+               digits: int = 4, bad_rows: Iterable[int] = ()) -> str:
+    """An HTML table; numbers are right-aligned and formatted by `format_value`.
+
+    Parameters
+    ----------
+    columns : header texts.
+    rows : rows of cell values (numbers, strings, None).
+    caption : optional caption above the table.
+    bad_rows : indices of rows to highlight (failures).
+
+    Examples
+    --------
+    >>> table = html_table(["a", "b"], [[1, None]])
+    >>> table[table.index("<tbody>"):]
+    '<tbody><tr><td class="num">1</td><td>–</td></tr></tbody></table>'
+    """
+    bad = set(bad_rows)
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
+    body = []
+    for i, row in enumerate(rows):
+        cells = []
+        for value in row:
+            numeric = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+                value, (bool, np.bool_))
+            cls = ' class="num"' if numeric else ""
+            cells.append(f"<td{cls}>{html.escape(format_value(value, digits))}</td>")
+        tr = '<tr class="bad">' if i in bad else "<tr>"
+        body.append(tr + "".join(cells) + "</tr>")
+    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+
+
+def html_paragraph(text: str, *, cls: str | None = None) -> str:
+    """A paragraph of escaped text (``cls``: ``"note"`` or ``"fail"`` for a framed box)."""
+    attr = f' class="{cls}"' if cls else ""
+    return f"<p{attr}>{html.escape(text)}</p>"
+
+
+def html_links(label: str, links: Sequence[tuple[str, str]]) -> str:
+    """A paragraph of links: `label` then ``(text, href)`` pairs (hrefs relative to the
+    page, so that a report folder can be moved or shared as a whole).
+
+    Examples
+    --------
+    >>> html_links("Files", [("net.obj", "candidates/a b/net.obj")])
+    '<p>Files: <a href="candidates/a%20b/net.obj">net.obj</a></p>'
+    """
+    from urllib.parse import quote
+
+    items = ", ".join(f'<a href="{html.escape(quote(href))}">{html.escape(text)}</a>'
+                      for text, href in links)
+    return f"<p>{html.escape(label)}: {items}</p>"
+
+
+def html_figure(uri: str, caption: str, *, alt: str | None = None) -> str:
+    """An embedded picture with its caption."""
+    return (f'<figure><img src="{uri}" alt="{html.escape(alt or caption)}">'
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+
+
+def html_details(summary: str, *parts: str) -> str:
+    """A collapsible block (long tables)."""
+    return f"<details><summary>{html.escape(summary)}</summary>{''.join(parts)}</details>"
+
+
+def html_section(title: str, *parts: str) -> str:
+    """A titled section of already built HTML parts."""
+    return f"<section><h2>{html.escape(title)}</h2>{''.join(parts)}</section>"
+
+
+def html_page(title: str, parts: Iterable[str], *, subtitle: str | None = None) -> str:
+    """A complete, self-contained HTML document."""
+    sub = f'<p class="subtitle">{html.escape(subtitle)}</p>' if subtitle else ""
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>"
+            f"<body><h1>{html.escape(title)}</h1>{sub}{''.join(parts)}</body></html>\n")

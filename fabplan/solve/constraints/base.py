@@ -1,0 +1,100 @@
+"""What every constraint family provides, and the state they read."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Constraint", "NetState", "VariableBlocks"]
+
+
+@dataclass
+class VariableBlocks:
+    """Named variable blocks inside one flat vector.
+
+    Attributes
+    ----------
+    blocks : dict name -> (offset, shape)
+    size : total number of variables.
+    """
+
+    blocks: dict = field(default_factory=dict)
+    size: int = 0
+
+    def add(self, name: str, shape: tuple) -> None:
+        if name in self.blocks:
+            if self.blocks[name][1] != tuple(shape):
+                raise ValueError(f"variable block {name!r} declared with two shapes")
+            return
+        self.blocks[name] = (self.size, tuple(shape))
+        self.size += int(np.prod(shape))
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.blocks
+
+    def index(self, name: str) -> np.ndarray:
+        """Global variable indices of a block, shaped like the block."""
+        offset, shape = self.blocks[name]
+        return offset + np.arange(int(np.prod(shape))).reshape(shape)
+
+    def view(self, x: np.ndarray, name: str) -> np.ndarray:
+        """A writable view of a block inside the flat vector ``x``."""
+        offset, shape = self.blocks[name]
+        return x[offset:offset + int(np.prod(shape))].reshape(shape)
+
+
+@dataclass
+class NetState:
+    """Everything a constraint family reads while the solver runs (normalized units).
+
+    Coordinates are translated to the centroid and divided by the mean edge length of the
+    input, so that every residual is measured in mean edges.
+    """
+
+    mesh: object                   # fabplan.mesh.QuadMesh (combinatorics)
+    stars: np.ndarray              # (s, 5) int, canonical labelling
+    blocks: VariableBlocks
+    x: np.ndarray                  # (N,) float, all variables
+    length_scale: float            # model units per normalized unit
+    origin: np.ndarray             # (3,) model coordinates of the normalized origin
+    data: dict = field(default_factory=dict)  # per-iteration data shared between families
+
+    @property
+    def X(self) -> np.ndarray:
+        """(n, 3) vertex positions (normalized), a view into ``x``."""
+        return self.blocks.view(self.x, "vertices")
+
+
+class Constraint:
+    """A family of residuals ``r(x) = 0`` with a fixed sparsity pattern.
+
+    Subclasses set `name`, declare their variable blocks in `declare`, fill initial values
+    of their own blocks in `initialize`, give the column pattern ``(m, k)`` once in
+    `columns`, and return residuals ``(m,)`` and Jacobian values ``(m, k)`` in `evaluate`.
+    `prepare` runs once per iteration before evaluation (rebasing, footpoints).
+    Soft families (fairness, closeness) have ``hard = False``: they guide the solution and
+    are not part of the convergence test.
+    """
+
+    name = "constraint"
+    hard = True
+
+    def declare(self, state: NetState) -> dict:
+        """Variable blocks this family needs: name -> shape."""
+        return {}
+
+    def initialize(self, state: NetState) -> None:
+        """Set initial values of the blocks this family owns."""
+
+    def prepare(self, state: NetState) -> None:
+        """Per-iteration update of constant data (runs before `evaluate`)."""
+
+    def columns(self, state: NetState) -> np.ndarray:
+        raise NotImplementedError
+
+    def evaluate(self, state: NetState) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r})"

@@ -1,0 +1,585 @@
+"""The files of a facade study: ``report.html``, ``study.json``, ``candidates.csv`` and,
+per candidate, the net (OBJ + measured JSON), its molds (CSV, JSON) and strips (DXF).
+
+The output folder is built beside its destination and moved into place only when every
+file is written: a failed run leaves no partial folder. The schema of ``study.json`` is
+``docs/study-schema.md``; every number of the report is in it.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import io
+import math
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io import output
+from ..io.records import json_text
+from ..layout.picture import write_layout_picture
+from ..report import figures, html
+from ..report.figures import agreeing_normal
+from ..report.html import counted
+from .run import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
+
+__all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA"]
+
+STUDY_SCHEMA = "fabplan-study/1"
+
+
+# ---------------------------------------------------------------------------- records
+def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None) -> dict:
+    return {
+        "name": c.name,
+        "net": c.candidate.net,
+        "description": c.candidate.describe(),
+        "baseline": c.candidate.baseline,
+        "recommended": c.name == recommended,
+        "requested": {"angle_deg": c.candidate.angle, "radius": c.candidate.radius},
+        "feasible": c.feasible,
+        "reasons": c.reasons,
+        "same_net_as": c.same_net_as,
+        "notes": c.notes,
+        "error": c.error,
+        "checks": c.checks,
+        "metrics": c.metrics,
+        "cost": c.cost,
+        "cost_terms": c.cost_terms,
+        "rank": c.rank,
+        "outputs": outputs,
+    }
+
+
+def study_record(result: StudyResult, outputs: dict | None = None, *,
+                 seconds_total: float | None = None) -> dict:
+    """The ``study.json`` record (schema ``docs/study-schema.md``).
+
+    `seconds_total` is the wall time including writing the files (`write_study` measures
+    it); without it, the run time.
+    """
+    outputs = outputs or {}
+    design = result.design
+    triangles = int(len(design.triangles))
+    study = result.study.record()
+    if study["design"]["triangles"] is None:          # a design file: its own triangles
+        study["design"]["triangles"] = triangles
+    return {
+        "schema": STUDY_SCHEMA,
+        "study": study,
+        "design": {"label": result.study.design.label, "source": result.study.design.source,
+                   "triangles": triangles, "area": float(design.area),
+                   "size": result.design_size, "units": result.study.design.units},
+        "recommended": result.recommended,
+        "recommendation": result.recommendation,
+        "sheets_charged": result.sheets_charged,
+        "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended)
+                       for c in result.candidates],
+        "seconds_run": result.seconds_run,
+        "seconds_total": result.seconds_run if seconds_total is None else seconds_total,
+        # fabplan-study/1 readers knew the run time as `seconds`: the same as seconds_total
+        "seconds": result.seconds_run if seconds_total is None else seconds_total,
+    }
+
+
+_CSV_COLUMNS = ["rank", "name", "net", "feasible", "cost", "molds", "panels", "planar",
+                "single_curved", "double_curved", "deviation_max_mm", "deviation_p95_mm",
+                "planarity_max_mm", "kink_max_deg", "angle_min_deg", "angle_max_deg",
+                "radius_min", "radius_max", "sheets", "strips_congruent", "seconds", "reasons"]
+
+
+def _row(c: CandidateResult) -> dict:
+    m = c.metrics
+    if c.failed:
+        return {"name": c.name, "net": c.candidate.net, "feasible": "no",
+                "reasons": "; ".join(c.reasons), "seconds": _num(m.get("seconds", {}).get("total"))}
+    types = m["molds"]["panel_types"]
+    angle, radius, strips = m["intersection_angle_deg"], m["meusnier_radius"], m["strips"]
+    return {
+        "rank": c.rank, "name": c.name, "net": c.candidate.net,
+        "feasible": "yes" if c.feasible else "no", "cost": _num(c.cost),
+        "molds": m["molds"]["count"], "panels": m["panels"],
+        "planar": types.get("planar", 0), "single_curved": types.get("single_curved", 0),
+        "double_curved": types.get("double_curved", 0),
+        "deviation_max_mm": _num(m["deviation_mm"]["max"]),
+        "deviation_p95_mm": _num(m["deviation_mm"]["p95"]),
+        "planarity_max_mm": _num(m["planarity_mm"]["max"]),
+        "kink_max_deg": _num(m["kink_deg"]["max"]),
+        "angle_min_deg": _num(angle and angle["min"]), "angle_max_deg": _num(angle and angle["max"]),
+        "radius_min": _num(radius and radius["min"]), "radius_max": _num(radius and radius["max"]),
+        "sheets": strips["sheets"] if strips else "",
+        "strips_congruent": ("yes" if strips["congruent"] else "no") if strips else "",
+        "seconds": _num(m["seconds"]["total"]), "reasons": "; ".join(c.reasons),
+    }
+
+
+def _num(value) -> str:
+    return "" if value is None else f"{value:.6g}"
+
+
+def candidates_csv(result: StudyResult) -> str:
+    """``candidates.csv``: one row per candidate in rank order."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=_CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for c in result.ranked():
+        writer.writerow(_row(c))
+    return buffer.getvalue()
+
+
+# ---------------------------------------------------------------------------- pictures
+def _view(mesh):
+    from ..fabricate.mold_report import facade_view
+
+    return facade_view(mesh)
+
+
+def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Face normals and a viewing frame for a heat map that must show `point`.
+
+    An open surface whose faces agree on a side is seen from that side (as the mold
+    pictures); a closed one (a ring, a barrel) from the side of `point`, so that the
+    worst point is not hidden behind the near wall.
+    """
+    normals, view = _view(mesh)
+    if agreeing_normal(normals, mesh.face_areas) is None:
+        X = mesh.vertices
+        out = point - X.mean(axis=0)
+        out[2] = 0.0
+        if np.linalg.norm(out) > 1e-9 * np.ptp(X, axis=0).max():
+            view = figures.view_frame(X, out[None, :], np.ones(1))
+    return normals, view
+
+
+def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: float) -> str:
+    """Data URI: the net coloured by its distance from the design (mm) at every vertex.
+
+    The distance is measured at the vertices and interpolated linearly across the
+    triangles of each panel (Gouraud shading), so the largest value shows at its vertex;
+    that vertex is circled and labelled. Faces are drawn far to near in depth layers with
+    their edges, so nearer panels hide farther ones.
+    """
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.collections import PolyCollection
+    from matplotlib.colors import Normalize
+
+    mesh = c.net.mesh
+    X = mesh.vertices
+    d = c.deviation_mm if c.deviation_mm is not None else vertex_deviation_mm(mesh, design, mm_per_unit)
+    worst = int(np.argmax(d))
+    _, view = deviation_view(mesh, X[worst])
+    P = X @ view.T
+    sizes = mesh.face_sizes
+    owner = np.repeat(np.arange(len(sizes)), sizes)
+    depth = np.bincount(owner, P[mesh.face_indices, 2], minlength=len(sizes)) / sizes
+    layers = 40
+    layer = np.empty(len(sizes), np.int64)
+    layer[np.argsort(depth, kind="stable")] = np.arange(len(sizes)) * layers // len(sizes)
+    tri = mesh.triangles()
+    tri_layer = np.repeat(layer, sizes - 2)
+    polys = np.split(P[mesh.face_indices, :2], mesh.face_indptr[1:-1])
+    top = max(limit_mm, float(d.max()), 1e-9)
+    norm = Normalize(0.0, top)
+    cmap = colormaps["viridis"]
+    fig = figures.new_figure((8, 6))
+    ax = fig.subplots()
+    for k in range(layers):
+        ids = np.flatnonzero(tri_layer == k)
+        if ids.size == 0:
+            continue
+        ax.tripcolor(P[:, 0], P[:, 1], tri[ids], d, shading="gouraud", cmap=cmap, norm=norm,
+                     zorder=2 * k)
+        ax.add_collection(PolyCollection([polys[f] for f in np.flatnonzero(layer == k)],
+                                         facecolors="none", edgecolors=(0.1, 0.1, 0.1, 0.5),
+                                         linewidths=0.2, zorder=2 * k + 1))
+    ax.plot(P[worst, 0], P[worst, 1], "o", ms=14, mfc="none", mec="#c0392b", mew=2.2,
+            zorder=2 * layers + 2)
+    # the label points inwards, so that it stays inside the picture
+    right = P[worst, 0] > 0.5 * (P[:, 0].min() + P[:, 0].max())
+    above = P[worst, 1] > 0.5 * (P[:, 1].min() + P[:, 1].max())
+    ax.annotate(f"max {d[worst]:.1f} mm", (P[worst, 0], P[worst, 1]),
+                xytext=(-14 if right else 14, -14 if above else 14), textcoords="offset points",
+                ha="right" if right else "left", va="top" if above else "bottom",
+                color="#c0392b", fontsize=10, fontweight="bold", zorder=2 * layers + 3,
+                bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "#c0392b", "alpha": 0.85})
+    pad = 0.03 * np.ptp(P[:, :2], axis=0).max()      # the circle must not be cut at an edge
+    ax.set_xlim(P[:, 0].min() - pad, P[:, 0].max() + pad)
+    ax.set_ylim(P[:, 1].min() - pad, P[:, 1].max() + pad)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8)
+    bar.set_label("distance from the design at the vertices [mm]")
+    bar.ax.axhline(limit_mm, color="#c0392b", lw=2)
+    ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm (circled), "
+                 f"limit {limit_mm:g} mm (red line on the scale)")
+    return figures.figure_to_data_uri(fig)
+
+
+def comparison_figure(result: StudyResult) -> str:
+    """Data URI: molds and deviation of every measured candidate, limits marked."""
+    done = [c for c in result.ranked() if not c.failed]
+    limits = result.study.limits
+    names = [c.name for c in done]
+    colors = ["#2e8b57" if c.feasible else "#c0392b" for c in done]
+    fig = figures.new_figure((12, 0.45 * len(done) + 1.8))
+    left, right = fig.subplots(1, 2)
+    y = np.arange(len(done))
+    molds = [c.metrics["molds"]["count"] for c in done]
+    left.barh(y, molds, color=colors)
+    left.set_yticks(y, names)
+    left.invert_yaxis()
+    left.set_xlabel("molds (for the curved panels; flat panels need none)")
+    if limits.max_molds is not None:
+        left.axvline(limits.max_molds, color="black", ls="--", lw=1, label="limit")
+        left.legend(loc="lower right")
+    for yi, n in zip(y, molds, strict=True):
+        left.text(n, yi, f" {n}", va="center", fontsize=8)
+    dev = [c.metrics["deviation_mm"]["max"] for c in done]
+    right.barh(y, dev, color=colors)
+    right.set_yticks(y, [""] * len(done))
+    right.invert_yaxis()
+    right.axvline(limits.max_deviation_mm, color="black", ls="--", lw=1, label="limit")
+    right.set_xlabel("largest deviation from the design [mm]")
+    right.legend(loc="lower right")
+    for yi, v in zip(y, dev, strict=True):
+        right.text(v, yi, f" {v:.1f}", va="center", fontsize=8)
+    fig.suptitle("Candidates in rank order (green: feasible, red: not)")
+    fig.tight_layout()
+    return figures.figure_to_data_uri(fig)
+
+
+def _png_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+# ---------------------------------------------------------------------------- HTML
+#: Radii beyond this multiple of the design's size are shown as infinite: the stars (or
+#: strips) are planar (straight) to within what a computation can tell.
+INFINITE_RADIUS_FACTOR = 1e4
+
+
+def _fmt_range(r: dict | None, digits: int = 4) -> str:
+    if not r:
+        return ""
+    return f"{html.format_value(r['min'], digits)} .. {html.format_value(r['max'], digits)}"
+
+
+def radius_text(r: dict | float | None, unit: str, beyond: float, infinite: str) -> str:
+    """A radius or a ``{min, max}`` range of radii with its unit; values above `beyond`
+    (or infinite, or None) are `infinite`.
+
+    Examples
+    --------
+    >>> radius_text({"min": 3.558e9, "max": 1.033e16}, "m", 2.8e5, "infinite (planar stars)")
+    'infinite (planar stars)'
+    >>> radius_text({"min": 12.25, "max": 3e9}, "m", 2.8e5, "infinite")
+    '12.25 m .. infinite'
+    >>> radius_text({"min": 12.25, "max": 73548.6}, "m", 2.8e5, "infinite")
+    '12.25 .. 73549 m'
+    >>> radius_text({"min": 97.0512, "max": 97.0498}, "m", 2.8e5, "infinite")
+    '97.05 m'
+    >>> radius_text(2e11, "m", 1e5, "infinite"), radius_text(None, "mm", 1e8, "infinite (straight)")
+    ('infinite', 'infinite (straight)')
+    """
+    def big(v):
+        return v is None or not math.isfinite(v) or abs(v) > beyond
+
+    def text(v):          # 4 significant digits, but no exponent for a large radius
+        return f"{v:.0f}" if v >= 1e4 else html.format_value(v)
+
+    if r is None or not isinstance(r, dict):
+        return infinite if big(r) else f"{text(abs(r))} {unit}"
+    lo, hi = sorted((r["min"], r["max"]), key=lambda v: (big(v), abs(v)))
+    if big(lo):
+        return infinite
+    if big(hi):
+        return f"{text(abs(lo))} {unit} .. {infinite}"
+    if text(abs(lo)) == text(abs(hi)):
+        return f"{text(abs(lo))} {unit}"
+    return f"{text(abs(lo))} .. {text(abs(hi))} {unit}"
+
+
+def _meusnier_text(result: StudyResult, r) -> str:
+    return radius_text(r, result.study.design.units, INFINITE_RADIUS_FACTOR * result.design_size,
+                       "infinite (planar stars)")
+
+
+def _strip_radius_text(result: StudyResult, r) -> str:
+    beyond = INFINITE_RADIUS_FACTOR * result.design_size * result.study.design.mm_per_unit
+    return radius_text(r, "mm", beyond, "infinite (straight)")
+
+
+def _comparison_table(result: StudyResult) -> str:
+    rows, bad = [], []
+    for c in result.ranked():
+        m = c.metrics
+        if c.failed:
+            rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "",
+                         "", "", "", c.reasons[0]])
+            bad.append(len(rows) - 1)
+            continue
+        s = m["strips"]
+        rows.append([
+            c.rank, c.name, c.candidate.describe(), "yes" if c.feasible else "no",
+            m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
+            f"{m['deviation_mm']['max']:.1f}", f"{m['planarity_mm']['max']:.2f}",
+            f"{m['kink_deg']['max']:.2f}", _fmt_range(m["intersection_angle_deg"]),
+            _meusnier_text(result, m["meusnier_radius"]) if m["meusnier_radius"] else "",
+            "" if s is None else f"{s['sheets']}{' (congruent)' if s['congruent'] else ''}",
+            f"{c.cost:.0f}", f"the same net as {c.same_net_as}" if c.same_net_as else ""])
+        if not c.feasible:
+            bad.append(len(rows) - 1)
+    return html.html_table(
+        ["rank", "candidate", "net", "feasible", "molds", "panels", "max deviation [mm]",
+         "planarity [mm]", "max kink [deg]", "angle [deg]", "Meusnier radius",
+         "strip sheets", "cost", "note"], rows, caption="All candidates, best first", bad_rows=bad)
+
+
+def _limits_table(result: StudyResult) -> str:
+    from dataclasses import asdict
+
+    limits = asdict(result.study.limits)
+    if not limits["planar_panels"]:
+        del limits["planarity_tolerance_mm"]
+    if not limits["congruent_strips"]:
+        del limits["congruence_tolerance_mm"]
+    rows = [[k, html.format_value(v)] for k, v in limits.items()
+            if v is not None and v is not False]
+    return html.html_table(["limit", "value"], rows, caption="Fabrication limits")
+
+
+def _cost_table(result: StudyResult) -> str:
+    from dataclasses import asdict
+
+    rows = [[k.replace("_", " "), html.format_value(v)]
+            for k, v in asdict(result.study.cost).items()]
+    return html.html_table(["per", "cost units"], rows, caption="Cost weights")
+
+
+def cost_line(result: StudyResult) -> str:
+    """How the cost is made up, in words (as charged in this study)."""
+    measured = [c for c in result.candidates if not c.failed]
+    with_strips = [c for c in measured if c.metrics.get("strips")]
+    text = ("Cost = the weights times the molds (of the curved panels: flat panels need "
+            "none), the panels by type, ")
+    if result.sheets_charged:
+        text += "the strip sheets "
+    text += "and the largest deviation in mm; feasible candidates rank first, by cost."
+    if with_strips and not result.sheets_charged:
+        text += (f" Strip sheets are reported but not charged: only {len(with_strips)} of "
+                 f"{len(measured)} candidates {'gets' if len(with_strips) == 1 else 'get'} "
+                 "strips, and charging them would make those "
+                 "look dearer than candidates that were not asked for strips.")
+    return text
+
+
+def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
+                       result: StudyResult) -> str:
+    head = f"{c.rank}. {c.name}" if c.rank else c.name
+    if c.failed:
+        return html.html_section(head, html.html_paragraph(
+            f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
+    m = c.metrics
+    verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
+    if c.notes:
+        verdict += " Note: " + "; ".join(c.notes) + "."
+    checks = html.html_table(
+        ["limit", "measured", "bound", "met", "what was measured"],
+        [[ck["limit"], html.format_value(ck["measured"]), html.format_value(ck["bound"]),
+          "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks],
+        caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
+    types = m["molds"]["panel_types"]
+    parameters = []
+    for k, v in m["parameters"].items():
+        if not isinstance(v, float):
+            continue
+        parameters.append(f"radius {_meusnier_text(result, v)}" if k == "radius" else
+                          f"angle {v:.6g} deg" if k == "angle_deg" else f"{k} {v:.6g}")
+    molds = m["molds"]
+    facts = [
+        ["net", c.candidate.describe()],
+        ["solve", f"{m['status']} after {m['iterations']} iterations"],
+        ["solved parameters", ", ".join(parameters) or "-"],
+        ["panels", f"{m['panels']} ({m['quads']} quads, {m['other_faces']} other; "
+                   f"{m['irregular_vertices']} irregular vertices)"],
+        ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in types.items())],
+        ["edge length", _fmt_range(m["edge_length"])],
+        ["panel area", _fmt_range(m["panel_area"])],
+        ["Meusnier radius", _meusnier_text(result, m["meusnier_radius"])
+         if m["meusnier_radius"] else "-"],
+        ["deviation from the design [mm]", f"max {m['deviation_mm']['max']:.2f}, mean "
+                                           f"{m['deviation_mm']['mean']:.2f}, 95 % "
+                                           f"{m['deviation_mm']['p95']:.2f}"],
+        ["molds", (molds_text(molds) if molds["count"] == 0 else
+                   f"{molds_text(molds)} for the curved panels "
+                   f"({molds['molds_per_sqrt_panels']:.2f} x sqrt of the panel count)")
+         + f"; largest gap of a panel to its mold (flat panels: to a plane) "
+           f"{molds['max_deviation_mm']:.2f} mm"],
+        ["sphere residual (max, of an edge)", html.format_value(m["sphere_residual_relative_max"])],
+        ["seconds", ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())],
+    ]
+    if m["strips"]:
+        s = m["strips"]
+        shape = "all straight (so all congruent)" if s["straight"] else (
+            f"arc radius {_strip_radius_text(result, s['radius_mm'])}; the parts differ from "
+            f"one common arc by up to {s['congruence_deviation_mm']:.3g} mm"
+            + (" (congruent)" if s["congruent"] else " (not congruent)"))
+        facts.append(["strips", f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} "
+                      f"on {counted(s['sheets'], 'sheet')} ({100 * s['material_use']:.0f} % "
+                      f"material use); {shape}"])
+    parts = [html.html_paragraph(verdict, cls="note" if c.feasible else "fail"),
+             html.html_table(["quantity", "value"], facts, caption="Measured"), checks]
+    captions = {"net": "The net on the design surface (grey), axes to scale",
+                "deviation": "Deviation heat map: the distance of the net from the design, "
+                             "measured at every vertex and interpolated across the panels; "
+                             "the largest is circled and labelled",
+                "molds": "Panels coloured by mold" + (" (all flat: no molds)"
+                                                      if molds["count"] == 0 else ""),
+                "sheet": "First strip sheet (as cut: red outline, magenta slits, blue labels)"}
+    for key, caption in captions.items():
+        if key in pictures:
+            parts.append(html.html_figure(pictures[key], caption))
+    links = []
+    for key, value in outputs.items():
+        for i, href in enumerate(value if isinstance(value, list) else [value]):
+            links.append((Path(href).name if i else f"{key.replace('_', ' ')}: {Path(href).name}",
+                          href))
+    if links:
+        parts.append(html.html_links("Files", links))
+    return html.html_section(head, *parts)
+
+
+def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
+               seconds_total: float | None = None) -> str:
+    """The self-contained ``report.html`` (links to the candidates' files are relative)."""
+    study = result.study
+    seconds = result.seconds_run if seconds_total is None else seconds_total
+    sub = (f"Design {study.design.label}, panel size {study.panel_size:g} {study.design.units}, "
+           f"{len(result.candidates)} candidates, run in {seconds:.0f} s"
+           + (" including writing the files" if seconds_total is not None else ""))
+    parts = []
+    if study.description:
+        parts.append(html.html_paragraph(study.description))
+    parts.append(html.html_section(
+        "Recommendation", html.html_paragraph(result.recommendation,
+                                                cls="note" if result.recommended else "fail")))
+    overview = [_comparison_table(result)]
+    if "comparison" in pictures:
+        overview.append(html.html_figure(pictures["comparison"],
+                                           "Molds and deviation of each candidate"))
+    overview += [_limits_table(result), _cost_table(result),
+                 html.html_paragraph(cost_line(result))]
+    parts.append(html.html_section("Comparison", *overview))
+    for c in result.ranked():
+        parts.append(_candidate_section(c, pictures.get(c.name, {}), outputs.get(c.name, {}),
+                                        result))
+    return html.html_page(f"Facade study: {study.name}", parts, subtitle=sub)
+
+
+# ---------------------------------------------------------------------------- writing
+def holds_study(folder: Path) -> bool:
+    """True when `folder` holds an earlier study (a ``study.json``): a study may replace it."""
+    return (Path(folder) / "study.json").is_file()
+
+
+def check_output_folder(folder: str | os.PathLike) -> None:
+    """Refuse a folder that cannot hold a study, without creating anything.
+
+    A study replaces its whole output folder. A folder that does not exist yet, an empty
+    one, or one that holds an earlier study (`holds_study`) is therefore accepted and
+    replaced as a whole, so that a study can be re-run into its folder; a file, an
+    unwritable place, or a folder of other files is refused.
+    """
+    output.check_output_folder(folder, accept=holds_study)
+
+
+def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
+                     twin: Path | None = None) -> tuple:
+    """Write one candidate's files into `folder`; `twin` is the folder of the earlier
+    candidate whose net (and strip plan) this one shares, if any: its checked strip files
+    are copied rather than made and read back a second time."""
+    from ..fabricate.dxf import preview_png, sheet_document
+
+    study = result.study
+    if not folder.resolve().is_relative_to(folder.parent.resolve()) or folder.parent.name != "candidates":
+        raise InputError(f"candidate {c.name!r}: the name must not leave the study folder")
+    folder.mkdir(parents=True)
+    net_obj, net_json = c.net.write(folder / "net.obj")
+    output.write_texts({folder / "molds.csv": c.molds.panels_csv(),
+                 folder / "molds.json": json_text(c.molds.record())})
+    outputs = {"net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
+               "molds_json": "molds.json", "picture": "net.png"}
+    title = f"{c.name}: {c.candidate.describe()}"
+    write_layout_picture(folder / "net.png", result.design, c.net.mesh, title=title,
+                singular_points=c.layout.singular_points if c.layout else None)
+    pictures = {"net": _png_uri(folder / "net.png"),
+                "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
+                                              study.design.mm_per_unit)}
+    from ..fabricate.mold_report import mold_figure
+
+    molds = c.metrics["molds"]
+    pictures["molds"] = mold_figure(c.molds, title=f"{c.name}: {counted(c.molds.panel_count, 'panel')}"
+                                    + (", all flat: no molds" if molds["count"] == 0 else
+                                       f", {counted(molds['count'], 'mold')} for the curved "
+                                       "ones (one colour per mold)"))
+    if c.strips is not None:
+        if twin is not None and (twin / "strips").is_dir():
+            shutil.copytree(twin / "strips", folder / "strips")
+            files = sorted((folder / "strips").iterdir())
+        else:
+            files = c.strips.write(folder / "strips", previews=False)
+        layout, settings = c.strips.nesting, c.strips.strips.settings
+        sheet = layout.sheets[0]
+        preview = folder / "strips" / "sheet-preview.png"
+        preview_png(sheet_document(layout, [sheet], settings), preview, settings.sheet_mm,
+                    title=f"{c.name}: sheet 1 of {len(layout.sheets)}")
+        pictures["sheet"] = _png_uri(preview)
+        outputs["strips_dxf"] = sorted(f"strips/{f.name}" for f in files if f.suffix == ".dxf")
+        outputs["strips_schedule"] = "strips/strips.csv"
+        outputs["strips_preview"] = "strips/sheet-preview.png"
+    say(f"    wrote {c.name}")
+    return {k: (f"candidates/{c.name}/{v}" if isinstance(v, str) else
+                [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
+
+
+def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
+    """Write every file of a study into `out_dir`, replacing the folder as a whole.
+
+    `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
+    The time recorded as ``seconds_total`` (and shown in the report) is the run time
+    plus writing every file up to the last three (``study.json``, ``candidates.csv``,
+    ``report.html``), which must hold it.
+
+    Returns
+    -------
+    list of Path: ``report.html``, ``study.json``, ``candidates.csv`` (the candidate
+    folders are listed in ``study.json``).
+    """
+    say = progress or (lambda message: None)
+    clock = time.perf_counter()
+    out_dir = Path(out_dir)
+    with output.output_folder(out_dir, replace=True, accept=holds_study) as tmp:
+        outputs, pictures = {}, {}
+        by_name = {c.name: c for c in result.candidates}
+        for c in result.candidates:
+            if not c.failed:
+                twin = by_name.get(c.same_net_as)
+                shared = twin is not None and twin.strips is not None and twin.strips is c.strips
+                outputs[c.name], pictures[c.name] = _candidate_files(
+                    c, tmp / "candidates" / c.name, result, say,
+                    twin=tmp / "candidates" / twin.name if shared else None)
+        if any(not c.failed for c in result.candidates):
+            pictures["comparison"] = comparison_figure(result)
+        total = result.seconds_run + time.perf_counter() - clock
+        record = study_record(result, outputs, seconds_total=total)
+        output.write_texts({tmp / "study.json": json_text(record),
+                            tmp / "candidates.csv": candidates_csv(result),
+                            tmp / "report.html": study_html(result, pictures, outputs,
+                                                            seconds_total=total)})
+    return [out_dir / "report.html", out_dir / "study.json", out_dir / "candidates.csv"]

@@ -1,0 +1,782 @@
+"""Facade feasibility studies: run the candidate rationalizations of a design, measure
+each against the fabrication limits, rank them by cost and recommend one.
+
+For every candidate the pipeline is the one a user would run by hand::
+
+    layout on the design  ->  net type solved  ->  measured  ->  molds  ->  strips
+    (fabplan.layout)         (glide / optimize)   (this module)  (molds)   (strips)
+
+Net types that exist on every surface (general, isogonal, orthogonal S-nets) are solved
+exactly on the design (gliding); the others change the surface, so they start from the
+gliding S-net and stay close to the design by a soft pull: how far they move is then a
+measured deviation, judged against the limit. The baseline, a general S-net on the design,
+is always run first, so that savings are measured against something.
+
+Every verdict is computed from the metrics by `verdict`, a pure function of the measured
+numbers and the limits: a change of a limit changes the verdict without a new run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+
+from ..errors import FabplanError
+from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
+from ..net.geometry import face_planarity, kink_angles
+from ..report.html import counted
+from .spec import Candidate, CostWeights, Limits, Study
+
+__all__ = [
+    "CandidateResult",
+    "StudyResult",
+    "run_study",
+    "judge_study",
+    "measure_candidate",
+    "vertex_deviation_mm",
+    "mold_metrics",
+    "molds_text",
+    "same_net",
+    "earlier_same_net",
+    "start_angle",
+    "verdict",
+    "candidate_cost",
+    "rank_candidates",
+    "recommend",
+    "is_lamella_study",
+    "SAME_NET_TOLERANCE",
+]
+
+
+@dataclass
+class CandidateResult:
+    """What one candidate produced and how it was judged.
+
+    Attributes
+    ----------
+    candidate : the `Candidate`.
+    error : why the candidate failed to produce a net (None when it did).
+    metrics : measured numbers (see ``docs/study-schema.md``).
+    checks : one dict per limit: ``limit, bound, measured, ok, text``.
+    feasible : every check passed.
+    reasons : the verdict in plain words (the failed checks, or what was met).
+    cost, cost_terms : the ranking cost and its parts (None for a failed candidate).
+    rank : 1 for the best candidate.
+    same_net_as : name of an earlier candidate that ended at the same net (see
+        `same_net`), or None.
+    notes : remarks beside the verdict (that it is the same net as another candidate).
+    net, molds, strips, layout : the objects behind the metrics (for the files).
+    deviation_mm : (n,) float, distance of every net vertex from the design (mm), which
+        the deviation metrics and the heat map are made of.
+    """
+
+    candidate: Candidate
+    error: str | None = None
+    metrics: dict = field(default_factory=dict)
+    checks: list = field(default_factory=list)
+    feasible: bool = False
+    reasons: list = field(default_factory=list)
+    cost: float | None = None
+    cost_terms: dict = field(default_factory=dict)
+    rank: int | None = None
+    same_net_as: str | None = None
+    deviation_mm: np.ndarray | None = None
+    notes: list = field(default_factory=list)
+    net: object = None
+    molds: object = None
+    strips: object = None
+    layout: object = None
+
+    @property
+    def name(self) -> str:
+        return self.candidate.name
+
+    @property
+    def failed(self) -> bool:
+        return self.error is not None
+
+
+@dataclass
+class StudyResult:
+    """All candidates of a study, ranked, with the recommendation.
+
+    Attributes
+    ----------
+    study : the `Study`.
+    design : the `fabplan.surfaces.DesignSurface`.
+    candidates : `CandidateResult` in the order of the study file (baseline first).
+    recommended : name of the recommended candidate, or None when none is feasible.
+    recommendation : the recommendation in plain words.
+    sheets_charged : whether strip sheets enter the cost (only when every measured
+        candidate has strips, see `judge_study`).
+    seconds_run : wall time from loading the design to the last verdict (writing the
+        files is not included: `fabplan.study_report.write_study` adds it).
+    """
+
+    study: Study
+    design: object
+    candidates: list
+    recommended: str | None
+    recommendation: str
+    sheets_charged: bool = False
+    seconds_run: float = 0.0
+
+    @property
+    def baseline(self) -> CandidateResult:
+        return next(c for c in self.candidates if c.candidate.baseline)
+
+    @property
+    def design_size(self) -> float:
+        """Diagonal of the design's bounding box (model units)."""
+        return self.design.extent
+
+    def ranked(self) -> list:
+        """Measured candidates in rank order, then the failed ones."""
+        done = sorted((c for c in self.candidates if c.rank is not None), key=lambda c: c.rank)
+        return done + [c for c in self.candidates if c.rank is None]
+
+
+# ---------------------------------------------------------------------------- running
+def run_study(study: Study, *, progress: Callable[[str], None] | None = None) -> StudyResult:
+    """Run every candidate of `study` and judge it.
+
+    A candidate that fails (a layout or a solve that breaks) is recorded with its reason
+    and the study goes on.
+
+    Raises
+    ------
+    InputError
+        When the design cannot be loaded or the baseline layout is impossible (panel
+        size too large for the surface, ...): nothing could be compared.
+    """
+    from ..design.load import load_design
+    from ..layout.surface_layout import layout_surface
+
+    say = progress or (lambda message: None)
+    start = time.perf_counter()
+    design = load_design(study.design.source, triangles=study.design.triangles)
+    say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
+        f"{design.area:.4g} {study.design.units}^2")
+    layouts = {90.0: layout_surface(design, study.panel_size, angle=90.0)}
+    starts: dict = {}
+    results = []
+    count = len(study.candidates)
+    for i, candidate in enumerate(study.candidates, 1):
+        say(f"[{i}/{count}] {candidate.name}: {candidate.describe()}")
+        clock = time.perf_counter()
+        try:
+            result = _run_candidate(study, design, candidate, layouts, starts, results, say)
+        except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            reason = str(exc) if isinstance(exc, FabplanError) else \
+                f"{type(exc).__name__}: {exc} ({_where(exc)})"
+            result = CandidateResult(candidate, error=reason, reasons=[reason])
+            say(f"    failed: {reason}")
+        result.metrics.setdefault("seconds", {})["total"] = time.perf_counter() - clock
+        results.append(result)
+    return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+
+
+def judge_study(study: Study, design, results: list, *, seconds_run: float = 0.0) -> StudyResult:
+    """Checks, verdicts, costs, ranks and the recommendation of measured candidates.
+
+    A pure function of the candidates' metrics and the study's limits and weights: judging
+    the same results under other limits (``dataclasses.replace(study, limits=...)``) needs
+    no new run. The given `results` are left unchanged; the returned `StudyResult` holds
+    judged copies.
+
+    Strip sheets enter the cost only when every measured candidate has strips: with
+    ``[strips] nets = "auto"`` only the lamella nets get strips, and charging their sheets
+    would make them look dearer than nets that are not asked for strips at all.
+    """
+    measured = [r for r in results if not r.failed]
+    charge_sheets = bool(measured) and all(r.metrics.get("strips") for r in measured)
+    judged = []
+    for r in results:
+        if r.failed:
+            judged.append(replace(r, checks=[], feasible=False, cost=None, cost_terms={},
+                                  rank=None, notes=[]))
+            continue
+        checks = verdict(r.metrics, study.limits)
+        feasible = all(c["ok"] for c in checks)
+        cost, terms = candidate_cost(r.metrics, study.cost, charge_sheets=charge_sheets)
+        notes = [f"the same net as {r.same_net_as} (the same panels, every vertex within "
+                 f"{SAME_NET_TOLERANCE:g} of the panel size of it; its molds and strips are "
+                 f"those of {r.same_net_as}): not a separate option"] if r.same_net_as else []
+        judged.append(replace(r, checks=checks, feasible=feasible,
+                              reasons=_reasons(checks, feasible), cost=cost, cost_terms=terms,
+                              rank=None, notes=notes))
+    rank_candidates(judged)
+    recommended, text = recommend(judged, study, sheets_charged=charge_sheets)
+    return StudyResult(study, design, judged, recommended, text, sheets_charged=charge_sheets,
+                       seconds_run=seconds_run)
+
+
+#: Two candidates end at the same net when they share the combinatorics and every vertex
+#: lies within this fraction of the panel size of its counterpart.
+SAME_NET_TOLERANCE = 1e-6
+
+
+def same_net(a, b, tolerance: float) -> bool:
+    """Whether two meshes are the same net: the same faces (same vertex order) and every
+    vertex within `tolerance` (model units) of its counterpart.
+
+    Examples
+    --------
+    >>> from fabplan.net.mesh import QuadMesh
+    >>> X = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    >>> a, b = QuadMesh(X, [[0, 1, 2, 3]]), QuadMesh(X + 1e-9, [[0, 1, 2, 3]])
+    >>> same_net(a, b, 1e-6), same_net(a, QuadMesh(X, [[1, 2, 3, 0]]), 1e-6)
+    (True, False)
+    """
+    if a.vertex_count != b.vertex_count or not np.array_equal(a.face_sizes, b.face_sizes):
+        return False
+    if not np.array_equal(a.face_indices, b.face_indices):
+        return False
+    return bool(np.abs(a.vertices - b.vertices).max(initial=0.0) <= tolerance)
+
+
+def earlier_same_net(mesh, earlier: list, panel_size: float) -> CandidateResult | None:
+    """The first of the `earlier` candidates that ended at the net `mesh` (within
+    `SAME_NET_TOLERANCE` of the panel size), not counting those that are themselves the
+    net of another; None when there is none."""
+    return next((r for r in earlier if not r.failed and r.net is not None and
+                 r.same_net_as is None and
+                 same_net(r.net.mesh, mesh, SAME_NET_TOLERANCE * panel_size)), None)
+
+
+def _where(exc: BaseException) -> str:
+    """File and line where an unexpected error arose (for the report, not a traceback)."""
+    frame = traceback.extract_tb(exc.__traceback__)[-1]
+    return f"{frame.filename.rsplit('/', 1)[-1]}:{frame.lineno}"
+
+
+def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, starts: dict,
+                   earlier: list, say) -> CandidateResult:
+    from ..fabricate.molds import MoldSettings, plan_molds
+    from ..fabricate.strip_plan import plan_strips
+    from ..fabricate.strips import StripSettings
+    from ..layout.surface_layout import glide, layout_surface
+    from ..solve.optimize import optimize
+    from ..solve.solver import SolverSettings
+
+    seconds: dict = {}
+    clock = time.perf_counter()
+    angle = start_angle(candidate, design)
+    if angle != 90.0:
+        say(f"    layout at {angle:g} deg")
+    if angle not in layouts:
+        layouts[angle] = layout_surface(design, study.panel_size, angle=angle)
+    layout = layouts[angle]
+    seconds["layout"] = time.perf_counter() - clock
+    settings = SolverSettings(max_iterations=study.max_iterations)
+
+    def report(rec):
+        if rec.iteration % 10 == 0:
+            say(f"    iteration {rec.iteration:3d}  residual {rec.hard_residual:.2e}")
+
+    clock = time.perf_counter()
+    if candidate.glides:
+        net = glide(layout, candidate.net, angle=candidate.angle, settings=settings,
+                    progress=report)
+        if candidate.net == "snet":
+            starts[angle] = net
+    else:
+        if angle not in starts:
+            starts[angle] = glide(layout, "snet", settings=settings)
+        net = optimize(starts[angle].mesh, candidate.net, angle=candidate.angle,
+                       radius=candidate.radius, reference=design.reference, settings=settings,
+                       progress=report)
+    seconds["optimize"] = time.perf_counter() - clock
+    say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
+    # the same net as an earlier candidate (CMC on a saddle ending at the minimal surface):
+    # its molds and strips are that candidate's, not planned and written a second time
+    twin = earlier_same_net(net.mesh, earlier, study.panel_size)
+    if twin is not None:
+        say(f"    the same net as {twin.name}: its molds and strips are reused")
+
+    clock = time.perf_counter()
+    units = study.design.units
+    molds = twin.molds if twin is not None else plan_molds(
+        net.mesh, MoldSettings(tolerance_mm=study.limits.mold_tolerance_mm, units=units))
+    seconds["molds"] = time.perf_counter() - clock
+    say(f"    {molds_text(mold_metrics(molds))} for {counted(molds.panel_count, 'panel')} "
+        f"({seconds['molds']:.1f} s)")
+
+    strips = None
+    wanted = study.strips is not None and study.strips.wanted(candidate.net)
+    if wanted and twin is not None and twin.strips is not None:
+        strips = twin.strips
+    elif wanted:
+        clock = time.perf_counter()
+        options = study.strips
+        strips = plan_strips(net.mesh, StripSettings(
+            height_mm=options.height_mm, thickness_mm=options.thickness_mm, units=units,
+            sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm))
+        seconds["strips"] = time.perf_counter() - clock
+        s = strips.summary()
+        say(f"    {counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
+            f"{counted(s['sheets'], 'sheet')} ({seconds['strips']:.1f} s)")
+    deviation = vertex_deviation_mm(net.mesh, design, study.design.mm_per_unit)
+    metrics = measure_candidate(net, design, molds, strips, mm_per_unit=study.design.mm_per_unit,
+                                deviation_mm=deviation)
+    metrics["seconds"] = seconds
+    return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
+                           layout=layout, same_net_as=twin.name if twin is not None else None,
+                           deviation_mm=deviation)
+
+
+def start_angle(candidate: Candidate, design) -> float:
+    """Intersection angle (degrees) of the layout a candidate starts from: the
+    candidate's own angle, else its ``start_angle``, else the natural one of its net
+    type on the design (`fabplan.layout.layout_angle`)."""
+    from ..layout.surface_layout import layout_angle
+
+    if candidate.start_angle is not None and candidate.angle is None:
+        return float(candidate.start_angle)
+    return layout_angle(candidate.net, design, candidate.angle)
+
+
+# ---------------------------------------------------------------------------- measuring
+def _range(values: np.ndarray) -> dict | None:
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return None
+    return {"min": float(v.min()), "max": float(v.max()), "mean": float(v.mean())}
+
+
+def vertex_deviation_mm(mesh, design, mm_per_unit: float) -> np.ndarray:
+    """(n,) float, distance of every vertex of a net from the design in mm (to the exact
+    surface of a built-in design, to the triangle mesh of a design file)."""
+    return design.distances(mesh.vertices) * mm_per_unit
+
+
+def measure_candidate(net, design, molds, strips, *, mm_per_unit: float,
+                      deviation_mm: np.ndarray | None = None) -> dict:
+    """Everything a verdict and a report need, measured on the solved net.
+
+    Parameters
+    ----------
+    net : `fabplan.optimize.OptimizationResult`.
+    design : the `DesignSurface` (deviation is measured to it).
+    molds : the `MoldPlan` of the net; strips : its `StripPlan` or None.
+    mm_per_unit : millimetres per model unit.
+    deviation_mm : (n,) float, the vertices' distances from the design (mm), when already
+        measured (`vertex_deviation_mm`).
+
+    Returns
+    -------
+    dict, JSON-ready: lengths in model units unless the key ends in ``_mm``, angles in
+    degrees.
+    """
+    mesh = net.mesh
+    X = mesh.vertices
+    props = net.properties
+    deviation = vertex_deviation_mm(mesh, design, mm_per_unit) if deviation_mm is None else deviation_mm
+    edges = np.linalg.norm(X[mesh.edges[:, 0]] - X[mesh.edges[:, 1]], axis=1)
+    area = mesh.face_areas
+    coverage = float(area.sum() / design.area)
+    planarity = face_planarity(X, mesh.quads) * mm_per_unit
+    kinks = np.degrees(kink_angles(X, mesh))
+    residual = props.get("sphere_residual_relative", {}).get("max")
+    metrics = {
+        "status": net.status,
+        "converged": net.converged,
+        "iterations": net.iterations,
+        "parameters": {k: v for k, v in net.parameters.items()
+                       if k in ("angle_deg", "radius") and v is not None},
+        "sphere_residual_relative_max": residual,
+        "deviation_mm": {"max": float(deviation.max()), "mean": float(deviation.mean()),
+                         "p95": float(np.percentile(deviation, 95))},
+        "panels": int(len(mesh.face_sizes)),
+        "quads": int(np.sum(mesh.face_sizes == 4)),
+        "other_faces": int(np.sum(mesh.face_sizes != 4)),
+        "vertices": int(mesh.vertex_count),
+        "irregular_vertices": int(len(mesh.irregular_vertices)),
+        "edge_length": _range(edges),
+        "panel_area": _range(area),
+        "coverage": coverage,
+        "planarity_mm": _range(planarity) or {"min": 0.0, "max": 0.0, "mean": 0.0},
+        "kink_deg": _range(kinks) or {"min": 0.0, "max": 0.0, "mean": 0.0},
+        "intersection_angle_deg": _pick(props.get("intersection_angle_deg")),
+        "meusnier_radius": _pick(props.get("meusnier_radius")),
+        "molds": mold_metrics(molds),
+        "strips": None,
+    }
+    if strips is not None:
+        s = strips.summary()
+        radius = s["radius_mm"]
+        metrics["strips"] = {
+            "strips": s["strips"],
+            "parts": s["parts"],
+            "sheets": s["sheets"],
+            "material_use": s["material_use"],
+            "total_length_mm": s["total_length_mm"],
+            "straight": s["straight"],
+            "congruent": s["congruent"],
+            "congruence_deviation_mm": s["congruence_deviation_mm"],
+            "radius_mm": None if radius is None else
+            {"min": radius["min"], "max": radius["max"], "median": radius["median"]},
+            "min_radius_mm": math.inf if radius is None else radius["min"],
+            "max_radius_mm": math.inf if s["straight"] or radius is None or
+            any(math.isinf(st.radius_mm) for st in strips.strips.strips) else radius["max"],
+            "unrolled_length_error_mm": s["unrolled_length_error_mm"],
+        }
+    return metrics
+
+
+def mold_metrics(plan) -> dict:
+    """The mold numbers of a study: only curved panels need a mold.
+
+    A flat panel is cut from flat stock (glass, sheet) and needs no mold, so `count` is
+    the number of molds of the single and double curved panels; the plane "mold" that a
+    `fabplan.molds.MoldPlan` assigns to its flat panels is not counted.
+
+    Parameters
+    ----------
+    plan : `fabplan.molds.MoldPlan`.
+
+    Returns
+    -------
+    dict: ``count`` (molds of the curved panels), ``all_panels_flat``, ``fits_all``,
+    ``failures``, ``max_deviation_mm`` (largest panel-to-mold gap, flat panels measured
+    against a plane), ``molds_per_sqrt_panels`` (``count / sqrt(panels)``),
+    ``panel_types``, ``mold_types`` (the plane type counts the plane flat panels are
+    checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any).
+    """
+    curved = np.asarray(plan.mold_type) > 0
+    count = int(curved.sum())
+    per_mold = plan.panels_per_mold
+    panels = plan.panel_count
+    return {
+        "count": count,
+        "all_panels_flat": count == 0,
+        "fits_all": bool(plan.fits_all),
+        "failures": int(plan.failures.size),
+        "max_deviation_mm": float(np.max(plan.deviation_mm)),
+        "molds_per_sqrt_panels": count / math.sqrt(panels),
+        "panel_types": {t: int(np.sum(plan.panel_type == i)) for i, t in enumerate(PANEL_TYPES)},
+        "mold_types": {t: int(np.sum(plan.mold_type == i)) for i, t in enumerate(MOLD_TYPES)},
+        "panels_per_mold_max": int(per_mold[curved].max()) if count else 0,
+    }
+
+
+def molds_text(molds: dict) -> str:
+    """The molds of a candidate in words: ``"no molds: all panels flat"`` or ``"12 molds"``.
+
+    Examples
+    --------
+    >>> molds_text({"count": 0}), molds_text({"count": 1}), molds_text({"count": 12})
+    ('no molds: all panels flat', '1 mold', '12 molds')
+    """
+    return "no molds: all panels flat" if molds["count"] == 0 else counted(molds["count"], "mold")
+
+
+def _pick(stats: dict | None) -> dict | None:
+    if not stats or stats.get("min") is None:
+        return None
+    return {"min": stats["min"], "max": stats["max"]}
+
+
+# ---------------------------------------------------------------------------- judging
+def _check(limit: str, bound, measured, ok: bool, text: str) -> dict:
+    return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text}
+
+
+def verdict(metrics: dict, limits: Limits) -> list:
+    """The checks of one candidate's measured `metrics` against the `limits`.
+
+    Returns
+    -------
+    list of dicts ``{limit, bound, measured, ok, text}``, one per limit that applies;
+    `text` says in plain words what was measured against what.
+    """
+    checks = []
+    res = metrics["sphere_residual_relative_max"]
+    res_ok = res is not None and res <= limits.max_sphere_residual and metrics["converged"]
+    state = "converged" if metrics["converged"] else f"stopped ({metrics['status']})"
+    checks.append(_check(
+        "max_sphere_residual", limits.max_sphere_residual, res, res_ok,
+        f"the solve {state} after {metrics['iterations']} iterations; largest sphere residual "
+        f"{_g(res)} of an edge (limit {limits.max_sphere_residual:g})"))
+    dev = metrics["deviation_mm"]["max"]
+    checks.append(_check(
+        "max_deviation_mm", limits.max_deviation_mm, dev, dev <= limits.max_deviation_mm,
+        f"the net deviates up to {dev:.1f} mm from the design (limit "
+        f"{limits.max_deviation_mm:g} mm)"))
+    molds = metrics["molds"]
+    checks.append(_check(
+        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"],
+        molds["fits_all"],
+        f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
+        f"{molds['max_deviation_mm']:.2f} mm)" if molds["fits_all"] else
+        f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
+    if limits.max_molds is not None:
+        n = molds["count"]
+        needs = "it needs no molds: all panels are flat" if n == 0 else \
+            f"its curved panels need {counted(n, 'mold')}"
+        checks.append(_check("max_molds", limits.max_molds, n, n <= limits.max_molds,
+                             f"{needs} (limit {limits.max_molds})"))
+    if limits.planar_panels:
+        p = metrics["planarity_mm"]["max"]
+        checks.append(_check(
+            "planarity_tolerance_mm", limits.planarity_tolerance_mm, p,
+            p <= limits.planarity_tolerance_mm,
+            (f"the panels are planar within {p:.2f} mm" if p <= limits.planarity_tolerance_mm
+             else f"the panels are up to {p:.2f} mm out of plane")
+            + f" (planar panels required: tolerance {limits.planarity_tolerance_mm:g} mm)"))
+    if limits.min_coverage is not None:
+        cov = metrics["coverage"]
+        checks.append(_check("min_coverage", limits.min_coverage, cov, cov >= limits.min_coverage,
+                             f"the panels cover {100 * cov:.1f} % of the design (limit at least "
+                             f"{100 * limits.min_coverage:g} %)"))
+    if limits.max_kink_deg is not None:
+        k = metrics["kink_deg"]["max"]
+        checks.append(_check("max_kink_deg", limits.max_kink_deg, k, k <= limits.max_kink_deg,
+                             f"the largest kink between neighbouring panels is {k:.2f} deg (limit "
+                             f"{limits.max_kink_deg:g} deg)"))
+    strips = metrics.get("strips")
+    if strips is not None:
+        if limits.min_strip_radius_mm is not None:
+            r = strips["min_radius_mm"]
+            checks.append(_check(
+                "min_strip_radius_mm", limits.min_strip_radius_mm, r,
+                r >= limits.min_strip_radius_mm,
+                f"the smallest strip radius is {_mm(r)} (limit at least "
+                f"{limits.min_strip_radius_mm:g} mm)"))
+        if limits.max_strip_radius_mm is not None:
+            r = strips["max_radius_mm"]
+            checks.append(_check(
+                "max_strip_radius_mm", limits.max_strip_radius_mm, r,
+                r <= limits.max_strip_radius_mm,
+                f"the largest strip radius is {_mm(r)} (limit at most "
+                f"{limits.max_strip_radius_mm:g} mm)"))
+        if limits.congruent_strips:
+            d, tol = strips["congruence_deviation_mm"], limits.congruence_tolerance_mm
+            ok = d <= tol
+            checks.append(_check(
+                "congruent_strips", tol, d, ok,
+                ("all strip parts are congruent" if ok else "the strip parts are not congruent")
+                + f" (they differ from one common arc {_differ_by(d)}; congruence "
+                f"tolerance {tol:g} mm)"))
+        if limits.max_sheets is not None:
+            n = strips["sheets"]
+            checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,
+                                 f"the strips nest on {counted(n, 'sheet')} (limit "
+                                 f"{limits.max_sheets})"))
+    return checks
+
+
+def _g(value) -> str:
+    return "n/a" if value is None else f"{value:.2g}"
+
+
+def _mm(value: float) -> str:
+    return "infinite (straight)" if math.isinf(value) else f"{value:.0f} mm"
+
+
+def _differ_by(value: float) -> str:
+    """How much strip parts differ (mm), in words with the digits it needs.
+
+    Examples
+    --------
+    >>> [_differ_by(v) for v in (0.0, 3e-12, 0.0123, 4.5)]
+    ['by 0 mm', 'by less than 0.001 mm', 'by up to 0.012 mm', 'by up to 4.50 mm']
+    """
+    if value == 0:
+        return "by 0 mm"
+    if value < 0.001:
+        return "by less than 0.001 mm"
+    return f"by up to {value:.2g} mm" if value < 0.1 else f"by up to {value:.2f} mm"
+
+
+def _reasons(checks: list, feasible: bool) -> list:
+    if feasible:
+        return [f"meets all {len(checks)} limits: " + "; ".join(c["text"] for c in checks)]
+    return [c["text"] for c in checks if not c["ok"]]
+
+
+def candidate_cost(metrics: dict, weights: CostWeights, *,
+                   charge_sheets: bool = True) -> tuple[float, dict]:
+    """The ranking cost of a candidate and its terms (see `CostWeights`).
+
+    Molds are counted for the curved panels only (`mold_metrics`). With `charge_sheets`
+    false the sheets term is 0: strip sheets are then reported, not charged (see
+    `judge_study`).
+
+    Examples
+    --------
+    >>> m = {"molds": {"count": 2, "panel_types": {"planar": 10}}, "coverage": 1.0,
+    ...      "strips": {"sheets": 3}, "deviation_mm": {"max": 5.0}}
+    >>> candidate_cost(m, CostWeights())[0], candidate_cost(m, CostWeights(), charge_sheets=False)[0]
+    (230.0, 215.0)
+    """
+    types = metrics["molds"]["panel_types"]
+    strips = metrics.get("strips")
+    # panels are counted for the whole design: a net with gaps must not look cheaper
+    whole = 1.0 / max(min(metrics["coverage"], 1.0), 1e-6)
+    terms = {
+        "molds": weights.mold * metrics["molds"]["count"],
+        "flat panels": weights.flat_panel * types.get(PANEL_TYPES[0], 0) * whole,
+        "single curved panels": weights.single_curved_panel * types.get(PANEL_TYPES[1], 0) * whole,
+        "double curved panels": weights.double_curved_panel * types.get(PANEL_TYPES[2], 0) * whole,
+        "sheets": weights.sheet * strips["sheets"] if strips and charge_sheets else 0.0,
+        "deviation": weights.deviation_mm * metrics["deviation_mm"]["max"],
+    }
+    return float(sum(terms.values())), terms
+
+
+def rank_candidates(results: list) -> None:
+    """Set `rank`: feasible candidates by cost, then the others by failed checks, cost. A
+    candidate that ended at the net of another ranks right after it (their costs differ by
+    rounding only)."""
+    done = [r for r in results if not r.failed]
+    named = {r.name: r for r in done}
+
+    def key(r):
+        twin = named.get(r.same_net_as, r)
+        return (not r.feasible, sum(not c["ok"] for c in r.checks), twin.cost, twin is not r)
+
+    order = sorted(done, key=key)
+    for i, r in enumerate(order, 1):
+        r.rank = i
+
+
+def is_lamella_study(study: Study) -> bool:
+    """Whether a study is about lamella strips rather than panels: every candidate gets
+    strips (``[strips] nets = "all"``) or a strip limit is set."""
+    limits = study.limits
+    return study.strips is not None and (
+        study.strips.nets == "all" or limits.congruent_strips or limits.max_sheets is not None
+        or limits.min_strip_radius_mm is not None or limits.max_strip_radius_mm is not None)
+
+
+def recommend(results: list, study: Study, *,
+              sheets_charged: bool = True) -> tuple[str | None, str]:
+    """The recommended candidate (the cheapest feasible one) and why, in plain words.
+
+    The text says first what decides the study: when the baseline fails a limit, which one
+    (measured against the limit). Then what the recommended candidate achieves: its strips
+    and sheets in a lamella study (`is_lamella_study`), its molds in a panel study, planar
+    panels where they are required; then its deviation and its cost against the
+    baseline's. A candidate that ended at the same net as an earlier one is named as that
+    net, not as another option.
+    """
+    base = next((r for r in results if r.candidate.baseline and not r.failed), None)
+    feasible = sorted((r for r in results if r.feasible), key=lambda r: r.rank)
+    if not feasible:
+        measured = sorted((r for r in results if not r.failed), key=lambda r: r.rank)
+        if not measured:
+            return None, "No candidate produced a net; see the reasons of each below."
+        best = measured[0]
+        return None, (f"No candidate meets every limit. The closest is {best.name} "
+                      f"({best.candidate.describe()}), which fails: "
+                      + "; ".join(best.reasons) + ".")
+    best = feasible[0]
+    limits = study.limits
+    words = [f"Recommended: {best.name} ({best.candidate.describe()})."]
+    said = None                        # a candidate whose failure is already told
+    if best.candidate.baseline:
+        words.append("The general S-net on the design meets every limit, and no other "
+                     "candidate that does is cheaper.")
+    elif base is not None and not base.feasible:
+        failed = [c["text"] for c in base.checks if not c["ok"]]
+        words.append("The baseline, a general S-net on the design, does not meet the limits: "
+                     + "; ".join(failed) + ".")
+        said = base
+    if best.same_net_as:
+        words.append(f"It ends at the same net as {best.same_net_as}.")
+    words += _achievements(best, None if best.candidate.baseline else base, study)
+    m = best.metrics
+    words.append(f"It deviates at most {m['deviation_mm']['max']:.1f} mm from the design "
+                 f"(limit {limits.max_deviation_mm:g} mm).")
+    if base is not None and not best.candidate.baseline:
+        words.append(_cost_sentence(best, base))
+    with_strips = [r for r in results if not r.failed and r.metrics.get("strips")]
+    measured = [r for r in results if not r.failed]
+    if with_strips and not sheets_charged:
+        words.append(f"Strip sheets are reported but not charged: only {len(with_strips)} of "
+                     f"{len(measured)} candidates {'gets' if len(with_strips) == 1 else 'get'} "
+                     "strips.")
+    others = feasible[1:]
+    if others:
+        words.append("Also feasible: " + ", ".join(_also(r) for r in others) + ".")
+    infeasible = [r for r in results if not r.feasible and r is not said]
+    if infeasible:
+        words.append("Not feasible: " + "; ".join(
+            f"{r.name}: {r.reasons[0]}" + (f" (the same net as {r.same_net_as})"
+                                            if r.same_net_as else "")
+            for r in infeasible) + ".")
+    return best.name, " ".join(words)
+
+
+def _achievements(best: CandidateResult, base: CandidateResult | None, study: Study) -> list:
+    """What the recommended candidate achieves that the study asks for, in sentences."""
+    m, limits = best.metrics, study.limits
+    b = base.metrics if base is not None else None
+    words = []
+    s = m.get("strips")
+    if is_lamella_study(study) and s:
+        tol = limits.congruence_tolerance_mm
+        if s["straight"]:
+            shape = "all straight"
+        elif s["congruence_deviation_mm"] <= tol:
+            radius = s["radius_mm"]
+            shape = (f"all congruent: pieces of one arc of radius {radius['median']:.0f} mm, "
+                     f"differing from it {_differ_by(s['congruence_deviation_mm'])} "
+                     f"(tolerance {tol:g} mm)")
+        else:
+            shape = (f"not congruent (they differ from one common arc "
+                     f"{_differ_by(s['congruence_deviation_mm'])})")
+        sheets = counted(s["sheets"], "sheet")
+        if b is not None and b.get("strips"):
+            sheets += f" (the baseline: {b['strips']['sheets']})"
+        words.append(f"Its {counted(s['strips'], 'lamella')} are cut as "
+                     f"{counted(s['parts'], 'part')}, {shape}, nested on {sheets}.")
+        if limits.min_strip_radius_mm is not None and not s["straight"]:
+            words.append(f"The smallest arc radius is {s['min_radius_mm']:.0f} mm (limit at least "
+                         f"{limits.min_strip_radius_mm:g} mm).")
+    else:
+        molds, panels = m["molds"], m["panels"]
+        if molds["count"] == 0:
+            text = f"It needs no molds: all its {counted(panels, 'panel')} are flat"
+        else:
+            text = f"It needs {counted(molds['count'], 'mold')} for its {counted(panels, 'panel')}"
+        if limits.max_molds is not None:
+            text += f" (limit {limits.max_molds})"
+        if b is not None:
+            bm = b["molds"]["count"]
+            text += (f", where the baseline needs {'none' if bm == 0 else counted(bm, 'mold')} "
+                     f"for its {b['panels']}") + (_saving(molds["count"], bm)
+                                                  if molds["count"] else "")
+        words.append(text + ".")
+    if limits.planar_panels:
+        words.append(f"Its panels are planar within {m['planarity_mm']['max']:.2f} mm "
+                     f"(tolerance {limits.planarity_tolerance_mm:g} mm).")
+    return words
+
+
+def _cost_sentence(best: CandidateResult, base: CandidateResult) -> str:
+    if best.cost <= base.cost:
+        less = 100 * (base.cost - best.cost) / base.cost if base.cost > 0 else 0.0
+        return (f"It costs {best.cost:.0f} units against {base.cost:.0f} for the baseline "
+                f"({less:.0f} % less).")
+    return (f"It costs {best.cost:.0f} units, more than the {base.cost:.0f} of the baseline, "
+            "which does not meet the limits.")
+
+
+def _also(r: CandidateResult) -> str:
+    if r.same_net_as:
+        return f"{r.name} (the same net as {r.same_net_as})"
+    return f"{r.name} (cost {r.cost:.0f})"
+
+
+def _saving(n: int, base: int) -> str:
+    if base <= 0 or n >= base:
+        return ""
+    return f" ({100 * (base - n) / base:.0f} % fewer)"

@@ -1,0 +1,720 @@
+"""Facade study files: read a TOML study, validate every key, expand the candidates.
+
+A study file says what the design is, how large its panels should be, what the
+fabrication can do (the limits) and which rationalizations to try. The keys are
+documented in ``docs/study-file.md``; a minimal study::
+
+    [design]
+    surface = "hyperbolic-paraboloid"
+    parameters = { width = 10, depth = 10, rise = 3 }
+
+    [panels]
+    size = 1.5
+
+    [limits]
+    max_deviation_mm = 50
+    mold_tolerance_mm = 3
+
+    [[candidates]]
+    net = "isogonal"
+    angle = { from = 60, to = 90, step = 10 }
+
+Every problem is reported as one `InputError` naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import InputError
+from ..solve.net_types import NETS, get_net
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+__all__ = [
+    "Study",
+    "DesignSpec",
+    "Limits",
+    "StripOptions",
+    "CostWeights",
+    "Candidate",
+    "read_study",
+    "parse_study",
+    "AUTO_CANDIDATES",
+]
+
+#: Net types that exist on every surface: they glide on the design exactly.
+GLIDING_NETS = ("snet", "isogonal", "orthogonal", "mean-curvature-spheres")
+
+#: The tables of a study file.
+TABLES = ("study", "design", "panels", "limits", "strips", "cost", "candidates")
+
+#: The candidates ``net = "auto"`` stands for (the baseline is always added).
+AUTO_CANDIDATES = (
+    ("isogonal", None, None),
+    ("linear-weingarten", None, None),
+    ("const-radius", None, None),
+    ("char-conjugate", None, None),
+    ("cmc", None, None),
+)
+
+
+@dataclass(frozen=True)
+class DesignSpec:
+    """The design surface of a study.
+
+    Attributes
+    ----------
+    source : a triangle-mesh file (absolute path) or a built-in surface spec
+        ``"name:key=value,..."`` (see `fabplan.surfaces`).
+    label : what the report calls it.
+    parameters : parameters of a built-in surface (for the record).
+    triangles : triangles of the design mesh a built-in surface is sampled with (about);
+        None for a design file, which keeps its own triangles.
+    units : model units, ``"m"`` or ``"mm"``.
+    """
+
+    source: str
+    label: str
+    parameters: dict
+    triangles: int | None = 20000
+    units: str = "m"
+
+    @property
+    def mm_per_unit(self) -> float:
+        return 1000.0 if self.units == "m" else 1.0
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What fabrication can do (millimetres and degrees; None: no limit).
+
+    Attributes
+    ----------
+    max_deviation_mm : largest distance of a net vertex from the design surface.
+    mold_tolerance_mm : largest gap between a panel and its mold.
+    max_molds : most molds the budget allows.
+    planar_panels : panels must be flat (glass): face planarity within
+        `planarity_tolerance_mm`.
+    planarity_tolerance_mm : largest distance of a quad's corner from its best-fit plane.
+    max_kink_deg : largest angle between the normals of neighbouring panels.
+    min_strip_radius_mm, max_strip_radius_mm : range of the arc radii of the unrolled
+        lamella strips (a straight strip has an infinite radius).
+    max_sheets : most sheets of strip material.
+    congruent_strips : every strip must be cut from one circle (or line): all parts
+        congruent within `congruence_tolerance_mm`, so one bending form or jig serves all.
+    congruence_tolerance_mm : how far a strip part may differ from the common arc and
+        still count as congruent (from ``[strips] congruence_tolerance_mm``; it is also
+        the cutting tolerance the strips are planned with).
+    min_coverage : smallest fraction of the design's area the panels must cover (the
+        layout may leave gaps of up to one panel along the boundary).
+    max_sphere_residual : largest sphere residual (relative to the mean edge) for a net to
+        count as the net type it claims to be.
+    """
+
+    max_deviation_mm: float
+    mold_tolerance_mm: float
+    max_molds: int | None = None
+    planar_panels: bool = False
+    planarity_tolerance_mm: float = 2.0
+    max_kink_deg: float | None = None
+    min_strip_radius_mm: float | None = None
+    max_strip_radius_mm: float | None = None
+    max_sheets: int | None = None
+    congruent_strips: bool = False
+    congruence_tolerance_mm: float = 0.1
+    min_coverage: float | None = None
+    max_sphere_residual: float = 1e-6
+
+
+@dataclass(frozen=True)
+class StripOptions:
+    """Lamella strips for the candidates that suit them.
+
+    Attributes
+    ----------
+    height_mm, thickness_mm, sheet_mm : strip height, material thickness, sheet size.
+    nets : ``"auto"`` (nets whose lamellas unroll onto circles or lines: constant radius,
+        CMC, linear Weingarten and the A-nets), ``"all"``, or a list of net types.
+    congruence_tolerance_mm : cutting tolerance of the strips
+        (`fabplan.strips.StripSettings.tolerance_mm`): parts that differ from one common
+        arc by at most this much are congruent, and runs of nodes within it of one circle
+        are cut as one arc.
+    """
+
+    height_mm: float
+    thickness_mm: float
+    sheet_mm: tuple[float, float] = (2500.0, 1250.0)
+    nets: tuple | str = "auto"
+    congruence_tolerance_mm: float = 0.1
+
+    def wanted(self, net: str) -> bool:
+        if self.nets == "all":
+            return True
+        if self.nets == "auto":
+            preset = get_net(net)
+            return not preset.dual and preset.radius != "none"
+        return net in self.nets
+
+
+@dataclass(frozen=True)
+class CostWeights:
+    """The cost a candidate is ranked by: a weighted sum of what it takes to build.
+
+    ``cost = mold * molds + (flat_panel * planar panels + single_curved_panel * single
+    curved panels + double_curved_panel * double curved panels) / coverage + sheet * strip
+    sheets + deviation_mm * largest deviation from the design (mm)``, where coverage is
+    the fraction of the design's area the net's panels cover (panels are counted for the
+    whole design, so that a net with gaps at the boundary does not look cheaper).
+
+    The defaults are relative prices: a mold costs as much as 100 flat panels.
+    """
+
+    mold: float = 100.0
+    flat_panel: float = 1.0
+    single_curved_panel: float = 2.0
+    double_curved_panel: float = 4.0
+    sheet: float = 5.0
+    deviation_mm: float = 1.0
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One rationalization to try.
+
+    Attributes
+    ----------
+    name : unique name (folder name of its outputs).
+    net : net type (`fabplan.nets.NETS`).
+    angle : intersection angle in degrees, or None (free, or fixed by the type).
+    radius : Meusnier radius in model units, or None (free).
+    baseline : the unrationalized reference (a general S-net on the design).
+    start_angle : intersection angle of the layout the candidate starts from (degrees);
+        None: the candidate's angle, or one suited to the design (see
+        `fabplan.study.start_angle`).
+    """
+
+    name: str
+    net: str
+    angle: float | None = None
+    radius: float | None = None
+    baseline: bool = False
+    start_angle: float | None = None
+
+    @property
+    def glides(self) -> bool:
+        """The net exists on every surface: it is solved exactly on the design."""
+        return self.net in GLIDING_NETS
+
+    def describe(self) -> str:
+        parts = [self.net]
+        if self.angle is not None:
+            parts.append(f"angle {self.angle:g} deg")
+        elif get_net(self.net).angle == "param":
+            parts.append("free angle")
+        if self.radius is not None:
+            parts.append(f"radius {self.radius:g}")
+        elif get_net(self.net).radius == "param":
+            parts.append("free radius")
+        return ", ".join(parts)
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study (see `read_study`)."""
+
+    name: str
+    path: Path | None
+    description: str
+    design: DesignSpec
+    panel_size: float
+    limits: Limits
+    strips: StripOptions | None
+    cost: CostWeights
+    candidates: tuple
+    max_iterations: int = 100
+    extra: dict = field(default_factory=dict)
+
+    def record(self) -> dict:
+        """The study as JSON (what `study.json` says was asked)."""
+        from dataclasses import asdict
+
+        return {
+            "name": self.name,
+            "file": str(self.path) if self.path else None,
+            "description": self.description,
+            "design": asdict(self.design),
+            "panel_size": self.panel_size,
+            "limits": asdict(self.limits),
+            "strips": None if self.strips is None else
+            {**asdict(self.strips), "nets": self.strips.nets if isinstance(self.strips.nets, str)
+             else list(self.strips.nets)},
+            "cost": asdict(self.cost),
+            "max_iterations": self.max_iterations,
+        }
+
+
+# ---------------------------------------------------------------------------- validation
+class _Table:
+    """One TOML table and its path in the file, for messages that name the key."""
+
+    def __init__(self, data, where: str, file: str):
+        if not isinstance(data, dict):
+            raise InputError(f"{file}: [{where}] must be a table")
+        self.data, self.where, self.file, self.used = data, where, file, set()
+
+    def _name(self, key: str) -> str:
+        return f"{self.file}: {self.where}.{key}" if self.where else f"{self.file}: {key}"
+
+    def fail(self, key: str, what: str):
+        raise InputError(f"{self._name(key)} {what}")
+
+    def missing(self, key: str, what: str):
+        """A required key is absent: name a present key that looks like a typo of it."""
+        close = difflib.get_close_matches(key, [k for k in self.data if k not in self.used], n=1)
+        if close:
+            self.fail(close[0], f"is not a known key (did you mean {key!r}?)")
+        self.fail(key, f"is missing: {what}")
+
+    def get(self, key: str, default=None):
+        self.used.add(key)
+        return self.data.get(key, default)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def number(self, key: str, default=None, *, positive: bool = True, required: bool = False,
+               integer: bool = False, unit: str = ""):
+        value = self.get(key)
+        if value is None:
+            if required:
+                self.missing(key, f"give a {'positive ' if positive else ''}number"
+                             + (f" ({unit})" if unit else ""))
+            return default
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        if ok and integer:
+            ok = float(value).is_integer()
+        if not ok or (positive and value <= 0):
+            kind = "a positive " if positive else "a "
+            kind += "whole number" if integer else "number"
+            self.fail(key, f"must be {kind}{f' ({unit})' if unit else ''}, got {value!r}")
+        return int(value) if integer else float(value)
+
+    def text(self, key: str, default=None, *, choices=None, required: bool = False):
+        value = self.get(key)
+        if value is None:
+            if required:
+                self.missing(key, "give a name")
+            return default
+        if not isinstance(value, str):
+            self.fail(key, f"must be a string, got {value!r}")
+        if choices is not None and value not in choices:
+            self.fail(key, f"must be one of {', '.join(map(str, choices))}; got {value!r}"
+                      + _suggest(value, choices))
+        return value
+
+    def boolean(self, key: str, default: bool = False) -> bool:
+        value = self.get(key)
+        if value is None:
+            return default
+        if not isinstance(value, bool):
+            self.fail(key, f"must be true or false, got {value!r}")
+        return value
+
+    def only(self, tables) -> None:
+        """Refuse top-level tables other than `tables` before anything else is read, so
+        that a misspelt table (``[panel]``) is named, not reported as missing keys."""
+        for key in self.data:
+            if key not in tables:
+                header = {t: f"[[{t}]]" if t == "candidates" else f"[{t}]" for t in tables}
+                close = difflib.get_close_matches(key, tables, n=1, cutoff=0.7)
+                hint = f" (did you mean {header[close[0]]}?)" if close else \
+                    f"; the tables are {', '.join(header.values())}"
+                raise InputError(f"{self.file}: [{key}] is not a known table{hint}")
+
+    def done(self) -> None:
+        """Refuse keys nobody asked for (a typo must not silently drop a limit)."""
+        for key in self.data:
+            if key not in self.used:
+                self.fail(key, "is not a known key" + _suggest(key, self.used))
+
+
+def _suggest(word: str, options) -> str:
+    close = difflib.get_close_matches(str(word), [str(o) for o in options], n=1, cutoff=0.7)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def read_study(path: str | Path) -> Study:
+    """Read and validate a study file.
+
+    Raises
+    ------
+    InputError
+        A missing or unreadable file, invalid TOML, an unknown or malformed key, an
+        unknown net type or surface, a missing design file; the message names the file
+        and the key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such study file")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the study file ({exc})") from None
+    return parse_study(text, path=path)
+
+
+def parse_study(text: str, *, path: Path | None = None) -> Study:
+    """Validate a study given as TOML text (design files are found beside `path`).
+
+    Examples
+    --------
+    >>> s = parse_study('''
+    ... [design]
+    ... surface = "hyperbolic-paraboloid"
+    ... [panels]
+    ... size = 2.0
+    ... [limits]
+    ... max_deviation_mm = 30
+    ... mold_tolerance_mm = 2
+    ... [[candidates]]
+    ... net = "isogonal"
+    ... angle = { from = 70, to = 90, step = 10 }
+    ... ''')
+    >>> [c.name for c in s.candidates]
+    ['baseline', 'isogonal-70', 'isogonal-80', 'isogonal-90']
+    >>> parse_study('[panels]\\nsize = -1')
+    Traceback (most recent call last):
+    ...
+    fabplan.errors.InputError: study: panels.size must be a positive number (model units), got -1
+    """
+    file = str(path) if path else "study"
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{file}: not a valid TOML study file: {exc}") from None
+    top = _Table(data, "", file)
+    top.only(TABLES)
+    folder = path.parent if path else Path.cwd()
+
+    meta = _Table(top.get("study", {}), "study", file)
+    name = meta.text("name", path.stem if path else "study")
+    description = meta.text("description", "")
+    max_iterations = meta.number("max_iterations", 100, integer=True)
+    meta.done()
+
+    panels = _Table(top.get("panels", {}), "panels", file)
+    panel_size = panels.number("size", required=True, unit="model units")
+    panels.done()
+
+    design = _design(_Table(top.get("design", None) or {}, "design", file), folder)
+    strips = _strips(_Table(top.get("strips"), "strips", file)) if top.has("strips") else None
+    limits = _limits(_Table(top.get("limits", None) or {}, "limits", file),
+                     congruence_tolerance_mm=strips.congruence_tolerance_mm if strips else 0.1)
+    cost = _cost(_Table(top.get("cost", {}), "cost", file))
+    candidates = _candidates(top.get("candidates", "auto"), file)
+    top.done()
+    return Study(name=name, path=path, description=description, design=design,
+                 panel_size=panel_size, limits=limits, strips=strips, cost=cost,
+                 candidates=candidates, max_iterations=max_iterations)
+
+
+def _design(t: _Table, folder: Path) -> DesignSpec:
+    from ..design.parametric import SURFACES
+
+    surface, file = t.text("surface"), t.text("file")
+    if (surface is None) == (file is None):
+        t.fail("surface", "or design.file: give exactly one (a built-in surface name or a "
+               "triangle-mesh file)")
+    units = t.text("units", "m", choices=("m", "mm"))
+    parameters = t.get("parameters", {})
+    if not isinstance(parameters, dict):
+        t.fail("parameters", "must be a table of surface parameters")
+    if file is not None:
+        if parameters:
+            t.fail("parameters", "belongs to a built-in surface, not to a design file")
+        source = (folder / file).resolve()
+        if not source.is_file():
+            t.fail("file", f"names {file!r}, which does not exist (looked in {folder})")
+        if t.has("triangles"):
+            t.fail("triangles", "belongs to a built-in surface; a design file keeps its own "
+                   "triangles")
+        t.done()
+        return DesignSpec(str(source), Path(file).name, {}, None, units)
+    triangles = t.number("triangles", 20000, integer=True)
+    if surface not in SURFACES:
+        t.fail("surface", f"is {surface!r}, not a built-in surface; known: {', '.join(SURFACES)}"
+               + _suggest(surface, SURFACES))
+    items = []
+    for key, value in parameters.items():
+        if isinstance(value, list) and key in ("u_deg", "v_deg") and len(value) == 2:
+            items.append(f"{key}={value[0]}..{value[1]}")
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            items.append(f"{key}={value}")
+        elif isinstance(value, str) and key in ("heights", "control_points", "profile"):
+            target = (folder / value).resolve()
+            if not target.is_file():
+                t.fail(f"parameters.{key}", f"names {value!r}, which does not exist "
+                       f"(looked in {folder})")
+            items.append(f"{key}={target}")
+        else:
+            t.fail(f"parameters.{key}", f"has an unusable value {value!r}")
+    t.done()
+    spec = surface + (":" + ",".join(items) if items else "")
+    _check_surface(spec, t)
+    return DesignSpec(spec, surface, dict(parameters), triangles, units)
+
+
+def _check_surface(spec: str, t: _Table) -> None:
+    """Build the parametric surface once, so that a bad parameter is named now."""
+    from ..design.parametric import surface_from_spec
+
+    try:
+        surface_from_spec(spec)
+    except InputError as exc:
+        t.fail("parameters", f"do not describe a surface: {exc}")
+
+
+def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
+    limits = Limits(
+        max_deviation_mm=t.number("max_deviation_mm", required=True, unit="mm"),
+        mold_tolerance_mm=t.number("mold_tolerance_mm", required=True, unit="mm"),
+        max_molds=t.number("max_molds", integer=True),
+        planar_panels=t.boolean("planar_panels"),
+        planarity_tolerance_mm=t.number("planarity_tolerance_mm", 2.0, unit="mm"),
+        max_kink_deg=t.number("max_kink_deg", unit="degrees"),
+        min_strip_radius_mm=t.number("min_strip_radius_mm", unit="mm"),
+        max_strip_radius_mm=t.number("max_strip_radius_mm", unit="mm"),
+        max_sheets=t.number("max_sheets", integer=True),
+        congruent_strips=t.boolean("congruent_strips"),
+        congruence_tolerance_mm=congruence_tolerance_mm,
+        min_coverage=t.number("min_coverage"),
+        max_sphere_residual=t.number("max_sphere_residual", 1e-6),
+    )
+    if limits.max_kink_deg is not None and limits.max_kink_deg >= 180:
+        t.fail("max_kink_deg", f"must lie below 180 degrees, got {limits.max_kink_deg:g}")
+    if limits.min_coverage is not None and limits.min_coverage > 1:
+        t.fail("min_coverage", f"is a fraction of the design's area, at most 1; got "
+               f"{limits.min_coverage:g}")
+    lo, hi = limits.min_strip_radius_mm, limits.max_strip_radius_mm
+    if lo is not None and hi is not None and lo > hi:
+        t.fail("min_strip_radius_mm", f"({lo:g}) is larger than max_strip_radius_mm ({hi:g})")
+    t.done()
+    return limits
+
+
+def _strips(t: _Table) -> StripOptions:
+    sheet = t.get("sheet_mm", [2500.0, 1250.0])
+    if (not isinstance(sheet, list) or len(sheet) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
+                       for v in sheet)):
+        t.fail("sheet_mm", f"must be [width, height] in mm, got {sheet!r}")
+    nets = t.get("nets", "auto")
+    if isinstance(nets, list):
+        for net in nets:
+            if net not in NETS:
+                t.fail("nets", f"names an unknown net type {net!r}" + _suggest(net, NETS))
+        nets = tuple(nets)
+    elif nets not in ("auto", "all"):
+        t.fail("nets", f"must be \"auto\", \"all\" or a list of net types, got {nets!r}")
+    options = StripOptions(height_mm=t.number("height_mm", required=True, unit="mm"),
+                           thickness_mm=t.number("thickness_mm", required=True, unit="mm"),
+                           sheet_mm=(float(sheet[0]), float(sheet[1])), nets=nets,
+                           congruence_tolerance_mm=t.number("congruence_tolerance_mm", 0.1,
+                                                            unit="mm"))
+    t.done()
+    return options
+
+
+def _cost(t: _Table) -> CostWeights:
+    defaults = CostWeights()
+    weights = {key: t.number(key, getattr(defaults, key), positive=False)
+               for key in defaults.__dataclass_fields__}
+    for key, value in weights.items():
+        if value < 0:
+            t.fail(key, f"must not be negative, got {value:g}")
+    t.done()
+    return CostWeights(**weights)
+
+
+def _values(t: _Table, key: str, unit: str) -> list:
+    """A parameter as a list of values: a number, "free", a list, or {from, to, step}."""
+    value = t.get(key)
+    if value is None or value == "free":
+        return [None]
+    if isinstance(value, dict):
+        sweep = _Table(value, f"{t.where}.{key}", t.file)
+        lo = sweep.number("from", required=True, unit=unit)
+        hi = sweep.number("to", required=True, unit=unit)
+        step = sweep.number("step", required=True, unit=unit)
+        sweep.done()
+        if hi < lo:
+            t.fail(key, f"sweeps from {lo:g} down to {hi:g}: 'to' must not be below 'from'")
+        count = int(math.floor((hi - lo) / step + 1e-9)) + 1
+        if count > 50:
+            t.fail(key, f"sweep has {count} values; at most 50")
+        return [round(lo + i * step, 9) for i in range(count)]
+    items = value if isinstance(value, list) else [value]
+    out = []
+    for v in items:
+        if v == "free":
+            out.append(None)
+        elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0:
+            out.append(float(v))
+        else:
+            t.fail(key, f"must be \"free\", a positive number ({unit}), a list of them or "
+                   f"{{ from = .., to = .., step = .. }}; got {v!r}")
+    return out
+
+
+def _candidates(value, file: str) -> tuple:
+    baseline = Candidate("baseline", "snet", baseline=True)
+    if value == "auto":
+        value = [{"net": "auto"}]
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise InputError(f"{file}: candidates must be \"auto\" or a list of [[candidates]] tables")
+    out: list[Candidate] = [baseline]
+    for i, entry in enumerate(value):
+        t = _Table(entry, f"candidates[{i}]", file)
+        net = t.text("net", required=True, choices=(*NETS, "auto"))
+        if net == "auto":
+            t.done()
+            out += [Candidate(_name(n, a, r), n, a, r) for n, a, r in AUTO_CANDIDATES]
+            continue
+        preset = get_net(net)
+        if preset.dual:
+            t.fail("net", f"is the S*-net type {net!r}: studies lay out S-nets on the design; "
+                   "optimize an S*-net from a study's net with `fabplan optimize`")
+        angles = _values(t, "angle", "degrees")
+        radii = _values(t, "radius", "model units")
+        label = t.text("name")
+        start = t.number("start_angle", unit="degrees")
+        if start is not None and not 0 < start < 180:
+            t.fail("start_angle", f"must lie strictly between 0 and 180 degrees, got {start:g}")
+        t.done()
+        if angles != [None] and preset.angle != "param":
+            t.fail("angle", f"does not apply to net type {net!r} (its angle is "
+                   f"{'90 degrees' if preset.angle == 'right' else 'not constrained'})")
+        if radii != [None] and preset.radius != "param":
+            t.fail("radius", f"does not apply to net type {net!r}")
+        for a in angles:
+            if a is not None and not 0 < a <= 90:
+                t.fail("angle", f"must lie in (0, 90] degrees, got {a:g}: an isogonal net of "
+                       f"angle a is the same net as one of 180 - a with the families swapped "
+                       f"(ask for {180 - a:g})" if 90 < a < 180 else
+                       f"must lie in (0, 90] degrees, got {a:g}")
+        sweep = len(angles) * len(radii) > 1
+        for a in angles:
+            for r in radii:
+                name = _name(net, a, r) if (label is None or sweep) else label
+                if label is not None and sweep:
+                    name = label + name[len(net):]
+                out.append(Candidate(name, net, a, r, start_angle=start))
+    names = [c.name for c in out]
+    for c in out:
+        if names.count(c.name) > 1:
+            raise InputError(f"{file}: two candidates are both called {c.name!r}; give them "
+                             "different names (candidates[].name)")
+    return tuple(out)
+
+
+def _name(net: str, angle: float | None, radius: float | None) -> str:
+    name = net
+    if angle is not None:
+        name += f"-{angle:g}"
+    if radius is not None:
+        name += f"-r{radius:g}"
+    return name
+
+
+# ---------------------------------------------------------------------------- templates
+def templates_folder() -> Path:
+    """The folder of the bundled study templates (``templates/`` of the project)."""
+    from importlib.util import find_spec
+
+    try:
+        spec = find_spec("fabplan.templates")
+    except ModuleNotFoundError:
+        spec = None
+    for location in (spec.submodule_search_locations or []) if spec else []:
+        if Path(location).is_dir():
+            return Path(location)
+    return Path(__file__).resolve().parents[2] / "templates"
+
+
+def template_names() -> list:
+    """Names of the bundled templates (``templates/NAME.toml``), sorted."""
+    return sorted(p.stem for p in templates_folder().glob("*.toml"))
+
+
+def template_path(name: str) -> Path:
+    """The study file of a bundled template.
+
+    Raises
+    ------
+    InputError
+        For an unknown template name (the message lists the known ones).
+    """
+    path = templates_folder() / f"{name}.toml"
+    if not path.is_file():
+        names = template_names()
+        raise InputError(f"unknown template {name!r}; templates: {', '.join(names)}"
+                         + _suggest(name, names))
+    return path
+
+
+def template_summary(name: str) -> str:
+    """The one-line description of a template (its ``study.description``)."""
+    data = tomllib.loads(template_path(name).read_text(encoding="utf-8"))
+    text = str(data.get("study", {}).get("description", ""))
+    return text.split(". ")[0].rstrip(".")
+
+
+def resolve_study(source: str) -> Path:
+    """A study file path from a path or a template name (a folder of the same name, such as
+    an earlier study's output, does not hide the template)."""
+    path = Path(source)
+    if path.suffix.lower() == ".toml" or path.is_file():
+        return path
+    if path.is_dir() and source not in template_names():
+        raise InputError(f"{source}: a folder, not a study file (a .toml file or a template "
+                         f"name: {', '.join(template_names())})")
+    return template_path(source)
+
+
+def copy_template(name: str, destination: str | Path) -> list:
+    """Copy a template (and the files it refers to beside it) to start a new study.
+
+    Returns
+    -------
+    list of Path written. Refuses to overwrite an existing file.
+    """
+    from ..io.output import write_texts
+
+    source = template_path(name)
+    folder = str(destination).endswith(("/", os.sep)) or Path(destination).is_dir()
+    destination = Path(destination)
+    if folder:
+        destination = destination / source.name
+    elif destination.suffix.lower() != ".toml":
+        destination = destination.with_suffix(".toml")
+    study = read_study(source)
+    files = {destination: source.read_text(encoding="utf-8")}
+    referenced = [Path(study.design.source)] if Path(study.design.source).is_file() else []
+    referenced += [Path(v.split("=", 1)[1]) for v in study.design.source.split(":", 1)[-1].split(",")
+                   if "=" in v and Path(v.split("=", 1)[1]).is_file()]
+    for path in referenced:
+        files[destination.parent / path.name] = path.read_text(encoding="utf-8")
+    for path in files:
+        if path.exists():
+            raise InputError(f"{path}: exists; refusing to overwrite it")
+    write_texts(files)
+    return list(files)

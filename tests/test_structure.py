@@ -1,0 +1,174 @@
+"""The package reads as its data flow: imports run down the stages, with no circles, no
+underscored names taken from another module, and no side effects at import time."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "fabplan"
+
+# top of the flow first: a stage may import the stages after it, never one before it
+STAGES = ["cli", "study", "fabricate", "layout", "design", "solve", "net", "report", "io", "errors"]
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _in_type_checking(node: ast.AST, parents: dict) -> bool:
+    while node in parents:
+        node = parents[node]
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            return True
+    return False
+
+
+def _imports(path: Path) -> list[tuple[str, list[str], int]]:
+    """(module, names, line) of every fabplan import in a file, lazy ones included, those
+    only for type checkers left out."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+    package = _module_name(path) if path.name == "__init__.py" else _module_name(path).rsplit(".", 1)[0]
+    found = []
+    for node in ast.walk(tree):
+        if _in_type_checking(node, parents):
+            continue
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            if module.split(".")[0] == "fabplan":
+                found.append((module, [a.name for a in node.names], node.lineno))
+        elif isinstance(node, ast.Import):
+            found += [(a.name, [], node.lineno) for a in node.names if a.name.split(".")[0] == "fabplan"]
+    return found
+
+
+MODULES = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+def _target(module: str, name: str) -> str:
+    """The module an imported name refers to (a submodule, or the module itself)."""
+    return f"{module}.{name}" if f"{module}.{name}" in MODULES else module
+
+
+def _graph() -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {m: set() for m in MODULES}
+    for module, path in MODULES.items():
+        for target, names, _ in _imports(path):
+            for t in {_target(target, n) for n in names} or {target}:
+                if t in MODULES and t != module:
+                    graph[module].add(t)
+    return graph
+
+
+def _stage(module: str) -> str:
+    return module.split(".")[1] if "." in module else "fabplan"
+
+
+def test_no_import_cycle():
+    graph = _graph()
+    state: dict[str, int] = {}
+    cycles = []
+
+    def visit(m, stack):
+        state[m] = 1
+        for t in sorted(graph[m]):
+            if state.get(t) == 1:
+                cycles.append(stack[stack.index(t):] + [t])
+            elif t not in state:
+                visit(t, stack + [t])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state and m != "fabplan":   # the package re-exports lazily
+            visit(m, [m])
+    assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_no_underscored_name_from_another_module():
+    taken = [f"{_module_name(p)}:{line} takes {n} from {module}"
+             for p in MODULES.values() for module, names, line in _imports(p)
+             for n in names if n.startswith("_") and not n.endswith("__") and module != _module_name(p)]
+    assert not taken, "\n".join(taken)
+
+
+def test_imports_run_down_the_stages():
+    upward = []
+    for module, targets in _graph().items():
+        if module == "fabplan":
+            continue
+        here = STAGES.index(_stage(module))
+        for t in targets:
+            if t != "fabplan" and STAGES.index(_stage(t)) < here:
+                upward.append(f"{module} imports {t}")
+    assert not upward, "\n".join(sorted(upward))
+
+
+def test_every_stage_is_a_folder_with_its_rules():
+    for stage in STAGES:
+        folder = PACKAGE / stage
+        if folder.is_dir():
+            doc = ast.get_docstring(ast.parse((folder / "__init__.py").read_text()))
+            assert doc and ("May import" in doc or stage == "io"), \
+                f"{stage}/__init__.py says what it may import"
+    loose = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert loose == ["__init__.py", "cli.py", "errors.py"]
+
+
+@pytest.mark.parametrize("statement", ["import fabplan", "import fabplan.cli",
+                                       "import fabplan.study.report", "import fabplan.layout.picture"])
+def test_import_has_no_side_effects(statement):
+    """No backend switching, no umask change, no pyplot: a Jupyter or Rhino host keeps its own."""
+    code = ("import os, sys\nmask = os.umask(0o027)\n"
+            f"{statement}\n"
+            "assert os.umask(0o027) == 0o027, 'umask changed'\n"
+            "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'\n"
+            "assert 'ezdxf' not in sys.modules or '" + statement + "' != 'import fabplan'\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_import_fabplan_stays_light():
+    """``import fabplan`` loads none of the heavy libraries; they come with their stage."""
+    code = ("import sys, fabplan\n"
+            "heavy = [m for m in ('ezdxf', 'igl', 'shapely', 'trimesh', 'matplotlib', 'scipy') "
+            "if m in sys.modules]\n"
+            "assert not heavy, heavy\n"
+            "assert fabplan.QuadMesh.__module__ == 'fabplan.net.mesh'\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_figures_leave_pyplot_alone(tmp_path):
+    """Drawing a report picture neither imports pyplot nor changes the backend."""
+    code = ("import sys\n"
+            "from fabplan.report import figures\n"
+            "fig = figures.new_figure((2, 2)); ax = fig.subplots(); ax.plot([0, 1], [0, 1])\n"
+            "uri = figures.figure_to_data_uri(fig)\n"
+            "assert uri.startswith('data:image/png;base64,') and len(uri) > 200\n"
+            "assert 'matplotlib.pyplot' not in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    switching = [f"{_module_name(p)}:{node.lineno}" for p in MODULES.values()
+                 for node in ast.walk(ast.parse(p.read_text(encoding="utf-8")))
+                 if (isinstance(node, ast.Call) and ast.unparse(node.func) in ("matplotlib.use", "os.umask"))
+                 or (isinstance(node, (ast.Import, ast.ImportFrom))
+                     and "pyplot" in ast.unparse(node))]
+    assert not switching, "backend, umask or pyplot in the library: " + ", ".join(switching)
+
+
+def test_every_public_name_resolves():
+    import fabplan
+
+    lazy = set(fabplan.__all__) - {"FabplanError", "InputError", "SolverError", "data_path"}
+    assert lazy == set(fabplan._EXPORTS)
+    for name in fabplan.__all__:
+        assert getattr(fabplan, name) is not None
