@@ -191,6 +191,7 @@ def test_floors_given_as_polylines(tmp_path):
     assert np.abs(z - 3.0 * level[on_floor] / per_floor).max() <= 0.01
 
 
+@pytest.mark.slow
 def test_umbilics_give_irregular_vertices_in_the_layout_and_the_report(tmp_path, capsys):
     out = tmp_path / "dome.obj"
     code = main(["layout", "paraboloid:radius_x=10,radius_y=14,width=8,depth=8",
@@ -452,6 +453,7 @@ def _layout_cli(out: Path, capsys, *args: str) -> tuple[dict, QuadMesh, str]:
     return json.loads(out.with_suffix(".json").read_text())["properties"], QuadMesh.from_obj(out), err
 
 
+@pytest.mark.slow
 def test_low_coverage_is_measured_and_warned_about(tmp_path, capsys):
     """A dome whose apex is a rotationally symmetric umbilic: the S-net's spirals close in
     on it and leave a hole; the net's share of the design is measured and reported."""
@@ -534,6 +536,7 @@ def test_fast_turning_principal_directions_are_found_and_reported():
     assert len(layout_surface(calm, 1.0, angle=70.0).turning_points) == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("panel", [1.0, 0.6])
 def test_a_facade_with_near_umbilics_gets_an_orthogonal_snet(tmp_path, panel):
     """Across the near-umbilics of the wavy facade the principal directions turn by a

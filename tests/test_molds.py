@@ -185,6 +185,7 @@ def test_wein99_report_files_agree_and_embed_their_pictures(wein99_run):
 
 
 # ----------------------------------------------------------------------------- not Weingarten
+@pytest.mark.slow
 def test_a_freeform_of_the_same_size_needs_several_times_the_molds(wein99_run, wein99):
     wein = json.loads((wein99_run[1] / "molds.json").read_text())
     freeform = wein99.with_vertices(wein99.vertices * STRETCH)
@@ -278,6 +279,7 @@ def test_panels_the_coarse_assignment_misjudged_are_caught_by_the_dense_verifica
 
 
 # ----------------------------------------------------------------------------- failures
+@pytest.mark.slow
 def test_panels_larger_than_the_largest_mold_are_reported_not_hidden(tmp_path, capsys):
     net_path = tmp_path / "cyl.obj"
     cylinder_helical(radius=5.0, n=6).write_obj(net_path)

@@ -161,6 +161,7 @@ def test_anet_strips_unroll_straight(anet):
             assert dev.max() > 10 * LENGTH_TOL_MM
 
 
+@pytest.mark.slow
 def test_anet_parts_are_straight_in_the_dxf(anet, tmp_path):
     plan = plan_strips(anet, _settings())
     files = plan.write(tmp_path, previews=False)
@@ -203,6 +204,7 @@ def _flatten(entity) -> np.ndarray:
     return np.array([(v.x, v.y) for v in dxfpath.make_path(entity).flattening(0.01)])
 
 
+@pytest.mark.slow
 def test_every_dxf_reads_back_clean(text_run, stroke_run):
     for plan, _, files in (text_run, stroke_run):
         W, H = plan.strips.settings.sheet_mm
@@ -334,6 +336,7 @@ def test_slits_sit_at_the_crossing_arc_length_on_both_strips(text_run, const_net
             assert from_top == strip_id.startswith("A")
 
 
+@pytest.mark.slow
 def test_slit_width_and_outline_height_follow_the_kerf(const_net, tmp_path):
     kerf = 0.3
     plan = plan_strips(const_net, _settings(kerf_mm=kerf, spacing_mm=12))
@@ -397,6 +400,7 @@ def test_round_ends_are_semicircles_in_the_dxf(stroke_run):
     assert caps == 2 * len(stroke_run[0].strips.strips)
 
 
+@pytest.mark.slow
 def test_schedule_lists_every_strip_with_its_sheets(text_run):
     plan, out, _ = text_run
     lines = (out / "strips.csv").read_text().splitlines()
@@ -417,6 +421,7 @@ def test_schedule_lists_every_strip_with_its_sheets(text_run):
     assert sorted(record["files"]) == sorted(f.name for f in out.iterdir())
 
 
+@pytest.mark.slow
 def test_labels_as_outlines_and_one_file(const_net, tmp_path):
     plan = plan_strips(const_net, _settings(labels="outline", one_file=True))
     files = plan.write(tmp_path, previews=False)
@@ -431,6 +436,7 @@ def test_labels_as_outlines_and_one_file(const_net, tmp_path):
     assert doc.layers.get("SHEET").dxf.plot == 0
 
 
+@pytest.mark.slow
 def test_custom_layers(const_net, tmp_path):
     layers = {"cut": ("LASER_CUT", 2), "slit": ("LASER_SLOT", 3), "engrave": ("MARK", 4)}
     plan = plan_strips(const_net, _settings(layers=layers))
@@ -516,6 +522,7 @@ def test_librecad_converts_a_sheet(text_run, tmp_path):
 
 
 # ---------------------------------------------------------------------- CLI and bad input
+@pytest.mark.slow
 def test_cli_writes_the_strip_files(const_net, tmp_path, capsys):
     net = tmp_path / "net.obj"
     const_net.write_obj(net)

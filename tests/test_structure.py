@@ -4,6 +4,7 @@ underscored names taken from another module, and no side effects at import time.
 from __future__ import annotations
 
 import ast
+import functools
 import subprocess
 import sys
 from pathlib import Path
@@ -31,6 +32,7 @@ def _in_type_checking(node: ast.AST, parents: dict) -> bool:
     return False
 
 
+@functools.cache
 def _imports(path: Path) -> list[tuple[str, list[str], int]]:
     """(module, names, line) of every fabplan import in a file, lazy ones included, those
     only for type checkers left out."""
@@ -62,6 +64,7 @@ def _target(module: str, name: str) -> str:
     return f"{module}.{name}" if f"{module}.{name}" in MODULES else module
 
 
+@functools.cache
 def _graph() -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {m: set() for m in MODULES}
     for module, path in MODULES.items():

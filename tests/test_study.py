@@ -351,6 +351,7 @@ def test_the_report_embeds_a_picture_per_candidate(study_run):
     assert len(csv_rows) == 1 + len(record["candidates"])
 
 
+@pytest.mark.slow
 def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, capsys):
     """Lower max_deviation_mm below what const-radius measured: it alone becomes
     infeasible, because of its deviation; the numbers stay the same (deterministic)."""
@@ -380,6 +381,7 @@ def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, 
     assert again["recommended"] != "const-radius"
 
 
+@pytest.mark.slow
 def test_a_failing_candidate_is_reported_and_the_study_goes_on(monkeypatch):
     import importlib
 

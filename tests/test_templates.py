@@ -31,6 +31,9 @@ from fabplan.cli import main
 from fabplan.design.load import load_design
 from fabplan.study.spec import read_study, template_names, template_path
 
+# every template study runs for 10 to 90 s: the full suite runs them, `-m "not slow"` does not
+pytestmark = pytest.mark.slow
+
 
 def _run(name: str, folder) -> dict:
     assert main(["study", name, "-o", str(folder), "-q"]) == 0
