@@ -84,10 +84,11 @@ def _solver_options(args) -> tuple:
 
 
 def _warn_not_converged(result, json_path: Path) -> None:
-    stopped = ("stopped at the iteration cap" if result.status == "iteration cap" else
-               f"stopped ({result.status})")
-    print(f"fabplan: warning: the optimization {stopped} before reaching the tolerance; see "
-          f"the residuals in {json_path}", file=sys.stderr)
+    what = {"iteration cap": "stopped at the iteration cap", "folded": "ended folded",
+            "degenerate": "ended degenerate"}.get(
+        result.status, f"stopped ({result.status})")
+    print(f"fabplan: warning: the optimization {what}: {result.message} (details in {json_path})",
+          file=sys.stderr)
 
 
 def _reference(spec: str | None):
@@ -116,7 +117,7 @@ def _cmd_optimize(args) -> int:
 
     result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                       reference=reference, fixed=fixed, handles=handles, settings=settings,
-                      coherent=args.coherent, progress=progress)
+                      coherent=args.coherent, guards=args.guards, progress=progress)
     obj_path, json_path = result.write(out)
     print(format_summary(result.properties))
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items()
@@ -434,6 +435,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "of 'ID X Y Z' lines")
     p.add_argument("--coherent", action="store_true",
                    help="keep all Meusnier spheres on one side of the surface")
+    guards = p.add_mutually_exclusive_group()
+    guards.add_argument("--guards", dest="guards", action="store_const", const=True,
+                        help="solve with the guards against folding from the start (face normals "
+                             "within 75 deg of the reference's, star angles within 15..165 deg); "
+                             "by default they are added only when a first solve folds")
+    guards.add_argument("--no-guards", dest="guards", action="store_const", const=False,
+                        help="never add the guards against folding")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")

@@ -317,12 +317,13 @@ def test_failed_json_write_leaves_no_obj(tmp_path, capsys, cmc_copy):
 # ---------------------------------------------------------------------------- solver failure
 
 
-def test_absurd_radius_diverges_cleanly(tmp_path, capsys, cmc_copy):
+def test_absurd_radius_is_refused_cleanly(tmp_path, capsys, cmc_copy):
+    """No sphere through a star can be smaller than half its edges: refused before solving."""
     before = _snapshot(tmp_path)
     code = main(["optimize", str(cmc_copy), "--net", "cmc", "--radius", "1e-3",
                  "-o", str(tmp_path / "out.obj"), "-q"])
-    err = _assert_refused(code, capsys, before, tmp_path, "diverged")
-    assert re.search(r"iteration \d+", err)
+    err = _assert_refused(code, capsys, before, tmp_path, "smaller than half the edges")
+    assert re.search(r"\(\d+\.\d+\)", err)
 
 
 def test_non_finite_residuals_diverge_cleanly(tmp_path, capsys, cmc_copy, monkeypatch):

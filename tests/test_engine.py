@@ -144,7 +144,7 @@ def test_repeated_runs_fade_soft_terms_per_step(wein99):
     steps = [h for h in solver.history if h.step > 0]
     assert len(steps) == 3
     fade = solver.settings.fade
-    assert solver._weights(len(steps))["fairness"] == pytest.approx(
+    assert solver.soft_weights(len(steps))["fairness"] == pytest.approx(
         solver.settings.fairness_weight * fade**3)
 
 

@@ -27,12 +27,14 @@ from fabplan.solve.constraints import (
     Fairness,
     FamilyLevels,
     MannheimTangency,
+    NormalCone,
     NormalNormalization,
     PlanarFaces,
     PlaneNormalization,
     RulingAngle,
     SphereCondition,
     SphereNormalization,
+    StarAngleRange,
 )
 from fabplan.solve.reference import ReferenceSurface
 from fabplan.solve.solver import GuidedProjection
@@ -78,6 +80,8 @@ FAMILIES = {
     "ruling-angle-orthogonal": lambda: [ContactNormals(), RulingAngle(0.0)],
     "ruling-angle-prescribed": lambda: [ContactNormals(), RulingAngle(math.cos(math.radians(80)))],
     "ruling-angle-free": lambda: [ContactNormals(), RulingAngle(None)],
+    "normal-cone": lambda: [NormalCone(_reference(), 30.0)],
+    "star-angle-range": lambda: [StarAngleRange(60.0)],
 }
 
 

@@ -150,3 +150,13 @@ def test_staging_of_a_killed_run_is_removed_by_the_next_one(tmp_path):
     assert not stale.exists() and alive.exists()
     assert (tmp_path / "out" / "x.txt").read_text() == "x"
     assert remove_stale_staging(tmp_path) == []
+
+
+def test_relative_paths_are_written_in_the_working_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "out.txt").write_text("earlier")
+    write_texts({"out.txt": "new", "sub/x.txt": "x"})
+    assert (tmp_path / "out.txt").read_text() == "new"
+    assert (tmp_path / "sub" / "x.txt").read_text() == "x"
+    with pytest.raises(InputError, match="is not a folder"):
+        check_output_file("out.txt/inside.txt")

@@ -59,11 +59,14 @@ def _special_kind(path: Path) -> str | None:
 
 
 def _check_creatable(path: Path) -> None:
-    """Refuse `path` when its nearest existing ancestor is not a writable folder."""
-    probe = existing_ancestor(path.parent if not path.exists() else path)
-    if probe != path and not probe.is_dir():
-        raise InputError(f"{path}: cannot write there ({probe} is not a folder)")
-    folder = probe if probe.is_dir() else probe.parent
+    """Refuse `path` when the folder a run would write it into is not a writable folder."""
+    path = Path(os.path.abspath(path))
+    if path.exists():
+        folder = path if path.is_dir() else path.parent
+    else:
+        folder = existing_ancestor(path)
+        if not folder.is_dir():
+            raise InputError(f"{path}: cannot write there ({folder} is not a folder)")
     if not os.access(folder, os.W_OK):
         raise InputError(f"{path}: cannot write there ({folder} is not writable)")
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .folds import measure_folds
 from .geometry import (
     canonical_stars,
     face_planarity,
@@ -38,12 +39,14 @@ def measure_net(mesh, *, reference=None) -> dict:
     Parameters
     ----------
     mesh : `fabplan.mesh.QuadMesh`
-    reference : optional `fabplan.reference.ReferenceSurface` to measure the distance to.
+    reference : optional reference surface (`fabplan.solve.reference.ReferenceSurface` or a
+        design surface's) to measure the distance to, and to judge flipped faces against.
 
     Returns
     -------
     dict, JSON-ready. Lengths are in model units; ``*_relative`` values are divided by the
-    mean edge length; angles are in degrees.
+    mean edge length; angles are in degrees; ``folds`` holds the counts and element ids
+    of `fabplan.net.folds.measure_folds`.
     """
     X = mesh.vertices
     L = mesh.mean_edge_length
@@ -84,6 +87,7 @@ def measure_net(mesh, *, reference=None) -> dict:
         d = reference.distances(X)
         record["distance_to_reference"] = _stats(d)
         record["distance_to_reference_relative"] = _stats(d / L)
+    record["folds"] = measure_folds(mesh, reference=reference).record()
     return record
 
 
@@ -123,4 +127,11 @@ def format_summary(record: dict) -> str:
     if "distance_to_reference" in record:
         d = record["distance_to_reference"]
         lines.append(f"distance to reference: max {_fmt(d, 'max', '.3e')}, mean {_fmt(d, 'mean', '.3e')}")
+    folds = record.get("folds")
+    if folds:
+        counts = [(folds["flipped_faces"]["count"], "flipped faces"),
+                  (folds["fold_edges"]["count"], "fold edges"),
+                  (folds["degenerate_stars"]["count"], "degenerate stars"),
+                  (folds["collapsed_edges"]["count"], "collapsed edges")]
+        lines.append("folds: " + (", ".join(f"{n} {what}" for n, what in counts if n) or "none"))
     return "\n".join(lines)

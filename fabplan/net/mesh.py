@@ -231,11 +231,22 @@ class QuadMesh:
         return np.unique(pairs, axis=0)
 
     @cached_property
+    def _interior_corners(self) -> np.ndarray:
+        c = self._corners
+        return np.flatnonzero(c["twin"] > np.arange(len(c["twin"])))
+
+    @cached_property
     def interior_edge_faces(self) -> np.ndarray:
         """(i, 2) int, the two faces on either side of every interior edge."""
-        c = self._corners
-        corner = np.flatnonzero(c["twin"] > np.arange(len(c["twin"])))
+        c, corner = self._corners, self._interior_corners
         return np.stack([c["face"][corner], c["face"][c["twin"][corner]]], axis=1)
+
+    @cached_property
+    def interior_edges(self) -> np.ndarray:
+        """(i, 2) int, the vertices of every interior edge, in the order of
+        `interior_edge_faces`."""
+        c, corner = self._corners, self._interior_corners
+        return np.stack([c["vert"][corner], c["nxt"][corner]], axis=1)
 
     @cached_property
     def mean_edge_length(self) -> float:

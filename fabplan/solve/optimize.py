@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -14,7 +14,15 @@ from ..errors import InputError, SolverError
 from ..io.obj import format_obj
 from ..io.output import write_texts
 from ..io.records import json_text
-from ..net.geometry import canonical_stars, fit_mannheim_spheres, fit_star_spheres, vertex_contact_normals
+from ..net.folds import fold_edge_mask, measure_folds
+from ..net.geometry import (
+    canonical_stars,
+    face_normals,
+    fit_mannheim_spheres,
+    fit_star_spheres,
+    intersection_angles,
+    vertex_contact_normals,
+)
 from ..net.measure import measure_net
 from ..net.mesh import QuadMesh
 from .constraints import (
@@ -26,7 +34,9 @@ from .constraints import (
     ConstantMannheimRadius,
     EdgeCollapseBarrier,
     Fairness,
+    NormalCone,
     RulingAngle,
+    StarAngleRange,
 )
 from .net_types import get_net, net_constraints
 from .reference import ReferenceSurface
@@ -57,9 +67,11 @@ class OptimizationResult:
     history: list = field(default_factory=list)
     properties: dict = field(default_factory=dict)
     linear_solver: str = ""    # the sparse backend that solved the normal equations
+    message: str = ""          # what stood in the way when not converged, and what to try
 
     @property
     def converged(self) -> bool:
+        """Hard residuals within tolerance and no fold (see `fabplan.net.folds`)."""
         return self.status == "converged"
 
     def record(self) -> dict:
@@ -68,6 +80,7 @@ class OptimizationResult:
             "net": self.net,
             "parameters": self.parameters,
             "status": self.status,
+            "message": self.message,
             "iterations": self.iterations,
             "seconds": self.seconds,
             "linear_solver": self.linear_solver,
@@ -125,10 +138,11 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
                  fairness: bool = True, coherent: bool = False,
                  closeness: bool = True, glide: bool = False,
                  glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
-                 extra: tuple = ()) -> GuidedProjection:
+                 extra: tuple = (), guards: bool = False) -> GuidedProjection:
     """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
     check_net_input(mesh)
     preset = get_net(net)
+    check_radius_fits(mesh, radius, dual=preset.dual)
     families = net_constraints(preset, angle_deg=angle, radius=radius,
                                length_scale=mesh.mean_edge_length,
                                curvature_sign=sphere_side(mesh, dual=preset.dual))
@@ -149,11 +163,56 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
             families.append(BoundaryGliding(curves, glide_boundary))
     elif closeness:
         families.append(Closeness(reference))
+    if guards:
+        families += [NormalCone(reference, GUARD_CONE_DEG), StarAngleRange(GUARD_STAR_ANGLE_DEG)]
     families += list(extra)
-    solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings)
+    solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings,
+                              admissible=_admissible(mesh, families))
     solver.net = preset.name
     solver.reference = reference
     return solver
+
+
+# the guards added against folding (`fabplan.solve.constraints.guards`)
+GUARD_CONE_DEG = 75.0        # face normals within this angle of the reference normal
+GUARD_STAR_ANGLE_DEG = 15.0  # the families of a star at least this far apart
+
+
+def check_radius_fits(mesh: QuadMesh, radius: float | None, *, dual: bool = False) -> None:
+    """Refuse a prescribed Meusnier radius no sphere through a star can have.
+
+    A sphere through a vertex and a neighbour at distance d has a radius of at least d / 2.
+    """
+    if radius is None or dual:
+        return
+    E = mesh.edges
+    shortest = 0.5 * float(np.median(np.linalg.norm(mesh.vertices[E[:, 0]] - mesh.vertices[E[:, 1]],
+                                                    axis=1)))
+    if radius < shortest:
+        raise InputError(f"--radius {radius:g} is smaller than half the edges of {mesh.name} "
+                         f"({shortest:.4g}): no sphere of that radius passes through a vertex "
+                         "and its neighbours; give a larger radius, or scale the net")
+
+
+def _admissible(mesh: QuadMesh, families: list):
+    """The solver's test of an iterate: no fold edge, and no farther from the reference
+    than at the start or one mean edge, whichever is more (when a closeness family says
+    how far the net is)."""
+    edge_faces = mesh.interior_edge_faces
+    closeness = next((f for f in families if isinstance(f, Closeness)), None)
+    allowed: list[float] = []
+
+    def admissible(state) -> bool:
+        if fold_edge_mask(face_normals(state.X, mesh), edge_faces).any():
+            return False
+        if closeness is None:
+            return True
+        far = float(closeness.distances(state).max(initial=0.0))
+        if not allowed:
+            allowed.append(max(far, 1.0))      # normalized units: 1 is the mean edge
+        return far <= allowed[0]
+
+    return admissible
 
 
 def sphere_side(mesh: QuadMesh, *, dual: bool = False) -> float:
@@ -209,9 +268,11 @@ def solver_normals(solver: GuidedProjection) -> np.ndarray | None:
 
 
 def unmet_constraints(solver: GuidedProjection) -> dict:
-    """Hard constraint families whose last measured residual is above the tolerance:
-    name -> max |residual| (mean edges for distances, cosines for angles)."""
+    """Hard constraint families whose residual on the net the solve ends with is above
+    the tolerance: name -> max |residual| (mean edges for distances, cosines for angles)."""
     last = solver.history[-1].residuals if solver.history else {}
+    if solver.status != "converged" and solver.best is not None:
+        last = solver.best.residuals       # a solve that stops short ends at its best
     hard = {c.name for c in solver.constraints if c.hard}
     tol = solver.settings.tolerance
     return {name: r for name, r in last.items() if name in hard and r > tol}
@@ -228,14 +289,15 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              settings: SolverSettings | None = None, fairness: bool = True,
              coherent: bool = False, closeness: bool = True, glide: bool = False,
              glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
-             extra: tuple = (), progress: Callable[[IterationRecord], None] | None = None
+             extra: tuple = (), guards: bool | None = None,
+             progress: Callable[[IterationRecord], None] | None = None
              ) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
 
     Parameters
     ----------
     mesh : the starting quad mesh.
-    net : a name from `fabplan.nets.NETS`.
+    net : a name from `fabplan.solve.net_types.NETS`.
     angle : prescribed intersection angle in degrees (isogonal types).
     radius : prescribed Meusnier radius in model units (constant-radius types).
     reference : surface to stay close to; defaults to the input mesh itself.
@@ -255,48 +317,153 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     surface_tolerance : with `glide`, how far the vertices may leave the reference
         (model units; 0 holds them on it).
     extra : further constraint families to solve with (e.g. prescribed levels).
+    guards : the constraints against folding (`fabplan.solve.constraints.guards`): face
+        normals within 75 degrees of the reference's, star angles within 15 to 165
+        degrees. None (default): solve without them and, when that net folds, solve again
+        from the start with them, keeping the better result; True: from the start; False:
+        never.
     progress : called after every iteration with its record.
 
     Returns
     -------
-    OptimizationResult, with the properties measured on the result.
+    OptimizationResult, with the properties measured on the result. Its status is
+    "converged" (hard residuals within tolerance, no fold, no degenerate star or collapsed
+    edge), "folded" or "degenerate" (within tolerance, but folded, or with stars whose
+    lines run together or edges collapsed: `fabplan.net.folds`), "stagnated" or
+    "iteration cap" (stopped short: the net is the best iterate, fold-free and near the
+    reference where one was reached); `message` says what stood in the way.
 
     Raises
     ------
     SolverError
         When handles ask for a net the constraints cannot reach (the message names the
-        constraint families left unmet and their residuals), or the solver diverges.
+        constraint families left unmet and their residuals), or the residuals are not
+        finite.
     """
     handle_ids, targets = _handle_arrays(handles, mesh)
     held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
-    solver = build_solver(mesh, net, angle=angle, radius=radius, reference=reference,
-                          fixed=held, settings=settings, fairness=fairness, coherent=coherent,
-                          closeness=closeness, glide=glide, glide_boundary=glide_boundary,
-                          surface_tolerance=surface_tolerance, extra=extra)
-    if handle_ids.size:
-        solver.set_vertices(handle_ids, targets)
-    status = solver.run(callback=progress)
-    if handle_ids.size and status != "converged":
-        raise SolverError(f"the handles ask for a net that cannot be reached ({status} after "
+    options = dict(angle=angle, radius=radius, reference=reference, fixed=held, settings=settings,
+                   fairness=fairness, coherent=coherent, closeness=closeness, glide=glide,
+                   glide_boundary=glide_boundary, surface_tolerance=surface_tolerance, extra=extra)
+    solver = build_solver(mesh, net, guards=bool(guards), **options)
+    _solve(solver, handle_ids, targets, progress)
+    folds = measure_folds(mesh, solver.vertices, reference=solver.reference)
+    if guards is None and (folds.folded or folds.degenerate):
+        retry = build_solver(mesh, net, guards=True, **options)
+        _solve(retry, handle_ids, targets, progress)
+        retry_folds = measure_folds(mesh, retry.vertices, reference=retry.reference)
+        if _rank(retry, retry_folds) < _rank(solver, folds):
+            solver, folds = retry, retry_folds
+    if handle_ids.size and solver.status != "converged":
+        raise SolverError(f"the handles ask for a net that cannot be reached ({solver.status} after "
                           f"{len(solver.history) - 1} iterations): "
                           f"{describe_unmet(unmet_constraints(solver))}")
     seconds = time.perf_counter() - start
     result_mesh = mesh.with_vertices(solver.vertices, normals=solver_normals(solver))
     parameters = {"angle_deg": angle, "radius": radius, **solved_parameters(solver),
                   "coherent": coherent, "fixed_vertices": int(len(solver.fixed)),
+                  "guards": any(isinstance(c, NormalCone) for c in solver.constraints),
                   "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)}}
+    status = solver.status
+    if status == "converged" and (folds.folded or folds.degenerate):
+        status = "folded" if folds.folded else "degenerate"
     return OptimizationResult(
         mesh=result_mesh,
         net=solver.net,
         parameters=parameters,
         status=status,
-        iterations=sum(1 for h in solver.history if h.step > 0),
+        iterations=solver.accepted_steps,
         seconds=seconds,
         linear_solver=solver.linear_solver,
         history=[h.as_dict() for h in solver.history],
         properties=measure_net(result_mesh, reference=solver.reference),
+        message=_explain(solver, status, folds, mesh, angle),
     )
+
+
+def _rank(solver: GuidedProjection, folds) -> tuple:
+    """Sort key of a finished solve: fold-free first, then converged, then residual."""
+    hard = solver.history[-1].hard_residual if solver.history else np.inf
+    return (folds.folded, folds.degenerate, solver.status != "converged", hard)
+
+
+# a prescribed angle this far (degrees) from the start's is reached in stages
+CONTINUATION_STEP_DEG = 10.0
+# each stage but the last is solved to this tolerance, in at most this many iterations
+STAGE_TOLERANCE, STAGE_ITERATIONS = 1e-4, 25
+
+
+def _solve(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarray,
+           progress: Callable[[IterationRecord], None] | None) -> None:
+    """Run the solver; a far target (an angle or handles far from the start) is moved
+    there in stages, each solved to a loose tolerance, the last to the full one."""
+    stages = _stages(solver, handle_ids, targets)
+    final = solver.settings
+    for k, apply in enumerate(stages):
+        apply()
+        if k == len(stages) - 1:
+            solver.settings = final
+        else:
+            solver.settings = replace(final, tolerance=max(final.tolerance, STAGE_TOLERANCE),
+                                      max_iterations=min(final.max_iterations, STAGE_ITERATIONS))
+        if k:
+            solver.restart_soft_terms()
+        solver.run(callback=progress)
+    solver.settings = final
+
+
+def _stages(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarray) -> list:
+    """The stages of a solve, as functions that set their targets on the solver: the
+    prescribed angle moved from the start's in steps of at most `CONTINUATION_STEP_DEG`,
+    then the handles moved in steps of at most one mean edge."""
+    stages: list = []
+    family = next((c for c in solver.constraints
+                   if isinstance(c, ConstantAngle) and c.cosine is not None), None)
+    if family is not None:
+        goal = float(np.degrees(np.arccos(np.clip(family.cosine, -1.0, 1.0))))
+        here = float(np.degrees(np.median(intersection_angles(solver.state.X, solver.state.stars))))
+        count = max(1, int(np.ceil(abs(goal - here) / CONTINUATION_STEP_DEG)))
+        for c in np.cos(np.radians(here + (goal - here) * np.arange(1, count + 1) / count)):
+            stages.append(lambda c=float(c): setattr(family, "cosine", c))
+    if handle_ids.size:
+        begin = solver.vertices[handle_ids]
+        far = float(np.linalg.norm(targets - begin, axis=1).max()) / solver.length_scale
+        count = int(min(10, max(1, np.ceil(far))))
+        for t in np.arange(1, count + 1) / count:
+            stages.append(lambda t=t: solver.set_vertices(handle_ids, begin + t * (targets - begin)))
+    return stages or [lambda: None]
+
+
+def _explain(solver: GuidedProjection, status: str, folds, start: QuadMesh,
+             angle: float | None) -> str:
+    """One line: what stood in the way of a converged net, and what to try."""
+    if status == "converged":
+        return ""
+    parts = []
+    if status in ("folded", "degenerate"):
+        parts.append(f"the constraints are met but {folds.describe()}")
+    else:
+        unmet = describe_unmet(unmet_constraints(solver))
+        parts.append(f"stopped ({status}) with {unmet or 'residuals above the tolerance'}")
+        best = solver.best
+        if best is not None and best.admissible:
+            parts.append("the net written is the best iterate, fold-free and near the reference")
+        if best is not None and best.iteration <= solver.run_start:
+            parts.append("no step improved on the start: it may be far from any net of this "
+                         "type, or the type may not exist on this surface")
+        if folds.folded or folds.degenerate:
+            parts.append(f"on the net written {folds.describe()}")
+    if angle is not None and len(start.stars):
+        here = float(np.degrees(np.median(intersection_angles(start.vertices,
+                                                              canonical_stars(start.vertices,
+                                                                              start.stars)))))
+        gap = min(abs(here - angle), abs(180.0 - here - angle))
+        if gap > 15.0:
+            parts.append(f"the requested angle is {gap:.0f} deg from the start's ({here:.0f} deg); "
+                         "try `fabplan layout` on the design, which starts from the right "
+                         "directions")
+    return "; ".join(parts)
 
 
 def _handle_arrays(handles: dict | None, mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray]:

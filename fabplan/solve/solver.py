@@ -1,6 +1,15 @@
 """The guided-projection solver (Algorithm 1): regularized Gauss-Newton on constraint families.
 
-Every iteration linearizes all residuals, solves ``(J^T J + eps I) h = -J^T r`` and steps.
+Every iteration linearizes all residuals, solves ``(J^T J + mu I) h = -J^T r`` and tries
+the step. The step is taken only when it lowers the merit function, the weighted sum of
+squares of all residuals (hard constraints and the current soft terms), by a fair share
+of what the linearization predicts (Levenberg-Marquardt with a gain ratio): otherwise the
+damping is raised and the step recomputed from the same factorization pattern. A step
+that lowers the merit as predicted lets the damping fall back towards its base value, so
+a solve that went well before goes the same way now. The solver keeps the best iterate
+(judged by a caller's test, e.g. fold-free and near the design, then by the hard
+residual) and returns to it when it stops short of the tolerance.
+
 The sparsity pattern of the normal equations is fixed for the whole run: it is analysed
 once, and each iteration only refills values (one `np.bincount`) and refactors numerically.
 Coordinates are normalized (centroid at the origin, mean edge length 1) so that weights,
@@ -10,7 +19,7 @@ tolerances and the regularization mean the same on every net.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -41,7 +50,15 @@ class SolverSettings:
     fade : factor applied to the soft weights after every step.
     stagnation : stop when the best hard residual has not improved by 10 % over this many
         iterations.
-    backend : linear solver backend (see `fabplan.linalg`).
+    backend : linear solver backend (see `fabplan.solve.linalg`).
+    max_rejections : how many times one iteration may raise its damping (by factors 2, 4,
+        8, ...) for a step that lowers the merit function, before the solve stops as
+        stagnated.
+    watchdog : Gauss-Newton steps may raise the hard residuals for this many steps; when
+        they have not come below their best by then, the solve returns to the best point
+        and continues with steps that must lower the merit function.
+    climb : a free Gauss-Newton step is refused at once when it raises the hard residuals'
+        sum of squares beyond this factor of the best.
     """
 
     max_iterations: int = 50
@@ -52,6 +69,9 @@ class SolverSettings:
     fade: float = 0.1
     stagnation: int = 15
     backend: str = "auto"
+    max_rejections: int = 12
+    watchdog: int = 15
+    climb: float = 1e8
 
 
 @dataclass
@@ -66,6 +86,9 @@ class IterationRecord:
     assembly_seconds: float = 0.0
     factor_seconds: float = 0.0
     solve_seconds: float = 0.0
+    merit: float = 0.0         # weighted sum of squares before the step (hard and soft terms)
+    rejected: int = 0          # trial steps rejected (damping raised) before this one
+    damping: float = 0.0       # damping of the accepted step
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -156,13 +179,16 @@ class GuidedProjection:
     constraints : list of `Constraint`, hard and soft families.
     fixed : (k,) int, vertices held at their positions.
     settings : `SolverSettings`.
+    admissible : a test of an iterate (its `NetState`, after `prepare`): iterates that pass
+        it are preferred as the best iterate (for example: no fold, near the design).
 
     The instance keeps its state between calls of `run`, so an interactive editor can run
     one iteration per drag step and reuse the symbolic factorization.
     """
 
     def __init__(self, mesh, constraints: list[Constraint], *, fixed=None,
-                 settings: SolverSettings | None = None):
+                 settings: SolverSettings | None = None,
+                 admissible: Callable[[NetState], bool] | None = None):
         self.mesh = mesh
         self.constraints = list(constraints)
         self.settings = settings or SolverSettings()
@@ -190,6 +216,12 @@ class GuidedProjection:
         self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free))
         self._pattern: _Pattern | None = None
         self.status = "not started"
+        self.admissible = admissible
+        self.best: _Iterate | None = None    # the best iterate seen (see `run`)
+        self._damping_scale = 1.0              # raised on rejected steps, >= 1
+        self._fade_start = 0                   # accepted steps before the soft terms restart
+        self._phase_start = 0                  # first record of the current phase
+        self.run_start = 0                     # first record of the last `run`
 
     # -------------------------------------------------------------- results
     @property
@@ -293,97 +325,260 @@ class GuidedProjection:
         raise SolverError("the normal equations stay singular even with strong damping")
 
     def _stagnant(self, hard: float) -> bool:
-        """No 10 % improvement of the best residual over the last `stagnation` iterations."""
+        """No 10 % improvement of the best residual over the last `stagnation` iterations
+        (of the current phase: free or monotone steps)."""
         window = self.settings.stagnation
-        past = [h.hard_residual for h in self.history if h.step > 0]
+        past = [h.hard_residual for h in self.history[self._phase_start:] if h.step > 0]
         if len(past) < window:
             return False
         return min(past[-window + 1:] + [hard]) > 0.9 * min(past[:-window + 1] or [np.inf])
 
     # -------------------------------------------------------------- iteration
-    def _evaluate(self, weights: dict) -> tuple[list, list, dict]:
-        """Weighted residuals (m,) and Jacobian values (m, k) of every family, and the
-        unweighted max residual of each."""
+    def _evaluate(self) -> _Evaluation:
+        """Prepare every family at the current point and evaluate its residuals (m,) and
+        Jacobian values (m, k), unweighted."""
+        for c in self.constraints:
+            c.prepare(self.state)
         residuals, jacobians, measured = [], [], {}
         for c in self.constraints:
             r, J = c.evaluate(self.state)
-            w = weights.get(c.name, 1.0)
+            residuals.append(np.asarray(r, dtype=np.float64))
+            jacobians.append(np.asarray(J, dtype=np.float64))
             measured[c.name] = float(np.max(np.abs(r))) if len(r) else 0.0
-            residuals.append(w * np.asarray(r, dtype=np.float64))
-            jacobians.append(w * np.asarray(J, dtype=np.float64))
-        return residuals, jacobians, measured
+        finite = all(np.isfinite(r).all() and np.isfinite(J).all()
+                     for r, J in zip(residuals, jacobians, strict=True))
+        return _Evaluation(residuals, jacobians, measured, finite)
 
-    def _weights(self, iteration: int) -> dict:
+    def soft_weights(self, steps: int) -> dict[str, float]:
+        """Row weight of every soft family after `steps` accepted steps: they fade with
+        every step (since the last `restart_soft_terms`)."""
         s = self.settings
-        fade = s.fade ** iteration
+        fade = s.fade ** max(steps - self._fade_start, 0)
         soft = {"fairness": s.fairness_weight, "closeness": s.closeness_weight}
         return {c.name: soft.get(c.name, 1.0) * fade for c in self.constraints if not c.hard}
+
+    def _weights(self, steps: int) -> list[float]:
+        """Row weight of every family, in the order of `constraints`."""
+        soft = self.soft_weights(steps)
+        return [soft.get(c.name, 1.0) if not c.hard else 1.0 for c in self.constraints]
+
+    def restart_soft_terms(self) -> None:
+        """Give the soft terms their initial weights again (a new stage of a continuation:
+        fairness and closeness guide it as they guided the first)."""
+        self._fade_start = self.accepted_steps
+
+    @property
+    def accepted_steps(self) -> int:
+        return sum(1 for h in self.history if h.step > 0)
+
+    def _snapshot(self) -> _Iterate:
+        data = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in self.state.data.items()}
+        return _Iterate(self.state.x.copy(), data)
+
+    def _restore(self, iterate: _Iterate) -> None:
+        self.state.x[:] = iterate.x
+        self.state.data = {k: (v.copy() if isinstance(v, np.ndarray) else v)
+                           for k, v in iterate.data.items()}
+
+    def _remember(self, hard: float, residuals: dict) -> None:
+        """Keep the current iterate when it beats the best: admissible first, then by hard
+        residual."""
+        ok = True if self.admissible is None else bool(self.admissible(self.state))
+        best = self.best
+        if best is None or (ok, -hard) > (best.admissible, -best.hard):
+            self.best = self._snapshot()
+            self.best.hard, self.best.admissible = hard, ok
+            self.best.residuals, self.best.iteration = dict(residuals), len(self.history)
+
+    def return_to_best(self) -> bool:
+        """Go back to the best iterate seen; True when that moved the net."""
+        if self.best is None or np.array_equal(self.best.x, self.state.x):
+            return False
+        self._restore(self.best)
+        return True
 
     def run(self, max_iterations: int | None = None,
             callback: Callable[[IterationRecord], None] | None = None) -> str:
         """Iterate until converged, stagnant or at the cap; returns the status.
 
+        Steps are Gauss-Newton steps as long as the hard residuals come below their best
+        within `SolverSettings.watchdog` steps (a step may climb a little on its way: the
+        constraints are far from linear). When they do not, the solve returns to the best
+        point and goes on with steps that must lower the merit function (Levenberg-
+        Marquardt with a gain ratio; see the module docstring). A solve that stops short of
+        the tolerance ends at its best iterate: ``self.best`` says whether that iterate was
+        admissible.
+
         Raises
         ------
         SolverError
-            When the residuals become non-finite or grow without bound.
+            When the residuals at the start are not finite.
         """
         s = self.settings
         cap = s.max_iterations if max_iterations is None else max_iterations
-        hard_names = {c.name for c in self.constraints if c.hard}
+        hard_index = [i for i, c in enumerate(self.constraints) if c.hard]
         if self._pattern is None:
             for c in self.constraints:
                 c.prepare(self.state)
             self._pattern = self._build_pattern()
-        first = len(self.history)
+        first = self.run_start = len(self.history)
         self.status = "iteration cap"
-        for _ in range(cap + 1):
+        self.best, self._damping_scale, self.monotone = None, 1.0, False
+        current = self._evaluate()
+        if not current.finite:
+            raise SolverError(f"the solver diverged at iteration {len(self.history)}: "
+                              "non-finite residuals")
+        watch = (self._snapshot(), current.hard_merit(hard_index), 0)
+        self._phase_start = len(self.history)
+        while True:
             it = len(self.history)
             t0 = time.perf_counter()
-            for c in self.constraints:
-                c.prepare(self.state)
-            steps = sum(1 for h in self.history if h.step > 0)   # soft terms fade per step
-            residuals, jacobians, measured = self._evaluate(self._weights(steps))
-            hard = max([measured[n] for n in hard_names], default=0.0)
-            if not all(np.isfinite(r).all() and np.isfinite(J).all()
-                       for r, J in zip(residuals, jacobians, strict=True)):
-                raise SolverError(f"the solver diverged at iteration {it}: non-finite residuals")
-            initial = self.history[0].hard_residual if self.history else hard
-            if hard > 1e6 * max(initial, 1.0):
-                raise SolverError(
-                    f"the solver diverged at iteration {it}: residual {hard:.3g} "
-                    f"(started at {initial:.3g})")
-            if hard <= s.tolerance:
-                self.status = "converged"
-                self.history.append(IterationRecord(it, measured, hard, 0.0,
-                                                    time.perf_counter() - t0))
-                break
-            if it - first >= cap:
-                self.history.append(IterationRecord(it, measured, hard, 0.0,
-                                                    time.perf_counter() - t0))
-                break
-            if self._stagnant(hard):
-                self.status = "stagnated"
-                self.history.append(IterationRecord(it, measured, hard, 0.0,
-                                                    time.perf_counter() - t0))
+            hard = max([current.measured[self.constraints[i].name] for i in hard_index], default=0.0)
+            if not self.monotone:
+                hard_merit = current.hard_merit(hard_index)
+                if hard_merit < watch[1]:
+                    watch = (self._snapshot(), hard_merit, 0)
+                elif watch[2] >= s.watchdog or (hard > s.tolerance and self._stagnant(hard)):
+                    # the free steps climbed, or crawled, for too long: back to their best
+                    # point, and from there only steps that lower the merit function
+                    self._restore(watch[0])
+                    current, self.monotone = self._evaluate(), True
+                    self._phase_start = len(self.history)
+                    hard = max([current.measured[self.constraints[i].name] for i in hard_index],
+                               default=0.0)
+            steps = self.accepted_steps
+            weights = self._weights(steps)
+            self._remember(hard, current.measured)
+            merit = current.merit(weights)
+            if hard <= s.tolerance or it - first >= cap or self._stagnant(hard):
+                if hard <= s.tolerance:
+                    self.status = "converged"
+                elif it - first < cap:
+                    self.status = "stagnated"
+                self.history.append(IterationRecord(it, current.measured, hard, 0.0,
+                                                    time.perf_counter() - t0, merit=merit))
                 break
             # Damping proportional to the residual (stable far away, quadratic near the end),
             # but fading no faster than the soft terms: otherwise fairness and closeness take
             # long steps along the solution manifold that the linearization cannot follow.
-            soft = s.fade ** steps if any(not c.hard for c in self.constraints) else 0.0
-            damping = max(s.epsilon * min(hard, 1.0), s.epsilon * soft, 1e-10)
-            upper, gradient = self._assemble(jacobians, residuals, damping)
+            soft = s.fade ** max(steps - self._fade_start, 0) \
+                if any(not c.hard for c in self.constraints) else 0.0
+            base = max(s.epsilon * min(hard, 1.0), s.epsilon * soft, 1e-10)
+            measured = current.measured
+            ceiling = None if self.monotone else s.climb * watch[1]
+            step = self._step(current, weights, merit, base, hard_index, ceiling)
+            if step is None:
+                self.status = "stagnated"        # no step lowers the merit function
+                self.history.append(IterationRecord(it, current.measured, hard, 0.0,
+                                                    time.perf_counter() - t0, merit=merit,
+                                                    rejected=s.max_rejections))
+                break
+            current, record = step
+            if not self.monotone:
+                watch = (watch[0], watch[1], watch[2] + 1)
+            record.iteration, record.residuals, record.hard_residual = it, measured, hard
+            record.seconds = time.perf_counter() - t0
+            self.history.append(record)
+            if callback is not None:
+                callback(record)
+        if self.status != "converged":
+            self.return_to_best()
+        return self.status
+
+    def _step(self, current: _Evaluation, weights: list[float], merit: float, base: float,
+              hard_index: list[int], ceiling: float | None
+              ) -> tuple[_Evaluation, IterationRecord] | None:
+        """Find the next step.
+
+        With a `ceiling` (free steps), the Gauss-Newton step is taken when its hard
+        residuals' sum of squares stays below the ceiling. Otherwise, and in the monotone
+        phase, the damping is raised until a step lowers the merit function by a fair share
+        of what the linearization predicts.
+
+        Returns the evaluation at the new point and the iteration's record (the residuals
+        in it are those before the step), or None when every trial failed.
+        """
+        s = self.settings
+        t0 = time.perf_counter()
+        residuals = [w * r for w, r in zip(weights, current.residuals, strict=True)]
+        jacobians = [w * J for w, J in zip(weights, current.jacobians, strict=True)]
+        damping = base * self._damping_scale
+        upper, gradient = self._assemble(jacobians, residuals, damping)
+        t_assembly = time.perf_counter() - t0
+        t_factor = t_solve = 0.0
+        growth = 2.0
+        before = self._snapshot()
+        for rejected in range(s.max_rejections + 1):
             t1 = time.perf_counter()
             self._factor(upper, damping)
             t2 = time.perf_counter()
             h = self._linear.solve(-gradient)
             t3 = time.perf_counter()
-            if not np.isfinite(h).all():
-                raise SolverError(f"the solver diverged at iteration {it}: singular system")
-            self.state.x[self.free] += h
-            rec = IterationRecord(it, measured, hard, float(np.linalg.norm(h)),
-                                  time.perf_counter() - t0, t1 - t0, t2 - t1, t3 - t2)
-            self.history.append(rec)
-            if callback is not None:
-                callback(rec)
-        return self.status
+            t_factor += t2 - t1
+            t_solve += t3 - t2
+            if np.isfinite(h).all():
+                self.state.x[self.free] += h
+                trial = self._evaluate()
+                if trial.finite and self._acceptable(trial, weights, merit, damping, h, gradient,
+                                                     hard_index, ceiling if rejected == 0 else None):
+                    return trial, IterationRecord(
+                        0, {}, 0.0, float(np.linalg.norm(h)), 0.0, t_assembly, t_factor,
+                        t_solve, merit=merit, rejected=rejected, damping=damping)
+                self._restore(before)
+            raised = damping * growth
+            upper.data[self._pattern.diagonal] += raised - damping
+            damping, growth = raised, 2.0 * growth
+            self._damping_scale *= growth / 2.0
+        self._restore(before)
+        for c in self.constraints:      # back to the data of the point the solve ends at
+            c.prepare(self.state)
+        return None
+
+    def _acceptable(self, trial: _Evaluation, weights: list[float], merit: float, damping: float,
+                    h: np.ndarray, gradient: np.ndarray, hard_index: list[int],
+                    ceiling: float | None) -> bool:
+        """Whether a trial step is taken (see `_step`); adapts the damping scale."""
+        if ceiling is not None:
+            return trial.hard_merit(hard_index) <= ceiling
+        # the decrease the linearization predicts: h^T (mu h - g) / 2
+        predicted = 0.5 * float(damping * (h @ h) - gradient @ h)
+        achieved = merit - trial.merit(weights)
+        gain = achieved / predicted if predicted > 0 else (1.0 if achieved >= 0 else -1.0)
+        if gain <= 1e-4:
+            return False
+        # a step the linearization predicted well lets the damping fall back towards its base
+        if gain > 0.75:
+            self._damping_scale = max(1.0, self._damping_scale / 4.0)
+        elif gain < 0.25:
+            self._damping_scale *= 2.0
+        return True
+
+
+@dataclass
+class _Evaluation:
+    """Unweighted residuals and Jacobians of every family at one point."""
+
+    residuals: list
+    jacobians: list
+    measured: dict             # family name -> max |residual|
+    finite: bool
+
+    def merit(self, weights: list[float]) -> float:
+        """Half the weighted sum of squares of all residuals."""
+        return 0.5 * sum(w * w * float(r @ r) for w, r in zip(weights, self.residuals, strict=True))
+
+    def hard_merit(self, hard_index: list[int]) -> float:
+        """Half the sum of squares of the hard residuals (comparable across iterations)."""
+        return 0.5 * sum(float(self.residuals[i] @ self.residuals[i]) for i in hard_index)
+
+
+@dataclass
+class _Iterate:
+    """A copy of the solver's state: variables and per-iteration data."""
+
+    x: np.ndarray
+    data: dict
+    hard: float = np.inf
+    admissible: bool = False
+    residuals: dict = field(default_factory=dict)   # family name -> max |residual|
+    iteration: int = 0                               # its index in the history

@@ -5,6 +5,7 @@ from .base import Constraint, NetState, VariableBlocks
 from .closeness import BoundaryGliding, Closeness
 from .collapse import EdgeCollapseBarrier, EdgeLengthRange
 from .fairness import Fairness
+from .guards import NormalCone, StarAngleRange
 from .levels import FamilyLevels
 from .mannheim import (
     ConstantMannheimRadius,
@@ -30,6 +31,8 @@ __all__ = [
     "PlanarFaces",
     "PlaneNormalization",
     "Fairness",
+    "NormalCone",
+    "StarAngleRange",
     "EdgeCollapseBarrier",
     "EdgeLengthRange",
     "FamilyLevels",

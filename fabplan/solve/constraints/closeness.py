@@ -69,6 +69,11 @@ class Closeness(Constraint):
             self.reference.on_boundary(foot, triangle)[:, None]
         self._outward = np.where(outside, along / np.where(outside, length, 1.0), 0.0)
 
+    def distances(self, state) -> np.ndarray:
+        """(k,) float, distance of each vertex from its footpoint (normalized units), as
+        found by the last `prepare`."""
+        return np.linalg.norm(state.X[self._ids(state)] - self._foot, axis=1)
+
     def columns(self, state):
         ids = state.blocks.index("vertices")[self._ids(state)]
         if self.tolerance > 0:

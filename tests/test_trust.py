@@ -1,0 +1,181 @@
+"""Solves a user can trust on meshes nobody tuned for: step control, far targets reached
+in stages, folds measured on every result, honest status and messages that help.
+
+The meshes are made here, seeded: a principal grid on a dome asked for a 60 deg net, a
+translational (planar-quad) net asked to become minimal, and a strongly noised saddle
+whose plain S-net solve folds.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import fabplan
+from fabplan.cli import main
+from fabplan.net.folds import measure_folds
+from fabplan.net.generate import height_field_grid
+from fabplan.net.mesh import QuadMesh
+from fabplan.solve.reference import ReferenceSurface
+
+
+def _dome() -> QuadMesh:
+    """A 30 x 30 principal grid over 8 x 8 m on z = 3 - (x^2 + 1.5 y^2) / 10, noised by
+    0.5 % of an edge."""
+    h = 8 / 29
+    grid = height_field_grid(30, 30, lambda x, y: 3 - (x**2 + 1.5 * y**2) / 10, spacing=h)
+    rng = np.random.default_rng(7)
+    return grid.with_vertices(grid.vertices + rng.normal(scale=0.005 * h, size=grid.vertices.shape))
+
+
+def _translational() -> QuadMesh:
+    """z = f(x) + g(y): every quad planar (a conjugate net), not a minimal surface."""
+    return height_field_grid(20, 20, lambda x, y: 0.15 * x**2 - 0.1 * y**2 + 0.02 * x**3,
+                             spacing=0.5)
+
+
+def _noisy_saddle() -> QuadMesh:
+    """A 25 x 25 grid on a saddle, every vertex moved by 0.2 edges (normal noise): itself
+    fold-free, while its plain S-net folds."""
+    grid = height_field_grid(25, 25, lambda x, y: 0.08 * x * y, spacing=1.0)
+    rng = np.random.default_rng(2)
+    return grid.with_vertices(grid.vertices + rng.normal(scale=0.2, size=grid.vertices.shape))
+
+
+def _distance_to(start: QuadMesh, result) -> float:
+    """Largest distance of the result's vertices from the start, in mean edges."""
+    ref = ReferenceSurface.from_mesh(start)
+    return float(ref.distances(result.mesh.vertices).max() / start.mean_edge_length)
+
+
+def test_folds_are_found_with_their_faces():
+    grid = height_field_grid(6, 6, lambda x, y: 0.1 * x * y)
+    X = grid.vertices.copy()
+    # an inner vertex pushed diagonally past its neighbours: the quad it crossed turns over
+    X[14, :2] += 1.6 * (X[20, :2] - X[14, :2] + X[15, :2] - X[14, :2])
+    report = measure_folds(grid, X, reference=ReferenceSurface.from_mesh(grid))
+    assert report.folded and report.flipped_faces.size >= 1
+    faces_at_14 = {f for f, face in enumerate(grid.faces) if 14 in face}
+    assert set(report.flipped_faces.tolist()) <= faces_at_14
+    assert measure_folds(grid).folded is False
+    record = report.record()
+    assert record["flipped_faces"]["count"] == report.flipped_faces.size
+    assert record["flipped_faces"]["ids"] == report.flipped_faces.tolist()
+
+
+def test_degenerate_stars_and_collapsed_edges_are_named():
+    grid = height_field_grid(5, 5, lambda x, y: 0 * x)
+    X = grid.vertices.copy()
+    X[12] = X[13] + [0.02, 0.0, 0.0]    # the centre vertex almost on its neighbour
+    report = measure_folds(grid, X)
+    assert [12, 13] in report.collapsed_edges.tolist()
+    assert "shorter than" in report.describe()
+
+
+@pytest.mark.slow
+def test_a_principal_grid_asked_for_60_degrees_ends_fold_free_near_the_design():
+    dome = _dome()
+    result = fabplan.optimize(dome, "isogonal", angle=60.0)
+    folds = result.properties["folds"]
+    assert not folds["folded"]
+    if result.converged:
+        L = result.properties["mean_edge_length"]
+        assert result.properties["sphere_residual_relative"]["max"] <= 1e-6
+        angles = result.properties["intersection_angle_deg"]
+        assert abs(angles["min"] - 60) <= 0.01 and abs(angles["max"] - 60) <= 0.01
+        assert result.properties["distance_to_reference"]["max"] <= 1.5 * L
+    else:
+        assert result.status in ("stagnated", "iteration cap")
+        assert _distance_to(dome, result) <= 1.0
+        assert "requested angle is 30 deg from the start's" in result.message
+    # before the step control the residual climbed to 493 and 869 faces flipped
+    assert max(h["hard_residual"] for h in result.history[-10:]) < 1.0
+
+
+def test_a_planar_quad_net_asked_for_minimal_ends_fold_free_at_its_best(tmp_path, capsys):
+    start = _translational()
+    path = tmp_path / "translational.obj"
+    start.write_obj(path)
+    out = tmp_path / "out.obj"
+    assert main(["optimize", str(path), "--net", "minimal", "-o", str(out), "-q"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no step improved on the start" in err[0]
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert record["status"] == "stagnated" and record["message"]
+    assert not record["properties"]["folds"]["folded"]
+    written = QuadMesh.from_obj(out)
+    hard = [h["hard_residual"] for h in record["history"]]
+    # the net written is the best iterate: no farther from the input than it
+    distance = ReferenceSurface.from_mesh(start).distances(written.vertices).max()
+    assert distance <= 1e-9 * start.mean_edge_length or min(hard) < hard[0]
+    # before: 24-33 mean edges away, half the faces flipped
+    assert distance <= start.mean_edge_length
+
+
+def test_a_folded_snet_is_reported_folded_with_its_faces():
+    start = _noisy_saddle()
+    plain = fabplan.optimize(start, "snet", guards=False)
+    assert plain.status == "folded" and not plain.converged
+    folds = plain.properties["folds"]
+    assert folds["folded"] and folds["flipped_faces"]["count"] > 0
+    assert len(folds["flipped_faces"]["ids"]) == folds["flipped_faces"]["count"]
+    assert "faces are flipped (faces" in plain.message
+
+
+def test_with_the_guards_a_folding_start_ends_fold_free_or_says_why():
+    start = _noisy_saddle()
+    assert not measure_folds(start).folded
+    result = fabplan.optimize(start, "snet")           # guards when the plain solve folds
+    assert result.parameters["guards"] is True
+    assert not result.properties["folds"]["folded"]
+    if not result.converged:
+        assert result.status in ("stagnated", "iteration cap", "degenerate")
+        assert "stopped" in result.message or "the constraints are met but" in result.message
+        assert _distance_to(start, result) <= 1.0
+
+
+def test_the_cli_names_the_folded_faces(tmp_path, capsys):
+    path = tmp_path / "noisy.obj"
+    _noisy_saddle().write_obj(path)
+    out = tmp_path / "out.obj"
+    code = main(["optimize", str(path), "--net", "snet", "--no-guards", "-o", str(out), "-q"])
+    assert code == 3
+    err = capsys.readouterr().err
+    assert "ended folded" in err and "faces are flipped" in err
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert record["status"] == "folded"
+
+
+def test_measure_reports_folds(tmp_path, capsys):
+    grid = height_field_grid(6, 6, lambda x, y: 0.1 * x * y)
+    X = grid.vertices.copy()
+    X[14, :2] += 1.6 * (X[20, :2] - X[14, :2] + X[15, :2] - X[14, :2])
+    path = tmp_path / "folded.obj"
+    grid.with_vertices(X).write_obj(path)
+    assert main(["measure", str(path), "-o", str(tmp_path / "m.json")]) == 0
+    record = json.loads((tmp_path / "m.json").read_text())
+    assert record["folds"]["folded"] is True
+    assert "folds:" in capsys.readouterr().out
+
+
+def test_an_absurd_radius_is_refused_with_the_smallest_possible_one(tmp_path, capsys):
+    path = fabplan.data_path("cmc1.obj")
+    code = main(["optimize", str(path), "--net", "cmc", "--radius", "1e-3",
+                 "-o", str(tmp_path / "out.obj"), "-q"])
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert "smaller than half the edges" in err and not list(tmp_path.iterdir())
+
+
+def test_converged_nets_are_unchanged_by_the_step_control():
+    """The bundled Weingarten net, noised, converges as before: every step taken at once."""
+    net = fabplan.QuadMesh.from_obj(fabplan.data_path("wein99.obj"))
+    rng = np.random.default_rng(3)
+    start = net.with_vertices(net.vertices + rng.normal(scale=0.01 * net.mean_edge_length,
+                                                       size=net.vertices.shape))
+    result = fabplan.optimize(start, "linear-weingarten")
+    assert result.converged and not result.properties["folds"]["folded"]
+    assert all(h["rejected"] == 0 for h in result.history)
+    assert result.iterations <= 12
