@@ -153,7 +153,7 @@ def bulge_points(outline: np.ndarray, *, closed: bool = True,
         if abs(bulge) < 1e-12:
             continue
         theta = 4 * math.atan(bulge)
-        chord = np.linalg.norm(b - a)
+        chord = float(np.linalg.norm(b - a))
         radius = chord / (2 * abs(math.sin(theta / 2)))
         step = 2 * math.acos(max(-1.0, 1 - tolerance_mm / radius)) if radius > tolerance_mm else 0.5
         n = max(2, int(math.ceil(abs(theta) / max(step, 1e-9))))
