@@ -27,5 +27,5 @@ def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = N
     if not looks_like_file:
         surface = surface_from_spec(str(source))
         return surface.triangulate(resolution or surface.resolution_for(triangles))
-    vertices, triangles = read_triangles(path)
-    return DesignSurface(vertices, triangles, name=str(path))
+    vertices, faces = read_triangles(path)
+    return DesignSurface(vertices, faces, name=str(path))

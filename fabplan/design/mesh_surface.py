@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import igl
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import InputError
 from ..net.forest import tree_parity
@@ -52,8 +53,8 @@ class DesignSurface:
     done. Messages number vertices and triangles as in the input (from 0).
     """
 
-    def __init__(self, vertices, triangles, *, name: str = "surface", uv=None,
-                 parametric: ParametricSurface | None = None):
+    def __init__(self, vertices: npt.ArrayLike, triangles: npt.ArrayLike, *, name: str = "surface",
+                 uv: npt.ArrayLike | None = None, parametric: ParametricSurface | None = None) -> None:
         self.name = name
         self.parametric = parametric
         V = np.asarray(vertices, dtype=np.float64)
@@ -69,7 +70,7 @@ class DesignSurface:
         if not np.isfinite(V).all():
             raise InputError(f"{name}: vertex {int(np.flatnonzero(~np.isfinite(V).all(1))[0])} has a "
                              "non-finite coordinate")
-        self.repairs: dict = {}
+        self.repairs: dict[str, int] = {}
         uv = None if uv is None else np.asarray(uv, dtype=np.float64)
         # input numbers of the kept vertices and triangles, for messages
         self._vertex_ids = np.arange(len(V))
@@ -82,7 +83,7 @@ class DesignSurface:
         self._orient()
 
     # ------------------------------------------------------------------ repairs and checks
-    def _weld(self, V, T):
+    def _weld(self, V: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Merge exactly coincident vertices, keeping the first of each in input order."""
         _, first, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
         if len(first) == len(V):
@@ -94,7 +95,8 @@ class DesignSurface:
         self._vertex_ids = first[order]
         return V[first[order]], rank[inverse.ravel()][T]
 
-    def _clean(self, V, T, uv):
+    def _clean(self, V: np.ndarray, T: np.ndarray,
+               uv: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         P = V[T]
         double_area = np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
         scale = float(np.ptp(V, axis=0).max())
@@ -199,6 +201,8 @@ class DesignSurface:
     def triangle_uv(self, tri: np.ndarray) -> np.ndarray:
         """(m, 3, 2) float, parameters of the corners of triangles `tri`, a triangle across
         the seam of a periodic surface unwrapped to one side of it."""
+        if self.parametric is None or self.uv is None:
+            raise InputError(f"{self.name}: not a parametric design, its triangles have no parameters")
         uv = self.uv[self.triangles[tri]].copy()
         if self.parametric.periodic_u:
             (u0, u1), _ = self.parametric.domain
@@ -252,7 +256,7 @@ class DesignSurface:
         return float(np.linalg.norm(P - P[:, [1, 2, 0]], axis=2).mean())
 
     @cached_property
-    def boundary_loops(self) -> list:
+    def boundary_loops(self) -> list[np.ndarray]:
         """list of (k,) int arrays, the boundary loops (vertex ids in order), longest first."""
         import igl
 
@@ -265,7 +269,7 @@ class DesignSurface:
         P = self.vertices[loop]
         return float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).sum())
 
-    def boundary_curves(self) -> list:
+    def boundary_curves(self) -> list[np.ndarray]:
         """The boundary loops as closed polylines, list of (k, 3) float."""
         return [self.vertices[loop] for loop in self.boundary_loops]
 

@@ -203,8 +203,8 @@ class ParametricSurface:
         -------
         DesignSurface with ``uv`` (n, 2) and this surface attached.
         """
-        nu, nv = (resolution, resolution) if np.isscalar(resolution) else resolution
-        nu, nv = int(nu), int(nv)
+        pair = np.full(2, resolution) if np.isscalar(resolution) else np.asarray(resolution)
+        nu, nv = (int(n) for n in pair)
         if nu < 1 or nv < 1:
             raise InputError(f"{self.name}: the triangulation needs at least 1 x 1 cells")
         (u0, u1), (v0, v1) = self.domain
@@ -300,6 +300,7 @@ def revolution(profile=None, *, height: float = 40.0, radius: float = 8.0, waist
     -------
     ParametricSurface with u the angle about the axis (radians) and v the height z.
     """
+    described: dict[str, object]
     if profile is None:
         _positive(height=height, radius=radius, waist=waist)
 
@@ -319,7 +320,7 @@ def revolution(profile=None, *, height: float = 40.0, radius: float = 8.0, waist
         if np.any(pts[:, 0] <= 0):
             raise InputError("revolution: the profile radii must be positive")
         r_of_z = CubicSpline(pts[:, 1], pts[:, 0]) if len(pts) > 2 else \
-            (lambda z, p=pts: np.interp(z, p[:, 1], p[:, 0]))
+            (lambda z: np.interp(z, pts[:, 1], pts[:, 0]))
         z0, z1, described = pts[0, 1], pts[-1, 1], dict(profile=pts.tolist())
     if not 0 < sweep_deg <= 360 or aspect <= 0:
         raise InputError("revolution: sweep_deg must lie in (0, 360] and aspect be positive")

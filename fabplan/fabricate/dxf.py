@@ -18,13 +18,16 @@ import os
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterator
 
 import ezdxf
 import numpy as np
 import shapely
 from ezdxf import recover
+from ezdxf.document import Drawing
+from ezdxf.entities import LWPolyline
 from ezdxf.enums import TextEntityAlignment
+from ezdxf.layouts import BaseLayout
 
 from ..errors import FabplanError, InputError
 from ..report.figures import new_figure
@@ -286,10 +289,17 @@ class SheetDrawing:
     version: str
     audit_errors: int
     recover_errors: int
-    doc: object = None
+    doc: Drawing | None = None
 
 
-def read_sheet(path, layers: dict, *, recover_too: bool = True) -> SheetDrawing:
+def _lwpolylines(layout: BaseLayout) -> Iterator[LWPolyline]:
+    """The LWPOLYLINE entities of a layout, typed as such."""
+    for e in layout.query("LWPOLYLINE"):
+        if isinstance(e, LWPolyline):
+            yield e
+
+
+def read_sheet(path: str | os.PathLike, layers: dict, *, recover_too: bool = True) -> SheetDrawing:
     """Read a sheet DXF back with ezdxf and audit it.
 
     Parameters
@@ -304,7 +314,7 @@ def read_sheet(path, layers: dict, *, recover_too: bool = True) -> SheetDrawing:
     cut, slit, engrave = (str(layers[k][0]) for k in ("cut", "slit", "engrave"))
     msp = doc.modelspace()
     outlines, closed_o, slits, closed_s = [], [], [], []
-    for e in msp.query("LWPOLYLINE"):
+    for e in _lwpolylines(msp):
         if e.dxf.layer == cut:
             outlines.append(np.array(list(e.get_points("xyb")), dtype=np.float64))
             closed_o.append(bool(e.closed))
@@ -320,7 +330,7 @@ def read_sheet(path, layers: dict, *, recover_too: bool = True) -> SheetDrawing:
     return drawing
 
 
-def segment_problems(doc_or_path) -> list:
+def segment_problems(doc_or_path: str | os.PathLike | Drawing) -> list:
     """Zero-length and duplicate segments among all LWPOLYLINEs of a document.
 
     Two segments are duplicates when they join the same points (to 1e-4 mm, either way
@@ -333,7 +343,7 @@ def segment_problems(doc_or_path) -> list:
     doc = ezdxf.readfile(str(doc_or_path)) if isinstance(doc_or_path, (str, os.PathLike)) \
         else doc_or_path
     starts, ends, bulges, layers = [], [], [], []
-    for e in doc.modelspace().query("LWPOLYLINE"):
+    for e in _lwpolylines(doc.modelspace()):
         pts = np.array(list(e.get_points("xyb")), dtype=np.float64)
         if len(pts) < 2:
             continue
@@ -358,7 +368,7 @@ def segment_problems(doc_or_path) -> list:
     return problems
 
 
-def check_sheet(path, settings: "StripSettings", sheet_count: int = 1) -> SheetDrawing:
+def check_sheet(path: str | os.PathLike, settings: "StripSettings", sheet_count: int = 1) -> SheetDrawing:
     """Read a written sheet file back and check it as a cutter would need it.
 
     Checks: R2010, $INSUNITS 4, no audit errors (plain and recover reader), closed cut and
@@ -391,7 +401,7 @@ def check_sheet(path, settings: "StripSettings", sheet_count: int = 1) -> SheetD
     pairs = tree.query(polys, predicate="dwithin", distance=max(settings.spacing_mm - 1e-3, 0))
     if any(a < b for a, b in pairs.T):
         raise FabplanError(f"{name}: two outlines are closer than the spacing")
-    problems = segment_problems(d.doc)
+    problems = segment_problems(d.doc if d.doc is not None else path)
     if problems:
         raise FabplanError(f"{name}: {problems[0]}")
     return d
@@ -411,7 +421,7 @@ def preview_png(doc, path, size: tuple, *, title: str = "") -> None:
     W, H = size
     scale = 14.0 / max(W, H)
     fig = new_figure((max(W * scale, 2), max(H * scale, 2) + (0.3 if title else 0)), dpi=100)
-    ax = fig.add_axes([0, 0, 1, 1 if not title else H * scale / (H * scale + 0.3)])
+    ax = fig.add_axes((0, 0, 1, 1 if not title else H * scale / (H * scale + 0.3)))
     colours = {layer.dxf.name: np.array(aci2rgb(layer.color)) / 255 for layer in doc.layers}
     lines, cols = [], []
     for e in doc.modelspace():

@@ -38,12 +38,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from ..errors import InputError
+from ..net.mesh import QuadMesh
 from ..net.weingarten import weingarten_fit
 from .panels import (
     SURFACE_MODELS,
@@ -190,13 +192,15 @@ class _Panels:
     reach: np.ndarray       # (p,) curvature distance beyond which molds are not tried (1/mm)
 
 
-def _frame_coordinates(points, point, frames, mm):
+def _frame_coordinates(points: np.ndarray, point: np.ndarray, frames: np.ndarray,
+                       mm: float) -> np.ndarray:
     """(p, v, s, 3) mold coordinates (mm) of samples (p, s, 3) in frames (p, v, 3, 3)."""
     d = points - point[:, None, :]
     return mm * np.einsum("pvij,psj->pvsi", frames, d)
 
 
-def _panel_data(points, point, frames, shapes, mm, tolerance) -> _Panels:
+def _panel_data(points: np.ndarray, point: np.ndarray, frames: np.ndarray, shapes: np.ndarray,
+                mm: float, tolerance: float) -> _Panels:
     """Samples (p, s, 3) of panels with apex points (p, 3) in their placement frames
     (p, 4, 3, 3), their shapes there (p, 4, 2) and their reach at the tolerance (mm)."""
     Q = _frame_coordinates(points, point, frames, mm)
@@ -209,14 +213,15 @@ def _panel_data(points, point, frames, shapes, mm, tolerance) -> _Panels:
     return _Panels(shapes=shapes, U=U, Z=Z, reach=reach)
 
 
-def _cylinder_fits(U: np.ndarray, Z: np.ndarray, k1: np.ndarray, iterations: int = 80):
+def _cylinder_fits(U: np.ndarray, Z: np.ndarray, k1: np.ndarray,
+                   iterations: int = 80) -> tuple[np.ndarray, np.ndarray]:
     """Best ``K1`` of a cylinder mold ``(K1, 0)`` for each panel (frame F0), by golden
     section on the convex gap. Returns (K1, deviation), each (p,)."""
     span = 2.0 * np.abs(k1) + 1e-9
     lo, hi = k1 - span, k1 + span
     g = (math.sqrt(5) - 1) / 2
 
-    def gap(K1):
+    def gap(K1: np.ndarray) -> np.ndarray:
         return _offset_gap(U, Z, np.stack([K1, np.zeros_like(K1)], -1))[0]
 
     for _ in range(iterations):
@@ -228,7 +233,7 @@ def _cylinder_fits(U: np.ndarray, Z: np.ndarray, k1: np.ndarray, iterations: int
 
 
 # ----------------------------------------------------------------------------- gaps and cover
-def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32):
+def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """Exact gaps of every panel on every mold, in the best of the four placements.
 
     Molds are taken in blocks of nearby curvatures; a block is only evaluated for the
@@ -269,8 +274,8 @@ def _greedy_cover(fits: np.ndarray) -> np.ndarray:
     """Columns of `fits` (p, c) bool chosen greedily, the one covering most uncovered rows
     first (lowest index on ties), until every coverable row is covered."""
     A = fits.T.astype(np.float32)
-    uncovered = fits.any(axis=1).astype(np.float32)
-    chosen = []
+    uncovered = np.any(fits, axis=1).astype(np.float32)
+    chosen: list[int] = []
     while uncovered.any():
         best = int(np.argmax(A @ uncovered))
         chosen.append(best)
@@ -376,8 +381,9 @@ def _assign(data: _Panels, candidates: np.ndarray, free: int, tolerance: float,
         own[:, free:] = 0.0
         molds = np.concatenate([molds, own])
     mold = np.full(n, -1)
-    state = None
-    refitted: set = set()  # (mold, members, placements) already refitted: a refit is a fixpoint
+    state: tuple[int, bytes] | None = None
+    # (mold, members, placements) already refitted: a refit is a fixpoint
+    refitted: set[tuple[bytes, bytes, bytes]] = set()
     for _ in range(max(rounds, 1)):
         dev, var = _gap_matrix(data, molds)
         rows = np.arange(n)
@@ -397,15 +403,16 @@ def _assign(data: _Panels, candidates: np.ndarray, free: int, tolerance: float,
             if _offset_gap(U, Z, new)[0].max() <= deviation[members].max():
                 molds[j] = new
             refitted.add((molds[j].tobytes(), members.tobytes(), variant[members].tobytes()))
-        key = (len(molds), mold.tobytes())
-        if key == state:
+        settled = (len(molds), mold.tobytes())
+        if settled == state:
             break
-        state = key
+        state = settled
     _, var = _gap_matrix(data, molds)
     return _Stage(molds=molds, mold=mold, variant=var[np.arange(n), mold])
 
 
-def _remove_molds(mold, molds, dev, var, tolerance):
+def _remove_molds(mold: np.ndarray, molds: np.ndarray, dev: np.ndarray, var: np.ndarray,
+                  tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Drop molds (fewest panels first) whose panels all fit another remaining mold, moving
     each of them to its closest remaining mold."""
     alive = np.ones(len(molds), bool)
@@ -455,7 +462,7 @@ class MoldPlan:
     seconds : run time.
     """
 
-    mesh: object
+    mesh: QuadMesh
     settings: MoldSettings
     panel_surface: str
     panel_type: np.ndarray
@@ -467,11 +474,11 @@ class MoldPlan:
     placement: np.ndarray
     deviation_mm: np.ndarray
     footprint_mm: np.ndarray
-    problem: list
+    problem: list[str | None]
     weingarten: dict
     reassigned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     seconds: float = 0.0
-    stage_seconds: dict = field(default_factory=dict)
+    stage_seconds: dict[str, float] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ derived numbers
     @property
@@ -618,7 +625,7 @@ class MoldPlan:
         return "\n".join(lines)
 
 
-def plan_molds(mesh, settings: MoldSettings | None = None, **options) -> MoldPlan:
+def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: Any) -> MoldPlan:
     """Find few molds that fit every panel of a net, and verify every panel on its mold.
 
     Parameters
@@ -646,7 +653,7 @@ def plan_molds(mesh, settings: MoldSettings | None = None, **options) -> MoldPla
     mm = settings.mm_per_unit
     tol = settings.tolerance_mm
     work = settings.working_tolerance_mm
-    clock = {}
+    clock: dict[str, float] = {}
 
     model = surface_model(mesh, tol / mm, settings.panel_surface)
     surfaces = fit_panel_surfaces(mesh, model)
@@ -684,7 +691,7 @@ def plan_molds(mesh, settings: MoldSettings | None = None, **options) -> MoldPla
     clock["verification"] = time.perf_counter() - start - sum(clock.values())
 
     n = len(panel_type)
-    problem: list = [None] * n
+    problem: list[str | None] = [None] * n
     for i in np.flatnonzero(deviation > tol):
         problem[i] = f"deviates {deviation[i]:.3f} mm from its mold (tolerance {tol:g} mm)"
     if settings.max_mold_size_mm is not None:
@@ -712,7 +719,7 @@ def _classify(data: _Panels, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _assign_by_type(data: _Panels, panel_type: np.ndarray, cylinder: np.ndarray,
-                    tolerance: float, rounds: int):
+                    tolerance: float, rounds: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Molds for panels, each type on molds of its own type (plane, cylinder, paraboloid).
 
     Returns mold (p,) int, variant (p,) int, mold shapes (m, 2), mold types (m,) int.
@@ -747,13 +754,15 @@ def _subset(data: _Panels, idx: np.ndarray) -> _Panels:
     return _Panels(shapes=data.shapes[idx], U=data.U[idx], Z=data.Z[idx], reach=data.reach[idx])
 
 
-def _drop_empty(mold, mold_shape, mold_type):
+def _drop_empty(mold: np.ndarray, mold_shape: np.ndarray,
+                mold_type: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     used = np.bincount(mold, minlength=len(mold_shape)) > 0
     renumber = np.cumsum(used) - 1
     return renumber[mold], mold_shape[used], mold_type[used]
 
 
-def _place(points, point, frames, variant, shape, mm):
+def _place(points: np.ndarray, point: np.ndarray, frames: np.ndarray, variant: np.ndarray,
+           shape: np.ndarray, mm: float) -> tuple[np.ndarray, np.ndarray]:
     """Placement matrices (frame of the chosen variant, shift evening out the gap) and the
     resulting deviations, for samples (p, s, 3) and mold shapes (p, 2)."""
     R = frames[np.arange(len(variant)), variant]                     # (p, 3, 3)

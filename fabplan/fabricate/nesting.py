@@ -153,7 +153,7 @@ def bulge_points(outline: np.ndarray, *, closed: bool = True,
         if abs(bulge) < 1e-12:
             continue
         theta = 4 * math.atan(bulge)
-        chord = np.linalg.norm(b - a)
+        chord = float(np.linalg.norm(b - a))
         radius = chord / (2 * abs(math.sin(theta / 2)))
         step = 2 * math.acos(max(-1.0, 1 - tolerance_mm / radius)) if radius > tolerance_mm else 0.5
         n = max(2, int(math.ceil(abs(theta) / max(step, 1e-9))))
@@ -483,7 +483,7 @@ def _place_part_label(curve, part_id: str, span: tuple, size: float, h: float) -
     return label, arrow
 
 
-def make_parts(strips: "StripSet", settings: "StripSettings") -> list:
+def make_parts(strips: "StripSet", settings: "StripSettings") -> list[Part]:
     """Split every strip into parts that fit the sheet and build their cut geometry.
 
     Parameters
@@ -544,7 +544,7 @@ def make_parts(strips: "StripSet", settings: "StripSettings") -> list:
     return parts
 
 
-def congruence(parts: list, strips: "StripSet") -> dict:
+def congruence(parts: list[Part], strips: "StripSet") -> dict:
     """Whether all parts are pieces of one annulus (or all straight) within the tolerance.
 
     The deviation of a part from the common radius ``R`` (the median arc radius) is bounded
@@ -601,16 +601,16 @@ class Sheet:
 
     index: int
     size: tuple[float, float]
-    placements: list
+    placements: list[Placement]
 
 
 @dataclass
 class Nesting:
     """Parts on sheets, with the measured material use."""
 
-    sheets: list
-    parts: list
-    settings: object
+    sheets: list[Sheet]
+    parts: list[Part]
+    settings: StripSettings
 
     def summary(self) -> dict:
         sheet_area = self.settings.sheet_mm[0] * self.settings.sheet_mm[1]
@@ -681,7 +681,7 @@ def _orientations(part: Part, spacing: float, res: float) -> list:
     return out
 
 
-def nest_parts(parts: list, settings: "StripSettings") -> Nesting:
+def nest_parts(parts: list[Part], settings: "StripSettings") -> Nesting:
     """Place parts on as few sheets as the skyline heuristic finds, then check exactly.
 
     Parameters

@@ -20,7 +20,7 @@ from ..io.output import output_folder
 from ..io.records import json_text
 from ..net.mesh import QuadMesh
 from .dxf import check_sheet, preview_png, sheet_document
-from .nesting import Nesting, congruence, make_parts, nest_parts
+from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts
 from .strips import StripSet, StripSettings, build_strips
 
 __all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan"]
@@ -39,7 +39,7 @@ class StripPlan:
     """
 
     strips: StripSet
-    parts: list
+    parts: list[Part]
     nesting: Nesting
     seconds: float = 0.0
 
@@ -51,7 +51,8 @@ class StripPlan:
         rec["seconds"] = self.seconds
         return rec
 
-    def write(self, out_dir, *, name: str = "strips", previews: bool = True) -> list:
+    def write(self, out_dir: str | os.PathLike, *, name: str = "strips",
+              previews: bool = True) -> list[Path]:
         """Write DXF sheets, the schedule (CSV, JSON) and preview PNGs into `out_dir`.
 
         Everything is built in a temporary folder beside `out_dir`, every DXF is read back
@@ -129,17 +130,17 @@ def _schedule_csv(rows: list, header: str) -> str:
 
 def _plan_record(plan: StripPlan, files: list, sheet_files: dict) -> dict:
     s = plan.strips.settings
-    sheet_of_part = {}
+    sheet_of_part: dict[int, tuple[int, Placement]] = {}
     for sheet in plan.nesting.sheets:
         for p in sheet.placements:
             sheet_of_part[p.part] = (sheet.index, p)
     parts = []
     for i, part in enumerate(plan.parts):
-        sheet, placement = sheet_of_part[i]
+        sheet_index, placement = sheet_of_part[i]
         parts.append({
             "id": part.id, "strip": plan.strips.strips[part.strip].id, "index": part.index,
             "count": part.count, "s_start_mm": part.s_range[0], "s_end_mm": part.s_range[1],
-            "sheet": sheet, "file": sheet_files[sheet], "angle_deg": placement.angle_deg,
+            "sheet": sheet_index, "file": sheet_files[sheet_index], "angle_deg": placement.angle_deg,
             "offset_mm": list(placement.offset),
             "slits": [{"crossing": c, "s_mm": sv, "from": side}
                       for c, sv, side in part.slit_crossings],

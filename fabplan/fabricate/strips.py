@@ -160,11 +160,11 @@ class StripSettings:
         InputError
             Naming the first bad setting and what it must be.
         """
-        def positive(name, value):
+        def positive(name: str, value: object) -> None:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise InputError(f"{name} must be a positive number of millimetres, got {value}")
 
-        def non_negative(name, value):
+        def non_negative(name: str, value: object) -> None:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InputError(f"{name} must be zero or more millimetres, got {value}")
 
@@ -270,7 +270,8 @@ def strip_polylines(mesh: QuadMesh, *, join_boundary: bool = True) -> Polylines:
     for p in range(len(verts)):
         if used[p] or ((p, 0) in link and (p, 1) in link):
             continue  # start chains at a polyline with a free end
-        chain, side = [], 0
+        chain: list[np.ndarray] = []
+        side = 0
         q, entry = p, (0 if (p, 0) not in link else 1)
         while True:
             used[q] = True
@@ -285,10 +286,10 @@ def strip_polylines(mesh: QuadMesh, *, join_boundary: bool = True) -> Polylines:
         out_v.append(np.concatenate(chain))
         out_f.append(family[p])
         out_c.append(closed[p])
-    for p in np.flatnonzero(~used):  # chains that close up on themselves: keep as they were
-        out_v.append(verts[p])
-        out_f.append(family[p])
-        out_c.append(closed[p])
+    for loop in np.flatnonzero(~used):  # chains that close up on themselves: keep as they were
+        out_v.append(verts[loop])
+        out_f.append(family[loop])
+        out_c.append(closed[loop])
     return Polylines(vertices=out_v, family=np.array(out_f, np.int64), closed=np.array(out_c, bool))
 
 
@@ -633,7 +634,7 @@ def fit_arc_runs(nodes: np.ndarray, tolerance_mm: float) -> list[ArcRun]:
     k = len(nodes)
     min_edges = 2 if k == 3 else 3
 
-    def fit(i: int, j: int):
+    def fit(i: int, j: int) -> tuple[float, float] | None:
         P = nodes[i:j + 1]
         dev_line = _line_deviation(P)
         if dev_line <= tolerance_mm:
@@ -647,7 +648,7 @@ def fit_arc_runs(nodes: np.ndarray, tolerance_mm: float) -> list[ArcRun]:
         side = edge[0] * (centre[1] - P[0, 1]) - edge[1] * (centre[0] - P[0, 0])
         return (R if side > 0 else -R), dev
 
-    def longest(i: int):
+    def longest(i: int) -> tuple[int, tuple[float, float]] | None:
         """Largest j such that nodes i..j fit, with its fit, or None."""
         j = i + min_edges
         if j > k - 1 or (res := fit(i, j)) is None:
@@ -679,8 +680,9 @@ def fit_arc_runs(nodes: np.ndarray, tolerance_mm: float) -> list[ArcRun]:
         if 0 < k - 1 - stop < min_edges:
             # leave the tail enough edges for a run of its own when it fits
             cut = k - 1 - min_edges
-            if cut - i >= min_edges and fit(cut, k - 1) is not None:
-                stop, res = cut, fit(i, cut)
+            if (cut - i >= min_edges and fit(cut, k - 1) is not None
+                    and (head := fit(i, cut)) is not None):
+                stop, res = cut, head
         runs.append(ArcRun(i, stop, float(res[0]), float(res[1]), True))
         i = stop
     return runs
@@ -756,7 +758,7 @@ class ReferenceCurve:
         e, t = self.locate(s)
         return self._edge_point(e, t, offset)
 
-    def points(self, s: np.ndarray, offset=0.0) -> tuple[np.ndarray, np.ndarray]:
+    def points(self, s: np.ndarray, offset: float | np.ndarray = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Vectorized `point`: (m, 2) points at arc lengths `s` moved `offset` (a number or
         (m,) array) to the left, and (m, 2) unit tangents."""
         s = np.asarray(s, dtype=np.float64)
@@ -786,7 +788,7 @@ class ReferenceCurve:
         """
         e0, t0 = self.locate(s0)
         e1, t1 = self.locate(s1)
-        rows = []
+        rows: list[list[float]] = []
         for e in range(e0, e1 + 1):
             ta = t0 if e == e0 else 0.0
             tb = t1 if e == e1 else 1.0
@@ -1007,15 +1009,15 @@ def build_strips(mesh: QuadMesh, settings: StripSettings) -> StripSet:
     bad = ~np.isfinite(N).all(axis=1)
     used = np.unique(np.concatenate(verts))
     if bad[used].any():
-        v = int(used[bad[used]][0])
-        raise InputError(f"{mesh.name}: vertex {v} has no surface normal (degenerate faces)")
+        vertex = int(used[bad[used]][0])
+        raise InputError(f"{mesh.name}: vertex {vertex} has no surface normal (degenerate faces)")
     u = unroll_polylines(X, N, verts, scale=settings.scale,
                          curvature=_continued_curvature(mesh, verts))
     zero = np.flatnonzero((u.edge_mm < 1e-9) & ~np.isin(np.arange(len(u.edge_mm)), u.ptr[1:] - 1))
     if zero.size:
         k = int(np.searchsorted(u.ptr, zero[0], side="right") - 1)
-        v = verts[k][zero[0] - u.ptr[k]]
-        raise InputError(f"{mesh.name}: a polyline has a zero-length edge at vertex {v}")
+        vertex = verts[k][zero[0] - u.ptr[k]]
+        raise InputError(f"{mesh.name}: a polyline has a zero-length edge at vertex {vertex}")
     counters = [0, 0]
     strips = []
     for k, v in enumerate(verts):
@@ -1112,16 +1114,16 @@ def _one_edge_run(mesh: QuadMesh, N: np.ndarray, v: np.ndarray, scale: float) ->
     return ArcRun(0, 1, 1 / kappa, 0.0, True)
 
 
-def _find_crossings(X: np.ndarray, strips: list) -> tuple[list, np.ndarray]:
+def _find_crossings(X: np.ndarray, strips: list[Strip]) -> tuple[list[Crossing], np.ndarray]:
     """Crossings: vertices on exactly one strip of each family (closed loops counted once)."""
-    vert, fam, owner, local = [], [], [], []
+    vert_parts, fam_parts, owner_parts, local_parts = [], [], [], []
     for k, s in enumerate(strips):
         v = s.vertices[:-1] if s.closed else s.vertices
-        vert.append(v)
-        fam.append(np.full(len(v), s.family))
-        owner.append(np.full(len(v), k))
-        local.append(np.arange(len(v)))
-    vert, fam, owner, local = (np.concatenate(a) for a in (vert, fam, owner, local))
+        vert_parts.append(v)
+        fam_parts.append(np.full(len(v), s.family))
+        owner_parts.append(np.full(len(v), k))
+        local_parts.append(np.arange(len(v)))
+    vert, fam, owner, local = (np.concatenate(a) for a in (vert_parts, fam_parts, owner_parts, local_parts))
     n = len(X)
     count = np.zeros((n, 2), np.int64)
     np.add.at(count, (vert, fam), 1)

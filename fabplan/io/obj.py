@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 
@@ -121,7 +122,7 @@ def parse_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray], np
     return np.asarray(vertices, dtype=np.float64), face_arrays, per_vertex
 
 
-def format_obj(vertices: np.ndarray, faces, header: str = "",
+def format_obj(vertices: np.ndarray, faces: Iterable[Iterable[int]], header: str = "",
                normals: np.ndarray | None = None) -> str:
     """OBJ text for a polygon mesh; coordinates round-trip exactly (17 significant digits).
     With `normals` (n, 3), one ``vn`` per vertex is written and faces refer to it."""
@@ -135,8 +136,8 @@ def format_obj(vertices: np.ndarray, faces, header: str = "",
     return "\n".join(lines) + "\n"
 
 
-def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces, header: str = "",
-              normals: np.ndarray | None = None) -> None:
+def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: Iterable[Iterable[int]],
+              header: str = "", normals: np.ndarray | None = None) -> None:
     """Write a polygon mesh as OBJ atomically, keeping vertex and face order and face sizes
     (and per-vertex normals when given)."""
     write_texts({Path(path): format_obj(vertices, faces, header, normals)})

@@ -147,7 +147,7 @@ def remove_stale_staging(folder: str | os.PathLike) -> list[Path]:
     -------
     list of Path, the folders removed.
     """
-    removed = []
+    removed: list[Path] = []
     folder = Path(folder)
     if not folder.is_dir():
         return removed
@@ -213,7 +213,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
-def write_texts(files: Mapping[str | os.PathLike, str]) -> None:
+def write_texts(files: Mapping[Path, str] | Mapping[str, str]) -> None:
     """Write several text files as one step: all of them, or none.
 
     Every file goes to a temporary file beside it first; the renames happen only after

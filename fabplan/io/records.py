@@ -14,7 +14,7 @@ from .output import write_texts
 __all__ = ["json_text", "write_json"]
 
 
-def _json_default(obj):
+def _json_default(obj: object) -> object:
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, (np.floating, np.integer, np.bool_)):
@@ -22,7 +22,7 @@ def _json_default(obj):
     raise TypeError(f"cannot serialise {type(obj).__name__}")
 
 
-def _finite_or_none(obj):
+def _finite_or_none(obj: object) -> object:
     """Replace NaN and infinities (undefined measurements) by None, recursively."""
     if isinstance(obj, dict):
         return {k: _finite_or_none(v) for k, v in obj.items()}

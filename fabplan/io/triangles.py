@@ -35,8 +35,8 @@ def read_triangles(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"{path}: empty file (not a surface)")
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        vertices, faces = read_obj(path)
-        tris = [np.stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]], axis=1) for f in faces]
+        vertices, polygons = read_obj(path)
+        tris = [np.stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]], axis=1) for f in polygons]
         return vertices, np.concatenate(tris)
     if suffix not in (".stl", ".ply", ".off"):
         raise InputError(f"{path}: unknown surface format {suffix or '(none)'}; "
@@ -45,10 +45,12 @@ def read_triangles(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
-        vertices, faces = np.asarray(loaded.vertices), np.asarray(loaded.faces)
     except Exception as exc:  # trimesh raises many types for malformed files
         raise InputError(f"{path}: cannot read as {suffix[1:].upper()} "
                          f"({type(exc).__name__})") from None
+    if not isinstance(loaded, trimesh.Trimesh):  # force="mesh" returns one Trimesh
+        raise InputError(f"{path}: no faces")
+    vertices, faces = np.asarray(loaded.vertices), np.asarray(loaded.faces)
     if faces.ndim != 2 or len(faces) == 0:
         raise InputError(f"{path}: no faces")
     return vertices, faces

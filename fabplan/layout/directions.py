@@ -465,17 +465,17 @@ def _read_polylines(spec: str) -> list:
         raise InputError(f"{spec}: not a text file of polylines") from None
     curves: list = []
     if path.suffix.lower() == ".obj":
-        verts, lines = [], []
+        vertex_rows, lines = [], []
         for lineno, line in enumerate(text.splitlines(), start=1):
             parts = line.split()
             if parts[:1] == ["v"]:
                 try:
-                    verts.append([float(p) for p in parts[1:4]])
+                    vertex_rows.append([float(p) for p in parts[1:4]])
                 except ValueError:
                     raise InputError(f"{spec}:{lineno}: malformed vertex line") from None
             elif parts[:1] == ["l"]:
                 lines.append([int(p.split("/")[0]) - 1 for p in parts[1:]])
-        verts = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
+        verts = np.asarray(vertex_rows, dtype=np.float64).reshape(-1, 3)
         curves = [verts[idx] for idx in lines if len(idx) >= 2]
     else:
         block: list = []

@@ -21,7 +21,7 @@ from ..design.mesh_surface import DesignSurface
 from ..design.topology import edge_corners
 from ..solve.linalg import solve_spd_columns
 
-__all__ = ["integrate_directions"]
+__all__ = ["integrate_directions", "cut_mesh", "CutMesh"]
 
 
 # ---------------------------------------------------------------------------- cuts
@@ -98,7 +98,7 @@ def _depth(parent: np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class _CutMesh:
+class CutMesh:
     """The design mesh cut open along translation cuts and field seams.
 
     Every design vertex on a cut has several copies; one (the master) carries the vertex's
@@ -142,7 +142,7 @@ class _CutMesh:
 
 
 def cut_mesh(design: DesignSurface, paths: list, seam_edges: np.ndarray,
-              e1: np.ndarray) -> _CutMesh:
+              e1: np.ndarray) -> CutMesh:
     """Cut the design mesh open along translation `paths` and the field's `seam_edges`.
 
     Parameters
@@ -208,7 +208,7 @@ def cut_mesh(design: DesignSurface, paths: list, seam_edges: np.ndarray,
     sign[plain_seam] = -1.0
     seam = np.where(plain_seam, seam_label[v], -1)
     side[sign <= 0] = 0.0
-    return _CutMesh(corner_copy.reshape(-1, 3), copy_vertex, sign, side, seam, len(paths), nseam)
+    return CutMesh(corner_copy.reshape(-1, 3), copy_vertex, sign, side, seam, len(paths), nseam)
 
 
 # ---------------------------------------------------------------------------- integration

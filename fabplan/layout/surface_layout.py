@@ -42,6 +42,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Callable
 
 import igl
 import numpy as np
@@ -52,7 +53,7 @@ from scipy.spatial import cKDTree
 from ..design.mesh_surface import DesignSurface
 from ..errors import InputError
 from ..net.mesh import QuadMesh
-from ..solve.constraints import EdgeLengthRange, FamilyLevels
+from ..solve.constraints import Constraint, EdgeLengthRange, FamilyLevels
 from .directions import (
     comb_cross_field,
     comb_line_field,
@@ -68,6 +69,7 @@ from .directions import (
 )
 from .extraction import clean_quads, extract_quads, fill_boundary_cells, fill_holes
 from .parametrization import (
+    CutMesh,
     boundary_circulation,
     cut_mesh,
     cut_paths,
@@ -76,6 +78,10 @@ from .parametrization import (
     integrate_directions,
 )
 from .settings import SURFACE_TOLERANCE, LayoutSettings
+
+if TYPE_CHECKING:
+    from ..solve.optimize import OptimizationResult
+    from ..solve.solver import IterationRecord, SolverSettings
 
 __all__ = ["SurfaceLayout", "layout_surface", "layout_angle", "glide"]
 
@@ -200,10 +206,10 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     s = settings or LayoutSettings()
     h = float(panel_size)
     _check_layout_request(design, h, angle, s)
-    seconds: dict = {}
+    seconds: dict[str, float] = {}
     clock = time.perf_counter()
 
-    def lap(name):
+    def lap(name: str) -> None:
         nonlocal clock
         now = time.perf_counter()
         seconds[name] = round(now - clock, 4)
@@ -324,7 +330,7 @@ def _gradient_fields(design: DesignSurface, e1: np.ndarray, anisotropy: np.ndarr
 
 
 def _cut_open(design: DesignSurface, fields: _GradientFields, seam: np.ndarray, e1: np.ndarray,
-              turn_starts: list):
+              turn_starts: np.ndarray) -> CutMesh:
     """Cut the design open along the boundary loops around which the field turns, the
     seams of the line field and the whole-turn umbilics (`cut_mesh`)."""
     loops = design.boundary_loops
@@ -344,7 +350,7 @@ def _cut_open(design: DesignSurface, fields: _GradientFields, seam: np.ndarray, 
     return cut_mesh(design, paths, seam if fields.prescribed is None else np.zeros((0, 2), np.int64), e1)
 
 
-def _integrate(design: DesignSurface, fields: _GradientFields, cut) -> tuple[np.ndarray, list]:
+def _integrate(design: DesignSurface, fields: _GradientFields, cut: CutMesh) -> tuple[np.ndarray, list]:
     """The parameters ``(phi, psi)`` at the corners of every triangle, (t, 3, 2), and the
     transitions ``(sign, jump)`` across the cuts."""
     S, njump = cut.substitution()
@@ -384,7 +390,7 @@ def _extract(design: DesignSurface, P2: np.ndarray, transitions: list, h: float,
     vertices (n, 3), quads (q, 4), keys (n, 2) the lattice parameters, and the shift used.
     """
     V, T = design.vertices, design.triangles
-    best = None
+    best: tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float]] | None = None
     # a seam maps phi to c - phi: only half-integer shifts keep the lattice on itself
     count = 2 if seams else s.offsets
     shifts = np.arange(count) / count
@@ -402,6 +408,9 @@ def _extract(design: DesignSurface, P2: np.ndarray, transitions: list, h: float,
         used, quads = clean_quads(verts, quads)
         if best is None or len(quads) > len(best[1]):
             best = (verts[used], quads, keys[used], off)
+    if best is None:
+        raise InputError(f"{design.name}: no grid shift to try (LayoutSettings.offsets is {s.offsets}, "
+                         "it must be at least 1)")
     verts, quads, keys, off = best
     if len(quads):
         verts, quads, keys, _ = fill_boundary_cells(
@@ -483,7 +492,7 @@ def _near_design_boundary(mesh: QuadMesh, design: DesignSurface, radius: float,
     # faces onto the boundary curve: they stay free on the surface
     faces_at = np.bincount(mesh.face_indices, minlength=mesh.vertex_count)
     near &= faces_at[boundary] <= 2
-    if prescribed is not None:
+    if prescribed is not None and levels is not None:
         # sliding along the boundary by at most the radius must reach the vertex's level
         # (linearly): a boundary running along a level set is not glided on
         step = 0.1 * radius
@@ -566,8 +575,9 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
 
 
 def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,
-          radius: float | None = None, settings=None, fixed: np.ndarray | None = None,
-          surface_tolerance: float = SURFACE_TOLERANCE, progress=None):
+          radius: float | None = None, settings: SolverSettings | None = None,
+          fixed: np.ndarray | None = None, surface_tolerance: float = SURFACE_TOLERANCE,
+          progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
     """Optimize a layout into a net of type `net` while it glides on the design surface.
 
     The vertices are held within `surface_tolerance` panel sizes of the design surface
@@ -591,7 +601,7 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     if get_net(net).dual:
         raise InputError(f"net type {net!r}: layouts are computed for S-nets; optimize the "
                          "S-net first and then the S*-net with `fabplan optimize`")
-    extra = ()
+    extra: tuple[Constraint, ...] = ()
     # a prescribed family's levels are read on the surface: its nets are held on it
     tolerance = 0.0 if layout.prescribed is not None else surface_tolerance
     if layout.prescribed is not None:

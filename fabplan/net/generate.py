@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -338,7 +339,7 @@ def rotational_weingarten_snet(m: int, k: int, *, radius: float = 1.5, angle_deg
     n_levels, half = _levels_and_half_step("rotational_weingarten_snet", m, k, span_deg, step)
     cosine, curvature = math.cos(math.radians(angle_deg)), 1 / radius
 
-    def conditions(pa, pb, pc):
+    def conditions(pa: np.ndarray, pb: np.ndarray, pc: np.ndarray) -> np.ndarray:
         star = _meridian_star(pa, pb, pc, half)
         return np.array([_star_cosine(*star) - cosine, (_star_curvature(*star) - curvature) * radius])
 
@@ -351,9 +352,9 @@ def rotational_weingarten_snet(m: int, k: int, *, radius: float = 1.5, angle_deg
     P[c - 1], P[c + 1] = (r1, -dz), (r1, dz)
     # A second-order recurrence, solved level by level (once per mesh, over levels).
     for at in range(c + 1, n_levels - 1):
-        P[at + 1] = _solve_point(lambda x, at=at: conditions(P[at - 1], P[at], x), 2 * P[at] - P[at - 1])
+        P[at + 1] = _solve_point(partial(conditions, P[at - 1], P[at]), 2 * P[at] - P[at - 1])
     for at in range(c - 1, 0, -1):
-        P[at - 1] = _solve_point(lambda x, at=at: conditions(x, P[at], P[at + 1]), 2 * P[at] - P[at + 1])
+        P[at - 1] = _solve_point(partial(conditions, pb=P[at], pc=P[at + 1]), 2 * P[at] - P[at + 1])
     i, j = np.meshgrid(np.arange(m), np.arange(k), indexing="ij")
     phi = (i + j - (m + k - 2) / 2) * half
     rz = P[j - i + m - 1]

@@ -18,8 +18,10 @@ import os
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
+import numpy.typing as npt
 import scipy.sparse as sp
 
 from ..errors import InputError
@@ -69,7 +71,8 @@ class QuadMesh:
     (12, 6, (2, 5))
     """
 
-    def __init__(self, vertices, faces, *, name: str = "mesh", normals=None):
+    def __init__(self, vertices: npt.ArrayLike, faces: Sequence[Sequence[int] | np.ndarray] | np.ndarray,
+                 *, name: str = "mesh", normals: npt.ArrayLike | None = None) -> None:
         self.name = name
         vertices = np.array(vertices, dtype=np.float64)
         if vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -78,7 +81,7 @@ class QuadMesh:
         if bad.size:
             raise InputError(f"{name}: vertex {bad[0]} has a non-finite coordinate")
         self.vertices = vertices
-        self.normals = None
+        self.normals: np.ndarray | None = None
         if normals is not None:
             normals = np.array(normals, dtype=np.float64)
             if normals.shape != vertices.shape or not np.isfinite(normals).all():
@@ -317,11 +320,11 @@ class QuadMesh:
         pref = np.where(fam >= 0, 0, 1)
         order = np.lexsort((pref, c["vert"]))
         first = order[np.searchsorted(c["vert"][order], np.arange(n))[candidate]]
-        ring = [first]
+        ring_corners = [first]
         for _ in range(3):
-            ring.append(succ[ring[-1]])
-        ring = np.stack(ring, axis=1)
-        closed = (ring >= 0).all(axis=1)
+            ring_corners.append(succ[ring_corners[-1]])
+        ring = np.stack(ring_corners, axis=1)
+        closed = np.all(ring >= 0, axis=1)
         closed[closed] &= succ[ring[closed, 3]] == ring[closed, 0]
         ring = ring[closed]
         centre = np.flatnonzero(candidate)[closed]

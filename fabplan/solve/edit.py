@@ -8,6 +8,7 @@ release runs a few more, as in the paper's editing loop (section 4.5).
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from ..net.mesh import QuadMesh
 from .optimize import (
@@ -45,9 +46,10 @@ class NetEditor:
     True
     """
 
-    def __init__(self, mesh: QuadMesh, net: str, handles, *, angle: float | None = None,
-                 radius: float | None = None, fixed=None, settings: SolverSettings | None = None,
-                 coherent: bool = False):
+    def __init__(self, mesh: QuadMesh, net: str, handles: npt.ArrayLike, *,
+                 angle: float | None = None, radius: float | None = None,
+                 fixed: npt.ArrayLike | None = None, settings: SolverSettings | None = None,
+                 coherent: bool = False) -> None:
         self.handles = np.unique(np.asarray(handles, dtype=np.int64))
         held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), self.handles)
         self._mesh = mesh

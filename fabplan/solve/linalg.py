@@ -21,6 +21,7 @@ import functools
 import glob
 import os
 import sys
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -73,8 +74,11 @@ class _Pardiso:
 
     _PHASES = {"analysis": 11, "numeric": 22, "solve": 33, "release": -1}
 
-    def __init__(self, upper: sp.csr_matrix):
-        self._call = _mkl_runtime().pardiso
+    def __init__(self, upper: sp.csr_matrix) -> None:
+        runtime = _mkl_runtime()
+        if runtime is None:
+            raise FabplanError("linear solver backend 'pardiso' is not installed")
+        self._call = runtime.pardiso
         self._call.restype = None
         self.n = upper.shape[0]
         if upper.nnz >= 2**31 - 1:
@@ -95,10 +99,10 @@ class _Pardiso:
         x = np.zeros_like(b)
         error = ctypes.c_int32(0)
 
-        def integer(value):
+        def integer(value: int) -> object:
             return ctypes.byref(ctypes.c_int32(value))
 
-        def pointer(array):
+        def pointer(array: np.ndarray) -> ctypes.c_void_p:
             return array.ctypes.data_as(ctypes.c_void_p)
 
         self._call(pointer(self.handle), integer(1), integer(1), integer(2),
@@ -120,7 +124,7 @@ class _Pardiso:
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self._run("solve", b)
 
-    def __del__(self):
+    def __del__(self) -> None:
         if self.handle.any():      # free PARDISO's memory; nothing to report at exit
             try:
                 self._run("release")
@@ -141,7 +145,7 @@ class SparseSPDSolver:
         on, when installed; CHOLMOD otherwise.
     """
 
-    def __init__(self, backend: str = "auto", unknowns: int | None = None):
+    def __init__(self, backend: str = "auto", unknowns: int | None = None) -> None:
         names = available_backends()
         if backend == "auto":
             small = unknowns is None or unknowns < PARDISO_MIN_UNKNOWNS
@@ -151,8 +155,10 @@ class SparseSPDSolver:
         if backend not in names:
             raise FabplanError(f"linear solver backend {backend!r} is not installed")
         self.backend = backend
-        self._matrix = None
-        self._factor = None
+        # cholmod: the cvxopt matrix holding the pattern; the factorization is a _Pardiso,
+        # a cvxopt CHOLMOD factor or a scipy SuperLU (the last two untyped)
+        self._matrix: Any = None
+        self._factor: _Pardiso | Any = None
 
     def factor(self, upper: sp.csr_matrix) -> None:
         """Numeric factorization; the symbolic analysis runs on the first call only."""

@@ -13,6 +13,7 @@ from .constraints import (
     ConstantAngle,
     ConstantCurvature,
     ConstantMannheimRadius,
+    Constraint,
     ContactNormals,
     MannheimTangency,
     NormalNormalization,
@@ -112,7 +113,7 @@ def check_radius(radius: float | None) -> None:
 
 def net_constraints(net: NetType, *, angle_deg: float | None = None,
                     radius: float | None = None, length_scale: float = 1.0,
-                    curvature_sign: float = 1.0) -> list:
+                    curvature_sign: float = 1.0) -> list[Constraint]:
     """The hard constraint families of a preset.
 
     Parameters
@@ -130,6 +131,8 @@ def net_constraints(net: NetType, *, angle_deg: float | None = None,
         raise InputError(f"net type {net.name!r} takes no --angle")
     if radius is not None and net.radius != "param":
         raise InputError(f"net type {net.name!r} takes no --radius")
+    families: list[Constraint]
+    angle_family: type[RulingAngle] | type[ConstantAngle]
     if net.dual:   # planes touching Mannheim spheres; angles between cone rulings
         families = [ContactNormals(), NormalNormalization(), MannheimTangency()]
         angle_family = RulingAngle

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.triangles import read_triangles
+from ..net.mesh import QuadMesh
 
 __all__ = ["ReferenceSurface", "load_reference"]
 
@@ -37,7 +38,7 @@ class ReferenceSurface:
         self._tree.init(self.vertices, self.triangles)
 
     @classmethod
-    def from_mesh(cls, mesh) -> "ReferenceSurface":
+    def from_mesh(cls, mesh: QuadMesh) -> "ReferenceSurface":
         """The triangulated faces of a `QuadMesh` as a reference surface."""
         return cls(mesh.vertices, mesh.triangles())
 

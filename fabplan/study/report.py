@@ -16,6 +16,7 @@ import os
 import shutil
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from ..report import figures, html
 from ..report.figures import agreeing_normal
 from ..report.html import counted
 from .run import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
+
+if TYPE_CHECKING:
+    from ..design.mesh_surface import DesignSurface
 
 __all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA"]
 
@@ -156,7 +160,8 @@ def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return normals, view
 
 
-def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: float) -> str:
+def deviation_figure(c: CandidateResult, design: DesignSurface, limit_mm: float,
+                     mm_per_unit: float) -> str:
     """Data URI: the net coloured by its distance from the design (mm) at every vertex.
 
     The distance is measured at the vertices and interpolated linearly across the
@@ -169,6 +174,8 @@ def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: f
     from matplotlib.collections import PolyCollection
     from matplotlib.colors import Normalize
 
+    if c.net is None:
+        raise ValueError(f"candidate {c.name!r} has no net to draw (it failed)")
     mesh = c.net.mesh
     X = mesh.vertices
     d = c.deviation_mm if c.deviation_mm is not None else vertex_deviation_mm(mesh, design, mm_per_unit)
@@ -193,8 +200,8 @@ def deviation_figure(c: CandidateResult, design, limit_mm: float, mm_per_unit: f
         ids = np.flatnonzero(tri_layer == k)
         if ids.size == 0:
             continue
-        ax.tripcolor(P[:, 0], P[:, 1], tri[ids], d, shading="gouraud", cmap=cmap, norm=norm,
-                     zorder=2 * k)
+        ax.tripcolor(P[:, 0], P[:, 1], d, triangles=tri[ids], shading="gouraud", cmap=cmap,
+                     norm=norm, zorder=2 * k)
         ax.add_collection(PolyCollection([polys[f] for f in np.flatnonzero(layer == k)],
                                          facecolors="none", edgecolors=(0.1, 0.1, 0.1, 0.5),
                                          linewidths=0.2, zorder=2 * k + 1))
@@ -293,8 +300,8 @@ def radius_text(r: dict | float | None, unit: str, beyond: float, infinite: str)
     def text(v):          # 4 significant digits, but no exponent for a large radius
         return f"{v:.0f}" if v >= 1e4 else html.format_value(v)
 
-    if r is None or not isinstance(r, dict):
-        return infinite if big(r) else f"{text(abs(r))} {unit}"
+    if not isinstance(r, dict):
+        return infinite if r is None or big(r) else f"{text(abs(r))} {unit}"
     lo, hi = sorted((r["min"], r["max"]), key=lambda v: (big(v), abs(v)))
     if big(lo):
         return infinite
@@ -316,7 +323,8 @@ def _strip_radius_text(result: StudyResult, r) -> str:
 
 
 def _comparison_table(result: StudyResult) -> str:
-    rows, bad = [], []
+    rows: list[list[object]] = []
+    bad: list[int] = []
     for c in result.ranked():
         m = c.metrics
         if c.failed:
@@ -507,16 +515,20 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
     from ..fabricate.dxf import preview_png, sheet_document
 
     study = result.study
+    net, molds_plan = c.net, c.molds
+    if net is None or molds_plan is None:
+        raise ValueError(f"candidate {c.name!r} has no net to write (it failed)")
     if not folder.resolve().is_relative_to(folder.parent.resolve()) or folder.parent.name != "candidates":
         raise InputError(f"candidate {c.name!r}: the name must not leave the study folder")
     folder.mkdir(parents=True)
-    net_obj, net_json = c.net.write(folder / "net.obj")
-    output.write_texts({folder / "molds.csv": c.molds.panels_csv(),
-                 folder / "molds.json": json_text(c.molds.record())})
-    outputs = {"net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
-               "molds_json": "molds.json", "picture": "net.png"}
+    net_obj, net_json = net.write(folder / "net.obj")
+    output.write_texts({folder / "molds.csv": molds_plan.panels_csv(),
+                 folder / "molds.json": json_text(molds_plan.record())})
+    outputs: dict[str, str | list[str]] = {
+        "net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
+        "molds_json": "molds.json", "picture": "net.png"}
     title = f"{c.name}: {c.candidate.describe()}"
-    write_layout_picture(folder / "net.png", result.design, c.net.mesh, title=title,
+    write_layout_picture(folder / "net.png", result.design, net.mesh, title=title,
                 singular_points=c.layout.singular_points if c.layout else None)
     pictures = {"net": _png_uri(folder / "net.png"),
                 "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
@@ -524,7 +536,7 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
     from ..fabricate.mold_report import mold_figure
 
     molds = c.metrics["molds"]
-    pictures["molds"] = mold_figure(c.molds, title=f"{c.name}: {counted(c.molds.panel_count, 'panel')}"
+    pictures["molds"] = mold_figure(molds_plan, title=f"{c.name}: {counted(molds_plan.panel_count, 'panel')}"
                                     + (", all flat: no molds" if molds["count"] == 0 else
                                        f", {counted(molds['count'], 'mold')} for the curved "
                                        "ones (one colour per mold)"))
@@ -569,11 +581,11 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
         by_name = {c.name: c for c in result.candidates}
         for c in result.candidates:
             if not c.failed:
-                twin = by_name.get(c.same_net_as)
+                twin = None if c.same_net_as is None else by_name.get(c.same_net_as)
                 shared = twin is not None and twin.strips is not None and twin.strips is c.strips
                 outputs[c.name], pictures[c.name] = _candidate_files(
                     c, tmp / "candidates" / c.name, result, say,
-                    twin=tmp / "candidates" / twin.name if shared else None)
+                    twin=tmp / "candidates" / twin.name if twin is not None and shared else None)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
         total = result.seconds_run + time.perf_counter() - clock

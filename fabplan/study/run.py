@@ -22,7 +22,7 @@ import math
 import time
 import traceback
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -31,6 +31,15 @@ from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
 from ..net.geometry import face_planarity, kink_angles
 from ..report.html import counted
 from .spec import Candidate, CostWeights, Limits, Study
+
+if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs
+    from ..design.mesh_surface import DesignSurface
+    from ..fabricate.molds import MoldPlan
+    from ..fabricate.strip_plan import StripPlan
+    from ..layout.surface_layout import SurfaceLayout
+    from ..net.mesh import QuadMesh
+    from ..solve.optimize import OptimizationResult
+    from ..solve.solver import IterationRecord
 
 __all__ = [
     "CandidateResult",
@@ -78,19 +87,19 @@ class CandidateResult:
     candidate: Candidate
     error: str | None = None
     metrics: dict = field(default_factory=dict)
-    checks: list = field(default_factory=list)
+    checks: list[dict] = field(default_factory=list)
     feasible: bool = False
-    reasons: list = field(default_factory=list)
+    reasons: list[str] = field(default_factory=list)
     cost: float | None = None
     cost_terms: dict = field(default_factory=dict)
     rank: int | None = None
     same_net_as: str | None = None
     deviation_mm: np.ndarray | None = None
-    notes: list = field(default_factory=list)
-    net: object = None
-    molds: object = None
-    strips: object = None
-    layout: object = None
+    notes: list[str] = field(default_factory=list)
+    net: OptimizationResult | None = None
+    molds: MoldPlan | None = None
+    strips: StripPlan | None = None
+    layout: SurfaceLayout | None = None
 
     @property
     def name(self) -> str:
@@ -119,8 +128,8 @@ class StudyResult:
     """
 
     study: Study
-    design: object
-    candidates: list
+    design: DesignSurface
+    candidates: list[CandidateResult]
     recommended: str | None
     recommendation: str
     sheets_charged: bool = False
@@ -135,10 +144,9 @@ class StudyResult:
         """Diagonal of the design's bounding box (model units)."""
         return self.design.extent
 
-    def ranked(self) -> list:
+    def ranked(self) -> list[CandidateResult]:
         """Measured candidates in rank order, then the failed ones."""
-        done = sorted((c for c in self.candidates if c.rank is not None), key=lambda c: c.rank)
-        return done + [c for c in self.candidates if c.rank is None]
+        return sorted(self.candidates, key=_by_rank)
 
 
 # ---------------------------------------------------------------------------- running
@@ -159,12 +167,13 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None) ->
 
     say = progress or (lambda message: None)
     start = time.perf_counter()
-    design = load_design(study.design.source, triangles=study.design.triangles)
+    source, triangles = study.design.source, study.design.triangles
+    design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
     say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
         f"{design.area:.4g} {study.design.units}^2")
     layouts = {90.0: layout_surface(design, study.panel_size, angle=90.0)}
-    starts: dict = {}
-    results = []
+    starts: dict[float, OptimizationResult] = {}
+    results: list[CandidateResult] = []
     count = len(study.candidates)
     for i, candidate in enumerate(study.candidates, 1):
         say(f"[{i}/{count}] {candidate.name}: {candidate.describe()}")
@@ -181,7 +190,8 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None) ->
     return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
 
 
-def judge_study(study: Study, design, results: list, *, seconds_run: float = 0.0) -> StudyResult:
+def judge_study(study: Study, design: DesignSurface, results: list[CandidateResult], *,
+                seconds_run: float = 0.0) -> StudyResult:
     """Checks, verdicts, costs, ranks and the recommendation of measured candidates.
 
     A pure function of the candidates' metrics and the study's limits and weights: judging
@@ -221,7 +231,7 @@ def judge_study(study: Study, design, results: list, *, seconds_run: float = 0.0
 SAME_NET_TOLERANCE = 1e-6
 
 
-def same_net(a, b, tolerance: float) -> bool:
+def same_net(a: QuadMesh, b: QuadMesh, tolerance: float) -> bool:
     """Whether two meshes are the same net: the same faces (same vertex order) and every
     vertex within `tolerance` (model units) of its counterpart.
 
@@ -240,7 +250,8 @@ def same_net(a, b, tolerance: float) -> bool:
     return bool(np.abs(a.vertices - b.vertices).max(initial=0.0) <= tolerance)
 
 
-def earlier_same_net(mesh, earlier: list, panel_size: float) -> CandidateResult | None:
+def earlier_same_net(mesh: QuadMesh, earlier: list[CandidateResult],
+                     panel_size: float) -> CandidateResult | None:
     """The first of the `earlier` candidates that ended at the net `mesh` (within
     `SAME_NET_TOLERANCE` of the panel size), not counting those that are themselves the
     net of another; None when there is none."""
@@ -255,8 +266,9 @@ def _where(exc: BaseException) -> str:
     return f"{frame.filename.rsplit('/', 1)[-1]}:{frame.lineno}"
 
 
-def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, starts: dict,
-                   earlier: list, say) -> CandidateResult:
+def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
+                   layouts: dict[float, SurfaceLayout], starts: dict[float, OptimizationResult],
+                   earlier: list[CandidateResult], say: Callable[[str], None]) -> CandidateResult:
     from ..fabricate.molds import MoldSettings, plan_molds
     from ..fabricate.strip_plan import plan_strips
     from ..fabricate.strips import StripSettings
@@ -264,7 +276,7 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
     from ..solve.optimize import optimize
     from ..solve.solver import SolverSettings
 
-    seconds: dict = {}
+    seconds: dict[str, float] = {}
     clock = time.perf_counter()
     angle = start_angle(candidate, design)
     if angle != 90.0:
@@ -275,7 +287,7 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
     seconds["layout"] = time.perf_counter() - clock
     settings = SolverSettings(max_iterations=study.max_iterations)
 
-    def report(rec):
+    def report(rec: IterationRecord) -> None:
         if rec.iteration % 10 == 0:
             say(f"    iteration {rec.iteration:3d}  residual {rec.hard_residual:.2e}")
 
@@ -301,26 +313,29 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
 
     clock = time.perf_counter()
     units = study.design.units
-    molds = twin.molds if twin is not None else plan_molds(
-        net.mesh, MoldSettings(tolerance_mm=study.limits.mold_tolerance_mm, units=units))
+    if twin is not None and twin.molds is not None:
+        molds = twin.molds
+    else:
+        molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=study.limits.mold_tolerance_mm,
+                                                  units=units))
     seconds["molds"] = time.perf_counter() - clock
     say(f"    {molds_text(mold_metrics(molds))} for {counted(molds.panel_count, 'panel')} "
         f"({seconds['molds']:.1f} s)")
 
     strips = None
-    wanted = study.strips is not None and study.strips.wanted(candidate.net)
-    if wanted and twin is not None and twin.strips is not None:
-        strips = twin.strips
-    elif wanted:
-        clock = time.perf_counter()
-        options = study.strips
-        strips = plan_strips(net.mesh, StripSettings(
-            height_mm=options.height_mm, thickness_mm=options.thickness_mm, units=units,
-            sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm))
-        seconds["strips"] = time.perf_counter() - clock
-        s = strips.summary()
-        say(f"    {counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
-            f"{counted(s['sheets'], 'sheet')} ({seconds['strips']:.1f} s)")
+    options = study.strips
+    if options is not None and options.wanted(candidate.net):
+        if twin is not None and twin.strips is not None:
+            strips = twin.strips
+        else:
+            clock = time.perf_counter()
+            strips = plan_strips(net.mesh, StripSettings(
+                height_mm=options.height_mm, thickness_mm=options.thickness_mm, units=units,
+                sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm))
+            seconds["strips"] = time.perf_counter() - clock
+            s = strips.summary()
+            say(f"    {counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
+                f"{counted(s['sheets'], 'sheet')} ({seconds['strips']:.1f} s)")
     deviation = vertex_deviation_mm(net.mesh, design, study.design.mm_per_unit)
     metrics = measure_candidate(net, design, molds, strips, mm_per_unit=study.design.mm_per_unit,
                                 deviation_mm=deviation)
@@ -330,7 +345,7 @@ def _run_candidate(study: Study, design, candidate: Candidate, layouts: dict, st
                            deviation_mm=deviation)
 
 
-def start_angle(candidate: Candidate, design) -> float:
+def start_angle(candidate: Candidate, design: DesignSurface) -> float:
     """Intersection angle (degrees) of the layout a candidate starts from: the
     candidate's own angle, else its ``start_angle``, else the natural one of its net
     type on the design (`fabplan.layout.layout_angle`)."""
@@ -350,13 +365,14 @@ def _range(values: np.ndarray) -> dict | None:
     return {"min": float(v.min()), "max": float(v.max()), "mean": float(v.mean())}
 
 
-def vertex_deviation_mm(mesh, design, mm_per_unit: float) -> np.ndarray:
+def vertex_deviation_mm(mesh: QuadMesh, design: DesignSurface, mm_per_unit: float) -> np.ndarray:
     """(n,) float, distance of every vertex of a net from the design in mm (to the exact
     surface of a built-in design, to the triangle mesh of a design file)."""
     return design.distances(mesh.vertices) * mm_per_unit
 
 
-def measure_candidate(net, design, molds, strips, *, mm_per_unit: float,
+def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: MoldPlan,
+                      strips: StripPlan | None, *, mm_per_unit: float,
                       deviation_mm: np.ndarray | None = None) -> dict:
     """Everything a verdict and a report need, measured on the solved net.
 
@@ -430,7 +446,7 @@ def measure_candidate(net, design, molds, strips, *, mm_per_unit: float,
     return metrics
 
 
-def mold_metrics(plan) -> dict:
+def mold_metrics(plan: MoldPlan) -> dict:
     """The mold numbers of a study: only curved panels need a mold.
 
     A flat panel is cut from flat stock (glass, sheet) and needs no mold, so `count` is
@@ -484,11 +500,11 @@ def _pick(stats: dict | None) -> dict | None:
 
 
 # ---------------------------------------------------------------------------- judging
-def _check(limit: str, bound, measured, ok: bool, text: str) -> dict:
+def _check(limit: str, bound: float, measured: float | None, ok: bool, text: str) -> dict:
     return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text}
 
 
-def verdict(metrics: dict, limits: Limits) -> list:
+def verdict(metrics: dict, limits: Limits) -> list[dict]:
     """The checks of one candidate's measured `metrics` against the `limits`.
 
     Returns
@@ -572,7 +588,7 @@ def verdict(metrics: dict, limits: Limits) -> list:
     return checks
 
 
-def _g(value) -> str:
+def _g(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.2g}"
 
 
@@ -595,7 +611,7 @@ def _differ_by(value: float) -> str:
     return f"by up to {value:.2g} mm" if value < 0.1 else f"by up to {value:.2f} mm"
 
 
-def _reasons(checks: list, feasible: bool) -> list:
+def _reasons(checks: list[dict], feasible: bool) -> list[str]:
     if feasible:
         return [f"meets all {len(checks)} limits: " + "; ".join(c["text"] for c in checks)]
     return [c["text"] for c in checks if not c["ok"]]
@@ -631,20 +647,27 @@ def candidate_cost(metrics: dict, weights: CostWeights, *,
     return float(sum(terms.values())), terms
 
 
-def rank_candidates(results: list) -> None:
+def rank_candidates(results: list[CandidateResult]) -> None:
     """Set `rank`: feasible candidates by cost, then the others by failed checks, cost. A
     candidate that ended at the net of another ranks right after it (their costs differ by
     rounding only)."""
     done = [r for r in results if not r.failed]
     named = {r.name: r for r in done}
 
-    def key(r):
-        twin = named.get(r.same_net_as, r)
-        return (not r.feasible, sum(not c["ok"] for c in r.checks), twin.cost, twin is not r)
+    def key(r: CandidateResult) -> tuple[bool, int, float, bool]:
+        twin = r if r.same_net_as is None else named.get(r.same_net_as, r)
+        cost = math.inf if twin.cost is None else twin.cost
+        return (not r.feasible, sum(not c["ok"] for c in r.checks), cost, twin is not r)
 
     order = sorted(done, key=key)
     for i, r in enumerate(order, 1):
         r.rank = i
+
+
+def _by_rank(result: CandidateResult) -> tuple[bool, int]:
+    """Sort key: ranked candidates in rank order, then the unranked (failed) ones in their
+    order (sorting is stable)."""
+    return (result.rank is None, 0 if result.rank is None else result.rank)
 
 
 def is_lamella_study(study: Study) -> bool:
@@ -656,7 +679,7 @@ def is_lamella_study(study: Study) -> bool:
         or limits.min_strip_radius_mm is not None or limits.max_strip_radius_mm is not None)
 
 
-def recommend(results: list, study: Study, *,
+def recommend(results: list[CandidateResult], study: Study, *,
               sheets_charged: bool = True) -> tuple[str | None, str]:
     """The recommended candidate (the cheapest feasible one) and why, in plain words.
 
@@ -668,9 +691,9 @@ def recommend(results: list, study: Study, *,
     net, not as another option.
     """
     base = next((r for r in results if r.candidate.baseline and not r.failed), None)
-    feasible = sorted((r for r in results if r.feasible), key=lambda r: r.rank)
+    feasible = sorted((r for r in results if r.feasible), key=_by_rank)
     if not feasible:
-        measured = sorted((r for r in results if not r.failed), key=lambda r: r.rank)
+        measured = sorted((r for r in results if not r.failed), key=_by_rank)
         if not measured:
             return None, "No candidate produced a net; see the reasons of each below."
         best = measured[0]
@@ -715,7 +738,7 @@ def recommend(results: list, study: Study, *,
     return best.name, " ".join(words)
 
 
-def _achievements(best: CandidateResult, base: CandidateResult | None, study: Study) -> list:
+def _achievements(best: CandidateResult, base: CandidateResult | None, study: Study) -> list[str]:
     """What the recommended candidate achieves that the study asks for, in sentences."""
     m, limits = best.metrics, study.limits
     b = base.metrics if base is not None else None
@@ -762,11 +785,14 @@ def _achievements(best: CandidateResult, base: CandidateResult | None, study: St
 
 
 def _cost_sentence(best: CandidateResult, base: CandidateResult) -> str:
-    if best.cost <= base.cost:
-        less = 100 * (base.cost - best.cost) / base.cost if base.cost > 0 else 0.0
-        return (f"It costs {best.cost:.0f} units against {base.cost:.0f} for the baseline "
+    cost, base_cost = best.cost, base.cost
+    if cost is None or base_cost is None:
+        raise ValueError("only measured candidates have a cost to compare")
+    if cost <= base_cost:
+        less = 100 * (base_cost - cost) / base_cost if base_cost > 0 else 0.0
+        return (f"It costs {cost:.0f} units against {base_cost:.0f} for the baseline "
                 f"({less:.0f} % less).")
-    return (f"It costs {best.cost:.0f} units, more than the {base.cost:.0f} of the baseline, "
+    return (f"It costs {cost:.0f} units, more than the {base_cost:.0f} of the baseline, "
             "which does not meet the limits.")
 
 

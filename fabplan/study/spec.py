@@ -30,6 +30,7 @@ import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
 from ..solve.net_types import NETS, get_net
@@ -239,7 +240,7 @@ class Study:
     limits: Limits
     strips: StripOptions | None
     cost: CostWeights
-    candidates: tuple
+    candidates: tuple[Candidate, ...]
     max_iterations: int = 100
     extra: dict = field(default_factory=dict)
 
@@ -266,33 +267,53 @@ class Study:
 class _Table:
     """One TOML table and its path in the file, for messages that name the key."""
 
-    def __init__(self, data, where: str, file: str):
+    def __init__(self, data: object, where: str, file: str) -> None:
         if not isinstance(data, dict):
             raise InputError(f"{file}: [{where}] must be a table")
-        self.data, self.where, self.file, self.used = data, where, file, set()
+        self.data: dict[str, Any] = data    # TOML values: whatever the file holds
+        self.where, self.file = where, file
+        self.used: set[str] = set()
 
     def _name(self, key: str) -> str:
         return f"{self.file}: {self.where}.{key}" if self.where else f"{self.file}: {key}"
 
-    def fail(self, key: str, what: str):
+    def fail(self, key: str, what: str) -> NoReturn:
         raise InputError(f"{self._name(key)} {what}")
 
-    def missing(self, key: str, what: str):
+    def missing(self, key: str, what: str) -> NoReturn:
         """A required key is absent: name a present key that looks like a typo of it."""
         close = difflib.get_close_matches(key, [k for k in self.data if k not in self.used], n=1)
         if close:
             self.fail(close[0], f"is not a known key (did you mean {key!r}?)")
         self.fail(key, f"is missing: {what}")
 
-    def get(self, key: str, default=None):
+    def get(self, key: str, default: Any = None) -> Any:
         self.used.add(key)
         return self.data.get(key, default)
 
     def has(self, key: str) -> bool:
         return key in self.data
 
-    def number(self, key: str, default=None, *, positive: bool = True, required: bool = False,
-               integer: bool = False, unit: str = ""):
+    # number and text return None only for an absent key without a default that is not
+    # required, and number an int with integer=True: the overloads say so to the checker
+    @overload
+    def number(self, key: str, default: int, *, positive: bool = ..., integer: Literal[True],
+               unit: str = ...) -> int: ...
+    @overload
+    def number(self, key: str, default: None = ..., *, positive: bool = ..., integer: Literal[True],
+               unit: str = ...) -> int | None: ...
+    @overload
+    def number(self, key: str, default: float, *, positive: bool = ..., unit: str = ...) -> float: ...
+    @overload
+    def number(self, key: str, default: None = ..., *, positive: bool = ..., required: Literal[True],
+               unit: str = ...) -> float: ...
+    @overload
+    def number(self, key: str, default: None = ..., *, positive: bool = ...,
+               unit: str = ...) -> float | None: ...
+
+    def number(self, key: str, default: float | None = None, *, positive: bool = True,
+               required: bool = False, integer: bool = False, unit: str = "") -> float | None:
+        """A number (an int with `integer`); `default` when absent, unless `required`."""
         value = self.get(key)
         if value is None:
             if required:
@@ -308,7 +329,18 @@ class _Table:
             self.fail(key, f"must be {kind}{f' ({unit})' if unit else ''}, got {value!r}")
         return int(value) if integer else float(value)
 
-    def text(self, key: str, default=None, *, choices=None, required: bool = False):
+    @overload
+    def text(self, key: str, default: str, *, choices: Sequence[str] | None = ...) -> str: ...
+    @overload
+    def text(self, key: str, default: None = ..., *, choices: Sequence[str] | None = ...,
+             required: Literal[True]) -> str: ...
+    @overload
+    def text(self, key: str, default: None = ..., *,
+             choices: Sequence[str] | None = ...) -> str | None: ...
+
+    def text(self, key: str, default: str | None = None, *, choices: Sequence[str] | None = None,
+             required: bool = False) -> str | None:
+        """A string (one of `choices` if given); `default` when absent, unless `required`."""
         value = self.get(key)
         if value is None:
             if required:
@@ -329,7 +361,7 @@ class _Table:
             self.fail(key, f"must be true or false, got {value!r}")
         return value
 
-    def only(self, tables) -> None:
+    def only(self, tables: Sequence[str]) -> None:
         """Refuse top-level tables other than `tables` before anything else is read, so
         that a misspelt table (``[panel]``) is named, not reported as missing keys."""
         for key in self.data:
@@ -347,7 +379,7 @@ class _Table:
                 self.fail(key, "is not a known key" + _suggest(key, self.used))
 
 
-def _suggest(word: str, options) -> str:
+def _suggest(word: object, options: Iterable[object]) -> str:
     close = difflib.get_close_matches(str(word), [str(o) for o in options], n=1, cutoff=0.7)
     return f" (did you mean {close[0]!r}?)" if close else ""
 
@@ -450,7 +482,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
         t.done()
         return DesignSpec(str(source), Path(file).name, {}, None, units)
     triangles = t.number("triangles", 20000, integer=True)
-    if surface not in SURFACES:
+    if surface is None or surface not in SURFACES:
         t.fail("surface", f"is {surface!r}, not a built-in surface; known: {', '.join(SURFACES)}"
                + _suggest(surface, SURFACES))
     items = []
@@ -545,7 +577,7 @@ def _cost(t: _Table) -> CostWeights:
     return CostWeights(**weights)
 
 
-def _values(t: _Table, key: str, unit: str) -> list:
+def _values(t: _Table, key: str, unit: str) -> list[float | None]:
     """A parameter as a list of values: a number, "free", a list, or {from, to, step}."""
     value = t.get(key)
     if value is None or value == "free":
@@ -563,7 +595,7 @@ def _values(t: _Table, key: str, unit: str) -> list:
             t.fail(key, f"sweep has {count} values; at most 50")
         return [round(lo + i * step, 9) for i in range(count)]
     items = value if isinstance(value, list) else [value]
-    out = []
+    out: list[float | None] = []
     for v in items:
         if v == "free":
             out.append(None)
@@ -575,7 +607,7 @@ def _values(t: _Table, key: str, unit: str) -> list:
     return out
 
 
-def _candidates(value, file: str) -> tuple:
+def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
     baseline = Candidate("baseline", "snet", baseline=True)
     if value == "auto":
         value = [{"net": "auto"}]
@@ -650,7 +682,7 @@ def templates_folder() -> Path:
     return Path(__file__).resolve().parents[2] / "templates"
 
 
-def template_names() -> list:
+def template_names() -> list[str]:
     """Names of the bundled templates (``templates/NAME.toml``), sorted."""
     return sorted(p.stem for p in templates_folder().glob("*.toml"))
 
@@ -690,7 +722,7 @@ def resolve_study(source: str) -> Path:
     return template_path(source)
 
 
-def copy_template(name: str, destination: str | Path) -> list:
+def copy_template(name: str, destination: str | Path) -> list[Path]:
     """Copy a template (and the files it refers to beside it) to start a new study.
 
     Returns
