@@ -18,12 +18,26 @@ A net is *folded* when it has a flipped face or a fold edge.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from .geometry import canonical_stars, face_normals, intersection_angles
 
-__all__ = ["FoldLimits", "FoldReport", "measure_folds", "fold_edge_mask", "flipped_against"]
+if TYPE_CHECKING:
+    from .mesh import QuadMesh
+
+__all__ = ["FoldLimits", "FoldReport", "SurfaceWithNormals", "measure_folds", "fold_edge_mask",
+           "flipped_against"]
+
+
+class SurfaceWithNormals(Protocol):
+    """A reference surface: closest points with the surface normal there (for example
+    `fabplan.solve.reference.ReferenceSurface`)."""
+
+    def closest_points(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def distances(self, points: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -145,7 +159,8 @@ def _flipped_among_neighbours(normals: np.ndarray, edge_faces: np.ndarray) -> np
     return 2 * against > total
 
 
-def measure_folds(mesh, X: np.ndarray | None = None, *, reference=None,
+def measure_folds(mesh: QuadMesh, X: np.ndarray | None = None, *,
+                  reference: SurfaceWithNormals | None = None,
                   limits: FoldLimits | None = None) -> FoldReport:
     """Find flipped faces, fold edges, degenerate stars and collapsed edges.
 

@@ -6,9 +6,11 @@ copied from a solver's residuals.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from .folds import measure_folds
+from .folds import SurfaceWithNormals, measure_folds
 from .geometry import (
     canonical_stars,
     face_planarity,
@@ -19,6 +21,9 @@ from .geometry import (
     ruling_angles,
     star_planarity,
 )
+
+if TYPE_CHECKING:
+    from .mesh import QuadMesh
 
 __all__ = ["measure_net", "format_summary"]
 
@@ -33,7 +38,7 @@ def _stats(values: np.ndarray) -> dict:
             "mean": float(v.mean()), "count": int(v.size)}
 
 
-def measure_net(mesh, *, reference=None) -> dict:
+def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None) -> dict:
     """Measure the S-net properties of a quad mesh.
 
     Parameters

@@ -14,7 +14,7 @@ from ..errors import InputError, SolverError
 from ..io.obj import format_obj
 from ..io.output import write_texts
 from ..io.records import json_text
-from ..net.folds import fold_edge_mask, measure_folds
+from ..net.folds import FoldReport, fold_edge_mask, measure_folds
 from ..net.geometry import (
     canonical_stars,
     face_normals,
@@ -34,6 +34,7 @@ from .constraints import (
     ConstantMannheimRadius,
     EdgeCollapseBarrier,
     Fairness,
+    NetState,
     NormalCone,
     RulingAngle,
     StarAngleRange,
@@ -154,6 +155,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     if reference is None and (closeness or glide):
         reference = ReferenceSurface.from_mesh(mesh)
     if glide:
+        assert reference is not None
         # on the surface at convergence, boundary vertices on its boundary curves
         families.append(Closeness(reference, hard=True, tolerance=surface_tolerance))
         curves = reference.boundary_curves()
@@ -194,7 +196,7 @@ def check_radius_fits(mesh: QuadMesh, radius: float | None, *, dual: bool = Fals
                          "and its neighbours; give a larger radius, or scale the net")
 
 
-def _admissible(mesh: QuadMesh, families: list):
+def _admissible(mesh: QuadMesh, families: list) -> Callable[[NetState], bool]:
     """The solver's test of an iterate: no fold edge, and no farther from the reference
     than at the start or one mean edge, whichever is more (when a closeness family says
     how far the net is)."""
@@ -202,7 +204,7 @@ def _admissible(mesh: QuadMesh, families: list):
     closeness = next((f for f in families if isinstance(f, Closeness)), None)
     allowed: list[float] = []
 
-    def admissible(state) -> bool:
+    def admissible(state: NetState) -> bool:
         if fold_edge_mask(face_normals(state.X, mesh), edge_faces).any():
             return False
         if closeness is None:
@@ -343,14 +345,18 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     handle_ids, targets = _handle_arrays(handles, mesh)
     held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
-    options = dict(angle=angle, radius=radius, reference=reference, fixed=held, settings=settings,
-                   fairness=fairness, coherent=coherent, closeness=closeness, glide=glide,
-                   glide_boundary=glide_boundary, surface_tolerance=surface_tolerance, extra=extra)
-    solver = build_solver(mesh, net, guards=bool(guards), **options)
+
+    def make(with_guards: bool) -> GuidedProjection:
+        return build_solver(mesh, net, angle=angle, radius=radius, reference=reference, fixed=held,
+                            settings=settings, fairness=fairness, coherent=coherent,
+                            closeness=closeness, glide=glide, glide_boundary=glide_boundary,
+                            surface_tolerance=surface_tolerance, extra=extra, guards=with_guards)
+
+    solver = make(bool(guards))
     _solve(solver, handle_ids, targets, progress)
     folds = measure_folds(mesh, solver.vertices, reference=solver.reference)
     if guards is None and (folds.folded or folds.degenerate):
-        retry = build_solver(mesh, net, guards=True, **options)
+        retry = make(True)
         _solve(retry, handle_ids, targets, progress)
         retry_folds = measure_folds(mesh, retry.vertices, reference=retry.reference)
         if _rank(retry, retry_folds) < _rank(solver, folds):
@@ -382,7 +388,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     )
 
 
-def _rank(solver: GuidedProjection, folds) -> tuple:
+def _rank(solver: GuidedProjection, folds: FoldReport) -> tuple:
     """Sort key of a finished solve: fold-free first, then converged, then residual."""
     hard = solver.history[-1].hard_residual if solver.history else np.inf
     return (folds.folded, folds.degenerate, solver.status != "converged", hard)
@@ -420,7 +426,7 @@ def _stages(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarra
     stages: list = []
     family = next((c for c in solver.constraints
                    if isinstance(c, ConstantAngle) and c.cosine is not None), None)
-    if family is not None:
+    if family is not None and family.cosine is not None:
         goal = float(np.degrees(np.arccos(np.clip(family.cosine, -1.0, 1.0))))
         here = float(np.degrees(np.median(intersection_angles(solver.state.X, solver.state.stars))))
         count = max(1, int(np.ceil(abs(goal - here) / CONTINUATION_STEP_DEG)))
@@ -435,7 +441,7 @@ def _stages(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarra
     return stages or [lambda: None]
 
 
-def _explain(solver: GuidedProjection, status: str, folds, start: QuadMesh,
+def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: QuadMesh,
              angle: float | None) -> str:
     """One line: what stood in the way of a converged net, and what to try."""
     if status == "converged":

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,6 +29,9 @@ from ..errors import SolverError
 from ..net.geometry import canonical_stars
 from .constraints import Constraint, NetState, VariableBlocks
 from .linalg import SparseSPDSolver
+
+if TYPE_CHECKING:
+    from ..net.mesh import QuadMesh
 
 __all__ = ["SolverSettings", "IterationRecord", "GuidedProjection"]
 
@@ -186,10 +189,12 @@ class GuidedProjection:
     one iteration per drag step and reuse the symbolic factorization.
     """
 
-    def __init__(self, mesh, constraints: list[Constraint], *, fixed=None,
-                 settings: SolverSettings | None = None,
-                 admissible: Callable[[NetState], bool] | None = None):
+    def __init__(self, mesh: QuadMesh, constraints: list[Constraint], *,
+                 fixed: np.ndarray | None = None, settings: SolverSettings | None = None,
+                 admissible: Callable[[NetState], bool] | None = None) -> None:
         self.mesh = mesh
+        self.net = ""                # the net type's name, when a preset built the solver
+        self.reference: Any = None   # the surface a preset measures closeness to
         self.constraints = list(constraints)
         self.settings = settings or SolverSettings()
         X = mesh.vertices
@@ -286,10 +291,17 @@ class GuidedProjection:
                         indices=ukeys % nfree, diagonal=slots[:nfree],
                         slots=slots[nfree:], products=np.empty(len(keys) - nfree))
 
+    @property
+    def pattern(self) -> _Pattern:
+        """The fixed sparsity pattern of the normal equations (built by the first `run`)."""
+        if self._pattern is None:
+            raise SolverError("the solver has not been run yet: no sparsity pattern")
+        return self._pattern
+
     def _assemble(self, jacobians: list, residuals: list,
                   damping: float) -> tuple[sp.csr_matrix, np.ndarray]:
         """Upper triangle of ``J^T J + damping I`` (CSR) and the gradient ``J^T r``."""
-        pat = self._pattern
+        pat = self.pattern
         nnz, nfree = len(pat.indices), len(self.free)
         gradient = np.zeros(nfree + 1)
         start = 0
@@ -314,7 +326,7 @@ class GuidedProjection:
 
     def _factor(self, upper: sp.csr_matrix, damping: float) -> None:
         """Factor, adding damping when rounding makes the matrix lose definiteness."""
-        diagonal = self._pattern.diagonal
+        diagonal = self.pattern.diagonal
         for _ in range(4):
             try:
                 self._linear.factor(upper)
@@ -526,7 +538,7 @@ class GuidedProjection:
                         t_solve, merit=merit, rejected=rejected, damping=damping)
                 self._restore(before)
             raised = damping * growth
-            upper.data[self._pattern.diagonal] += raised - damping
+            upper.data[self.pattern.diagonal] += raised - damping
             damping, growth = raised, 2.0 * growth
             self._damping_scale *= growth / 2.0
         self._restore(before)
