@@ -13,6 +13,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from . import __version__
 from .errors import FabplanError, InputError
@@ -406,21 +407,20 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"fabplan: error: {message} (see '{self.prog} --help')\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="fabplan", description="Fabrication planning with principal symmetric meshes.")
-    parser.add_argument("--version", action="version", version=f"fabplan {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-
+def _add_nets(sub: Any) -> None:
     p = sub.add_parser("nets", help="list the net types and their defining properties")
     p.set_defaults(func=_cmd_nets)
 
+
+def _add_measure(sub: Any) -> None:
     p = sub.add_parser("measure", help="measure the S-net properties of a quad mesh")
     p.add_argument("net", help="quad mesh (OBJ)")
     p.add_argument("-o", "--output", help="JSON file to write (default: NET.measure.json)")
     p.add_argument("--reference", help="surface to measure the distance to (OBJ/STL/PLY/OFF)")
     p.set_defaults(func=_cmd_measure)
 
+
+def _add_optimize(sub: Any) -> None:
     p = sub.add_parser("optimize", help="optimize a quad mesh into a net of a given type")
     p.add_argument("input", help="quad mesh (OBJ)")
     p.add_argument("--net", required=True, choices=list(NETS), metavar="NAME",
@@ -448,6 +448,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
     p.set_defaults(func=_cmd_optimize)
 
+
+def _add_molds(sub: Any) -> None:
     p = sub.add_parser("molds", help="count the molds a net's curved panels need and write a "
                                      "report (report.html, molds.json, panels.csv)")
     p.add_argument("net", help="quad mesh (OBJ); every face is a panel")
@@ -463,6 +465,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     p.set_defaults(func=_cmd_molds)
 
+
+def _add_layout(sub: Any) -> None:
     from .design.parametric import SURFACES, describe_surface_parameters
 
     p = sub.add_parser("layout", help="lay out an S-net on a design surface and optimize it "
@@ -493,6 +497,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
     p.set_defaults(func=_cmd_layout)
 
+
+def _add_strips(sub: Any) -> None:
     p = sub.add_parser("strips", help="lamella strips along the parameter lines, unrolled, "
                                       "slit, labelled and nested on sheets (DXF + schedule)")
     p.add_argument("net", help="the net (OBJ)")
@@ -535,6 +541,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
     p.set_defaults(func=_cmd_strips)
 
+
+def _add_study(sub: Any) -> None:
     p = sub.add_parser("study", help="facade feasibility study: run the candidate nets of a "
                        "design, judge them against the fabrication limits, recommend one",
                        description="Run a facade feasibility study and write its report. "
@@ -549,12 +557,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)
 
+
+def _add_templates(sub: Any) -> None:
     p = sub.add_parser("templates", help="list the study templates, print or copy one")
     p.add_argument("name", nargs="?", help="template to print (or copy with -o)")
     p.add_argument("-o", "--output", metavar="FILE",
                    help="copy the template here: a .toml file, or a folder (an existing one, "
                         "or a path ending in /) that gets NAME.toml")
     p.set_defaults(func=_cmd_templates)
+
+
+# every subcommand adds its parser; a new command is one function and one entry here
+_SUBCOMMANDS = [_add_nets, _add_measure, _add_optimize, _add_molds, _add_layout, _add_strips,
+               _add_study, _add_templates]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="fabplan", description="Fabrication planning with principal symmetric meshes.")
+    parser.add_argument("--version", action="version", version=f"fabplan {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
     return parser
 
 
