@@ -263,6 +263,10 @@ def layout_warnings(properties: dict) -> list:
     if angle.get("min") is not None and (angle["min"] < 20 or angle["max"] > 160):
         out.append(f"the families meet at {angle['min']:.1f} .. {angle['max']:.1f} deg: some "
                    "panels are nearly degenerate")
+    folds = properties.get("folds") or {}
+    if folds.get("folded"):
+        out.append(f"the net folds: {folds['flipped_faces']['count']} flipped faces (ids in the "
+                   f"JSON under properties.folds), {folds['fold_edges']['count']} fold edges")
     off = properties["distance_to_design_relative_to_panel"]["max"]
     if off > 0.01:
         chord = properties.get("design_chord_error") or 0.0

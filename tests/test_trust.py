@@ -179,3 +179,27 @@ def test_converged_nets_are_unchanged_by_the_step_control():
     assert result.converged and not result.properties["folds"]["folded"]
     assert all(h["rejected"] == 0 for h in result.history)
     assert result.iterations <= 12
+
+
+def test_a_layout_and_a_study_candidate_carry_the_fold_counts(tmp_path):
+    from fabplan.study.run import measure_candidate, verdict
+
+    design = fabplan.load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5", triangles=4000)
+    layout = fabplan.layout_surface(design, 1.5)
+    result = fabplan.glide(layout, "snet")
+    folds = result.properties["folds"]
+    assert folds["folded"] is False and folds["flipped_faces"]["count"] == 0
+    assert result.converged
+    # a candidate whose net folds is judged on it: the verdict names the folds
+    folded = dict(folds, folded=True, flipped_faces={"count": 3, "ids": [1, 2, 3]})
+    result.properties["folds"] = folded
+    result.status = "folded"
+    plan = fabplan.plan_molds(result.mesh, tolerance_mm=5.0)
+    metrics = measure_candidate(result, design, plan, None, mm_per_unit=1000.0)
+    assert metrics["folds"] == {"folded": True, "flipped_faces": 3, "fold_edges": 0,
+                                "degenerate_stars": folds["degenerate_stars"]["count"],
+                                "collapsed_edges": folds["collapsed_edges"]["count"]}
+    from fabplan.study.spec import Limits
+
+    first = verdict(metrics, Limits(max_deviation_mm=1e9, mold_tolerance_mm=5.0))[0]
+    assert not first["ok"] and "3 flipped faces" in first["text"]

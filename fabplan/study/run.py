@@ -421,6 +421,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "kink_deg": _range(kinks) or {"min": 0.0, "max": 0.0, "mean": 0.0},
         "intersection_angle_deg": _pick(props.get("intersection_angle_deg")),
         "meusnier_radius": _pick(props.get("meusnier_radius")),
+        "folds": _fold_counts(props.get("folds")),
         "molds": mold_metrics(molds),
         "strips": None,
     }
@@ -444,6 +445,15 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
             "unrolled_length_error_mm": s["unrolled_length_error_mm"],
         }
     return metrics
+
+
+def _fold_counts(folds: dict | None) -> dict | None:
+    """The counts of `fabplan.net.folds` on the net (flipped faces, fold edges, degenerate
+    stars, collapsed edges) and whether it folds."""
+    if folds is None:
+        return None
+    keys = ("flipped_faces", "fold_edges", "degenerate_stars", "collapsed_edges")
+    return {"folded": bool(folds["folded"]), **{k: int(folds[k]["count"]) for k in keys}}
 
 
 def mold_metrics(plan: MoldPlan) -> dict:
@@ -516,6 +526,12 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     res = metrics["sphere_residual_relative_max"]
     res_ok = res is not None and res <= limits.max_sphere_residual and metrics["converged"]
     state = "converged" if metrics["converged"] else f"stopped ({metrics['status']})"
+    folds = metrics.get("folds")
+    if folds and metrics["status"] in ("folded", "degenerate"):
+        state = (f"met its constraints on a net that folds ({folds['flipped_faces']} flipped "
+                 f"faces, {folds['fold_edges']} fold edges)" if folds["folded"] else
+                 f"met its constraints on a degenerate net ({folds['degenerate_stars']} stars "
+                 f"with their lines run together, {folds['collapsed_edges']} collapsed edges)")
     checks.append(_check(
         "max_sphere_residual", limits.max_sphere_residual, res, res_ok,
         f"the solve {state} after {metrics['iterations']} iterations; largest sphere residual "
