@@ -10,6 +10,7 @@ are tried on the same run without solving again.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import html
 import json
@@ -732,3 +733,22 @@ def test_an_output_folder_named_like_a_template_does_not_hide_it(tmp_path, monke
     (tmp_path / "mine").mkdir()
     with pytest.raises(InputError, match="mine: a folder, not a study file"):
         resolve_study("mine")
+
+
+def test_the_report_says_how_much_of_the_design_is_clad_and_whether_nets_fold(study_run):
+    """Designs were left 6-9 % unclad at their edges and no report said so."""
+    _, out, record = study_run
+    page = html.unescape((out / "report.html").read_text(encoding="utf-8"))
+    assert "design covered [%]" in page
+    rows = {r["name"]: r for r in csv.DictReader(
+        line for line in (out / "candidates.csv").read_text(encoding="utf-8").splitlines()
+        if not line.startswith("#"))}
+    for c in record["candidates"]:
+        if c.get("failed"):
+            continue
+        m = c["metrics"]
+        assert float(rows[c["name"]]["coverage"]) == pytest.approx(m["coverage"], rel=1e-5)
+        assert rows[c["name"]]["folded"] == ("yes" if m["folds"]["folded"] else "no")
+        assert f"{100 * m['coverage']:.1f} % of the design's area" in page
+        if m["coverage"] < 0.999:
+            assert f"{100 * (1 - m['coverage']):.1f} % is left unclad" in page

@@ -92,7 +92,8 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
 
 
 _CSV_COLUMNS = ["rank", "name", "net", "feasible", "cost", "molds", "panels", "planar",
-                "single_curved", "double_curved", "deviation_max_mm", "deviation_p95_mm",
+                "single_curved", "double_curved", "coverage", "folded", "deviation_max_mm",
+                "deviation_p95_mm",
                 "planarity_max_mm", "kink_max_deg", "angle_min_deg", "angle_max_deg",
                 "radius_min", "radius_max", "sheets", "strips_congruent", "seconds", "reasons"]
 
@@ -110,6 +111,8 @@ def _row(c: CandidateResult) -> dict:
         "molds": m["molds"]["count"], "panels": m["panels"],
         "planar": types.get("planar", 0), "single_curved": types.get("single_curved", 0),
         "double_curved": types.get("double_curved", 0),
+        "coverage": _num(m["coverage"]),
+        "folded": "yes" if (m.get("folds") or {}).get("folded") else "no",
         "deviation_max_mm": _num(m["deviation_mm"]["max"]),
         "deviation_p95_mm": _num(m["deviation_mm"]["p95"]),
         "planarity_max_mm": _num(m["planarity_mm"]["max"]),
@@ -329,13 +332,14 @@ def _comparison_table(result: StudyResult) -> str:
         m = c.metrics
         if c.failed:
             rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "",
-                         "", "", "", c.reasons[0]])
+                         "", "", "", "", c.reasons[0]])
             bad.append(len(rows) - 1)
             continue
         s = m["strips"]
         rows.append([
             c.rank, c.name, c.candidate.describe(), "yes" if c.feasible else "no",
             m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
+            f"{100 * m['coverage']:.1f}",
             f"{m['deviation_mm']['max']:.1f}", f"{m['planarity_mm']['max']:.2f}",
             f"{m['kink_deg']['max']:.2f}", _fmt_range(m["intersection_angle_deg"]),
             _meusnier_text(result, m["meusnier_radius"]) if m["meusnier_radius"] else "",
@@ -344,7 +348,8 @@ def _comparison_table(result: StudyResult) -> str:
         if not c.feasible:
             bad.append(len(rows) - 1)
     return html.html_table(
-        ["rank", "candidate", "net", "feasible", "molds", "panels", "max deviation [mm]",
+        ["rank", "candidate", "net", "feasible", "molds", "panels", "design covered [%]",
+         "max deviation [mm]",
          "planarity [mm]", "max kink [deg]", "angle [deg]", "Meusnier radius",
          "strip sheets", "cost", "note"], rows, caption="All candidates, best first", bad_rows=bad)
 
@@ -368,6 +373,26 @@ def _cost_table(result: StudyResult) -> str:
     rows = [[k.replace("_", " "), html.format_value(v)]
             for k, v in asdict(result.study.cost).items()]
     return html.html_table(["per", "cost units"], rows, caption="Cost weights")
+
+
+def _coverage_text(coverage: float) -> str:
+    """The share of the design the panels cover, and what the rest means for the counts."""
+    text = f"{100 * coverage:.1f} % of the design's area"
+    if coverage < 0.999:
+        text += (f": {100 * (1 - coverage):.1f} % is left unclad along the edges, and the panel, "
+                 "mold, sheet and cost figures leave it out")
+    return text
+
+
+def _folds_text(folds: dict | None) -> str:
+    if not folds:
+        return "-"
+    counts = [(folds["flipped_faces"], "flipped face"), (folds["fold_edges"], "fold edge"),
+              (folds["degenerate_stars"], "degenerate star"),
+              (folds["collapsed_edges"], "collapsed edge")]
+    found = [counted(n, what) for n, what in counts if n]
+    return ", ".join(found) if found else "none (no flipped face, fold, degenerate star or " \
+                                         "collapsed edge)"
 
 
 def cost_line(result: StudyResult) -> str:
@@ -417,6 +442,8 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
         ["panels", f"{m['panels']} ({m['quads']} quads, {m['other_faces']} other; "
                    f"{m['irregular_vertices']} irregular vertices)"],
         ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in types.items())],
+        ["design covered", _coverage_text(m["coverage"])],
+        ["folds", _folds_text(m.get("folds"))],
         ["edge length", _fmt_range(m["edge_length"])],
         ["panel area", _fmt_range(m["panel_area"])],
         ["Meusnier radius", _meusnier_text(result, m["meusnier_radius"])
