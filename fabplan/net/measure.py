@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .fairness import fairness_record
 from .folds import SurfaceWithNormals, measure_folds
 from .geometry import (
     canonical_stars,
@@ -51,7 +52,8 @@ def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None) 
     -------
     dict, JSON-ready. Lengths are in model units; ``*_relative`` values are divided by the
     mean edge length; angles are in degrees; ``folds`` holds the counts and element ids
-    of `fabplan.net.folds.measure_folds`.
+    of `fabplan.net.folds.measure_folds`, ``fairness`` the line turns, edge ratios and
+    angle range of `fabplan.net.fairness.fairness_record` with their worst places.
     """
     X = mesh.vertices
     L = mesh.mean_edge_length
@@ -93,6 +95,7 @@ def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None) 
         record["distance_to_reference"] = _stats(d)
         record["distance_to_reference_relative"] = _stats(d / L)
     record["folds"] = measure_folds(mesh, reference=reference).record()
+    record["fairness"] = fairness_record(mesh)
     return record
 
 
@@ -139,4 +142,8 @@ def format_summary(record: dict) -> str:
                   (folds["degenerate_stars"]["count"], "degenerate stars"),
                   (folds["collapsed_edges"]["count"], "collapsed edges")]
         lines.append("folds: " + (", ".join(f"{n} {what}" for n, what in counts if n) or "none"))
+    turn = (record.get("fairness") or {}).get("line_turn_deg") or {}
+    if turn.get("max") is not None:
+        lines.append(f"lines turn in the surface by up to {turn['max']:.2f} deg (median "
+                     f"{turn['median']:.2f}), worst at vertex {turn['vertex']}")
     return "\n".join(lines)

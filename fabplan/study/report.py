@@ -384,6 +384,14 @@ def _coverage_text(coverage: float) -> str:
     return text
 
 
+def _turn_text(turn: dict | None) -> str:
+    """How much the net's lines turn within the surface, and where the most."""
+    if not turn or turn.get("max") is None:
+        return "-"
+    return (f"up to {turn['max']:.2f} deg at vertex {turn['vertex']} (median {turn['median']:.2f}, "
+            f"95 % below {turn['p95']:.2f} deg)")
+
+
 def _folds_text(folds: dict | None) -> str:
     if not folds:
         return "-"
@@ -443,6 +451,7 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
                    f"{m['irregular_vertices']} irregular vertices)"],
         ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in types.items())],
         ["design covered", _coverage_text(m["coverage"])],
+        ["line turns", _turn_text(m.get("line_turn_deg"))],
         ["folds", _folds_text(m.get("folds"))],
         ["edge length", _fmt_range(m["edge_length"])],
         ["panel area", _fmt_range(m["panel_area"])],

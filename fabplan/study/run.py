@@ -422,6 +422,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "intersection_angle_deg": _pick(props.get("intersection_angle_deg")),
         "meusnier_radius": _pick(props.get("meusnier_radius")),
         "folds": _fold_counts(props.get("folds")),
+        "line_turn_deg": (props.get("fairness") or {}).get("line_turn_deg"),
         "molds": mold_metrics(molds),
         "strips": None,
     }
@@ -572,6 +573,12 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         checks.append(_check("max_kink_deg", limits.max_kink_deg, k, k <= limits.max_kink_deg,
                              f"the largest kink between neighbouring panels is {k:.2f} deg (limit "
                              f"{limits.max_kink_deg:g} deg)"))
+    turn = (metrics.get("line_turn_deg") or {}).get("max")
+    if limits.max_line_turn_deg is not None and turn is not None:
+        checks.append(_check("max_line_turn_deg", limits.max_line_turn_deg, turn,
+                             turn <= limits.max_line_turn_deg,
+                             f"the net's lines turn in the surface by up to {turn:.2f} deg at a "
+                             f"vertex (limit {limits.max_line_turn_deg:g} deg)"))
     strips = metrics.get("strips")
     if strips is not None:
         if limits.min_strip_radius_mm is not None:

@@ -107,6 +107,8 @@ class Limits:
         `planarity_tolerance_mm`.
     planarity_tolerance_mm : largest distance of a quad's corner from its best-fit plane.
     max_kink_deg : largest angle between the normals of neighbouring panels.
+    max_line_turn_deg : largest turn of a net line within the surface at a vertex
+        (`fabplan.net.fairness`): how much the lines may wander and kink.
     min_strip_radius_mm, max_strip_radius_mm : range of the arc radii of the unrolled
         lamella strips (a straight strip has an infinite radius).
     max_sheets : most sheets of strip material.
@@ -127,6 +129,7 @@ class Limits:
     planar_panels: bool = False
     planarity_tolerance_mm: float = 2.0
     max_kink_deg: float | None = None
+    max_line_turn_deg: float | None = None
     min_strip_radius_mm: float | None = None
     max_strip_radius_mm: float | None = None
     max_sheets: int | None = None
@@ -523,6 +526,7 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
         planar_panels=t.boolean("planar_panels"),
         planarity_tolerance_mm=t.number("planarity_tolerance_mm", 2.0, unit="mm"),
         max_kink_deg=t.number("max_kink_deg", unit="degrees"),
+        max_line_turn_deg=t.number("max_line_turn_deg", unit="degrees"),
         min_strip_radius_mm=t.number("min_strip_radius_mm", unit="mm"),
         max_strip_radius_mm=t.number("max_strip_radius_mm", unit="mm"),
         max_sheets=t.number("max_sheets", integer=True),
@@ -531,8 +535,10 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
         min_coverage=t.number("min_coverage"),
         max_sphere_residual=t.number("max_sphere_residual", 1e-6),
     )
-    if limits.max_kink_deg is not None and limits.max_kink_deg >= 180:
-        t.fail("max_kink_deg", f"must lie below 180 degrees, got {limits.max_kink_deg:g}")
+    for key in ("max_kink_deg", "max_line_turn_deg"):
+        value = getattr(limits, key)
+        if value is not None and not 0 < value < 180:
+            t.fail(key, f"must lie between 0 and 180 degrees, got {value:g}")
     if limits.min_coverage is not None and limits.min_coverage > 1:
         t.fail("min_coverage", f"is a fraction of the design's area, at most 1; got "
                f"{limits.min_coverage:g}")
