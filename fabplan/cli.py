@@ -158,7 +158,7 @@ def _cmd_molds(args) -> int:
 
 def _cmd_layout(args) -> int:
     from .design.load import load_design
-    from .layout.picture import write_layout_picture
+    from .layout.picture import fairness_marks, write_layout_picture
     from .layout.surface_layout import glide, layout_angle, layout_surface
     from .solve.net_types import get_net
 
@@ -197,7 +197,8 @@ def _cmd_layout(args) -> int:
              + (f", {layout.family}" if layout.family else
                 f", {angle:.4g} deg" if isinstance(angle, float) else ""))
     write_layout_picture(picture, design, result.mesh, title=title,
-                         singular_points=layout.singular_points)
+                         singular_points=layout.singular_points,
+                         marks=fairness_marks(result.properties))
     obj_path, json_path = result.write(out)
     props = result.properties
     print(format_summary(props))

@@ -13,22 +13,39 @@ from ..io.output import atomic_path
 from ..net.mesh import QuadMesh
 from ..report.figures import net_view_angles, new_figure
 
-__all__ = ["write_layout_picture"]
+__all__ = ["write_layout_picture", "fairness_marks"]
+
+
+def fairness_marks(properties: dict) -> dict[str, list]:
+    """Where a measured net is least fair (`fabplan.net.fairness`), as labelled points for
+    `write_layout_picture`: the vertex its lines turn most, and the smallest angle."""
+    fairness = properties.get("fairness") or {}
+    marks = {}
+    turn = fairness.get("line_turn_deg") or {}
+    if turn.get("point") is not None:
+        marks[f"lines turn most ({turn['max']:.1f} deg)"] = turn["point"]
+    angle = fairness.get("intersection_angle_deg") or {}
+    if angle.get("min_vertex") is not None and properties.get("vertices"):
+        marks[f"smallest angle ({angle['min']:.1f} deg)"] = angle["min_vertex"]
+    return marks
 
 
 def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: QuadMesh, *,
-                         title: str = "", singular_points: np.ndarray | None = None) -> Path:
+                         title: str = "", singular_points: np.ndarray | None = None,
+                         marks: dict | None = None) -> Path:
     """A PNG of the net on the design surface, axes to scale (atomically written).
 
     The design is drawn light grey with its boundary black, the net's faces blue with
     their edges, irregular vertices red and singular points of the layout's direction
-    field orange; the view is `net_view_angles`.
+    field orange; `marks` ({label: point (3,) or vertex id}, e.g. `fairness_marks`) are
+    drawn as labelled markers; the view is `net_view_angles`.
     """
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     path = Path(path)
     fig = new_figure((8, 7))
     ax = fig.add_subplot(projection="3d")
+    ax.computed_zorder = False      # markers are drawn over the faces, in the order added
     T = design.triangles
     if len(T) > 30000:  # a coarser sample of the surface keeps the picture quick
         T = T[:: int(math.ceil(len(T) / 30000))]
@@ -46,6 +63,10 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     if singular_points is not None and len(singular_points):
         ax.scatter(*np.asarray(singular_points).T, color="orange", s=12, depthshade=False,
                    label="field singularities")
+    for (label, where), style in zip((marks or {}).items(), ("v", "s", "D", "^"), strict=False):
+        point = mesh.vertices[where] if isinstance(where, (int, np.integer)) else np.asarray(where)
+        ax.scatter(*point[:, None], color="magenta", edgecolor="black", marker=style, s=70,
+                   depthshade=False, label=label, zorder=10)
     elevation, azimuth = net_view_angles(design)
     ax.view_init(elev=elevation, azim=azimuth)
     lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
@@ -56,7 +77,7 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     ax.set_axis_off()
     if title:
         ax.set_title(title, fontsize=9)
-    if len(irregular) or (singular_points is not None and len(singular_points)):
+    if len(irregular) or marks or (singular_points is not None and len(singular_points)):
         ax.legend(loc="lower left", fontsize=8)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", bbox_inches="tight")

@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import output
 from ..io.records import json_text
-from ..layout.picture import write_layout_picture
+from ..layout.picture import fairness_marks, write_layout_picture
 from ..report import figures, html
 from ..report.figures import agreeing_normal
 from ..report.html import counted
@@ -565,7 +565,8 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
         "molds_json": "molds.json", "picture": "net.png"}
     title = f"{c.name}: {c.candidate.describe()}"
     write_layout_picture(folder / "net.png", result.design, net.mesh, title=title,
-                singular_points=c.layout.singular_points if c.layout else None)
+                         singular_points=c.layout.singular_points if c.layout else None,
+                         marks=fairness_marks(net.properties))
     pictures = {"net": _png_uri(folder / "net.png"),
                 "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
                                               study.design.mm_per_unit)}
