@@ -1,0 +1,165 @@
+"""Layouts judged on designs nobody tuned for: the corpus of `benchmarks/designs.py`.
+
+Run from the repository root::
+
+    python benchmarks/bench_corpus.py                          # every design, net and size
+    python benchmarks/bench_corpus.py --designs bumps l-facade --nets snet
+    python benchmarks/bench_corpus.py --summarize A.json B.json  # compare two runs
+
+Every design is laid out (`fabplan.layout_surface`) and solved gliding on it
+(`fabplan.glide`) with each net type (snet, orthogonal, isogonal 60 deg, const-radius) at
+two panel sizes (about 150 and 500 panels). Each case records how it ended (converged,
+the solver's status, or the one-line refusal), the share of the design covered, how far
+the net's lines turn within the surface (measured here, independently of fabplan: the
+angle between consecutive edges of a line projected onto the tangent plane of the star),
+the angle range, folds and seconds. A run writes ``benchmarks/results/corpus-<label>.json``
+and prints a markdown table; ``--summarize`` prints the median and worst line turn and the
+coverage per net type for several runs side by side (for example the code of two commits,
+each run with its checkout on ``PYTHONPATH``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from designs import DESIGNS  # noqa: E402
+
+import fabplan  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+NETS = [("snet", None), ("orthogonal", None), ("isogonal", 60.0), ("const-radius", None)]
+PANELS = (150, 500)
+
+
+def line_turns_deg(X: np.ndarray, stars: np.ndarray) -> np.ndarray:
+    """Turn of both lines at every star, projected on the star's tangent plane (degrees)."""
+    if len(stars) == 0:
+        return np.zeros(0)
+    P = X[stars]
+    v = P[:, 0]
+    n = np.cross(P[:, 3] - P[:, 1], P[:, 4] - P[:, 2])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    out = []
+    for a, b in ((1, 3), (2, 4)):
+        d0, d1 = v - P[:, a], P[:, b] - v
+        d0 = d0 - np.sum(d0 * n, axis=1, keepdims=True) * n
+        d1 = d1 - np.sum(d1 * n, axis=1, keepdims=True) * n
+        c = np.sum(d0 * d1, axis=1) / np.linalg.norm(d0, axis=1) / np.linalg.norm(d1, axis=1)
+        out.append(np.degrees(np.arccos(np.clip(c, -1, 1))))
+    return np.concatenate(out)
+
+
+def run_case(design, net: str, angle: float | None, panels: int) -> dict:
+    h = math.sqrt(design.area / panels)
+    record: dict = {"design": design.name, "net": net if angle is None else f"{net}-{angle:g}",
+                    "panel_size": round(h, 4)}
+    t0 = time.perf_counter()
+    try:
+        layout = fabplan.layout_surface(design, h, angle=angle or 90.0)
+        result = fabplan.glide(layout, net, angle=angle)
+    except fabplan.FabplanError as exc:
+        record.update(status="refused", message=str(exc), seconds=time.perf_counter() - t0)
+        return record
+    X = result.mesh.vertices
+    stars = result.mesh.stars
+    turns = line_turns_deg(X, stars)
+    props = result.properties
+    angle_stats = props.get("intersection_angle_deg") or {}
+    folds = props.get("folds") or {}
+    record.update(
+        status=result.status, converged=bool(result.converged),
+        message=getattr(result, "message", ""),
+        coverage=props.get("coverage"),
+        line_turn_max=float(turns.max()) if turns.size else None,
+        line_turn_median=float(np.median(turns)) if turns.size else None,
+        angle_min=angle_stats.get("min"), angle_max=angle_stats.get("max"),
+        folded=folds.get("folded"),
+        quads=int(np.sum(result.mesh.face_sizes == 4)),
+        seconds=time.perf_counter() - t0)
+    return record
+
+
+def _fmt(v, spec=".1f") -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def table(records: list) -> str:
+    rows = ["| design | net | panel | status | coverage % | line turn max / median deg | "
+            "angles deg | s |", "|---|---|---|---|---|---|---|---|"]
+    for r in records:
+        cov = None if r.get("coverage") is None else 100 * r["coverage"]
+        status = r["status"] + (" (folded)" if r.get("folded") else "")
+        if r["status"] == "refused":
+            status = "refused: " + r["message"].split(": ", 1)[-1][:60]
+        rows.append(f"| {r['design']} | {r['net']} | {r['panel_size']:.2f} | {status} | "
+                    f"{_fmt(cov)} | {_fmt(r.get('line_turn_max'))} / {_fmt(r.get('line_turn_median'))} | "
+                    f"{_fmt(r.get('angle_min'))} .. {_fmt(r.get('angle_max'))} | {r['seconds']:.1f} |")
+    return "\n".join(rows)
+
+
+def summarize(paths: list[Path]) -> str:
+    runs = [json.loads(p.read_text()) for p in paths]
+    head = "| net | " + " | ".join(
+        f"{r['label']}: converged, coverage median / min %, line turn median / worst deg"
+        for r in runs) + " |"
+    rows = [head, "|---|" + "---|" * len(runs)]
+    for net in sorted({c["net"] for r in runs for c in r["cases"]}):
+        cells = []
+        for r in runs:
+            cases = [c for c in r["cases"] if c["net"] == net]
+            done = [c for c in cases if c.get("line_turn_max") is not None]
+            cov = [100 * c["coverage"] for c in done if c.get("coverage") is not None]
+            turn = [c["line_turn_max"] for c in done]
+            ok = sum(1 for c in cases if c.get("converged"))
+            cells.append(f"{ok} of {len(cases)}, {_fmt(np.median(cov) if cov else None)} / "
+                         f"{_fmt(min(cov) if cov else None)}, "
+                         f"{_fmt(np.median(turn) if turn else None)} / "
+                         f"{_fmt(max(turn) if turn else None)}")
+        rows.append(f"| {net} | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--designs", nargs="*", default=list(DESIGNS), choices=list(DESIGNS))
+    parser.add_argument("--nets", nargs="*", default=[n for n, _ in NETS])
+    parser.add_argument("--label", default=datetime.date.today().isoformat())
+    parser.add_argument("--summarize", nargs="*", type=Path)
+    args = parser.parse_args(argv)
+    if args.summarize:
+        print(summarize(args.summarize))
+        return 0
+    records = []
+    for name in args.designs:
+        design = DESIGNS[name]()
+        for net, angle in NETS:
+            if net not in args.nets:
+                continue
+            for panels in PANELS:
+                records.append(run_case(design, net, angle, panels))
+                r = records[-1]
+                print(f"{r['design']:<14} {r['net']:<13} {r['panel_size']:6.2f} {r['status']:<14} "
+                      f"coverage {_fmt(None if r.get('coverage') is None else 100 * r['coverage'])} "
+                      f"turn {_fmt(r.get('line_turn_max'))} {r['seconds']:.1f} s", flush=True)
+    RESULTS.mkdir(exist_ok=True)
+    out = RESULTS / f"corpus-{args.label}.json"
+    out.write_text(json.dumps({"label": args.label, "fabplan": fabplan.__file__,
+                               "machine": f"{platform.machine()}, {platform.python_version()}",
+                               "cases": records}, indent=1))
+    print(table(records))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
