@@ -88,9 +88,9 @@ def _cut(name: str, f: Callable, width: float, depth: float,
     return DesignSurface(V[used], remap[T], name=name)
 
 
-def _triangulated(surface: ParametricSurface) -> DesignSurface:
+def _triangulated(surface: ParametricSurface, name: str | None = None) -> DesignSurface:
     design = surface.triangulate(surface.resolution_for(TRIANGLES))
-    design.name = surface.name
+    design.name = name or surface.name
     return design
 
 
@@ -101,14 +101,17 @@ DESIGNS: dict[str, Callable[[], DesignSurface]] = {
     "bumps": lambda: _triangulated(_height_field("bumps", _bumps, 16, 16)),
     "monkey-saddle": lambda: _triangulated(_height_field(
         "monkey-saddle", lambda x, y: (x**3 - 3 * x * y * y) / 120, 12, 12)),
-    "apex-dome": lambda: _triangulated(paraboloid(radius_x=12, radius_y=12, width=14, depth=14)),
-    "elliptic-dome": lambda: _triangulated(paraboloid(radius_x=10, radius_y=16, width=14, depth=10)),
+    "apex-dome": lambda: _triangulated(paraboloid(radius_x=12, radius_y=12, width=14, depth=14),
+                                       "apex-dome"),
+    "elliptic-dome": lambda: _triangulated(paraboloid(radius_x=10, radius_y=16, width=14,
+                                                      depth=10), "elliptic-dome"),
     "twisted-tower": lambda: _triangulated(revolution(height=30, radius=8, waist=0.75,
-                                                      twist_deg=45)),
-    "tower-facade": lambda: _triangulated(tower_facade()),
-    "ruled-canopy": lambda: _triangulated(hyperbolic_paraboloid(width=10, depth=6, rise=3)),
+                                                      twist_deg=45), "twisted-tower"),
+    "tower-facade": lambda: _triangulated(tower_facade(), "tower-facade"),
+    "ruled-canopy": lambda: _triangulated(hyperbolic_paraboloid(width=10, depth=6, rise=3),
+                                          "ruled-canopy"),
     "torus-patch": lambda: _triangulated(torus_patch(major=12, minor=5, u_deg=(-40, 40),
-                                                     v_deg=(-120, 120))),
+                                                     v_deg=(-120, 120)), "torus-patch"),
     "bspline-a": lambda: _triangulated(_bspline(1)),
     "bspline-b": lambda: _triangulated(_bspline(2)),
     "door-facade": lambda: _cut("door-facade", _wavy, 12, 6,

@@ -364,7 +364,14 @@ def _cmd_study(args) -> int:
     out = Path(args.output)
     study = read_study(resolve_study(args.study))
     check_output_folder(out)
-    result = run_study(study, progress=say)
+    if args.workers is not None or args.scheduler is not None:
+        from .study.parallel import run_study_parallel, worker_count
+
+        workers = None if args.workers is None else worker_count(args.workers)
+        result = run_study_parallel(study, workers=workers, scheduler=args.scheduler,
+                                    progress=say)
+    else:
+        result = run_study(study, progress=say)
     writing = time.perf_counter()
     files = write_study(result, out, progress=say)
     done = time.perf_counter()
@@ -559,6 +566,10 @@ def _add_study(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True, metavar="DIR",
                    help="folder for report.html, study.json, candidates.csv and candidates/; "
                         "an empty folder or one holding an earlier study is replaced")
+    p.add_argument("--workers", metavar="N|auto",
+                   help="run the candidates in N local processes (auto: one per core) with Dask")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="run the candidates on a running Dask cluster (see docs/parallel.md)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)
 

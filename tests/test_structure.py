@@ -175,3 +175,19 @@ def test_every_public_name_resolves():
     assert lazy == set(fabplan._EXPORTS)
     for name in fabplan.__all__:
         assert getattr(fabplan, name) is not None
+
+
+def test_designs_and_reference_surfaces_travel_to_other_processes():
+    """Studies send a design (with its closest-point tree) to worker processes."""
+    import numpy as np
+
+    pickle = pytest.importorskip("cloudpickle")   # what Dask sends functions with
+
+    import fabplan
+
+    design = fabplan.load_design("hyperbolic-paraboloid:width=4,depth=4,rise=1.2", triangles=2000)
+    reference = design.reference
+    copy = pickle.loads(pickle.dumps(design))
+    points = np.array([[0.3, -0.2, 1.0], [1.0, 1.0, -2.0]])
+    assert np.array_equal(copy.reference.closest_points(points)[0],
+                          reference.closest_points(points)[0])

@@ -37,6 +37,16 @@ class ReferenceSurface:
         self._tree = igl.AABB()
         self._tree.init(self.vertices, self.triangles)
 
+    def __getstate__(self) -> dict:
+        # libigl's tree does not pickle: it is rebuilt on arrival (studies send designs to
+        # other processes)
+        return {k: v for k, v in self.__dict__.items() if k != "_tree"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._tree = igl.AABB()
+        self._tree.init(self.vertices, self.triangles)
+
     @classmethod
     def from_mesh(cls, mesh: QuadMesh) -> "ReferenceSurface":
         """The triangulated faces of a `QuadMesh` as a reference surface."""

@@ -269,9 +269,22 @@ def _where(exc: BaseException) -> str:
 def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                    layouts: dict[float, SurfaceLayout], starts: dict[float, OptimizationResult],
                    earlier: list[CandidateResult], say: Callable[[str], None]) -> CandidateResult:
-    from ..fabricate.molds import MoldSettings, plan_molds
-    from ..fabricate.strip_plan import plan_strips
-    from ..fabricate.strips import StripSettings
+    """Solve one candidate and plan its molds and strips (the serial path)."""
+    solved = solve_candidate(study, design, candidate, layouts, starts, say)
+    twin = earlier_same_net(solved.net.mesh, earlier, study.panel_size) if solved.net else None
+    return fabricate_candidate(study, design, solved, twin, say)
+
+
+def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
+                    layouts: dict[float, SurfaceLayout], starts: dict[float, OptimizationResult],
+                    say: Callable[[str], None]) -> CandidateResult:
+    """The first half of a candidate: its layout (cached in `layouts` by start angle) and
+    its solved net (an S-net start for the nets that leave the design, cached in `starts`).
+
+    Returns
+    -------
+    CandidateResult with `net` and `layout`, its seconds so far in ``metrics["seconds"]``.
+    """
     from ..layout.surface_layout import glide, layout_surface
     from ..solve.optimize import optimize
     from ..solve.solver import SolverSettings
@@ -305,12 +318,26 @@ def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                        progress=report)
     seconds["optimize"] = time.perf_counter() - clock
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
-    # the same net as an earlier candidate (CMC on a saddle ending at the minimal surface):
-    # its molds and strips are that candidate's, not planned and written a second time
-    twin = earlier_same_net(net.mesh, earlier, study.panel_size)
+    return CandidateResult(candidate, metrics={"seconds": seconds}, net=net, layout=layout)
+
+
+def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateResult,
+                        twin: CandidateResult | None, say: Callable[[str], None]
+                        ) -> CandidateResult:
+    """The second half of a candidate: molds, strips and every measurement of its net.
+
+    A `twin` is an earlier candidate that ended at the same net (CMC on a saddle ending at
+    the minimal surface): its molds and strips are this candidate's, not planned again.
+    """
+    from ..fabricate.molds import MoldSettings, plan_molds
+    from ..fabricate.strip_plan import plan_strips
+    from ..fabricate.strips import StripSettings
+
+    net, candidate = solved.net, solved.candidate
+    assert net is not None
+    seconds = dict(solved.metrics.get("seconds", {}))
     if twin is not None:
         say(f"    the same net as {twin.name}: its molds and strips are reused")
-
     clock = time.perf_counter()
     units = study.design.units
     if twin is not None and twin.molds is not None:
@@ -341,7 +368,8 @@ def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                                 deviation_mm=deviation)
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
-                           layout=layout, same_net_as=twin.name if twin is not None else None,
+                           layout=solved.layout,
+                           same_net_as=twin.name if twin is not None else None,
                            deviation_mm=deviation)
 
 

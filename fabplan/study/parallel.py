@@ -1,0 +1,206 @@
+"""A study's candidates run in parallel: in local processes or on a Dask cluster.
+
+The candidates of a study are independent but for two things the serial run shares:
+the layouts (one per start angle) and the nets that end at the same net as an earlier
+candidate (whose molds and strips are reused). The parallel run keeps both, in three
+steps, so that its `study.json` is the serial one apart from timings:
+
+1. every candidate's net is solved in a task of its own (its layout computed there; the
+   baseline layout at 90 deg, computed first, travels with the tasks);
+2. the client finds the candidates that ended at the same net as an earlier one, in the
+   order of the study, as the serial run does;
+3. every candidate's molds, strips and measurements are made in a task, a twin's after
+   (and from) its original's.
+
+The engine is Dask (`dask.distributed`): `LocalCluster` for ``--workers N`` on this
+machine, or a running scheduler for ``--scheduler tcp://HOST:PORT``, whose workers have
+fabplan installed. A task that raises a fabplan error records the candidate as failed
+with its message, and the others go on; a worker that dies has its task retried
+(`RETRIES` times) before the candidate is recorded as failed.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+
+from ..errors import FabplanError, InputError
+from .run import (
+    CandidateResult,
+    StudyResult,
+    earlier_same_net,
+    fabricate_candidate,
+    judge_study,
+    solve_candidate,
+)
+
+if TYPE_CHECKING:
+    from ..design.mesh_surface import DesignSurface
+    from ..layout.surface_layout import SurfaceLayout
+    from .spec import Candidate, Study
+
+__all__ = ["run_study_parallel", "RETRIES", "worker_count"]
+
+RETRIES = 2   # a task whose worker died is run again this many times
+
+
+def worker_count(spec: str | int) -> int:
+    """The number of local worker processes for ``--workers`` (``auto``: the cores)."""
+    if spec == "auto":
+        return max(1, os.cpu_count() or 1)
+    try:
+        n = int(spec)
+    except ValueError:
+        raise InputError(f"--workers must be a number or 'auto', got {spec!r}") from None
+    if not 1 <= n <= 512:
+        raise InputError(f"--workers must lie between 1 and 512, got {n}")
+    return n
+
+
+def _quiet(message: str) -> None:
+    pass
+
+
+def _failed(candidate: Candidate, exc: BaseException) -> CandidateResult:
+    reason = str(exc) if isinstance(exc, FabplanError) else f"{type(exc).__name__}: {exc}"
+    return CandidateResult(candidate, error=reason, reasons=[reason])
+
+
+def _solve_task(study: Study, design: DesignSurface, baseline: SurfaceLayout,
+                candidate: Candidate) -> CandidateResult:
+    clock = time.perf_counter()
+    try:
+        result = solve_candidate(study, design, candidate, {90.0: baseline}, {}, _quiet)
+    except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        result = _failed(candidate, exc)
+    result.metrics.setdefault("seconds", {})["solve_task"] = time.perf_counter() - clock
+    return result
+
+
+def _fabricate_task(study: Study, design: DesignSurface, solved: CandidateResult,
+                    twin: CandidateResult | None) -> CandidateResult:
+    if solved.failed:
+        return solved
+    clock = time.perf_counter()
+    try:
+        result = fabricate_candidate(study, design, solved, twin, _quiet)
+    except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        result = _failed(solved.candidate, exc)
+    seconds = result.metrics.setdefault("seconds", {})
+    seconds["total"] = (solved.metrics.get("seconds", {}).get("solve_task", 0.0)
+                        + time.perf_counter() - clock)
+    seconds.pop("solve_task", None)
+    return result
+
+
+def _connect(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
+    """A Dask client (and the local cluster it owns, if any)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError("parallel studies need dask.distributed: pip install "
+                         "\"fabplan[parallel]\"") from None
+    if scheduler is not None:
+        try:
+            return Client(scheduler, timeout="5s"), None
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+    cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
+                           dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: str | None = None,
+                       progress: Callable[[str], None] | None = None,
+                       client: Any = None) -> StudyResult:
+    """Run every candidate of `study` on Dask workers and judge them (see the module).
+
+    Parameters
+    ----------
+    study : the study.
+    workers : local worker processes (a `LocalCluster`), when no `scheduler` is given.
+    scheduler : address of a running Dask scheduler (``tcp://HOST:PORT``).
+    progress : called with one line per event (candidates done, running, failed, ETA).
+    client : an existing `distributed.Client` to use instead (not closed here).
+
+    Raises
+    ------
+    InputError
+        When the design cannot be loaded or the baseline layout is impossible, or the
+        scheduler cannot be reached.
+    """
+    from ..design.load import load_design
+    from ..layout.surface_layout import layout_surface
+
+    say = progress or _quiet
+    start = time.perf_counter()
+    own = client is None
+    cluster = None
+    if own:
+        client, cluster = _connect(workers, scheduler)
+    try:
+        source, triangles = study.design.source, study.design.triangles
+        design = load_design(source) if triangles is None else \
+            load_design(source, triangles=triangles)
+        say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
+            f"{design.area:.4g} {study.design.units}^2")
+        baseline = layout_surface(design, study.panel_size, angle=90.0)
+        results = _run_on(client, study, design, baseline, say)
+    finally:
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+
+
+def _run_on(client: Any, study: Study, design: DesignSurface, baseline: SurfaceLayout,
+            say: Callable[[str], None]) -> list[CandidateResult]:
+    from distributed import as_completed
+
+    candidates = list(study.candidates)
+    shared = client.scatter([study, design, baseline], broadcast=True, hash=False)
+    clock = time.perf_counter()
+    solving = [client.submit(_solve_task, *shared, c, key=f"solve-{i}-{c.name}", pure=False,
+                             retries=RETRIES) for i, c in enumerate(candidates)]
+    solved = _gather(solving, candidates, "solved", say, clock, as_completed)
+    # twins in the order of the study, as the serial run finds them
+    twins: list[int | None] = []
+    for i, s in enumerate(solved):
+        earlier = [r for j, r in enumerate(solved[:i]) if twins[j] is None]
+        twin = earlier_same_net(s.net.mesh, earlier, study.panel_size) if s.net else None
+        twins.append(None if twin is None else next(j for j, r in enumerate(solved) if r is twin))
+    clock = time.perf_counter()
+    fabricating: list[Any] = []
+    for i, (c, s) in enumerate(zip(candidates, solved, strict=True)):
+        original = twins[i]
+        fabricating.append(client.submit(
+            _fabricate_task, shared[0], shared[1], s,
+            None if original is None else fabricating[original],
+            key=f"fabricate-{i}-{c.name}", pure=False, retries=RETRIES))
+    return _gather(fabricating, candidates, "measured", say, clock, as_completed)
+
+
+def _gather(futures: list, candidates: list, verb: str, say: Callable[[str], None],
+            clock: float, as_completed: Any) -> list[CandidateResult]:
+    """Wait for the futures in the order they finish, saying how far the step is; a task
+    that fails even after its retries records its candidate as failed."""
+    index = {f.key: i for i, f in enumerate(futures)}
+    results: list[CandidateResult | None] = [None] * len(futures)
+    failed = 0
+    for n, future in enumerate(as_completed(futures), 1):
+        i = index[future.key]
+        try:
+            result: CandidateResult = future.result()
+        except Exception as exc:   # a lost worker after its retries: the study goes on
+            result = _failed(candidates[i], exc)
+        results[i] = result
+        failed += bool(result.failed)
+        left = len(futures) - n
+        eta = (time.perf_counter() - clock) / n * left
+        say(f"  {n} of {len(futures)} {verb}, {left} to go, {failed} failed"
+            + (f", about {eta:.0f} s left" if left else "") + f" ({candidates[i].name})")
+    return [r for r in results if r is not None]

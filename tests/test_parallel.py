@@ -1,0 +1,156 @@
+"""Studies run in parallel: local processes or a Dask cluster, the serial result bit for
+bit (apart from timings), failures recorded, a killed worker's candidates retried."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fabplan.cli import main
+from fabplan.errors import InputError
+from fabplan.study.parallel import worker_count
+
+pytest.importorskip("distributed")
+
+# a saddle with a twin (CMC ends at the minimal net) and a candidate that fails
+STUDY = """\
+[study]
+name = "Parallel test"
+max_iterations = 80
+
+[design]
+surface = "hyperbolic-paraboloid"
+parameters = { width = 4, depth = 4, rise = 1.2 }
+triangles = 4000
+
+[panels]
+size = 0.7
+
+[limits]
+max_deviation_mm = 200
+mold_tolerance_mm = 1.5
+
+[strips]
+height_mm = 60
+thickness_mm = 3
+sheet_mm = [1200, 600]
+
+[[candidates]]
+net = "isogonal"
+angle = 80
+
+[[candidates]]
+net = "minimal"
+
+[[candidates]]
+net = "cmc"
+
+[[candidates]]
+net = "const-radius"
+radius = 0.01
+"""
+
+
+def _without_timings(value):
+    if isinstance(value, dict):
+        return {k: _without_timings(v) for k, v in value.items() if "second" not in k}
+    if isinstance(value, list):
+        return [_without_timings(v) for v in value]
+    return value
+
+
+def _record(folder: Path) -> dict:
+    return _without_timings(json.loads((folder / "study.json").read_text(encoding="utf-8")))
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("parallel")
+    (folder / "small.toml").write_text(STUDY, encoding="utf-8")
+    assert main(["study", str(folder / "small.toml"), "-o", str(folder / "serial"), "-q"]) == 0
+    return folder, _record(folder / "serial")
+
+
+def test_worker_counts_are_checked():
+    assert worker_count("auto") == (os.cpu_count() or 1)
+    assert worker_count("3") == 3
+    for bad in ("0", "x", "-2"):
+        with pytest.raises(InputError, match="--workers"):
+            worker_count(bad)
+
+
+@pytest.mark.slow
+def test_local_workers_give_the_serial_study(serial, capsys):
+    folder, expected = serial
+    assert main(["study", str(folder / "small.toml"), "-o", str(folder / "local"),
+                 "--workers", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "5 of 5 measured" in err and "1 failed" in err
+    record = _record(folder / "local")
+    assert record == expected
+    names = {c["name"]: c for c in record["candidates"]}
+    assert names["cmc"]["same_net_as"] == "minimal"
+    assert "smaller than half the edges" in names["const-radius-r0.01"]["error"]
+
+
+def _start(args: list[str], log: Path) -> subprocess.Popen:
+    return subprocess.Popen(args, stdout=log.open("w"), stderr=subprocess.STDOUT,
+                            start_new_session=True)
+
+
+@pytest.mark.slow
+def test_a_dask_cluster_survives_a_killed_worker(serial, tmp_path):
+    """A real scheduler and two workers on loopback; one is killed with SIGKILL while the
+    candidates run: its tasks are retried on the other, and the study is the serial one."""
+    folder, expected = serial
+    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    scheduler_file = tmp_path / "scheduler.json"
+    procs = [_start(dask + ["--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                            "--scheduler-file", str(scheduler_file)], tmp_path / "scheduler.log")]
+    try:
+        for _ in range(200):
+            if scheduler_file.is_file() and scheduler_file.stat().st_size:
+                break
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        for k in range(2):
+            procs.append(_start([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                 "--nthreads", "1", "--no-dashboard", "--name", f"w{k}"],
+                                tmp_path / f"worker{k}.log"))
+        study = subprocess.Popen(
+            [sys.executable, "-m", "fabplan.cli", "study", str(folder / "small.toml"), "-o",
+             str(tmp_path / "cluster"), "--scheduler", address],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # kill a worker once the first candidates are solved (it holds tasks or results)
+        line = ""
+        while "of 5 solved" not in line and study.poll() is None:
+            line = study.stderr.readline()
+        os.killpg(procs[1].pid, signal.SIGKILL)
+        out, err = study.communicate(timeout=600)
+        assert study.returncode == 0, err
+        assert _record(tmp_path / "cluster") == expected
+    finally:
+        for p in procs:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            p.wait()
+
+
+@pytest.mark.slow
+def test_an_unreachable_scheduler_is_one_line(tmp_path, capsys):
+    (tmp_path / "small.toml").write_text(STUDY, encoding="utf-8")
+    code = main(["study", str(tmp_path / "small.toml"), "-o", str(tmp_path / "out"),
+                 "--scheduler", "tcp://127.0.0.1:9", "-q"])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot connect" in err[0]
+    assert not (tmp_path / "out").exists()
