@@ -20,7 +20,7 @@ from .errors import FabplanError, InputError
 from .io.output import check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
-from .net.mesh import load_mesh
+from .net.validate import load_net
 from .solve.net_types import NETS, check_angle, check_radius
 from .solve.optimize import check_net_input, optimize, read_fixed, read_handles
 from .solve.reference import load_reference
@@ -42,7 +42,7 @@ def _cmd_nets(args) -> int:
 def _cmd_measure(args) -> int:
     out = Path(args.output) if args.output else Path(args.net).with_suffix(".measure.json")
     _check_outputs([out], [args.net, args.reference])
-    mesh = load_mesh(args.net)
+    mesh = load_net(args.net)
     reference = _reference(args.reference)
     record = measure_net(mesh, reference=reference)
     record["file"] = str(args.net)
@@ -109,7 +109,7 @@ def _cmd_optimize(args) -> int:
     if args.max_iter is not None and args.max_iter < 1:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
     out = _output_path(args)
-    mesh = load_mesh(args.input)
+    mesh = load_net(args.input)
     check_net_input(mesh)
     reference = _reference(args.reference)
     fixed = read_fixed(args.fix, mesh)
@@ -142,7 +142,7 @@ def _cmd_molds(args) -> int:
     settings.check()
     out = Path(args.output)
     check_output_folder(out)
-    mesh = load_mesh(args.net)
+    mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
     plan = plan_molds(mesh, settings)
     files = write_mold_report(plan, out)
@@ -317,7 +317,7 @@ def _cmd_strips(args) -> int:
     out = Path(args.output)
     check_output_folder(out)
     started = time.perf_counter()
-    mesh = load_mesh(args.net)
+    mesh = load_net(args.net)
     plan = plan_strips(mesh, settings)
     files = plan.write(out, previews=not args.no_previews)
     s = plan.summary()

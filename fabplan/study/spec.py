@@ -27,12 +27,14 @@ from __future__ import annotations
 import difflib
 import math
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
+from ..io.inputs import check_input_file, check_text
 from ..solve.net_types import NETS, get_net
 
 if sys.version_info >= (3, 11):
@@ -395,13 +397,10 @@ def read_study(path: str | Path) -> Study:
         and the key.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         raise InputError(f"{path}: no such study file")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the study file ({exc})") from None
-    return parse_study(text, path=path)
+    check_input_file(path, "a study file")
+    return parse_study(check_text(path, "TOML study"), path=path)
 
 
 def parse_study(text: str, *, path: Path | None = None) -> Study:
@@ -628,6 +627,8 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
         angles = _values(t, "angle", "degrees")
         radii = _values(t, "radius", "model units")
         label = t.text("name")
+        if label is not None and not SAFE_NAME.fullmatch(label):
+            t.fail("name", f"is {label!r}, {_SAFE_NAME_RULE}")
         start = t.number("start_angle", unit="degrees")
         if start is not None and not 0 < start < 180:
             t.fail("start_angle", f"must lie strictly between 0 and 180 degrees, got {start:g}")
@@ -652,10 +653,20 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
                 out.append(Candidate(name, net, a, r, start_angle=start))
     names = [c.name for c in out]
     for c in out:
+        if not SAFE_NAME.fullmatch(c.name):
+            raise InputError(f"{file}: candidate name {c.name!r} {_SAFE_NAME_RULE}")
+    for c in out:
         if names.count(c.name) > 1:
             raise InputError(f"{file}: two candidates are both called {c.name!r}; give them "
                              "different names (candidates[].name)")
     return tuple(out)
+
+
+SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._+-]{0,63}")
+"""A candidate name: it becomes a folder inside the study folder, so no separators, no
+leading dot (no '..', no hidden folder) and nothing a shell or a file system mangles."""
+_SAFE_NAME_RULE = ("which is not a safe folder name: use up to 64 letters, digits, '.', '_', "
+                   "'+' and '-', starting with a letter, digit or '_' (no '/', '..' or spaces)")
 
 
 def _name(net: str, angle: float | None, radius: float | None) -> str:
@@ -729,11 +740,13 @@ def copy_template(name: str, destination: str | Path) -> list[Path]:
     -------
     list of Path written. Refuses to overwrite an existing file.
     """
-    from ..io.output import write_texts
+    from ..io.output import check_output_file, write_texts
 
     source = template_path(name)
     folder = str(destination).endswith(("/", os.sep)) or Path(destination).is_dir()
     destination = Path(destination)
+    if not folder:
+        check_output_file(destination)  # a device or FIFO is refused, not renamed .toml
     if folder:
         destination = destination / source.name
     elif destination.suffix.lower() != ".toml":
