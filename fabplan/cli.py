@@ -20,7 +20,7 @@ from .errors import FabplanError, InputError
 from .io.output import check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
-from .net.validate import load_net
+from .net.validate import check_panel_size, load_net
 from .solve.net_types import NETS, check_angle, check_radius
 from .solve.optimize import check_net_input, optimize, read_fixed, read_handles
 from .solve.reference import load_reference
@@ -50,6 +50,11 @@ def _cmd_measure(args) -> int:
     print(format_summary(record))
     print(f"wrote {out}")
     return 0
+
+
+def _warn(message: str | None) -> None:
+    if message:
+        print(f"fabplan: warning: {message}", file=sys.stderr)
 
 
 def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
@@ -144,6 +149,7 @@ def _cmd_molds(args) -> int:
     check_output_folder(out)
     mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit))
     plan = plan_molds(mesh, settings)
     files = write_mold_report(plan, out)
     print(plan.summary())
@@ -163,6 +169,7 @@ def _cmd_layout(args) -> int:
     from .solve.net_types import get_net
 
     check_angle(args.angle)
+    _check_max_panels(args)
     preset = get_net(args.net)
     if not (args.panel_size > 0 and args.panel_size < float("inf")):
         raise InputError(f"--panel-size must be a positive length, got {args.panel_size}")
@@ -186,6 +193,7 @@ def _cmd_layout(args) -> int:
     family_file = args.family if args.family and Path(args.family).is_file() else None
     _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
     design = load_design(args.surface, triangles=args.triangles)
+    _check_layout_size(design, args.panel_size, args.max_panels)
     start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
     layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
     settings, progress = _solver_options(args)
@@ -246,6 +254,29 @@ def _cmd_layout(args) -> int:
     return 0
 
 
+def _check_max_panels(args) -> None:
+    if args.max_panels is not None and args.max_panels < 1:
+        raise InputError(f"--max-panels must be at least 1, got {args.max_panels}")
+
+
+def _check_layout_size(design: Any, panel_size: float, max_panels: int | None) -> None:
+    """Refuse a layout whose panel count (design area / panel size squared) would exhaust
+    the memory, before the layout starts (see `fabplan.resources`)."""
+    from .resources import check_panel_count, default_max_panels
+
+    panels = design.area / panel_size**2
+    limit = default_max_panels() if max_panels is None else max_panels
+    fitting = (design.area / (0.5 * limit)) ** 0.5
+    hint = (f"; the design spans {design.extent:.4g} units: if it is in millimetres, give "
+            "the panel size in millimetres too" if design.extent > 2000 else "")
+    check_panel_count(
+        panels, max_panels=limit,
+        what=f"{Path(design.name).name}: a layout at panel size {panel_size:g} of a surface "
+             f"of area {design.area:.4g}",
+        fix=f"use a larger --panel-size (about {fitting:.2g} gives {0.5 * limit:,.0f} "
+            f"panels){hint}")
+
+
 def layout_warnings(properties: dict) -> list:
     """What a user should know about a layout's measured result, in plain words."""
     out = []
@@ -304,7 +335,10 @@ def _parse_layers(specs: list | None) -> dict:
 
 def _cmd_strips(args) -> int:
     from .fabricate.strip_plan import plan_strips
-    from .fabricate.strips import StripSettings
+    from .fabricate.strips import UNITS_MM, StripSettings
+    from .resources import check_panel_count
+
+    _check_max_panels(args)
 
     settings = StripSettings(
         height_mm=args.height, thickness_mm=args.thickness, clearance_mm=args.clearance,
@@ -318,6 +352,10 @@ def _cmd_strips(args) -> int:
     check_output_folder(out)
     started = time.perf_counter()
     mesh = load_net(args.net)
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS_MM[settings.units]))
+    check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
+                      what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
+                      fix="plan the strips of a coarser net or of parts of it")
     plan = plan_strips(mesh, settings)
     files = plan.write(out, previews=not args.no_previews)
     s = plan.summary()
@@ -350,6 +388,7 @@ def _cmd_study(args) -> int:
     from .study.spec import read_study, resolve_study
 
     show = not args.quiet
+    _check_max_panels(args)
 
     def say(message: str) -> None:
         if show:
@@ -359,7 +398,7 @@ def _cmd_study(args) -> int:
     out = Path(args.output)
     study = read_study(resolve_study(args.study))
     check_output_folder(out)
-    result = run_study(study, progress=say)
+    result = run_study(study, progress=say, max_panels=args.max_panels)
     writing = time.perf_counter()
     files = write_study(result, out, progress=say)
     done = time.perf_counter()
@@ -405,6 +444,12 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         self.exit(EXIT_BAD_INPUT, f"fabplan: error: {message} (see '{self.prog} --help')\n")
+
+
+def _add_max_panels(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-panels", type=int, metavar="N",
+                   help="refuse runs estimated to need more panels than this (default: what "
+                        "half the available memory holds, at least 20000)")
 
 
 def _add_nets(sub: Any) -> None:
@@ -491,6 +536,7 @@ def _add_layout(sub: Any) -> None:
     p.add_argument("--triangles", type=int, default=40000,
                    help="triangles of a built-in surface's triangulation (default 40000)")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
+    _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -538,6 +584,7 @@ def _add_strips(sub: Any) -> None:
     p.add_argument("--one-file", action="store_true",
                    help="all sheets side by side in one DXF instead of one file per sheet")
     p.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
+    _add_max_panels(p)
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
     p.set_defaults(func=_cmd_strips)
 
@@ -554,6 +601,7 @@ def _add_study(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True, metavar="DIR",
                    help="folder for report.html, study.json, candidates.csv and candidates/; "
                         "an empty folder or one holding an earlier study is replaced")
+    _add_max_panels(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)
 

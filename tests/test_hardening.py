@@ -298,3 +298,125 @@ def test_a_valid_net_is_measured_without_a_warning(work, capsys):
         assert main(["measure", str(work / "wein99.obj"), "-o", str(work / "w.json")]) == 0
         assert main(["measure", str(work / "grid.obj"), "-o", str(work / "g.json")]) == 0
     assert capsys.readouterr().err == ""
+
+
+# ---------------------------------------------------------------------------- resources
+def test_a_layout_that_would_need_5_gb_is_refused_in_under_2_s(tmp_path, capsys, monkeypatch):
+    """Panel size 0.05 on a 30 m design ran 46 s into a MemoryError at 5.3 GB. Here the
+    machine is made to have 4 GB available: the layout is refused up front."""
+    import time
+
+    from fabplan import resources
+
+    monkeypatch.setattr(resources, "available_memory", lambda: 4 * 10**9)
+    started = time.perf_counter()
+    err = refused(["layout", "hyperbolic-paraboloid", "--net", "snet", "--panel-size", "0.05",
+                   "-o", tmp_path / "out" / "l.obj"], capsys, tmp_path,
+                  "about 164,704 panels (about 6.6 GB of memory), more than the limit of 50,000",
+                  "use a larger --panel-size (about 0.13 gives 25,000 panels)", "--max-panels")
+    assert time.perf_counter() - started < 2.0, err
+
+
+def test_a_design_in_millimetres_read_with_a_panel_in_metres_is_refused(tmp_path, capsys):
+    path = tmp_path / "wall.stl"
+    path.write_bytes(_stl_bytes(1000.0 * _saddle_triangles()))
+    refused(["layout", path, "--net", "snet", "--panel-size", "1", "-o", tmp_path / "l.obj"],
+            capsys, tmp_path, "wall.stl: a layout at panel size 1 of a surface of area",
+            "if it is in millimetres, give the panel size in millimetres too")
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["layout", "hyperbolic-paraboloid", "--net", "snet", "--panel-size", "2",
+      "--max-panels", "50"], "about 103 panels (about 4 MB of memory), more than the limit of 50"),
+    (["layout", "hyperbolic-paraboloid", "--net", "snet", "--panel-size", "2",
+      "--max-panels", "0"], "--max-panels must be at least 1, got 0"),
+    (["strips", "{net}", "--height", "40", "--thickness", "4", "--max-panels", "10"],
+     "strips of a net of 20 faces: about 20 panels"),
+    (["strips", "{net}", "--height", "40", "--thickness", "4", "--spacing", "1e9"],
+     "--spacing 1e+09 mm is wider than the sheet inside its margins (1230 mm)"),
+    (["strips", "{net}", "--height", "40", "--thickness", "4", "--sheet", "1e9x1e9"],
+     "no sheet is larger than 20000 mm"),
+    (["strips", "{net}", "--height", "2000", "--thickness", "4"],
+     "--height 2000 mm does not fit on the 1250 mm side of the sheet"),
+    (["strips", "{net}", "--height", "40", "--thickness", "4", "--tolerance", "1e12"],
+     "--tolerance 1e+12 mm lies outside 0.001 .. 10 mm"),
+])
+def test_runs_beyond_the_limits_are_refused_before_the_work(work, capsys, argv, fragment):
+    argv = [a.format(net=work / "grid.obj") for a in argv]
+    refused([*argv, "-o", work / "out" / ("l.obj" if argv[0] == "layout" else "")], capsys,
+            work, fragment)
+
+
+def test_a_study_beyond_the_panel_limit_is_refused_before_any_layout(tmp_path, capsys,
+                                                                      monkeypatch):
+    from fabplan.layout import surface_layout
+
+    def no_layout(*args, **kwargs):
+        raise AssertionError("a layout started")
+
+    monkeypatch.setattr(surface_layout, "layout_surface", no_layout)
+    study = tmp_path / "s.toml"
+    study.write_text(_study_text().replace("size = 2.0", "size = 0.02"), encoding="utf-8")
+    refused(["study", study, "-q", "-o", tmp_path / "out", "--max-panels", "100000"], capsys,
+            tmp_path, "layouts of panel size 0.02 m on a design of area 411.8 m^2: about "
+            "1,029,405 panels (about 41 GB of memory), more than the limit of 100,000",
+            "give a larger panels.size")
+
+
+# ---------------------------------------------------------------------------- units
+def test_molds_in_millimetres_on_a_model_in_metres_is_refused(tmp_path, capsys):
+    """`molds --units mm` on a net in metres reported 1 mold for 100 planar panels."""
+    net = tmp_path / "wein99.obj"
+    shutil.copyfile(fabplan.data_path("wein99.obj"), net)
+    refused(["molds", net, "--tolerance-mm", "1", "--units", "mm", "-o", tmp_path / "m"],
+            capsys, tmp_path, "wein99.obj: panels of 0.62 mm (median edge 0.6198 mm) cannot be",
+            "is the model in metres? Give --units m")
+
+
+@pytest.mark.parametrize("value", ["1e12", "1e-5", "inf"])
+def test_a_mold_tolerance_outside_its_range_is_refused(work, capsys, value):
+    fragment = ("lies outside 0.01 .. 1000 mm" if value != "inf" else
+                "must be a positive number of millimetres")
+    refused(["molds", work / "grid.obj", "--tolerance-mm", value, "-o", work / "m"], capsys, work,
+            fragment)
+
+
+def test_a_plausible_but_odd_panel_size_warns_and_names_the_other_unit():
+    from fabplan.net.validate import check_panel_size
+
+    net = QuadMesh.grid(grid_points() * 5.0, name="small.obj")   # 5 mm panels
+    assert check_panel_size(net, units="mm", mm_per_unit=1.0) == (
+        "small.obj: panels of 5.02 mm (median edge 5.025 mm) are implausible for a building; "
+        "if the model is in metres, give --units m")
+    assert check_panel_size(net, units="m", mm_per_unit=1000.0) is None
+    big = QuadMesh.grid(grid_points() * 30.0, name="big.obj")   # 30 m panels
+    assert "if the model is in millimetres, give --units mm" in check_panel_size(
+        big, units="m", mm_per_unit=1000.0)
+
+
+@pytest.mark.slow
+def test_a_warning_on_the_panel_size_reaches_the_user_of_molds(work, capsys):
+    net = QuadMesh.grid(grid_points() * 5.0)      # 5 mm panels in millimetres
+    net.write_obj(work / "small.obj")
+    code = main(["molds", str(work / "small.obj"), "--tolerance-mm", "1", "--units", "mm",
+                 "-o", str(work / "m")])
+    err = capsys.readouterr().err
+    assert code in (0, 3)
+    assert err.startswith(f"fabplan: warning: {work / 'small.obj'}: panels of 5.02 mm")
+
+
+@pytest.mark.parametrize("size, units, fragment", [
+    ("0.0005", "m", "panels.size 0.0005 m is 0.5 mm, not a panel of a building: is the design "
+                    "in mm?"),
+    ("0.5", "mm", 'panels.size 0.5 mm is 0.5 mm, not a panel of a building: is the design in '
+                  'm? Set design.units = "m"'),
+    ("300", "m", "panels.size 300 m is 300000 mm, not a panel of a building: is the design in "
+                 "mm?"),
+])
+def test_a_study_panel_size_implausible_in_its_units_is_refused(tmp_path, capsys, size, units,
+                                                                fragment):
+    study = tmp_path / "s.toml"
+    study.write_text(_study_text().replace("size = 2.0", f"size = {size}").replace(
+        'surface = "hyperbolic-paraboloid"', f'surface = "hyperbolic-paraboloid"\nunits = "{units}"'),
+        encoding="utf-8")
+    refused(["study", study, "-o", tmp_path / "out"], capsys, tmp_path, fragment)

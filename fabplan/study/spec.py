@@ -447,6 +447,7 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     panels.done()
 
     design = _design(_Table(top.get("design", None) or {}, "design", file), folder)
+    _check_panel_units(panel_size, design, file)
     strips = _strips(_Table(top.get("strips"), "strips", file)) if top.has("strips") else None
     limits = _limits(_Table(top.get("limits", None) or {}, "limits", file),
                      congruence_tolerance_mm=strips.congruence_tolerance_mm if strips else 0.1)
@@ -502,6 +503,20 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     spec = surface + (":" + ",".join(items) if items else "")
     _check_surface(spec, t)
     return DesignSpec(spec, surface, dict(parameters), triangles, units)
+
+
+def _check_panel_units(panel_size: float, design: DesignSpec, file: str) -> None:
+    """Refuse a panel size no building has in the design's units (a factor 10 beyond
+    `PLAUSIBLE_PANEL_MM`): the units are wrong."""
+    from ..net.validate import PLAUSIBLE_PANEL_MM
+
+    size_mm = panel_size * design.mm_per_unit
+    low, high = PLAUSIBLE_PANEL_MM
+    if not 0.1 * low <= size_mm <= 10 * high:
+        other = "m" if design.units == "mm" else "mm"
+        raise InputError(f"{file}: panels.size {panel_size:g} {design.units} is {size_mm:g} mm, "
+                         f"not a panel of a building: is the design in {other}? Set "
+                         f'design.units = "{other}"')
 
 
 def _check_surface(spec: str, t: _Table) -> None:
