@@ -17,7 +17,7 @@ from typing import Any
 
 from . import __version__
 from .errors import FabplanError, InputError
-from .io.output import check_output_file, check_output_folder
+from .io.output import atomic_path, check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
 from .net.validate import check_panel_size, load_net
@@ -204,9 +204,10 @@ def _cmd_layout(args) -> int:
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
              + (f", {layout.family}" if layout.family else
                 f", {angle:.4g} deg" if isinstance(angle, float) else ""))
-    write_layout_picture(picture, design, result.mesh, title=title,
-                         singular_points=layout.singular_points)
-    obj_path, json_path = result.write(out)
+    with atomic_path(picture) as staged:   # the picture lands only with the net it shows
+        write_layout_picture(staged, design, result.mesh, title=title,
+                             singular_points=layout.singular_points)
+        obj_path, json_path = result.write(out)
     props = result.properties
     print(format_summary(props))
     d = props["distance_to_design"]
@@ -352,10 +353,10 @@ def _cmd_strips(args) -> int:
     check_output_folder(out)
     started = time.perf_counter()
     mesh = load_net(args.net)
-    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS_MM[settings.units]))
     check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
                       what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
                       fix="plan the strips of a coarser net or of parts of it")
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS_MM[settings.units]))
     plan = plan_strips(mesh, settings)
     files = plan.write(out, previews=not args.no_previews)
     s = plan.summary()
@@ -646,6 +647,16 @@ def main(argv: list[str] | None = None) -> int:
         # the reader of our output went away (e.g. `| head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except MemoryError:
+        print("fabplan: error: out of memory: use a larger panel size or a smaller net "
+              "(--max-panels sets the limit that is checked up front)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        # a file system failure while writing (disk full, a vanished folder): outputs are
+        # staged, so nothing half-written is left; say what failed in one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"fabplan: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":

@@ -199,7 +199,11 @@ def _new_staging(beside: Path, name: str) -> Path:
     remove_stale_staging(beside)
     staging = beside / f".{name}.staging-{uuid.uuid4().hex[:12]}"
     os.mkdir(staging, 0o777)
-    (staging / STAGING_MARKER).write_text(f"{os.getpid()}\n", encoding="utf-8")
+    try:
+        (staging / STAGING_MARKER).write_text(f"{os.getpid()}\n", encoding="utf-8")
+    except BaseException:     # disk full at the first byte: leave no unmarked folder
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
     return staging
 
 
@@ -336,9 +340,7 @@ def _swap_in(staging: Path, folder: Path) -> None:
     if not folder.exists():
         os.replace(staging, folder)
         return
-    old = folder.parent / f".{folder.name}.old-{uuid.uuid4().hex[:12]}"
-    os.mkdir(old, 0o777)
-    (old / STAGING_MARKER).write_text(f"{os.getpid()}\n", encoding="utf-8")
+    old = _new_staging(folder.parent, f"{folder.name}.old")
     os.replace(folder, old / "previous")
     try:
         os.replace(staging, folder)

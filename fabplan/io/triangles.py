@@ -11,7 +11,7 @@ from ..errors import InputError
 from .inputs import check_coordinates, check_input_file, check_text
 from .obj import read_obj
 
-__all__ = ["read_triangles", "read_binary_stl", "TRIANGLE_FORMATS"]
+__all__ = ["read_triangles", "read_binary_stl", "read_ascii_stl", "TRIANGLE_FORMATS"]
 
 TRIANGLE_FORMATS = (".obj", ".stl", ".ply", ".off")
 
@@ -38,13 +38,14 @@ def read_triangles(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if suffix not in (".stl", ".ply", ".off"):
         raise InputError(f"{path}: unknown surface format {suffix or '(none)'}; "
                          "use OBJ, STL, PLY or OFF")
-    if suffix == ".stl" and _is_binary_stl(path):
-        vertices, faces = read_binary_stl(path)
+    if suffix == ".stl":
+        # fabplan reads STL itself: trimesh decodes text that is not UTF-8 through an
+        # optional package (charset_normalizer), logs tracebacks and warns on bad numbers
+        binary = _is_binary_stl(path)
+        vertices, faces = read_binary_stl(path) if binary else read_ascii_stl(path)
     else:
-        if suffix in (".stl", ".off"):
-            # trimesh decodes text it cannot read as UTF-8 through an optional package
-            # (charset_normalizer); refuse binary content here with a message instead
-            check_text(path, "STL" if suffix == ".stl" else "OFF")
+        if suffix == ".off":
+            check_text(path, "OFF")   # see above: refuse binary content with a message
         vertices, faces = _read_with_trimesh(path, suffix)
     check_coordinates(vertices, str(path))
     return vertices, faces
@@ -98,6 +99,43 @@ def read_binary_stl(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     records = np.frombuffer(data, dtype=_STL_TRIANGLE, count=count, offset=84)
     vertices = records["corners"].reshape(-1, 3).astype(np.float64)
     return vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3)
+
+
+def read_ascii_stl(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangles of a text STL file: every ``vertex x y z`` line, three per
+    facet; each triangle has its own three vertices (weld them later).
+
+    Returns
+    -------
+    vertices : (3 m, 3) float64
+    triangles : (m, 3) int64
+
+    Raises
+    ------
+    InputError
+        For binary content, a malformed vertex line (named by its line number), or a
+        vertex count that is not a whole number of triangles.
+    """
+    path = Path(path)
+    text = check_text(path, "STL")
+    rows: list[list[float]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        parts = line.split()
+        if not parts or parts[0].lower() != "vertex":
+            continue
+        try:
+            if len(parts) != 4:
+                raise ValueError
+            rows.append([float(p) for p in parts[1:]])
+        except ValueError:
+            raise InputError(f"{path}:{lineno}: malformed vertex line "
+                             f"{line.strip()[:60]!r}") from None
+    if not rows:
+        raise InputError(f"{path}: no faces (no 'vertex' lines: is this an STL file?)")
+    if len(rows) % 3:
+        raise InputError(f"{path}: {len(rows)} vertex lines, not three per facet")
+    vertices = np.asarray(rows, dtype=np.float64)
+    return vertices, np.arange(len(rows), dtype=np.int64).reshape(-1, 3)
 
 
 def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]:

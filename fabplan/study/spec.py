@@ -558,11 +558,14 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
 
 
 def _strips(t: _Table) -> StripOptions:
+    from ..fabricate.strips import MAX_SHEET_MM
+
     sheet = t.get("sheet_mm", [2500.0, 1250.0])
     if (not isinstance(sheet, list) or len(sheet) != 2
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
-                       for v in sheet)):
-        t.fail("sheet_mm", f"must be [width, height] in mm, got {sheet!r}")
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and 0 < v <= MAX_SHEET_MM for v in sheet)):
+        t.fail("sheet_mm", f"must be [width, height] in mm (each at most {MAX_SHEET_MM:g}), "
+               f"got {sheet!r}")
     nets = t.get("nets", "auto")
     if isinstance(nets, list):
         for net in nets:
