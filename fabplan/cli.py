@@ -17,6 +17,7 @@ from typing import Any
 
 from . import __version__
 from .errors import FabplanError, InputError
+from .io.inputs import check_input_file
 from .io.output import atomic_path, check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
@@ -66,6 +67,14 @@ def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
         check_output_file(out)
 
 
+def _check_option_files(*options: tuple[str | None, str]) -> None:
+    """Name a folder, FIFO or device given to an option that reads a file (`--fix`,
+    `--handle`, `--family`) as what it is, instead of "no such file" or a hang."""
+    for value, what in options:
+        if value and os.path.lexists(value):
+            check_input_file(value, what)
+
+
 def _output_path(args) -> Path:
     out = Path(args.output)
     if out.suffix.lower() != ".obj":
@@ -113,6 +122,8 @@ def _cmd_optimize(args) -> int:
     check_radius(args.radius)
     if args.max_iter is not None and args.max_iter < 1:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
+    _check_option_files((None if args.fix == "boundary" else args.fix, "a file of vertex ids"),
+                        *[(h, "a file of handles") for h in args.handle or []])
     out = _output_path(args)
     mesh = load_net(args.input)
     check_net_input(mesh)
@@ -190,6 +201,7 @@ def _cmd_layout(args) -> int:
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")
     picture = out.with_suffix(".png")
+    _check_option_files((args.family, "a file of polylines"))
     family_file = args.family if args.family and Path(args.family).is_file() else None
     _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
     design = load_design(args.surface, triangles=args.triangles)

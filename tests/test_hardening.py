@@ -420,3 +420,19 @@ def test_a_study_panel_size_implausible_in_its_units_is_refused(tmp_path, capsys
         'surface = "hyperbolic-paraboloid"', f'surface = "hyperbolic-paraboloid"\nunits = "{units}"'),
         encoding="utf-8")
     refused(["study", study, "-o", tmp_path / "out"], capsys, tmp_path, fragment)
+
+
+@pytest.mark.parametrize("option, what", [
+    (["--fix"], "a file of vertex ids"), (["--handle"], "a file of handles"),
+    (["--reference"], "a surface file"), (["--family"], "a file of polylines")])
+@pytest.mark.parametrize("kind", ["folder", "fifo"])
+def test_a_folder_or_fifo_given_to_a_file_option_is_named(work, capsys, option, what, kind):
+    """`--fix FIFO` said "no such file" (and reading a FIFO would wait forever)."""
+    target = work / "thing"
+    target.mkdir() if kind == "folder" else os.mkfifo(target)
+    if option == ["--family"]:
+        argv = _argv("layout", work, "l.obj")
+    else:
+        argv = _argv("optimize", work, "o.obj")
+    argv[-2:-2] = [*option, str(target)]
+    refused(argv, capsys, work, f"{target}: is a {kind.replace('fifo', 'FIFO')}, not {what}")
