@@ -274,8 +274,8 @@ def _check_max_panels(args) -> None:
 
 def _check_layout_size(design: Any, panel_size: float, max_panels: int | None) -> None:
     """Refuse a layout whose panel count (design area / panel size squared) would exhaust
-    the memory, before the layout starts (see `fabplan.resources`)."""
-    from .resources import check_panel_count, default_max_panels
+    the memory, before the layout starts (see `fabplan.io.resources`)."""
+    from .io.resources import check_panel_count, default_max_panels
 
     panels = design.area / panel_size**2
     limit = default_max_panels() if max_panels is None else max_panels
@@ -349,7 +349,7 @@ def _parse_layers(specs: list | None) -> dict:
 def _cmd_strips(args) -> int:
     from .fabricate.strip_plan import plan_strips
     from .fabricate.strips import UNITS_MM, StripSettings
-    from .resources import check_panel_count
+    from .io.resources import check_panel_count
 
     _check_max_panels(args)
 

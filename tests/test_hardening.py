@@ -306,7 +306,7 @@ def test_a_layout_that_would_need_5_gb_is_refused_in_under_2_s(tmp_path, capsys,
     machine is made to have 4 GB available: the layout is refused up front."""
     import time
 
-    from fabplan import resources
+    from fabplan.io import resources
 
     monkeypatch.setattr(resources, "available_memory", lambda: 4 * 10**9)
     started = time.perf_counter()

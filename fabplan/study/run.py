@@ -162,7 +162,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     study : the study.
     progress : called with one line per step.
     max_panels : refuse a study whose layouts would have more panels (default: what the
-        memory holds, `fabplan.resources.default_max_panels`).
+        memory holds, `fabplan.io.resources.default_max_panels`).
 
     Raises
     ------
@@ -172,8 +172,8 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         surface, ...): nothing could be compared.
     """
     from ..design.load import load_design
+    from ..io.resources import check_panel_count
     from ..layout.surface_layout import layout_surface
-    from ..resources import check_panel_count
 
     say = progress or (lambda message: None)
     start = time.perf_counter()

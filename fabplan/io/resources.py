@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import resource
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = ["BYTES_PER_PANEL", "MIN_MAX_PANELS", "available_memory", "default_max_panels",
            "check_panel_count"]
