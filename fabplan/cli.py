@@ -17,10 +17,11 @@ from typing import Any
 
 from . import __version__
 from .errors import FabplanError, InputError
-from .io.output import check_output_file, check_output_folder
+from .io.inputs import check_input_file
+from .io.output import atomic_path, check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
-from .net.mesh import load_mesh
+from .net.validate import check_panel_size, load_net
 from .solve.net_types import NETS, check_angle, check_radius
 from .solve.optimize import check_net_input, optimize, read_fixed, read_handles
 from .solve.reference import load_reference
@@ -42,7 +43,7 @@ def _cmd_nets(args) -> int:
 def _cmd_measure(args) -> int:
     out = Path(args.output) if args.output else Path(args.net).with_suffix(".measure.json")
     _check_outputs([out], [args.net, args.reference])
-    mesh = load_mesh(args.net)
+    mesh = load_net(args.net)
     reference = _reference(args.reference)
     record = measure_net(mesh, reference=reference)
     record["file"] = str(args.net)
@@ -52,6 +53,11 @@ def _cmd_measure(args) -> int:
     return 0
 
 
+def _warn(message: str | None) -> None:
+    if message:
+        print(f"fabplan: warning: {message}", file=sys.stderr)
+
+
 def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
     """Refuse outputs that would overwrite an input or cannot be written, before working."""
     protected = {Path(p).resolve() for p in inputs if p}
@@ -59,6 +65,14 @@ def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
         if out.resolve() in protected:
             raise InputError(f"{out}: refusing to overwrite the input file")
         check_output_file(out)
+
+
+def _check_option_files(*options: tuple[str | None, str]) -> None:
+    """Name a folder, FIFO or device given to an option that reads a file (`--fix`,
+    `--handle`, `--family`) as what it is, instead of "no such file" or a hang."""
+    for value, what in options:
+        if value and os.path.lexists(value):
+            check_input_file(value, what)
 
 
 def _output_path(args) -> Path:
@@ -108,8 +122,10 @@ def _cmd_optimize(args) -> int:
     check_radius(args.radius)
     if args.max_iter is not None and args.max_iter < 1:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
+    _check_option_files((None if args.fix == "boundary" else args.fix, "a file of vertex ids"),
+                        *[(h, "a file of handles") for h in args.handle or []])
     out = _output_path(args)
-    mesh = load_mesh(args.input)
+    mesh = load_net(args.input)
     check_net_input(mesh)
     reference = _reference(args.reference)
     fixed = read_fixed(args.fix, mesh)
@@ -142,8 +158,9 @@ def _cmd_molds(args) -> int:
     settings.check()
     out = Path(args.output)
     check_output_folder(out)
-    mesh = load_mesh(args.net)
+    mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit))
     plan = plan_molds(mesh, settings)
     files = write_mold_report(plan, out)
     print(plan.summary())
@@ -163,6 +180,7 @@ def _cmd_layout(args) -> int:
     from .solve.net_types import get_net
 
     check_angle(args.angle)
+    _check_max_panels(args)
     preset = get_net(args.net)
     if not (args.panel_size > 0 and args.panel_size < float("inf")):
         raise InputError(f"--panel-size must be a positive length, got {args.panel_size}")
@@ -183,9 +201,11 @@ def _cmd_layout(args) -> int:
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")
     picture = out.with_suffix(".png")
+    _check_option_files((args.family, "a file of polylines"))
     family_file = args.family if args.family and Path(args.family).is_file() else None
     _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
     design = load_design(args.surface, triangles=args.triangles)
+    _check_layout_size(design, args.panel_size, args.max_panels)
     start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
     layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
     settings, progress = _solver_options(args)
@@ -196,10 +216,11 @@ def _cmd_layout(args) -> int:
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
              + (f", {layout.family}" if layout.family else
                 f", {angle:.4g} deg" if isinstance(angle, float) else ""))
-    write_layout_picture(picture, design, result.mesh, title=title,
-                         singular_points=layout.singular_points,
-                         marks=fairness_marks(result.properties))
-    obj_path, json_path = result.write(out)
+    with atomic_path(picture) as staged:   # the picture lands only with the net it shows
+        write_layout_picture(staged, design, result.mesh, title=title,
+                             singular_points=layout.singular_points,
+                             marks=fairness_marks(result.properties))
+        obj_path, json_path = result.write(out)
     props = result.properties
     print(format_summary(props))
     d = props["distance_to_design"]
@@ -245,6 +266,29 @@ def _cmd_layout(args) -> int:
                   "(`fabplan study` measures how far)", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
+
+
+def _check_max_panels(args) -> None:
+    if args.max_panels is not None and args.max_panels < 1:
+        raise InputError(f"--max-panels must be at least 1, got {args.max_panels}")
+
+
+def _check_layout_size(design: Any, panel_size: float, max_panels: int | None) -> None:
+    """Refuse a layout whose panel count (design area / panel size squared) would exhaust
+    the memory, before the layout starts (see `fabplan.io.resources`)."""
+    from .io.resources import check_panel_count, default_max_panels
+
+    panels = design.area / panel_size**2
+    limit = default_max_panels() if max_panels is None else max_panels
+    fitting = (design.area / (0.5 * limit)) ** 0.5
+    hint = (f"; the design spans {design.extent:.4g} units: if it is in millimetres, give "
+            "the panel size in millimetres too" if design.extent > 2000 else "")
+    check_panel_count(
+        panels, max_panels=limit,
+        what=f"{Path(design.name).name}: a layout at panel size {panel_size:g} of a surface "
+             f"of area {design.area:.4g}",
+        fix=f"use a larger --panel-size (about {fitting:.2g} gives {0.5 * limit:,.0f} "
+            f"panels){hint}")
 
 
 def layout_warnings(properties: dict) -> list:
@@ -309,7 +353,10 @@ def _parse_layers(specs: list | None) -> dict:
 
 def _cmd_strips(args) -> int:
     from .fabricate.strip_plan import plan_strips
-    from .fabricate.strips import StripSettings
+    from .fabricate.strips import UNITS_MM, StripSettings
+    from .io.resources import check_panel_count
+
+    _check_max_panels(args)
 
     settings = StripSettings(
         height_mm=args.height, thickness_mm=args.thickness, clearance_mm=args.clearance,
@@ -322,7 +369,11 @@ def _cmd_strips(args) -> int:
     out = Path(args.output)
     check_output_folder(out)
     started = time.perf_counter()
-    mesh = load_mesh(args.net)
+    mesh = load_net(args.net)
+    check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
+                      what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
+                      fix="plan the strips of a coarser net or of parts of it")
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS_MM[settings.units]))
     plan = plan_strips(mesh, settings)
     files = plan.write(out, previews=not args.no_previews)
     s = plan.summary()
@@ -355,6 +406,7 @@ def _cmd_study(args) -> int:
     from .study.spec import read_study, resolve_study
 
     show = not args.quiet
+    _check_max_panels(args)
 
     def say(message: str) -> None:
         if show:
@@ -369,9 +421,9 @@ def _cmd_study(args) -> int:
 
         workers = None if args.workers is None else worker_count(args.workers)
         result = run_study_parallel(study, workers=workers, scheduler=args.scheduler,
-                                    progress=say)
+                                    progress=say, max_panels=args.max_panels)
     else:
-        result = run_study(study, progress=say)
+        result = run_study(study, progress=say, max_panels=args.max_panels)
     writing = time.perf_counter()
     files = write_study(result, out, progress=say)
     done = time.perf_counter()
@@ -417,6 +469,12 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         self.exit(EXIT_BAD_INPUT, f"fabplan: error: {message} (see '{self.prog} --help')\n")
+
+
+def _add_max_panels(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-panels", type=int, metavar="N",
+                   help="refuse runs estimated to need more panels than this (default: what "
+                        "half the available memory holds, at least 20000)")
 
 
 def _add_nets(sub: Any) -> None:
@@ -503,6 +561,7 @@ def _add_layout(sub: Any) -> None:
     p.add_argument("--triangles", type=int, default=40000,
                    help="triangles of a built-in surface's triangulation (default 40000)")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
+    _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -550,6 +609,7 @@ def _add_strips(sub: Any) -> None:
     p.add_argument("--one-file", action="store_true",
                    help="all sheets side by side in one DXF instead of one file per sheet")
     p.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
+    _add_max_panels(p)
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
     p.set_defaults(func=_cmd_strips)
 
@@ -570,6 +630,7 @@ def _add_study(sub: Any) -> None:
                    help="run the candidates in N local processes (auto: one per core) with Dask")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="run the candidates on a running Dask cluster (see docs/parallel.md)")
+    _add_max_panels(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)
 
@@ -614,6 +675,16 @@ def main(argv: list[str] | None = None) -> int:
         # the reader of our output went away (e.g. `| head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except MemoryError:
+        print("fabplan: error: out of memory: use a larger panel size or a smaller net "
+              "(--max-panels sets the limit that is checked up front)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        # a file system failure while writing (disk full, a vanished folder): outputs are
+        # staged, so nothing half-written is left; say what failed in one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"fabplan: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":

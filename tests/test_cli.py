@@ -202,7 +202,7 @@ UNUSABLE = {
     "garbage.obj": ["garbage.obj: not a text OBJ file"],
     "prose.obj": ["prose.obj:1: not an OBJ line", "Dear reader"],
     "nan.obj": ["nan.obj:2: vertex 1 has a non-finite coordinate"],
-    "triangles.obj": ["triangles.obj: no quad faces"],
+    "triangles.obj": ["triangles.obj: face 0 is a triangle", "a net is a quad mesh"],
     "strip.obj": ["strip.obj: no regular vertex star"],
 }
 UNREADABLE = ["missing.obj", "garbage.obj", "prose.obj", "nan.obj"]

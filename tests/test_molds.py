@@ -295,8 +295,9 @@ def test_panels_larger_than_the_largest_mold_are_reported_not_hidden(tmp_path, c
 
 
 def _degenerate_obj(path: Path) -> None:
-    path.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nv 0 1 0\nv 1 1 0\n"
-                    "f 1 2 6 5\nf 2 3 4 1\n")
+    # face 1 is a quad with its corners on one line; the mesh is manifold otherwise
+    path.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nv 0 1 0\nv 1 1 0\nv 4 0 0\n"
+                    "f 1 2 6 5\nf 2 3 4 7\n")
 
 
 @pytest.mark.parametrize("case, fragment", [

@@ -59,6 +59,7 @@ from .panels import (
 
 __all__ = [
     "UNITS",
+    "TOLERANCE_RANGE_MM",
     "PANEL_TYPES",
     "MOLD_TYPES",
     "MoldSettings",
@@ -70,6 +71,10 @@ __all__ = [
 
 UNITS = {"m": 1000.0, "mm": 1.0}
 """Millimetres per model unit for each accepted ``units`` name."""
+
+TOLERANCE_RANGE_MM = (0.01, 1000.0)
+"""Mold tolerances that mean something: finer than 0.01 mm no mold is made, a gap of a
+metre is no mold at all."""
 
 PANEL_TYPES = ("planar", "single_curved", "double_curved")
 MOLD_TYPES = ("plane", "cylinder", "paraboloid")
@@ -109,6 +114,10 @@ class MoldSettings:
         t = self.tolerance_mm
         if not isinstance(t, (int, float)) or not math.isfinite(t) or t <= 0:
             raise InputError(f"the tolerance must be a positive number of millimetres, got {t}")
+        low, high = TOLERANCE_RANGE_MM
+        if not low <= t <= high:
+            raise InputError(f"the tolerance {t:g} mm lies outside {low:g} .. {high:g} mm, the "
+                             "range a mold can be made to (is it in the wrong unit?)")
         if self.units not in UNITS:
             raise InputError(f"unknown units {self.units!r}: use " + " or ".join(UNITS))
         s = self.max_mold_size_mm

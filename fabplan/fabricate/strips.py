@@ -70,6 +70,12 @@ __all__ = [
 UNITS_MM = {"m": 1000.0, "mm": 1.0}
 """Millimetres per model unit for the accepted `StripSettings.units`."""
 
+CUTTING_TOLERANCE_MM = (0.001, 10.0)
+"""Cutting tolerances that mean something for arcs fitted to the strip outlines (mm)."""
+
+MAX_SHEET_MM = 20_000.0
+"""The longest sheet side accepted (mm): beyond it the sizes are in the wrong unit."""
+
 FAMILY_LETTERS = "AB"
 _LAYER_KINDS = ("cut", "slit", "engrave")
 
@@ -191,6 +197,21 @@ class StripSettings:
             raise InputError(f"--splice must be 'overlap' or 'lap', got {self.splice!r}")
         if self.labels not in ("stroke", "outline", "text"):
             raise InputError(f"--labels must be 'stroke', 'outline' or 'text', got {self.labels!r}")
+        low, high = CUTTING_TOLERANCE_MM
+        if not low <= self.tolerance_mm <= high:
+            raise InputError(f"--tolerance {self.tolerance_mm:g} mm lies outside {low:g} .. "
+                             f"{high:g} mm, the range a cutting machine works to")
+        if max(self.sheet_mm) > MAX_SHEET_MM:
+            raise InputError(f"--sheet {self.sheet_mm[0]:g}x{self.sheet_mm[1]:g} mm: no sheet is "
+                             f"larger than {MAX_SHEET_MM:g} mm (is it in the wrong unit?)")
+        room = min(self.sheet_mm) - 2 * self.margin_mm
+        if self.height_mm >= room:
+            raise InputError(f"--height {self.height_mm:g} mm does not fit on the "
+                             f"{min(self.sheet_mm):g} mm side of the sheet inside its margins "
+                             f"(--margin {self.margin_mm:g} mm)")
+        if self.spacing_mm >= room:
+            raise InputError(f"--spacing {self.spacing_mm:g} mm is wider than the sheet inside its "
+                             f"margins ({room:g} mm): it must leave room for a part")
         if self.kerf_mm >= self.slit_width_mm:
             raise InputError(f"--kerf {self.kerf_mm:g} mm must be narrower than the slit "
                              f"({self.slit_width_mm:g} mm = thickness + clearance)")

@@ -1,6 +1,7 @@
-"""Readers and writers, and the one output transaction.
+"""Readers and writers, the checks every input passes, and the one output transaction.
 
 Owns: OBJ quad meshes (`obj`), triangle mesh files (`triangles`), JSON records
-(`records`), and atomic output files and folders (`output`).
+(`records`), atomic output files and folders (`output`), the checks of input files and
+coordinates (`inputs`) and the memory guard of big runs (`resources`).
 May import: `fabplan.errors` only.
 """

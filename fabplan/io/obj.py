@@ -14,6 +14,7 @@ from typing import Iterable
 import numpy as np
 
 from ..errors import InputError
+from .inputs import check_input_file, check_text
 from .output import write_texts
 
 __all__ = ["read_obj", "parse_obj", "write_obj", "format_obj"]
@@ -51,15 +52,8 @@ def parse_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray], np
         When the file is missing, unreadable, not an OBJ, or has bad coordinates or
         indices; the message names the file and line.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # tolerate a byte order mark
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text OBJ file (binary content)") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    path = check_input_file(path, "an OBJ file")
+    text = check_text(path, "OBJ")  # a byte order mark is tolerated
 
     vertices: list[list[float]] = []
     normals: list[list[float]] = []
@@ -90,6 +84,9 @@ def parse_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray], np
                     raise InputError(f"{path}:{lineno}: malformed face line {line.strip()!r}") from None
                 if index == 0:
                     raise InputError(f"{path}:{lineno}: OBJ vertex indices start at 1, not 0")
+                if abs(index) > 2**62:
+                    raise InputError(f"{path}:{lineno}: face {len(faces)} refers to vertex "
+                                     f"{index}, which cannot exist")
                 # OBJ indices are 1-based; negative ones count back from the last vertex.
                 face.append(index - 1 if index > 0 else len(vertices) + index)
             if len(face) < 3:

@@ -32,6 +32,7 @@ __all__ = [
     "write_texts",
     "output_folder",
     "remove_stale_staging",
+    "path_inside",
 ]
 
 STAGING_MARKER = ".fabplan-staging"   # file in every staging folder: the owner's pid
@@ -43,6 +44,35 @@ def existing_ancestor(path: str | os.PathLike) -> Path:
     while not probe.exists() and probe != probe.parent:
         probe = probe.parent
     return probe
+
+
+def path_inside(folder: str | os.PathLike, *parts: str) -> Path:
+    """`folder` joined with `parts`, refused unless it resolves to a path inside `folder`.
+
+    For output paths built from names a user gave (a study's candidate names): an
+    absolute name, ``..`` or a symbolic link must not lead a run to write elsewhere.
+
+    Raises
+    ------
+    InputError
+        When the joined path leaves `folder`.
+
+    Examples
+    --------
+    >>> path_inside("/tmp/study", "candidates", "snet").as_posix()
+    '/tmp/study/candidates/snet'
+    >>> path_inside("/tmp/study", "candidates", "../../etc")
+    Traceback (most recent call last):
+    ...
+    fabplan.errors.InputError: candidates/../../etc: leaves the output folder /tmp/study; \
+refusing to write there
+    """
+    root = Path(os.path.realpath(folder))
+    path = root.joinpath(*parts)
+    if not Path(os.path.realpath(path)).is_relative_to(root) or path == root:
+        raise InputError(f"{'/'.join(parts)}: leaves the output folder {folder}; "
+                         "refusing to write there")
+    return path
 
 
 def _special_kind(path: Path) -> str | None:
@@ -169,7 +199,11 @@ def _new_staging(beside: Path, name: str) -> Path:
     remove_stale_staging(beside)
     staging = beside / f".{name}.staging-{uuid.uuid4().hex[:12]}"
     os.mkdir(staging, 0o777)
-    (staging / STAGING_MARKER).write_text(f"{os.getpid()}\n", encoding="utf-8")
+    try:
+        (staging / STAGING_MARKER).write_text(f"{os.getpid()}\n", encoding="utf-8")
+    except BaseException:     # disk full at the first byte: leave no unmarked folder
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
     return staging
 
 
@@ -306,9 +340,7 @@ def _swap_in(staging: Path, folder: Path) -> None:
     if not folder.exists():
         os.replace(staging, folder)
         return
-    old = folder.parent / f".{folder.name}.old-{uuid.uuid4().hex[:12]}"
-    os.mkdir(old, 0o777)
-    (old / STAGING_MARKER).write_text(f"{os.getpid()}\n", encoding="utf-8")
+    old = _new_staging(folder.parent, f"{folder.name}.old")
     os.replace(folder, old / "previous")
     try:
         os.replace(staging, folder)

@@ -115,7 +115,7 @@ def _connect(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
 
 def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: str | None = None,
                        progress: Callable[[str], None] | None = None,
-                       client: Any = None) -> StudyResult:
+                       client: Any = None, max_panels: int | None = None) -> StudyResult:
     """Run every candidate of `study` on Dask workers and judge them (see the module).
 
     Parameters
@@ -125,6 +125,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
     scheduler : address of a running Dask scheduler (``tcp://HOST:PORT``).
     progress : called with one line per event (candidates done, running, failed, ETA).
     client : an existing `distributed.Client` to use instead (not closed here).
+    max_panels : refuse a study whose layouts would have more panels (see `run_study`).
 
     Raises
     ------
@@ -133,6 +134,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
         scheduler cannot be reached.
     """
     from ..design.load import load_design
+    from ..io.resources import check_panel_count
     from ..layout.surface_layout import layout_surface
 
     say = progress or _quiet
@@ -147,6 +149,11 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
             load_design(source, triangles=triangles)
         say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
             f"{design.area:.4g} {study.design.units}^2")
+        check_panel_count(design.area / study.panel_size**2, max_panels=max_panels,
+                          what=f"{study.path or study.name}: layouts of panel size "
+                               f"{study.panel_size:g} {study.design.units} on a design of area "
+                               f"{design.area:.4g} {study.design.units}^2",
+                          fix="give a larger panels.size")
         baseline = layout_surface(design, study.panel_size, angle=90.0)
         results = _run_on(client, study, design, baseline, say)
     finally:

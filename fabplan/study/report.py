@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import InputError
 from ..io import output
 from ..io.records import json_text
 from ..layout.picture import fairness_marks, write_layout_picture
@@ -554,8 +553,6 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
     net, molds_plan = c.net, c.molds
     if net is None or molds_plan is None:
         raise ValueError(f"candidate {c.name!r} has no net to write (it failed)")
-    if not folder.resolve().is_relative_to(folder.parent.resolve()) or folder.parent.name != "candidates":
-        raise InputError(f"candidate {c.name!r}: the name must not leave the study folder")
     folder.mkdir(parents=True)
     net_obj, net_json = net.write(folder / "net.obj")
     output.write_texts({folder / "molds.csv": molds_plan.panels_csv(),
@@ -620,9 +617,11 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
             if not c.failed:
                 twin = None if c.same_net_as is None else by_name.get(c.same_net_as)
                 shared = twin is not None and twin.strips is not None and twin.strips is c.strips
+                # names are checked when the study is read; this guards the API too
+                folder = output.path_inside(tmp, "candidates", c.name)
                 outputs[c.name], pictures[c.name] = _candidate_files(
-                    c, tmp / "candidates" / c.name, result, say,
-                    twin=tmp / "candidates" / twin.name if twin is not None and shared else None)
+                    c, folder, result, say,
+                    twin=folder.parent / twin.name if twin is not None and shared else None)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
         total = result.seconds_run + time.perf_counter() - clock

@@ -150,19 +150,29 @@ class StudyResult:
 
 
 # ---------------------------------------------------------------------------- running
-def run_study(study: Study, *, progress: Callable[[str], None] | None = None) -> StudyResult:
+def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
+              max_panels: int | None = None) -> StudyResult:
     """Run every candidate of `study` and judge it.
 
     A candidate that fails (a layout or a solve that breaks) is recorded with its reason
     and the study goes on.
 
+    Parameters
+    ----------
+    study : the study.
+    progress : called with one line per step.
+    max_panels : refuse a study whose layouts would have more panels (default: what the
+        memory holds, `fabplan.io.resources.default_max_panels`).
+
     Raises
     ------
     InputError
-        When the design cannot be loaded or the baseline layout is impossible (panel
-        size too large for the surface, ...): nothing could be compared.
+        When the design cannot be loaded, the layouts would need more panels than
+        `max_panels`, or the baseline layout is impossible (panel size too large for the
+        surface, ...): nothing could be compared.
     """
     from ..design.load import load_design
+    from ..io.resources import check_panel_count
     from ..layout.surface_layout import layout_surface
 
     say = progress or (lambda message: None)
@@ -171,6 +181,11 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None) ->
     design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
     say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
         f"{design.area:.4g} {study.design.units}^2")
+    check_panel_count(design.area / study.panel_size**2, max_panels=max_panels,
+                      what=f"{study.path or study.name}: layouts of panel size "
+                           f"{study.panel_size:g} {study.design.units} on a design of area "
+                           f"{design.area:.4g} {study.design.units}^2",
+                      fix="give a larger panels.size")
     layouts = {90.0: layout_surface(design, study.panel_size, angle=90.0)}
     starts: dict[float, OptimizationResult] = {}
     results: list[CandidateResult] = []

@@ -27,12 +27,14 @@ from __future__ import annotations
 import difflib
 import math
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
+from ..io.inputs import check_input_file, check_text
 from ..solve.net_types import NETS, get_net
 
 if sys.version_info >= (3, 11):
@@ -398,13 +400,10 @@ def read_study(path: str | Path) -> Study:
         and the key.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         raise InputError(f"{path}: no such study file")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the study file ({exc})") from None
-    return parse_study(text, path=path)
+    check_input_file(path, "a study file")
+    return parse_study(check_text(path, "TOML study"), path=path)
 
 
 def parse_study(text: str, *, path: Path | None = None) -> Study:
@@ -451,6 +450,7 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     panels.done()
 
     design = _design(_Table(top.get("design", None) or {}, "design", file), folder)
+    _check_panel_units(panel_size, design, file)
     strips = _strips(_Table(top.get("strips"), "strips", file)) if top.has("strips") else None
     limits = _limits(_Table(top.get("limits", None) or {}, "limits", file),
                      congruence_tolerance_mm=strips.congruence_tolerance_mm if strips else 0.1)
@@ -508,6 +508,20 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     return DesignSpec(spec, surface, dict(parameters), triangles, units)
 
 
+def _check_panel_units(panel_size: float, design: DesignSpec, file: str) -> None:
+    """Refuse a panel size no building has in the design's units (a factor 10 beyond
+    `PLAUSIBLE_PANEL_MM`): the units are wrong."""
+    from ..net.validate import PLAUSIBLE_PANEL_MM
+
+    size_mm = panel_size * design.mm_per_unit
+    low, high = PLAUSIBLE_PANEL_MM
+    if not 0.1 * low <= size_mm <= 10 * high:
+        other = "m" if design.units == "mm" else "mm"
+        raise InputError(f"{file}: panels.size {panel_size:g} {design.units} is {size_mm:g} mm, "
+                         f"not a panel of a building: is the design in {other}? Set "
+                         f'design.units = "{other}"')
+
+
 def _check_surface(spec: str, t: _Table) -> None:
     """Build the parametric surface once, so that a bad parameter is named now."""
     from ..design.parametric import surface_from_spec
@@ -550,11 +564,14 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
 
 
 def _strips(t: _Table) -> StripOptions:
+    from ..fabricate.strips import MAX_SHEET_MM
+
     sheet = t.get("sheet_mm", [2500.0, 1250.0])
     if (not isinstance(sheet, list) or len(sheet) != 2
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
-                       for v in sheet)):
-        t.fail("sheet_mm", f"must be [width, height] in mm, got {sheet!r}")
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and 0 < v <= MAX_SHEET_MM for v in sheet)):
+        t.fail("sheet_mm", f"must be [width, height] in mm (each at most {MAX_SHEET_MM:g}), "
+               f"got {sheet!r}")
     nets = t.get("nets", "auto")
     if isinstance(nets, list):
         for net in nets:
@@ -634,6 +651,8 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
         angles = _values(t, "angle", "degrees")
         radii = _values(t, "radius", "model units")
         label = t.text("name")
+        if label is not None and not SAFE_NAME.fullmatch(label):
+            t.fail("name", f"is {label!r}, {_SAFE_NAME_RULE}")
         start = t.number("start_angle", unit="degrees")
         if start is not None and not 0 < start < 180:
             t.fail("start_angle", f"must lie strictly between 0 and 180 degrees, got {start:g}")
@@ -658,10 +677,20 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
                 out.append(Candidate(name, net, a, r, start_angle=start))
     names = [c.name for c in out]
     for c in out:
+        if not SAFE_NAME.fullmatch(c.name):
+            raise InputError(f"{file}: candidate name {c.name!r} {_SAFE_NAME_RULE}")
+    for c in out:
         if names.count(c.name) > 1:
             raise InputError(f"{file}: two candidates are both called {c.name!r}; give them "
                              "different names (candidates[].name)")
     return tuple(out)
+
+
+SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._+-]{0,63}")
+"""A candidate name: it becomes a folder inside the study folder, so no separators, no
+leading dot (no '..', no hidden folder) and nothing a shell or a file system mangles."""
+_SAFE_NAME_RULE = ("which is not a safe folder name: use up to 64 letters, digits, '.', '_', "
+                   "'+' and '-', starting with a letter, digit or '_' (no '/', '..' or spaces)")
 
 
 def _name(net: str, angle: float | None, radius: float | None) -> str:
@@ -735,11 +764,13 @@ def copy_template(name: str, destination: str | Path) -> list[Path]:
     -------
     list of Path written. Refuses to overwrite an existing file.
     """
-    from ..io.output import write_texts
+    from ..io.output import check_output_file, write_texts
 
     source = template_path(name)
     folder = str(destination).endswith(("/", os.sep)) or Path(destination).is_dir()
     destination = Path(destination)
+    if not folder:
+        check_output_file(destination)  # a device or FIFO is refused, not renamed .toml
     if folder:
         destination = destination / source.name
     elif destination.suffix.lower() != ".toml":
