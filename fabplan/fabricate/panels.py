@@ -441,8 +441,8 @@ def net_curvature(mesh) -> NetCurvature:
     the median miss (Eq. 9 breaks down near umbilics). Every other vertex (the boundary,
     the ring next to it, irregular vertices) borrows the surface of its donor, the nearest
     such vertex (ring by ring along the edges, the nearest in space among equals), shifted
-    along the donor's normal to pass through it: the curvature elements are extended from the interior, and a linear
-    Weingarten relation of the interior holds at every vertex.
+    along the donor's normal to pass through it: the curvature elements are extended from
+    the interior, and a linear Weingarten relation of the interior holds at every vertex.
 
     Raises
     ------
