@@ -236,7 +236,7 @@ def test_wein99_needs_at_most_sqrt_n_molds_and_every_panel_fits(wein99_run, wein
     assert record["reassigned_by_verification"] == []
     # auto planned with both panel surfaces and kept the one whose panels meet best
     alt = record["panel_surface_alternatives"]
-    assert set(alt) == {"osculating", "local_fit"}
+    assert "osculating" in alt and (len(alt) == 2 or record["fits_all"])
     kept = alt[record["panel_surface"]]
     assert kept["mold_count"] == record["mold_count"]
     assert all((kept["failures"], kept["steps_over_limit"], kept["mold_count"])
@@ -498,9 +498,15 @@ def test_the_one_surface_is_continuous_across_every_edge():
     for p, q in shared:
         d = np.linalg.norm(p[:, None] - q[None], axis=2).min(axis=1)
         assert d.max() < 1e-12
-    # and the one surface passes through every vertex
-    corners = S[:, int(np.flatnonzero(i[keep] == level)[0])]  # fan 0 at b0 = 1: corner 0
-    assert np.allclose(corners, net.vertices[[f[0] for f in faces]], atol=1e-12)
+    # and the one surface passes through every vertex with its own curvature elements, and
+    # as far as it says from the vertices that borrow them
+    corner = S[:, int(np.flatnonzero(i[keep] == level)[0])]  # fan 0 at b0 = 1: corner 0
+    first = np.array([f[0] for f in faces])
+    miss = np.linalg.norm(corner - net.vertices[first], axis=1)
+    own = elements.measured[first]
+    assert own.any() and (~own).any()
+    assert miss[own].max() < 1e-12
+    assert np.allclose(miss, elements.miss[first], rtol=1e-9, atol=1e-12)
 
 
 def test_the_boundary_keeps_the_linear_weingarten_relation_of_the_interior(wein99):

@@ -595,10 +595,13 @@ class MoldPlan:
     surfaces : the `PanelSurfaces` (one quadric per panel) the molds were fitted to.
     surface_gap_mm : (p,) float, for the ``osculating`` model the largest distance between a
         panel's quadric and the one surface through the net (zeros for the other models).
+    vertex_miss_mm : (n,) float, ``osculating``: distance of every net vertex from the one
+        surface (0 at the vertices with their own curvature elements; zeros otherwise).
     alternatives : for ``panel_surface="auto"`` on a curved net, the `outline` of the plan
-        with each panel surface model tried (the plan kept is the one with the fewest
-        panels that fit no mold, then the fewest steps over the limit, then the fewest
-        molds).
+        with each panel surface model tried: ``osculating``, and ``local_fit`` too when the
+        first does not fit and meet everywhere (the plan kept is then the one with the
+        fewest panels that fit no mold, then the fewest steps over the limit, then the
+        fewest molds).
     seconds : run time.
     """
 
@@ -621,6 +624,7 @@ class MoldPlan:
     kink_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     surfaces: PanelSurfaces | None = None
     surface_gap_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    vertex_miss_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alternatives: dict = field(default_factory=dict)
     seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
@@ -752,6 +756,7 @@ class MoldPlan:
                                 "mean": float(per.mean()), "max": int(per.max())},
             "max_deviation_mm": float(self.deviation_mm.max()),
             "max_surface_gap_mm": float(self.surface_gap_mm.max()) if self.surface_gap_mm.size else 0.0,
+            "max_vertex_miss_mm": float(self.vertex_miss_mm.max()) if self.vertex_miss_mm.size else 0.0,
             "panel_steps": self._steps_record(),
             "mold_count_bound": {"curvature_set_length_per_mm": length,
                                  "mold_reach_per_mm": self.curvature_reach(0.5),
@@ -859,13 +864,16 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
                           settings.panel_surface)
     if settings.panel_surface != "auto" or model != "osculating":
         return _plan(mesh, settings, model, start)
-    # auto on a curved net: both panel surfaces, keeping the plan whose panels meet best
+    # auto on a curved net: the one surface first; the per-face fit too when its panels
+    # do not all fit or do not all meet, keeping the plan whose panels meet best
     plans = []
     for name in ("osculating", "local_fit"):
         try:
             plans.append(_plan(mesh, settings, name, time.perf_counter()))
         except NetCurvatureError:
             continue
+        if plans[-1].fits_all:
+            break
     best = min(plans, key=lambda p: (p.failures.size, p.steps_over.size, p.mold_count))
     best.alternatives = {p.panel_surface: p.outline() for p in plans}
     best.seconds = time.perf_counter() - start
@@ -883,12 +891,14 @@ def _plan(mesh: QuadMesh, settings: MoldSettings, model: str, start: float) -> M
     work = settings.working_tolerance_mm
     clock: dict[str, float] = {}
     surface_gap = np.zeros(len(mesh.face_sizes))
+    vertex_miss = np.zeros(mesh.vertex_count)
     if model == "osculating":
         try:
             elements = net_curvature(mesh)
         except InputError as exc:
             raise NetCurvatureError(str(exc)) from exc
         surfaces, surface_gap = fit_osculating_surfaces(mesh, elements)
+        vertex_miss = elements.miss * mm
     else:
         surfaces = fit_panel_surfaces(mesh, model)
     shapes = panel_shapes(surfaces)
@@ -948,7 +958,7 @@ def _plan(mesh: QuadMesh, settings: MoldSettings, model: str, start: float) -> M
                     placement=placement, deviation_mm=deviation, footprint_mm=footprint,
                     problem=problem, weingarten=weingarten, reassigned=over,
                     step_mm=step, kink_deg=kink, surfaces=surfaces,
-                    surface_gap_mm=surface_gap * mm,
+                    surface_gap_mm=surface_gap * mm, vertex_miss_mm=vertex_miss,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
 
 

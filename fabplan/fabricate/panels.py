@@ -9,11 +9,12 @@ Every face of a net is a panel. Three panel surface models:
     neighbours, hence an osculating surface whose normal sections are the circles of
     Euler's normal curvatures (`osculating_points`). Vertices without Eq. 7-9 (the boundary,
     the ring next to it, irregular vertices) borrow the surface of the nearest interior
-    vertex, shifted to pass through them, so the boundary is extended from the interior and
-    a linear Weingarten relation of the interior holds there too. A point of the one
-    surface over a face is the blend of its corners' surfaces (`osculating_panel_samples`);
-    along an edge only the edge's two vertices count, so the one surface is continuous
-    across every edge. The panel cast on a mold is the least-squares quadric of that piece
+    vertex, so the boundary is extended from the interior and a linear Weingarten relation
+    of the interior holds there too. A point of the one surface over a face is the blend of
+    its corners' surfaces (`osculating_panel_samples`); along an edge only the edge's two
+    vertices count, so the one surface is continuous across every edge. It passes through
+    every vertex with its own surface and within `NetCurvature.miss` of the others. The
+    panel cast on a mold is the least-squares quadric of that piece
     (`fit_osculating_surfaces`, with its gap from the one surface).
 ``local_fit``
     each panel is its own quadratic height field in the face frame (origin at the mean of
@@ -402,8 +403,7 @@ class NetCurvature:
     Attributes
     ----------
     origin : (n, 3) float, the point each vertex's osculating surface is centred on: the
-        vertex itself, or for a vertex that borrows the surface of its donor that donor
-        shifted along its normal so that the surface passes through the vertex.
+        vertex itself, or its donor for a vertex that borrows the donor's surface.
     normal : (n, 3) float, unit normals: the discrete normal (Def. 2.13).
     e1, e2 : (n, 3) float, unit principal directions (bisectors of the net's osculating
         tangents, Def. 2.16); ``(e1, e2, normal)`` is right-handed.
@@ -414,6 +414,8 @@ class NetCurvature:
         plane in the coordinates ``x, y`` along `e1`, `e2` (inverse square model units).
     donor : (n,) int, the vertex whose curvature elements each vertex carries: itself where
         Eq. 7-9 applies, else the nearest such vertex (`net_curvature`).
+    miss : (n,) float, distance of each vertex from its own osculating surface (0 where it
+        is the donor; model units): how far the one surface passes from a borrowing vertex.
     """
 
     origin: np.ndarray
@@ -424,6 +426,7 @@ class NetCurvature:
     k2: np.ndarray
     cubic: np.ndarray
     donor: np.ndarray
+    miss: np.ndarray
 
     @property
     def measured(self) -> np.ndarray:
@@ -440,9 +443,10 @@ def net_curvature(mesh) -> NetCurvature:
     neighbours, unless that surface misses a neighbour by more than `OUTLIER_FACTOR` times
     the median miss (Eq. 9 breaks down near umbilics). Every other vertex (the boundary,
     the ring next to it, irregular vertices) borrows the surface of its donor, the nearest
-    such vertex (ring by ring along the edges, the nearest in space among equals), shifted
-    along the donor's normal to pass through it: the curvature elements are extended from
-    the interior, and a linear Weingarten relation of the interior holds at every vertex.
+    such vertex (ring by ring along the edges, the nearest in space among equals): the
+    curvature elements are extended from the interior, a linear Weingarten relation of the
+    interior holds at every vertex, and the one surface passes within `NetCurvature.miss`
+    of a borrowing vertex.
 
     Raises
     ------
@@ -470,7 +474,7 @@ def net_curvature(mesh) -> NetCurvature:
     own = np.flatnonzero(measured)
     cubic[own] = _cubic_terms(mesh, own, normal[own], e1[own], e2[own], k[own], CUBIC_RINGS)
     elements = NetCurvature(origin=X, normal=normal, e1=e1, e2=e2, k1=k[:, 0], k2=k[:, 1],
-                            cubic=cubic, donor=np.arange(n))
+                            cubic=cubic, donor=np.arange(n), miss=np.zeros(n))
     # Eq. 7-9 break down near umbilics and flat stars (a vanishing denominator): a vertex
     # whose own surface misses its neighbours by far more than is usual borrows instead
     a, b = np.concatenate([mesh.edges, mesh.edges[:, ::-1]]).T
@@ -480,11 +484,13 @@ def net_curvature(mesh) -> NetCurvature:
     usual = max(float(np.median(worst[measured])), 1e-4 * mesh.mean_edge_length)
     measured &= worst <= OUTLIER_FACTOR * usual
     donor = _donors(mesh, measured)
-    # the donor's surface, shifted along its normal to pass through the vertex
-    offset = np.sum((X - osculating_points(elements, donor, X)) * normal[donor], axis=1)
-    origin = np.where(measured[:, None], X, X[donor] + offset[:, None] * normal[donor])
-    return NetCurvature(origin=origin, normal=normal[donor], e1=e1[donor], e2=e2[donor],
-                        k1=k[donor, 0], k2=k[donor, 1], cubic=cubic[donor], donor=donor)
+    # a borrowed surface is the donor's own, not shifted through the vertex: shifted copies
+    # of neighbouring vertices would disagree by their shifts, and the panels between them
+    # would bend to follow (the vertex's miss is measured instead)
+    miss = np.linalg.norm(osculating_points(elements, donor, X) - X, axis=1)
+    return NetCurvature(origin=X[donor], normal=normal[donor], e1=e1[donor], e2=e2[donor],
+                        k1=k[donor, 0], k2=k[donor, 1], cubic=cubic[donor], donor=donor,
+                        miss=miss)
 
 
 def _donors(mesh, measured: np.ndarray) -> np.ndarray:
