@@ -598,10 +598,9 @@ class MoldPlan:
     vertex_miss_mm : (n,) float, ``osculating``: distance of every net vertex from the one
         surface (0 at the vertices with their own curvature elements; zeros otherwise).
     alternatives : for ``panel_surface="auto"`` on a curved net, the `outline` of the plan
-        with each panel surface model tried: ``osculating``, and ``local_fit`` too when the
-        first does not fit and meet everywhere (the plan kept is then the one with the
-        fewest panels that fit no mold, then the fewest steps over the limit, then the
-        fewest molds).
+        with each panel surface model tried (the plan kept is the one with the fewest
+        panels that fit no mold, then the fewest steps over the limit, then the fewest
+        molds).
     seconds : run time.
     """
 
@@ -829,6 +828,11 @@ class MoldPlan:
             f"(limit {self.step_limit_mm:g} mm, {self.steps_over.size} edges over it); "
             f"at least {r['mold_count_bound']['molds']} molds by the curvature set's length",
         ]
+        if r["max_vertex_miss_mm"] > r["tolerance_mm"]:
+            miss = self.vertex_miss_mm
+            lines.append(f"the one surface misses {int(np.sum(miss > r['tolerance_mm']))} net vertices "
+                         f"(boundary vertices extended from the interior) by more than the "
+                         f"tolerance, up to {r['max_vertex_miss_mm']:.1f} mm")
         if w.get("thickness") is not None:
             lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
                          f"line a k1 + b k2 = c, {w['thickness']:.3f} of the curvature spread")
@@ -864,16 +868,14 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
                           settings.panel_surface)
     if settings.panel_surface != "auto" or model != "osculating":
         return _plan(mesh, settings, model, start)
-    # auto on a curved net: the one surface first; the per-face fit too when its panels
-    # do not all fit or do not all meet, keeping the plan whose panels meet best
+    # auto on a curved net: both panel surfaces, keeping the plan whose panels fit and
+    # meet best, then the one with fewer molds
     plans = []
     for name in ("osculating", "local_fit"):
         try:
             plans.append(_plan(mesh, settings, name, time.perf_counter()))
         except NetCurvatureError:
             continue
-        if plans[-1].fits_all:
-            break
     best = min(plans, key=lambda p: (p.failures.size, p.steps_over.size, p.mold_count))
     best.alternatives = {p.panel_surface: p.outline() for p in plans}
     best.seconds = time.perf_counter() - start
