@@ -75,23 +75,18 @@ def test_degenerate_stars_and_collapsed_edges_are_named():
 
 
 @pytest.mark.slow
-def test_a_principal_grid_asked_for_60_degrees_ends_fold_free_near_the_design():
+def test_a_principal_grid_asked_for_60_degrees_converges_fold_free_near_the_design():
+    """Before: the residual climbed to 493, 869 of 900 faces flipped, 5.2 m off the design."""
     dome = _dome()
     result = fabplan.optimize(dome, "isogonal", angle=60.0)
-    folds = result.properties["folds"]
-    assert not folds["folded"]
-    if result.converged:
-        L = result.properties["mean_edge_length"]
-        assert result.properties["sphere_residual_relative"]["max"] <= 1e-6
-        angles = result.properties["intersection_angle_deg"]
-        assert abs(angles["min"] - 60) <= 0.01 and abs(angles["max"] - 60) <= 0.01
-        assert result.properties["distance_to_reference"]["max"] <= 1.5 * L
-    else:
-        assert result.status in ("stagnated", "iteration cap")
-        assert _distance_to(dome, result) <= 1.0
-        assert "requested angle is 30 deg from the start's" in result.message
-    # before the step control the residual climbed to 493 and 869 faces flipped
-    assert max(h["hard_residual"] for h in result.history[-10:]) < 1.0
+    assert result.converged, result.message
+    assert not result.properties["folds"]["folded"]
+    L = result.properties["mean_edge_length"]
+    assert result.properties["sphere_residual_relative"]["max"] <= 1e-6
+    angles = result.properties["intersection_angle_deg"]
+    assert abs(angles["min"] - 60) <= 0.01 and abs(angles["max"] - 60) <= 0.01
+    assert result.properties["distance_to_reference"]["max"] <= 1.5 * L
+    assert _distance_to(dome, result) <= 1.5
 
 
 def test_a_planar_quad_net_asked_for_minimal_ends_fold_free_at_its_best(tmp_path, capsys):

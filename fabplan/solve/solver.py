@@ -54,8 +54,8 @@ class SolverSettings:
     stagnation : stop when the best hard residual has not improved by 10 % over this many
         iterations.
     backend : linear solver backend (see `fabplan.solve.linalg`).
-    max_rejections : how many times one iteration may raise its damping (by factors 2, 4,
-        8, ...) for a step that lowers the merit function, before the solve stops as
+    max_rejections : how many times one iteration may raise its damping (fourfold each
+        time) for a step that lowers the merit function, before the solve stops as
         stagnated.
     watchdog : Gauss-Newton steps may raise the hard residuals for this many steps; when
         they have not come below their best by then, the solve returns to the best point
@@ -518,7 +518,7 @@ class GuidedProjection:
         upper, gradient = self._assemble(jacobians, residuals, damping)
         t_assembly = time.perf_counter() - t0
         t_factor = t_solve = 0.0
-        growth = 2.0
+        growth = 4.0            # each rejection raises the damping fourfold
         before = self._snapshot()
         for rejected in range(s.max_rejections + 1):
             t1 = time.perf_counter()
@@ -528,19 +528,24 @@ class GuidedProjection:
             t3 = time.perf_counter()
             t_factor += t2 - t1
             t_solve += t3 - t2
-            if np.isfinite(h).all():
-                self.state.x[self.free] += h
+            # the step, then (past a free step) shorter ones along it: a kink of the merit
+            # function (a one-sided barrier, a flipped orientation) stops the full step only
+            for length in (1.0,) if rejected == 0 and ceiling is not None else (1.0, 0.5, 0.25):
+                if not np.isfinite(h).all():
+                    break
+                self.state.x[self.free] += length * h
                 trial = self._evaluate()
-                if trial.finite and self._acceptable(trial, weights, merit, damping, h, gradient,
-                                                     hard_index, ceiling if rejected == 0 else None):
+                if trial.finite and self._acceptable(
+                        trial, weights, merit, damping, length * h, gradient, hard_index,
+                        ceiling if rejected == 0 else None, length=length):
                     return trial, IterationRecord(
-                        0, {}, 0.0, float(np.linalg.norm(h)), 0.0, t_assembly, t_factor,
-                        t_solve, merit=merit, rejected=rejected, damping=damping)
+                        0, {}, 0.0, float(length * np.linalg.norm(h)), 0.0, t_assembly,
+                        t_factor, t_solve, merit=merit, rejected=rejected, damping=damping)
                 self._restore(before)
             raised = damping * growth
             upper.data[self.pattern.diagonal] += raised - damping
-            damping, growth = raised, 2.0 * growth
-            self._damping_scale *= growth / 2.0
+            damping = raised
+            self._damping_scale *= growth
         self._restore(before)
         for c in self.constraints:      # back to the data of the point the solve ends at
             c.prepare(self.state)
@@ -548,12 +553,16 @@ class GuidedProjection:
 
     def _acceptable(self, trial: _Evaluation, weights: list[float], merit: float, damping: float,
                     h: np.ndarray, gradient: np.ndarray, hard_index: list[int],
-                    ceiling: float | None) -> bool:
-        """Whether a trial step is taken (see `_step`); adapts the damping scale."""
+                    ceiling: float | None, *, length: float = 1.0) -> bool:
+        """Whether a trial step `h` (`length` times the solution of the damped system) is
+        taken (see `_step`); adapts the damping scale."""
         if ceiling is not None:
             return trial.hard_merit(hard_index) <= ceiling
-        # the decrease the linearization predicts: h^T (mu h - g) / 2
-        predicted = 0.5 * float(damping * (h @ h) - gradient @ h)
+        # the decrease the linearization predicts for t h, h solving (J^T J + mu) h = -g:
+        # -t g.h - t^2 h^T J^T J h / 2, with h^T J^T J h = -g.h - mu |h|^2 (here h is t h)
+        full = h / length
+        gh, hh = float(gradient @ full), float(full @ full)
+        predicted = -length * gh + 0.5 * length * length * (gh + damping * hh)
         achieved = merit - trial.merit(weights)
         gain = achieved / predicted if predicted > 0 else (1.0 if achieved >= 0 else -1.0)
         if gain <= 1e-4:
