@@ -416,14 +416,17 @@ def _cmd_study(args) -> int:
     out = Path(args.output)
     study = read_study(resolve_study(args.study))
     check_output_folder(out)
+    cache = _study_cache(out, study, args.resume)
     if args.workers is not None or args.scheduler is not None:
         from .study.parallel import run_study_parallel, worker_count
 
         workers = None if args.workers is None else worker_count(args.workers)
         result = run_study_parallel(study, workers=workers, scheduler=args.scheduler,
-                                    progress=say, max_panels=args.max_panels)
+                                    progress=say, max_panels=args.max_panels, cache=cache,
+                                    resume=args.resume)
     else:
-        result = run_study(study, progress=say, max_panels=args.max_panels)
+        result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
+                           resume=args.resume)
     writing = time.perf_counter()
     files = write_study(result, out, progress=say)
     done = time.perf_counter()
@@ -441,6 +444,20 @@ def _cmd_study(args) -> int:
           f"{done - started:.0f} s: {result.seconds_run:.0f} s to run the candidates, "
           f"{done - writing:.0f} s to write the files")
     return 0
+
+
+def _study_cache(out: Path, study, resume: bool):
+    """The study's cache of finished candidates (`fabplan.study.cache`), or None when
+    cloudpickle (with the parallel extra) is not installed and no resume was asked."""
+    try:
+        from .study.cache import CandidateCache
+
+        return CandidateCache(out, study)
+    except ImportError:
+        if resume:
+            raise InputError("--resume needs the study cache, which comes with "
+                             "pip install \"fabplan[parallel]\"") from None
+        return None
 
 
 def _cmd_templates(args) -> int:
@@ -632,6 +649,9 @@ def _add_study(sub: Any) -> None:
                    help="run the candidates in N local processes (auto: one per core) with Dask")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="run the candidates on a running Dask cluster (see docs/parallel.md)")
+    p.add_argument("--resume", action="store_true",
+                   help="take the candidates an earlier (or interrupted) run into DIR finished "
+                        "from DIR's cache and compute only the others")
     _add_max_panels(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)

@@ -154,3 +154,32 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot connect" in err[0]
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_an_interrupted_study_resumes_with_only_the_missing_candidates(serial, tmp_path):
+    """Ctrl-C after two candidates: the folder keeps an earlier study intact and the two
+    finished candidates; --resume computes the other three and gives the serial study."""
+    folder, expected = serial
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "study.json").write_text('{"earlier": true}', encoding="utf-8")
+    run = subprocess.Popen([sys.executable, "-m", "fabplan.cli", "study",
+                            str(folder / "small.toml"), "-o", str(out)],
+                           stderr=subprocess.PIPE, text=True)
+    for line in run.stderr:
+        if line.startswith("[3/5]"):
+            run.send_signal(signal.SIGINT)
+            break
+    run.communicate(timeout=300)
+    assert run.returncode != 0
+    assert json.loads((out / "study.json").read_text()) == {"earlier": True}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]      # nothing beside it
+    assert len(list((out / ".fabplan-cache").glob("*.pkl"))) == 2
+    resumed = subprocess.run([sys.executable, "-m", "fabplan.cli", "study",
+                              str(folder / "small.toml"), "-o", str(out), "--resume"],
+                             capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    assert resumed.stderr.count("taken from the cache") == 2
+    assert resumed.stderr.count("] ") - resumed.stderr.count("taken from the cache") == 3
+    assert _record(out) == expected

@@ -40,6 +40,7 @@ from .run import (
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
     from ..layout.surface_layout import SurfaceLayout
+    from .cache import CandidateCache
     from .spec import Candidate, Study
 
 __all__ = ["run_study_parallel", "RETRIES", "worker_count"]
@@ -115,7 +116,8 @@ def _connect(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
 
 def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: str | None = None,
                        progress: Callable[[str], None] | None = None,
-                       client: Any = None, max_panels: int | None = None) -> StudyResult:
+                       client: Any = None, max_panels: int | None = None,
+                       cache: CandidateCache | None = None, resume: bool = False) -> StudyResult:
     """Run every candidate of `study` on Dask workers and judge them (see the module).
 
     Parameters
@@ -126,6 +128,8 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
     progress : called with one line per event (candidates done, running, failed, ETA).
     client : an existing `distributed.Client` to use instead (not closed here).
     max_panels : refuse a study whose layouts would have more panels (see `run_study`).
+    cache, resume : finished candidates are kept in `cache`; with `resume` those it holds
+        are taken from it (see `fabplan.study.cache`).
 
     Raises
     ------
@@ -155,7 +159,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
                                f"{design.area:.4g} {study.design.units}^2",
                           fix="give a larger panels.size")
         baseline = layout_surface(design, study.panel_size, angle=90.0)
-        results = _run_on(client, study, design, baseline, say)
+        results = _run_on(client, study, design, baseline, say, cache, resume)
     finally:
         if own:
             client.close()
@@ -165,15 +169,22 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
 
 
 def _run_on(client: Any, study: Study, design: DesignSurface, baseline: SurfaceLayout,
-            say: Callable[[str], None]) -> list[CandidateResult]:
+            say: Callable[[str], None], cache: CandidateCache | None,
+            resume: bool) -> list[CandidateResult]:
     from distributed import as_completed
 
     candidates = list(study.candidates)
+    kept = [cache.load(c) if cache is not None and resume else None for c in candidates]
+    if any(k is not None for k in kept):
+        say(f"  {sum(k is not None for k in kept)} of {len(candidates)} candidates taken from "
+            "the cache")
+    todo = [i for i, k in enumerate(kept) if k is None]
     shared = client.scatter([study, design, baseline], broadcast=True, hash=False)
     clock = time.perf_counter()
-    solving = [client.submit(_solve_task, *shared, c, key=f"solve-{i}-{c.name}", pure=False,
-                             retries=RETRIES) for i, c in enumerate(candidates)]
-    solved = _gather(solving, candidates, "solved", say, clock, as_completed)
+    solving = [client.submit(_solve_task, *shared, candidates[i], key=f"solve-{i}-{candidates[i].name}",
+                             pure=False, retries=RETRIES) for i in todo]
+    fresh = iter(_gather(solving, [candidates[i] for i in todo], "solved", say, clock, as_completed))
+    solved = [k if k is not None else next(fresh) for k in kept]
     # twins in the order of the study, as the serial run finds them
     twins: list[int | None] = []
     for i, s in enumerate(solved):
@@ -181,20 +192,24 @@ def _run_on(client: Any, study: Study, design: DesignSurface, baseline: SurfaceL
         twin = earlier_same_net(s.net.mesh, earlier, study.panel_size) if s.net else None
         twins.append(None if twin is None else next(j for j, r in enumerate(solved) if r is twin))
     clock = time.perf_counter()
-    fabricating: list[Any] = []
-    for i, (c, s) in enumerate(zip(candidates, solved, strict=True)):
+    made: list[Any] = list(kept)
+    for i in todo:
         original = twins[i]
-        fabricating.append(client.submit(
-            _fabricate_task, shared[0], shared[1], s,
-            None if original is None else fabricating[original],
-            key=f"fabricate-{i}-{c.name}", pure=False, retries=RETRIES))
-    return _gather(fabricating, candidates, "measured", say, clock, as_completed)
+        made[i] = client.submit(
+            _fabricate_task, shared[0], shared[1], solved[i],
+            None if original is None else made[original],
+            key=f"fabricate-{i}-{candidates[i].name}", pure=False, retries=RETRIES)
+    done = iter(_gather([made[i] for i in todo], [candidates[i] for i in todo], "measured", say,
+                        clock, as_completed, cache))
+    return [k if k is not None else next(done) for k in kept]
 
 
 def _gather(futures: list, candidates: list, verb: str, say: Callable[[str], None],
-            clock: float, as_completed: Any) -> list[CandidateResult]:
+            clock: float, as_completed: Any,
+            cache: CandidateCache | None = None) -> list[CandidateResult]:
     """Wait for the futures in the order they finish, saying how far the step is; a task
-    that fails even after its retries records its candidate as failed."""
+    that fails even after its retries records its candidate as failed. Finished results
+    go to the `cache` as they come."""
     index = {f.key: i for i, f in enumerate(futures)}
     results: list[CandidateResult | None] = [None] * len(futures)
     failed = 0
@@ -205,6 +220,8 @@ def _gather(futures: list, candidates: list, verb: str, say: Callable[[str], Non
         except Exception as exc:   # a lost worker after its retries: the study goes on
             result = _failed(candidates[i], exc)
         results[i] = result
+        if cache is not None:
+            cache.store(result)
         failed += bool(result.failed)
         left = len(futures) - n
         eta = (time.perf_counter() - clock) / n * left

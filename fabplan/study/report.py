@@ -26,6 +26,7 @@ from ..layout.picture import fairness_marks, write_layout_picture
 from ..report import figures, html
 from ..report.figures import agreeing_normal
 from ..report.html import counted
+from .cache import CACHE_FOLDER
 from .run import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
 
 if TYPE_CHECKING:
@@ -527,8 +528,10 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
 
 # ---------------------------------------------------------------------------- writing
 def holds_study(folder: Path) -> bool:
-    """True when `folder` holds an earlier study (a ``study.json``): a study may replace it."""
-    return (Path(folder) / "study.json").is_file()
+    """True when `folder` holds an earlier study (a ``study.json``, or the candidates an
+    interrupted one kept: `fabplan.study.cache`): a study may replace it."""
+    folder = Path(folder)
+    return (folder / "study.json").is_file() or (folder / CACHE_FOLDER).is_dir()
 
 
 def check_output_folder(folder: str | os.PathLike) -> None:
@@ -630,4 +633,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
                             tmp / "candidates.csv": candidates_csv(result),
                             tmp / "report.html": study_html(result, pictures, outputs,
                                                             seconds_total=total)})
+        kept = out_dir / CACHE_FOLDER
+        if kept.is_dir():     # the finished candidates stay with the study, for --resume
+            os.replace(kept, tmp / CACHE_FOLDER)
     return [out_dir / "report.html", out_dir / "study.json", out_dir / "candidates.csv"]

@@ -40,6 +40,7 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..net.mesh import QuadMesh
     from ..solve.optimize import OptimizationResult
     from ..solve.solver import IterationRecord
+    from .cache import CandidateCache
 
 __all__ = [
     "CandidateResult",
@@ -151,7 +152,8 @@ class StudyResult:
 
 # ---------------------------------------------------------------------------- running
 def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
-              max_panels: int | None = None) -> StudyResult:
+              max_panels: int | None = None, cache: CandidateCache | None = None,
+              resume: bool = False) -> StudyResult:
     """Run every candidate of `study` and judge it.
 
     A candidate that fails (a layout or a solve that breaks) is recorded with its reason
@@ -163,6 +165,8 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     progress : called with one line per step.
     max_panels : refuse a study whose layouts would have more panels (default: what the
         memory holds, `fabplan.io.resources.default_max_panels`).
+    cache : where finished candidates are kept (`fabplan.study.cache.CandidateCache`).
+    resume : take the candidates the cache already holds instead of computing them.
 
     Raises
     ------
@@ -191,6 +195,11 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     results: list[CandidateResult] = []
     count = len(study.candidates)
     for i, candidate in enumerate(study.candidates, 1):
+        kept = cache.load(candidate) if cache is not None and resume else None
+        if kept is not None:
+            say(f"[{i}/{count}] {candidate.name}: taken from the cache")
+            results.append(kept)
+            continue
         say(f"[{i}/{count}] {candidate.name}: {candidate.describe()}")
         clock = time.perf_counter()
         try:
@@ -201,6 +210,8 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
             result = CandidateResult(candidate, error=reason, reasons=[reason])
             say(f"    failed: {reason}")
         result.metrics.setdefault("seconds", {})["total"] = time.perf_counter() - clock
+        if cache is not None:
+            cache.store(result)
         results.append(result)
     return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
 
