@@ -57,6 +57,7 @@ def test_editor_drag_steps_reuse_the_factorization(wein99, handle):
     _check_linear_weingarten(editor.mesh)
 
 
+@pytest.mark.slow   # the solve tries every stage and both phases before it gives up (about 10 s)
 def test_impossible_handles_are_reported(wein99, tmp_path, capsys):
     src = tmp_path / "wein99.obj"
     src.write_bytes(fabplan.data_path("wein99.obj").read_bytes())

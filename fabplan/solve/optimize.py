@@ -355,7 +355,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     solver = make(bool(guards))
     _solve(solver, handle_ids, targets, progress)
     folds = measure_folds(mesh, solver.vertices, reference=solver.reference)
-    if guards is None and (folds.folded or folds.degenerate):
+    unreachable = handle_ids.size and solver.status != "converged"
+    if guards is None and (folds.folded or folds.degenerate) and not unreachable:
         retry = make(True)
         _solve(retry, handle_ids, targets, progress)
         retry_folds = measure_folds(mesh, retry.vertices, reference=retry.reference)
@@ -406,16 +407,19 @@ def _solve(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarray
     there in stages, each solved to a loose tolerance, the last to the full one."""
     stages = _stages(solver, handle_ids, targets)
     final = solver.settings
-    for k, apply in enumerate(stages):
-        apply()
-        if k == len(stages) - 1:
-            solver.settings = final
-        else:
-            solver.settings = replace(final, tolerance=max(final.tolerance, STAGE_TOLERANCE),
-                                      max_iterations=min(final.max_iterations, STAGE_ITERATIONS))
+    k = 0
+    while k < len(stages):
+        stages[k]()
+        last = k == len(stages) - 1
+        solver.settings = final if last else replace(
+            final, tolerance=max(final.tolerance, STAGE_TOLERANCE),
+            max_iterations=min(final.max_iterations, STAGE_ITERATIONS))
         if k:
             solver.restart_soft_terms()
-        solver.run(callback=progress)
+        status = solver.run(callback=progress)
+        # a stage out of reach: the ones between it and the last are farther still, so
+        # the last (the real targets) is solved right away
+        k = k + 1 if status == "converged" or last else len(stages) - 1
     solver.settings = final
 
 
