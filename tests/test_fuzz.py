@@ -1,6 +1,6 @@
 """Seeded fuzzing of every command through `fabplan.cli.main`, in-process.
 
-Valid OBJ nets, STL designs (binary and ASCII), study TOML files and option sets are
+Valid OBJ nets, STL designs (binary and ASCII), OFF designs, study TOML files and option sets are
 mutated: truncation, byte flips, NaN and infinities, bad indices, huge and tiny numbers,
 empty and random binary files, wrong types. Whatever the mutation, a run must
 
@@ -10,7 +10,7 @@ empty and random binary files, wrong types. Whatever the mutation, a run must
 - leave its input files byte for byte as they were.
 
 Each case is generated from its seed alone, so a failure names a reproducible case.
-About 100 cases run in the quick tier, 1,100 more in the slow tier. Studies that are
+115 cases run in the quick tier, 1,250 more in the slow tier. Studies that are
 still valid after mutation are stopped where the candidates would start to run (the
 reading, validation and output checks before it are what is fuzzed; `test_study` runs
 whole studies).
@@ -77,6 +77,14 @@ def _stl_ascii() -> str:
         lines += [f"vertex {x:.6g} {y:.6g} {z:.6g}" for x, y, z in t]
         lines += ["endloop", "endfacet"]
     return "\n".join(lines + ["endsolid fuzz"]) + "\n"
+
+
+def _off_text() -> str:
+    T = _saddle_triangles()
+    lines = ["OFF", f"{3 * len(T)} {len(T)} 0"]
+    lines += [f"{x:.6g} {y:.6g} {z:.6g}" for x, y, z in T.reshape(-1, 3)]
+    lines += [f"3 {3 * i} {3 * i + 1} {3 * i + 2}" for i in range(len(T))]
+    return "\n".join(lines) + "\n"
 
 
 TOML = """\
@@ -243,6 +251,10 @@ def _case(kind: str, seed: int, folder: Path) -> tuple[list, dict]:
     elif kind == "stl":
         inputs[stl.name] = _mutate_stl(rng)
         argv = [a.format(net=net, stl=stl, out=out) for a in OPTION_SETS["layout"][0]]
+    elif kind == "off":                                     # read through trimesh
+        off = folder / "design.off"
+        inputs[off.name] = _mutate_text(_off_text(), rng)
+        argv = [a.format(net=net, stl=off, out=out) for a in OPTION_SETS["layout"][0]]
     elif kind == "toml":
         inputs[study.name] = _mutate_text(TOML, rng)
         argv = ["study", str(study), "-q", "-o", str(out / "study")]
@@ -333,9 +345,9 @@ def _fuzz(kind: str, seeds: range, tmp_path: Path, monkeypatch) -> Counter:
     return outcomes
 
 
-KINDS = ["obj", "stl", "toml", "options"]
-QUICK = {"obj": 30, "stl": 20, "toml": 30, "options": 25}
-SLOW = {"obj": 350, "stl": 200, "toml": 300, "options": 250}
+KINDS = ["obj", "stl", "off", "toml", "options"]
+QUICK = {"obj": 30, "stl": 20, "off": 10, "toml": 30, "options": 25}
+SLOW = {"obj": 350, "stl": 200, "off": 150, "toml": 300, "options": 250}
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -348,6 +360,6 @@ def test_fuzz_sample(kind, tmp_path, monkeypatch):
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", KINDS)
 def test_fuzz_full(kind, tmp_path, monkeypatch):
-    """1,100 further cases (seeds from 1000 on)."""
+    """1,250 further cases (seeds from 1000 on)."""
     outcomes = _fuzz(kind, range(1000, 1000 + SLOW[kind]), tmp_path, monkeypatch)
     assert outcomes["refused"] > 0

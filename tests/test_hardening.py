@@ -278,6 +278,24 @@ def test_a_broken_stl_is_named_not_a_missing_package(tmp_path, capsys, content, 
     assert "ModuleNotFoundError" not in err and str(path) in err
 
 
+PLY = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+       "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+       "0 0 0\n1 0 0\n0 {y} 0\n3 0 1 2\n")
+
+
+@pytest.mark.parametrize("name, text, fragment", [
+    ("big.ply", PLY.format(y="1e39"), "big.ply: vertex 2 has a non-finite coordinate (0, inf, 0)"),
+    ("short.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1\n", "short.off: cannot read as OFF"),
+    ("nan.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 nan\n3 0 1 2\n",
+     "nan.off: vertex 2 has a non-finite coordinate (0, 1, nan)"),
+])
+def test_a_broken_ply_or_off_is_refused_without_a_warning(tmp_path, capsys, name, text, fragment):
+    """A PLY number beyond float range printed numpy's overflow RuntimeWarning."""
+    (tmp_path / name).write_text(text)
+    refused(["layout", tmp_path / name, "--net", "snet", "--panel-size", "1", "-o",
+             tmp_path / "l.obj"], capsys, tmp_path, fragment)
+
+
 @pytest.mark.parametrize("kind", ["folder", "fifo"])
 def test_a_design_or_study_that_is_not_a_file_is_named_as_such(tmp_path, capsys, kind):
     target = tmp_path / "thing.stl"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -142,7 +143,11 @@ def _read_with_trimesh(path: Path, suffix: str) -> tuple[np.ndarray, np.ndarray]
     import trimesh
 
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        # numbers beyond float range become inf with a RuntimeWarning; the coordinates are
+        # checked right after, so the warning is not needed
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = (str(exc).splitlines() or ["malformed"])[0][:80]
         raise InputError(f"{path}: cannot read as {suffix[1:].upper()} "
