@@ -173,15 +173,10 @@ def _cmd_molds(args) -> int:
     return 0
 
 
-def _cmd_layout(args) -> int:
-    from .design.load import load_design
-    from .layout.picture import fairness_marks, write_layout_picture
-    from .layout.surface_layout import glide, layout_angle, layout_surface
-    from .solve.net_types import get_net
-
+def _check_layout_options(args: argparse.Namespace, preset: Any) -> None:
+    """Refuse options of `fabplan layout` that cannot go together, before any work."""
     check_angle(args.angle)
     _check_max_panels(args)
-    preset = get_net(args.net)
     if not (args.panel_size > 0 and args.panel_size < float("inf")):
         raise InputError(f"--panel-size must be a positive length, got {args.panel_size}")
     if args.family is not None and args.angle is not None:
@@ -197,31 +192,10 @@ def _cmd_layout(args) -> int:
         raise InputError(f"--triangles must lie between 100 and 5000000, got {args.triangles}")
     if args.max_iter is not None and args.max_iter < 1:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
-    out = Path(args.output)
-    if out.suffix.lower() != ".obj":
-        raise InputError(f"{out}: the output must be an .obj file")
-    picture = out.with_suffix(".png")
-    _check_option_files((args.family, "a file of polylines"))
-    family_file = args.family if args.family and Path(args.family).is_file() else None
-    _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
-    design = load_design(args.surface, triangles=args.triangles)
-    _check_layout_size(design, args.panel_size, args.max_panels)
-    start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
-    layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
-    settings, progress = _solver_options(args)
 
-    result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
-                   settings=settings, progress=progress)
-    angle = result.parameters.get("angle_deg")
-    title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
-             + (f", {layout.family}" if layout.family else
-                f", {angle:.4g} deg" if isinstance(angle, float) else ""))
-    with atomic_path(picture) as staged:   # the picture lands only with the net it shows
-        write_layout_picture(staged, design, result.mesh, title=title,
-                             singular_points=layout.singular_points,
-                             marks=fairness_marks(result.properties))
-        obj_path, json_path = result.write(out)
-    props = result.properties
+
+def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
+    """What `fabplan layout` measured on its net, and what a user should know about it."""
     print(format_summary(props))
     d = props["distance_to_design"]
     rel = props["distance_to_design_relative_to_panel"]
@@ -250,6 +224,42 @@ def _cmd_layout(args) -> int:
               f"{record['filled_holes']} holes around them were closed with irregular vertices, "
               f"{record['open_holes']} left open; the rest of the layout is regular",
               file=sys.stderr)
+
+
+def _cmd_layout(args) -> int:
+    from .design.load import load_design
+    from .layout.picture import fairness_marks, write_layout_picture
+    from .layout.surface_layout import glide, layout_angle, layout_surface
+    from .solve.net_types import get_net
+
+    preset = get_net(args.net)
+    _check_layout_options(args, preset)
+    out = Path(args.output)
+    if out.suffix.lower() != ".obj":
+        raise InputError(f"{out}: the output must be an .obj file")
+    picture = out.with_suffix(".png")
+    _check_option_files((args.family, "a file of polylines"))
+    family_file = args.family if args.family and Path(args.family).is_file() else None
+    _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
+    design = load_design(args.surface, triangles=args.triangles)
+    _check_layout_size(design, args.panel_size, args.max_panels)
+    start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
+    layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
+    settings, progress = _solver_options(args)
+
+    result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
+                   settings=settings, progress=progress)
+    angle = result.parameters.get("angle_deg")
+    title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
+             + (f", {layout.family}" if layout.family else
+                f", {angle:.4g} deg" if isinstance(angle, float) else ""))
+    with atomic_path(picture) as staged:   # the picture lands only with the net it shows
+        write_layout_picture(staged, design, result.mesh, title=title,
+                             singular_points=layout.singular_points,
+                             marks=fairness_marks(result.properties))
+        obj_path, json_path = result.write(out)
+    props = result.properties
+    _print_layout_report(props, layout, json_path)
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items() if isinstance(v, float))
     print(f"{result.net}: {result.status} after {result.iterations} iterations in "
           f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
