@@ -285,22 +285,6 @@ def test_every_verdict_traces_to_a_measured_number(study_run):
         assert c["feasible"] == all(ck["ok"] for ck in c["checks"])
 
 
-def test_the_step_between_neighbouring_panels_is_a_limit_twice_the_mold_tolerance(study_run):
-    path, _, record = study_run
-    limits = read_study(path).limits
-    assert limits.max_panel_step_mm is None  # not set in the study: twice the mold tolerance
-    for c in record["candidates"]:
-        m = c["metrics"]
-        step = {ck["limit"]: ck for ck in c["checks"]}["max_panel_step_mm"]
-        assert step["bound"] == 2 * limits.mold_tolerance_mm
-        assert step["measured"] == m["molds"]["max_panel_step_mm"] >= 0
-        assert step["ok"] == (m["molds"]["max_panel_step_mm"] <= 2 * limits.mold_tolerance_mm)
-        # a stated limit below the measured step fails the candidate, and says so
-        tight = dataclasses.replace(limits, max_panel_step_mm=0.5 * step["measured"])
-        check = {ck["limit"]: ck for ck in verdict(m, tight)}["max_panel_step_mm"]
-        assert not check["ok"] and "step up to" in check["text"]
-
-
 def test_counts_are_written_in_words_with_the_right_number(study_result):
     """"1 molds" in the terminal lines and picture titles."""
     _, out, _, _, lines = study_result
