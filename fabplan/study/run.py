@@ -528,9 +528,7 @@ def mold_metrics(plan: MoldPlan) -> dict:
     ``failures``, ``max_deviation_mm`` (largest panel-to-mold gap, flat panels measured
     against a plane), ``molds_per_sqrt_panels`` (``count / sqrt(panels)``),
     ``panel_types``, ``mold_types`` (the plane type counts the plane flat panels are
-    checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any),
-    ``max_panel_step_mm`` (largest step between neighbouring panels' molds at a shared
-    edge) and ``panel_steps_over`` (shared edges whose step exceeds twice the tolerance).
+    checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any).
     """
     curved = np.asarray(plan.mold_type) > 0
     count = int(curved.sum())
@@ -546,8 +544,6 @@ def mold_metrics(plan: MoldPlan) -> dict:
         "panel_types": {t: int(np.sum(plan.panel_type == i)) for i, t in enumerate(PANEL_TYPES)},
         "mold_types": {t: int(np.sum(plan.mold_type == i)) for i, t in enumerate(MOLD_TYPES)},
         "panels_per_mold_max": int(per_mold[curved].max()) if count else 0,
-        "max_panel_step_mm": plan.max_step_mm,
-        "panel_steps_over": int(plan.steps_over.size),
     }
 
 
@@ -601,22 +597,12 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         f"the net deviates up to {dev:.1f} mm from the design (limit "
         f"{limits.max_deviation_mm:g} mm)"))
     molds = metrics["molds"]
-    panels_fit = molds["failures"] == 0
     checks.append(_check(
-        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"], panels_fit,
+        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"],
+        molds["fits_all"],
         f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
-        f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
+        f"{molds['max_deviation_mm']:.2f} mm)" if molds["fits_all"] else
         f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
-    step_limit = (limits.max_panel_step_mm if limits.max_panel_step_mm is not None
-                  else 2.0 * limits.mold_tolerance_mm)
-    step = molds.get("max_panel_step_mm")
-    if step is not None:
-        checks.append(_check(
-            "max_panel_step_mm", step_limit, step, step <= step_limit,
-            f"neighbouring panels meet: the largest step between their molds is {step:.2f} mm "
-            f"(limit {step_limit:g} mm)" if step <= step_limit else
-            f"the molds of neighbouring panels step up to {step:.2f} mm apart at shared edges "
-            f"(limit {step_limit:g} mm)"))
     if limits.max_molds is not None:
         n = molds["count"]
         needs = "it needs no molds: all panels are flat" if n == 0 else \
