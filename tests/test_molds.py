@@ -26,7 +26,12 @@ from fabplan.cli import main
 from fabplan.errors import InputError
 from fabplan.fabricate.mold_report import explain_mold_count, mold_report_files
 from fabplan.fabricate.molds import MoldSettings, plan_molds
-from fabplan.fabricate.panels import net_curvature, osculating_panel_samples
+from fabplan.fabricate.panels import (
+    fit_cast_surfaces,
+    net_curvature,
+    osculating_panel_samples,
+    panel_corner_misses,
+)
 from fabplan.net.generate import height_field_grid
 from fabplan.net.mesh import QuadMesh
 from fabplan.net.weingarten import weingarten_fit
@@ -537,3 +542,19 @@ def test_steps_over_twice_the_tolerance_fail_the_plan():
     assert [e["faces"] for e in r["panel_steps"]["over_limit"]] == [
         net.interior_edge_faces[5].tolist()]
     assert r["panel_steps"]["max_mm"] == 2.5
+
+
+def test_cast_panels_pass_through_their_corners_and_far_corners_are_cast_locally():
+    net = sphere_patch(radius=10.0, n=10)
+    X = net.vertices.copy()
+    tip = int(net.faces[0][0])
+    X[tip] += 0.03 * X[tip] / np.linalg.norm(X[tip])
+    bent = QuadMesh(X, net.faces, name="sphere-patch-bent")
+    elements = net_curvature(bent)
+    surfaces, gap, local = fit_cast_surfaces(bent, elements, 0.0005)
+    far = np.array([elements.miss[f].max() > 0.0005 for f in bent.faces])
+    assert np.array_equal(local, far) and local[0]
+    # every cast quadric passes through its corners: the one surface's pieces where it
+    # passes near them, the local fits elsewhere
+    assert panel_corner_misses(bent, surfaces).max() < 1e-6
+    assert gap[~local].max() < 0.001 and gap[local].max() > 0.001

@@ -15,7 +15,10 @@ Every face of a net is a panel. Three panel surface models:
     vertices count, so the one surface is continuous across every edge. It passes through
     every vertex with its own surface and within `NetCurvature.miss` of the others. The
     panel cast on a mold is the least-squares quadric of that piece
-    (`fit_osculating_surfaces`, with its gap from the one surface).
+    (`fit_osculating_surfaces`, with its gap from the one surface). `fit_cast_surfaces`
+    also passes each quadric through its panel's corners and casts a panel one of whose
+    corners the one surface misses by more than a limit (a borrowing vertex far off the one
+    surface, such as the tip of a zigzag boundary) from its ``local_fit`` quadric.
 ``local_fit``
     each panel is its own quadratic height field in the face frame (origin at the mean of
     its corners, ``z`` along its Newell normal)::
@@ -72,6 +75,8 @@ __all__ = [
     "osculating_points",
     "osculating_panel_samples",
     "fit_osculating_surfaces",
+    "panel_corner_misses",
+    "fit_cast_surfaces",
 ]
 
 CORNER_WEIGHT = 1.0e6
@@ -683,7 +688,65 @@ def fit_osculating_surfaces(mesh, curvature: NetCurvature,
     coefficients = _height_fits(points, np.ones(points.shape[:2]), frames.origin, frames.frame,
                                 frames.scale)
     surfaces = replace(frames, coefficients=coefficients, model="osculating")
-    P = np.einsum("fmj,fij->fmi", points - frames.origin[:, None, :], frames.frame)
-    P = P / frames.scale[:, None, None]
-    gap = np.abs(P[..., 2] - surfaces.height(P[..., :2])).max(axis=1) * frames.scale
-    return surfaces, gap
+    return surfaces, _height_gaps(points, surfaces)
+
+
+def _height_gaps(points: np.ndarray, surfaces: PanelSurfaces) -> np.ndarray:
+    """(f,) largest distance along the face normal (model units) between every panel's
+    quadric and its points (f, s, 3)."""
+    P = np.einsum("fmj,fij->fmi", points - surfaces.origin[:, None, :], surfaces.frame)
+    P = P / surfaces.scale[:, None, None]
+    return np.abs(P[..., 2] - surfaces.height(P[..., :2])).max(axis=1) * surfaces.scale
+
+
+def panel_corner_misses(mesh, surfaces: PanelSurfaces) -> np.ndarray:
+    """(f,) float, the largest distance along the face normal (model units) between every
+    panel's quadric and its own corners (the net's vertices).
+
+    Examples
+    --------
+    >>> from fabplan.net.generate import height_field_grid
+    >>> net = height_field_grid(4, 4, lambda x, y: 0.1 * x * y)
+    >>> bool(panel_corner_misses(net, fit_panel_surfaces(net, "corners")).max() < 1e-9)
+    True
+    """
+    ids, _ = _padded_corners(mesh)
+    return _height_gaps(mesh.vertices[ids], surfaces)
+
+
+def fit_cast_surfaces(mesh, curvature: NetCurvature, corner_limit: float,
+                      level: int = 6) -> tuple[PanelSurfaces, np.ndarray, np.ndarray]:
+    """The quadrics the panels of the ``osculating`` model are cast from.
+
+    Every panel is the least-squares quadric of its piece of the one surface
+    (`osculating_panel_samples` at `level`, weight 1) and of its own corners (weight
+    `CORNER_WEIGHT`): a panel that does not pass through its corners does not fit, whatever
+    its mold, and the plain fit of the piece (`fit_osculating_surfaces`) misses them by some
+    tenths of a millimetre on a 3 m panel. Where the one surface itself misses one of the
+    panel's corners by more than `corner_limit` (model units; `NetCurvature.miss`, a
+    borrowing vertex such as the tip of a zigzag boundary) the panel is cast from its
+    ``local_fit`` quadric (`fit_panel_surfaces`) instead.
+
+    Returns
+    -------
+    surfaces : `PanelSurfaces` with model ``"osculating"``, one quadric per panel.
+    gap : (f,) float, the largest distance (model units) between each panel's cast quadric
+        and the one surface, measured along the face normal at the samples.
+    cast_locally : (f,) bool, True for the panels cast from their ``local_fit`` quadric
+        (the one surface misses one of their corners by more than `corner_limit`).
+    """
+    frames = fit_panel_surfaces(mesh, "corners")
+    points = osculating_panel_samples(mesh, curvature, level)
+    ids, valid = _padded_corners(mesh)
+    weight = np.concatenate([np.ones(points.shape[:2]), np.where(valid, CORNER_WEIGHT, 0.0)], axis=1)
+    coefficients = _height_fits(np.concatenate([points, mesh.vertices[ids]], axis=1), weight,
+                                frames.origin, frames.frame, frames.scale)
+    one = replace(frames, coefficients=coefficients, model="osculating")
+    cast_locally = np.where(valid, curvature.miss[ids], 0.0).max(axis=1) > corner_limit
+    if cast_locally.any():
+        # local_fit panels share the face frames of the corners model: only the
+        # coefficients differ
+        local = fit_panel_surfaces(mesh, "local_fit")
+        coefficients = np.where(cast_locally[:, None], local.coefficients, coefficients)
+        one = replace(one, coefficients=coefficients)
+    return one, _height_gaps(points, one), cast_locally
