@@ -152,6 +152,20 @@ def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> 
     return gaps
 
 
+def _recheck_corners(record: dict, mesh: QuadMesh) -> np.ndarray:
+    """Largest gap of every panel's own corners (the net's vertices, not their points on the
+    exported surface) from its exported mold, through its exported placement (mm)."""
+    molds = {m["id"]: m for m in record["molds"]}
+    gaps = np.zeros(len(mesh.faces))
+    for panel in record["panels"]:
+        i = panel["face"]
+        M = np.array(panel["placement"])
+        q = mesh.vertices[mesh.faces[i]] @ M[:3, :3].T + M[:3, 3]
+        mold = molds[panel["mold"]]
+        gaps[i] = np.abs(q[:, 2] - 0.5 * (mold["k1"] * q[:, 0] ** 2 + mold["k2"] * q[:, 1] ** 2)).max()
+    return gaps
+
+
 def _onto_mold(p: np.ndarray, k1: float, k2: float) -> np.ndarray:
     """Closest point of the mold z = (k1 x^2 + k2 y^2) / 2 to p (3,), by the fixed point
     x = p_xy - (f(x) - p_z) grad f(x) of the closest-point condition."""
@@ -210,6 +224,11 @@ def _assert_every_panel_fits(record: dict, mesh: QuadMesh) -> None:
     assert record["failures"] == []
     assert record["fits_all"] == (record["panel_steps"]["over_limit"] == [])
     assert gaps.max() <= tol + 1e-6, (gaps.max(), int(gaps.argmax()))
+    # a panel passes through its own corners: the net's vertices lie on its mold
+    corner = _recheck_corners(record, mesh)
+    assert corner.max() <= tol + 1e-6, (corner.max(), int(corner.argmax()))
+    assert np.allclose(corner, [p["corner_deviation_mm"] for p in record["panels"]], atol=1e-6)
+    assert record["max_corner_deviation_mm"] == pytest.approx(corner.max(), abs=1e-6)
     reported = np.array([p["deviation_mm"] for p in record["panels"]])
     assert reported.max() <= tol
     # the report measures the same gaps: random samples never exceed the dense ones by more
@@ -542,6 +561,27 @@ def test_steps_over_twice_the_tolerance_fail_the_plan():
     assert [e["faces"] for e in r["panel_steps"]["over_limit"]] == [
         net.interior_edge_faces[5].tolist()]
     assert r["panel_steps"]["max_mm"] == 2.5
+
+
+def test_a_vertex_far_off_the_one_surface_gets_its_panels_cast_through_their_corners():
+    # a sphere patch with one boundary vertex pulled 30 mm off: the one surface, extended
+    # from the interior, misses it; the panel at that corner is cast from its own local_fit
+    # quadric, and every panel passes through its corners within the tolerance
+    net = sphere_patch(radius=10.0, n=10)
+    X = net.vertices.copy()
+    tip = int(net.faces[0][0])
+    X[tip] += 0.03 * X[tip] / np.linalg.norm(X[tip])
+    bent = QuadMesh(X, net.faces, name="sphere-patch-bent")
+    plan = plan_molds(bent, tolerance_mm=1.0, panel_surface="osculating")
+    record = plan.record()
+    touching = [i for i, f in enumerate(bent.faces) if tip in f.tolist()]
+    local = [p["face"] for p in record["panels"] if p["cast_locally"]]
+    assert set(touching) <= set(local)
+    assert record["panels_cast_locally"] == len(local) == plan.local_count
+    corner = _recheck_corners(record, bent)
+    assert corner.max() <= 1.0 + 1e-6
+    assert np.allclose(corner, plan.corner_deviation_mm, atol=1e-6)
+    assert record["failures"] == [] and "cast from their own local_fit" in plan.summary()
 
 
 def test_cast_panels_pass_through_their_corners_and_far_corners_are_cast_locally():

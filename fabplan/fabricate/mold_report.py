@@ -253,7 +253,11 @@ def mold_report_html(plan: MoldPlan) -> str:
         ["largest distance of a net vertex from the panel surface",
          f"{r['max_vertex_miss_mm']:.1f} mm (vertices extended from the interior)"],
         ["largest gap between a panel's quadric and the one surface",
-         f"{r['max_surface_gap_mm']:.2f} mm"],
+         f"{r['max_surface_gap_mm']:.2f} mm (panels cast from the one surface)"],
+        ["panels cast from their own local_fit quadric (the one surface misses a corner)",
+         r["panels_cast_locally"]],
+        ["largest gap between a panel's corner (a net vertex) and its mold",
+         f"{r['max_corner_deviation_mm']:.3f} mm"],
         ["panels the verification moved to new molds", len(r["reassigned_by_verification"])],
         ["Weingarten residual (rms distance from the line, 1/m)",
          None if w.get("line_residual_rms") is None else w["line_residual_rms"] * _PER_M],
@@ -266,7 +270,8 @@ def mold_report_html(plan: MoldPlan) -> str:
     if plan.fits_all:
         verdict = html.html_paragraph(
             f"Every panel fits its mold within {tol:g} mm, measured on densely sampled panels "
-            "placed by their exported matrices, and neighbouring panels meet: the largest step "
+            "and their corners (the net's vertices) placed by their exported matrices, and "
+            "neighbouring panels meet: the largest step "
             f"between their molds at a shared edge is {steps['max_mm']:.2f} mm (limit "
             f"{steps['limit_mm']:g} mm).", cls="note")
     elif len(r["failures"]):

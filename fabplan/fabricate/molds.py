@@ -22,8 +22,9 @@ module counts the molds a net really needs at a stated tolerance:
    shapes), then rounds of refitting every mold's curvatures to its panels (a small linear
    program minimizing the largest deviation), reassigning panels to their closest mold and
    removing molds whose panels all fit elsewhere. Everything is sorted and deterministic.
-4. Verification: every panel is sampled again, densely, placed by its exported 4 x 4
-   matrix and measured against its mold; panels found above the tolerance get molds of
+4. Verification: every panel is sampled again, densely, with its corners (the net's
+   vertices themselves, not their points on the panel surface), placed by its exported
+   4 x 4 matrix and measured against its mold; panels found above the tolerance get molds of
    their own; a panel that fits no mold (or exceeds the largest mold size) is reported as
    a failure, never dropped.
 5. Weingarten evidence: how close the panels' ``(k1, k2)`` lie to a line
@@ -51,9 +52,10 @@ from .panels import (
     SURFACE_MODELS,
     PanelSurfaces,
     check_panels,
-    fit_osculating_surfaces,
+    fit_cast_surfaces,
     fit_panel_surfaces,
     net_curvature,
+    panel_corner_misses,
     panel_samples,
     panel_shapes,
     placement_frames,
@@ -104,6 +106,9 @@ class MoldSettings:
     verify_level : the same for the verification (364 points on a quad at 12).
     reserve : fraction of the tolerance kept in reserve while assigning, for what lies
         between the assignment samples; the verification uses the full tolerance.
+    corner_fraction : ``osculating`` model: a panel one of whose corners the one surface
+        misses by more than this fraction of the tolerance is cast from its ``local_fit``
+        quadric instead (`fabplan.fabricate.panels.fit_cast_surfaces`).
     rounds : cap on the refit / reassign / remove rounds.
     """
 
@@ -114,6 +119,7 @@ class MoldSettings:
     cover_level: int = 4
     verify_level: int = 12
     reserve: float = 0.01
+    corner_fraction: float = 0.5
     rounds: int = 8
     step_fractions: tuple[float, ...] = (0.25, 0.5, 0.75)
 
@@ -130,6 +136,8 @@ class MoldSettings:
         if self.panel_surface not in ("auto",) + SURFACE_MODELS:
             raise InputError(f"unknown panel surface {self.panel_surface!r}: use auto, "
                              + ", ".join(SURFACE_MODELS))
+        if not (0.0 <= self.corner_fraction <= 1.0):
+            raise InputError(f"the corner fraction must lie between 0 and 1, got {self.corner_fraction}")
         if self.cover_level < 1 or self.verify_level < 1:
             raise InputError("the sample levels must be at least 1")
 
@@ -597,6 +605,12 @@ class MoldPlan:
         panel's quadric and the one surface through the net (zeros for the other models).
     vertex_miss_mm : (n,) float, ``osculating``: distance of every net vertex from the one
         surface (0 at the vertices with their own curvature elements; zeros otherwise).
+    cast_locally : (p,) bool, ``osculating``: panels cast from their ``local_fit`` quadric
+        because the one surface misses one of their corners by more than
+        ``settings.corner_fraction`` of the tolerance (all False for the other models).
+    corner_deviation_mm : (p,) float, largest gap between every panel's corners (the net's
+        vertices) and its mold, measured through `placement`; over the tolerance the panel
+        is a failure.
     alternatives : for ``panel_surface="auto"`` on a curved net, the `outline` of the plan
         with each panel surface model tried (the plan kept is the one with the fewest
         panels that fit no mold, then the fewest steps over the limit, then the fewest
@@ -624,6 +638,8 @@ class MoldPlan:
     surfaces: PanelSurfaces | None = None
     surface_gap_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     vertex_miss_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cast_locally: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    corner_deviation_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alternatives: dict = field(default_factory=dict)
     seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
@@ -656,6 +672,20 @@ class MoldPlan:
     @property
     def max_step_mm(self) -> float:
         return float(self.step_mm.max()) if self.step_mm.size else 0.0
+
+    @property
+    def local_count(self) -> int:
+        """Panels cast from their ``local_fit`` quadric (see `cast_locally`)."""
+        return int(np.count_nonzero(self.cast_locally))
+
+    @property
+    def max_surface_gap_mm(self) -> float:
+        """Largest gap between the one surface and the quadric of a panel cast from it
+        (the panels cast locally leave the one surface on purpose)."""
+        gap = self.surface_gap_mm
+        if gap.size and self.cast_locally.size:
+            gap = gap[~self.cast_locally]
+        return float(gap.max()) if gap.size else 0.0
 
     @property
     def fits_all(self) -> bool:
@@ -733,6 +763,9 @@ class MoldPlan:
                 "problem": self.problem[i],
                 "surface": surface,
                 "surface_gap_mm": float(self.surface_gap_mm[i]) if self.surface_gap_mm.size else 0.0,
+                "cast_locally": bool(self.cast_locally[i]) if self.cast_locally.size else False,
+                "corner_deviation_mm": (float(self.corner_deviation_mm[i])
+                                        if self.corner_deviation_mm.size else 0.0),
             })
         n = self.panel_count
         length, bound = self.mold_count_bound()
@@ -754,7 +787,10 @@ class MoldPlan:
             "panels_per_mold": {"min": int(per.min()), "median": float(np.median(per)),
                                 "mean": float(per.mean()), "max": int(per.max())},
             "max_deviation_mm": float(self.deviation_mm.max()),
-            "max_surface_gap_mm": float(self.surface_gap_mm.max()) if self.surface_gap_mm.size else 0.0,
+            "max_surface_gap_mm": self.max_surface_gap_mm,
+            "max_corner_deviation_mm": (float(self.corner_deviation_mm.max())
+                                        if self.corner_deviation_mm.size else 0.0),
+            "panels_cast_locally": self.local_count,
             "max_vertex_miss_mm": float(self.vertex_miss_mm.max()) if self.vertex_miss_mm.size else 0.0,
             "panel_steps": self._steps_record(),
             "mold_count_bound": {"curvature_set_length_per_mm": length,
@@ -776,6 +812,7 @@ class MoldPlan:
         return {"mold_count": self.mold_count, "failures": int(self.failures.size),
                 "max_deviation_mm": float(self.deviation_mm.max()),
                 "max_step_mm": self.max_step_mm, "steps_over_limit": int(self.steps_over.size),
+                "panels_cast_locally": self.local_count,
                 "mold_count_bound": self.mold_count_bound()[1]}
 
     def _steps_record(self) -> dict:
@@ -828,6 +865,12 @@ class MoldPlan:
             f"(limit {self.step_limit_mm:g} mm, {self.steps_over.size} edges over it); "
             f"at least {r['mold_count_bound']['molds']} molds by the curvature set's length",
         ]
+        lines.append(f"largest gap between a panel's corner and its mold "
+                     f"{r['max_corner_deviation_mm']:.3f} mm")
+        if self.local_count:
+            lines.append(f"{self.local_count} panels cast from their own local_fit quadric: the "
+                         f"one surface misses one of their corners by more than "
+                         f"{self.settings.corner_fraction:g} x the tolerance")
         if r["max_vertex_miss_mm"] > r["tolerance_mm"]:
             miss = self.vertex_miss_mm
             lines.append(f"the one surface misses {int(np.sum(miss > r['tolerance_mm']))} net vertices "
@@ -894,12 +937,14 @@ def _plan(mesh: QuadMesh, settings: MoldSettings, model: str, start: float) -> M
     clock: dict[str, float] = {}
     surface_gap = np.zeros(len(mesh.face_sizes))
     vertex_miss = np.zeros(mesh.vertex_count)
+    cast_locally = np.zeros(len(mesh.face_sizes), bool)
     if model == "osculating":
         try:
             elements = net_curvature(mesh)
         except InputError as exc:
             raise NetCurvatureError(str(exc)) from exc
-        surfaces, surface_gap = fit_osculating_surfaces(mesh, elements)
+        surfaces, surface_gap, cast_locally = fit_cast_surfaces(
+            mesh, elements, settings.corner_fraction * tol / mm)
         vertex_miss = elements.miss * mm
     else:
         surfaces = fit_panel_surfaces(mesh, model)
@@ -920,9 +965,12 @@ def _plan(mesh: QuadMesh, settings: MoldSettings, model: str, start: float) -> M
                                                            settings.rounds)
     clock["assignment"] = time.perf_counter() - start - sum(clock.values())
 
-    # verification on dense samples; a panel found above the tolerance is classified again
-    # on them (it may be more curved than the assignment samples showed) and gets a new mold
-    dense = samples(settings.verify_level)
+    # verification on dense samples and the panel's corners (the net's vertices: a panel
+    # cast off its own corners does not fit); a panel found above the tolerance is
+    # classified again on them (it may be more curved than the assignment samples showed)
+    # and gets a new mold
+    corners = mesh.vertices[_padded_corner_ids(mesh)]
+    dense = np.concatenate([samples(settings.verify_level), corners], axis=1)
     placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
     over = np.flatnonzero(deviation > tol)
     if over.size:
@@ -938,12 +986,18 @@ def _plan(mesh: QuadMesh, settings: MoldSettings, model: str, start: float) -> M
     q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
     footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
     deviation = placement_deviations(dense, placement, mold_shape[mold])
+    corner_deviation = placement_deviations(corners, placement, mold_shape[mold])
     clock["verification"] = time.perf_counter() - start - sum(clock.values())
 
     n = len(panel_type)
+    corner_miss = panel_corner_misses(mesh, surfaces) * mm
     problem: list[str | None] = [None] * n
     for i in np.flatnonzero(deviation > tol):
         problem[i] = f"deviates {deviation[i]:.3f} mm from its mold (tolerance {tol:g} mm)"
+    for i in np.flatnonzero(corner_deviation > tol):
+        problem[i] = (f"a corner lies {corner_deviation[i]:.3f} mm off its mold (tolerance "
+                      f"{tol:g} mm): the panel misses its own corner by "
+                      f"{corner_miss[i]:.3f} mm")
     if settings.max_mold_size_mm is not None:
         limit = settings.max_mold_size_mm
         for i in np.flatnonzero(footprint.max(axis=1) > limit):
@@ -961,6 +1015,7 @@ def _plan(mesh: QuadMesh, settings: MoldSettings, model: str, start: float) -> M
                     problem=problem, weingarten=weingarten, reassigned=over,
                     step_mm=step, kink_deg=kink, surfaces=surfaces,
                     surface_gap_mm=surface_gap * mm, vertex_miss_mm=vertex_miss,
+                    cast_locally=cast_locally, corner_deviation_mm=corner_deviation,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
 
 
@@ -1014,6 +1069,13 @@ def _drop_empty(mold: np.ndarray, mold_shape: np.ndarray,
     used = np.bincount(mold, minlength=len(mold_shape)) > 0
     renumber = np.cumsum(used) - 1
     return renumber[mold], mold_shape[used], mold_type[used]
+
+
+def _padded_corner_ids(mesh: QuadMesh) -> np.ndarray:
+    """(p, k_max) int, every face's corners padded by repeating its last corner."""
+    sizes, ptr = mesh.face_sizes, mesh.face_indptr
+    slot = np.minimum(np.arange(int(sizes.max())), sizes[:, None] - 1)
+    return mesh.face_indices[ptr[:-1, None] + slot]
 
 
 def _place(points: np.ndarray, point: np.ndarray, frames: np.ndarray, variant: np.ndarray,

@@ -15,10 +15,10 @@ Every face of a net is a panel. Three panel surface models:
     vertices count, so the one surface is continuous across every edge. It passes through
     every vertex with its own surface and within `NetCurvature.miss` of the others. The
     panel cast on a mold is the least-squares quadric of that piece
-    (`fit_osculating_surfaces`, with its gap from the one surface). `fit_cast_surfaces`
-    also passes each quadric through its panel's corners and casts a panel one of whose
-    corners the one surface misses by more than a limit (a borrowing vertex far off the one
-    surface, such as the tip of a zigzag boundary) from its ``local_fit`` quadric.
+    and of its corners (`fit_cast_surfaces`, with its gap from the one surface), except a
+    panel one of whose corners the one surface misses by more than a limit (a borrowing
+    vertex far off the one surface, such as the tip of a zigzag boundary): it is cast from
+    its ``local_fit`` quadric, which passes through its corners.
 ``local_fit``
     each panel is its own quadratic height field in the face frame (origin at the mean of
     its corners, ``z`` along its Newell normal)::
