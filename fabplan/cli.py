@@ -426,7 +426,7 @@ def _cmd_study(args) -> int:
     out = Path(args.output)
     study = read_study(resolve_study(args.study))
     check_output_folder(out)
-    cache = _study_cache(out, study, args.resume)
+    cache = _study_cache(out, study) if args.resume else None
     if args.workers is not None or args.scheduler is not None:
         from .study.parallel import run_study_parallel, worker_count
 
@@ -456,18 +456,14 @@ def _cmd_study(args) -> int:
     return 0
 
 
-def _study_cache(out: Path, study, resume: bool):
-    """The study's cache of finished candidates (`fabplan.study.cache`), or None when
-    cloudpickle (with the parallel extra) is not installed and no resume was asked."""
+def _study_cache(out: Path, study: Any) -> Any:
+    """The study's cache of finished candidates (`fabplan.study.cache`)."""
     try:
         from .study.cache import CandidateCache
-
-        return CandidateCache(out, study)
     except ImportError:
-        if resume:
-            raise InputError("--resume needs the study cache, which comes with "
-                             "pip install \"fabplan[parallel]\"") from None
-        return None
+        raise InputError("--resume needs the study cache, which comes with "
+                         "pip install \"fabplan[parallel]\"") from None
+    return CandidateCache(out, study)
 
 
 def _cmd_templates(args) -> int:
@@ -658,8 +654,9 @@ def _add_study(sub: Any) -> None:
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="run the candidates on a running Dask cluster (see docs/parallel.md)")
     p.add_argument("--resume", action="store_true",
-                   help="take the candidates an earlier (or interrupted) run into DIR finished "
-                        "from DIR's cache and compute only the others")
+                   help="keep every finished candidate in DIR/.fabplan-cache as it finishes, and "
+                        "take those an earlier (or interrupted) --resume run kept there instead "
+                        "of computing them again")
     _add_max_panels(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)

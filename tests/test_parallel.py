@@ -158,14 +158,15 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_an_interrupted_study_resumes_with_only_the_missing_candidates(serial, tmp_path):
-    """Ctrl-C after two candidates: the folder keeps an earlier study intact and the two
-    finished candidates; --resume computes the other three and gives the serial study."""
+    """Ctrl-C after two candidates of a --resume run: the folder keeps an earlier study
+    intact and the two finished candidates; --resume computes the other three and gives
+    the serial study."""
     folder, expected = serial
     out = tmp_path / "out"
     out.mkdir()
     (out / "study.json").write_text('{"earlier": true}', encoding="utf-8")
     run = subprocess.Popen([sys.executable, "-m", "fabplan.cli", "study",
-                            str(folder / "small.toml"), "-o", str(out)],
+                            str(folder / "small.toml"), "-o", str(out), "--resume"],
                            stderr=subprocess.PIPE, text=True)
     for line in run.stderr:
         if line.startswith("[3/5]"):

@@ -1,13 +1,15 @@
 """The candidates a study has computed, kept in its output folder for `--resume`.
 
-A study writes every finished candidate (its net, molds, strips and measurements) to
-``DIR/.fabplan-cache/KEY.pkl`` as soon as it is done, so that a run that was interrupted
-(Ctrl-C, a lost machine) or a sweep that grows can compute only what is missing:
-``fabplan study STUDY -o DIR --resume``. The key hashes everything a candidate's result
-depends on: the fabplan version, the design (and the bytes of every file it reads), the
-panel size, the limits, the strip options, the iteration cap and the candidate itself.
-The cost weights are not in it: ranking is recomputed from the measured candidates. A
-cache entry that does not load is ignored and computed again.
+With ``fabplan study STUDY -o DIR --resume`` a study writes every finished candidate (its
+net, molds, strips and measurements) to ``DIR/.fabplan-cache/KEY.pkl`` as soon as it is
+done, and takes the candidates already there instead of computing them: a run that was
+interrupted (Ctrl-C, a lost machine) or a sweep that grows computes only what is missing.
+Without ``--resume`` nothing is kept: a failed run leaves nothing behind. The key hashes
+everything a candidate's result depends on: the fabplan version, the design (and the
+bytes of every file it reads), the panel size, the limits, the strip options, the
+iteration cap and the candidate itself. The cost weights are not in it: ranking is
+recomputed from the measured candidates. A cache entry that does not load is ignored and
+computed again.
 """
 
 from __future__ import annotations
