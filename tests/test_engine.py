@@ -148,6 +148,7 @@ def test_repeated_runs_fade_soft_terms_per_step(wein99):
         solver.settings.fairness_weight * fade**3)
 
 
+@pytest.mark.slow
 def test_a_gliding_snet_keeps_its_edges_regression(wein99):
     """Gliding on a slightly stretched copy of the Weingarten net once collapsed an
     interior edge to 1e-13 (a star with a collapsed edge is on a sphere trivially)."""

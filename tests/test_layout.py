@@ -111,6 +111,7 @@ def test_tower_of_revolution_closes_up_around_its_axis():
     assert_snet_on_design(result.mesh, design, 1.5, angle=75.0)
 
 
+@pytest.mark.slow
 def test_freeform_facade_mesh_through_the_cli(facade_stl, tmp_path, capsys):
     original = facade_stl.read_bytes()
     out = tmp_path / "net" / "facade.obj"

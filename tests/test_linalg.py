@@ -57,6 +57,7 @@ def test_auto_keeps_small_systems_on_one_core():
     assert big == ("pardiso" if "pardiso" in BACKENDS else BACKENDS[0])
 
 
+@pytest.mark.slow
 def test_every_backend_gives_the_same_linear_weingarten_net(wein99):
     start = noisy(wein99, 0.01, seed=4)
     results = {b: fabplan.optimize(start, "linear-weingarten", settings=SolverSettings(backend=b))

@@ -264,6 +264,7 @@ def test_plans_are_deterministic():
     assert a == b
 
 
+@pytest.mark.slow
 def test_panels_the_coarse_assignment_misjudged_are_caught_by_the_dense_verification():
     # assignment on corners and centres only, no reserve: some panels are more curved than
     # those samples show; the verification must classify them again and give them molds
