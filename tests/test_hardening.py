@@ -1,6 +1,6 @@
 """Bad input and hostile paths, every command: refused in one line, nothing written.
 
-Regression tests of issue 16: device files replaced by outputs, study candidate names
+Regression tests of hardening against bad input: device files replaced by outputs, study candidate names
 leaving the output folder, a folder or FIFO given as input reported as missing, meshes
 with 1e300 coordinates, coincident or duplicate vertices, triangles or non-manifold
 edges accepted or ending in a traceback, binary STL failing on a missing package.
