@@ -1,7 +1,7 @@
 """Bad input and hostile paths, every command: refused in one line, nothing written.
 
-Regression tests of hardening against bad input: device files replaced by outputs, study candidate names
-leaving the output folder, a folder or FIFO given as input reported as missing, meshes
+Regression tests: device files replaced by outputs, study candidate names leaving the
+output folder, a folder or FIFO given as input reported as missing, meshes
 with 1e300 coordinates, coincident or duplicate vertices, triangles or non-manifold
 edges accepted or ending in a traceback, binary STL failing on a missing package.
 The tests make their own FIFOs and sockets; they never touch the system's devices.
