@@ -34,6 +34,7 @@ from .run import (
     earlier_same_net,
     fabricate_candidate,
     judge_study,
+    prepare_design,
     solve_candidate,
 )
 
@@ -137,10 +138,6 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
         When the design cannot be loaded or the baseline layout is impossible, or the
         scheduler cannot be reached.
     """
-    from ..design.load import load_design
-    from ..io.resources import check_panel_count
-    from ..layout.surface_layout import layout_surface
-
     say = progress or _quiet
     start = time.perf_counter()
     own = client is None
@@ -148,17 +145,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
     if own:
         client, cluster = _connect(workers, scheduler)
     try:
-        source, triangles = study.design.source, study.design.triangles
-        design = load_design(source) if triangles is None else \
-            load_design(source, triangles=triangles)
-        say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
-            f"{design.area:.4g} {study.design.units}^2")
-        check_panel_count(design.area / study.panel_size**2, max_panels=max_panels,
-                          what=f"{study.path or study.name}: layouts of panel size "
-                               f"{study.panel_size:g} {study.design.units} on a design of area "
-                               f"{design.area:.4g} {study.design.units}^2",
-                          fix="give a larger panels.size")
-        baseline = layout_surface(design, study.panel_size, angle=90.0)
+        design, baseline = prepare_design(study, say, max_panels)
         results = _run_on(client, study, design, baseline, say, cache, resume)
     finally:
         if own:

@@ -47,6 +47,9 @@ __all__ = [
     "StudyResult",
     "run_study",
     "judge_study",
+    "prepare_design",
+    "solve_candidate",
+    "fabricate_candidate",
     "measure_candidate",
     "vertex_deviation_mm",
     "mold_metrics",
@@ -175,22 +178,10 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         `max_panels`, or the baseline layout is impossible (panel size too large for the
         surface, ...): nothing could be compared.
     """
-    from ..design.load import load_design
-    from ..io.resources import check_panel_count
-    from ..layout.surface_layout import layout_surface
-
     say = progress or (lambda message: None)
     start = time.perf_counter()
-    source, triangles = study.design.source, study.design.triangles
-    design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
-    say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
-        f"{design.area:.4g} {study.design.units}^2")
-    check_panel_count(design.area / study.panel_size**2, max_panels=max_panels,
-                      what=f"{study.path or study.name}: layouts of panel size "
-                           f"{study.panel_size:g} {study.design.units} on a design of area "
-                           f"{design.area:.4g} {study.design.units}^2",
-                      fix="give a larger panels.size")
-    layouts = {90.0: layout_surface(design, study.panel_size, angle=90.0)}
+    design, baseline = prepare_design(study, say, max_panels)
+    layouts = {90.0: baseline}
     starts: dict[float, OptimizationResult] = {}
     results: list[CandidateResult] = []
     count = len(study.candidates)
@@ -214,6 +205,33 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
             cache.store(result)
         results.append(result)
     return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+
+
+def prepare_design(study: Study, say: Callable[[str], None],
+                   max_panels: int | None = None) -> tuple[DesignSurface, SurfaceLayout]:
+    """The study's design and its baseline layout (at 90 deg): what every candidate is
+    compared on, made before any candidate runs.
+
+    Raises
+    ------
+    InputError
+        When the design cannot be loaded, the layouts would need more panels than
+        `max_panels`, or the baseline layout is impossible.
+    """
+    from ..design.load import load_design
+    from ..io.resources import check_panel_count
+    from ..layout.surface_layout import layout_surface
+
+    source, triangles = study.design.source, study.design.triangles
+    design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
+    say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
+        f"{design.area:.4g} {study.design.units}^2")
+    check_panel_count(design.area / study.panel_size**2, max_panels=max_panels,
+                      what=f"{study.path or study.name}: layouts of panel size "
+                           f"{study.panel_size:g} {study.design.units} on a design of area "
+                           f"{design.area:.4g} {study.design.units}^2",
+                      fix="give a larger panels.size")
+    return design, layout_surface(design, study.panel_size, angle=90.0)
 
 
 def judge_study(study: Study, design: DesignSurface, results: list[CandidateResult], *,
