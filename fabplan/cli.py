@@ -362,8 +362,9 @@ def _parse_layers(specs: list | None) -> dict:
 
 
 def _cmd_strips(args) -> int:
+    from .fabricate.molds import UNITS
     from .fabricate.strip_plan import plan_strips
-    from .fabricate.strips import UNITS_MM, StripSettings
+    from .fabricate.strips import StripSettings
     from .io.resources import check_panel_count
 
     _check_max_panels(args)
@@ -383,7 +384,7 @@ def _cmd_strips(args) -> int:
     check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
                       what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
                       fix="plan the strips of a coarser net or of parts of it")
-    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS_MM[settings.units]))
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS[settings.units]))
     plan = plan_strips(mesh, settings)
     files = plan.write(out, previews=not args.no_previews)
     s = plan.summary()

@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 UNITS = {"m": 1000.0, "mm": 1.0}
-"""Millimetres per model unit for each accepted ``units`` name."""
+"""Millimetres per model unit for each accepted ``units`` name (molds and strips)."""
 
 TOLERANCE_RANGE_MM = (0.01, 1000.0)
 """Mold tolerances that mean something: finer than 0.01 mm no mold is made, a gap of a

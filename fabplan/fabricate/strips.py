@@ -51,9 +51,9 @@ import numpy as np
 from ..errors import InputError
 from ..net.geometry import circumcircle_tangent, face_normals, fit_star_spheres, star_normals
 from ..net.mesh import Polylines, QuadMesh
+from .molds import UNITS
 
 __all__ = [
-    "UNITS_MM",
     "StripSettings",
     "ReferenceCurve",
     "ArcRun",
@@ -66,9 +66,6 @@ __all__ = [
     "fit_arc_runs",
     "build_strips",
 ]
-
-UNITS_MM = {"m": 1000.0, "mm": 1.0}
-"""Millimetres per model unit for the accepted `StripSettings.units`."""
 
 CUTTING_TOLERANCE_MM = (0.001, 10.0)
 """Cutting tolerances that mean something for arcs fitted to the strip outlines (mm)."""
@@ -137,7 +134,7 @@ class StripSettings:
     @property
     def scale(self) -> float:
         """Millimetres per model unit."""
-        return UNITS_MM[self.units]
+        return UNITS[self.units]
 
     @property
     def slit_width_mm(self) -> float:
@@ -185,8 +182,8 @@ class StripSettings:
         non_negative("--extension", self.extension_mm)
         positive("--splice-length", self.splice_mm)
         positive("--label-height", self.text_height_mm)
-        if self.units not in UNITS_MM:
-            raise InputError(f"--units must be one of {', '.join(UNITS_MM)}, got {self.units!r}")
+        if self.units not in UNITS:
+            raise InputError(f"--units must be one of {', '.join(UNITS)}, got {self.units!r}")
         if len(self.sheet_mm) != 2:
             raise InputError(f"--sheet must be WIDTHxHEIGHT, got {self.sheet_mm}")
         for value in self.sheet_mm:

@@ -395,8 +395,10 @@ class GuidedProjection:
     def _remember(self, hard: float, residuals: dict) -> None:
         """Keep the current iterate when it beats the best: admissible first, then by hard
         residual."""
-        ok = True if self.admissible is None else bool(self.admissible(self.state))
         best = self.best
+        if best is not None and best.admissible and hard >= best.hard:
+            return      # cannot beat the best: spare the test (it runs every iteration)
+        ok = True if self.admissible is None else bool(self.admissible(self.state))
         if best is None or (ok, -hard) > (best.admissible, -best.hard):
             self.best = self._snapshot()
             self.best.hard, self.best.admissible = hard, ok
