@@ -80,6 +80,10 @@ def run_case(design, net: str, angle: float | None, panels: int) -> dict:
         status=result.status, converged=bool(result.converged),
         message=getattr(result, "message", ""),
         coverage=props.get("coverage"),
+        coverage_net=props.get("coverage_net"),
+        boundary_panels=(props.get("boundary_panels") or {}).get("count"),
+        boundary_flipped=len((props.get("boundary_panels") or {}).get("flipped") or []),
+        boundary_patches=len((props.get("boundary_panels") or {}).get("patches") or []),
         line_turn_max=float(turns.max()) if turns.size else None,
         line_turn_median=float(np.median(turns)) if turns.size else None,
         angle_min=angle_stats.get("min"), angle_max=angle_stats.get("max"),
@@ -94,15 +98,17 @@ def _fmt(v, spec=".1f") -> str:
 
 
 def table(records: list) -> str:
-    rows = ["| design | net | panel | status | coverage % | line turn max / median deg | "
-            "angles deg | s |", "|---|---|---|---|---|---|---|---|"]
+    rows = ["| design | net | panel | status | coverage % (full panels) | boundary panels | "
+            "line turn max / median deg | angles deg | s |", "|---|---|---|---|---|---|---|---|---|"]
     for r in records:
         cov = None if r.get("coverage") is None else 100 * r["coverage"]
+        net = None if r.get("coverage_net") is None else 100 * r["coverage_net"]
         status = r["status"] + (" (folded)" if r.get("folded") else "")
         if r["status"] == "refused":
             status = "refused: " + r["message"].split(": ", 1)[-1][:60]
         rows.append(f"| {r['design']} | {r['net']} | {r['panel_size']:.2f} | {status} | "
-                    f"{_fmt(cov)} | {_fmt(r.get('line_turn_max'))} / {_fmt(r.get('line_turn_median'))} | "
+                    f"{_fmt(cov, '.2f')} ({_fmt(net)}) | {_fmt(r.get('boundary_panels'), 'd')} | "
+                    f"{_fmt(r.get('line_turn_max'))} / {_fmt(r.get('line_turn_median'))} | "
                     f"{_fmt(r.get('angle_min'))} .. {_fmt(r.get('angle_max'))} | {r['seconds']:.1f} |")
     return "\n".join(rows)
 
@@ -149,7 +155,9 @@ def main(argv: list[str] | None = None) -> int:
                 records.append(run_case(design, net, angle, panels))
                 r = records[-1]
                 print(f"{r['design']:<14} {r['net']:<13} {r['panel_size']:6.2f} {r['status']:<14} "
-                      f"coverage {_fmt(None if r.get('coverage') is None else 100 * r['coverage'])} "
+                      f"coverage {_fmt(None if r.get('coverage') is None else 100 * r['coverage'], '.2f')} "
+                      f"boundary {r.get('boundary_panels')} flipped {r.get('boundary_flipped')} "
+                      f"patches {r.get('boundary_patches')} "
                       f"turn {_fmt(r.get('line_turn_max'))} {r['seconds']:.1f} s", flush=True)
     RESULTS.mkdir(exist_ok=True)
     out = RESULTS / f"corpus-{args.label}.json"

@@ -203,7 +203,8 @@ def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
           f"size), mean {d['mean']:.3e} ({rel['mean']:.2e})")
     edge = props["edge_length_relative_to_panel"]
     record = props["layout"]
-    print(f"net: {record['quads']} quads covering {100 * props['coverage']:.1f} % of the design, "
+    print(f"net: {record['quads']} quads covering {100 * props['coverage_net']:.1f} % of the design, "
+          f"{boundary_text(props)}; "
           f"edges {edge['min']:.3f} .. {edge['max']:.3f} of the panel size; "
           f"{len(record['irregular_vertices'])} irregular vertices "
           f"{record['irregular_vertices'][:12]}{' ...' if len(record['irregular_vertices']) > 12 else ''}; "
@@ -231,6 +232,7 @@ def _cmd_layout(args) -> int:
     from .layout.picture import fairness_marks, write_layout_picture
     from .layout.surface_layout import glide, layout_angle, layout_surface
     from .solve.net_types import get_net
+    from .solve.optimize import boundary_path
 
     preset = get_net(args.net)
     _check_layout_options(args, preset)
@@ -240,7 +242,8 @@ def _cmd_layout(args) -> int:
     picture = out.with_suffix(".png")
     _check_option_files((args.family, "a file of polylines"))
     family_file = args.family if args.family and Path(args.family).is_file() else None
-    _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
+    _check_outputs([out, out.with_suffix(".json"), boundary_path(out), picture],
+                   [args.surface, family_file])
     design = load_design(args.surface, triangles=args.triangles)
     _check_layout_size(design, args.panel_size, args.max_panels)
     start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
@@ -256,7 +259,8 @@ def _cmd_layout(args) -> int:
     with atomic_path(picture) as staged:   # the picture lands only with the net it shows
         write_layout_picture(staged, design, result.mesh, title=title,
                              singular_points=layout.singular_points,
-                             marks=fairness_marks(result.properties))
+                             marks=fairness_marks(result.properties),
+                             boundary_panels=result.boundary_panels)
         obj_path, json_path = result.write(out)
     props = result.properties
     _print_layout_report(props, layout, json_path)
@@ -264,7 +268,7 @@ def _cmd_layout(args) -> int:
     print(f"{result.net}: {result.status} after {result.iterations} iterations in "
           f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
           + (f" ({params})" if params else ""))
-    print(f"wrote {obj_path}, {json_path} and {picture}")
+    print(f"wrote {obj_path}, {json_path}, {boundary_path(obj_path)} and {picture}")
     for warning in layout_warnings(props):
         print(f"fabplan: warning: {warning}", file=sys.stderr)
     if not result.converged:
@@ -301,15 +305,30 @@ def _check_layout_size(design: Any, panel_size: float, max_panels: int | None) -
             f"panels){hint}")
 
 
+def boundary_text(properties: dict) -> str:
+    """The boundary panels of a layout and the coverage they bring, in words."""
+    panels = properties.get("boundary_panels") or {}
+    count = panels.get("count", 0)
+    text = (f"{count} boundary panel{'' if count == 1 else 's'} trimmed to the design boundary "
+            f"bring it to {100 * properties['coverage']:.2f} %")
+    patches = panels.get("patches") or []
+    if patches:
+        text += (f" (of them {len(patches)} patch{'' if len(patches) == 1 else 'es'} closing holes "
+                 "inside the net, ids under properties.boundary_panels.patches)")
+    return text
+
+
 def layout_warnings(properties: dict) -> list:
     """What a user should know about a layout's measured result, in plain words."""
     out = []
     coverage = properties["coverage"]
-    if coverage < 0.9:
-        out.append(f"the net covers only {100 * coverage:.0f} % of the design surface")
-    elif coverage > 1.05:
-        out.append(f"the net folds over itself: its panels add up to {100 * coverage:.0f} % of "
-                   "the design's area")
+    if coverage < 0.999:
+        out.append(f"the panels cover only {100 * coverage:.1f} % of the design surface "
+                   "(measured by area on the design; see properties.boundary_panels in the JSON)")
+    flipped = (properties.get("boundary_panels") or {}).get("flipped") or []
+    if flipped:
+        out.append(f"{len(flipped)} boundary panels face against the design (ids under "
+                   "properties.boundary_panels.flipped)")
     edge = properties["edge_length_relative_to_panel"]
     if edge["min"] < 0.5 or edge["max"] > 2.0:
         out.append(f"edges range over {edge['min']:.2f} .. {edge['max']:.2f} of the panel size "

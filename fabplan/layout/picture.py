@@ -12,6 +12,7 @@ from ..design.mesh_surface import DesignSurface
 from ..io.output import atomic_path
 from ..net.mesh import QuadMesh
 from ..report.figures import net_view_angles, new_figure
+from .trim import BoundaryPanels
 
 __all__ = ["write_layout_picture", "fairness_marks"]
 
@@ -32,13 +33,15 @@ def fairness_marks(properties: dict) -> dict[str, list]:
 
 def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: QuadMesh, *,
                          title: str = "", singular_points: np.ndarray | None = None,
-                         marks: dict | None = None) -> Path:
+                         marks: dict | None = None,
+                         boundary_panels: BoundaryPanels | None = None) -> Path:
     """A PNG of the net on the design surface, axes to scale (atomically written).
 
     The design is drawn light grey with its boundary black, the net's faces blue with
-    their edges, irregular vertices red and singular points of the layout's direction
-    field orange; `marks` ({label: point (3,) or vertex id}, e.g. `fairness_marks`) are
-    drawn as labelled markers; the view is `net_view_angles`.
+    their edges, its `boundary_panels` (`fabplan.layout.trim`) green, irregular vertices
+    red and singular points of the layout's direction field orange; `marks` ({label:
+    point (3,) or vertex id}, e.g. `fairness_marks`) are drawn as labelled markers; the
+    view is `net_view_angles`.
     """
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
@@ -57,6 +60,13 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     ax.add_collection3d(Poly3DCollection([mesh.vertices[f] for f in mesh.faces],
                                          facecolor=(0.55, 0.7, 0.95, 0.9),
                                          edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4))
+    trimmed = boundary_panels is not None and boundary_panels.count > 0
+    if trimmed:
+        assert boundary_panels is not None
+        ax.add_collection3d(Poly3DCollection(
+            [boundary_panels.vertices[p] for p in boundary_panels.polygons],
+            facecolor=(0.55, 0.85, 0.55, 0.9), edgecolor=(0.1, 0.4, 0.1, 1.0), linewidths=0.4,
+            label=f"boundary panels ({boundary_panels.count})"))
     irregular = mesh.vertices[mesh.irregular_vertices]
     if len(irregular):
         ax.scatter(*irregular.T, color="red", s=18, depthshade=False, label="irregular vertices")
@@ -77,7 +87,7 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     ax.set_axis_off()
     if title:
         ax.set_title(title, fontsize=9)
-    if len(irregular) or marks or (singular_points is not None and len(singular_points)):
+    if trimmed or len(irregular) or marks or (singular_points is not None and len(singular_points)):
         ax.legend(loc="lower left", fontsize=8)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", bbox_inches="tight")

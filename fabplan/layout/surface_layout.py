@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
@@ -78,6 +79,7 @@ from .parametrization import (
     integrate_directions,
 )
 from .settings import SURFACE_TOLERANCE, LayoutSettings
+from .trim import ParameterChart, add_boundary_panels
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
@@ -144,6 +146,12 @@ class SurfaceLayout:
     direction_symmetry: int = 2
     smoothing: float = 0.5
     seconds: dict = field(default_factory=dict)
+
+    @cached_property
+    def chart(self) -> ParameterChart:
+        """The design in the plane of the parameters ``(phi, psi)`` (`fabplan.layout.trim`),
+        made once and shared by every net laid out from this layout."""
+        return ParameterChart(self.design, self.parameters)
 
     def record(self) -> dict:
         """JSON-ready summary (written with the optimized net)."""
@@ -589,10 +597,12 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
 
     Returns
     -------
-    `fabplan.optimize.OptimizationResult`, whose properties also hold
+    `fabplan.optimize.OptimizationResult`, with the panels between the net and the design
+    boundary (`fabplan.layout.trim`) as its ``boundary_panels``; its properties also hold
     ``distance_to_design`` (model units), ``distance_to_design_relative_to_panel``,
-    ``edge_length_relative_to_panel`` and ``coverage`` (area of the net's faces over
-    the design's area).
+    ``edge_length_relative_to_panel``, ``coverage`` (share of the design's area the
+    full and boundary panels cover), ``coverage_net`` (the full panels alone) and
+    ``boundary_panels``.
     """
     from ..solve.net_types import get_net
     from ..solve.optimize import optimize
@@ -632,7 +642,7 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     # a closest-point search per triangle, so it is measured only when that matters
     off = d.max() > 0.01 * layout.panel_size and design.parametric is not None
     result.properties["design_chord_error"] = design.chord_error if off else None
-    result.properties["coverage"] = float(result.mesh.face_areas.sum() / design.area)
+    add_boundary_panels(result, layout)
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size
     return result

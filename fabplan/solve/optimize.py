@@ -6,7 +6,7 @@ import os
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -47,6 +47,7 @@ __all__ = [
     "optimize",
     "build_solver",
     "OptimizationResult",
+    "boundary_path",
     "check_net_input",
     "read_fixed",
     "read_handles",
@@ -69,6 +70,9 @@ class OptimizationResult:
     properties: dict = field(default_factory=dict)
     linear_solver: str = ""    # the sparse backend that solved the normal equations
     message: str = ""          # what stood in the way when not converged, and what to try
+    # for a net laid out on a design: the panels between it and the design's boundary
+    # (`fabplan.layout.trim.BoundaryPanels`, with `obj_text()`), written beside the OBJ
+    boundary_panels: Any = None
 
     @property
     def converged(self) -> bool:
@@ -90,14 +94,26 @@ class OptimizationResult:
         }
 
     def write(self, path: str | os.PathLike) -> tuple[Path, Path]:
-        """Write ``path`` (OBJ) and the same name with ``.json``; both atomically."""
+        """Write ``path`` (OBJ) and the same name with ``.json``, and with boundary panels
+        `boundary_path` beside them; all atomically."""
         path = Path(path)
         json_path = path.with_suffix(".json")
         header = (f"fabplan {self.net} net; status {self.status}; "
                   f"properties in {json_path.name}")
-        obj_text = format_obj(self.mesh.vertices, self.mesh.faces, header, self.mesh.normals)
-        write_texts({path: obj_text, json_path: json_text(self.record())})
+        texts = {path: format_obj(self.mesh.vertices, self.mesh.faces, header, self.mesh.normals),
+                 json_path: json_text(self.record())}
+        if self.boundary_panels is not None:
+            texts[boundary_path(path)] = self.boundary_panels.obj_text(
+                f"fabplan boundary panels of {path.name}: its vertices first, then the corners "
+                "and outline points on the design boundary; one face per panel")
+        write_texts(texts)
         return path, json_path
+
+
+def boundary_path(path: str | os.PathLike) -> Path:
+    """Where the boundary panels of the net written to `path` go: ``NAME.boundary.obj``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.boundary.obj")
 
 
 def check_net_input(mesh: QuadMesh) -> None:

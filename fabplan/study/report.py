@@ -91,8 +91,9 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
     }
 
 
-_CSV_COLUMNS = ["rank", "name", "net", "feasible", "cost", "molds", "panels", "planar",
-                "single_curved", "double_curved", "coverage", "folded", "deviation_max_mm",
+_CSV_COLUMNS = ["rank", "name", "net", "feasible", "cost", "molds", "panels", "boundary_panels",
+                "planar", "single_curved", "double_curved", "coverage", "coverage_full_panels",
+                "folded", "deviation_max_mm",
                 "deviation_p95_mm",
                 "planarity_max_mm", "kink_max_deg", "angle_min_deg", "angle_max_deg",
                 "radius_min", "radius_max", "sheets", "strips_congruent", "seconds", "reasons"]
@@ -109,6 +110,8 @@ def _row(c: CandidateResult) -> dict:
         "rank": c.rank, "name": c.name, "net": c.candidate.net,
         "feasible": "yes" if c.feasible else "no", "cost": _num(c.cost),
         "molds": m["molds"]["count"], "panels": m["panels"],
+        "boundary_panels": (m.get("boundary_panels") or {}).get("count", 0),
+        "coverage_full_panels": _num(m.get("coverage_net", m["coverage"])),
         "planar": types.get("planar", 0), "single_curved": types.get("single_curved", 0),
         "double_curved": types.get("double_curved", 0),
         "coverage": _num(m["coverage"]),
@@ -331,7 +334,7 @@ def _comparison_table(result: StudyResult) -> str:
     for c in result.ranked():
         m = c.metrics
         if c.failed:
-            rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "",
+            rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "", "",
                          "", "", "", "", c.reasons[0]])
             bad.append(len(rows) - 1)
             continue
@@ -339,6 +342,7 @@ def _comparison_table(result: StudyResult) -> str:
         rows.append([
             c.rank, c.name, c.candidate.describe(), "yes" if c.feasible else "no",
             m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
+            (m.get("boundary_panels") or {}).get("count", 0),
             f"{100 * m['coverage']:.1f}",
             f"{m['deviation_mm']['max']:.1f}", f"{m['planarity_mm']['max']:.2f}",
             f"{m['kink_deg']['max']:.2f}", _fmt_range(m["intersection_angle_deg"]),
@@ -348,7 +352,8 @@ def _comparison_table(result: StudyResult) -> str:
         if not c.feasible:
             bad.append(len(rows) - 1)
     return html.html_table(
-        ["rank", "candidate", "net", "feasible", "molds", "panels", "design covered [%]",
+        ["rank", "candidate", "net", "feasible", "molds", "panels", "of them boundary panels",
+         "design covered [%]",
          "max deviation [mm]",
          "planarity [mm]", "max kink [deg]", "angle [deg]", "Meusnier radius",
          "strip sheets", "cost", "note"], rows, caption="All candidates, best first", bad_rows=bad)
@@ -375,12 +380,30 @@ def _cost_table(result: StudyResult) -> str:
     return html.html_table(["per", "cost units"], rows, caption="Cost weights")
 
 
-def _coverage_text(coverage: float) -> str:
+def _coverage_text(coverage: float, full: float | None = None) -> str:
     """The share of the design the panels cover, and what the rest means for the counts."""
-    text = f"{100 * coverage:.1f} % of the design's area"
+    text = f"{100 * coverage:.2f} % of the design's area"
+    if full is not None and full < coverage:
+        text += f" ({100 * full:.1f} % by full panels, the rest by boundary panels)"
     if coverage < 0.999:
-        text += (f": {100 * (1 - coverage):.1f} % is left unclad along the edges, and the panel, "
-                 "mold, sheet and cost figures leave it out")
+        text += (f": {100 * (1 - coverage):.1f} % is left unclad, and the panel, mold, sheet and "
+                 "cost figures leave it out")
+    return text
+
+
+def _boundary_text(boundary: dict | None) -> str:
+    """The boundary panels of a candidate: how many, and on which molds."""
+    if not boundary or not boundary["count"]:
+        return ""
+    own = boundary["own_molds"]
+    text = (f"; and {counted(boundary['count'], 'boundary panel')} trimmed to the design "
+            "boundary, each cut from the mold of the full panel it continues")
+    if boundary.get("deviation_max_mm") is not None:
+        text += f" (up to {boundary['deviation_max_mm']:.1f} mm from the design)"
+    if own:
+        text += f", {counted(own, 'panel')} on a mold of its own"
+    if boundary.get("flipped"):
+        text += f"; {counted(boundary['flipped'], 'boundary panel')} facing against the design"
     return text
 
 
@@ -447,10 +470,11 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
         ["net", c.candidate.describe()],
         ["solve", f"{m['status']} after {m['iterations']} iterations"],
         ["solved parameters", ", ".join(parameters) or "-"],
-        ["panels", f"{m['panels']} ({m['quads']} quads, {m['other_faces']} other; "
-                   f"{m['irregular_vertices']} irregular vertices)"],
+        ["panels", f"{m['panels']}: {m['quads']} quads, {m['other_faces']} other "
+                   f"({m['irregular_vertices']} irregular vertices)"
+                   + _boundary_text(m.get("boundary_panels"))],
         ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in types.items())],
-        ["design covered", _coverage_text(m["coverage"])],
+        ["design covered", _coverage_text(m["coverage"], m.get("coverage_net"))],
         ["line turns", _turn_text(m.get("line_turn_deg"))],
         ["folds", _folds_text(m.get("folds"))],
         ["edge length", _fmt_range(m["edge_length"])],

@@ -1,0 +1,716 @@
+"""Boundary panels: the net's lines extended to the design boundary and cut there.
+
+A layout's full quads stop up to a panel short of the design boundary, in steps: only
+lattice cells with all four corners on the surface become quads. The facade is built to
+its edges, so the strip between the net and the boundary is cut into *boundary panels*:
+
+1. The layout's parametrization ``(phi, psi)`` (integer values are the net's lines) maps
+   the design to the plane. There the design is the union of its parameter triangles
+   ``D``, the net is the union of its faces ``N`` (every vertex at the parameters of its
+   closest design point), and the unclad strip is ``R = D - N``.
+2. Every line of the net that ends on the net's boundary is extended straight in the
+   parameter plane (the lattice lines are straight there) until it leaves ``R``. The rays
+   cut ``R`` into pieces: quads, pentagons and triangles with one side on the design
+   boundary, whose corners are net vertices, ray ends on the boundary, and the design
+   boundary's own vertices between them (the trim outline).
+3. Pieces are mapped back to the surface through the design's triangles (barycentric;
+   through the exact surface's parameters for a built-in design), so corners on the
+   parameter boundary land on the design's boundary curve.
+
+Pieces smaller than `min_panel` of a full panel join the neighbour they share the longest
+side with. Unclad regions that do not reach the design boundary (a hole the layout left
+open around a singularity of the directions) are cut the same way, by the lines that end
+on their rim: their pieces are *patches*, reported with their places. Coverage is measured
+by areas on the design: every region's share of each design triangle in the parameter
+plane, times that triangle's area.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import igl
+import numpy as np
+import shapely
+from scipy.spatial import cKDTree
+
+from ..design.mesh_surface import DesignSurface
+from ..net.mesh import QuadMesh
+
+if TYPE_CHECKING:
+    from ..solve.optimize import OptimizationResult
+    from .surface_layout import SurfaceLayout
+
+__all__ = ["BoundaryPanels", "ParameterChart", "trim_to_design", "add_boundary_panels"]
+
+
+@dataclass
+class BoundaryPanels:
+    """The panels between a net and the design boundary, and the coverage they give.
+
+    Attributes
+    ----------
+    vertices : (m, 3) float, the net's vertices (first `net_vertex_count` rows, unchanged)
+        followed by the new corners and trim-outline points (on the design surface).
+    polygons : list of (k,) int arrays, each boundary panel's outline into `vertices`,
+        counter-clockwise about the surface normal, following the design boundary.
+    net_vertex_count : number of the net's vertices at the head of `vertices`.
+    on_boundary : (m,) bool, points on the design's boundary curve.
+    corner : (m,) bool, panel corners: net vertices, ends of the extended lines and
+        crossings off the boundary (the other points follow the boundary curve).
+    neighbour_face : (p,) int, the net face each panel shares its longest side with (the
+        panel it continues; -1 for a panel touching the net only at a corner).
+    area : (p,) float, area of each panel on the design (model units squared).
+    panel_size : the layout's panel size.
+    coverage_net : share of the design's area the net's full panels cover.
+    coverage : share covered by the full and the boundary panels together.
+    flipped : (k,) int, panels that face against the design (none in a sound result).
+    patch : (p,) bool, the panels that close a hole inside the net (not reaching the
+        design boundary).
+    boundary_distance_max : largest distance of a point flagged `on_boundary` from the
+        design's boundary curve (the exact one for a built-in design), in panel sizes.
+    seconds : time taken.
+    """
+
+    vertices: np.ndarray
+    polygons: list
+    net_vertex_count: int
+    on_boundary: np.ndarray
+    corner: np.ndarray
+    neighbour_face: np.ndarray
+    area: np.ndarray
+    panel_size: float
+    coverage_net: float
+    coverage: float
+    flipped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    patch: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    boundary_distance_max: float = 0.0
+    seconds: float = 0.0
+
+    @property
+    def count(self) -> int:
+        return len(self.polygons)
+
+    def corner_counts(self) -> np.ndarray:
+        """(p,) int, corners of each panel: net vertices and ends of the extended lines
+        (points of the trim outline between them are not corners)."""
+        return np.array([int(self.corner[p].sum()) for p in self.polygons], dtype=np.int64)
+
+    def record(self) -> dict:
+        """JSON-ready summary."""
+        full = self.panel_size ** 2
+        return {
+            "count": self.count,
+            "coverage_net": self.coverage_net,
+            "coverage": self.coverage,
+            "area_relative_to_panel": None if not self.count else {
+                "min": float(self.area.min() / full), "max": float(self.area.max() / full),
+                "mean": float(self.area.mean() / full)},
+            "corners": {str(k): int(c) for k, c in enumerate(np.bincount(self.corner_counts()))
+                        if c},
+            "outline_points_max": max((len(p) for p in self.polygons), default=0),
+            "flipped": self.flipped.tolist(),
+            "without_neighbour_face": int(np.sum(self.neighbour_face < 0)),
+            "boundary_distance_max_relative_to_panel": self.boundary_distance_max,
+            "patches": np.flatnonzero(self.patch).tolist(),
+            "uncovered": 1.0 - self.coverage,
+            "seconds": round(self.seconds, 4),
+        }
+
+    def obj_text(self, header: str = "") -> str:
+        """OBJ text of the boundary panels: `vertices` (the net's first, numbered as in
+        the net's OBJ) and one polygon face per panel."""
+        from ..io.obj import format_obj
+
+        return format_obj(self.vertices, self.polygons, header)
+
+
+def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05
+                   ) -> BoundaryPanels:
+    """The boundary panels of a net laid out on a design (see the module's text).
+
+    Parameters
+    ----------
+    mesh : the net (a layout's mesh, or the net solved from it: same faces, vertices
+        within a small distance of the design).
+    layout : the `SurfaceLayout` the net comes from (design, parametrization, cuts).
+    min_panel : pieces smaller than this share of a full panel's area join a neighbour.
+
+    Returns
+    -------
+    BoundaryPanels
+    """
+    clock = time.perf_counter()
+    design, h = layout.design, layout.panel_size
+    chart = layout.chart
+    p_net = chart.parameters_of(mesh.vertices)
+    faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
+    cell = float(np.median(shapely.area(faces)))
+    # every overlay is snap-rounded to this grid (a ten-millionth of a panel), so that a
+    # vertex on a boundary segment to rounding is noded there
+    grid = 1e-7 * cell ** 0.5
+    p_net = np.round(p_net / grid) * grid
+    faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
+    net = shapely.union_all(shapely.make_valid(faces), grid_size=grid)
+    unclad = shapely.difference(shapely.set_precision(chart.domain, grid), net, grid_size=grid)
+    boundary = chart.boundary_lines
+    tol = 4 * grid
+    # a vertex on the boundary (to a thousandth of a panel: gliding, or added on it)
+    # ends its lines there; a line continued from it would run along the boundary. It is
+    # joined to the boundary by the shortest way instead, which parts the slivers beside it
+    touching = shapely.distance(shapely.points(p_net), boundary) <= 1e-3 * cell ** 0.5
+    rays = np.concatenate([
+        _clipped_rays(mesh, p_net, unclad, ~touching, grid),
+        _connectors(p_net[touching & mesh.is_boundary_vertex], boundary, unclad, grid)])
+    pieces = _split(unclad, rays, grid)
+    # specks of rounding size are no panels (their area stays in the uncovered share)
+    pieces = shapely.orient_polygons(
+        _merge_small(pieces[shapely.area(pieces) > 1e-6 * cell], min_panel * cell))
+    # unclad regions that do not reach the design boundary are holes inside the net
+    regions = shapely.get_parts(unclad)
+    inner = regions[shapely.distance(regions, boundary) > tol]
+    patch = np.zeros(len(pieces), bool)
+    if len(pieces) and len(inner):
+        hit, _ = shapely.STRtree(inner).query(shapely.point_on_surface(pieces), predicate="within")
+        patch[hit] = True
+    vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+        pieces, mesh, p_net, chart, boundary, rays, tol, touching)
+    # a piece over a seam of the parametrization, where the plane holds several sheets
+    # of the design, may map to points of different sheets: its sides then stretch far
+    # beyond their length in the plane (about a panel per unit). Such pieces are left
+    # out and their area counted as unclad
+    sane = _sane_on_surface(pieces, vertices, polygons, h)
+    if not sane.all():
+        pieces = pieces[sane]
+        vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+            pieces, mesh, p_net, chart, boundary, rays, tol, touching)
+    patch = patch[sane]
+    # coverage is measured on the surface, independently of the plane (`_under`)
+    triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    samples, normals, weight = _design_samples(design)
+    on_net = _under(samples, normals, mesh.vertices, mesh.triangles(), h)
+    on_any = on_net | _under(samples, normals, vertices, triangles, h)
+    T = vertices[triangles]
+    tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    return BoundaryPanels(
+        vertices=vertices, polygons=polygons, net_vertex_count=mesh.vertex_count,
+        on_boundary=on_boundary, corner=corner, neighbour_face=_neighbour_faces(polygons, mesh),
+        area=np.bincount(owner, tri_area, minlength=len(polygons)), panel_size=h,
+        coverage_net=float(weight[on_net].sum() / weight.sum()),
+        coverage=float(weight[on_any].sum() / weight.sum()),
+        flipped=_flipped(vertices, polygons, design, 1e-3 * h * h), patch=patch,
+        boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
+        seconds=time.perf_counter() - clock)
+
+
+def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout) -> BoundaryPanels:
+    """Trim a net solved from `layout` to the design (`trim_to_design`), attach the panels
+    to `result` (written beside its OBJ) and record what they give in its properties:
+    ``coverage`` (full and boundary panels), ``coverage_net`` (full panels only) and
+    ``boundary_panels`` (`BoundaryPanels.record`)."""
+    panels = trim_to_design(result.mesh, layout)
+    result.boundary_panels = panels
+    result.properties["coverage"] = panels.coverage
+    result.properties["coverage_net"] = panels.coverage_net
+    result.properties["boundary_panels"] = panels.record()
+    return panels
+
+
+# ---------------------------------------------------------------------------- the chart
+
+
+class ParameterChart:
+    """The design in the parameter plane of a layout: point location both ways, the
+    domain, its boundary, and areas on the surface of regions of the plane."""
+
+    def __init__(self, design: DesignSurface, parameters: np.ndarray):
+        self.design = design
+        P = np.asarray(parameters, dtype=np.float64)           # (t, 3, 2)
+        e0, e1 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+        self.param_area = 0.5 * (e0[:, 0] * e1[:, 1] - e0[:, 1] * e1[:, 0])
+        # triangles the map squeezes to nothing carry no area of the plane
+        self.usable = np.abs(self.param_area) > 1e-12 * np.abs(self.param_area).max()
+        self.P = P
+        self.triangles = shapely.polygons(np.concatenate([P, P[:, :1]], axis=1))
+        self.tree = shapely.STRtree(self.triangles)
+        self.centroids = cKDTree(P.mean(axis=1))
+
+    @cached_property
+    def domain(self):
+        """The union of the parameter triangles (shapely geometry)."""
+        # the triangles tile the plane where the map keeps its orientation: a coverage
+        # union is then exact and many times faster than the general one
+        upright = self.param_area > 0
+        if upright.all():
+            domain = shapely.coverage_union_all(self.triangles)
+            if domain.is_valid:
+                return domain
+        return shapely.make_valid(shapely.union_all(self.triangles[self.usable]))
+
+    @cached_property
+    def boundary_lines(self):
+        """The design's boundary edges in the parameter plane (not the cuts)."""
+        T = self.design.triangles
+        directed = np.stack([T, np.roll(T, -1, axis=1)], axis=2).reshape(-1, 2)
+        key = np.sort(directed, axis=1)
+        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        lone = counts[inverse.ravel()] == 1
+        corner = np.flatnonzero(lone)
+        tri, k = corner // 3, corner % 3
+        segments = np.stack([self.P[tri, k], self.P[tri, (k + 1) % 3]], axis=1)
+        return shapely.multilinestrings(shapely.linestrings(segments))
+
+    def locate(self, points: np.ndarray, near: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The parameter triangle holding each point and the point's barycentric
+        coordinates in it (clipped into the triangle).
+
+        The plane of a parametrization with seams can hold several sheets of the design
+        over one point; of the triangles holding a point, the one whose surface point is
+        nearest to `near` (m, 3) is taken (the first without). A point in no triangle
+        (outside by rounding) takes the triangle it is least outside of among the twelve
+        nearest.
+        """
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        m = len(points)
+        tri = np.full(m, -1)
+        bary = np.zeros((m, 3))
+        if m == 0:
+            return tri, bary
+        which, hold = self.tree.query(shapely.points(points), predicate="intersects")
+        ok = self.usable[hold]
+        which, hold = which[ok], hold[ok]
+        if len(which):
+            b = np.clip(_barycentric(self.P[hold], points[which]), 0.0, None)
+            b /= b.sum(axis=1, keepdims=True)
+            score = np.zeros(len(which))
+            if near is not None:
+                X = np.einsum("mk,mkj->mj", b, self.design.vertices[self.design.triangles[hold]])
+                score = np.linalg.norm(X - near[which], axis=1)
+            order = np.lexsort((score, which))
+            first = order[np.r_[True, which[order][1:] != which[order][:-1]]]
+            tri[which[first]], bary[which[first]] = hold[first], b[first]
+        lost = np.flatnonzero(tri < 0)
+        if lost.size:
+            k = min(12, len(self.P))
+            _, cand = self.centroids.query(points[lost], k=k)
+            cand = cand.reshape(len(lost), k)
+            b = _barycentric(self.P[cand.ravel()], np.repeat(points[lost], k, axis=0)).reshape(-1, k, 3)
+            score = np.where(self.usable[cand], b.min(axis=-1), -np.inf)
+            best = np.argmax(score, axis=1)
+            rows = np.arange(len(lost))
+            chosen = np.clip(b[rows, best], 0.0, None)
+            tri[lost], bary[lost] = cand[rows, best], chosen / chosen.sum(axis=1, keepdims=True)
+        return tri, bary
+
+    def to_surface(self, points: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """(m, 3) float, the points of the design at parameters `points` (m, 2), on the
+        sheet nearest to `near` (m, 3) where the plane holds several (`locate`)."""
+        tri, bary = self.locate(points, near)
+        design = self.design
+        if design.parametric is not None and design.uv is not None:
+            uv = np.einsum("mk,mkj->mj", bary, design.triangle_uv(tri))
+            return design.parametric.points(uv[:, 0], uv[:, 1])
+        X = design.vertices[design.triangles[tri]]
+        return np.einsum("mk,mkj->mj", bary, X)
+
+    def parameters_of(self, points: np.ndarray) -> np.ndarray:
+        """(m, 2) float, the parameters of the design points closest to `points`."""
+        design = self.design
+        foot, _, tri = design.reference.closest_points(points)
+        X = design.vertices[design.triangles[tri]]
+        bary = igl.barycentric_coordinates(foot, X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy())
+        return np.einsum("mk,mkj->mj", bary, self.P[tri])
+
+    def area_on_design(self, regions: np.ndarray) -> np.ndarray:
+        """(r,) float, the area on the design of regions of the parameter plane: each
+        one's share of every parameter triangle it meets, times the triangle's area."""
+        regions = np.asarray(regions, dtype=object)
+        if len(regions) == 0:
+            return np.zeros(0)
+        region, tri = self.tree.query(regions, predicate="intersects")
+        ok = self.usable[tri]
+        region, tri = region[ok], tri[ok]
+        share = shapely.area(shapely.intersection(regions[region], self.triangles[tri]))
+        scale = self.design.face_areas[tri] / np.abs(self.param_area[tri])
+        return np.bincount(region, weights=share * scale, minlength=len(regions))
+
+
+def _barycentric(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(m, 3) float, barycentric coordinates of `points` (m, 2) in `triangles` (m, 3, 2)."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    v0, v1, v2 = b - a, c - a, points - a
+    det = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
+    det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+    l1 = (v2[:, 0] * v1[:, 1] - v2[:, 1] * v1[:, 0]) / det
+    l2 = (v0[:, 0] * v2[:, 1] - v0[:, 1] * v2[:, 0]) / det
+    return np.stack([1 - l1 - l2, l1, l2], axis=1)
+
+
+def _transition_maps(cuts: list) -> list[tuple[int, np.ndarray]]:
+    """The maps ``p -> sign p + shift`` between the sides of the layout's cuts (the
+    identity first): a loop cut open shifts by its jump both ways, a seam turns a half
+    turn about its centre."""
+    maps = [(1, np.zeros(2))]
+    for sign, jp, js in cuts:
+        shift = np.array([jp, js], dtype=np.float64)
+        maps += [(1, shift), (1, -shift)] if sign > 0 else [(-1, shift)]
+    return maps
+
+
+def _face_polygons(mesh: QuadMesh, p: np.ndarray, maps: list) -> np.ndarray:
+    """The net's faces in the parameter plane. Across a cut a face's corners are taken to
+    the side of its first corner, and every face also enters in its images under the
+    cuts' maps, so that it covers the plane on both sides of the cut."""
+    sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
+    face = np.repeat(np.arange(len(sizes)), sizes)
+    corner_p = p[idx]
+    if len(maps) > 1:
+        anchor = p[idx[ptr[face]]]
+        images = np.stack([sign * corner_p + shift for sign, shift in maps])   # (m, c, 2)
+        pick = np.argmin(np.linalg.norm(images - anchor[None], axis=2), axis=0)
+        corner_p = images[pick, np.arange(len(idx))]
+    rings = np.split(corner_p, ptr[1:-1])
+    polygons = [shapely.polygons(r) for r in rings]
+    out = np.array(polygons, dtype=object)
+    for sign, shift in maps[1:]:
+        out = np.concatenate([out, np.array([shapely.polygons(sign * r + shift) for r in rings],
+                                            dtype=object)])
+    return out
+
+
+def _clipped_rays(mesh: QuadMesh, p: np.ndarray, unclad, free: np.ndarray, grid: float
+                  ) -> np.ndarray:
+    """The net's lines that end on its boundary, continued straight in the parameter
+    plane from their last vertex through the unclad strip, up to where they leave it.
+
+    A boundary vertex with one face continues both its edges, one with two faces its
+    interior edge; with three or more faces every line through it goes on in the net.
+    Only vertices marked `free` (n,) bool (off the design boundary) start rays. The
+    overlays are snap-rounded to `grid`.
+
+    Returns
+    -------
+    (r,) array of LineStrings.
+    """
+    faces_at = np.bincount(mesh.face_indices, minlength=mesh.vertex_count)
+    boundary = mesh.is_boundary_vertex & free
+    starts, throughs = [], []
+    _, idx, nxt, prv = _corner_table(mesh)
+    lone = boundary[idx] & (faces_at[idx] == 1)
+    starts += [idx[lone], idx[lone]]
+    throughs += [nxt[lone], prv[lone]]
+    e = mesh.interior_edges
+    for a, b in ((e[:, 0], e[:, 1]), (e[:, 1], e[:, 0])):
+        ok = boundary[a] & (faces_at[a] == 2)
+        starts.append(a[ok])
+        throughs.append(b[ok])
+    start, through = np.concatenate(starts), np.concatenate(throughs)
+    if start.size == 0 or unclad.is_empty:
+        return np.zeros(0, dtype=object)
+    direction = p[start] - p[through]
+    length = np.linalg.norm(direction, axis=1)
+    ok = length > 0
+    start, direction, length = start[ok], direction[ok], length[ok]
+    # long enough to cross any strip the net leaves (a few panels)
+    reach = 6.0 * float(np.median(length))
+    end = p[start] + direction / length[:, None] * reach
+    lines = shapely.linestrings(np.stack([p[start], end], axis=1))
+    inside = shapely.intersection(lines, unclad, grid_size=grid)
+    rays = [_first_piece(line, o, grid) for line, o in zip(inside, p[start], strict=True)]
+    return np.array([r for r in rays if r is not None], dtype=object)
+
+
+def _connectors(points: np.ndarray, boundary, unclad, grid: float) -> np.ndarray:
+    """(r,) LineStrings, the shortest segments from `points` (k, 2) near the boundary to
+    it, where they run through the unclad region (a hair longer, to be noded)."""
+    if len(points) == 0 or unclad.is_empty:
+        return np.zeros(0, dtype=object)
+    lines = shapely.shortest_line(shapely.points(points), boundary)
+    ends = shapely.get_coordinates(lines).reshape(-1, 2, 2)
+    step = ends[:, 1] - ends[:, 0]
+    length = np.linalg.norm(step, axis=1)
+    ok = length > 2 * grid
+    ends, step, length = ends[ok], step[ok], length[ok]
+    ends[:, 1] += 10 * grid * step / length[:, None]
+    segments = shapely.linestrings(ends)
+    return segments[shapely.within(shapely.line_interpolate_point(segments, 0.5, normalized=True),
+                                   unclad)]
+
+
+def _first_piece(line, origin: np.ndarray, grid: float):
+    """The part of a clipped ray that starts at `origin` (2,), as a straight segment a
+    few grid steps longer (so that it crosses the boundary it ends on and is noded
+    there), or None."""
+    parts = shapely.get_parts(line)
+    parts = parts[shapely.get_type_id(parts) == 1]
+    if len(parts) == 0:
+        return None
+    d = shapely.distance(parts, shapely.points(origin))
+    best = int(np.argmin(d))
+    if d[best] > 2 * grid or shapely.length(parts[best]) < 10 * grid:
+        return None
+    end = np.asarray(parts[best].coords)[-1]
+    step = end - origin
+    return shapely.linestrings([origin, end + 10 * grid * step / np.linalg.norm(step)])
+
+
+def _split(unclad, rays: np.ndarray, grid: float) -> np.ndarray:
+    """The pieces the rays cut the unclad region into (polygons; noded on `grid`)."""
+    if unclad.is_empty:
+        return np.zeros(0, dtype=object)
+    lines = [shapely.boundary(unclad)] + list(rays)
+    noded = shapely.union_all(np.array(lines, dtype=object), grid_size=grid)
+    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
+    if len(faces) == 0:
+        return faces
+    inside = shapely.contains(unclad, shapely.point_on_surface(faces))
+    pieces = faces[inside & (shapely.area(faces) > 0)]
+    return pieces
+
+
+def _merge_small(pieces: np.ndarray, min_area: float) -> np.ndarray:
+    """Pieces below `min_area` joined to the neighbour they share the longest side with
+    (the smallest first, one at a time); one without a neighbour stays."""
+    pieces = np.asarray(pieces, dtype=object)
+    stuck: set[int] = set()
+    while len(pieces) > 1:
+        area = shapely.area(pieces)
+        small = [i for i in np.argsort(area) if area[i] < min_area and i not in stuck]
+        if not small:
+            break
+        i = int(small[0])
+        shared = shapely.length(shapely.intersection(shapely.boundary(pieces[i]),
+                                                     shapely.boundary(pieces)))
+        shared[i] = 0.0
+        j = int(np.argmax(shared))
+        union = shapely.union(pieces[j], pieces[i]) if shared[j] > 0 else None
+        if union is None or union.geom_type != "Polygon":
+            stuck.add(i)
+            continue
+        pieces[j] = union
+        pieces = np.delete(pieces, i)
+        stuck = {k - (k > i) for k in stuck}
+    return pieces
+
+
+def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: ParameterChart,
+                boundary, rays: np.ndarray, tol: float, touching: np.ndarray) -> tuple:
+    """The pieces as polygons on the surface: corners at net vertices are those vertices,
+    the others are mapped through the chart (shared points once; points within `tol` of
+    the design boundary are first put on it, so that they land on its curve). Net
+    vertices marked `touching` (n,) bool lie on the boundary as far as corners go.
+
+    Returns
+    -------
+    vertices (m, 3), polygons (list of int arrays), on_boundary (m,) bool, corner (m,) bool,
+    and the id of every point of every piece's ring (list of int arrays, repeats kept).
+    """
+    n = mesh.vertex_count
+    if len(pieces) == 0:
+        return (mesh.vertices.copy(), [], np.zeros(n, bool), np.ones(n, bool), [])
+    rings = [np.asarray(g.exterior.coords)[:-1] for g in pieces]
+    points = np.concatenate(rings)
+    # a point is a net vertex when the parameters agree to the grid
+    d, nearest = cKDTree(p_net).query(points)
+    is_net = d <= tol
+    other = np.flatnonzero(~is_net)
+    ids = np.where(is_net, nearest, -1)
+    new_p = np.zeros((0, 2))
+    first = np.zeros(0, np.int64)
+    if other.size:
+        # the overlays are snap-rounded: equal points are equal coordinates
+        _, first, inverse = np.unique(points[other], axis=0, return_index=True, return_inverse=True)
+        ids[other] = n + inverse.ravel()
+        new_p = points[other[first]]
+    new_points = shapely.points(new_p)
+    on_boundary = np.zeros(n + len(new_p), bool)
+    on_boundary[n:] = shapely.distance(new_points, boundary) <= tol
+    exact = new_p.copy()
+    if on_boundary[n:].any():
+        at = on_boundary[n:]
+        exact[at] = shapely.get_coordinates(
+            shapely.line_interpolate_point(boundary, shapely.line_locate_point(boundary, new_points[at])))
+    # where the plane holds several sheets of the design, a point belongs to the sheet of
+    # the net vertices of its panel
+    sizes = np.array([len(r) for r in rings])
+    piece = np.repeat(np.arange(len(rings)), sizes)
+    weight = is_net.astype(np.float64)
+    count = np.bincount(piece, weight, minlength=len(rings))
+    anchor = np.stack([np.bincount(piece, weight * mesh.vertices[nearest, k], minlength=len(rings))
+                       for k in range(3)], axis=1) / np.maximum(count, 1)[:, None]
+    near: np.ndarray | None = anchor[piece[other[first]]] if other.size else np.zeros((0, 3))
+    if other.size and (count[piece[other[first]]] == 0).any():
+        near = None   # a panel without a net vertex: no sheet to prefer
+    vertices = np.vstack([mesh.vertices, chart.to_surface(exact, near)])
+    on_ray = np.zeros(len(vertices), bool)
+    if len(rays) and len(new_p):
+        on_ray[n:] = shapely.distance(new_points, shapely.union_all(rays)) <= tol
+    ring_ids = np.split(ids, np.cumsum(sizes)[:-1])
+    polygons = ring_ids
+    # drop repeated consecutive ids (two points of one ring mapped to one net vertex)
+    polygons = [q[np.r_[True, q[1:] != q[:-1]] & ~((np.arange(len(q)) == len(q) - 1) & (q == q[0]))]
+                for q in polygons]
+    # a corner is off the boundary, ends a line, or is where the outline meets or leaves
+    # the boundary; the points between follow the boundary curve
+    ring = np.concatenate(polygons)
+    before = np.concatenate([np.roll(q, 1) for q in polygons])
+    after = np.concatenate([np.roll(q, -1) for q in polygons])
+    ob = on_boundary.copy()
+    ob[:n] = touching
+    corner = np.zeros(len(vertices), bool)
+    corner[ring[(ring < n) | ~ob[ring] | ~ob[before] | ~ob[after] | on_ray[ring]]] = True
+    return vertices, polygons, on_boundary, corner, ring_ids
+
+
+def _triangles_on_surface(pieces: np.ndarray, ring_ids: list) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces triangulated in the plane (constrained Delaunay: concave outlines stay
+    whole) with corners numbered as their ring points (`ring_ids`); (t, 3) int and the
+    piece of each (t,)."""
+    if len(pieces) == 0:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    rings = [np.asarray(g.exterior.coords)[:-1] for g in pieces]
+    parts = shapely.get_parts(shapely.constrained_delaunay_triangles(pieces), return_index=True)
+    corners = shapely.get_coordinates(shapely.get_exterior_ring(parts[0])).reshape(-1, 4, 2)[:, :3]
+    owner = parts[1]
+    # a corner is a point of its piece's ring: numbered as that point is
+    points = np.concatenate(rings)
+    piece_of = np.repeat(np.arange(len(rings)), [len(r) for r in rings])
+    ids = np.concatenate(ring_ids)
+    tree = cKDTree(np.c_[points, piece_of * 1e6])
+    _, at = tree.query(np.c_[corners.reshape(-1, 2), np.repeat(owner, 3) * 1e6])
+    triangles = ids[at].reshape(-1, 3)
+    keep = (triangles[:, 0] != triangles[:, 1]) & (triangles[:, 1] != triangles[:, 2]) & \
+        (triangles[:, 0] != triangles[:, 2])
+    return triangles[keep], owner[keep]
+
+
+def _design_samples(design: DesignSurface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points spread over the design, four per triangle: (m, 3) points, their (m, 3)
+    unit normals and the (m,) area each stands for."""
+    X = design.vertices[design.triangles]
+    weights = np.array([[4, 1, 1], [1, 4, 1], [1, 1, 4], [1, 1, 1]]) / np.array([[6], [6], [6], [3]])
+    points = np.einsum("sk,tkj->tsj", weights, X).reshape(-1, 3)
+    return points, np.repeat(design.face_normals, 4, axis=0), np.repeat(design.face_areas / 4, 4)
+
+
+def _under(points: np.ndarray, normals: np.ndarray, V: np.ndarray, F: np.ndarray, h: float
+           ) -> np.ndarray:
+    """(m,) bool, design points under the panels (V, F): their closest panel point is
+    within a hundredth of a panel, or straight above or below them (the offset within
+    18 deg of the normal) and within a quarter panel. A point in a gap beside a panel
+    has its closest point on the panel's edge, off to the side."""
+    if len(F) == 0:
+        return np.zeros(len(points), bool)
+    d2, _, closest = igl.point_mesh_squared_distance(points, V, np.asarray(F, dtype=np.int64))
+    offset = closest - points
+    distance = np.sqrt(d2)
+    along = np.abs(np.sum(offset * normals, axis=1))
+    return (distance <= 0.01 * h) | ((along >= 0.95 * distance) & (distance <= 0.25 * h))
+
+
+def _sane_on_surface(pieces: np.ndarray, vertices: np.ndarray, polygons: list, h: float
+                     ) -> np.ndarray:
+    """(p,) bool, pieces whose sides on the surface are at most three times their length
+    in the plane times the panel size `h` (plus a tenth of a panel)."""
+    if not polygons:
+        return np.zeros(0, bool)
+    plane = [np.asarray(g.exterior.coords)[:-1] for g in pieces]
+    ok = np.ones(len(polygons), bool)
+    for k, (q, r) in enumerate(zip(polygons, plane, strict=True)):
+        if len(q) != len(r):      # a ring with points merged into one net vertex
+            r = r[:len(q)] if len(r) > len(q) else r
+        side3 = np.linalg.norm(vertices[q] - vertices[np.roll(q, -1)], axis=1).sum()
+        side2 = np.linalg.norm(r - np.roll(r, -1, axis=0), axis=1).sum()
+        ok[k] = side3 <= 3 * h * side2 + 0.1 * h
+    return ok
+
+
+def _neighbour_faces(polygons: list, mesh: QuadMesh) -> np.ndarray:
+    """(p,) int, the net face sharing a side (two consecutive net vertices) with each
+    panel, the longest such side deciding; -1 where none."""
+    out = np.full(len(polygons), -1)
+    if not polygons:
+        return out
+    n = mesh.vertex_count
+    face, vert, nxt, _ = _corner_table(mesh)
+    a = np.concatenate(polygons)
+    b = np.concatenate([np.roll(q, -1) for q in polygons])
+    panel = np.repeat(np.arange(len(polygons)), [len(q) for q in polygons])
+    net_side = (a < n) & (b < n)
+    a, b, panel = a[net_side], b[net_side], panel[net_side]
+    # the panel runs along the face's half-edge the other way
+    key = vert * n + nxt
+    order = np.argsort(key)
+    at = np.clip(np.searchsorted(key[order], b * n + a), 0, len(key) - 1)
+    found = key[order][at] == b * n + a
+    a, b, panel, corner = a[found], b[found], panel[found], order[at[found]]
+    length = np.linalg.norm(mesh.vertices[a] - mesh.vertices[b], axis=1)
+    best = np.lexsort((-length, panel))
+    first = best[np.r_[True, panel[best][1:] != panel[best][:-1]]]
+    out[panel[first]] = face[corner[first]]
+    return out
+
+
+def _corner_table(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per face corner: its face, vertex, next and previous vertex (each (c,) int)."""
+    sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
+    face = np.repeat(np.arange(len(sizes)), sizes)
+    local = np.arange(len(idx)) - ptr[face]
+    nxt = idx[np.where(local == sizes[face] - 1, ptr[face], np.arange(len(idx)) + 1)]
+    prv = idx[np.where(local == 0, ptr[face] + sizes[face] - 1, np.arange(len(idx)) - 1)]
+    return face, idx, nxt, prv
+
+
+def _flipped(vertices: np.ndarray, polygons: list, design: DesignSurface, min_area: float
+             ) -> np.ndarray:
+    """(k,) int, panels facing against the design: their vector area, longer than twice
+    `min_area` (a sliver's is noise), against the design's normal at the closest point to
+    their centroid."""
+    if not polygons:
+        return np.zeros(0, np.int64)
+    X = vertices
+    ring = np.concatenate(polygons)
+    after = np.concatenate([np.roll(q, -1) for q in polygons])
+    count = np.array([len(q) for q in polygons])
+    panel = np.repeat(np.arange(len(polygons)), count)
+    cross = np.cross(X[ring], X[after])
+    vector = np.stack([np.bincount(panel, cross[:, k], minlength=len(polygons)) for k in range(3)],
+                      axis=1)
+    centroid = np.stack([np.bincount(panel, X[ring, k], minlength=len(polygons)) for k in range(3)],
+                        axis=1) / count[:, None]
+    _, _, tri = design.reference.closest_points(centroid)
+    size = np.linalg.norm(vector, axis=1)
+    return np.flatnonzero((np.sum(vector * design.face_normals[tri], axis=1) <= 0)
+                          & (size > 2 * min_area))
+
+
+def _boundary_distance(design: DesignSurface, points: np.ndarray) -> float:
+    """Largest distance of points from the design's boundary curve (model units): to
+    the exact boundary of a built-in design (its parameter domain's edges), to the
+    boundary polylines of a mesh design."""
+    from ..solve.constraints.closeness import closest_points_on_polylines
+
+    if len(points) == 0:
+        return 0.0
+    if design.parametric is not None and design.uv is not None:
+        foot, _, tri = design.reference.closest_points(points)
+        X = design.vertices[design.triangles[tri]]
+        bary = igl.barycentric_coordinates(foot, X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy())
+        uv = design.parametric.closest_parameters(
+            points, np.einsum("mk,mkj->mj", bary, design.triangle_uv(tri)))
+        (u0, u1), (v0, v1) = design.parametric.domain
+        edge = np.stack([uv[:, 0] - u0, u1 - uv[:, 0], uv[:, 1] - v0, v1 - uv[:, 1]], axis=1)
+        if design.parametric.periodic_u:
+            edge = edge[:, 2:]
+        uv_edge = uv.copy()
+        side = np.argmin(edge, axis=1) + (2 if design.parametric.periodic_u else 0)
+        uv_edge[side == 0, 0], uv_edge[side == 1, 0] = u0, u1
+        uv_edge[side == 2, 1], uv_edge[side == 3, 1] = v0, v1
+        exact = design.parametric.points(uv_edge[:, 0], uv_edge[:, 1])
+        return float(np.linalg.norm(exact - points, axis=1).max())
+    foot, _ = closest_points_on_polylines(points, design.boundary_curves())
+    return float(np.linalg.norm(foot - points, axis=1).max())
