@@ -325,6 +325,11 @@ def layout_warnings(properties: dict) -> list:
     if coverage < 0.999:
         out.append(f"the panels cover only {100 * coverage:.1f} % of the design surface "
                    "(measured by area on the design; see properties.boundary_panels in the JSON)")
+    net = properties.get("coverage_net", coverage)
+    if coverage - net > 0.1:
+        out.append(f"the full panels cover only {100 * net:.0f} % of the design: the layout stops far "
+                   "short of the boundary or leaves holes, and boundary panels and patches cover "
+                   f"{100 * (coverage - net):.0f} % (try a smaller --panel-size)")
     flipped = (properties.get("boundary_panels") or {}).get("flipped") or []
     if flipped:
         out.append(f"{len(flipped)} boundary panels face against the design (ids under "

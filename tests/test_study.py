@@ -25,6 +25,7 @@ from fabplan.cli import main
 from fabplan.design.load import load_design
 from fabplan.errors import InputError, SolverError
 from fabplan.fabricate.molds import plan_molds
+from fabplan.io.obj import read_obj
 from fabplan.net.geometry import canonical_stars, fit_star_spheres
 from fabplan.net.mesh import QuadMesh, load_mesh
 from fabplan.study.report import check_output_folder, study_html, study_record
@@ -277,7 +278,9 @@ def test_every_verdict_traces_to_a_measured_number(study_run):
         m = c["metrics"]
         assert verdict(m, limits) == c["checks"]
         by_limit = {ck["limit"]: ck for ck in c["checks"]}
-        assert by_limit["max_deviation_mm"]["measured"] == m["deviation_mm"]["max"]
+        # the net's vertices and its boundary panels on their neighbours' molds
+        edge = (m["boundary_panels"] or {}).get("deviation_max_mm")
+        assert by_limit["max_deviation_mm"]["measured"] == max(m["deviation_mm"]["max"], edge or 0.0)
         assert by_limit["max_kink_deg"]["measured"] == m["kink_deg"]["max"]
         assert by_limit["mold_tolerance_mm"]["measured"] == m["molds"]["max_deviation_mm"]
         for ck in c["checks"]:
@@ -307,9 +310,17 @@ def test_candidate_files_are_real(study_run):
         assert residual == pytest.approx(measured["properties"]["sphere_residual_relative"]["max"],
                                          rel=1e-3, abs=1e-12)
         rows = (out / outputs["molds_csv"]).read_text(encoding="utf-8").strip().splitlines()
-        assert len(rows) - 1 == c["metrics"]["panels"]
+        # the full panels in molds.csv, the boundary panels (not the slivers cut as part
+        # of a full panel) in boundary-panels.csv
+        edge = (out / outputs["boundary_panels_csv"]).read_text(encoding="utf-8").splitlines()
+        own = [r for r in edge[1:] if r.split(",")[1] != "extension"]
+        assert len(rows) - 1 + len(own) == c["metrics"]["panels"]
+        assert len(own) == c["metrics"]["boundary_panels"]["count"]
+        _, faces = read_obj(out / outputs["boundary_panels"])
+        assert len(faces) == len(edge) - 1
         curved = {int(r.split(",")[1]) for r in rows[1:] if r.split(",")[2] != "planar"}
-        assert len(curved) == c["metrics"]["molds"]["count"]       # flat panels need none
+        own_molds = sum(1 for r in edge[1:] if r.split(",")[3] == "own")
+        assert len(curved) + own_molds == c["metrics"]["molds"]["count"]   # flat panels need none
 
 
 def test_lamella_candidates_get_strips_that_read_back(study_run):
@@ -749,6 +760,6 @@ def test_the_report_says_how_much_of_the_design_is_clad_and_whether_nets_fold(st
         m = c["metrics"]
         assert float(rows[c["name"]]["coverage"]) == pytest.approx(m["coverage"], rel=1e-5)
         assert rows[c["name"]]["folded"] == ("yes" if m["folds"]["folded"] else "no")
-        assert f"{100 * m['coverage']:.1f} % of the design's area" in page
+        assert f"{100 * m['coverage']:.2f} % of the design's area" in page
         if m["coverage"] < 0.999:
             assert f"{100 * (1 - m['coverage']):.1f} % is left unclad" in page

@@ -41,6 +41,12 @@ def _run(name: str, folder) -> dict:
     assert (folder / "report.html").stat().st_size > 100_000          # pictures embedded
     assert all(c["error"] is None for c in record["candidates"]), \
         [c["error"] for c in record["candidates"]]
+    # the whole facade is clad: full panels and boundary panels trimmed to the design
+    for c in record["candidates"]:
+        assert c["metrics"]["coverage"] >= 0.999, (c["name"], c["metrics"]["coverage"])
+        assert c["metrics"]["boundary_panels"]["flipped"] == 0
+    report = (folder / "report.html").read_text(encoding="utf-8")
+    assert "boundary panel" in report and "design covered" in report
     return record
 
 

@@ -7,9 +7,9 @@ edge, and the boundary panel is that surface cut to the boundary outline. What i
 checked is how far that surface stays from the design over the boundary panel: every
 outline point (on the design) is placed by the neighbour's placement and its gap to the
 mold measured (`fabplan.fabricate.molds.placement_deviations`, an upper bound of the
-distance). A panel whose gap exceeds the allowed deviation, or that touches the net only
-at a corner, needs a mold of its own: counted as one more mold each (an upper bound: such
-panels are few and rarely share a shape).
+distance). A panel whose gap exceeds the allowed deviation needs a mold of its own:
+counted as one more mold each (an upper bound: such panels are few and rarely share a
+shape).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 from ..layout.trim import BoundaryPanels
 from .molds import MoldPlan, placement_deviations
 
-__all__ = ["BoundaryMolds", "boundary_molds"]
+__all__ = ["BoundaryMolds", "boundary_molds", "boundary_panels_csv"]
 
 
 @dataclass
@@ -35,16 +35,20 @@ class BoundaryMolds:
     deviation_mm : (p,) float, the largest gap between the panel's outline on the design
         and its neighbour's mold surface (mm; inf without a neighbour).
     limit_mm : the gap allowed.
+    extension : (p,) bool, slivers made as part of their neighbour (not panels).
     """
 
     neighbour_face: np.ndarray
     mold: np.ndarray
     deviation_mm: np.ndarray
     limit_mm: float
+    extension: np.ndarray
 
     @property
     def count(self) -> int:
-        return len(self.mold)
+        """Boundary panels made as panels of their own (extensions of full panels not
+        counted)."""
+        return int(np.sum(~self.extension))
 
     @property
     def own_molds(self) -> int:
@@ -56,6 +60,7 @@ class BoundaryMolds:
         fits = np.isfinite(self.deviation_mm) & (self.mold >= 0)
         return {
             "panels": self.count,
+            "extensions_of_full_panels": int(self.extension.sum()),
             "cut_from_neighbour_mold": int(fits.sum()),
             "own_molds": self.own_molds,
             "deviation_limit_mm": self.limit_mm,
@@ -63,6 +68,22 @@ class BoundaryMolds:
             "mold": self.mold.tolist(),
             "neighbour_face": self.neighbour_face.tolist(),
         }
+
+
+def boundary_panels_csv(panels: BoundaryPanels, molds: BoundaryMolds) -> str:
+    """One row per boundary panel: its id (its face in ``NAME.boundary.obj``), what it is
+    (a trimmed panel, a patch closing a hole, or an extension cut as part of the full
+    panel beside it), the full panel it continues, its mold (``own`` for one of its own),
+    its gap to that mold (mm), its corners and its area (model units squared)."""
+    kind = np.where(panels.extension, "extension", np.where(panels.patch, "patch", "trimmed"))
+    corners = panels.corner_counts()
+    rows = ["panel,kind,neighbour_face,mold,deviation_mm,corners,area"]
+    for k in range(panels.count):
+        mold = str(molds.mold[k]) if molds.mold[k] >= 0 else "own"
+        gap = f"{molds.deviation_mm[k]:.6g}" if np.isfinite(molds.deviation_mm[k]) else ""
+        rows.append(f"{k},{kind[k]},{panels.neighbour_face[k]},{mold},{gap},{corners[k]},"
+                    f"{panels.area[k]:.9g}")
+    return "\n".join(rows) + "\n"
 
 
 def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> BoundaryMolds:
@@ -82,7 +103,8 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> B
     p = panels.count
     face = np.asarray(panels.neighbour_face, dtype=np.int64)
     if p == 0:
-        return BoundaryMolds(face, np.zeros(0, np.int64), np.zeros(0), float(limit_mm))
+        return BoundaryMolds(face, np.zeros(0, np.int64), np.zeros(0), float(limit_mm),
+                             np.zeros(0, bool))
     # the outline points of every panel, padded by repeating its first point
     size = max(len(q) for q in panels.polygons)
     idx = np.array([np.r_[q, np.full(size - len(q), q[0])] for q in panels.polygons])
@@ -94,4 +116,4 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> B
         deviation[has] = placement_deviations(points[has], plan.placement[f],
                                               plan.mold_shape[plan.mold[f]])
     mold = np.where(has & (deviation <= limit_mm), plan.mold[np.maximum(face, 0)], -1)
-    return BoundaryMolds(face, mold, deviation, float(limit_mm))
+    return BoundaryMolds(face, mold, deviation, float(limit_mm), np.asarray(panels.extension, bool))

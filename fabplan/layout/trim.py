@@ -61,8 +61,8 @@ class BoundaryPanels:
     on_boundary : (m,) bool, points on the design's boundary curve.
     corner : (m,) bool, panel corners: net vertices, ends of the extended lines and
         crossings off the boundary (the other points follow the boundary curve).
-    neighbour_face : (p,) int, the net face each panel shares its longest side with (the
-        panel it continues; -1 for a panel touching the net only at a corner).
+    neighbour_face : (p,) int, the net face each panel continues: the one it shares its
+        longest side with, else (a corner cell, a sliver) the nearest one.
     area : (p,) float, area of each panel on the design (model units squared).
     panel_size : the layout's panel size.
     coverage_net : share of the design's area the net's full panels cover.
@@ -70,6 +70,9 @@ class BoundaryPanels:
     flipped : (k,) int, panels that face against the design (none in a sound result).
     patch : (p,) bool, the panels that close a hole inside the net (not reaching the
         design boundary).
+    extension : (p,) bool, slivers under `min_panel` of a full panel along the side of a
+        full panel: made as part of that panel (cut larger from its mold), not as panels
+        of their own.
     boundary_distance_max : largest distance of a point flagged `on_boundary` from the
         design's boundary curve (the exact one for a built-in design), in panel sizes.
     seconds : time taken.
@@ -87,12 +90,19 @@ class BoundaryPanels:
     coverage: float
     flipped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     patch: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    extension: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     boundary_distance_max: float = 0.0
     seconds: float = 0.0
 
     @property
     def count(self) -> int:
+        """All pieces, extensions of full panels included (the rows of every array)."""
         return len(self.polygons)
+
+    @property
+    def panel_count(self) -> int:
+        """The boundary panels made as panels of their own (not extensions)."""
+        return int(np.sum(~self.extension))
 
     def corner_counts(self) -> np.ndarray:
         """(p,) int, corners of each panel: net vertices and ends of the extended lines
@@ -102,18 +112,19 @@ class BoundaryPanels:
     def record(self) -> dict:
         """JSON-ready summary."""
         full = self.panel_size ** 2
+        own = self.area[~self.extension]
         return {
-            "count": self.count,
+            "count": self.panel_count,
+            "extensions": np.flatnonzero(self.extension).tolist(),
             "coverage_net": self.coverage_net,
             "coverage": self.coverage,
-            "area_relative_to_panel": None if not self.count else {
-                "min": float(self.area.min() / full), "max": float(self.area.max() / full),
-                "mean": float(self.area.mean() / full)},
-            "corners": {str(k): int(c) for k, c in enumerate(np.bincount(self.corner_counts()))
-                        if c},
+            "area_relative_to_panel": None if not self.panel_count else {
+                "min": float(own.min() / full), "max": float(own.max() / full),
+                "mean": float(own.mean() / full)},
+            "corners": {str(k): int(c) for k, c in
+                        enumerate(np.bincount(self.corner_counts()[~self.extension])) if c},
             "outline_points_max": max((len(p) for p in self.polygons), default=0),
             "flipped": self.flipped.tolist(),
-            "without_neighbour_face": int(np.sum(self.neighbour_face < 0)),
             "boundary_distance_max_relative_to_panel": self.boundary_distance_max,
             "patches": np.flatnonzero(self.patch).tolist(),
             "uncovered": 1.0 - self.coverage,
@@ -165,7 +176,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     rays = np.concatenate([
         _clipped_rays(mesh, p_net, unclad, ~touching, grid),
         _connectors(p_net[touching & mesh.is_boundary_vertex], boundary, unclad, grid)])
-    pieces = _split(unclad, rays, grid)
+    pieces = _split_large(_split(unclad, rays, grid), 1.5 * cell, grid)
     # specks of rounding size are no panels (their area stays in the uncovered share)
     pieces = shapely.orient_polygons(
         _merge_small(pieces[shapely.area(pieces) > 1e-6 * cell], min_panel * cell))
@@ -195,13 +206,26 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     on_any = on_net | _under(samples, normals, vertices, triangles, h)
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    area = np.bincount(owner, tri_area, minlength=len(polygons))
+    neighbour = _neighbour_faces(polygons, mesh)
+    extension = area < min_panel * h * h
+    # a piece touching no full panel along a side (a corner cell, a sliver) continues the
+    # nearest one
+    lone = np.flatnonzero(neighbour < 0)
+    if lone.size:
+        centre = np.array([vertices[polygons[k]].mean(axis=0) for k in lone])
+        face_centre = np.stack([np.bincount(np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes),
+                                            mesh.vertices[mesh.face_indices, k]) for k in range(3)],
+                               axis=1) / mesh.face_sizes[:, None]
+        neighbour[lone] = cKDTree(face_centre).query(centre)[1]
+    flipped = _flipped(vertices, polygons, design, 1e-3 * h * h)
     return BoundaryPanels(
         vertices=vertices, polygons=polygons, net_vertex_count=mesh.vertex_count,
-        on_boundary=on_boundary, corner=corner, neighbour_face=_neighbour_faces(polygons, mesh),
-        area=np.bincount(owner, tri_area, minlength=len(polygons)), panel_size=h,
+        on_boundary=on_boundary, corner=corner, neighbour_face=neighbour,
+        area=area, panel_size=h, extension=extension,
         coverage_net=float(weight[on_net].sum() / weight.sum()),
         coverage=float(weight[on_any].sum() / weight.sum()),
-        flipped=_flipped(vertices, polygons, design, 1e-3 * h * h), patch=patch,
+        flipped=flipped[~extension[flipped]], patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
         seconds=time.perf_counter() - clock)
 
@@ -470,6 +494,24 @@ def _split(unclad, rays: np.ndarray, grid: float) -> np.ndarray:
     inside = shapely.contains(unclad, shapely.point_on_surface(faces))
     pieces = faces[inside & (shapely.area(faces) > 0)]
     return pieces
+
+
+def _split_large(pieces: np.ndarray, max_area: float, grid: float) -> np.ndarray:
+    """Pieces above `max_area` (where the net stops more than a panel short of the
+    boundary) cut further by the lattice lines ``phi = k``, ``psi = k`` that cross them:
+    the lines the net would have there."""
+    big = shapely.area(pieces) > max_area
+    if not big.any():
+        return pieces
+    out = [pieces[~big]]
+    for piece in pieces[big]:
+        x0, y0, x1, y1 = piece.bounds
+        xs = np.arange(np.ceil(x0), np.floor(x1) + 1)
+        ys = np.arange(np.ceil(y0), np.floor(y1) + 1)
+        lines = [shapely.linestrings([[x, y0 - 1], [x, y1 + 1]]) for x in xs] + \
+            [shapely.linestrings([[x0 - 1, y], [x1 + 1, y]]) for y in ys]
+        out.append(_split(piece, np.array(lines, dtype=object), grid) if lines else np.array([piece]))
+    return np.concatenate(out)
 
 
 def _merge_small(pieces: np.ndarray, min_area: float) -> np.ndarray:

@@ -574,6 +574,7 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
     """Write one candidate's files into `folder`; `twin` is the folder of the earlier
     candidate whose net (and strip plan) this one shares, if any: its checked strip files
     are copied rather than made and read back a second time."""
+    from ..fabricate.boundary_molds import boundary_panels_csv
     from ..fabricate.dxf import preview_png, sheet_document
 
     study = result.study
@@ -587,10 +588,16 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
     outputs: dict[str, str | list[str]] = {
         "net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
         "molds_json": "molds.json", "picture": "net.png"}
+    if net.boundary_panels is not None and c.boundary_molds is not None:
+        output.write_texts({folder / "boundary-panels.csv": boundary_panels_csv(
+            net.boundary_panels, c.boundary_molds)})
+        outputs["boundary_panels"] = "net.boundary.obj"
+        outputs["boundary_panels_csv"] = "boundary-panels.csv"
     title = f"{c.name}: {c.candidate.describe()}"
     write_layout_picture(folder / "net.png", result.design, net.mesh, title=title,
                          singular_points=c.layout.singular_points if c.layout else None,
-                         marks=fairness_marks(net.properties))
+                         marks=fairness_marks(net.properties),
+                         boundary_panels=net.boundary_panels)
     pictures = {"net": _png_uri(folder / "net.png"),
                 "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
                                               study.design.mm_per_unit)}

@@ -85,6 +85,7 @@ class CandidateResult:
         `same_net`), or None.
     notes : remarks beside the verdict (that it is the same net as another candidate).
     net, molds, strips, layout : the objects behind the metrics (for the files).
+    boundary_molds : the molds of the net's boundary panels (`BoundaryMolds`), or None.
     deviation_mm : (n,) float, distance of every net vertex from the design (mm), which
         the deviation metrics and the heat map are made of.
     """
@@ -105,6 +106,7 @@ class CandidateResult:
     molds: MoldPlan | None = None
     strips: StripPlan | None = None
     layout: SurfaceLayout | None = None
+    boundary_molds: BoundaryMolds | None = None
 
     @property
     def name(self) -> str:
@@ -420,7 +422,7 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
                                 deviation_mm=deviation, boundary=bounds)
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
-                           layout=solved.layout,
+                           layout=solved.layout, boundary_molds=bounds,
                            same_net_as=twin.name if twin is not None else None,
                            deviation_mm=deviation)
 
@@ -581,8 +583,9 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
         per_mold += np.bincount(boundary.mold[cut], minlength=len(per_mold))
         own = boundary.own_molds
         double = PANEL_TYPES.index("double_curved")
-        panel_type = np.r_[panel_type, np.where(cut, plan.panel_type[np.maximum(boundary.neighbour_face, 0)],
-                                                double)]
+        own_panel = ~boundary.extension
+        panel_type = np.r_[panel_type, np.where(
+            cut, plan.panel_type[np.maximum(boundary.neighbour_face, 0)], double)[own_panel]]
     count = int(curved.sum()) + own
     panels = len(panel_type)
     return {

@@ -1,0 +1,155 @@
+"""Boundary panels: nets trimmed to the design boundary, checked by code independent of
+`fabplan.layout.trim`: corners measured against the boundary curves, tiling checked by
+polygon overlays in the design's own xy-plane (the designs here are height fields)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import shapely
+
+from fabplan.cli import main
+from fabplan.design.load import load_design
+from fabplan.design.mesh_surface import DesignSurface
+from fabplan.fabricate.boundary_molds import boundary_molds
+from fabplan.fabricate.molds import MoldSettings, plan_molds
+from fabplan.io.obj import read_obj
+from fabplan.layout.surface_layout import glide, layout_surface
+
+
+def _wavy_door_facade(width: float = 12.0, height: float = 6.0, cells: int = 96) -> DesignSurface:
+    """A wavy facade z = f(x, y) on a grid, without the triangles of a door (2 x 2.4 m)."""
+    nx, ny = cells, cells * height // width
+    x, y = np.meshgrid(np.linspace(0, width, nx + 1), np.linspace(0, height, int(ny) + 1),
+                       indexing="ij")
+    z = 0.35 * np.sin(x / 2.1) * np.cos(y / 1.7) + 0.02 * x * y / 6
+    V = np.stack([x, y, z], axis=-1).reshape(-1, 3)
+    idx = np.arange(V.shape[0]).reshape(x.shape)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    centre = V[T].mean(axis=1)
+    door = (np.abs(centre[:, 0] - 5.0) < 1.0) & (centre[:, 1] < 2.4)
+    return DesignSurface(V, T[~door], name="door-facade")
+
+
+def _distance_to_polylines(points: np.ndarray, curves: list) -> np.ndarray:
+    """Distance of points to closed polylines, brute force over every segment."""
+    a = np.concatenate(curves)
+    b = np.concatenate([np.roll(c, -1, axis=0) for c in curves])
+    ab = b - a
+    t = np.clip(np.einsum("psk,sk->ps", points[:, None, :] - a[None], ab) / np.sum(ab * ab, axis=1),
+                0, 1)
+    foot = a[None] + t[..., None] * ab[None]
+    return np.linalg.norm(foot - points[:, None, :], axis=2).min(axis=1)
+
+
+@pytest.fixture(scope="module")
+def door():
+    design = _wavy_door_facade()
+    layout = layout_surface(design, 0.6)
+    return design, layout, glide(layout, "snet")
+
+
+def test_door_facade_is_clad_to_its_edges_and_the_door(door):
+    design, layout, net = door
+    panels = net.boundary_panels
+    assert net.converged
+    assert panels.coverage >= 0.999
+    assert net.properties["coverage"] == panels.coverage
+    assert panels.coverage_net < panels.coverage
+    # every corner on the boundary lies on the boundary curve: the outline and the door
+    h = layout.panel_size
+    on = panels.vertices[panels.on_boundary]
+    assert len(on) > 0
+    assert _distance_to_polylines(on, design.boundary_curves()).max() <= 1e-6 * h
+    # some corners lie on the door's edges (the inner boundary loop)
+    door_loop = min(design.boundary_curves(), key=len)
+    assert (_distance_to_polylines(on, [door_loop]) <= 1e-6 * h).sum() >= 4
+
+
+def test_door_facade_panels_tile_without_overlap(door):
+    """In the xy-plane (the facade's own parametrization): net faces and boundary panels
+    overlap by nothing and together cover the design."""
+    design, layout, net = door
+    panels = net.boundary_panels
+    X = net.mesh.vertices
+    polygons = [shapely.Polygon(X[f][:, :2]) for f in net.mesh.faces]
+    polygons += [shapely.Polygon(panels.vertices[p][:, :2]) for p in panels.polygons]
+    polygons = [shapely.make_valid(p) for p in polygons]
+    total = sum(p.area for p in polygons)
+    union = shapely.union_all(polygons)
+    domain = shapely.union_all([shapely.Polygon(t) for t in design.vertices[design.triangles][:, :, :2]])
+    assert total - union.area <= 1e-3 * domain.area              # no overlap
+    assert shapely.intersection(union, domain).area >= 0.999 * domain.area
+    assert shapely.difference(union, domain).area <= 2e-3 * domain.area   # nothing outside
+
+
+def test_boundary_panels_are_fair_pieces_of_the_lattice(door):
+    """Boundary panels are trimmed cells: no larger than 1.5 panels, with 2 (a net edge
+    and the boundary arc over it) to 5 corners, none facing against the design."""
+    _, layout, net = door
+    panels = net.boundary_panels
+    own = ~panels.extension
+    assert panels.panel_count > 10
+    assert panels.area[own].max() <= 1.6 * layout.panel_size ** 2
+    corners = panels.corner_counts()[own]
+    assert np.all((corners >= 2) & (corners <= 5))
+    assert len(panels.flipped) == 0
+
+
+def test_corners_lie_on_the_exact_boundary_of_a_built_in_surface():
+    design = load_design("hyperbolic-paraboloid:width=6,depth=4,rise=2", triangles=4000)
+    layout = layout_surface(design, 0.8)
+    net = glide(layout, "snet")
+    panels = net.boundary_panels
+    on = panels.vertices[panels.on_boundary]
+    assert len(on) > 0
+    # over [-6, 6] x [-4, 4]: the boundary is |x| = 6 or |y| = 4
+    edge = np.minimum(np.abs(np.abs(on[:, 0]) - 6), np.abs(np.abs(on[:, 1]) - 4))
+    assert edge.max() <= 1e-6 * layout.panel_size
+    # ... on the exact surface, not on the chords of its triangulation
+    assert design.parametric is not None
+    exact = design.parametric.closest_parameters(on, np.zeros((len(on), 2)))
+    assert np.abs(design.parametric.points(exact[:, 0], exact[:, 1]) - on).max() <= 1e-9
+    assert panels.boundary_distance_max <= 1e-6
+    assert panels.coverage >= 0.999
+
+
+def test_boundary_panels_are_cut_from_their_neighbours_molds(door):
+    design, _, net = door
+    panels = net.boundary_panels
+    plan = plan_molds(net.mesh, MoldSettings(tolerance_mm=5.0, units="m"))
+    fit = boundary_molds(plan, panels, limit_mm=50.0)
+    assert np.all(panels.neighbour_face >= 0)
+    placed = fit.mold >= 0
+    assert np.array_equal(fit.mold[placed], plan.mold[panels.neighbour_face[placed]])
+    assert np.all(fit.deviation_mm[placed] <= 50.0)
+    # the gap is measured: the outline points of the design really are that close to the
+    # neighbour's mold surface, recomputed here from the placement
+    k = int(np.flatnonzero(placed)[0])
+    f = panels.neighbour_face[k]
+    P = plan.placement[f]
+    q = panels.vertices[panels.polygons[k]] @ P[:3, :3].T + P[:3, 3]
+    k1, k2 = plan.mold_shape[plan.mold[f]]
+    gap = np.abs(q[:, 2] - 0.5 * (k1 * q[:, 0] ** 2 + k2 * q[:, 1] ** 2)).max()
+    assert gap == pytest.approx(fit.deviation_mm[k], rel=1e-9, abs=1e-9)
+    # below the smallest gap no boundary panel fits its neighbour's mold
+    tight = boundary_molds(plan, panels, limit_mm=fit.deviation_mm[placed].min() / 2)
+    assert tight.own_molds == panels.count
+
+
+def test_layout_writes_the_boundary_panels_beside_the_net(tmp_path):
+    out = tmp_path / "hp.obj"
+    assert main(["layout", "hyperbolic-paraboloid", "--net", "snet", "--panel-size", "1",
+                 "-o", str(out)]) == 0
+    record = json.loads(out.with_suffix(".json").read_text())
+    props = record["properties"]
+    trimmed = props["boundary_panels"]
+    assert props["coverage"] >= 0.999 > props["coverage_net"]
+    net_v, _ = read_obj(out)
+    V, faces = read_obj(tmp_path / "hp.boundary.obj")
+    assert np.array_equal(V[:len(net_v)], net_v)        # the net's vertices, numbered alike
+    assert len(faces) == trimmed["count"] + len(trimmed["extensions"])
+    assert all(len(f) >= 3 for f in faces)
