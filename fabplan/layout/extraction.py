@@ -192,9 +192,11 @@ def extract_quads(P2: np.ndarray, X3: np.ndarray, normals: np.ndarray, panel_siz
     return vertices, quads[np.sort(first_q)], keys
 
 
-def clean_quads(vertices: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Largest edge-connected piece, no edge used twice in one direction or by three faces,
-    no pinched vertex.
+def clean_quads(vertices: np.ndarray, quads: np.ndarray, *, min_piece: int = 12
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Edge-connected pieces of at least `min_piece` quads (and the largest in any case:
+    where the directions have seams, the lattice comes in pieces that together clad the
+    design), no edge used twice in one direction or by three faces, no pinched vertex.
 
     Returns
     -------
@@ -231,7 +233,9 @@ def clean_quads(vertices: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np
                             shape=(len(quads),) * 2)
         ncomp, label = csgraph.connected_components(adj, directed=False)
         if ncomp > 1:
-            bad |= label != np.argmax(np.bincount(label))
+            size = np.bincount(label)
+            small = (size < min_piece) & (np.arange(ncomp) != np.argmax(size))
+            bad |= small[label]
         if not bad.any():
             break
         quads = quads[~bad]
