@@ -132,8 +132,9 @@ class ClosestPoints:
     points : (m, 3) float, the closest points (model units).
     distances : (m,) float, distance of each query point from its closest point.
     converged : (m,) bool, the first-order condition holds: the offset is normal to the
-        surface (cosine to both tangents below `tolerance`), or the tangents it leans on
-        point out of the domain at its edge, or the point lies on the surface.
+        surface (its cosine to both tangents below the tolerance, with a floor of 1e-13 of
+        the surface's size for the tangential part of points on it), where at an edge of
+        the domain a tangent the offset leans out along does not count.
     iterations : Newton iterations taken.
     """
 
@@ -326,7 +327,8 @@ class NurbsSurface(ParametricSurface):
         uv = self.seed_parameters(P) if start is None else \
             self._inside(np.array(start, dtype=np.float64).reshape(-1, 2))
         active = np.ones(len(P), bool)
-        tiny = (1e-15 * float(np.ptp(self.control_points.reshape(-1, 3), axis=0).max())) ** 2
+        extent = float(np.ptp(self.control_points.reshape(-1, 3), axis=0).max())
+        tiny = (1e-15 * extent) ** 2
         best = np.sum((self.points(uv[:, 0], uv[:, 1]) - P) ** 2, axis=1)
         done = 0
         for done in range(1, iterations + 1):
@@ -348,16 +350,24 @@ class NurbsSurface(ParametricSurface):
             # at the domain's edge, a parameter whose descent leads out stays there and the
             # other one is solved for alone
             pin_u, pin_v = self._outward(uv[idx], gu, gv)
+            # a point that already meets a tenth of the tolerance stops here
+            allowed = 0.1 * tolerance * np.linalg.norm(r, axis=1) + 1e-14 * extent
+            met = (((np.abs(gu) <= allowed * np.sqrt(a)) | pin_u)
+                   & ((np.abs(gv) <= allowed * np.sqrt(c)) | pin_v))
+            active[idx[met]] = False
             step[pin_u] = np.stack([np.zeros(pin_u.sum()), gv[pin_u] / hc[pin_u]], axis=1)
             step[pin_v] = np.stack([gu[pin_v] / ha[pin_v], np.zeros(pin_v.sum())], axis=1)
-            step[pin_u & pin_v] = 0.0
+            step[(pin_u & pin_v) | met] = 0.0
             moved = np.zeros(len(idx), bool)
-            for _ in range(9):
+            # a full Newton step shorter than a tenth of the distance is taken as it is:
+            # there the squared distance no longer resolves the last steps (rounding), and
+            # Newton's method converges quadratically
+            short = newton & (np.linalg.norm(step[:, :1] * Su + step[:, 1:] * Sv, axis=1)
+                              <= 0.1 * np.sqrt(best[idx]))
+            for attempt in range(9):
                 trial = self._inside(uv[idx] - step)
                 d2 = np.sum((self.points(trial[:, 0], trial[:, 1]) - P[idx]) ** 2, axis=1)
-                # rounding-level increases are accepted: near the solution the squared
-                # distance no longer resolves the last Newton steps
-                better = (d2 <= best[idx] * (1 + 1e-12) + tiny) & ~moved
+                better = ((d2 <= best[idx] * (1 + 1e-12) + tiny) | (short & (attempt == 0))) & ~moved
                 uv[idx[better]], best[idx[better]] = trial[better], d2[better]
                 moved |= better
                 if moved.all():
@@ -388,11 +398,13 @@ class NurbsSurface(ParametricSurface):
         gu, gv = np.sum(Su * offset, axis=1), np.sum(Sv * offset, axis=1)
         pin_u, pin_v = self._outward(uv, gu, gv)
         gu, gv = np.where(pin_u, 0.0, gu), np.where(pin_v, 0.0, gv)
+        # the tangential part of the offset: against the distance (a cosine), with a floor
+        # at the rounding of the coordinates for points on the surface
         r = np.linalg.norm(offset, axis=1)
-        cu = np.abs(gu) / (np.linalg.norm(Su, axis=1) * r + 1e-300)
-        cv = np.abs(gv) / (np.linalg.norm(Sv, axis=1) * r + 1e-300)
         extent = float(np.ptp(self.control_points.reshape(-1, 3), axis=0).max())
-        return ((cu <= tolerance) & (cv <= tolerance)) | (r <= 1e-12 * extent)
+        allowed = tolerance * r + 1e-13 * extent
+        return (np.abs(gu) <= allowed * np.linalg.norm(Su, axis=1)) & \
+            (np.abs(gv) <= allowed * np.linalg.norm(Sv, axis=1))
 
     def closest_parameters(self, points: np.ndarray, start: np.ndarray, *,
                            iterations: int = 30) -> np.ndarray:

@@ -307,13 +307,13 @@ def read_3dm(path: str | os.PathLike, *, layer: str | None = None, object_name: 
     usable = [e for e in picked if e.usable]
     said = " and ".join(f"{k} {v!r}" for k, v in choice.items() if k != "face")
     if not usable:
+        if not said:
+            raise InputError(f"{path}: no surface, polysurface or mesh to read; {holds}")
         if picked:
             kinds = sorted({e.kind for e in picked})
-            raise InputError(f"{path}: {said or 'the file'} holds no surface, polysurface or "
-                             f"mesh, only {', '.join(kinds)} (unsupported); {holds}")
-        if choice.keys() - {"face"}:
-            raise InputError(f"{path}: no object matches {said}; {holds}")
-        raise InputError(f"{path}: no surface, polysurface or mesh to read; {holds}")
+            raise InputError(f"{path}: {said} holds no surface, polysurface or mesh, only "
+                             f"{', '.join(kinds)} (unsupported); {holds}")
+        raise InputError(f"{path}: no object matches {said}; {holds}")
     if len(usable) > 1:
         how = "name one with FILE.3dm#layer=NAME or #object=NAME (design.layer / design.object " \
               "in a study)"
