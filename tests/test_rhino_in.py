@@ -111,10 +111,10 @@ def test_points_and_normals_agree_with_rhino(shell):
     rng = np.random.default_rng(3)
     u, v = rng.uniform(0, 1, 200), rng.uniform(0, 2, 200)
     ours = shell.points(u, v)
-    theirs = np.array([[p.X, p.Y, p.Z] for p in (ns.PointAt(a, b) for a, b in zip(u, v))])
+    theirs = np.array([[p.X, p.Y, p.Z] for p in (ns.PointAt(a, b) for a, b in zip(u, v, strict=True))])
     assert np.abs(ours - theirs).max() < 1e-9 * 12000
     *_, n = shell.principal_frames(u, v)
-    normals = np.array([[p.X, p.Y, p.Z] for p in (ns.NormalAt(a, b) for a, b in zip(u, v))])
+    normals = np.array([[p.X, p.Y, p.Z] for p in (ns.NormalAt(a, b) for a, b in zip(u, v, strict=True))])
     assert np.abs(np.sum(n * normals, axis=1)).min() > 1 - 1e-12
 
 
