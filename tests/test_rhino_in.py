@@ -406,3 +406,71 @@ def test_a_3dm_reference_measures_to_the_nurbs(shell_layout, shell_3dm, tmp_path
                  "-o", str(out)]) == 0
     measured = json.loads(out.read_text())
     assert measured["distance_to_reference"]["max"] <= 0.005 * PANEL_MM
+
+
+def _tower(waist: float = 0.6):
+    """A rational surface of revolution closed around its axis, in v (Rhino's circle of 9
+    control points, a quadratic profile from radius 8 m through a waist to 8 m over 20 m):
+    its directions are swapped so that u wraps."""
+    circle = r3.NurbsSurface.CreateFromCylinder(r3.Cylinder(r3.Circle(r3.Point3d(0, 0, 0), 1.0), 1.0))
+    ring = np.array(circle.Points)[:, 0]                         # (9, 4) homogeneous, radius 1
+    ring_w = ring[:, 3]
+    ring_xy = ring[:, :2] / ring_w[:, None]
+    radius, height = np.array([8000.0, 8000 * waist, 8000.0]), np.array([0.0, 10000, 20000])
+    P = np.concatenate([radius[:, None, None] * ring_xy[None], np.broadcast_to(
+        height[:, None, None], (3, 9, 1))], axis=2)              # (3 profile, 9 ring, 3)
+    W = np.ones(3)[:, None] * ring_w[None]
+    ns = r3.NurbsSurface.Create(3, True, 3, 3, 3, 9)
+    for i, k in enumerate([0.0, 0, 1, 1]):
+        ns.KnotsU[i] = k
+    ring_knots = circle.KnotsU.ToList()
+    for i, k in enumerate(ring_knots):
+        ns.KnotsV[i] = k
+    for i in range(3):
+        for j in range(9):
+            ns.Points[i, j] = r3.Point4d(*(W[i, j] * P[i, j]), W[i, j])
+    assert ns.IsValid and ns.IsClosed(1) and not ns.IsClosed(0)
+    return ns
+
+
+def test_a_surface_closed_around_its_axis_wraps_without_a_seam(tmp_path):
+    path = _write(tmp_path / "tower.3dm", [(_tower(), "tower", None)])
+    design = load_design(path, triangles=6000)
+    assert design.parametric.periodic_u
+    # only the bottom and top circles are boundaries: the seam is closed
+    assert len(design.boundary_loops) == 2
+    z = design.vertices[np.concatenate(design.boundary_loops), 2]
+    assert np.all((np.abs(z) < 1e-9) | (np.abs(z - 20000) < 1e-9))
+    rho = np.linalg.norm(design.vertices[:, :2], axis=1)
+    # a surface of revolution: at the bottom and top every point is 8 m from the axis
+    assert np.abs(rho[np.abs(design.vertices[:, 2]) < 1e-9] - 8000).max() < 1e-9
+    k1, k2, *_ = design.parametric.principal_frames(np.array([0.3, 2.0]), np.array([0.5, 0.5]))
+    assert np.allclose(k1, k1[0], rtol=1e-9) and np.allclose(k2, k2[0], rtol=1e-9)
+
+
+@pytest.mark.slow
+def test_a_rhino_tower_is_laid_out_closing_up_around_its_axis(tmp_path, capsys):
+    path = _write(tmp_path / "tower.3dm", [(_tower(), "tower", None)])
+    out = tmp_path / "tower-net.obj"
+    assert main(["layout", str(path), "--net", "snet", "--panel-size", "2000", "--triangles",
+                 "12000", "-q", "-o", str(out)]) == 0
+    mesh = QuadMesh.from_obj(out)
+    z = mesh.vertices[mesh.is_boundary_vertex, 2]
+    assert np.all((z < 2 * 2000) | (z > 20000 - 2 * 2000))     # no seam left open
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert record["status"] == "converged"
+    assert record["properties"]["distance_to_design"]["max"] <= 0.005 * 2000
+
+
+def test_a_nurbs_design_travels_to_other_processes(shell_3dm):
+    """Studies send designs to worker processes (pickle, cloudpickle): the surface comes
+    back whole, exact evaluation and closest points included."""
+    import pickle
+
+    design = load_design(f"{shell_3dm}#object=shell", triangles=2000)
+    back = pickle.loads(pickle.dumps(design))
+    u, v = np.array([0.13, 0.77]), np.array([0.4, 1.9])
+    assert np.array_equal(back.parametric.points(u, v), design.parametric.points(u, v))
+    assert back.units == "mm" and back.source == design.source
+    probe = design.vertices[:50] + 100.0
+    assert np.array_equal(back.distances(probe), design.distances(probe))

@@ -64,17 +64,25 @@ def load_3dm_design(source: str | os.PathLike, *, resolution: int | tuple | None
 
 def nurbs_from_rhino(read: RhinoDesign, *, name: str | None = None) -> NurbsSurface:
     """The exact `NurbsSurface` of a surface read from a .3dm file, its trims (3D loops)
-    taken into its parameter domain by closest-point projection."""
+    taken into its parameter domain by closest-point projection.
+
+    A surface closed in one direction (a tower) wraps around its seam; closed in v only,
+    its directions are swapped so that u is the one that wraps (`ParametricSurface` wraps
+    u). A surface closed in both directions (a torus) is cut open along its v seam.
+    """
     s = read.surface
     if s is None:
         raise ValueError("not a surface")
     label = name or f"{read.path} ({read.label})"
-    surface = NurbsSurface(s.control_points, s.weights, s.knots_u, s.knots_v, s.degree_u,
-                           s.degree_v, name=label, periodic_u=s.periodic_u)
+    P, W, ku, kv, p, q = s.control_points, s.weights, s.knots_u, s.knots_v, s.degree_u, s.degree_v
+    closed = s.closed_u
+    if s.closed_v and not s.closed_u:
+        P, W, ku, kv, p, q = P.transpose(1, 0, 2), W.T, kv, ku, q, p
+        closed = True
+    surface = NurbsSurface(P, W, ku, kv, p, q, name=label, periodic_u=closed)
     if s.trims is None:
         return surface
     trims = trims_to_parameters(surface, s.trims)
     if trims is None:
         return surface
-    return NurbsSurface(s.control_points, s.weights, s.knots_u, s.knots_v, s.degree_u,
-                        s.degree_v, name=label, trims=trims, periodic_u=s.periodic_u)
+    return NurbsSurface(P, W, ku, kv, p, q, name=label, trims=trims, periodic_u=closed)

@@ -54,7 +54,8 @@ class RhinoSurface:
     knots_u, knots_v : (nu + degree_u + 1,), (nv + degree_v + 1,) float (Rhino's knots
         with the superfluous first and last added).
     degree_u, degree_v : int.
-    periodic_u, periodic_v : the surface closes up smoothly in that direction.
+    closed_u, closed_v : the surface closes up in that direction (its two edges meet, a
+        tower's seam).
     trims : the loops of a polysurface face as closed 3D polylines, list of (k, 3)
         float, the outer loop first; None for a surface without trims.
     """
@@ -65,8 +66,8 @@ class RhinoSurface:
     knots_v: np.ndarray
     degree_u: int
     degree_v: int
-    periodic_u: bool = False
-    periodic_v: bool = False
+    closed_u: bool = False
+    closed_v: bool = False
     trims: list[np.ndarray] | None = None
 
 
@@ -391,7 +392,7 @@ def _nurbs_arrays(ns: Any, path: Path, label: str) -> RhinoSurface:
         k = np.array(direction.ToList(), dtype=np.float64)
         knots.append(np.r_[k[:1], k, k[-1:]])   # Rhino omits one superfluous knot at each end
     return RhinoSurface(points, weights, knots[0], knots[1], ns.OrderU - 1, ns.OrderV - 1,
-                        bool(ns.IsPeriodic(0)), bool(ns.IsPeriodic(1)))
+                        bool(ns.IsClosed(0)), bool(ns.IsClosed(1)))
 
 
 def _brep_face(brep: Any, k: int, path: Path) -> RhinoSurface:
