@@ -18,7 +18,7 @@ from fabplan.design.load import load_design
 from fabplan.design.nurbs import NurbsSurface, basis_function_derivatives, triangulate_trimmed
 from fabplan.design.parametric import ParametricSurface
 from fabplan.errors import InputError
-from fabplan.io.rhino_read import read_3dm, split_source
+from fabplan.io.rhino_read import describe_3dm, read_3dm, split_source
 from fabplan.net.mesh import QuadMesh
 from fabplan.study.spec import parse_study
 
@@ -179,6 +179,25 @@ def test_the_file_units_are_honoured_and_converted(tmp_path):
         assert design.units == "mm" and design.source["file_units"] == name
         assert design.area == pytest.approx(load_design(tmp_path / "mm.3dm", triangles=2000).area,
                                             rel=1e-9)
+
+
+def test_a_file_without_a_unit_system_keeps_model_units(tmp_path, capsys):
+    P, W, ku, kv = _shell_arrays(scale=1e-3)
+    path = _write(tmp_path / "plain.3dm", [(_rhino_nurbs(P, W, ku, kv), "s", None)],
+                  units=getattr(r3.UnitSystem, "None"))
+    read = read_3dm(path)
+    assert read.units is None and read.file_units is None and read.scale == 1
+    with pytest.raises(InputError, match="has no unit system, so it cannot be converted to mm"):
+        read_3dm(path, units="mm")
+
+
+def test_what_a_file_holds_is_said_in_one_line(bad_folder):
+    folder, _ = bad_folder
+    assert describe_3dm(folder / "two.3dm") == \
+        "the file holds surface 'a' on layer 'Roof'; surface 'b' on layer 'Roof'"
+    assert describe_3dm(folder / "nothing.3dm") == "the file holds 1 curve; 1 point"
+    assert describe_3dm(folder / "box.3dm") == \
+        "the file holds polysurface of 6 faces 'box' on layer 'Default'"
 
 
 def test_an_object_is_picked_by_layer_object_name_and_face(tmp_path):
