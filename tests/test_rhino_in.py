@@ -493,3 +493,29 @@ def test_a_nurbs_design_travels_to_other_processes(shell_3dm):
     assert back.units == "mm" and back.source == design.source
     probe = design.vertices[:50] + 100.0
     assert np.array_equal(back.distances(probe), design.distances(probe))
+
+
+@pytest.mark.slow
+def test_a_study_of_a_rhino_design_in_mm_runs_in_metres(shell_3dm, tmp_path, capsys):
+    """`design.file = "shell.3dm"` with `units = "m"`: the millimetre file is converted,
+    and every candidate's deviation is measured to the NURBS surface (in mm)."""
+    import shutil
+
+    shutil.copyfile(shell_3dm, tmp_path / "shell.3dm")
+    (tmp_path / "study.toml").write_text(
+        '[study]\nmax_iterations = 40\n[design]\nfile = "shell.3dm"\nobject = "shell"\n'
+        'units = "m"\ntriangles = 8000\n[panels]\nsize = 1.5\n[limits]\nmax_deviation_mm = 30\n'
+        'mold_tolerance_mm = 2\n[[candidates]]\nnet = "isogonal"\nangle = 80\n')
+    out = tmp_path / "study"
+    assert main(["study", str(tmp_path / "study.toml"), "-q", "-o", str(out)]) == 0
+    record = json.loads((out / "study.json").read_text())
+    assert record["design"]["units"] == "m" and record["design"]["source"].endswith("units=m")
+    assert record["design"]["area"] == pytest.approx(114.5, rel=0.01)     # 12 x 9 m saddle
+    P, W, ku, kv = _shell_arrays(scale=1e-3)
+    exact = NurbsSurface(P, W, ku, kv, 3, 3)
+    for candidate in record["candidates"]:
+        net = QuadMesh.from_obj(out / "candidates" / candidate["name"] / "net.obj")
+        found = exact.closest_points(net.vertices)
+        assert found.converged.all()
+        assert candidate["metrics"]["deviation_mm"]["max"] == pytest.approx(
+            1000 * found.distances.max(), rel=1e-6, abs=1e-9)
