@@ -519,3 +519,58 @@ def test_a_study_of_a_rhino_design_in_mm_runs_in_metres(shell_3dm, tmp_path, cap
         assert found.converged.all()
         assert candidate["metrics"]["deviation_mm"]["max"] == pytest.approx(
             1000 * found.distances.max(), rel=1e-6, abs=1e-9)
+
+
+def _trimmed_shell(shell):
+    """The shell trimmed to an ellipse in its parameter domain, with a round hole, the
+    trims given as 3D polylines on the surface (as a polysurface face's edges are)."""
+    from fabplan.design.nurbs import trims_to_parameters
+
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    outer = np.stack([0.5 + 0.45 * np.cos(t), 1.0 + 0.9 * np.sin(t)], axis=1)
+    hole = np.stack([0.62 + 0.08 * np.cos(t), 1.1 + 0.16 * np.sin(t)], axis=1)[::-1]
+    loops = [shell.points(c[:, 0], c[:, 1]) for c in (outer, hole)]
+    trims = trims_to_parameters(shell, loops)
+    return outer, hole, NurbsSurface(shell.control_points, shell.weights, shell.knots_u,
+                                     shell.knots_v, 3, 3, name="trimmed", trims=trims)
+
+
+def test_trims_on_a_curved_face_come_back_in_its_parameters(shell):
+    outer, hole, trimmed = _trimmed_shell(shell)
+    assert np.abs(trimmed.trims[0] - outer).max() < 1e-9
+    assert np.abs(trimmed.trims[1] - hole).max() < 1e-9
+    design = trimmed.triangulate(trimmed.resolution_for(6000))
+    assert len(design.boundary_loops) == 2 and not design.repairs
+    # every vertex is on the surface, and the boundary runs along the trims
+    assert design.distances(design.vertices).max() < 1e-9
+    import shapely
+
+    rings = [shapely.LinearRing(c) for c in (outer, hole)]
+    for loop in design.boundary_loops:
+        gaps = [min(ring.distance(shapely.Point(p)) for ring in rings) for p in design.uv[loop]]
+        assert max(gaps) < 1e-9
+    # about 6000 triangles inside the trims, not over the whole domain
+    assert 4000 < len(design.triangles) < 9000
+
+
+@pytest.mark.slow
+def test_a_trimmed_face_is_laid_out_up_to_its_trims(shell):
+    from fabplan.layout.surface_layout import glide, layout_surface
+
+    outer, hole, trimmed = _trimmed_shell(shell)
+    design = trimmed.triangulate(trimmed.resolution_for(20000))
+    layout = layout_surface(design, PANEL_MM, angle=90.0)
+    result = glide(layout, "snet")
+    assert result.converged
+    X = result.mesh.vertices
+    found = trimmed.closest_points(X)
+    assert found.converged.all() and found.distances.max() <= 0.005 * PANEL_MM
+    import shapely
+
+    # no vertex beyond the trims or in the hole: all within the layout's tolerance (0.5 %
+    # of a panel) of the trimmed face's triangles, and in its parameters at most 1e-4
+    # (about a millimetre) outside the trims
+    assert design.reference.distances(X).max() <= 0.005 * PANEL_MM
+    region = shapely.Polygon(outer, [hole])
+    assert shapely.distance(region, shapely.points(found.uv)).max() < 1e-4
+    assert result.properties["coverage"] > 0.8
