@@ -574,3 +574,24 @@ def test_a_trimmed_face_is_laid_out_up_to_its_trims(shell):
     region = shapely.Polygon(outer, [hole])
     assert shapely.distance(region, shapely.points(found.uv)).max() < 1e-4
     assert result.properties["coverage"] > 0.8
+
+
+def test_an_extrusion_is_read_as_its_side_surface(tmp_path):
+    """An arc of radius 17/3 m through (-5, 0), (0, 3), (5, 0) extruded 4 m: a rational
+    quadratic cylinder whose curvatures are exactly 3/17 and 0."""
+    arc = r3.NurbsCurve.CreateFromArc(r3.Arc(r3.Point3d(-5, 0, 0), r3.Point3d(0, 3, 0),
+                                             r3.Point3d(5, 0, 0)))
+    model = r3.File3dm()
+    model.Settings.ModelUnitSystem = r3.UnitSystem.Meters
+    model.Objects.AddExtrusion(r3.Extrusion.Create(arc, 4.0, False))
+    model.Write(str(tmp_path / "wall.3dm"), 8)
+    design = load_design(tmp_path / "wall.3dm", triangles=4000)
+    assert design.source["kind"] == "extrusion" and design.units == "m"
+    surface = design.parametric
+    (u0, u1), (v0, v1) = surface.domain
+    u, v = np.linspace(u0, u1, 7), np.linspace(v0, v1, 7)
+    k1, k2, *_ = surface.principal_frames(u, v)
+    curvatures = np.sort(np.abs(np.stack([k1, k2])), axis=0)
+    assert np.abs(curvatures[0]).max() < 1e-12 and np.abs(curvatures[1] - 3 / 17).max() < 1e-12
+    length = 17 / 3 * 2 * np.arctan2(5, 8 / 3)
+    assert design.area == pytest.approx(4 * length, rel=1e-3)
