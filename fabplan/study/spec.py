@@ -805,7 +805,6 @@ def copy_template(name: str, destination: str | Path) -> list[Path]:
     list of Path written. Refuses to overwrite an existing file.
     """
     from ..io.output import check_output_file, write_texts
-    from ..io.rhino_read import split_source
 
     source = template_path(name)
     folder = str(destination).endswith(("/", os.sep)) or Path(destination).is_dir()
@@ -818,8 +817,7 @@ def copy_template(name: str, destination: str | Path) -> list[Path]:
         destination = destination.with_suffix(".toml")
     study = read_study(source)
     files = {destination: source.read_text(encoding="utf-8")}
-    design_file = split_source(study.design.source)[0]
-    referenced = [design_file] if design_file.is_file() else []
+    referenced = [Path(study.design.source)] if Path(study.design.source).is_file() else []
     referenced += [Path(v.split("=", 1)[1]) for v in study.design.source.split(":", 1)[-1].split(",")
                    if "=" in v and Path(v.split("=", 1)[1]).is_file()]
     for path in referenced:
