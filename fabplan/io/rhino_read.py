@@ -333,9 +333,10 @@ def read_3dm(path: str | os.PathLike, *, layer: str | None = None, object_name: 
     design = RhinoDesign(path, entry.kind, label, out_units, file_units, rhino_units, scale,
                          holds=holds, choice=choice)
     geometry = entry.geometry
+    if face is not None and entry.kind != "polysurface":
+        raise InputError(f"{path}: face={face} picks a face of a polysurface; {label} is a "
+                         f"{entry.kind}")
     if entry.kind == "mesh":
-        if face is not None:
-            raise InputError(f"{path}: face={face} picks a face of a polysurface; {label} is a mesh")
         design.vertices, design.triangles = _mesh_arrays(geometry, path)
         design.vertices = design.vertices * scale
         check_coordinates(design.vertices, f"{path} ({label})")
@@ -351,12 +352,8 @@ def read_3dm(path: str | os.PathLike, *, layer: str | None = None, object_name: 
         design.kind = "polysurface face"
         design.label = f"{label}, face {k}" if count > 1 else label
         design.surface = _brep_face(geometry, k, path)
-    elif entry.kind == "extrusion":
+    else:   # a surface, or an extrusion's side surface
         design.surface = _nurbs_arrays(geometry.ToNurbsSurface(), path, label)
-    else:
-        design.surface = _nurbs_arrays(geometry.ToNurbsSurface(), path, label)
-    if face is not None and entry.kind != "polysurface":
-        raise InputError(f"{path}: face={face} picks a face of a polysurface; {label} is a {entry.kind}")
     s = design.surface
     s.control_points = s.control_points * scale
     s.trims = None if s.trims is None else [t * scale for t in s.trims]
