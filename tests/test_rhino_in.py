@@ -332,11 +332,13 @@ def _bad_files(folder: Path) -> dict[str, tuple[str, list[str]]]:
         "face out of range": ("box.3dm#face=6", ["has 6 faces (0..5)"]),
         "bad key": ("box.3dm#colour=red", ["unknown choice 'colour'"]),
         "unit system": ("km.3dm", ["Kilometers"]),
+        "face of a surface": ("two.3dm#object=a,face=0", ["face=0 picks a face of a polysurface",
+                                                          "is a surface"]),
     }
 
 
 BAD = ["no surface", "two surfaces", "empty", "corrupt", "garbage", "zero bytes", "no match",
-       "not a surface", "box", "face out of range", "bad key", "unit system"]
+       "not a surface", "box", "face out of range", "bad key", "unit system", "face of a surface"]
 
 
 @pytest.fixture(scope="module")
