@@ -107,10 +107,14 @@ def _warn_not_converged(result, json_path: Path) -> None:
 
 
 def _reference(spec: str | None):
-    """A reference surface from a mesh file or a built-in surface spec (`fabplan layout`)."""
+    """A reference surface from a mesh file, a Rhino file or a built-in surface spec
+    (`fabplan layout`)."""
+    from .io.rhino_read import is_3dm_source
+
     if spec is None:
         return None
-    if Path(spec).exists() or Path(spec).suffix.lower() in (".obj", ".stl", ".ply", ".off"):
+    if not is_3dm_source(spec) and (Path(spec).exists()
+                                    or Path(spec).suffix.lower() in (".obj", ".stl", ".ply", ".off")):
         return load_reference(spec)
     from .design.load import load_design
 
@@ -245,6 +249,10 @@ def _cmd_layout(args) -> int:
     _check_outputs([out, out.with_suffix(".json"), boundary_path(out), picture],
                    [args.surface, family_file])
     design = load_design(args.surface, triangles=args.triangles)
+    if design.source is not None and not args.quiet:
+        print(f"design: {design.source['object']} of {design.source['file']}, in "
+              f"{_units_said(design.units)}" + (f" (converted from {design.source['file_units']})"
+                                                if design.source["scale"] != 1 else ""))
     _check_layout_size(design, args.panel_size, args.max_panels)
     start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
     layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
@@ -280,6 +288,12 @@ def _cmd_layout(args) -> int:
                   "(`fabplan study` measures how far)", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
+
+
+def _units_said(units: str | None) -> str:
+    """Model units in words for the terminal (a unitless .3dm file has none)."""
+    return {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches",
+            "ft": "feet"}.get(units or "", "model units (the file has no unit system)")
 
 
 def _check_max_panels(args) -> None:
@@ -534,7 +548,8 @@ def _add_measure(sub: Any) -> None:
     p = sub.add_parser("measure", help="measure the S-net properties of a quad mesh")
     p.add_argument("net", help="quad mesh (OBJ)")
     p.add_argument("-o", "--output", help="JSON file to write (default: NET.measure.json)")
-    p.add_argument("--reference", help="surface to measure the distance to (OBJ/STL/PLY/OFF)")
+    p.add_argument("--reference", help="surface to measure the distance to (OBJ/STL/PLY/OFF, "
+                                       "FILE.3dm[#...] or a built-in surface)")
     p.set_defaults(func=_cmd_measure)
 
 
@@ -545,8 +560,8 @@ def _add_optimize(sub: Any) -> None:
                    help="net type (see `fabplan nets`)")
     p.add_argument("--angle", type=float, help="intersection angle in degrees (isogonal types)")
     p.add_argument("--radius", type=float, help="Meusnier radius in model units")
-    p.add_argument("--reference", help="surface to stay close to: a mesh file or a built-in "
-                                       "surface as for `fabplan layout` (default: the input)")
+    p.add_argument("--reference", help="surface to stay close to: a mesh file, a .3dm file or a "
+                                       "built-in surface as for `fabplan layout` (default: the input)")
     p.add_argument("--fix", help="'boundary' or a file of vertex ids to hold in place")
     p.add_argument("--handle", action="append", metavar="ID:X,Y,Z",
                    help="move vertex ID to (X, Y, Z) and hold it there; repeatable, or a file "
@@ -592,10 +607,11 @@ def _add_layout(sub: Any) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="built-in surfaces and their parameters (defaults):\n" + "\n".join(
                            f"  {name}: {describe_surface_parameters(name)}" for name in SURFACES))
-    p.add_argument("surface", help="design surface: a triangle mesh (OBJ/STL/PLY/OFF) or a "
-                                   "built-in surface 'NAME[:key=value,...]' (hyperbolic-paraboloid, "
-                                   "paraboloid, torus, revolution, tower-facade, height-field, "
-                                   "bspline)")
+    p.add_argument("surface", help="design surface: a triangle mesh (OBJ/STL/PLY/OFF), a Rhino "
+                                   "file 'FILE.3dm[#layer=L,object=NAME,face=K,units=U]' (a NURBS "
+                                   "surface, polysurface face or mesh), or a built-in surface "
+                                   "'NAME[:key=value,...]' (hyperbolic-paraboloid, paraboloid, torus, "
+                                   "revolution, tower-facade, height-field, bspline)")
     p.add_argument("--net", required=True, choices=list(NETS), metavar="NAME",
                    help="net type (see `fabplan nets`)")
     p.add_argument("--angle", type=float,

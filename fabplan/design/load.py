@@ -5,23 +5,30 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..io.rhino_read import RhinoDesign, is_3dm_source, read_3dm, split_source
 from ..io.triangles import read_triangles
 from .mesh_surface import DesignSurface
+from .nurbs import NurbsSurface, trims_to_parameters
 from .parametric import surface_from_spec
 
-__all__ = ["load_design"]
+__all__ = ["load_design", "load_3dm_design", "nurbs_from_rhino"]
 
 
 def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = None,
                 triangles: int = 40000) -> DesignSurface:
-    """A design surface from a mesh file (OBJ, STL, PLY, OFF) or a built-in surface spec.
+    """A design surface from a mesh file (OBJ, STL, PLY, OFF), a Rhino file
+    (``FILE.3dm`` or ``FILE.3dm#layer=..,object=..,face=..,units=..``, see
+    `fabplan.io.rhino_read`) or a built-in surface spec.
 
     Parameters
     ----------
-    source : a path to an existing file, or ``"name[:key=value,...]"`` (`surface_from_spec`).
-    resolution : grid cells of the triangulation of a parametric surface.
+    source : a path to an existing file, a .3dm source, or ``"name[:key=value,...]"``
+        (`surface_from_spec`).
+    resolution : grid cells of the triangulation of a parametric (or NURBS) surface.
     triangles : approximate triangle count of that triangulation when no resolution is given.
     """
+    if is_3dm_source(source):
+        return load_3dm_design(source, resolution=resolution, triangles=triangles)
     path = Path(source)
     looks_like_file = path.suffix.lower() in (".obj", ".stl", ".ply", ".off") or path.exists()
     if not looks_like_file:
@@ -29,3 +36,53 @@ def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = N
         return surface.triangulate(resolution or surface.resolution_for(triangles))
     vertices, faces = read_triangles(path)
     return DesignSurface(vertices, faces, name=str(path))
+
+
+def load_3dm_design(source: str | os.PathLike, *, resolution: int | tuple | None = None,
+                    triangles: int = 40000) -> DesignSurface:
+    """The design of a .3dm file: a NURBS surface (or polysurface face, trimmed) as an
+    exact `NurbsSurface` sampled by a triangulation, or a mesh as it is.
+
+    The design's `units` are the file's unit system (or those the source converts to)
+    and its `source` records the object read (`RhinoDesign.to_json`).
+    """
+    path, choice = split_source(source)
+    read = read_3dm(path, layer=choice.get("layer"), object_name=choice.get("object"),
+                    face=int(choice["face"]) if "face" in choice else None,
+                    units=choice.get("units"))
+    name = str(source)
+    if read.surface is None:
+        assert read.vertices is not None and read.triangles is not None
+        design = DesignSurface(read.vertices, read.triangles, name=name)
+    else:
+        surface = nurbs_from_rhino(read, name=name)
+        design = surface.triangulate(resolution or surface.resolution_for(triangles))
+    design.units = read.units
+    design.source = read.to_json()
+    return design
+
+
+def nurbs_from_rhino(read: RhinoDesign, *, name: str | None = None) -> NurbsSurface:
+    """The exact `NurbsSurface` of a surface read from a .3dm file, its trims (3D loops)
+    taken into its parameter domain by closest-point projection.
+
+    A surface closed in one direction (a tower) wraps around its seam; closed in v only,
+    its directions are swapped so that u is the one that wraps (`ParametricSurface` wraps
+    u). A surface closed in both directions (a torus) is cut open along its v seam.
+    """
+    s = read.surface
+    if s is None:
+        raise ValueError("not a surface")
+    label = name or f"{read.path} ({read.label})"
+    P, W, ku, kv, p, q = s.control_points, s.weights, s.knots_u, s.knots_v, s.degree_u, s.degree_v
+    closed = s.closed_u
+    if s.closed_v and not s.closed_u:
+        P, W, ku, kv, p, q = P.transpose(1, 0, 2), W.T, kv, ku, q, p
+        closed = True
+    surface = NurbsSurface(P, W, ku, kv, p, q, name=label, periodic_u=closed)
+    if s.trims is None:
+        return surface
+    trims = trims_to_parameters(surface, s.trims)
+    if trims is None:
+        return surface
+    return NurbsSurface(P, W, ku, kv, p, q, name=label, trims=trims, periodic_u=closed)

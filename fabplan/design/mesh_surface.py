@@ -38,6 +38,10 @@ class DesignSurface:
     name : label for messages (the file name or the parametric surface's name).
     uv : (n, 2) float, parameters of the vertices when triangulated from `parametric`.
     parametric : the `ParametricSurface` the mesh samples, if any.
+    units : the model units of the coordinates when the source says (a .3dm file's unit
+        system), else None.
+    source : what the design was read from, JSON-ready (a .3dm file's object, layer and
+        units), else None.
 
     Raises
     ------
@@ -54,9 +58,12 @@ class DesignSurface:
     """
 
     def __init__(self, vertices: npt.ArrayLike, triangles: npt.ArrayLike, *, name: str = "surface",
-                 uv: npt.ArrayLike | None = None, parametric: ParametricSurface | None = None) -> None:
+                 uv: npt.ArrayLike | None = None, parametric: ParametricSurface | None = None,
+                 units: str | None = None, source: dict | None = None) -> None:
         self.name = name
         self.parametric = parametric
+        self.units = units
+        self.source = source
         V = np.asarray(vertices, dtype=np.float64)
         T = np.asarray(triangles)
         if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:

@@ -160,6 +160,8 @@ class SurfaceLayout:
             "design": self.design.name,
             "design_triangles": int(len(self.design.triangles)),
             "design_repairs": dict(self.design.repairs),
+            "design_units": self.design.units,
+            "design_source": self.design.source,
             "panel_size": self.panel_size,
             "angle_deg": self.angle_deg,
             "prescribed_family": self.family,

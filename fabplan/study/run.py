@@ -449,7 +449,7 @@ def _range(values: np.ndarray) -> dict | None:
 
 def vertex_deviation_mm(mesh: QuadMesh, design: DesignSurface, mm_per_unit: float) -> np.ndarray:
     """(n,) float, distance of every vertex of a net from the design in mm (to the exact
-    surface of a built-in design, to the triangle mesh of a design file)."""
+    surface of a built-in or NURBS design, to the triangle mesh of a mesh file)."""
     return design.distances(mesh.vertices) * mm_per_unit
 
 

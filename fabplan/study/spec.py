@@ -76,12 +76,14 @@ class DesignSpec:
 
     Attributes
     ----------
-    source : a triangle-mesh file (absolute path) or a built-in surface spec
-        ``"name:key=value,..."`` (see `fabplan.surfaces`).
+    source : a triangle-mesh file (absolute path), a Rhino file with its choices
+        ``"/path/x.3dm#layer=..,object=..,face=..,units=.."`` (see
+        `fabplan.io.rhino_read`), or a built-in surface spec ``"name:key=value,..."``
+        (see `fabplan.surfaces`).
     label : what the report calls it.
     parameters : parameters of a built-in surface (for the record).
-    triangles : triangles of the design mesh a built-in surface is sampled with (about);
-        None for a design file, which keeps its own triangles.
+    triangles : triangles of the design mesh a built-in or NURBS surface is sampled with
+        (about); None for a mesh file, which keeps its own triangles.
     units : model units, ``"m"`` or ``"mm"``.
     """
 
@@ -468,11 +470,19 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     surface, file = t.text("surface"), t.text("file")
     if (surface is None) == (file is None):
         t.fail("surface", "or design.file: give exactly one (a built-in surface name or a "
-               "triangle-mesh file)")
-    units = t.text("units", "m", choices=("m", "mm"))
+               "triangle-mesh or Rhino file)")
     parameters = t.get("parameters", {})
     if not isinstance(parameters, dict):
         t.fail("parameters", "must be a table of surface parameters")
+    rhino_keys = [k for k in ("layer", "object", "face") if t.has(k)]
+    if file is not None and Path(file).suffix.lower() == ".3dm":
+        if parameters:
+            t.fail("parameters", "belongs to a built-in surface, not to a design file")
+        return _rhino_design(t, folder, file)
+    if rhino_keys:
+        t.fail(rhino_keys[0], "picks an object of a Rhino file: it belongs with a design.file "
+               "ending in .3dm")
+    units = t.text("units", "m", choices=("m", "mm"))
     if file is not None:
         if parameters:
             t.fail("parameters", "belongs to a built-in surface, not to a design file")
@@ -506,6 +516,36 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     spec = surface + (":" + ",".join(items) if items else "")
     _check_surface(spec, t)
     return DesignSpec(spec, surface, dict(parameters), triangles, units)
+
+
+def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
+    """A design in a .3dm file: the object that `layer`, `object` and `face` pick, read
+    now so that a bad choice is named before the study starts. The model units are
+    `units` when given (the file's coordinates converted to them), else the file's own
+    unit system when it is metres or millimetres, else metres (converted)."""
+    from ..io.rhino_read import read_3dm
+
+    source = (folder / file).resolve()
+    if not source.is_file():
+        t.fail("file", f"names {file!r}, which does not exist (looked in {folder})")
+    layer, name = t.text("layer"), t.text("object")
+    face = t.number("face", None, positive=False, integer=True)
+    if face is not None and face < 0:
+        t.fail("face", f"must be a face number (0, 1, ...), got {face}")
+    asked = t.text("units", None, choices=("m", "mm"))
+    triangles = t.number("triangles", 20000, integer=True)
+    t.done()
+    read = read_3dm(source, layer=layer, object_name=name, face=face)
+    if asked is not None and read.file_units is None:
+        units = asked          # a unitless file is taken to be in the units the study says
+    else:
+        units = asked or (read.file_units if read.file_units in ("m", "mm") else "m")
+    choice = {"layer": layer, "object": name, "face": None if face is None else str(face),
+              "units": units if read.file_units is not None else None}
+    fragment = ",".join(f"{k}={v}" for k, v in choice.items() if v is not None)
+    return DesignSpec(f"{source}#{fragment}" if fragment else str(source), Path(file).name,
+                      {k: v for k, v in choice.items() if v is not None and k != "units"},
+                      triangles, units)
 
 
 def _check_panel_units(panel_size: float, design: DesignSpec, file: str) -> None:
