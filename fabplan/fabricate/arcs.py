@@ -245,6 +245,26 @@ def _planes_through(normal: np.ndarray, source: np.ndarray, vertex: np.ndarray,
     source[vertices] = level
 
 
+def _circles_tangent_to_planes(mesh: QuadMesh, v: np.ndarray, w: np.ndarray, normal: np.ndarray,
+                               *, regular: bool) -> np.ndarray:
+    """Unit tangent at ``v`` of the circle through ``v`` and ``w`` tangent to both planes.
+
+    Where the planes are mirror images (two points of one sphere or plane), every circle
+    through both that touches one touches the other: between regular vertices the
+    parameter line's circle through the vertex beyond ``w`` is taken (a circle of the
+    common sphere; a straight line on a plane), else the one in the plane of the chord
+    and the normal at ``v``.
+    """
+    X = mesh.vertices
+    t, sine = _tangent_plane_circles(X, v, w, normal)
+    mirrored = sine < MIRROR_TOLERANCE
+    if regular:
+        t[mirrored] = _line_circle_tangents(mesh, v[mirrored], w[mirrored])
+    else:
+        t[mirrored] = _chord_in_plane(X, v[mirrored], w[mirrored], normal)
+    return t
+
+
 def _mirror(vectors: np.ndarray, u: np.ndarray) -> np.ndarray:
     """`vectors` mirrored in the planes normal to the unit vectors `u`."""
     return vectors - 2 * np.sum(vectors * u, axis=1, keepdims=True) * u
@@ -275,7 +295,7 @@ def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
 
     # 1. both ends regular: the circle where the two spheres meet
     both = regular[e[:, 0]] & regular[e[:, 1]]
-    tangent[both] = _tangent_plane_circles(X, e[both, 0], e[both, 1], normal)[0]
+    tangent[both] = _circles_tangent_to_planes(mesh, e[both, 0], e[both, 1], normal, regular=True)
 
     # 2. one end regular: the parameter line's circle through the edge, on that sphere
     one = regular[e[:, 0]] ^ regular[e[:, 1]]
@@ -319,11 +339,7 @@ def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     # 4. edges between two vertices reached in the same ring: the circle tangent to both
     # planes (where they are mirror images, any such circle is: the chord's in the plane)
     rest = np.flatnonzero(~decided)
-    v, w = e[rest, 0], e[rest, 1]
-    t, sine = _tangent_plane_circles(X, v, w, normal)
-    mirrored = sine < MIRROR_TOLERANCE
-    t[mirrored] = _chord_in_plane(X, v[mirrored], w[mirrored], normal)
-    tangent[rest] = t
+    tangent[rest] = _circles_tangent_to_planes(mesh, e[rest, 0], e[rest, 1], normal, regular=False)
     return tangent, normal, source, spheres
 
 
@@ -360,7 +376,7 @@ def arc_structure(mesh: QuadMesh) -> ArcStructure:
     --------
     >>> import fabplan
     >>> arcs = arc_structure(fabplan.QuadMesh.from_obj(fabplan.data_path("wein99.obj")))
-    >>> bool(arcs.tangent_defect.max() < 1e-9), round(float(np.median(arcs.radius)), 1)
+    >>> bool(arcs.tangent_defect.max() < 1e-6), round(float(np.median(arcs.radius)), 1)
     (True, 20.1)
     """
     X = mesh.vertices
@@ -429,9 +445,11 @@ def write_arcs_3dm(arcs: ArcStructure, path: str | os.PathLike, *, units: str = 
     ``radius``, ``angle_deg``, in the net's own units."""
     doc = Rhino3dmWriter(units)
     X = arcs.mesh.vertices
+    middle = arcs.points(0.5)
     for k, ((v, w), family) in enumerate(zip(arcs.edges.tolist(), arcs.family.tolist(), strict=True)):
         letter = FAMILY_NAMES[family] if family in (0, 1) else "other"
-        doc.add_arc(X[v], arcs.tangent[k], X[w], layer=f"arcs {letter}", name=f"edge {k}",
+        doc.add_arc(X[v], middle[k], X[w], layer=f"arcs {letter}", name=f"edge {k}",
+                    straight=bool(arcs.straight[k]),
                     user_text={"edge": k, "vertices": f"{v} {w}", "radius": f"{arcs.radius[k]:.12g}",
                                "angle_deg": f"{math.degrees(arcs.angle[k]):.12g}"})
     return doc.write(path)

@@ -160,20 +160,22 @@ class Rhino3dmWriter:
         curve = r.PolylineCurve(r.Point3dList([r.Point3d(*p) for p in np.asarray(points).tolist()]))
         self.doc.Objects.AddCurve(curve, self._attributes(layer, name, user_text or {}, colour))
 
-    def add_arc(self, start: np.ndarray, tangent: np.ndarray, end: np.ndarray, *, layer: str,
-                name: str = "", user_text: Mapping[str, object] | None = None) -> None:
-        """Add the circular arc from `start` to `end` leaving `start` along `tangent`, as an
-        ArcCurve (a true arc; a straight line when `tangent` runs along the chord)."""
+    def add_arc(self, start: np.ndarray, middle: np.ndarray, end: np.ndarray, *, layer: str,
+                name: str = "", user_text: Mapping[str, object] | None = None,
+                straight: bool = False) -> None:
+        """Add the circular arc from `start` through `middle` to `end` ((3,) float each) as
+        an ArcCurve (a true arc), or a LineCurve when `straight`.
+
+        The arc is built from three points: rhino3dm's start-tangent-end constructor
+        returned wrong radii (0.50 instead of 10.01 for a unit chord at 2.9 deg).
+        """
         r = _rhino()
-        a, b = r.Point3d(*np.asarray(start, float).tolist()), r.Point3d(*np.asarray(end, float).tolist())
-        chord = np.asarray(end, float) - np.asarray(start, float)
-        t = np.asarray(tangent, float)
+        a, m, b = (r.Point3d(*np.asarray(p, dtype=np.float64).tolist()) for p in (start, middle, end))
         attributes = self._attributes(layer, name, user_text or {}, None)
-        if np.linalg.norm(np.cross(t, chord)) <= 1e-12 * np.linalg.norm(t) * np.linalg.norm(chord):
+        if straight:
             self.doc.Objects.AddCurve(r.LineCurve(a, b), attributes)
             return
-        arc = r.Arc(a, r.Vector3d(*t.tolist()), b)
-        self.doc.Objects.AddCurve(r.ArcCurve.CreateFromArc(arc), attributes)
+        self.doc.Objects.AddCurve(r.ArcCurve.CreateFromArc(r.Arc(a, m, b)), attributes)
 
     def write(self, path: str | os.PathLike) -> Path:
         """Write the file atomically (openNURBS version 8); returns its path."""
