@@ -72,6 +72,8 @@ def write_glb(path: str | os.PathLike, vertices: np.ndarray,
     mesh = trimesh.Trimesh(vertices=corners, faces=np.arange(len(corners)).reshape(-1, 3),
                            face_colors=colours, process=False)
     data = mesh.export(file_type="glb")
+    if not isinstance(data, bytes):  # pragma: no cover - trimesh returns bytes for glb
+        raise TypeError(f"trimesh exported {type(data).__name__} instead of GLB bytes")
     path = Path(path)
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)

@@ -250,7 +250,7 @@ def _add_panel(doc: Rhino3dmWriter, X: np.ndarray, face: Sequence[int], index: i
                colour: np.ndarray) -> None:
     """One panel as its own small mesh (its corners only), named for ``panels.csv``."""
     ids = np.asarray(face, dtype=np.int64)
-    doc.add_mesh(X[ids], [np.arange(len(ids))], layer=f"mold {mold}", name=f"panel {index}",
+    doc.add_mesh(X[ids], [list(range(len(ids)))], layer=f"mold {mold}", name=f"panel {index}",
                  user_text={"face": index, "mold": mold}, colour=colour.tolist())
 
 

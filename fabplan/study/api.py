@@ -40,7 +40,7 @@ from ..solve.optimize import OptimizationResult
 from ..solve.optimize import optimize as _optimize_impl
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..design.mesh_surface import DesignSurface
+    from ..design.mesh_surface import DesignSurface  # noqa: F811 - imported again where used
     from ..layout.surface_layout import SurfaceLayout
     from ..solve.reference import ReferenceSurface
     from .run import StudyResult
@@ -181,15 +181,14 @@ def layout(design: DesignSurface | str | os.PathLike, panel_size: float, net: st
     settings : `fabplan.SolverSettings`.
     """
     from ..design.load import load_design
+    from ..design.mesh_surface import DesignSurface
     from ..layout.surface_layout import glide, layout_angle, layout_surface
     from ..solve.net_types import get_net
 
-    if not hasattr(design, "reference"):
-        design = load_design(design)      # type: ignore[arg-type]
+    surface = design if isinstance(design, DesignSurface) else load_design(design)
     preset = get_net(net)
-    start = layout_angle(preset.name, design, angle) if family is None else 90.0  # type: ignore[arg-type]
-    laid: SurfaceLayout = layout_surface(design, panel_size, angle=start,  # type: ignore[arg-type]
-                                         family=family)
+    start = layout_angle(preset.name, surface, angle) if family is None else 90.0
+    laid: SurfaceLayout = layout_surface(surface, panel_size, angle=start, family=family)
     result = glide(laid, preset.name, angle=angle if preset.angle == "param" else None,
                    settings=settings, progress=progress)
     return NetResult.of(result, layout=laid)
