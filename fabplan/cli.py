@@ -487,7 +487,7 @@ def _cmd_study(args) -> int:
         result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
                            resume=args.resume)
     writing = time.perf_counter()
-    files = write_study(result, out, progress=say)
+    files = write_study(result, out, progress=say, rhino=args.rhino)
     done = time.perf_counter()
     for c in result.ranked():
         if c.failed:
@@ -734,6 +734,9 @@ def _add_study(sub: Any) -> None:
                         "take those an earlier (or interrupted) --resume run kept there instead "
                         "of computing them again")
     _add_max_panels(p)
+    p.add_argument("--3dm", dest="rhino", action="store_true",
+                   help="also write every candidate's net as candidates/NAME/net.3dm (mesh, "
+                        "polylines, panels per mold, strip curves) and net.glb")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)
 

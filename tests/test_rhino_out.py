@@ -173,3 +173,71 @@ def test_unknown_3dm_units_are_refused(tmp_path, wein99):
     with pytest.raises(InputError, match="unknown units 'furlong'"):
         fabplan.write_3dm(wein99, tmp_path / "x.3dm", units="furlong")
     assert list(tmp_path.iterdir()) == []
+
+
+SMALL_STUDY = """\
+[study]
+name = "Saddle with Rhino files"
+max_iterations = 60
+
+[design]
+surface = "hyperbolic-paraboloid"
+parameters = { width = 4, depth = 4, rise = 1.2 }
+triangles = 2000
+
+[panels]
+size = 1.0
+
+[limits]
+max_deviation_mm = 200
+mold_tolerance_mm = 5
+
+[strips]
+height_mm = 60
+thickness_mm = 3
+sheet_mm = [1200, 600]
+
+[[candidates]]
+net = "isogonal"
+angle = 80
+
+[[candidates]]
+net = "anet"
+"""
+
+
+@pytest.mark.slow
+def test_study_candidates_get_3dm_and_glb(tmp_path):
+    """`fabplan study --3dm`: every candidate's net.3dm holds its net.obj to the float,
+    its molds (as in molds.json) and its strips (ids of strips/strips.csv)."""
+    path = tmp_path / "saddle.toml"
+    path.write_text(SMALL_STUDY, encoding="utf-8")
+    assert main(["study", str(path), "-o", str(tmp_path / "out"), "--3dm", "-q"]) == 0
+    record = json.loads((tmp_path / "out" / "study.json").read_text())
+    folders = sorted((tmp_path / "out" / "candidates").iterdir())
+    assert len(folders) == len(record["candidates"]) == 3
+    drawn_strips = 0
+    for folder in folders:
+        objects, units = _objects(folder / "net.3dm")
+        assert units == rhino3dm.UnitSystem.Meters
+        (net,) = [o for layer, o in objects if layer == "net"]
+        vertices, faces = _mesh_arrays(net.Geometry)
+        obj_vertices, obj_faces = read_obj(folder / "net.obj")
+        assert np.array_equal(vertices, obj_vertices)
+        assert faces == [f.tolist() for f in obj_faces]
+        molds = json.loads((folder / "molds.json").read_text())
+        per_layer = Counter(layer for layer, _ in objects if layer.startswith("mold "))
+        assert per_layer == {f"mold {m['id']}": m["panel_count"] for m in molds["molds"]}
+        strip_ids = set()     # strips are planned for lamella candidates only
+        if (folder / "strips").is_dir():
+            with open(folder / "strips" / "strips.csv", newline="") as handle:
+                strip_ids = {r["strip"] for r in csv.DictReader(line for line in handle
+                                                                if not line.startswith("#"))}
+        drawn = {o.Attributes.GetUserString("strip") for layer, o in objects
+                 if layer.startswith("strips ")}
+        assert drawn == strip_ids
+        drawn_strips += len(drawn)
+        assert (folder / "net.glb").stat().st_size > 0
+        candidate = next(c for c in record["candidates"] if c["name"] == folder.name)
+        assert candidate["outputs"]["rhino"].endswith("net.3dm")
+    assert drawn_strips > 0

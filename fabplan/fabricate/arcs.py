@@ -43,7 +43,7 @@ from ..errors import FabplanError, InputError
 from ..io.output import atomic_path
 from ..io.records import write_json
 from ..io.rhino_write import FAMILY_NAMES, RHINO_UNITS, Rhino3dmWriter
-from ..net.geometry import circumcircle_tangent, fit_star_spheres
+from ..net.geometry import StarSpheres, circumcircle_tangent, fit_star_spheres
 from ..net.mesh import QuadMesh
 from .molds import UNITS
 
@@ -160,7 +160,6 @@ class ArcStructure:
 
     def to_json(self) -> dict:
         """The report: summary, one record per arc and the defect of every vertex."""
-        X = self.mesh.vertices
         return {
             "schema": "fabplan-arcs/1",
             "net": str(self.mesh.name),
@@ -177,20 +176,21 @@ class ArcStructure:
                           "normal": [float(c) for c in X_n]}
                          for v, (s, d, X_n) in enumerate(zip(
                              self.plane_source.tolist(), self.tangent_defect, self.normal,
-                             strict=True))] if len(X) else [],
+                             strict=True))],
         }
 
 
-def _sphere_normals_at(points: np.ndarray, centres: np.ndarray, coefficients: np.ndarray,
+def _sphere_normals_at(points: np.ndarray, X: np.ndarray, coefficients: np.ndarray,
                        owners: np.ndarray) -> np.ndarray:
-    """Outward-oriented unit normals at `points` of the spheres of stars centred at `owners`.
+    """Unit normals at `points` of the spheres (rows of `coefficients`) of the stars
+    centred at the vertices `owners` of `X`.
 
     The sphere ``a|x - v|^2 + b.(x - v) + c = 0`` (``b`` against the star normal) has the
     gradient ``2a(x - v) + b``; its negative, normalized, is the normal on the star
     normal's side, also for a plane (``a = 0``).
     """
     a, b = coefficients[:, 0], coefficients[:, 1:4]
-    return _unit(-(2 * a[:, None] * (points - centres[owners]) + b))
+    return _unit(-(2 * a[:, None] * (points - X[owners]) + b))
 
 
 def _line_circle_tangents(mesh: QuadMesh, v: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -270,7 +270,7 @@ def _mirror(vectors: np.ndarray, u: np.ndarray) -> np.ndarray:
     return vectors - 2 * np.sum(vectors * u, axis=1, keepdims=True) * u
 
 
-def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, object]:
+def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, StarSpheres]:
     """Tangent at the first vertex of every edge's arc, the vertex planes and their sources.
 
     Returns
@@ -418,12 +418,12 @@ def arc_structure(mesh: QuadMesh) -> ArcStructure:
     return structure
 
 
-def _sphere_deviation(arcs: ArcStructure, spheres: object) -> np.ndarray:
+def _sphere_deviation(arcs: ArcStructure, spheres: StarSpheres) -> np.ndarray:
     """(e,) distance of every arc's midpoint from the spheres of its end vertices."""
     mid = arcs.points(0.5)
     X = arcs.mesh.vertices
     star_of = arcs.mesh.star_of_vertex
-    coefficients = spheres.coefficients  # type: ignore[attr-defined]
+    coefficients = spheres.coefficients
     out = np.full(len(mid), np.nan)
     for end in (0, 1):
         v = arcs.edges[:, end]
