@@ -705,8 +705,7 @@ def _add_arcs(sub: Any) -> None:
                                     "which its end vertices' spheres meet (3dm or DXF + JSON)")
     p.add_argument("net", help="the net (OBJ)")
     p.add_argument("--units", default="m", choices=["mm", "cm", "m", "in", "ft"],
-                   help="model units of the net (default m); the DXF is written in mm "
-                        "(only m and mm there)")
+                   help="model units of the net (default m); the DXF is written in mm")
     p.add_argument("-o", "--output", required=True, metavar="OUT.3dm|OUT.dxf",
                    help="the arcs as Rhino ArcCurves or DXF ARC entities; the report goes to "
                         "OUT.json")

@@ -181,3 +181,15 @@ def test_arcs_refuses_other_outputs_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and ".3dm or a .dxf" in err[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_arcs_dxf_in_millimetres_from_feet(tmp_path, wein99):
+    """A net in feet: the DXF's arcs are its arcs scaled to millimetres."""
+    net = patch_of(wein99, 0.1)
+    net.write_obj(tmp_path / "net.obj")
+    out = tmp_path / "arcs.dxf"
+    assert main(["arcs", str(tmp_path / "net.obj"), "--units", "ft", "-o", str(out)]) == 0
+    import ezdxf
+
+    radius = sorted(a.dxf.radius for a in ezdxf.readfile(out).modelspace().query("ARC"))
+    assert np.allclose(radius, np.sort(arc_structure(net).radius) * 304.8, rtol=1e-12)

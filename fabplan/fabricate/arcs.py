@@ -42,10 +42,9 @@ import numpy as np
 from ..errors import FabplanError, InputError
 from ..io.output import atomic_path
 from ..io.records import write_json
-from ..io.rhino_write import FAMILY_NAMES, RHINO_UNITS, Rhino3dmWriter
+from ..io.rhino_write import FAMILY_NAMES, MM_PER_UNIT, RHINO_UNITS, Rhino3dmWriter
 from ..net.geometry import StarSpheres, circumcircle_tangent, fit_star_spheres
 from ..net.mesh import QuadMesh
-from .molds import UNITS
 
 __all__ = ["ArcStructure", "PLANE_SOURCES", "MIRROR_TOLERANCE", "arc_structure", "write_arcs_3dm",
            "write_arcs_dxf", "write_arcs"]
@@ -468,9 +467,9 @@ def write_arcs_dxf(arcs: ArcStructure, path: str | os.PathLike, *, units: str = 
     import ezdxf
     from ezdxf.math import OCS
 
-    if units not in UNITS:
-        raise InputError(f"unknown units {units!r}: use " + " or ".join(UNITS))
-    mm = UNITS[units]
+    if units not in MM_PER_UNIT:
+        raise InputError(f"unknown units {units!r}: use " + ", ".join(MM_PER_UNIT))
+    mm = MM_PER_UNIT[units]
     doc = ezdxf.new("R2010")
     doc.header["$INSUNITS"] = 4
     msp = doc.modelspace()
@@ -514,7 +513,7 @@ def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m")
     suffix = path.suffix.lower()
     if suffix not in (".3dm", ".dxf"):
         raise InputError(f"{path}: arcs are written to a .3dm or a .dxf file")
-    if suffix == ".3dm" and units not in RHINO_UNITS:
+    if units not in RHINO_UNITS:
         raise InputError(f"unknown units {units!r}: use " + ", ".join(RHINO_UNITS))
     report = path.with_suffix(".json")
     record = arcs.to_json()

@@ -36,6 +36,7 @@ from .output import atomic_path
 
 __all__ = [
     "RHINO_UNITS",
+    "MM_PER_UNIT",
     "FAMILY_NAMES",
     "category_colours",
     "Rhino3dmWriter",
@@ -47,6 +48,9 @@ __all__ = [
 RHINO_UNITS = {"mm": "Millimeters", "cm": "Centimeters", "m": "Meters", "in": "Inches",
                "ft": "Feet"}
 """fabplan unit name -> the `rhino3dm.UnitSystem` member a file is written in."""
+
+MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "ft": 304.8}
+"""Millimetres per model unit of every name in `RHINO_UNITS`."""
 
 FAMILY_NAMES = ("A", "B")
 """Letters of the two families of parameter lines, as in strip ids (``A07``)."""
