@@ -121,7 +121,7 @@ def _write_viewer_files(args: argparse.Namespace, base: Path, mesh: Any, *, unit
     from .study.api import write_3dm, write_glb
 
     return [write_3dm(mesh, base.with_suffix(".3dm"), molds=molds, strips=strips, units=units),
-            write_glb(mesh, base.with_suffix(".glb"), molds=molds)]
+            write_glb(mesh, base.with_suffix(".glb"), molds=molds, units=units)]
 
 
 def _reference(spec: str | None):

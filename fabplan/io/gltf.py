@@ -13,7 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from .output import atomic_path
-from .rhino_write import category_colours
+from .rhino_write import MM_PER_UNIT, category_colours
 
 __all__ = ["write_glb", "glb_triangles"]
 
@@ -46,14 +46,16 @@ def glb_triangles(faces: Sequence[Sequence[int]] | np.ndarray) -> tuple[np.ndarr
 
 def write_glb(path: str | os.PathLike, vertices: np.ndarray,
               faces: Sequence[Sequence[int]] | np.ndarray, *,
-              face_mold: np.ndarray | None = None) -> Path:
+              face_mold: np.ndarray | None = None, units: str = "m") -> Path:
     """Write the net as a GLB file, each face coloured by its mold (grey without molds).
 
     Parameters
     ----------
-    vertices : (n, 3) float, model units (glTF viewers read metres).
+    vertices : (n, 3) float, model units.
     faces : polygon faces.
     face_mold : (f,) int, the mold of every face, or None.
+    units : the model units (a key of `MM_PER_UNIT`); glTF is in metres, so the
+        coordinates are scaled to metres.
 
     Returns
     -------
@@ -68,7 +70,8 @@ def write_glb(path: str | os.PathLike, vertices: np.ndarray,
         mold = np.asarray(face_mold, dtype=np.int64)
         colours = category_colours(int(mold.max()) + 1)[mold[face]]
     # one copy of the corners per triangle: flat colours, no blending across panels
-    corners = np.asarray(vertices, dtype=np.float64)[triangles].reshape(-1, 3)
+    metres = MM_PER_UNIT[units] / 1000.0
+    corners = metres * np.asarray(vertices, dtype=np.float64)[triangles].reshape(-1, 3)
     mesh = trimesh.Trimesh(vertices=corners, faces=np.arange(len(corners)).reshape(-1, 3),
                            face_colors=colours, process=False)
     data = mesh.export(file_type="glb")

@@ -289,9 +289,11 @@ def write_3dm(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None =
                                            user_text=user_text))
 
 
-def write_glb(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None = None) -> Path:
-    """Write a net as binary glTF, its panels coloured by mold (grey without molds)."""
+def write_glb(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None = None,
+              units: str = "m") -> Path:
+    """Write a net as binary glTF (in metres, from the model `units`), its panels coloured
+    by mold (grey without molds)."""
     mesh = as_mesh(net)
     return _write_glb_file(path, mesh.vertices, mesh.faces,
-                           face_mold=None if molds is None else molds.mold)
+                           face_mold=None if molds is None else molds.mold, units=units)
 

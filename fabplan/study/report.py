@@ -597,7 +597,7 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
 
         write_3dm(net, folder / "net.3dm", molds=molds_plan, strips=c.strips, units=study.design.units,
                   user_text={"candidate": c.name, "net_type": net.net, "status": net.status})
-        write_glb(net, folder / "net.glb", molds=molds_plan)
+        write_glb(net, folder / "net.glb", molds=molds_plan, units=study.design.units)
         outputs["rhino"] = "net.3dm"
         outputs["gltf"] = "net.glb"
     say(f"    wrote {c.name}")
