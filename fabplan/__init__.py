@@ -52,7 +52,8 @@ _EXPORTS = {
     "read_study": "fabplan.study.spec",
     "run_study": "fabplan.study.api",
     # the pipeline for scripts: (V, F) or a QuadMesh in, typed results with .to_json() out
-    "layout": "fabplan.study.api",
+    # `layout` is the name of the layout stage's subpackage, so the call is `layout_net`
+    "layout_net": "fabplan.study.api",
     "measure": "fabplan.study.api",
     "arcs": "fabplan.study.api",
     "read_obj": "fabplan.study.api",
@@ -98,7 +99,7 @@ __all__ = [
     "StripPlan",
     "read_study",
     "run_study",
-    "layout",
+    "layout_net",
     "measure",
     "arcs",
     "read_obj",
@@ -134,7 +135,7 @@ if TYPE_CHECKING:  # what a type checker and an IDE see; at run time `__getattr_
         NetResult,
         StripResult,
         arcs,
-        layout,
+        layout_net,
         measure,
         optimize,
         plan_molds,

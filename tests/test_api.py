@@ -4,6 +4,7 @@ Grasshopper example runs with rhino3dm standing in for RhinoCommon."""
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import json
 import sys
@@ -18,7 +19,7 @@ from fabplan.errors import InputError
 from fabplan.io.records import json_text
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-PIPELINE = ["load_design", "layout", "optimize", "measure", "plan_molds", "plan_strips",
+PIPELINE = ["load_design", "layout_net", "optimize", "measure", "plan_molds", "plan_strips",
             "run_study", "arcs", "read_obj", "write_obj", "read_3dm", "write_3dm", "write_glb"]
 
 
@@ -31,6 +32,8 @@ def test_the_pipeline_is_at_the_top_level():
     for name in PIPELINE:
         assert callable(getattr(fabplan, name)) and name in fabplan.__all__
     assert fabplan.optimize.__module__ == "fabplan.study.api"
+    importlib.import_module("fabplan.layout.surface_layout")   # the subpackage shadows nothing
+    assert fabplan.layout_net.__module__ == "fabplan.study.api"
 
 
 def test_arrays_and_meshes_give_the_same_results(patch):

@@ -6,7 +6,7 @@ holding the arrays, with ``.to_json()`` for the measured numbers. The `plan_*` f
 share one calling convention: a settings object, or its fields as keyword options::
 
     design = load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5")
-    net = layout(design, 1.5)                    # NetResult
+    net = layout_net(design, 1.5)                # NetResult
     molds = plan_molds(net, tolerance_mm=5)      # MoldResult
     strips = plan_strips(net, height_mm=120, thickness_mm=6)
     write_3dm(net, "net.3dm", molds=molds, strips=strips)
@@ -53,7 +53,7 @@ __all__ = [
     "MoldResult",
     "StripResult",
     "as_mesh",
-    "layout",
+    "layout_net",
     "optimize",
     "measure",
     "plan_molds",
@@ -97,7 +97,7 @@ class NetResult(OptimizationResult):
     """An optimized net (an `OptimizationResult`) with array accessors and ``to_json()``.
 
     Attributes beyond `OptimizationResult`'s: ``layout``, the `SurfaceLayout` the net was
-    laid out from (`layout` only).
+    laid out from (`layout_net` only).
     """
 
     layout: Any = None
@@ -165,7 +165,7 @@ class StripResult(StripPlan):
 
 
 # ----------------------------------------------------------------------------- stages
-def layout(design: DesignSurface | str | os.PathLike, panel_size: float, net: str = "snet", *,
+def layout_net(design: DesignSurface | str | os.PathLike, panel_size: float, net: str = "snet", *,
            angle: float | None = None, family: str | None = None, settings: Any = None,
            progress: Callable[..., None] | None = None) -> NetResult:
     """Lay out a net of type `net` on a design and solve it gliding on the surface
