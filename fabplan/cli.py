@@ -107,6 +107,12 @@ def _warn_not_converged(result, json_path: Path) -> None:
           file=sys.stderr)
 
 
+def _listing(paths: list[Path]) -> str:
+    """'a, b and c'"""
+    names = [str(p) for p in paths]
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
 def _viewer_paths(args: argparse.Namespace, base: Path) -> list[Path]:
     """OUT.3dm and OUT.glb when `--3dm` asks for them (checked before any work)."""
     return [base.with_suffix(".3dm"), base.with_suffix(".glb")] if args.rhino else []
@@ -160,7 +166,7 @@ def _cmd_optimize(args) -> int:
                        if isinstance(v, float))
     print(f"{result.net}: {result.status} after {result.iterations} iterations in "
           f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
-    print(f"wrote {', '.join(str(p) for p in [obj_path, json_path, *viewers])}")
+    print(f"wrote {_listing([obj_path, json_path, *viewers])}")
     if not result.converged:
         _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
@@ -286,7 +292,7 @@ def _cmd_layout(args) -> int:
     print(f"{result.net}: {result.status} after {result.iterations} iterations in "
           f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
           + (f" ({params})" if params else ""))
-    print(f"wrote {', '.join(str(p) for p in [obj_path, json_path, picture, *viewers])}")
+    print(f"wrote {_listing([obj_path, json_path, picture, *viewers])}")
     for warning in layout_warnings(props):
         print(f"fabplan: warning: {warning}", file=sys.stderr)
     if not result.converged:

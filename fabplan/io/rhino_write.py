@@ -70,8 +70,8 @@ def category_colours(count: int) -> np.ndarray:
     --------
     >>> category_colours(3)
     array([[217,  87,  87, 255],
-           [ 87, 217, 142, 255],
-           [178,  87, 217, 255]], dtype=uint8)
+           [ 87, 217, 125, 255],
+           [163,  87, 217, 255]], dtype=uint8)
     """
     hues = (np.arange(count) * 0.381966011250105) % 1.0
     rgb = [colorsys.hsv_to_rgb(h, 0.6, 0.85) for h in hues]
