@@ -193,3 +193,15 @@ def test_arcs_dxf_in_millimetres_from_feet(tmp_path, wein99):
 
     radius = sorted(a.dxf.radius for a in ezdxf.readfile(out).modelspace().query("ARC"))
     assert np.allclose(radius, np.sort(arc_structure(net).radius) * 304.8, rtol=1e-12)
+
+
+def test_boundary_arcs_stay_short(wein_arcs, cmc1):
+    """Arcs at boundary vertices continue the parameter lines' circles: on the CMC net
+    every arc is as short as the inner ones, on the Weingarten net only the few edges
+    where the fronts along the boundary meet are long arcs."""
+    cmc = arc_structure(cmc1)
+    inner = np.all(cmc1.star_of_vertex[cmc.edges] >= 0, axis=1)
+    assert np.degrees(cmc.angle).max() <= 1.1 * np.degrees(cmc.angle[inner]).max()
+    assert np.nanmax(cmc.tangent_defect) < 1e-6 and _plane_defects(cmc).max() < 1e-6
+    long_arcs = np.degrees(wein_arcs.angle) > 30
+    assert long_arcs.sum() <= 0.005 * len(long_arcs)

@@ -19,15 +19,17 @@ Vertices without a sphere of their own (boundary vertices, and irregular vertice
 have no regular star) use the neighbouring spheres. An edge from a regular vertex ``w``
 to such a vertex ``v`` becomes the circle through ``v``, ``w`` and the vertex beyond
 ``w`` on their parameter line: a circle of the sphere of ``w``, so it touches the plane of
-``w``. The plane of ``v`` is then chosen to hold the tangents of these arcs: exactly for
-one or two of them (boundary vertices), by a best fit for more (irregular vertices of
-valence 5 and up, whose defect the report shows). Vertices with no regular neighbour (the
-corners of a net) are reached ring by ring: the arc to a vertex already reached is the
-circle tangent to its plane in the plane of the chord and its normal, and the corner's
-plane again holds its arcs' tangents. Edges between two vertices of one ring (rare: next
-to a net's corners) are the circles tangent to both planes, which can be long arcs.
-`plane_source` says which vertex got its plane how; a net without any regular vertex
-falls back on face normals.
+``w``. The plane of ``v`` holds the tangents of these arcs: exactly for two of them
+(boundary vertices of valence 4, where two lines end), by a best fit for more (irregular
+vertices of valence 5 and up, whose defect the report shows). A vertex with one such arc
+(a boundary vertex of valence 3) and the vertices with none (the net's corners) get
+their planes from the arcs along the boundary, ring by ring from the vertices with a
+plane: the arc of an edge from a vertex with a plane is the circle tangent to that plane
+in the plane of the chord and its normal (the flattest one), and the new vertex's plane
+holds it and the vertex's own arc. Where two such fronts meet along the boundary, the
+last edge is the circle tangent to both planes, which can be a long arc (reported: the
+largest angles). `plane_source` says which vertex got its plane how; a net without any
+regular vertex falls back on face normals.
 """
 
 from __future__ import annotations
@@ -49,7 +51,8 @@ from ..net.mesh import QuadMesh
 __all__ = ["ArcStructure", "PLANE_SOURCES", "MIRROR_TOLERANCE", "arc_structure", "write_arcs_3dm",
            "write_arcs_dxf", "write_arcs"]
 
-PLANE_SOURCES = ("own sphere", "arcs on neighbouring spheres", "arcs to planes further in", "faces")
+PLANE_SOURCES = ("own sphere", "arcs on neighbouring spheres", "a neighbouring sphere",
+                 "arcs from neighbours with a plane", "faces")
 """Where a vertex's tangent plane comes from (`ArcStructure.plane_source` indexes this)."""
 
 MIRROR_TOLERANCE = 1e-9
@@ -307,25 +310,62 @@ def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     at_held = _mirror(at_free, _unit(X[held] - X[free]))
     tangent[idx] = np.where((e[idx, 0] == free)[:, None], at_free, at_held)
     decided = both | one
-    _planes_through(normal, source, free, at_free, held, _sphere_normals_at(
-        X[free], X, spheres.coefficients[star_of[held]], held), level=1)
+    suggestion = _sphere_normals_at(X[free], X, spheres.coefficients[star_of[held]], held)
+    several = np.bincount(free, minlength=n)[free] >= 2
+    _planes_through(normal, source, free[several], at_free[several], held[several],
+                    suggestion[several], level=1)
+    # a vertex with one such arc (a boundary vertex of valence 3) keeps one degree of
+    # freedom, its plane turning about that arc's tangent: the arcs along the boundary fix it
+    own_tangent = np.full((n, 3), np.nan)
+    own_suggestion = np.full((n, 3), np.nan)
+    own_tangent[free[~several]] = at_free[~several]
+    own_suggestion[free[~several]] = suggestion[~several]
 
-    # 3. vertices with no regular neighbour, ring by ring: the arc of an edge to a vertex
-    # already reached is the circle tangent to that vertex's plane in the plane of the
-    # chord and its normal; the new vertex's plane holds these arcs' tangents
-    pairs = np.r_[e[:, ::-1], e]     # rows (new vertex, reached vertex)
+    # 3. the remaining vertices, ring by ring from those with a plane: the arc of an edge
+    # from a vertex with a plane is the circle tangent to that plane in the plane of the
+    # chord and its normal (the flattest one), and the new vertex's plane holds it (and
+    # the vertex's own arc); where no vertex with a plane is next to an open one, the
+    # lowest open vertex with an arc takes the plane its neighbour's sphere suggests
+    pairs = np.r_[e[:, ::-1], e]     # rows (open vertex, vertex with a plane)
     edge_of = np.r_[np.arange(len(e)), np.arange(len(e))]
     while True:
-        keep = (np.isnan(normal[pairs[:, 0], 0]) & ~np.isnan(normal[pairs[:, 1], 0])
-                & ~decided[edge_of])
+        open_ = np.isnan(normal[:, 0])
+        keep = open_[pairs[:, 0]] & ~open_[pairs[:, 1]] & ~decided[edge_of]
         if not keep.any():
-            break
-        v, w, k = pairs[keep, 0], pairs[keep, 1], edge_of[keep]
+            seeds = np.flatnonzero(open_ & ~np.isnan(own_tangent[:, 0]))
+            if seeds.size == 0:
+                break
+            seed = seeds[0]
+            t, m = own_tangent[seed], own_suggestion[seed]
+            normal[seed] = _unit(m - np.dot(m, t) * t)
+            source[seed] = 2
+            continue
+        # a plane holds two arcs exactly: an open vertex with an arc of its own takes one
+        # arriving arc (from its lowest neighbour), one without takes two
+        order = np.lexsort((pairs[keep, 1], pairs[keep, 0]))
+        v_all, w_all, k_all = pairs[keep, 0][order], pairs[keep, 1][order], edge_of[keep][order]
+        start = np.searchsorted(v_all, v_all)
+        rank = np.arange(len(v_all)) - start
+        has_own = ~np.isnan(own_tangent[v_all, 0])
+        take = rank < np.where(has_own, 1, 2)
+        v, w, k = v_all[take], w_all[take], k_all[take]
         u = _unit(X[v] - X[w])
         at_v = _mirror(_chord_in_plane(X, w, v, normal), u)
         tangent[k] = np.where((e[k, 0] == v)[:, None], at_v, _mirror(at_v, u))
         decided[k] = True
-        _planes_through(normal, source, v, at_v, w, _mirror(normal[w], u), level=2)
+        # the plane through the vertex's own arc and the arriving one, or through two
+        # arriving ones, or (one arc only) through it nearest the mirrored neighbour plane
+        first = np.searchsorted(v, v) == np.arange(len(v))
+        second = np.r_[~first[1:], False]     # the first of a pair whose second follows
+        other = np.where(second[:, None], np.roll(at_v, -1, axis=0), own_tangent[v])
+        suggested = _mirror(normal[w], u)
+        plane = _unit(suggested - np.sum(suggested * at_v, axis=1, keepdims=True) * at_v)
+        span = np.cross(other, at_v)
+        spans = np.linalg.norm(span, axis=1) > 1e-6     # NaN (no other arc) compares False
+        plane[spans] = _unit(span[spans])
+        v, plane = v[first], plane[first]
+        normal[v] = plane
+        source[v] = 3
     missing = np.flatnonzero(np.isnan(normal[:, 0]))
     if missing.size:   # a part of the net without any sphere: face normals
         tri = mesh.triangles()
@@ -335,8 +375,8 @@ def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
             np.add.at(total, tri[:, k], face_normal)
         normal[missing] = _unit(total[missing])
 
-    # 4. edges between two vertices reached in the same ring: the circle tangent to both
-    # planes (where they are mirror images, any such circle is: the chord's in the plane)
+    # 4. edges between two vertices with planes from different sides (where two fronts
+    # meet): the circle tangent to both planes
     rest = np.flatnonzero(~decided)
     tangent[rest] = _circles_tangent_to_planes(mesh, e[rest, 0], e[rest, 1], normal, regular=False)
     return tangent, normal, source, spheres
