@@ -12,8 +12,9 @@ import argparse
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from . import __version__
 from .errors import FabplanError, InputError
@@ -118,16 +119,25 @@ def _viewer_paths(args: argparse.Namespace, base: Path) -> list[Path]:
     return [base.with_suffix(".3dm"), base.with_suffix(".glb")] if args.rhino else []
 
 
-def _write_viewer_files(args: argparse.Namespace, base: Path, mesh: Any, *, units: str,
-                        molds: Any = None, strips: Any = None) -> list[Path]:
+@contextmanager
+def _viewer_files(args: argparse.Namespace, base: Path, mesh: Any, *, units: str,
+                  molds: Any = None, strips: Any = None) -> Iterator[list[Path]]:
     """With `--3dm`: the net as Rhino ``BASE.3dm`` (mesh, polylines per family, panels per
-    mold, strip curves) and ``BASE.glb`` (coloured by mold) for web viewers."""
+    mold, strip curves) and ``BASE.glb`` (coloured by mold) for web viewers.
+
+    Both are written before the block (the command's other files) runs and land only when
+    it succeeds, so that a failure leaves neither them nor the other files behind.
+    """
     if not args.rhino:
-        return []
+        yield []
+        return
     from .study.api import write_3dm, write_glb
 
-    return [write_3dm(mesh, base.with_suffix(".3dm"), molds=molds, strips=strips, units=units),
-            write_glb(mesh, base.with_suffix(".glb"), molds=molds, units=units)]
+    rhino, glb = base.with_suffix(".3dm"), base.with_suffix(".glb")
+    with atomic_path(rhino) as staged_rhino, atomic_path(glb) as staged_glb:
+        write_3dm(mesh, staged_rhino, molds=molds, strips=strips, units=units)
+        write_glb(mesh, staged_glb, molds=molds, units=units)
+        yield [rhino, glb]
 
 
 def _reference(spec: str | None):
@@ -159,8 +169,8 @@ def _cmd_optimize(args) -> int:
     result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                       reference=reference, fixed=fixed, handles=handles, settings=settings,
                       coherent=args.coherent, guards=args.guards, progress=progress)
-    obj_path, json_path = result.write(out)
-    viewers = _write_viewer_files(args, out, result.mesh, units=args.units)
+    with _viewer_files(args, out, result.mesh, units=args.units) as viewers:
+        obj_path, json_path = result.write(out)
     print(format_summary(result.properties))
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items()
                        if isinstance(v, float))
@@ -187,8 +197,8 @@ def _cmd_molds(args) -> int:
     check_panels(mesh)
     _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit))
     plan = plan_molds(mesh, settings)
-    files = write_mold_report(plan, out)
-    files += _write_viewer_files(args, out / "net", mesh, units=settings.units, molds=plan)
+    with _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
+        files = write_mold_report(plan, out) + viewers
     print(plan.summary())
     print(f"wrote {', '.join(str(f) for f in files)}")
     if not plan.fits_all:
@@ -280,12 +290,13 @@ def _cmd_layout(args) -> int:
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
              + (f", {layout.family}" if layout.family else
                 f", {angle:.4g} deg" if isinstance(angle, float) else ""))
-    with atomic_path(picture) as staged:   # the picture lands only with the net it shows
+    # the picture and the Rhino files land only with the net they show
+    with atomic_path(picture) as staged, \
+            _viewer_files(args, out, result.mesh, units=args.units) as viewers:
         write_layout_picture(staged, design, result.mesh, title=title,
                              singular_points=layout.singular_points,
                              marks=fairness_marks(result.properties))
         obj_path, json_path = result.write(out)
-    viewers = _write_viewer_files(args, out, result.mesh, units=args.units)
     props = result.properties
     _print_layout_report(props, layout, json_path)
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items() if isinstance(v, float))
@@ -414,8 +425,8 @@ def _cmd_strips(args) -> int:
                       fix="plan the strips of a coarser net or of parts of it")
     _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS[settings.units]))
     plan = plan_strips(mesh, settings)
-    files = plan.write(out, previews=not args.no_previews)
-    files += _write_viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan)
+    with _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
+        files = plan.write(out, previews=not args.no_previews) + viewers
     s = plan.summary()
     radius = s["radius_mm"]
     print(f"{s['strips']} strips ({s['strips_per_family'][0]} A, {s['strips_per_family'][1]} B), "

@@ -246,3 +246,18 @@ def test_study_candidates_get_3dm_and_glb(tmp_path):
         candidate = next(c for c in record["candidates"] if c["name"] == folder.name)
         assert candidate["outputs"]["rhino"].endswith("net.3dm")
     assert drawn_strips > 0
+
+
+def test_a_3dm_that_cannot_be_written_leaves_nothing(tmp_path, patch_file, capsys):
+    (tmp_path / "net.3dm").mkdir()             # a folder where the .3dm would go
+    out = tmp_path / "net.obj"
+    code = main(["optimize", str(patch_file), "--net", "snet", "--3dm", "-o", str(out), "-q"])
+    assert code == 2
+    assert "net.3dm: is a folder" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["net.3dm"]
+
+
+def test_molds_without_3dm_write_no_rhino_files(tmp_path, patch_file):
+    out = tmp_path / "molds"
+    assert main(["molds", str(patch_file), "--tolerance-mm", "5", "-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["molds.json", "panels.csv", "report.html"]
