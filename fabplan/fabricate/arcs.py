@@ -483,6 +483,8 @@ def write_arcs_3dm(arcs: ArcStructure, path: str | os.PathLike, *, units: str = 
     (and ``arcs other``), named ``edge <id>`` with user text ``edge``, ``vertices``,
     ``radius``, ``angle_deg``, in the net's own units."""
     doc = Rhino3dmWriter(units)
+    for name, colour in (("arcs A", (200, 40, 40, 255)), ("arcs B", (40, 80, 200, 255))):
+        doc.layer(name, colour)
     X = arcs.mesh.vertices
     middle = arcs.points(0.5)
     for k, ((v, w), family) in enumerate(zip(arcs.edges.tolist(), arcs.family.tolist(), strict=True)):

@@ -242,6 +242,9 @@ def write_net_3dm(path: str | os.PathLike, drawing: NetDrawing) -> Path:
             doc.layer(f"mold {m}", colours[m].tolist())
         for i, face in enumerate(drawing.faces):
             _add_panel(doc, X, face, i, int(mold[i]), colours[mold[i]])
+    for f, letter in enumerate(FAMILY_NAMES):
+        if any(int(family) == f for _, family, _ in drawing.strips):
+            doc.layer(f"strips {letter}", LINE_COLOURS[f])
     for strip_id, family, ids in drawing.strips:
         letter = FAMILY_NAMES[int(family)]
         doc.add_polyline(X[np.asarray(ids)], layer=f"strips {letter}", name=str(strip_id),
