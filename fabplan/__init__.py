@@ -31,7 +31,7 @@ _EXPORTS = {
     "measure_net": "fabplan.net.measure",
     "NETS": "fabplan.solve.net_types",
     "get_net": "fabplan.solve.net_types",
-    "optimize": "fabplan.solve.optimize",
+    "optimize": "fabplan.study.api",
     "OptimizationResult": "fabplan.solve.optimize",
     "NetEditor": "fabplan.solve.edit",
     "ReferenceSurface": "fabplan.solve.reference",
@@ -42,15 +42,31 @@ _EXPORTS = {
     "load_design": "fabplan.design.load",
     "layout_surface": "fabplan.layout.surface_layout",
     "glide": "fabplan.layout.surface_layout",
-    "plan_molds": "fabplan.fabricate.molds",
+    "plan_molds": "fabplan.study.api",
     "MoldSettings": "fabplan.fabricate.molds",
     "MoldPlan": "fabplan.fabricate.molds",
     "StripSettings": "fabplan.fabricate.strips",
     "build_strips": "fabplan.fabricate.strips",
-    "plan_strips": "fabplan.fabricate.strip_plan",
+    "plan_strips": "fabplan.study.api",
     "StripPlan": "fabplan.fabricate.strip_plan",
     "read_study": "fabplan.study.spec",
-    "run_study": "fabplan.study.run",
+    "run_study": "fabplan.study.api",
+    # the pipeline for scripts: (V, F) or a QuadMesh in, typed results with .to_json() out
+    # `layout` is the name of the layout stage's subpackage, so the call is `layout_net`
+    "layout_net": "fabplan.study.api",
+    "measure": "fabplan.study.api",
+    "arcs": "fabplan.study.api",
+    "read_obj": "fabplan.study.api",
+    "write_obj": "fabplan.study.api",
+    "read_3dm": "fabplan.study.api",
+    "write_3dm": "fabplan.study.api",
+    "write_glb": "fabplan.study.api",
+    "NetResult": "fabplan.study.api",
+    "Measurement": "fabplan.study.api",
+    "MoldResult": "fabplan.study.api",
+    "StripResult": "fabplan.study.api",
+    "ArcStructure": "fabplan.fabricate.arcs",
+    # "mill": the CNC milling stage adds its entry point here, from fabplan.study.api
 }
 
 __all__ = [
@@ -83,23 +99,54 @@ __all__ = [
     "StripPlan",
     "read_study",
     "run_study",
+    "layout_net",
+    "measure",
+    "arcs",
+    "read_obj",
+    "write_obj",
+    "read_3dm",
+    "write_3dm",
+    "write_glb",
+    "NetResult",
+    "Measurement",
+    "MoldResult",
+    "StripResult",
+    "ArcStructure",
 ]
 
 if TYPE_CHECKING:  # what a type checker and an IDE see; at run time `__getattr__` imports
     from .design.load import load_design
     from .design.mesh_surface import DesignSurface
-    from .fabricate.molds import MoldPlan, MoldSettings, plan_molds
-    from .fabricate.strip_plan import StripPlan, plan_strips
+    from .fabricate.arcs import ArcStructure
+    from .fabricate.molds import MoldPlan, MoldSettings
+    from .fabricate.strip_plan import StripPlan
     from .fabricate.strips import StripSettings, build_strips
     from .layout.surface_layout import glide, layout_surface
     from .net.measure import measure_net
     from .net.mesh import QuadMesh, load_mesh
     from .solve.edit import NetEditor
     from .solve.net_types import NETS, get_net
-    from .solve.optimize import OptimizationResult, optimize
+    from .solve.optimize import OptimizationResult
     from .solve.reference import ReferenceSurface, load_reference
     from .solve.solver import GuidedProjection, SolverSettings
-    from .study.run import run_study
+    from .study.api import (
+        Measurement,
+        MoldResult,
+        NetResult,
+        StripResult,
+        arcs,
+        layout_net,
+        measure,
+        optimize,
+        plan_molds,
+        plan_strips,
+        read_3dm,
+        read_obj,
+        run_study,
+        write_3dm,
+        write_glb,
+        write_obj,
+    )
     from .study.spec import read_study
 
 

@@ -12,8 +12,9 @@ import argparse
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from . import __version__
 from .errors import FabplanError, InputError
@@ -79,7 +80,8 @@ def _output_path(args) -> Path:
     out = Path(args.output)
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")
-    _check_outputs([out, out.with_suffix(".json")], [args.input, args.reference, args.fix])
+    _check_outputs([out, out.with_suffix(".json"), *_viewer_paths(args, out)],
+                   [args.input, args.reference, args.fix])
     return out
 
 
@@ -104,6 +106,38 @@ def _warn_not_converged(result, json_path: Path) -> None:
         result.status, f"stopped ({result.status})")
     print(f"fabplan: warning: the optimization {what}: {result.message} (details in {json_path})",
           file=sys.stderr)
+
+
+def _listing(paths: list[Path]) -> str:
+    """'a, b and c'"""
+    names = [str(p) for p in paths]
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
+def _viewer_paths(args: argparse.Namespace, base: Path) -> list[Path]:
+    """OUT.3dm and OUT.glb when `--3dm` asks for them (checked before any work)."""
+    return [base.with_suffix(".3dm"), base.with_suffix(".glb")] if args.rhino else []
+
+
+@contextmanager
+def _viewer_files(args: argparse.Namespace, base: Path, mesh: Any, *, units: str,
+                  molds: Any = None, strips: Any = None) -> Iterator[list[Path]]:
+    """With `--3dm`: the net as Rhino ``BASE.3dm`` (mesh, polylines per family, panels per
+    mold, strip curves) and ``BASE.glb`` (coloured by mold) for web viewers.
+
+    Both are written before the block (the command's other files) runs and land only when
+    it succeeds, so that a failure leaves neither them nor the other files behind.
+    """
+    if not args.rhino:
+        yield []
+        return
+    from .study.api import write_3dm, write_glb
+
+    rhino, glb = base.with_suffix(".3dm"), base.with_suffix(".glb")
+    with atomic_path(rhino) as staged_rhino, atomic_path(glb) as staged_glb:
+        write_3dm(mesh, staged_rhino, molds=molds, strips=strips, units=units)
+        write_glb(mesh, staged_glb, molds=molds, units=units)
+        yield [rhino, glb]
 
 
 def _reference(spec: str | None):
@@ -139,13 +173,14 @@ def _cmd_optimize(args) -> int:
     result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                       reference=reference, fixed=fixed, handles=handles, settings=settings,
                       coherent=args.coherent, guards=args.guards, progress=progress)
-    obj_path, json_path = result.write(out)
+    with _viewer_files(args, out, result.mesh, units=args.units) as viewers:
+        obj_path, json_path = result.write(out)
     print(format_summary(result.properties))
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items()
                        if isinstance(v, float))
     print(f"{result.net}: {result.status} after {result.iterations} iterations in "
           f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
-    print(f"wrote {obj_path} and {json_path}")
+    print(f"wrote {_listing([obj_path, json_path, *viewers])}")
     if not result.converged:
         _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
@@ -166,7 +201,8 @@ def _cmd_molds(args) -> int:
     check_panels(mesh)
     _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit))
     plan = plan_molds(mesh, settings)
-    files = write_mold_report(plan, out)
+    with _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
+        files = write_mold_report(plan, out) + viewers
     print(plan.summary())
     print(f"wrote {', '.join(str(f) for f in files)}")
     if not plan.fits_all:
@@ -246,7 +282,8 @@ def _cmd_layout(args) -> int:
     picture = out.with_suffix(".png")
     _check_option_files((args.family, "a file of polylines"))
     family_file = args.family if args.family and Path(args.family).is_file() else None
-    _check_outputs([out, out.with_suffix(".json"), boundary_path(out), picture],
+    _check_outputs([out, out.with_suffix(".json"), boundary_path(out), picture,
+                    *_viewer_paths(args, out)],
                    [args.surface, family_file])
     design = load_design(args.surface, triangles=args.triangles)
     if design.source is not None and not args.quiet:
@@ -264,7 +301,9 @@ def _cmd_layout(args) -> int:
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
              + (f", {layout.family}" if layout.family else
                 f", {angle:.4g} deg" if isinstance(angle, float) else ""))
-    with atomic_path(picture) as staged:   # the picture lands only with the net it shows
+    # the picture and the Rhino files land only with the net they show
+    with atomic_path(picture) as staged, \
+            _viewer_files(args, out, result.mesh, units=args.units) as viewers:
         write_layout_picture(staged, design, result.mesh, title=title,
                              singular_points=layout.singular_points,
                              marks=fairness_marks(result.properties),
@@ -276,7 +315,7 @@ def _cmd_layout(args) -> int:
     print(f"{result.net}: {result.status} after {result.iterations} iterations in "
           f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
           + (f" ({params})" if params else ""))
-    print(f"wrote {obj_path}, {json_path}, {boundary_path(obj_path)} and {picture}")
+    print(f"wrote {_listing([obj_path, json_path, boundary_path(obj_path), picture, *viewers])}")
     for warning in layout_warnings(props):
         print(f"fabplan: warning: {warning}", file=sys.stderr)
     if not result.converged:
@@ -424,7 +463,8 @@ def _cmd_strips(args) -> int:
                       fix="plan the strips of a coarser net or of parts of it")
     _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS[settings.units]))
     plan = plan_strips(mesh, settings)
-    files = plan.write(out, previews=not args.no_previews)
+    with _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
+        files = plan.write(out, previews=not args.no_previews) + viewers
     s = plan.summary()
     radius = s["radius_mm"]
     print(f"{s['strips']} strips ({s['strips_per_family'][0]} A, {s['strips_per_family'][1]} B), "
@@ -446,6 +486,31 @@ def _cmd_strips(args) -> int:
         print(f"fabplan: note: {s['junctions']} vertices join more than one strip of a family "
               "(irregular vertices): no slits there, they need node connectors; listed in "
               f"{out / 'strips.json'}", file=sys.stderr)
+    return 0
+
+
+def _cmd_arcs(args) -> int:
+    from .fabricate.arcs import arc_structure, write_arcs
+
+    out = Path(args.output)
+    if out.suffix.lower() not in (".3dm", ".dxf"):
+        raise InputError(f"{out}: the output must be a .3dm or a .dxf file")
+    _check_outputs([out, out.with_suffix(".json")], [args.net])
+    mesh = load_net(args.net, quads=False)
+    arcs = arc_structure(mesh)
+    files = write_arcs(arcs, out, units=args.units)
+    s = arcs.summary()
+    sources = ", ".join(f"{count} {name}" for name, count in s["plane_sources"].items() if count)
+    print(f"{s['arcs']} arcs ({s['straight_arcs']} straight): radius {s['radius']['min']:.4g} .. "
+          f"{s['radius']['max']:.4g}, angle {s['angle_deg']['min']:.3g} .. "
+          f"{s['angle_deg']['max']:.3g} deg, arc-chord deviation up to "
+          f"{s['arc_chord_deviation']['max']:.3g}")
+    print(f"tangent-plane defect up to {s['tangent_plane_defect_deg']['max']:.2e} deg; ends off "
+          f"their vertices by {s['end_vertex_gap_relative_to_edge']:.1e} of the mean edge; arcs "
+          f"off the vertex spheres by up to {s['sphere_deviation_relative_to_edge']['max']:.1e} "
+          f"of the mean edge")
+    print(f"vertex planes: {sources}")
+    print(f"wrote {', '.join(str(f) for f in files)}")
     return 0
 
 
@@ -477,7 +542,7 @@ def _cmd_study(args) -> int:
         result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
                            resume=args.resume)
     writing = time.perf_counter()
-    files = write_study(result, out, progress=say)
+    files = write_study(result, out, progress=say, rhino=args.rhino)
     done = time.perf_counter()
     for c in result.ranked():
         if c.failed:
@@ -577,6 +642,7 @@ def _add_optimize(sub: Any) -> None:
                         help="never add the guards against folding")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
+    _add_3dm(p, units=True)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
     p.set_defaults(func=_cmd_optimize)
@@ -596,6 +662,7 @@ def _add_molds(sub: Any) -> None:
                         "(least curved through its corners), auto (corners for a net of flat "
                         "faces, else smooth)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
+    _add_3dm(p, units=False)
     p.set_defaults(func=_cmd_molds)
 
 
@@ -628,6 +695,7 @@ def _add_layout(sub: Any) -> None:
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
+    _add_3dm(p, units=True)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
     p.set_defaults(func=_cmd_layout)
@@ -675,7 +743,30 @@ def _add_strips(sub: Any) -> None:
     p.add_argument("--no-previews", action="store_true", help="skip the PNG previews")
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
+    _add_3dm(p, units=False)
     p.set_defaults(func=_cmd_strips)
+
+
+def _add_3dm(p: argparse.ArgumentParser, *, units: bool) -> None:
+    p.add_argument("--3dm", dest="rhino", action="store_true",
+                   help="also write the net as a Rhino .3dm file (mesh, polylines per family, "
+                        "panels per mold, strip curves; ids as in the CSV/JSON) and a .glb "
+                        "for web viewers, coloured by mold")
+    if units:
+        p.add_argument("--units", default="m", choices=["mm", "cm", "m", "in", "ft"],
+                       help="model units of the net, for the .3dm file (default m)")
+
+
+def _add_arcs(sub: Any) -> None:
+    p = sub.add_parser("arcs", help="circular arc structure: every edge replaced by the arc in "
+                                    "which its end vertices' spheres meet (3dm or DXF + JSON)")
+    p.add_argument("net", help="the net (OBJ)")
+    p.add_argument("--units", default="m", choices=["mm", "cm", "m", "in", "ft"],
+                   help="model units of the net (default m); the DXF is written in mm")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.3dm|OUT.dxf",
+                   help="the arcs as Rhino ArcCurves or DXF ARC entities; the report goes to "
+                        "OUT.json")
+    p.set_defaults(func=_cmd_arcs)
 
 
 def _add_study(sub: Any) -> None:
@@ -699,6 +790,9 @@ def _add_study(sub: Any) -> None:
                         "take those an earlier (or interrupted) --resume run kept there instead "
                         "of computing them again")
     _add_max_panels(p)
+    p.add_argument("--3dm", dest="rhino", action="store_true",
+                   help="also write every candidate's net as candidates/NAME/net.3dm (mesh, "
+                        "polylines, panels per mold, strip curves) and net.glb")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_cmd_study)
 
@@ -714,7 +808,7 @@ def _add_templates(sub: Any) -> None:
 
 # every subcommand adds its parser; a new command is one function and one entry here
 _SUBCOMMANDS = [_add_nets, _add_measure, _add_optimize, _add_molds, _add_layout, _add_strips,
-               _add_study, _add_templates]
+               _add_arcs, _add_study, _add_templates]
 
 
 def build_parser() -> argparse.ArgumentParser:

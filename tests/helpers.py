@@ -49,3 +49,17 @@ def jet_curvatures(X: np.ndarray, faces: list, vertices: np.ndarray):
         k2.append(b)
         normals.append((-fx * vt[0] - fy * vt[1] + vt[2]) / w)
     return np.array(k1), np.array(k2), np.array(normals)
+
+
+def patch_of(mesh: QuadMesh, fraction: float, *, name: str = "patch.obj") -> QuadMesh:
+    """The faces of `mesh` whose vertices all lie within `fraction` of the bounding box
+    diagonal from its centre vertex, as a mesh of its own (vertices renumbered in order)."""
+    X = mesh.vertices
+    centre = X[np.argmin(np.linalg.norm(X - X.mean(axis=0), axis=1))]
+    radius = fraction * np.linalg.norm(np.ptp(X, axis=0))
+    inside = np.linalg.norm(X - centre, axis=1) < radius
+    faces = [f for f in mesh.faces if inside[f].all()]
+    used = np.unique(np.concatenate(faces))
+    renumber = np.full(len(X), -1)
+    renumber[used] = np.arange(len(used))
+    return QuadMesh(X[used], [renumber[f] for f in faces], name=name)

@@ -570,7 +570,7 @@ def check_output_folder(folder: str | os.PathLike) -> None:
 
 
 def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
-                     twin: Path | None = None) -> tuple:
+                     twin: Path | None = None, rhino: bool = False) -> tuple:
     """Write one candidate's files into `folder`; `twin` is the folder of the earlier
     candidate whose net (and strip plan) this one shares, if any: its checked strip files
     are copied rather than made and read back a second time."""
@@ -623,13 +623,24 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
         outputs["strips_dxf"] = sorted(f"strips/{f.name}" for f in files if f.suffix == ".dxf")
         outputs["strips_schedule"] = "strips/strips.csv"
         outputs["strips_preview"] = "strips/sheet-preview.png"
+    if rhino:
+        from .api import write_3dm, write_glb
+
+        write_3dm(net, folder / "net.3dm", molds=molds_plan, strips=c.strips, units=study.design.units,
+                  user_text={"candidate": c.name, "net_type": net.net, "status": net.status})
+        write_glb(net, folder / "net.glb", molds=molds_plan, units=study.design.units)
+        outputs["rhino"] = "net.3dm"
+        outputs["gltf"] = "net.glb"
     say(f"    wrote {c.name}")
     return {k: (f"candidates/{c.name}/{v}" if isinstance(v, str) else
                 [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
 
 
-def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
+def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False) -> list[Path]:
     """Write every file of a study into `out_dir`, replacing the folder as a whole.
+
+    With `rhino`, every candidate's folder also gets ``net.3dm`` (the net, its polylines,
+    its panels by mold and its strip curves) and ``net.glb``.
 
     `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
     The time recorded as ``seconds_total`` (and shown in the report) is the run time
@@ -655,7 +666,8 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
                 folder = output.path_inside(tmp, "candidates", c.name)
                 outputs[c.name], pictures[c.name] = _candidate_files(
                     c, folder, result, say,
-                    twin=folder.parent / twin.name if twin is not None and shared else None)
+                    twin=folder.parent / twin.name if twin is not None and shared else None,
+                    rhino=rhino)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
         total = result.seconds_run + time.perf_counter() - clock

@@ -1,0 +1,299 @@
+"""The whole pipeline as plain function calls, for scripts (Grasshopper, COMPAS, Jupyter).
+
+Every function takes a net as a `QuadMesh` or as ``(V, F)`` arrays (vertices ``(n, 3)``,
+faces ``(f, 4)`` or a list of index sequences) and returns a typed result: a dataclass
+holding the arrays, with ``.to_json()`` for the measured numbers. The `plan_*` functions
+share one calling convention: a settings object, or its fields as keyword options::
+
+    design = load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5")
+    net = layout_net(design, 1.5)                # NetResult
+    molds = plan_molds(net, tolerance_mm=5)      # MoldResult
+    strips = plan_strips(net, height_mm=120, thickness_mm=6)
+    write_3dm(net, "net.3dm", molds=molds, strips=strips)
+
+This module only wraps the stages (`fabplan.layout`, `fabplan.solve`, `fabplan.fabricate`,
+`fabplan.study.run`); it sits in the study stage, the top of the flow, because it reaches
+every stage below.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Union
+
+import numpy as np
+
+from ..errors import InputError
+from ..fabricate.arcs import ArcStructure, arc_structure
+from ..fabricate.molds import MoldPlan, MoldSettings
+from ..fabricate.molds import plan_molds as _plan_molds_impl
+from ..fabricate.strip_plan import StripPlan, schedule_rows
+from ..fabricate.strip_plan import plan_strips as _plan_strips_impl
+from ..fabricate.strips import StripSettings
+from ..io.gltf import write_glb as _write_glb_file
+from ..io.rhino_write import NetDrawing, read_3dm_net, write_net_3dm
+from ..net.measure import measure_net
+from ..net.mesh import QuadMesh
+from ..solve.optimize import OptimizationResult
+from ..solve.optimize import optimize as _optimize_impl
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..design.mesh_surface import DesignSurface  # noqa: F811 - imported again where used
+    from ..layout.surface_layout import SurfaceLayout
+    from ..solve.reference import ReferenceSurface
+    from .run import StudyResult
+    from .spec import Study
+
+__all__ = [
+    "NetLike",
+    "NetResult",
+    "Measurement",
+    "MoldResult",
+    "StripResult",
+    "as_mesh",
+    "layout_net",
+    "optimize",
+    "measure",
+    "plan_molds",
+    "plan_strips",
+    "run_study",
+    "arcs",
+    "read_obj",
+    "write_obj",
+    "read_3dm",
+    "net_drawing",
+    "write_3dm",
+    "write_glb",
+]
+
+NetLike = Union[QuadMesh, OptimizationResult, tuple]
+"""A net: a `QuadMesh`, a result holding one (``.mesh``), or ``(V, F)`` arrays."""
+
+
+def as_mesh(net: NetLike, *, name: str = "net") -> QuadMesh:
+    """The `QuadMesh` of a net given as a mesh, a result with a ``.mesh``, or ``(V, F)``.
+
+    Examples
+    --------
+    >>> as_mesh(([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2, 3]])).vertex_count
+    4
+    """
+    if isinstance(net, QuadMesh):
+        return net
+    mesh = getattr(net, "mesh", None)
+    if isinstance(mesh, QuadMesh):
+        return mesh
+    if isinstance(net, tuple) and len(net) == 2:
+        vertices, faces = net
+        return QuadMesh(vertices, [np.asarray(f, dtype=np.int64) for f in faces], name=name)
+    raise InputError(f"a net is a QuadMesh or a (V, F) pair of arrays, got {type(net).__name__}")
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass
+class NetResult(OptimizationResult):
+    """An optimized net (an `OptimizationResult`) with array accessors and ``to_json()``.
+
+    Attributes beyond `OptimizationResult`'s: ``layout``, the `SurfaceLayout` the net was
+    laid out from (`layout_net` only).
+    """
+
+    layout: Any = None
+
+    @classmethod
+    def of(cls, result: OptimizationResult, layout: Any = None) -> "NetResult":
+        values = {f.name: getattr(result, f.name) for f in fields(OptimizationResult)}
+        return cls(**values, layout=layout)
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n, 3) float, the net's vertices (model units)."""
+        return self.mesh.vertices
+
+    @property
+    def faces(self) -> list:
+        """list of (k,) int vertex index arrays."""
+        return self.mesh.faces
+
+    def to_json(self) -> dict:
+        """The record written beside the OBJ (status, parameters, measured properties)."""
+        return self.record()
+
+
+@dataclass
+class Measurement:
+    """What `measure` found on a net.
+
+    Attributes
+    ----------
+    mesh : the net measured.
+    properties : the measured record (`fabplan.net.measure.measure_net`): sphere
+        residuals, radii, angles, curvatures, planarity, folds.
+    """
+
+    mesh: QuadMesh
+    properties: dict
+
+    def to_json(self) -> dict:
+        return self.properties
+
+
+@dataclass
+class MoldResult(MoldPlan):
+    """A `MoldPlan` with ``to_json()`` (the record of ``molds.json``)."""
+
+    @classmethod
+    def of(cls, plan: MoldPlan) -> "MoldResult":
+        return cls(**{f.name: getattr(plan, f.name) for f in fields(MoldPlan)})
+
+    def to_json(self) -> dict:
+        return self.record()
+
+
+@dataclass
+class StripResult(StripPlan):
+    """A `StripPlan` with ``to_json()`` (its summary and schedule, millimetres)."""
+
+    @classmethod
+    def of(cls, plan: StripPlan) -> "StripResult":
+        return cls(**{f.name: getattr(plan, f.name) for f in fields(StripPlan)})
+
+    def to_json(self) -> dict:
+        return {"summary": self.summary(), "strips": schedule_rows(self)}
+
+
+# ----------------------------------------------------------------------------- stages
+def layout_net(design: DesignSurface | str | os.PathLike, panel_size: float, net: str = "snet", *,
+           angle: float | None = None, family: str | None = None, settings: Any = None,
+           progress: Callable[..., None] | None = None) -> NetResult:
+    """Lay out a net of type `net` on a design and solve it gliding on the surface
+    (``fabplan layout``).
+
+    Parameters
+    ----------
+    design : a `DesignSurface`, or what `load_design` reads (a file or a built-in spec).
+    panel_size : target edge length (model units).
+    net : a net type (``fabplan nets``).
+    angle : intersection angle in degrees for isogonal nets (default: the design's).
+    family : prescribed first family (``"z"``, ``"z:3.5"`` or a file), see the CLI.
+    settings : `fabplan.SolverSettings`.
+    """
+    from ..design.load import load_design
+    from ..design.mesh_surface import DesignSurface
+    from ..layout.surface_layout import glide, layout_angle, layout_surface
+    from ..solve.net_types import get_net
+
+    surface = design if isinstance(design, DesignSurface) else load_design(design)
+    preset = get_net(net)
+    start = layout_angle(preset.name, surface, angle) if family is None else 90.0
+    laid: SurfaceLayout = layout_surface(surface, panel_size, angle=start, family=family)
+    result = glide(laid, preset.name, angle=angle if preset.angle == "param" else None,
+                   settings=settings, progress=progress)
+    return NetResult.of(result, layout=laid)
+
+
+def optimize(net: NetLike, net_type: str = "snet", **options: Any) -> NetResult:
+    """Optimize a net into a net type (``fabplan optimize``); `options` are those of
+    `fabplan.solve.optimize.optimize` (``angle``, ``radius``, ``reference``, ``fixed``,
+    ``handles``, ``settings``, ``guards``, ...).
+
+    Examples
+    --------
+    >>> import fabplan
+    >>> result = optimize(fabplan.QuadMesh.from_obj(fabplan.data_path("wein99.obj")), "snet")
+    >>> result.converged, result.vertices.shape
+    (True, (1732, 3))
+    """
+    return NetResult.of(_optimize_impl(as_mesh(net), net_type, **options))
+
+
+def measure(net: NetLike, *, reference: ReferenceSurface | None = None) -> Measurement:
+    """Measure a net (``fabplan measure``): sphere residuals, radii, angles, curvatures."""
+    mesh = as_mesh(net)
+    return Measurement(mesh=mesh, properties=measure_net(mesh, reference=reference))
+
+
+def plan_molds(net: NetLike, settings: MoldSettings | None = None, **options: Any) -> MoldResult:
+    """The molds of a net's panels (``fabplan molds``): `MoldSettings`, or its fields as
+    keyword options (``tolerance_mm=5, units="m"``)."""
+    return MoldResult.of(_plan_molds_impl(as_mesh(net), settings, **options))
+
+
+def plan_strips(net: NetLike, settings: StripSettings | None = None, **options: Any) -> StripResult:
+    """The lamella strips of a net, on sheets (``fabplan strips``): `StripSettings`, or its
+    fields as keyword options (``height_mm=120, thickness_mm=6``)."""
+    if settings is None:
+        settings = StripSettings(**options)
+    elif options:
+        raise InputError("give either settings or keyword options, not both")
+    settings.check()
+    return StripResult.of(_plan_strips_impl(as_mesh(net), settings))
+
+
+def run_study(study: Study | str | os.PathLike, **options: Any) -> StudyResult:
+    """Run a facade study (``fabplan study``): a `Study`, a study file or a template name;
+    `options` are those of `fabplan.study.run.run_study` (``progress``, ``max_panels``)."""
+    from .run import run_study as run
+    from .spec import read_study, resolve_study
+
+    if isinstance(study, (str, os.PathLike)):
+        study = read_study(resolve_study(str(study)))
+    return run(study, **options)
+
+
+def arcs(net: NetLike) -> ArcStructure:
+    """The circular arc structure of a net (``fabplan arcs``)."""
+    return arc_structure(as_mesh(net))
+
+
+# ----------------------------------------------------------------------------- files
+def read_obj(path: str | os.PathLike) -> QuadMesh:
+    """Read a net from OBJ, quads and vertex order kept."""
+    return QuadMesh.from_obj(path)
+
+
+def write_obj(net: NetLike, path: str | os.PathLike) -> Path:
+    """Write a net as OBJ (atomically); returns the path."""
+    as_mesh(net).write_obj(path)
+    return Path(path)
+
+
+def read_3dm(path: str | os.PathLike) -> QuadMesh:
+    """Read the net of a .3dm file fabplan wrote (the mesh on layer ``net``)."""
+    vertices, faces, _ = read_3dm_net(path)
+    return QuadMesh(vertices, faces, name=str(path))
+
+
+def net_drawing(net: NetLike, *, molds: MoldPlan | None = None, strips: StripPlan | None = None,
+                units: str = "m", user_text: dict | None = None) -> NetDrawing:
+    """What `write_3dm` draws: the mesh, its polylines, the molds' panels, the strips."""
+    mesh = as_mesh(net)
+    lines = mesh.polylines
+    return NetDrawing(
+        vertices=mesh.vertices, faces=mesh.faces,
+        polylines=list(zip(lines.vertices, lines.family.tolist(), strict=True)),
+        face_mold=None if molds is None else molds.mold,
+        strips=[] if strips is None else [(s.id, s.family, s.vertices) for s in strips.strips.strips],
+        units=units, name=Path(str(mesh.name)).name, user_text=dict(user_text or {}))
+
+
+def write_3dm(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None = None,
+              strips: StripPlan | None = None, units: str = "m",
+              user_text: dict | None = None) -> Path:
+    """Write a net as a Rhino .3dm file: the quad mesh, the parameter polylines per family,
+    with `molds` the panels on one layer per mold, with `strips` their reference curves
+    (see `fabplan.io.rhino_write`)."""
+    return write_net_3dm(path, net_drawing(net, molds=molds, strips=strips, units=units,
+                                           user_text=user_text))
+
+
+def write_glb(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None = None,
+              units: str = "m") -> Path:
+    """Write a net as binary glTF (in metres, from the model `units`), its panels coloured
+    by mold (grey without molds)."""
+    mesh = as_mesh(net)
+    return _write_glb_file(path, mesh.vertices, mesh.faces,
+                           face_mold=None if molds is None else molds.mold, units=units)
+

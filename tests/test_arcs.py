@@ -1,0 +1,207 @@
+"""Circular arc structures: every edge an arc through its end vertices, all arcs at a
+vertex tangent to one plane, written as true arcs to .3dm and DXF and read back."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from helpers import patch_of
+
+import fabplan
+from fabplan.cli import main
+from fabplan.fabricate.arcs import arc_structure
+from fabplan.net.geometry import fit_star_spheres
+
+
+def _tangents_from_circles(arcs, end: int) -> np.ndarray:
+    """Unit tangents at an end of every arc from its circle alone (centre, axis), not
+    from the tangents the construction stored; straight arcs give the chord."""
+    X = arcs.mesh.vertices
+    p = X[arcs.edges[:, end]]
+    t = np.cross(arcs.axis, p - arcs.centre)
+    chord = X[arcs.edges[:, 1]] - X[arcs.edges[:, 0]]
+    t = np.where(arcs.straight[:, None], chord, t)
+    return t / np.linalg.norm(t, axis=1, keepdims=True)
+
+
+def _plane_defects(arcs) -> np.ndarray:
+    """(n,) largest angle between a vertex's arc tangents and the plane that fits them
+    best (its own fit, independent of the planes the construction chose)."""
+    tangents = np.r_[_tangents_from_circles(arcs, 0), _tangents_from_circles(arcs, 1)]
+    at = np.r_[arcs.edges[:, 0], arcs.edges[:, 1]]
+    order = np.argsort(at, kind="stable")
+    groups = np.split(tangents[order], np.flatnonzero(np.diff(at[order])) + 1)
+    out = []
+    for t in groups:
+        normal = np.linalg.svd(t)[2][-1]
+        out.append(np.arcsin(np.abs(t @ normal).max()))
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def wein_arcs(wein99):
+    return arc_structure(wein99)
+
+
+def test_arcs_pass_through_their_end_vertices(wein_arcs, wein99):
+    X, e = wein99.vertices, wein_arcs.edges
+    edge = wein99.mean_edge_length
+    curved = ~wein_arcs.straight
+    assert curved.all()
+    for end in (0, 1):
+        on_circle = np.abs(np.linalg.norm(X[e[:, end]] - wein_arcs.centre, axis=1) - wein_arcs.radius)
+        assert on_circle.max() < 1e-9 * edge
+        in_plane = np.abs(np.sum((X[e[:, end]] - wein_arcs.centre) * wein_arcs.axis, axis=1))
+        assert in_plane.max() < 1e-9 * edge
+    assert np.linalg.norm(wein_arcs.points(1.0) - X[e[:, 1]], axis=1).max() < 1e-9 * edge
+
+
+def test_arcs_at_every_vertex_touch_one_plane(wein_arcs):
+    defects = _plane_defects(wein_arcs)
+    assert len(defects) == wein_arcs.mesh.vertex_count
+    assert defects.max() < 1e-6
+    assert np.nanmax(wein_arcs.tangent_defect) < 1e-6
+
+
+def test_inner_arcs_are_where_the_spheres_meet(wein_arcs, wein99):
+    """An arc between two regular vertices lies on both their Meusnier spheres, up to the
+    net's sphere residual (an independent sphere fit, not the construction's planes)."""
+    X = wein99.vertices
+    spheres = fit_star_spheres(X, wein99.stars)
+    star_of = wein99.star_of_vertex
+    inner = np.all(star_of[wein_arcs.edges] >= 0, axis=1)
+    residual = spheres.residual.max()
+    for t in (0.25, 0.5, 0.75):
+        p = wein_arcs.points(t)[inner]
+        for end in (0, 1):
+            s = star_of[wein_arcs.edges[inner, end]]
+            gap = np.abs(np.linalg.norm(p - spheres.centre[s], axis=1) - spheres.radius[s])
+            assert gap.max() < 2 * residual + 1e-12
+    # Fig. 21: on this Weingarten net the inner arcs are short arcs of near-constant radius
+    assert np.degrees(wein_arcs.angle[inner]).max() < 20
+    assert np.ptp(wein_arcs.radius[inner]) < 0.01 * np.median(wein_arcs.radius[inner])
+
+
+def test_arcs_of_a_net_on_a_sphere_lie_on_it():
+    theta, phi = np.meshgrid(np.linspace(0.5, 1.3, 6), np.linspace(0, 1.2, 7), indexing="ij")
+    points = 3 * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)],
+                          axis=-1)
+    arcs = arc_structure(fabplan.QuadMesh.grid(points))
+    for t in (0.3, 0.5):
+        assert np.abs(np.linalg.norm(arcs.points(t), axis=1) - 3).max() < 1e-12
+    assert _plane_defects(arcs).max() < 1e-9
+    # meridians are great circles
+    meridian = arcs.family == arcs.family[0]
+    assert np.allclose(arcs.radius[meridian], 3) or np.allclose(arcs.radius[~meridian], 3)
+
+
+def test_arcs_of_a_plane_net_are_straight():
+    u, v = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-1, 1, 5), indexing="ij")
+    arcs = arc_structure(fabplan.QuadMesh.grid(np.stack([u, v, 0 * u], axis=-1)))
+    assert arcs.straight.all() and np.all(arcs.sagitta == 0)
+    summary = arcs.summary()
+    assert summary["straight_arcs"] == len(arcs.edges) and summary["radius"]["max"] is None
+
+
+NETS = [pytest.param(0.12, id="wein99-patch"),
+        pytest.param(None, id="wein99", marks=pytest.mark.slow)]
+
+
+@pytest.fixture
+def net_file(request, tmp_path, wein99):
+    """The bundled Weingarten net, or a patch of it (quick), as an OBJ file."""
+    if request.param is None:
+        return fabplan.data_path("wein99.obj")
+    path = tmp_path / "patch.obj"
+    patch_of(wein99, request.param).write_obj(path)
+    return path
+
+
+@pytest.mark.parametrize("net_file", NETS, indirect=True)
+def test_arcs_dxf_reads_back_audit_clean(tmp_path, net_file):
+    import ezdxf
+
+    wein99 = fabplan.read_obj(net_file)
+    wein_arcs = arc_structure(wein99)
+    out = tmp_path / "arcs.dxf"
+    assert main(["arcs", str(net_file), "-o", str(out)]) == 0
+    doc = ezdxf.readfile(out)
+    auditor = doc.audit()
+    assert not auditor.has_errors and not auditor.has_fixes
+    assert doc.header["$INSUNITS"] == 4
+    entities = doc.modelspace().query("ARC")
+    assert len(entities) == len(wein_arcs.edges)
+    start = np.array([list(a.start_point) for a in entities]) / 1000
+    end = np.array([list(a.end_point) for a in entities]) / 1000
+    radius = np.array([a.dxf.radius for a in entities]) / 1000
+    extrusion = np.array([list(a.dxf.extrusion) for a in entities])
+    X, e = wein99.vertices, wein_arcs.edges
+    edge = wein99.mean_edge_length
+    assert np.abs(start - X[e[:, 0]]).max() < 1e-9 * edge
+    assert np.abs(end - X[e[:, 1]]).max() < 1e-9 * edge
+    assert np.allclose(radius, wein_arcs.radius, rtol=1e-12)
+    assert np.allclose(extrusion, wein_arcs.axis, atol=1e-12)
+    layers = {a.dxf.layer for a in entities}
+    assert layers == {"ARCS_A", "ARCS_B"}
+    report = json.loads(out.with_suffix(".json").read_text())
+    assert report["units"] == "mm" and len(report["arcs"]) == len(entities)
+    assert report["summary"]["tangent_plane_defect_deg"]["max"] < np.degrees(1e-6)
+
+
+@pytest.mark.parametrize("net_file", NETS, indirect=True)
+def test_arcs_3dm_holds_true_arcs(tmp_path, net_file):
+    import rhino3dm
+
+    wein99 = fabplan.read_obj(net_file)
+    wein_arcs = arc_structure(wein99)
+    out = tmp_path / "arcs.3dm"
+    assert main(["arcs", str(net_file), "-o", str(out)]) == 0
+    doc = rhino3dm.File3dm.Read(str(out))
+    assert doc.Settings.ModelUnitSystem == rhino3dm.UnitSystem.Meters
+    X, e = wein99.vertices, wein_arcs.edges
+    seen = 0
+    for obj in doc.Objects:
+        curve = obj.Geometry
+        assert isinstance(curve, rhino3dm.ArcCurve)
+        k = int(obj.Attributes.GetUserString("edge"))
+        assert obj.Attributes.Name == f"edge {k}"
+        a, b = curve.PointAtStart, curve.PointAtEnd
+        assert np.allclose([a.X, a.Y, a.Z], X[e[k, 0]], atol=1e-9)
+        assert np.allclose([b.X, b.Y, b.Z], X[e[k, 1]], atol=1e-9)
+        assert curve.Radius == pytest.approx(wein_arcs.radius[k], rel=1e-9)
+        seen += 1
+    assert seen == len(e)
+
+
+def test_arcs_refuses_other_outputs_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "arcs.svg"
+    assert main(["arcs", str(fabplan.data_path("wein99.obj")), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and ".3dm or a .dxf" in err[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_arcs_dxf_in_millimetres_from_feet(tmp_path, wein99):
+    """A net in feet: the DXF's arcs are its arcs scaled to millimetres."""
+    net = patch_of(wein99, 0.1)
+    net.write_obj(tmp_path / "net.obj")
+    out = tmp_path / "arcs.dxf"
+    assert main(["arcs", str(tmp_path / "net.obj"), "--units", "ft", "-o", str(out)]) == 0
+    import ezdxf
+
+    radius = sorted(a.dxf.radius for a in ezdxf.readfile(out).modelspace().query("ARC"))
+    assert np.allclose(radius, np.sort(arc_structure(net).radius) * 304.8, rtol=1e-12)
+
+
+def test_boundary_arcs_stay_short(wein_arcs, cmc1):
+    """Arcs at boundary vertices continue the parameter lines' circles: on the CMC net
+    every arc is as short as the inner ones, on the Weingarten net only the few edges
+    where the fronts along the boundary meet are long arcs."""
+    cmc = arc_structure(cmc1)
+    inner = np.all(cmc1.star_of_vertex[cmc.edges] >= 0, axis=1)
+    assert np.degrees(cmc.angle).max() <= 1.1 * np.degrees(cmc.angle[inner]).max()
+    assert np.nanmax(cmc.tangent_defect) < 1e-6 and _plane_defects(cmc).max() < 1e-6
+    long_arcs = np.degrees(wein_arcs.angle) > 30
+    assert long_arcs.sum() <= 0.005 * len(long_arcs)
