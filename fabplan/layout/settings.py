@@ -20,7 +20,12 @@ class LayoutSettings:
     ----------
     bisector : the principal direction bisecting the angle between the families, "max"
         (the larger principal curvature) or "min". Irrelevant at 90 degrees.
-    smoothing : smoothing length of the direction field.
+    smoothing : smoothing length of the direction field (the first one tried).
+    smoothing_tries : longer smoothing lengths tried in turn while the layout's quads and
+        boundary panels (`fabplan.layout.trim`) cover less than `good_coverage` of the
+        design: near umbilics a longer smoothing gives fewer seams and singular points,
+        so the lattice holds together; the layout covering the most is kept.
+    good_coverage : share of the design's area whose covering ends the tries.
     max_smoothing : orthogonal nets smooth the directions as a cross field, over
         `smoothing` doubled up to this length until the field has no quarter-turn
         singularity (see `_smoothed_directions`).
@@ -44,6 +49,8 @@ class LayoutSettings:
 
     bisector: str = "max"
     smoothing: float = 0.5
+    smoothing_tries: tuple[float, ...] = (1.0, 2.0, 4.0)
+    good_coverage: float = 0.995
     max_smoothing: float = 4.0
     scale_weight: float = 0.1
     curvature_radius: int = 5

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Callable
 import igl
 import numpy as np
 import scipy.sparse as sp
+import shapely
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
@@ -79,7 +80,7 @@ from .parametrization import (
     integrate_directions,
 )
 from .settings import SURFACE_TOLERANCE, LayoutSettings
-from .trim import ParameterChart, add_boundary_panels
+from .trim import ParameterChart, add_boundary_panels, net_coverage, trim_to_design
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
@@ -117,7 +118,8 @@ class SurfaceLayout:
     level_step : level k of the prescribed family is where its function equals
         ``k * level_step`` (see `prescribed_family`), or None.
     direction_symmetry : 4 when the directions were smoothed as a cross field, 2 as a
-        line field; `smoothing` the smoothing length (panel sizes).
+        line field; `smoothing` the smoothing length (panel sizes); `smoothing_tried` the
+        lengths tried and the share of the design each layout's quads covered.
     turning_points, turning_deg : (k, 3), (k,) float, where the direction field turns
         faster than `LayoutSettings.max_turning_deg` per panel (umbilics and near-umbilics,
         `fabplan.directions.direction_turning`), and how fast: the net's lines cannot
@@ -145,6 +147,7 @@ class SurfaceLayout:
     turning_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     direction_symmetry: int = 2
     smoothing: float = 0.5
+    smoothing_tried: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
 
     @cached_property
@@ -176,6 +179,7 @@ class SurfaceLayout:
             "fast_turning_deg_per_panel": self.turning_deg.tolist(),
             "direction_field": "cross" if self.direction_symmetry == 4 else "line",
             "smoothing_panels": self.smoothing,
+            "smoothing_tried": self.smoothing_tried,
             "seam_edges": int(self.seam_edges),
             "cuts": [list(map(int, c)) for c in self.cuts],
             "filled_holes": int(self.filled_holes),
@@ -213,9 +217,43 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         For a panel size that is not positive or too large for the surface, an angle
         outside (0, 180), or a layout without a single regular vertex.
     """
+    from dataclasses import replace
+
     s = settings or LayoutSettings()
     h = float(panel_size)
     _check_layout_request(design, h, angle, s)
+    best: SurfaceLayout | None = None
+    best_coverage = -1.0
+    refusal: InputError | None = None
+    tried = []
+    for length in (s.smoothing, *(x for x in s.smoothing_tries if x > s.smoothing)):
+        try:
+            layout = _layout_once(design, h, angle, family, replace(s, smoothing=length))
+        except InputError as exc:      # this smoothing leaves no usable lattice
+            refusal = refusal or exc
+            tried.append({"smoothing_panels": length, "coverage": 0.0})
+            continue
+        # judged with the boundary panels the net will get: the staircase along the
+        # boundary is theirs to clad; what they cannot reach are the lattice's own holes
+        try:
+            coverage = trim_to_design(layout.mesh, layout).coverage
+        except shapely.errors.GEOSException:
+            coverage = net_coverage(layout.mesh, design, h)
+        tried.append({"smoothing_panels": length, "coverage": coverage})
+        if coverage > best_coverage:
+            best, best_coverage = layout, coverage
+        if coverage >= s.good_coverage:
+            break
+    if best is None:
+        assert refusal is not None
+        raise refusal
+    best.smoothing_tried = tried
+    return best
+
+
+def _layout_once(design: DesignSurface, h: float, angle: float, family: str | None,
+                 s: LayoutSettings) -> SurfaceLayout:
+    """One layout at the smoothing of `s` (see `layout_surface`)."""
     seconds: dict[str, float] = {}
     clock = time.perf_counter()
 

@@ -44,7 +44,8 @@ if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
     from .surface_layout import SurfaceLayout
 
-__all__ = ["BoundaryPanels", "ParameterChart", "trim_to_design", "add_boundary_panels"]
+__all__ = ["BoundaryPanels", "ParameterChart", "trim_to_design", "add_boundary_panels",
+           "net_coverage"]
 
 
 @dataclass
@@ -165,8 +166,10 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     grid = 1e-7 * cell ** 0.5
     p_net = np.round(p_net / grid) * grid
     faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
-    net = shapely.union_all(shapely.make_valid(faces), grid_size=grid)
-    unclad = shapely.difference(shapely.set_precision(chart.domain, grid), net, grid_size=grid)
+    net = shapely.union_all(_polygonal(shapely.make_valid(faces)), grid_size=grid)
+    domain = shapely.union_all(_polygonal([shapely.set_precision(chart.domain, grid)]), grid_size=grid)
+    unclad = shapely.union_all(_polygonal([shapely.difference(domain, net, grid_size=grid)]),
+                               grid_size=grid)
     boundary = chart.boundary_lines
     tol = 4 * grid
     # a vertex on the boundary (to a thousandth of a panel: gliding, or added on it)
@@ -230,17 +233,35 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         seconds=time.perf_counter() - clock)
 
 
-def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout) -> BoundaryPanels:
+def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout
+                        ) -> BoundaryPanels | None:
     """Trim a net solved from `layout` to the design (`trim_to_design`), attach the panels
     to `result` (written beside its OBJ) and record what they give in its properties:
     ``coverage`` (full and boundary panels), ``coverage_net`` (full panels only) and
-    ``boundary_panels`` (`BoundaryPanels.record`)."""
-    panels = trim_to_design(result.mesh, layout)
+    ``boundary_panels`` (`BoundaryPanels.record`). A net the overlays fail on gets none,
+    and the reason under ``boundary_panels.error``."""
+    try:
+        panels = trim_to_design(result.mesh, layout)
+    except shapely.errors.GEOSException as exc:
+        # the overlays failed on a degenerate net: it is reported without boundary panels
+        coverage = net_coverage(result.mesh, layout.design, layout.panel_size)
+        result.properties["coverage"] = result.properties["coverage_net"] = coverage
+        result.properties["boundary_panels"] = {
+            "count": 0, "coverage": coverage, "coverage_net": coverage,
+            "error": f"the net could not be trimmed to the design boundary: {exc}"}
+        return None
     result.boundary_panels = panels
     result.properties["coverage"] = panels.coverage
     result.properties["coverage_net"] = panels.coverage_net
     result.properties["boundary_panels"] = panels.record()
     return panels
+
+
+def net_coverage(mesh: QuadMesh, design: DesignSurface, panel_size: float) -> float:
+    """The share of the design's area under the faces of `mesh` (`_under`)."""
+    samples, normals, weight = _design_samples(design)
+    on = _under(samples, normals, mesh.vertices, mesh.triangles(), panel_size)
+    return float(weight[on].sum() / weight.sum())
 
 
 # ---------------------------------------------------------------------------- the chart
@@ -372,6 +393,13 @@ def _barycentric(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     l1 = (v2[:, 0] * v1[:, 1] - v2[:, 1] * v1[:, 0]) / det
     l2 = (v0[:, 0] * v2[:, 1] - v0[:, 1] * v2[:, 0]) / det
     return np.stack([1 - l1 - l2, l1, l2], axis=1)
+
+
+def _polygonal(geometries) -> np.ndarray:
+    """The polygons among the parts of `geometries` (a degenerate face made valid may
+    leave lines and points, which no overlay with areas accepts)."""
+    parts = shapely.get_parts(np.asarray(geometries, dtype=object))
+    return parts[shapely.get_type_id(parts) == 3]
 
 
 def _transition_maps(cuts: list) -> list[tuple[int, np.ndarray]]:
