@@ -32,7 +32,7 @@ from scipy.interpolate import CubicSpline
 from scipy.sparse import csgraph
 
 from ..errors import InputError
-from ..net.geometry import fit_star_spheres, osculating_tangents, star_normals
+from ..net.geometry import fit_star_spheres, osculating_tangents, principal_curvatures, star_normals
 from ..net.mesh import QuadMesh
 
 __all__ = [
@@ -408,6 +408,7 @@ class _Nodes:
     motion: np.ndarray
     cross: np.ndarray
     radius: np.ndarray          # Meusnier radius, inf when flat
+    largest_curvature: np.ndarray  # larger principal curvature towards the tool, NaN unknown
     cross_neighbour: np.ndarray  # (s, 2) vertex ids along the other family: (-, +)
 
 
@@ -454,62 +455,60 @@ def _net_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_Nodes, str]:
     neighbours = stars[:, [4, 2]] if f == 0 else stars[:, [3, 1]]
     with np.errstate(divide="ignore"):
         radius = np.where(flat, np.inf, 1.0 / np.where(flat, 1.0, k))
+    k1, k2 = principal_curvatures(X, stars, spheres.curvature)
     return _Nodes(vertex=stars[:, 0], point=X[stars[:, 0]], normal=sign * normals,
                   motion=_unit(motion), cross=_unit(cross), radius=radius,
+                  largest_curvature=np.fmax(sign * k1, sign * k2),
                   cross_neighbour=neighbours), side
 
 
-def default_margin_mm(points: np.ndarray, radius: np.ndarray, cross_neighbours: np.ndarray,
-                      star_of_point: np.ndarray, circle_radius_mm: float,
-                      share: float = 0.005) -> float:
+def default_margin_mm(points: np.ndarray, radius: np.ndarray, largest_curvature: np.ndarray,
+                      circle_radius_mm: float, share: float = 0.005) -> float:
     """The margin that keeps a face mill's cut above the target: the rule of docs/milling.md.
 
-    Across the pass, at offset s from the contact, the swept cutting circle stands at least
-    ``s^2 / (2 R_s) + s^4 / (8 r^2 R_s)`` above the tangent plane (its ellipse, expanded),
-    the target at ``s^2 / (2 R) + g s^3 / 6`` with g the rate of change of the normal
-    curvature 1/R across the pass. The cut stays above the target for every s when
-    ``1/R_s - 1/R >= g^2 r^2 R_s / 9``, that is for a margin ``R - R_s`` of about
-    ``g^2 r^2 R^3 / 9``. The rule takes the largest over the nodes, and adds
-    ``share * max R`` for the difference between the discrete spheres and the smooth
-    surface they sample:
+    A point of the cutting circle seen from the contact in the tangent direction psi stands
+    ``d^2 / (2 R_s)`` above the tangent plane (it lies on the safety sphere), the target
+    ``kappa(psi) d^2 / 2`` with kappa the normal curvature; as the circle runs round, psi
+    runs through every direction. The circle stays above the target only where
+    ``1 / R_s`` is at least the largest principal curvature k_max within its reach (2 r).
+    The rule takes the largest shortfall over the nodes and adds ``share * max R`` for the
+    difference between the discrete spheres and the smooth surface they sample:
 
-    ``margin = max_i g_i^2 r^2 R_i^3 / 9 + share * max_i R_i``
+    ``margin = max_i (R_i - 1 / max{k_max,j : |p_j - p_i| <= 2 r}) + share * max_i R_i``
 
-    with g_i the difference of 1/R between the node's two neighbours across (or one
-    neighbour and the node) over their distance.
+    On an umbilic surface (k_max = 1/R) only the share remains; the spread of the principal
+    curvatures is what the margin, and with it the scallop, grows with.
 
     Parameters
     ----------
     points : (s, 3) float, node positions (mm).
     radius : (s,) float, Meusnier radii (mm, inf where flat).
-    cross_neighbours : (s, 2) int, the nodes' neighbours along the other family, as indices
-        into `star_of_point` (vertex ids).
-    star_of_point : (n,) int, node index of each vertex, -1 off the nodes.
+    largest_curvature : (s,) float, larger principal curvature towards the tool (1/mm, NaN
+        where unknown: the node's own 1/R is used).
     circle_radius_mm : radius r of the cutting circle.
     share : discretization share.
 
     Examples
     --------
-    >>> P = np.array([[0.0, 0, 0], [10, 0, 0], [20, 0, 0]])
+    >>> P = np.array([[0.0, 0, 0], [10, 0, 0], [200, 0, 0]])
     >>> R = np.array([300.0, 310, 320])
-    >>> nb = np.array([[-1, 1], [0, 2], [1, -1]])
-    >>> round(default_margin_mm(P, R, nb, np.arange(3), 25.0, 0.0), 4)   # g = 1.06e-5 / mm^2
-    0.1253
+    >>> k = np.array([1 / 280, 1 / 300, 1 / 300])
+    >>> round(default_margin_mm(P, R, k, 25.0, 0.0), 6)   # 310 - 280
+    30.0
     """
+    from scipy.spatial import cKDTree
+
     finite = np.isfinite(radius)
     if not finite.any():
         return 0.0
-    curvature = np.where(finite, 1.0 / np.where(finite, radius, 1.0), 0.0)
-    ends = star_of_point[np.maximum(cross_neighbours, 0)]
-    ends = np.where(cross_neighbours >= 0, ends, -1)
-    own = np.arange(len(points))
-    a = np.where(ends[:, 0] >= 0, ends[:, 0], own)
-    b = np.where(ends[:, 1] >= 0, ends[:, 1], own)
-    distance = np.linalg.norm(points[b] - points[a], axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rate = np.where(distance > 0, (curvature[b] - curvature[a]) / distance, 0.0)
-    bound = rate**2 * circle_radius_mm**2 * radius**3 / 9
-    return float(np.max(bound[finite]) + share * radius[finite].max())
+    P, R = points[finite], radius[finite]
+    k = np.where(np.isfinite(largest_curvature[finite]), largest_curvature[finite], 1.0 / R)
+    k = np.maximum(k, 1.0 / R)
+    tree = cKDTree(P)
+    pairs = tree.sparse_distance_matrix(tree, 2 * circle_radius_mm, output_type="coo_matrix")
+    reach = k.copy()
+    np.maximum.at(reach, pairs.row, k[pairs.col])
+    return float(np.max(R - 1.0 / reach) + share * R.max())
 
 
 def _line_sequence(mesh: QuadMesh, nodes: _Nodes, family: int) -> tuple[list, np.ndarray]:
@@ -688,11 +687,11 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     family = 0 if settings.along == "A" else 1
     r = tool.circle_radius_mm
     if settings.margin_mm is None:
-        margin = default_margin_mm(nodes.point, nodes.radius, nodes.cross_neighbour,
-                                   mesh.star_of_vertex, tool.circle_radius_mm,
-                                   settings.discretization_share)
-        rule = (f"max over nodes of g^2 r^2 R^3 / 9 + {settings.discretization_share:g} x max R "
-                "(g: change of 1/R across the pass per mm, r: cutting circle radius)")
+        margin = default_margin_mm(nodes.point, nodes.radius, nodes.largest_curvature,
+                                   tool.circle_radius_mm, settings.discretization_share)
+        rule = (f"max over nodes of (R - 1 / k_max within 2 r) + {settings.discretization_share:g}"
+                " x max R (R: Meusnier radius, k_max: larger principal curvature, r: cutting "
+                "circle radius)")
     else:
         margin = float(settings.margin_mm)
         rule = "given (--margin)"
