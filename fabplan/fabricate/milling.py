@@ -384,7 +384,7 @@ class MillPlan:
                 "normal_z,cross_x,cross_y,cross_z,tilt_deg,safety_radius_mm")
         table = np.column_stack([p.tip, p.axis, p.contact, p.normal, p.cross, p.tilt_deg,
                                  p.safety_radius])
-        rows = [f"{int(a)},{int(b)}," + ",".join(f"{v:.9f}" for v in row)
+        rows = [f"{int(a)},{int(b)}," + ",".join(f"{v:.12g}" for v in row)
                 for a, b, row in zip(p.pass_id, p.vertex, table, strict=True)]
         return "\n".join([head, *rows]) + "\n"
 
@@ -470,11 +470,14 @@ def default_margin_mm(points: np.ndarray, radius: np.ndarray, largest_curvature:
     ``d^2 / (2 R_s)`` above the tangent plane (it lies on the safety sphere), the target
     ``kappa(psi) d^2 / 2`` with kappa the normal curvature; as the circle runs round, psi
     runs through every direction. The circle stays above the target only where
-    ``1 / R_s`` is at least the largest principal curvature k_max within its reach (2 r).
+    ``1 / R_s`` is at least the largest principal curvature k_max; the rule takes k_max
+    over the nodes within a cutter radius r (the worst direction, 45 degrees off the
+    cross tangent on an orthogonal net, is reached about 1.4 r from the contact, and the
+    target's height there averages its curvature along the chord).
     The rule takes the largest shortfall over the nodes and adds ``share * max R`` for the
     difference between the discrete spheres and the smooth surface they sample:
 
-    ``margin = max_i (R_i - 1 / max{k_max,j : |p_j - p_i| <= 2 r}) + share * max_i R_i``
+    ``margin = max_i (R_i - 1 / max{k_max,j : |p_j - p_i| <= r}) + share * max_i R_i``
 
     On an umbilic surface (k_max = 1/R) only the share remains; the spread of the principal
     curvatures is what the margin, and with it the scallop, grows with.
@@ -505,7 +508,7 @@ def default_margin_mm(points: np.ndarray, radius: np.ndarray, largest_curvature:
     k = np.where(np.isfinite(largest_curvature[finite]), largest_curvature[finite], 1.0 / R)
     k = np.maximum(k, 1.0 / R)
     tree = cKDTree(P)
-    pairs = tree.sparse_distance_matrix(tree, 2 * circle_radius_mm, output_type="coo_matrix")
+    pairs = tree.sparse_distance_matrix(tree, circle_radius_mm, output_type="coo_matrix")
     reach = k.copy()
     np.maximum.at(reach, pairs.row, k[pairs.col])
     return float(np.max(R - 1.0 / reach) + share * R.max())
@@ -616,7 +619,7 @@ def _frames_between(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
     """Cubic splines through one pass's node frames, by arc length."""
     seg = np.linalg.norm(np.diff(contact, axis=0), axis=1)
     s = np.r_[0.0, np.cumsum(seg)]
-    kind = "natural" if len(s) > 2 else "not-a-knot"
+    kind = "not-a-knot"   # exact on cubics: no end curvature forced to zero
     splines = [CubicSpline(s, contact, bc_type=kind), CubicSpline(s, normal, bc_type=kind),
                CubicSpline(s, cross, bc_type=kind)]
     finite = np.isfinite(safety)
@@ -689,7 +692,7 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     if settings.margin_mm is None:
         margin = default_margin_mm(nodes.point, nodes.radius, nodes.largest_curvature,
                                    tool.circle_radius_mm, settings.discretization_share)
-        rule = (f"max over nodes of (R - 1 / k_max within 2 r) + {settings.discretization_share:g}"
+        rule = (f"max over nodes of (R - 1 / k_max within r) + {settings.discretization_share:g}"
                 " x max R (R: Meusnier radius, k_max: larger principal curvature, r: cutting "
                 "circle radius)")
     else:

@@ -53,7 +53,9 @@ class CLData:
 
 
 def _goto(p: np.ndarray, a: np.ndarray) -> str:
-    return "GOTO/" + ", ".join(f"{v:.6f}" for v in p) + ", " + ", ".join(f"{v:.9f}" for v in a)
+    # 1e-8 mm and 1e-12 rad: re-read locations keep sub-micrometre geometry on spheres of
+    # metres
+    return "GOTO/" + ", ".join(f"{v:.8f}" for v in p) + ", " + ", ".join(f"{v:.12f}" for v in a)
 
 
 def cldata_text(tip: np.ndarray, axis: np.ndarray, pass_id: np.ndarray, *, part: str,
@@ -78,7 +80,7 @@ def cldata_text(tip: np.ndarray, axis: np.ndarray, pass_id: np.ndarray, *, part:
     >>> text = cldata_text(np.zeros((2, 3)) + [[0, 0, 0], [1, 0, 0]], np.tile([0, 0, 1.0], (2, 1)),
     ...                    np.array([0, 0]), part="demo", diameter_mm=10)
     >>> text.splitlines()[5]
-    'GOTO/0.000000, 0.000000, 0.000000, 0.000000000, 0.000000000, 1.000000000'
+    'GOTO/0.00000000, 0.00000000, 0.00000000, 0.000000000000, 0.000000000000, 1.000000000000'
     """
     passes = np.unique(pass_id)
     comments = pass_comments or [f"pass {int(p) + 1}" for p in passes]
