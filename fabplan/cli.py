@@ -174,7 +174,7 @@ def _cmd_molds(args) -> int:
 
 
 def _cmd_mill(args) -> int:
-    from .fabricate.mill_report import write_mill_report, mill_net, MILL_FILES
+    from .fabricate.mill_report import MILL_FILES, mill_net, write_mill_report
     from .fabricate.mill_simulation import SimulationSettings
     from .fabricate.milling import MillSettings, parse_tool
 
@@ -193,7 +193,7 @@ def _cmd_mill(args) -> int:
     files = write_mill_report(result, out)
     print(result.summary())
     print(f"wrote {', '.join(str(f) for f in files)}")
-    if not result.gouge_free:
+    if not result.gouge_free and result.simulation is not None:
         print(f"fabplan: warning: the simulated cut gouges the target by "
               f"{result.simulation.max_gouge_mm:.4g} mm: give a larger --margin "
               f"(details in {out / 'report.html'})", file=sys.stderr)

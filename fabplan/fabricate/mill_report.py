@@ -178,7 +178,7 @@ def _paths_figure(result: MillResult) -> str:
     for number, part in enumerate(path.pass_slices()):
         ax.plot(C[part, 0], C[part, 1], "-", color=colors[number], lw=1.5)
         ax.plot(T[part, 0], T[part, 1], ":", color=colors[number], lw=0.8)
-        ax.annotate(str(number + 1), C[part][0, :2], fontsize=7)
+        ax.annotate(str(number + 1), (float(C[part][0, 0]), float(C[part][0, 1])), fontsize=7)
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")

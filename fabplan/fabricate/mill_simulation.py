@@ -150,7 +150,7 @@ def height_target(points_mm: np.ndarray, triangles: np.ndarray, up: np.ndarray, 
     y = np.arange(lo[1], hi[1] + step_mm / 2, step_mm)
     gx, gy = np.meshgrid(x, y)
     tri = Triangulation(P[:, 0], P[:, 1], triangles)
-    inside = tri.get_trifinder()(gx, gy) >= 0
+    inside = np.asarray(tri.get_trifinder()(gx, gy)) >= 0
     neighbours = None if len(P) <= 3000 else 60
     spline = RBFInterpolator(P[:, :2], P[:, 2], kernel="thin_plate_spline", degree=2,
                              neighbors=neighbours)

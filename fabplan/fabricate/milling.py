@@ -615,7 +615,7 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
 
 
 def _frames_between(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
-                    safety: np.ndarray, count: int) -> tuple:
+                    safety: np.ndarray) -> tuple[np.ndarray, list]:
     """Cubic splines through one pass's node frames, by arc length."""
     seg = np.linalg.norm(np.diff(contact, axis=0), axis=1)
     s = np.r_[0.0, np.cumsum(seg)]
@@ -639,15 +639,14 @@ def _evaluate_frames(splines: list, t: np.ndarray) -> tuple:
     return p, n, c, radius
 
 
-def _refine_pass(splines: list, s: np.ndarray, tool: MillTool, tolerance: float,
-                 lead_sign: float, motion_sign: float) -> tuple:
+def _refine_pass(splines: list, s: np.ndarray, tool: MillTool, tolerance: float) -> np.ndarray:
     """Parameters of the CL points of one pass: the nodes, plus midpoints wherever the
-    planned tip path leaves the straight move between neighbours by more than `tolerance`."""
+    planned tip path leaves the straight move between neighbours by more than `tolerance`
+    (the circle's centre trails the contact: the cutter cuts with its front)."""
     def pose(t):
         p, n, c, R = _evaluate_frames(splines, t)
-        motion = splines[0](t, 1) * motion_sign
-        tip, axis, tilt = circle_tool_pose(p, n, c, -lead_sign * motion, R, tool.circle_radius_mm,
-                                           tool.corner_mm)
+        tip, _, _ = circle_tool_pose(p, n, c, -splines[0](t, 1), R, tool.circle_radius_mm,
+                                     tool.corner_mm)
         return tip
     t = s.copy()
     for _ in range(20):
@@ -739,8 +738,8 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
         cross = nodes.cross[run]
         # consistent cross tangent along the run (the discrete tangents may flip sign)
         cross = cross * np.where(np.sum(cross * cross[:1], axis=1) < 0, -1.0, 1.0)[:, None]
-        s, splines = _frames_between(nodes.point[run], normal, cross, safety[run], len(run))
-        t = _refine_pass(splines, s, tool, settings.chordal_tolerance_mm, 1.0, 1.0)
+        s, splines = _frames_between(nodes.point[run], normal, cross, safety[run])
+        t = _refine_pass(splines, s, tool, settings.chordal_tolerance_mm)
         p, n, c, R = _evaluate_frames(splines, t)
         motion = _unit(splines[0](t, 1))
         tip, axis, tilt = circle_tool_pose(p, n, c, -motion, R, r, tool.corner_mm)
