@@ -326,3 +326,13 @@ def test_paraboloid_example_mills_without_gouge_and_beats_the_ball_end(tmp_path)
     assert simulated <= 0.01
     assert record["comparison"]["scallop_ratio"] >= 5
     assert result.plan.path.pass_count == record["passes"]
+
+
+def test_toroidal_entry_matches_the_closed_form_of_an_upright_torus():
+    r, c = 10.0, 3.0
+    rho = np.linspace(0, 9.99, 40)
+    z = entry_heights(Cutter("flat", r, 20.0, c), np.zeros((40, 3)), np.tile([0.0, 0, 1], (40, 1)),
+                      rho, np.zeros(40))
+    ring = np.clip(rho - (r - c), 0, None)
+    expected = np.where(rho <= r - c, 0.0, c - np.sqrt(c * c - ring**2))
+    assert np.abs(z - expected).max() < 1e-9
