@@ -566,16 +566,16 @@ def _line_sequence(mesh: QuadMesh, nodes: _Nodes, family: int) -> tuple[list, np
 def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle_radius: float,
                         corner: float, max_stride: int, star_of_vertex: np.ndarray,
                         towards: np.ndarray) -> np.ndarray:
-    """(max_stride,) largest predicted scallop between passes stride lines apart.
+    """(max_stride, s) predicted scallop between each node and the pass k lines on.
 
-    From every node the walk goes k steps along the other family towards the next pass
-    (through stars; a boundary vertex ends it). The material left between the node and
-    the vertex reached is where the two passes' swept profiles cross, each profile
-    ``swept_profile_height - (R - sqrt(R^2 - x^2))`` about its own node: the target's
-    normal section in the cross direction has the Meusnier radius R (a node off the
-    passes' stars uses the near node's sphere). The crossing is found by bisection.
+    From every node the walk goes k steps along the other family towards the next pass,
+    through stars (NaN where it leaves them: no pass runs there). The material left
+    between the node and the node reached is where the two passes' swept profiles cross,
+    each profile ``swept_profile_height - (R - sqrt(R^2 - x^2))`` about its own node: the
+    target's normal section in the cross direction has the Meusnier radius R. The
+    crossing is found by bisection.
     """
-    out = np.full(max_stride, np.inf)
+    out = np.full((max_stride, len(nodes.vertex)), np.nan)
     count = len(nodes.vertex)
     rows = np.arange(count)
     previous = nodes.vertex.copy()
@@ -599,10 +599,9 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
             alive &= current >= 0
         if not alive.any():
             break
-        i = np.flatnonzero(alive)
+        i = np.flatnonzero(alive & (star_of_vertex[np.maximum(current, 0)] >= 0))
         q = current[i]
-        far = star_of_vertex[q]
-        j = np.where(far >= 0, far, i)
+        j = star_of_vertex[q]
         w = np.linalg.norm(X[q] - nodes.point[i], axis=1)
         lo, hi = np.zeros(len(i)), w.copy()
         for _ in range(60):
@@ -610,7 +609,7 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
             near_higher = left(mid, i) > left(w - mid, j)
             hi = np.where(near_higher, mid, hi)
             lo = np.where(near_higher, lo, mid)
-        out[k - 1] = float(np.max(left(lo, i)))
+        out[k - 1, i] = left(lo, i)
     return out
 
 
@@ -717,8 +716,15 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     towards = np.where((plus == own + 1) | (minus == own - 1), 1, 0)
     lines = int(order.max()) + 1
     max_stride = max(1, min(lines - 1, 12))
-    predicted = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, max_stride,
-                                    mesh.star_of_vertex, towards)
+    per_node = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, max_stride,
+                                   mesh.star_of_vertex, towards)
+    # the prediction of stride k: between the lines the passes of that stride take
+    predicted = np.full(max_stride, np.inf)
+    for k in range(1, max_stride + 1):
+        on_pass = (own >= 0) & ((own - ((lines - 1) % k) // 2) % k == 0)
+        values = per_node[k - 1, on_pass]
+        if np.isfinite(values).any():
+            predicted[k - 1] = float(np.nanmax(values))
     fits = np.flatnonzero(predicted <= settings.scallop_mm)
     stride = int(fits.max()) + 1 if fits.size else 1
     notes = []
