@@ -93,7 +93,7 @@ def milled(tmp_path_factory):
     folder = tmp_path_factory.mktemp("mill")
     net = write_net(bowl_grid(), folder / "bowl.obj")
     code = main(["mill", str(net), "--tool", "face:D=40", "--units", "mm", "--sim-step", "1.0",
-                 "-o", str(folder / "out")])
+                 "--scallop", "0.003", "-o", str(folder / "out")])
     assert code == 0
     return folder / "out", QuadMesh.from_obj(net)
 
@@ -261,7 +261,10 @@ def test_bowl_simulation_has_no_gouge_and_matches_the_prediction(milled):
     record = json.loads((out / "mill.json").read_text())
     assert record["gouge_check"]["passed"]
     assert record["simulation"]["max_gouge_mm"] <= 0.005
-    assert record["scallop_simulated_over_predicted"] == pytest.approx(1.0, abs=0.15)
+    # on the coarse 1 mm grid of this quick test the cusps are sampled up to 0.5 mm off
+    # their crest; the prediction is an upper estimate here (see the slow example test
+    # for the 10 % agreement on a 0.5 mm grid)
+    assert 0.5 < record["scallop_simulated_over_predicted"] < 1.1
     assert record["comparison"]["scallop_ratio"] > 5
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 3
@@ -324,6 +327,7 @@ def test_paraboloid_example_mills_without_gouge_and_beats_the_ball_end(tmp_path)
     predicted, simulated = record["predicted_scallop_mm"], record["simulation"]["max_scallop_mm"]
     assert simulated == pytest.approx(predicted, rel=0.10)
     assert simulated <= 0.01
+    assert record["passes"] <= 12
     assert record["comparison"]["scallop_ratio"] >= 5
     assert result.plan.path.pass_count == record["passes"]
 

@@ -359,6 +359,38 @@ def _pose_at(tip: np.ndarray, axis: np.ndarray, param: np.ndarray) -> tuple[np.n
     return t, a / np.linalg.norm(a, axis=-1, keepdims=True)
 
 
+def _end_face_hits(cutter: Cutter, tip: np.ndarray, axis: np.ndarray, x: np.ndarray,
+                   y: np.ndarray) -> np.ndarray:
+    """(k,) bool, the vertical lines at (x, y) cross the flat end face of the cutter
+    (none for a ball end): the cutting edge passes a cell where this changes."""
+    if cutter.kind == "ball":
+        return np.zeros(len(x), bool)
+    dx, dy = x - tip[:, 0], y - tip[:, 1]
+    rise = (dx * axis[:, 0] + dy * axis[:, 1]) / axis[:, 2]
+    return dx * dx + dy * dy + rise * rise <= cutter.radius_mm**2
+
+
+def _golden_minimum(function, lo: np.ndarray, hi: np.ndarray, rounds: int) -> np.ndarray:
+    """Smallest value `function` takes at the golden-section points of [lo, hi] (arrays),
+    the interval shrinking towards the smaller value for `rounds` rounds."""
+    m1 = hi - _GOLDEN * (hi - lo)
+    m2 = lo + _GOLDEN * (hi - lo)
+    f1, f2 = function(m1), function(m2)
+    smallest = np.minimum(f1, f2)
+    for _ in range(rounds):
+        # keep the interior point of the smaller value; one new evaluation per round
+        left = f1 <= f2
+        hi = np.where(left, m2, hi)
+        lo = np.where(left, lo, m1)
+        keep_p, keep_f = np.where(left, m1, m2), np.where(left, f1, f2)
+        new_p = np.where(left, hi - _GOLDEN * (hi - lo), lo + _GOLDEN * (hi - lo))
+        new_f = function(new_p)
+        smallest = np.minimum(smallest, new_f)
+        m1, f1 = np.where(left, new_p, keep_p), np.where(left, new_f, keep_f)
+        m2, f2 = np.where(left, keep_p, new_p), np.where(left, keep_f, new_f)
+    return smallest
+
+
 def _sweep_pass(target: HeightTarget, cutter: Cutter, tip: np.ndarray, axis: np.ndarray,
                 settings: SimulationSettings) -> np.ndarray:
     """(ny, nx) lowest cut of one pass (inf where it does not reach)."""
@@ -379,6 +411,8 @@ def _sweep_pass(target: HeightTarget, cutter: Cutter, tip: np.ndarray, axis: np.
     oy, ox = oy[disk], ox[disk]
     best = np.full(ny * nx, np.inf)
     best_pose = np.full(ny * nx, -1)
+    first_pose = np.full(ny * nx, len(poses))
+    last_pose = np.full(ny * nx, -1)
     per = max(1, settings.chunk // len(ox))
     for start in range(0, len(poses), per):
         t, a = poses[start:start + per], pose_axes[start:start + per]
@@ -395,11 +429,14 @@ def _sweep_pass(target: HeightTarget, cutter: Cutter, tip: np.ndarray, axis: np.
         np.minimum.at(best, cell, z)
         won = z == best[cell]
         best_pose[cell[won]] = k[won]
-    # golden-section search on the continuous motion around the best pose
+        face = _end_face_hits(cutter, t[k - start], a[k - start], target.x[cell % nx],
+                              target.y[cell // nx])
+        np.minimum.at(first_pose, cell[face], k[face])
+        np.maximum.at(last_pose, cell[face], k[face])
+    # golden-section search on the continuous motion about the best pose, and about the
+    # first and last poses whose end face lies over the cell: the cutting edge crosses it
+    # there, and that narrow dip may lie between two coarse poses that both miss it
     reached = np.flatnonzero(best_pose >= 0)
-    j = best_pose[reached]
-    lo = param[np.maximum(j - 1, 0)]
-    hi = param[np.minimum(j + 1, len(param) - 1)]
     px = target.x[reached % nx]
     py = target.y[reached // nx]
 
@@ -407,20 +444,11 @@ def _sweep_pass(target: HeightTarget, cutter: Cutter, tip: np.ndarray, axis: np.
         t, a = _pose_at(tip, axis, p)
         return entry_heights(cutter, t, a, px, py)
 
-    m1 = hi - _GOLDEN * (hi - lo)
-    m2 = lo + _GOLDEN * (hi - lo)
-    f1, f2 = height(m1), height(m2)
-    for _ in range(settings.golden_rounds):
-        # keep the interior point of the smaller value; one new evaluation per round
-        left = f1 <= f2
-        hi = np.where(left, m2, hi)
-        lo = np.where(left, lo, m1)
-        keep_p, keep_f = np.where(left, m1, m2), np.where(left, f1, f2)
-        new_p = np.where(left, hi - _GOLDEN * (hi - lo), lo + _GOLDEN * (hi - lo))
-        new_f = height(new_p)
-        m1, f1 = np.where(left, new_p, keep_p), np.where(left, new_f, keep_f)
-        m2, f2 = np.where(left, keep_p, new_p), np.where(left, keep_f, new_f)
-    refined = np.minimum(np.minimum(f1, f2), best[reached])
+    refined = best[reached]
+    for j in (best_pose[reached], first_pose[reached], last_pose[reached]):
+        lo = param[np.maximum(j - 1, 0)]
+        hi = param[np.minimum(j + 1, len(param) - 1)]
+        refined = np.minimum(refined, _golden_minimum(height, lo, hi, settings.golden_rounds))
     best[reached] = refined
     return best.reshape(ny, nx)
 

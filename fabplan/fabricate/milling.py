@@ -32,7 +32,13 @@ from scipy.interpolate import CubicSpline
 from scipy.sparse import csgraph
 
 from ..errors import InputError
-from ..net.geometry import fit_star_spheres, osculating_tangents, principal_curvatures, star_normals
+from ..net.geometry import (
+    fit_star_spheres,
+    osculating_tangents,
+    principal_curvatures,
+    principal_directions,
+    star_normals,
+)
 from ..net.mesh import QuadMesh
 
 __all__ = [
@@ -409,6 +415,8 @@ class _Nodes:
     cross: np.ndarray
     radius: np.ndarray          # Meusnier radius, inf when flat
     largest_curvature: np.ndarray  # larger principal curvature towards the tool, NaN unknown
+    principal: np.ndarray       # (s, 2) principal curvatures towards the tool (NaN unknown)
+    principal_directions: np.ndarray  # (s, 2, 3) their unit directions
     cross_neighbour: np.ndarray  # (s, 2) vertex ids along the other family: (-, +)
 
 
@@ -456,9 +464,12 @@ def _net_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_Nodes, str]:
     with np.errstate(divide="ignore"):
         radius = np.where(flat, np.inf, 1.0 / np.where(flat, 1.0, k))
     k1, k2 = principal_curvatures(X, stars, spheres.curvature)
+    e1, e2 = principal_directions(X, stars)
     return _Nodes(vertex=stars[:, 0], point=X[stars[:, 0]], normal=sign * normals,
                   motion=_unit(motion), cross=_unit(cross), radius=radius,
                   largest_curvature=np.fmax(sign * k1, sign * k2),
+                  principal=np.column_stack([sign * k1, sign * k2]),
+                  principal_directions=np.stack([e1, e2], axis=1),
                   cross_neighbour=neighbours), side
 
 
@@ -563,17 +574,34 @@ def _line_sequence(mesh: QuadMesh, nodes: _Nodes, family: int) -> tuple[list, np
     return runs, order_of_line[run_line]
 
 
+def _second_form(nodes: _Nodes, who: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """II(a, b) at nodes `who` from the discrete principal curvatures and directions
+    (0 where they are unknown)."""
+    k = nodes.principal[who]
+    e = nodes.principal_directions[who]
+    value = (k[:, 0] * np.sum(a * e[:, 0], axis=1) * np.sum(b * e[:, 0], axis=1)
+             + k[:, 1] * np.sum(a * e[:, 1], axis=1) * np.sum(b * e[:, 1], axis=1))
+    return np.where(np.isfinite(value), value, 0.0)
+
+
 def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle_radius: float,
                         corner: float, max_stride: int, star_of_vertex: np.ndarray,
-                        towards: np.ndarray) -> np.ndarray:
+                        towards: np.ndarray, trailing: np.ndarray) -> np.ndarray:
     """(max_stride, s) predicted scallop between each node and the pass k lines on.
 
     From every node the walk goes k steps along the other family towards the next pass,
-    through stars (NaN where it leaves them: no pass runs there). The material left
-    between the node and the node reached is where the two passes' swept profiles cross,
-    each profile ``swept_profile_height - (R - sqrt(R^2 - x^2))`` about its own node: the
-    target's normal section in the cross direction has the Meusnier radius R. The
-    crossing is found by bisection.
+    through stars (NaN where it leaves them: no pass runs there). A point of the cutting
+    circle at lateral offset x from the contact trails it by ``b = r - sqrt(r^2 - x^2)``
+    and lies on the safety sphere; the target below it stands
+    ``(R - sqrt(R^2 - x^2)) + II(w, s) x b + II(s, s) b^2 / 2`` above the tangent plane
+    (w lateral, s trailing, the normal curvature across is 1/R, the one along the pass
+    ``k1 + k2 - 1/R``). What is left between two passes is where the two profiles cross,
+    found by bisection.
+
+    Parameters
+    ----------
+    trailing : (max_stride, s, 3) float, unit direction behind the contact at each node
+        for the passes of each stride (the motion reversed; passes alternate).
     """
     out = np.full((max_stride, len(nodes.vertex)), np.nan)
     count = len(nodes.vertex)
@@ -582,12 +610,24 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
     current = nodes.cross_neighbour[rows, towards]
     alive = current >= 0
 
-    def left(x, who):
+    def tangential(v, who):
+        n = nodes.normal[who]
+        v = v - np.sum(v * n, axis=1, keepdims=True) * n
+        return _unit(v)
+
+    def left(x, who, lateral, behind):
+        rs = safety[who] - corner
         R = nodes.radius[who] - corner
-        h_cut = swept_profile_height(x, circle_radius, safety[who] - corner)
         with np.errstate(invalid="ignore"):
-            h_target = np.where(np.isfinite(R), R - np.sqrt(np.maximum(R * R - x * x, 0)), 0.0)
-        return h_cut - h_target
+            b = circle_radius - np.sqrt(np.maximum(circle_radius**2 - x * x, 0))
+            d2 = x * x + b * b
+            h_cut = np.where(np.isfinite(rs), rs - np.sqrt(np.maximum(rs * rs - d2, 0)), 0.0)
+            across = np.where(np.isfinite(R), R - np.sqrt(np.maximum(R * R - x * x, 0)), 0.0)
+        k_sum = np.sum(nodes.principal[who], axis=1)
+        inverse = np.where(np.isfinite(R), 1.0 / np.where(np.isfinite(R), R, 1.0), 0.0)
+        k_along = np.where(np.isfinite(k_sum), k_sum - inverse, inverse)
+        h_target = across + _second_form(nodes, who, lateral, behind) * x * b + k_along * b * b / 2
+        return np.where(x < circle_radius, h_cut - h_target, np.inf)
 
     for k in range(1, max_stride + 1):
         if k > 1:
@@ -603,13 +643,16 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
         q = current[i]
         j = star_of_vertex[q]
         w = np.linalg.norm(X[q] - nodes.point[i], axis=1)
+        lateral_i = tangential(X[q] - nodes.point[i], i)
+        lateral_j = tangential(nodes.point[i] - X[q], j)
+        behind_i, behind_j = trailing[k - 1, i], trailing[k - 1, j]
         lo, hi = np.zeros(len(i)), w.copy()
         for _ in range(60):
             mid = (lo + hi) / 2
-            near_higher = left(mid, i) > left(w - mid, j)
+            near_higher = left(mid, i, lateral_i, behind_i) > left(w - mid, j, lateral_j, behind_j)
             hi = np.where(near_higher, mid, hi)
             lo = np.where(near_higher, lo, mid)
-        out[k - 1, i] = left(lo, i)
+        out[k - 1, i] = left(lo, i, lateral_i, behind_i)
     return out
 
 
@@ -706,6 +749,15 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
             f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
             f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
     runs, order = _line_sequence(mesh, nodes, family)
+    # orient the runs alike (so that passes alternate direction on the part), and note
+    # each node's forward direction along its run
+    reference = nodes.point[runs[int(np.argmin(order))]]
+    heading = reference[-1] - reference[0]
+    runs = [run if np.dot(nodes.point[run[-1]] - nodes.point[run[0]], heading) >= 0 else run[::-1]
+            for run in runs]
+    forward = np.zeros_like(nodes.point)
+    for run in runs:
+        forward[run] = _unit(np.gradient(nodes.point[run], axis=0))
     X = mesh.vertices * settings.mm_per_unit
     # which cross neighbour (0: the '-' one, 1: the '+' one) lies towards the next line
     v_order = np.full(mesh.vertex_count, -1)
@@ -716,8 +768,12 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     towards = np.where((plus == own + 1) | (minus == own - 1), 1, 0)
     lines = int(order.max()) + 1
     max_stride = max(1, min(lines - 1, 12))
+    trailing = np.empty((max_stride, len(nodes.vertex), 3))
+    for k in range(1, max_stride + 1):
+        pass_number = (own - ((lines - 1) % k) // 2) // k
+        trailing[k - 1] = np.where((pass_number % 2 == 0)[:, None], -forward, forward)
     per_node = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, max_stride,
-                                   mesh.star_of_vertex, towards)
+                                   mesh.star_of_vertex, towards, trailing)
     # the prediction of stride k: between the lines the passes of that stride take
     predicted = np.full(max_stride, np.inf)
     for k in range(1, max_stride + 1):
@@ -738,8 +794,9 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     parts = []
     for number, run_index in enumerate(chosen):
         run = runs[run_index]
-        direction = 1.0 if number % 2 == 0 else -1.0   # zig-zag: every other pass reversed
-        run = run if direction > 0 else run[::-1]
+        # zig-zag: every other line of the stride reversed (as the prediction assumed)
+        if ((order[run_index] - first) // stride) % 2:
+            run = run[::-1]
         normal = nodes.normal[run]
         cross = nodes.cross[run]
         # consistent cross tangent along the run (the discrete tangents may flip sign)
