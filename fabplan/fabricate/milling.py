@@ -615,19 +615,25 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
         v = v - np.sum(v * n, axis=1, keepdims=True) * n
         return _unit(v)
 
-    def left(x, who, lateral, behind):
+    def profile(who, lateral, behind):
+        """The material left beside node `who` as a function of the lateral offset."""
         rs = safety[who] - corner
         R = nodes.radius[who] - corner
-        with np.errstate(invalid="ignore"):
-            b = circle_radius - np.sqrt(np.maximum(circle_radius**2 - x * x, 0))
-            d2 = x * x + b * b
-            h_cut = np.where(np.isfinite(rs), rs - np.sqrt(np.maximum(rs * rs - d2, 0)), 0.0)
-            across = np.where(np.isfinite(R), R - np.sqrt(np.maximum(R * R - x * x, 0)), 0.0)
         k_sum = np.sum(nodes.principal[who], axis=1)
         inverse = np.where(np.isfinite(R), 1.0 / np.where(np.isfinite(R), R, 1.0), 0.0)
         k_along = np.where(np.isfinite(k_sum), k_sum - inverse, inverse)
-        h_target = across + _second_form(nodes, who, lateral, behind) * x * b + k_along * b * b / 2
-        return np.where(x < circle_radius, h_cut - h_target, np.inf)
+        k_mixed = _second_form(nodes, who, lateral, behind)
+
+        def left(x):
+            with np.errstate(invalid="ignore"):
+                b = circle_radius - np.sqrt(np.maximum(circle_radius**2 - x * x, 0))
+                d2 = x * x + b * b
+                h_cut = np.where(np.isfinite(rs), rs - np.sqrt(np.maximum(rs * rs - d2, 0)), 0.0)
+                across = np.where(np.isfinite(R), R - np.sqrt(np.maximum(R * R - x * x, 0)), 0.0)
+            h_target = across + k_mixed * x * b + k_along * b * b / 2
+            return np.where(x < circle_radius, h_cut - h_target, np.inf)
+
+        return left
 
     for k in range(1, max_stride + 1):
         if k > 1:
@@ -645,14 +651,15 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
         w = np.linalg.norm(X[q] - nodes.point[i], axis=1)
         lateral_i = tangential(X[q] - nodes.point[i], i)
         lateral_j = tangential(nodes.point[i] - X[q], j)
-        behind_i, behind_j = trailing[k - 1, i], trailing[k - 1, j]
+        near = profile(i, lateral_i, trailing[k - 1, i])
+        far = profile(j, lateral_j, trailing[k - 1, j])
         lo, hi = np.zeros(len(i)), w.copy()
-        for _ in range(60):
+        for _ in range(50):   # to 1e-15 of the spacing
             mid = (lo + hi) / 2
-            near_higher = left(mid, i, lateral_i, behind_i) > left(w - mid, j, lateral_j, behind_j)
+            near_higher = near(mid) > far(w - mid)
             hi = np.where(near_higher, mid, hi)
             lo = np.where(near_higher, lo, mid)
-        out[k - 1, i] = left(lo, i, lateral_i, behind_i)
+        out[k - 1, i] = near(lo)
     return out
 
 
