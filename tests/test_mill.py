@@ -340,3 +340,20 @@ def test_toroidal_entry_matches_the_closed_form_of_an_upright_torus():
     ring = np.clip(rho - (r - c), 0, None)
     expected = np.where(rho <= r - c, 0.0, c - np.sqrt(c * c - ring**2))
     assert np.abs(z - expected).max() < 1e-9
+
+
+@pytest.mark.parametrize("options", [["--margin", "-1"], ["--scallop", "0"], ["--sim-step", "0"],
+                                     ["--tool", "face:D=10,corner=6"]])
+def test_bad_options_are_refused_before_any_work(tmp_path, capsys, options):
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    tool = [] if "--tool" in options else ["--tool", "face:D=40"]
+    refused(tmp_path, capsys, net, *tool, *options)
+
+
+def test_a_net_in_metres_gets_the_same_plan_as_in_millimetres():
+    mesh = bowl_grid()
+    metres = QuadMesh(mesh.vertices / 1000, mesh.faces, name="bowl-m.obj")
+    in_mm = plan_face_milling(mesh, parse_tool("face:D=40"), MillSettings(units="mm"))
+    in_m = plan_face_milling(metres, parse_tool("face:D=40"), MillSettings(units="m"))
+    assert in_m.stride == in_mm.stride and in_m.margin_mm == pytest.approx(in_mm.margin_mm)
+    assert np.abs(in_m.path.tip - in_mm.path.tip).max() < 1e-9
