@@ -193,6 +193,8 @@ def _cmd_mill(args) -> int:
     files = write_mill_report(result, out)
     print(result.summary())
     print(f"wrote {', '.join(str(f) for f in files)}")
+    for note in result.plan.notes:
+        _warn(note)
     if not result.gouge_free and result.simulation is not None:
         print(f"fabplan: warning: the simulated cut gouges the target by "
               f"{result.simulation.max_gouge_mm:.4g} mm: give a larger --margin "

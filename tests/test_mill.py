@@ -357,3 +357,14 @@ def test_a_net_in_metres_gets_the_same_plan_as_in_millimetres():
     in_m = plan_face_milling(metres, parse_tool("face:D=40"), MillSettings(units="m"))
     assert in_m.stride == in_mm.stride and in_m.margin_mm == pytest.approx(in_mm.margin_mm)
     assert np.abs(in_m.path.tip - in_mm.path.tip).max() < 1e-9
+
+
+def test_a_net_off_its_spheres_is_planned_with_a_note():
+    u = np.arange(-30.0, 30.1, 7.5)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    bumpy = QuadMesh.grid(np.stack([x, y, x * x / 300 + y * y / 900], axis=-1))
+    plan = plan_face_milling(bumpy, parse_tool("face:D=20"), MillSettings())
+    assert plan.sphere_residual_mm > 1e-3
+    assert any("not an S-net" in note for note in plan.notes)
+    sphere = plan_face_milling(bowl_grid(), parse_tool("face:D=20"), MillSettings())
+    assert sphere.sphere_residual_mm < 1e-9 and not sphere.notes

@@ -328,7 +328,9 @@ class MillPlan:
     predicted_scallop_mm : (stride,) largest predicted scallop for each stride 1.. tried.
     meusnier_radius_mm : (m,) Meusnier radius at the pass nodes.
     side : ``"+"`` or ``"-"``, the side of the face normals the tool comes from.
+    sphere_residual_mm : largest distance of a star vertex from its fitted sphere.
     seconds : planning time.
+    notes : what a user should know (not an S-net, scallop limit out of reach).
     """
 
     net: str
@@ -342,6 +344,7 @@ class MillPlan:
     predicted_scallop_mm: np.ndarray
     meusnier_radius_mm: np.ndarray
     side: str
+    sphere_residual_mm: float = 0.0
     seconds: float = 0.0
     notes: list = field(default_factory=list)
 
@@ -370,6 +373,7 @@ class MillPlan:
             "cutter_locations": len(path),
             "nodes": int(nodes.sum()),
             "tilt_deg": {"min": float(path.tilt_deg.min()), "max": float(path.tilt_deg.max())},
+            "sphere_residual_max_mm": self.sphere_residual_mm,
             "meusnier_radius_mm": {"min": float(self.meusnier_radius_mm.min()),
                                    "max": float(self.meusnier_radius_mm.max())},
             "safety_radius_mm": {
@@ -417,6 +421,7 @@ class _Nodes:
     largest_curvature: np.ndarray  # larger principal curvature towards the tool, NaN unknown
     principal: np.ndarray       # (s, 2) principal curvatures towards the tool (NaN unknown)
     principal_directions: np.ndarray  # (s, 2, 3) their unit directions
+    sphere_residual: np.ndarray  # (s,) largest distance of a star vertex from its sphere (mm)
     cross_neighbour: np.ndarray  # (s, 2) vertex ids along the other family: (-, +)
 
 
@@ -470,6 +475,7 @@ def _net_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_Nodes, str]:
                   largest_curvature=np.fmax(sign * k1, sign * k2),
                   principal=np.column_stack([sign * k1, sign * k2]),
                   principal_directions=np.stack([e1, e2], axis=1),
+                  sphere_residual=spheres.residual,
                   cross_neighbour=neighbours), side
 
 
@@ -791,6 +797,10 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     fits = np.flatnonzero(predicted <= settings.scallop_mm)
     stride = int(fits.max()) + 1 if fits.size else 1
     notes = []
+    residual = float(nodes.sphere_residual.max())
+    if residual > 1e-3:
+        notes.append(f"the net is not an S-net within 0.001 mm: a star's vertices lie up to "
+                     f"{residual:.3g} mm off their least-squares sphere (optimize it first)")
     if not fits.size:
         notes.append(f"even passes along every line leave a predicted scallop of "
                      f"{predicted[0]:.4g} mm, above the limit {settings.scallop_mm:g} mm")
@@ -820,6 +830,6 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     path = ToolPath(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
     return MillPlan(net=mesh.name, tool=tool, settings=settings, path=path, margin_mm=margin,
                     margin_rule=rule, stride=stride, lines=lines, predicted_scallop_mm=predicted,
-                    meusnier_radius_mm=nodes.radius, side=side,
+                    meusnier_radius_mm=nodes.radius, side=side, sphere_residual_mm=residual,
                     seconds=time.perf_counter() - started, notes=notes)
 
