@@ -48,7 +48,6 @@ __all__ = [
     "MillPlan",
     "parse_tool",
     "circle_tool_pose",
-    "swept_profile_height",
     "plan_face_milling",
     "default_margin_mm",
 ]
@@ -231,40 +230,6 @@ def circle_tool_pose(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
     return tip, axis, np.arcsin(sin_tilt)
 
 
-def swept_profile_height(x: np.ndarray, circle_radius: float, sphere_radius: np.ndarray,
-                         cross_share: np.ndarray | None = None) -> np.ndarray:
-    """Height above the tangent plane of the swept cutting circle at transverse offset x.
-
-    The circle ``p + r sin(t) cross + r (1 - cos t) inward`` seen along the direction of
-    motion is an ellipse of half-axes r across and ``r^2 / R_s`` along the normal; when the
-    cross tangent meets the motion at an angle, its transverse share ``cross_share`` (the
-    sine of that angle) stretches it across.
-
-    Parameters
-    ----------
-    x : (k,) float, transverse offsets (mm), |x| below ``r * cross_share``.
-    circle_radius : r (mm).
-    sphere_radius : (k,) float, R_s (mm).
-    cross_share : (k,) float in (0, 1], default 1 (orthogonal net).
-
-    Returns
-    -------
-    (k,) float, heights (mm); inf beyond the circle's reach.
-
-    Examples
-    --------
-    >>> h = swept_profile_height(np.array([1.0]), 25.0, np.array([300.0]))
-    >>> bool(abs(h[0] - 1 / 600) < 1e-5)   # about x^2 / (2 R_s) near the contact
-    True
-    """
-    share = np.ones_like(x) if cross_share is None else cross_share
-    reach = circle_radius * share
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = np.abs(x) / reach
-        h = circle_radius**2 / sphere_radius * (1 - np.sqrt(1 - u * u))
-    return np.where(u <= 1, h, np.inf)
-
-
 @dataclass
 class ToolPath:
     """The cutter locations of a plan, in pass order (mm, the mill frame of the net).
@@ -415,7 +380,6 @@ class _Nodes:
     vertex: np.ndarray
     point: np.ndarray
     normal: np.ndarray
-    motion: np.ndarray
     cross: np.ndarray
     radius: np.ndarray          # Meusnier radius, inf when flat
     largest_curvature: np.ndarray  # larger principal curvature towards the tool, NaN unknown
@@ -425,7 +389,8 @@ class _Nodes:
     cross_neighbour: np.ndarray  # (s, 2) vertex ids along the other family: (-, +)
 
 
-def _describe_region(mesh: QuadMesh, vertices: np.ndarray, scale: float) -> str:
+def _describe_region(mesh: QuadMesh, vertices: np.ndarray) -> str:
+    """The vertices (the first eight) and their bounding box in model units, for messages."""
     X = mesh.vertices[vertices]
     lo, hi = X.min(axis=0), X.max(axis=0)
     ids = ", ".join(str(int(v)) for v in vertices[:8]) + (" ..." if len(vertices) > 8 else "")
@@ -460,18 +425,18 @@ def _net_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_Nodes, str]:
     if wrong.size:
         raise InputError(
             f"{mesh.name}: the Meusnier spheres switch sides: at "
-            f"{_describe_region(mesh, stars[wrong, 0], scale)} they lie on the {'-+'[side == '-']} "
+            f"{_describe_region(mesh, stars[wrong, 0])} they lie on the {'-+'[side == '-']} "
             f"side, the others on the {side} side; a face mill can only cut from the side of "
             "the spheres: split the net there and mill the parts from their own sides")
     f = 0 if settings.along == "A" else 1
-    motion, cross = (t1, t2) if f == 0 else (t2, t1)
+    cross = t2 if f == 0 else t1
     neighbours = stars[:, [4, 2]] if f == 0 else stars[:, [3, 1]]
     with np.errstate(divide="ignore"):
         radius = np.where(flat, np.inf, 1.0 / np.where(flat, 1.0, k))
     k1, k2 = principal_curvatures(X, stars, spheres.curvature)
     e1, e2 = principal_directions(X, stars)
     return _Nodes(vertex=stars[:, 0], point=X[stars[:, 0]], normal=sign * normals,
-                  motion=_unit(motion), cross=_unit(cross), radius=radius,
+                  cross=_unit(cross), radius=radius,
                   largest_curvature=np.fmax(sign * k1, sign * k2),
                   principal=np.column_stack([sign * k1, sign * k2]),
                   principal_directions=np.stack([e1, e2], axis=1),
@@ -758,7 +723,7 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
         largest = 2 * (float(np.min(safety)) - tool.corner_mm) + 2 * tool.corner_mm
         raise InputError(
             f"{mesh.name}: tool {tool.spec()} is larger than the safety spheres allow at "
-            f"{_describe_region(mesh, nodes.vertex[too_small], settings.mm_per_unit)}: the safety "
+            f"{_describe_region(mesh, nodes.vertex[too_small])}: the safety "
             f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
             f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
     runs, order = _line_sequence(mesh, nodes, family)
