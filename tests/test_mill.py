@@ -101,6 +101,16 @@ def milled(tmp_path_factory):
 # ------------------------------------------------------------------------------ geometry
 def test_every_cl_location_has_its_circle_on_the_safety_sphere(milled):
     out, mesh = milled
+    check_cl_geometry(out, mesh, 20.0)
+    # the safety sphere lies on the side of the Meusnier sphere (the bowl's inside: +z)
+    with open(out / "path.csv") as handle:
+        assert all(float(row["normal_z"]) > 0 for row in csv.DictReader(handle))
+
+
+def check_cl_geometry(out: Path, mesh: QuadMesh, r: float) -> None:
+    """The circle of every CL location (radius r) on its safety sphere within 1e-6 mm,
+    through its contact point and tangent there to the surface and to the cross line; at
+    the nodes the contact, normal and Meusnier radius of the net (computed here)."""
     values, passes = goto_rows(out / "path.cl")
     cut = np.array([p is not None for p in passes])
     tip, axis = values[cut, :3], values[cut, 3:]
@@ -112,7 +122,6 @@ def test_every_cl_location_has_its_circle_on_the_safety_sphere(milled):
     normal = np.column_stack([col["normal_x"], col["normal_y"], col["normal_z"]])
     cross = np.column_stack([col["cross_x"], col["cross_y"], col["cross_z"]])
     radius = col["safety_radius_mm"]
-    r = 20.0
     assert np.allclose(np.linalg.norm(axis, axis=1), 1, atol=1e-11)
     # points of the cutting circle (centre = tip, radius r, plane normal = axis)
     helper = np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
@@ -145,8 +154,6 @@ def test_every_cl_location_has_its_circle_on_the_safety_sphere(milled):
     n *= np.sign(np.sum(n * normal[node], axis=1))[:, None]
     assert np.abs(np.sum(n * normal[node], axis=1)).min() > 1 - 1e-9
     assert np.allclose(radius[node], R - record["margin_mm"], atol=1e-6)
-    # the safety sphere lies on the side of the Meusnier sphere (the bowl's inside: +z)
-    assert np.all(normal[:, 2] > 0)
 
 
 def test_cl_file_reads_back_with_its_units_tool_and_passes(milled):
@@ -330,6 +337,7 @@ def test_paraboloid_example_mills_without_gouge_and_beats_the_ball_end(tmp_path)
     assert record["passes"] <= 12
     assert record["comparison"]["scallop_ratio"] >= 5
     assert result.plan.path.pass_count == record["passes"]
+    check_cl_geometry(tmp_path, QuadMesh.from_obj(tmp_path / "net.obj"), 25.0)
 
 
 def test_toroidal_entry_matches_the_closed_form_of_an_upright_torus():
