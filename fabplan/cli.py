@@ -213,6 +213,36 @@ def _cmd_molds(args) -> int:
     return 0
 
 
+def _cmd_mill(args) -> int:
+    from .fabricate.mill_report import MILL_FILES, mill_net, write_mill_report
+    from .fabricate.mill_simulation import SimulationSettings
+    from .fabricate.milling import MillSettings, parse_tool
+
+    tool = parse_tool(args.tool)
+    settings = MillSettings(along=args.along, units=args.units, margin_mm=args.margin,
+                            scallop_mm=args.scallop, side=args.side)
+    settings.check()
+    if not 0.01 <= args.sim_step <= 10:
+        raise InputError(f"--sim-step must lie in 0.01 .. 10 mm, got {args.sim_step}")
+    out = Path(args.output)
+    check_output_folder(out)
+    _check_outputs([out / name for name in MILL_FILES], [args.net])
+    mesh = load_net(args.net)
+    result = mill_net(mesh, tool, settings, simulate=not args.no_simulation,
+                      simulation=SimulationSettings(step_mm=args.sim_step))
+    files = write_mill_report(result, out)
+    print(result.summary())
+    print(f"wrote {', '.join(str(f) for f in files)}")
+    for note in result.plan.notes:
+        _warn(note)
+    if not result.gouge_free and result.simulation is not None:
+        print(f"fabplan: warning: the simulated cut gouges the target by "
+              f"{result.simulation.max_gouge_mm:.4g} mm: give a larger --margin "
+              f"(details in {out / 'report.html'})", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
+    return 0
+
+
 def _check_layout_options(args: argparse.Namespace, preset: Any) -> None:
     """Refuse options of `fabplan layout` that cannot go together, before any work."""
     check_angle(args.angle)
@@ -666,6 +696,33 @@ def _add_molds(sub: Any) -> None:
     p.set_defaults(func=_cmd_molds)
 
 
+def _add_mill(sub: Any) -> None:
+    p = sub.add_parser("mill", help="curvature-adaptive face milling paths from the Meusnier "
+                                    "spheres of an S-net, checked by simulation (CL + CSV + "
+                                    "mill.json + report.html)")
+    p.add_argument("net", help="the S-net (OBJ), a regular quad net")
+    p.add_argument("--tool", required=True, metavar="face:D=MM[,corner=MM][,length=MM]",
+                   help="cylindrical face mill of diameter D (toroidal with a corner radius)")
+    p.add_argument("--along", choices=["A", "B"], default="A",
+                   help="family whose lines the passes follow (A: the first, default)")
+    p.add_argument("--units", choices=["mm", "m"], default="mm",
+                   help="unit of the net's coordinates (default mm)")
+    p.add_argument("--margin", type=float, metavar="MM",
+                   help="Meusnier radius minus safety sphere radius (default: the rule of "
+                        "docs/milling.md, which keeps the cut above the target)")
+    p.add_argument("--scallop", type=float, default=0.01, metavar="MM",
+                   help="largest predicted scallop height between passes (default 0.01)")
+    p.add_argument("--side", choices=["auto", "+", "-"], default="auto",
+                   help="side the tool comes from: that of the Meusnier spheres (auto), of the "
+                        "face normals (+) or the other (-)")
+    p.add_argument("--sim-step", type=float, default=0.5, metavar="MM",
+                   help="grid step of the milling simulation (default 0.5)")
+    p.add_argument("--no-simulation", action="store_true",
+                   help="plan only: no simulated scallop, gouge check or comparison")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
+    p.set_defaults(func=_cmd_mill)
+
+
 def _add_layout(sub: Any) -> None:
     from .design.parametric import SURFACES, describe_surface_parameters
 
@@ -808,7 +865,7 @@ def _add_templates(sub: Any) -> None:
 
 # every subcommand adds its parser; a new command is one function and one entry here
 _SUBCOMMANDS = [_add_nets, _add_measure, _add_optimize, _add_molds, _add_layout, _add_strips,
-               _add_arcs, _add_study, _add_templates]
+               _add_arcs, _add_mill, _add_study, _add_templates]
 
 
 def build_parser() -> argparse.ArgumentParser:

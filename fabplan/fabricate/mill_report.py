@@ -1,0 +1,298 @@
+"""A milling run and its files: ``path.cl``, ``path.csv``, ``mill.json`` and ``report.html``.
+
+`mill_net` plans the curvature-adaptive passes (`fabplan.fabricate.milling`), builds the
+target height map from the net, simulates the planned cut and the conventional one (a
+ball end of the same diameter normal to the surface through the same contact points) with
+`fabplan.fabricate.mill_simulation`, and keeps the evidence side by side.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..io.cldata import cldata_text
+from ..io.output import output_folder, write_texts
+from ..io.records import json_text
+from ..net.mesh import QuadMesh
+from ..report import figures, html
+from .mill_simulation import (
+    Cutter,
+    HeightTarget,
+    SimulationResult,
+    SimulationSettings,
+    ball_end_path,
+    height_target,
+    simulate_milling,
+)
+from .milling import MillPlan, MillSettings, MillTool, plan_face_milling
+
+__all__ = ["MillResult", "mill_net", "mill_report_html", "mill_report_files", "write_mill_report",
+           "MILL_FILES"]
+
+MILL_FILES = ("path.cl", "path.csv", "mill.json", "report.html")
+
+
+@dataclass
+class MillResult:
+    """A plan with its simulated cut and the conventional comparison.
+
+    Attributes
+    ----------
+    plan : the passes.
+    target : the target height map (None without simulation).
+    simulation : the simulated adaptive cut (None without simulation).
+    conventional : the simulated ball-end cut through the same contacts (or None).
+    simulation_settings : resolution used.
+    seconds : time per stage.
+    """
+
+    plan: MillPlan
+    target: HeightTarget | None
+    simulation: SimulationResult | None
+    conventional: SimulationResult | None
+    simulation_settings: SimulationSettings
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def gouge_free(self) -> bool:
+        """True when the simulated cut stays above the target within the gouge tolerance
+        (and when nothing was simulated)."""
+        sim = self.simulation
+        return sim is None or sim.max_gouge_mm <= self.simulation_settings.gouge_tolerance_mm
+
+    def record(self) -> dict:
+        """The contents of ``mill.json``."""
+        record = self.plan.record()
+        sim, conv = self.simulation, self.conventional
+        settings = self.simulation_settings
+        record["simulation_settings"] = {
+            "step_mm": settings.step_mm, "pose_spacing_mm": settings.pose_spacing_mm,
+            "golden_rounds": settings.golden_rounds, "body_mm": settings.body_mm,
+            "end_trim_mm": settings.end_trim_mm}
+        if sim is not None:
+            predicted = self.plan.predicted_max_scallop_mm
+            record["simulation"] = sim.record()
+            record["gouge_check"] = {"tolerance_mm": settings.gouge_tolerance_mm,
+                                     "max_gouge_mm": sim.max_gouge_mm,
+                                     "passed": self.gouge_free}
+            record["scallop_simulated_over_predicted"] = sim.max_scallop_mm / predicted
+        if conv is not None and sim is not None:
+            record["conventional"] = {
+                "tool": f"ball end D={self.plan.tool.diameter_mm:g} mm, axis along the normal",
+                "passes": self.plan.path.pass_count, **conv.record()}
+            record["comparison"] = {
+                "adaptive_max_scallop_mm": sim.max_scallop_mm,
+                "conventional_max_scallop_mm": conv.max_scallop_mm,
+                "scallop_ratio": conv.max_scallop_mm / sim.max_scallop_mm,
+                "adaptive_median_scallop_mm": _median_between(sim),
+                "conventional_median_scallop_mm": _median_between(conv)}
+        record["seconds"] = dict(self.seconds)
+        return record
+
+    def summary(self) -> str:
+        lines = [self.plan.summary()]
+        sim, conv = self.simulation, self.conventional
+        if sim is not None:
+            lines.append(f"simulated: scallop {sim.max_scallop_mm:.4g} mm (predicted "
+                         f"{self.plan.predicted_max_scallop_mm:.4g}), gouge {sim.max_gouge_mm:.4g} mm "
+                         f"({'within' if self.gouge_free else 'BEYOND'} "
+                         f"{self.simulation_settings.gouge_tolerance_mm:g} mm), {sim.seconds:.1f} s")
+        if sim is not None and conv is not None:
+            lines.append(f"conventional ball end, same passes: scallop {conv.max_scallop_mm:.4g} mm "
+                         f"({conv.max_scallop_mm / sim.max_scallop_mm:.1f} x)")
+        return "\n".join(lines)
+
+
+def _median_between(sim: SimulationResult) -> float:
+    values = sim.left[sim.between]
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else float("nan")
+
+
+def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate: bool = True,
+             simulation: SimulationSettings | None = None, conventional: bool = True) -> MillResult:
+    """Plan face milling on a net and check it by simulation.
+
+    Parameters
+    ----------
+    mesh : the net.
+    tool, settings : see `plan_face_milling`.
+    simulate : run the simulation (the target is the thin-plate spline through the net's
+        vertices, seen from the mean tool-side normal).
+    simulation : its resolution.
+    conventional : also simulate the conventional ball-end path.
+
+    Returns
+    -------
+    MillResult
+    """
+    sim_settings = simulation or SimulationSettings()
+    started = time.perf_counter()
+    plan = plan_face_milling(mesh, tool, settings)
+    seconds = {"plan": plan.seconds}
+    target = adaptive = ball = None
+    if simulate:
+        clock = time.perf_counter()
+        path = plan.path
+        up = path.normal.mean(axis=0)
+        target = height_target(mesh.vertices * settings.mm_per_unit, mesh.triangles(), up,
+                               step_mm=sim_settings.step_mm)
+        seconds["target"] = time.perf_counter() - clock
+        cutter = Cutter("flat", tool.radius_mm, min(tool.body_length_mm, sim_settings.body_mm),
+                        tool.corner_mm)
+        adaptive = simulate_milling(target, cutter, path.tip, path.axis, path.contact,
+                                    path.pass_id, sim_settings)
+        seconds["simulate"] = adaptive.seconds
+        if conventional:
+            tips, axes = ball_end_path(path.contact, path.normal, tool.radius_mm)
+            ball_cutter = Cutter("ball", tool.radius_mm,
+                                 tool.radius_mm + min(tool.body_length_mm, sim_settings.body_mm))
+            ball = simulate_milling(target, ball_cutter, tips, axes, path.contact, path.pass_id,
+                                    sim_settings)
+            seconds["conventional"] = ball.seconds
+    seconds["total"] = time.perf_counter() - started
+    return MillResult(plan=plan, target=target, simulation=adaptive, conventional=ball,
+                      simulation_settings=sim_settings, seconds=seconds)
+
+
+# ------------------------------------------------------------------------------ pictures
+def _paths_figure(result: MillResult) -> str:
+    plan, target = result.plan, result.target
+    fig = figures.new_figure((7.5, 6.5))
+    ax = fig.add_subplot(1, 1, 1)
+    path = plan.path
+    if target is not None:
+        C = target.to_frame(path.contact)
+        T = target.to_frame(path.tip)
+        image = ax.imshow(target.z, origin="lower", cmap="Greys", alpha=0.6,
+                          extent=(target.x[0], target.x[-1], target.y[0], target.y[-1]))
+        fig.colorbar(image, ax=ax, shrink=0.7, label="target height in the mill frame [mm]")
+    else:
+        C, T = path.contact, path.tip
+    colors = figures.distinct_colors(path.pass_count)
+    for number, part in enumerate(path.pass_slices()):
+        ax.plot(C[part, 0], C[part, 1], "-", color=colors[number], lw=1.5)
+        ax.plot(T[part, 0], T[part, 1], ":", color=colors[number], lw=0.8)
+        ax.annotate(str(number + 1), (float(C[part][0, 0]), float(C[part][0, 1])), fontsize=7)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title("contact paths (solid) and tool tips (dotted), seen along the mill direction")
+    return figures.figure_to_data_uri(fig)
+
+
+def _scallop_figure(result: MillResult) -> str:
+    target = result.target
+    assert target is not None
+    runs = [("curvature adaptive", result.simulation)]
+    if result.conventional is not None:
+        runs.append(("conventional ball end", result.conventional))
+    fig = figures.new_figure((6.0 * len(runs), 5.2))
+    extent = (target.x[0], target.x[-1], target.y[0], target.y[-1])
+    for i, (title, sim) in enumerate(runs):
+        assert sim is not None
+        ax = fig.add_subplot(1, len(runs), i + 1)
+        left = np.where(np.isfinite(sim.left), sim.left * 1000, np.nan)
+        top = np.nanpercentile(left[sim.between], 99.5) if sim.between.any() else 1.0
+        image = ax.imshow(left, origin="lower", cmap="viridis", extent=extent, vmin=min(0, np.nanmin(left)),
+                          vmax=max(top, 1e-3))
+        fig.colorbar(image, ax=ax, shrink=0.75, label="cut above target [um]")
+        ax.set_title(f"{title}: max scallop {sim.max_scallop_mm * 1000:.2f} um")
+        ax.set_aspect("equal")
+    return figures.figure_to_data_uri(fig)
+
+
+def _tilt_figure(result: MillResult) -> str:
+    path = result.plan.path
+    fig = figures.new_figure((8.0, 3.6))
+    ax = fig.add_subplot(1, 1, 1)
+    for number, part in enumerate(path.pass_slices()):
+        arc = np.r_[0, np.cumsum(np.linalg.norm(np.diff(path.contact[part], axis=0), axis=1))]
+        ax.plot(arc, path.tilt_deg[part], lw=1, label=f"pass {number + 1}" if number < 12 else None)
+    ax.set_xlabel("arc length along the pass [mm]")
+    ax.set_ylabel("tilt from the normal [deg]")
+    ax.legend(fontsize=6, ncol=4)
+    ax.grid(alpha=0.3)
+    return figures.figure_to_data_uri(fig)
+
+
+def mill_report_html(result: MillResult) -> str:
+    """The self-contained report page."""
+    r = result.record()
+    rows = [("tool", r["tool"]["spec"]), ("passes", f"{r['passes']} along family {r['along']} "
+                                                    f"(every {r['stride']}. of {r['lines']} lines)"),
+            ("margin [mm]", f"{r['margin_mm']:.4g} ({r['margin_rule']})"),
+            ("tilt [deg]", f"{r['tilt_deg']['min']:.3f} .. {r['tilt_deg']['max']:.3f}"),
+            ("Meusnier radius [mm]", f"{r['meusnier_radius_mm']['min']:.4g} .. "
+                                     f"{r['meusnier_radius_mm']['max']:.4g}"),
+            ("path length [mm]", f"{r['path_length_mm']:.1f}"),
+            ("cutter locations", r["cutter_locations"]),
+            ("predicted scallop [mm]", f"{r['predicted_scallop_mm']:.4g}")]
+    parts = []
+    if "simulation" in r:
+        rows += [("simulated scallop [mm]", f"{r['simulation']['max_scallop_mm']:.4g}"),
+                 ("simulated gouge [mm]", f"{r['gouge_check']['max_gouge_mm']:.4g} "
+                  f"({'passed' if r['gouge_check']['passed'] else 'FAILED'}, tolerance "
+                  f"{r['gouge_check']['tolerance_mm']:g})")]
+    parts.append(html.html_section("Summary", html.html_table(["quantity", "value"], rows)))
+    if "comparison" in r:
+        c = r["comparison"]
+        parts.append(html.html_section(
+            "Curvature adaptive against conventional",
+            html.html_paragraph(
+                "Both cuts are simulated on the same height map with the same passes through the "
+                "same contact points; the conventional cutter is a ball end of the same diameter "
+                "with its axis along the surface normal."),
+            html.html_table(["path", "max scallop [mm]", "median scallop [mm]", "max gouge [mm]"], [
+                ("curvature adaptive face mill", c["adaptive_max_scallop_mm"],
+                 c["adaptive_median_scallop_mm"], r["simulation"]["max_gouge_mm"]),
+                ("conventional ball end", c["conventional_max_scallop_mm"],
+                 c["conventional_median_scallop_mm"], r["conventional"]["max_gouge_mm"])]),
+            html.html_paragraph(f"The conventional path leaves {c['scallop_ratio']:.1f} times the "
+                                "scallop.")))
+    figures_html = [html.html_figure(_paths_figure(result), "Passes on the part.")]
+    if result.target is not None and result.simulation is not None:
+        figures_html.append(html.html_figure(_scallop_figure(result),
+                                             "Material left above the target (scallop height map)."))
+    figures_html.append(html.html_figure(_tilt_figure(result), "Tool tilt along each pass."))
+    parts.append(html.html_section("Pictures", *figures_html))
+    parts.append(html.html_section("Files", html.html_paragraph(
+        "path.cl: APT CLDATA (GOTO/x, y, z, i, j, k in mm: tool tip and axis). path.csv: the same "
+        "locations with contact point, normal, cross tangent, tilt and safety sphere radius. "
+        "mill.json: every number of this page.")))
+    return html.html_page(f"Milling report: {Path(str(r['net'])).name}", parts,
+                          subtitle=f"{r['tool']['spec']}, {r['passes']} passes, made by fabplan")
+
+
+def mill_report_files(result: MillResult, folder: str | os.PathLike) -> dict:
+    """{path: text} of the four files in `folder`."""
+    folder = Path(folder)
+    plan = result.plan
+    path = plan.path
+    comments = []
+    for number, part in enumerate(path.pass_slices()):
+        vertices = path.vertex[part][path.vertex[part] >= 0]
+        comments.append(f"pass {number + 1}: vertices {int(vertices[0])} .. {int(vertices[-1])}, "
+                        f"{part.stop - part.start} locations")
+    header = [f"fabplan mill {plan.tool.spec()} along {plan.settings.along}",
+              f"margin {plan.margin_mm:.6g} mm, tilt {path.tilt_deg.min():.4f} .. "
+              f"{path.tilt_deg.max():.4f} deg"]
+    cl = cldata_text(path.tip, path.axis, path.pass_id, part=Path(str(plan.net)).stem,
+                     diameter_mm=plan.tool.diameter_mm, corner_mm=plan.tool.corner_mm,
+                     length_mm=plan.tool.body_length_mm, pass_comments=comments, header=header)
+    return {folder / "path.cl": cl, folder / "path.csv": plan.csv(),
+            folder / "mill.json": json_text(result.record()),
+            folder / "report.html": mill_report_html(result)}
+
+
+def write_mill_report(result: MillResult, folder: str | os.PathLike) -> list[Path]:
+    """Write the four files into `folder`, all or none; returns their paths."""
+    folder = Path(folder)
+    with output_folder(folder) as staging:
+        write_texts(mill_report_files(result, staging))
+    return [folder / name for name in MILL_FILES]

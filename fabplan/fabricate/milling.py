@@ -1,0 +1,800 @@
+"""Curvature-adaptive face milling paths from the Meusnier spheres of an S-net (paper 3.2.1).
+
+A cylindrical cutter cuts with the circular edge of its base. At every node of a pass the
+cutting circle lies on the *safety sphere*: the Meusnier sphere of the node shrunk by a
+margin, touching the same tangent plane at the node. Of the circles on that sphere
+through the node, the one used is tangent to the line of the *other* family there: its
+normal curvature in that direction is ``1 / R_safe``, slightly more than the surface's
+``1 / R``, so the cut osculates the cross direction almost exactly while the tool moves
+along the pass. The circle fixes the tool: its plane makes the angle ``phi`` with the
+normal plane of the cross tangent, ``cos(phi) = r / R_safe`` (Meusnier's theorem), and
+the tool axis is the circle plane's normal, tilted by ``asin(r / R_safe)`` from the
+surface normal. A toroidal cutter (corner radius ``c``) is planned as the cylinder of
+radius ``r - c`` on the target offset by ``c``: its corner circle lies on the safety
+sphere shrunk by ``c`` about the same centre.
+
+Conventions: every length here is in millimetres (the net's coordinates are scaled by
+``mm_per_unit``), angles in degrees at the interface. The mill side is the side of the
+surface the tool comes from; its unit normal ``n`` points from the surface to the tool,
+and the Meusnier sphere centres must lie on that side (``p + R n``).
+
+Reference: Pellis et al., "Principal Symmetric Meshes", sections 2.1.7 and 3.2.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.interpolate import CubicSpline
+from scipy.sparse import csgraph
+
+from ..errors import InputError
+from ..net.geometry import (
+    fit_star_spheres,
+    osculating_tangents,
+    principal_curvatures,
+    principal_directions,
+    star_normals,
+)
+from ..net.mesh import QuadMesh
+
+__all__ = [
+    "MillTool",
+    "MillSettings",
+    "ToolPath",
+    "MillPlan",
+    "parse_tool",
+    "circle_tool_pose",
+    "plan_face_milling",
+    "default_margin_mm",
+]
+
+_MM_PER_UNIT = {"mm": 1.0, "m": 1000.0}
+
+
+@dataclass(frozen=True)
+class MillTool:
+    """A milling cutter.
+
+    Attributes
+    ----------
+    kind : ``"face"``, a cylindrical (face) mill cutting with its base circle.
+    diameter_mm : cutter diameter D.
+    corner_mm : corner radius c of a toroidal (bull-nose) cutter, 0 for a sharp edge.
+    length_mm : length of the cutter body the simulation sweeps (default: D).
+    """
+
+    kind: str
+    diameter_mm: float
+    corner_mm: float = 0.0
+    length_mm: float = 0.0
+
+    @property
+    def radius_mm(self) -> float:
+        """Cutter radius D / 2."""
+        return self.diameter_mm / 2
+
+    @property
+    def circle_radius_mm(self) -> float:
+        """Radius of the circle that is put on the safety sphere: r - c."""
+        return self.radius_mm - self.corner_mm
+
+    @property
+    def body_length_mm(self) -> float:
+        """Length of the cutter body (``length_mm``, or D when not given)."""
+        return self.length_mm if self.length_mm > 0 else self.diameter_mm
+
+    def spec(self) -> str:
+        """The tool as the CLI writes it (``face:D=50,corner=2``)."""
+        text = f"{self.kind}:D={self.diameter_mm:g}"
+        return text + (f",corner={self.corner_mm:g}" if self.corner_mm else "")
+
+    def to_json(self) -> dict:
+        return {"kind": self.kind, "diameter_mm": self.diameter_mm, "corner_mm": self.corner_mm,
+                "length_mm": self.body_length_mm, "spec": self.spec()}
+
+
+def parse_tool(spec: str) -> MillTool:
+    """A `MillTool` from ``face:D=50[,corner=R][,length=L]`` (millimetres).
+
+    Examples
+    --------
+    >>> parse_tool("face:D=50,corner=2").circle_radius_mm
+    23.0
+    >>> parse_tool("ball:D=10")
+    Traceback (most recent call last):
+    ...
+    fabplan.errors.InputError: --tool ball:D=10: unknown tool kind 'ball'; fabplan mill plans \
+face mills: face:D=MM[,corner=MM][,length=MM]
+    """
+    kind, _, rest = spec.partition(":")
+    if kind != "face":
+        raise InputError(f"--tool {spec}: unknown tool kind {kind!r}; fabplan mill plans face "
+                         "mills: face:D=MM[,corner=MM][,length=MM]")
+    values: dict[str, float] = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, value = item.partition("=")
+        key = key.strip().lower()
+        if not eq or key not in ("d", "corner", "length"):
+            raise InputError(f"--tool {spec}: cannot read {item!r}; expected D=MM, corner=MM "
+                             "or length=MM")
+        try:
+            number = float(value)
+        except ValueError:
+            raise InputError(f"--tool {spec}: {key} must be a number of mm, got {value!r}") from None
+        if not (np.isfinite(number) and number >= 0):
+            raise InputError(f"--tool {spec}: {key} must be a finite length >= 0, got {value}")
+        values[key] = number
+    diameter = values.get("d")
+    if diameter is None or not 0.1 <= diameter <= 1000:
+        raise InputError(f"--tool {spec}: the diameter D must lie in 0.1 .. 1000 mm")
+    corner = values.get("corner", 0.0)
+    if corner >= diameter / 2:
+        raise InputError(f"--tool {spec}: the corner radius must be smaller than D / 2")
+    return MillTool("face", diameter, corner, values.get("length", 0.0))
+
+
+@dataclass
+class MillSettings:
+    """Options of a milling plan (the CLI's options).
+
+    Attributes
+    ----------
+    along : ``"A"`` passes along the lines of family 0, ``"B"`` along family 1.
+    units : model units of the net, ``"mm"`` or ``"m"``.
+    margin_mm : the Meusnier sphere radius minus the safety sphere radius; None chooses
+        it by `default_margin_mm`.
+    scallop_mm : largest predicted scallop height the pass selection allows.
+    side : ``"auto"`` (the side of the Meusnier centres), ``"+"`` (the side the face
+        normals point to) or ``"-"``.
+    chordal_tolerance_mm : largest distance of the planned tool-tip path from the
+        straight moves between consecutive CL points.
+    discretization_share : share of the Meusnier radius added to the default margin for
+        the difference between the discrete spheres and the smooth surface they sample.
+    flat_curvature : normal curvatures (1/mm) below this in magnitude count as flat:
+        a sphere of infinite radius, millable from either side.
+    """
+
+    along: str = "A"
+    units: str = "mm"
+    margin_mm: float | None = None
+    scallop_mm: float = 0.01
+    side: str = "auto"
+    chordal_tolerance_mm: float = 0.001
+    discretization_share: float = 0.005
+    flat_curvature: float = 1e-9
+
+    @property
+    def mm_per_unit(self) -> float:
+        return _MM_PER_UNIT[self.units]
+
+    def check(self) -> None:
+        """Refuse impossible options (`InputError`, one line)."""
+        if self.along not in ("A", "B"):
+            raise InputError(f"--along must be A or B, got {self.along!r}")
+        if self.units not in _MM_PER_UNIT:
+            raise InputError(f"--units must be mm or m, got {self.units!r}")
+        if self.side not in ("auto", "+", "-"):
+            raise InputError(f"--side must be auto, + or -, got {self.side!r}")
+        if self.margin_mm is not None and not (np.isfinite(self.margin_mm) and self.margin_mm >= 0):
+            raise InputError(f"--margin must be a length >= 0 mm, got {self.margin_mm}")
+        if not (np.isfinite(self.scallop_mm) and 1e-5 <= self.scallop_mm <= 10):
+            raise InputError(f"--scallop must lie in 0.00001 .. 10 mm, got {self.scallop_mm}")
+        if not 1e-6 <= self.chordal_tolerance_mm <= 1:
+            raise InputError("the chordal tolerance must lie in 1e-6 .. 1 mm")
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def circle_tool_pose(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
+                     lead: np.ndarray, safety_radius: np.ndarray, circle_radius: float,
+                     corner: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tool tip and axis whose cutting circle lies on the safety sphere, tangent to `cross`.
+
+    Parameters
+    ----------
+    contact : (k, 3) float, contact points on the target (mm).
+    normal : (k, 3) float, unit normals pointing to the tool side.
+    cross : (k, 3) float, unit tangents of the other family's line (the circle's tangent).
+    lead : (k, 3) float, tangent direction the circle's centre is moved towards (its sign
+        only: the centre trails the contact point when `lead` is minus the motion).
+    safety_radius : (k,) float, safety sphere radii (mm, inf for a flat target).
+    circle_radius : radius of the circle put on the sphere (the cutter radius minus
+        `corner`).
+    corner : corner radius of a toroidal cutter: the circle is placed on the target offset
+        by `corner`, on the sphere of radius ``safety_radius - corner`` about the same centre.
+
+    Returns
+    -------
+    tip : (k, 3) float, centre of the cutter's end face.
+    axis : (k, 3) float, unit tool axis pointing from the tip to the spindle.
+    tilt : (k,) float, angle between axis and normal in radians, ``asin(r / (R_s - c))``.
+    """
+    sphere = np.asarray(safety_radius, dtype=np.float64) - corner
+    side = _unit(np.cross(normal, cross))
+    side = np.where((np.sum(side * lead, axis=1) < 0)[:, None], -side, side)
+    with np.errstate(divide="ignore"):
+        sin_tilt = np.where(np.isfinite(sphere), circle_radius / sphere, 0.0)
+    cos_tilt = np.sqrt(np.clip(1 - sin_tilt**2, 0.0, 1.0))
+    # in-plane direction from the contact to the circle's centre: cos(phi) n + sin(phi) side,
+    # with cos(phi) = r / R = sin(tilt)
+    inward = sin_tilt[:, None] * normal + cos_tilt[:, None] * side
+    axis = cos_tilt[:, None] * normal - sin_tilt[:, None] * side
+    centre = contact + corner * normal + circle_radius * inward
+    tip = centre - corner * axis
+    return tip, axis, np.arcsin(sin_tilt)
+
+
+@dataclass
+class ToolPath:
+    """The cutter locations of a plan, in pass order (mm, the mill frame of the net).
+
+    Attributes
+    ----------
+    pass_id : (k,) int, pass of each location (0, 1, ...).
+    contact : (k, 3) float, contact point on the target.
+    normal : (k, 3) float, unit normal at the contact, towards the tool.
+    cross : (k, 3) float, unit tangent of the other family's line at the contact.
+    tip : (k, 3) float, centre of the cutter's end face (the CL point).
+    axis : (k, 3) float, unit tool axis (tip to spindle).
+    tilt_deg : (k,) float, angle between axis and normal.
+    safety_radius : (k,) float, safety sphere radius (inf where flat).
+    vertex : (k,) int, the net vertex of a node location, -1 between nodes.
+    """
+
+    pass_id: np.ndarray
+    contact: np.ndarray
+    normal: np.ndarray
+    cross: np.ndarray
+    tip: np.ndarray
+    axis: np.ndarray
+    tilt_deg: np.ndarray
+    safety_radius: np.ndarray
+    vertex: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pass_id)
+
+    @property
+    def pass_count(self) -> int:
+        return int(self.pass_id.max()) + 1 if len(self.pass_id) else 0
+
+    def pass_slices(self) -> list[slice]:
+        """One slice of the location arrays per pass."""
+        bounds = np.flatnonzero(np.diff(self.pass_id)) + 1
+        starts = np.r_[0, bounds]
+        ends = np.r_[bounds, len(self.pass_id)]
+        return [slice(int(a), int(b)) for a, b in zip(starts, ends, strict=True)]
+
+    def path_length_mm(self) -> float:
+        """Length of the tool-tip path within the passes (no links between passes)."""
+        step = np.linalg.norm(np.diff(self.tip, axis=0), axis=1)
+        same = np.diff(self.pass_id) == 0
+        return float(step[same].sum())
+
+
+@dataclass
+class MillPlan:
+    """A face-milling plan: tool, passes, cutter locations and the predicted scallop.
+
+    Attributes
+    ----------
+    net : name of the net.
+    tool, settings : what the plan was made with.
+    path : the cutter locations.
+    margin_mm : the margin used; margin_rule says how it was chosen.
+    stride : passes run along every stride-th line of the family.
+    lines : number of lines of the family holding regular stars.
+    predicted_scallop_mm : (stride,) largest predicted scallop for each stride 1.. tried.
+    meusnier_radius_mm : (m,) Meusnier radius at the pass nodes.
+    side : ``"+"`` or ``"-"``, the side of the face normals the tool comes from.
+    sphere_residual_mm : largest distance of a star vertex from its fitted sphere.
+    seconds : planning time.
+    notes : what a user should know (not an S-net, scallop limit out of reach).
+    """
+
+    net: str
+    tool: MillTool
+    settings: MillSettings
+    path: ToolPath
+    margin_mm: float
+    margin_rule: str
+    stride: int
+    lines: int
+    predicted_scallop_mm: np.ndarray
+    meusnier_radius_mm: np.ndarray
+    side: str
+    sphere_residual_mm: float = 0.0
+    seconds: float = 0.0
+    notes: list = field(default_factory=list)
+
+    @property
+    def predicted_max_scallop_mm(self) -> float:
+        return float(self.predicted_scallop_mm[self.stride - 1])
+
+    def record(self) -> dict:
+        """JSON-ready summary (no per-location arrays; those are in the CSV)."""
+        path = self.path
+        nodes = path.vertex >= 0
+        finite = np.isfinite(path.safety_radius)
+        return {
+            "net": self.net,
+            "tool": self.tool.to_json(),
+            "along": self.settings.along,
+            "units": self.settings.units,
+            "side": self.side,
+            "margin_mm": self.margin_mm,
+            "margin_rule": self.margin_rule,
+            "scallop_limit_mm": self.settings.scallop_mm,
+            "chordal_tolerance_mm": self.settings.chordal_tolerance_mm,
+            "lines": self.lines,
+            "stride": self.stride,
+            "passes": path.pass_count,
+            "cutter_locations": len(path),
+            "nodes": int(nodes.sum()),
+            "tilt_deg": {"min": float(path.tilt_deg.min()), "max": float(path.tilt_deg.max())},
+            "sphere_residual_max_mm": self.sphere_residual_mm,
+            "meusnier_radius_mm": {"min": float(self.meusnier_radius_mm.min()),
+                                   "max": float(self.meusnier_radius_mm.max())},
+            "safety_radius_mm": {
+                "min": float(path.safety_radius[finite].min()) if finite.any() else None,
+                "max": float(path.safety_radius[finite].max()) if finite.any() else None},
+            "path_length_mm": path.path_length_mm(),
+            "predicted_scallop_mm": float(self.predicted_max_scallop_mm),
+            "predicted_scallop_by_stride_mm": self.predicted_scallop_mm.tolist(),
+            "plan_seconds": self.seconds,
+            "notes": list(self.notes),
+        }
+
+    def csv(self) -> str:
+        """One row per cutter location: pass, vertex, tip, axis, contact, normal, cross
+        tangent, tilt and safety sphere radius (mm, degrees)."""
+        p = self.path
+        head = ("pass,vertex,x,y,z,i,j,k,contact_x,contact_y,contact_z,normal_x,normal_y,"
+                "normal_z,cross_x,cross_y,cross_z,tilt_deg,safety_radius_mm")
+        table = np.column_stack([p.tip, p.axis, p.contact, p.normal, p.cross, p.tilt_deg,
+                                 p.safety_radius])
+        rows = [f"{int(a)},{int(b)}," + ",".join(f"{v:.12g}" for v in row)
+                for a, b, row in zip(p.pass_id, p.vertex, table, strict=True)]
+        return "\n".join([head, *rows]) + "\n"
+
+    def summary(self) -> str:
+        r = self.record()
+        return (f"{r['passes']} passes along family {r['along']} (every {self.stride}. of "
+                f"{self.lines} lines), {r['cutter_locations']} cutter locations, tilt "
+                f"{r['tilt_deg']['min']:.2f} .. {r['tilt_deg']['max']:.2f} deg, margin "
+                f"{self.margin_mm:.4g} mm, predicted scallop {self.predicted_max_scallop_mm:.4g} "
+                f"mm, path {r['path_length_mm']:.0f} mm, planned in {self.seconds:.2f} s")
+
+
+# --------------------------------------------------------------------------- net analysis
+@dataclass
+class _Nodes:
+    """Per regular star: what milling needs, mill side applied (mm)."""
+
+    vertex: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    cross: np.ndarray
+    radius: np.ndarray          # Meusnier radius, inf when flat
+    largest_curvature: np.ndarray  # larger principal curvature towards the tool, NaN unknown
+    principal: np.ndarray       # (s, 2) principal curvatures towards the tool (NaN unknown)
+    principal_directions: np.ndarray  # (s, 2, 3) their unit directions
+    sphere_residual: np.ndarray  # (s,) largest distance of a star vertex from its sphere (mm)
+    cross_neighbour: np.ndarray  # (s, 2) vertex ids along the other family: (-, +)
+
+
+def _describe_region(mesh: QuadMesh, vertices: np.ndarray) -> str:
+    """The vertices (the first eight) and their bounding box in model units, for messages."""
+    X = mesh.vertices[vertices]
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    ids = ", ".join(str(int(v)) for v in vertices[:8]) + (" ..." if len(vertices) > 8 else "")
+    box = " .. ".join("(" + ", ".join(f"{c:.4g}" for c in p) + ")" for p in (lo, hi))
+    return f"vertices {ids} ({len(vertices)} in all, within {box})"
+
+
+def _net_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_Nodes, str]:
+    """Stars with their normals, tangents and Meusnier radii on the mill side."""
+    stars = mesh.stars
+    if len(stars) == 0:
+        raise InputError(f"{mesh.name}: the net has no regular vertex star (interior vertex of "
+                         "valence 4): there is no Meusnier sphere to mill with")
+    scale = settings.mm_per_unit
+    X = mesh.vertices * scale
+    normals = star_normals(X, stars)
+    spheres = fit_star_spheres(X, stars, normals)
+    t1, t2 = osculating_tangents(X, stars)
+    bad = np.flatnonzero(~np.isfinite(normals).all(axis=1) | ~np.isfinite(spheres.curvature))
+    if bad.size:
+        raise InputError(f"{mesh.name}: the star of vertex {int(stars[bad[0], 0])} is degenerate "
+                         "(no normal): merge or move its vertices")
+    k = spheres.curvature
+    flat = np.abs(k) < settings.flat_curvature
+    if settings.side == "auto":
+        side = "+" if np.sum(np.sign(k[~flat])) >= 0 else "-"
+    else:
+        side = settings.side
+    sign = 1.0 if side == "+" else -1.0
+    k = sign * k
+    wrong = np.flatnonzero((k < 0) & ~flat)
+    if wrong.size:
+        raise InputError(
+            f"{mesh.name}: the Meusnier spheres switch sides: at "
+            f"{_describe_region(mesh, stars[wrong, 0])} they lie on the {'-+'[side == '-']} "
+            f"side, the others on the {side} side; a face mill can only cut from the side of "
+            "the spheres: split the net there and mill the parts from their own sides")
+    f = 0 if settings.along == "A" else 1
+    cross = t2 if f == 0 else t1
+    neighbours = stars[:, [4, 2]] if f == 0 else stars[:, [3, 1]]
+    with np.errstate(divide="ignore"):
+        radius = np.where(flat, np.inf, 1.0 / np.where(flat, 1.0, k))
+    k1, k2 = principal_curvatures(X, stars, spheres.curvature)
+    e1, e2 = principal_directions(X, stars)
+    return _Nodes(vertex=stars[:, 0], point=X[stars[:, 0]], normal=sign * normals,
+                  cross=_unit(cross), radius=radius,
+                  largest_curvature=np.fmax(sign * k1, sign * k2),
+                  principal=np.column_stack([sign * k1, sign * k2]),
+                  principal_directions=np.stack([e1, e2], axis=1),
+                  sphere_residual=spheres.residual,
+                  cross_neighbour=neighbours), side
+
+
+def default_margin_mm(points: np.ndarray, radius: np.ndarray, largest_curvature: np.ndarray,
+                      circle_radius_mm: float, share: float = 0.005) -> float:
+    """The margin that keeps a face mill's cut above the target: the rule of docs/milling.md.
+
+    A point of the cutting circle seen from the contact in the tangent direction psi stands
+    ``d^2 / (2 R_s)`` above the tangent plane (it lies on the safety sphere), the target
+    ``kappa(psi) d^2 / 2`` with kappa the normal curvature; as the circle runs round, psi
+    runs through every direction. The circle stays above the target only where
+    ``1 / R_s`` is at least the largest principal curvature k_max; the rule takes k_max
+    over the nodes within a cutter radius r (the worst direction, 45 degrees off the
+    cross tangent on an orthogonal net, is reached about 1.4 r from the contact, and the
+    target's height there averages its curvature along the chord).
+    The rule takes the largest shortfall over the nodes and adds ``share * max R`` for the
+    difference between the discrete spheres and the smooth surface they sample:
+
+    ``margin = max_i (R_i - 1 / max{k_max,j : |p_j - p_i| <= r}) + share * max_i R_i``
+
+    On an umbilic surface (k_max = 1/R) only the share remains; the spread of the principal
+    curvatures is what the margin, and with it the scallop, grows with.
+
+    Parameters
+    ----------
+    points : (s, 3) float, node positions (mm).
+    radius : (s,) float, Meusnier radii (mm, inf where flat).
+    largest_curvature : (s,) float, larger principal curvature towards the tool (1/mm, NaN
+        where unknown: the node's own 1/R is used).
+    circle_radius_mm : radius r of the cutting circle.
+    share : discretization share.
+
+    Examples
+    --------
+    >>> P = np.array([[0.0, 0, 0], [10, 0, 0], [200, 0, 0]])
+    >>> R = np.array([300.0, 310, 320])
+    >>> k = np.array([1 / 280, 1 / 300, 1 / 300])
+    >>> round(default_margin_mm(P, R, k, 25.0, 0.0), 6)   # 310 - 280
+    30.0
+    """
+    from scipy.spatial import cKDTree
+
+    finite = np.isfinite(radius)
+    if not finite.any():
+        return 0.0
+    P, R = points[finite], radius[finite]
+    k = np.where(np.isfinite(largest_curvature[finite]), largest_curvature[finite], 1.0 / R)
+    k = np.maximum(k, 1.0 / R)
+    tree = cKDTree(P)
+    pairs = tree.sparse_distance_matrix(tree, circle_radius_mm, output_type="coo_matrix")
+    reach = k.copy()
+    np.maximum.at(reach, pairs.row, k[pairs.col])
+    return float(np.max(R - 1.0 / reach) + share * R.max())
+
+
+def _line_sequence(mesh: QuadMesh, nodes: _Nodes, family: int) -> tuple[list, np.ndarray]:
+    """The lines of `family` holding stars, in order across the net.
+
+    Returns
+    -------
+    runs : list of (k,) int arrays, star indices along each pass candidate (a contiguous run
+        of stars on one line), in line order.
+    order : (runs,) int, position of each run's line in the sequence of lines.
+    """
+    lines = mesh.polylines
+    s_of_v = mesh.star_of_vertex
+    runs, line_of_run = [], []
+    for i in np.flatnonzero(lines.family == family):
+        s = s_of_v[lines.vertices[i]]
+        ok = s >= 0
+        if not ok.any():
+            continue
+        cuts = np.flatnonzero(np.diff(ok.astype(np.int8)) != 0) + 1
+        for piece, good in zip(np.split(s, cuts), np.split(ok, cuts), strict=True):
+            if good[0] and len(piece) >= 2:
+                runs.append(piece)
+                line_of_run.append(i)
+    if not runs:
+        raise InputError(f"{mesh.name}: no line of family {'AB'[family]} runs through two regular "
+                         "stars: nothing to mill along")
+    line_ids, run_line = np.unique(np.array(line_of_run), return_inverse=True)
+    star_line = np.full(len(nodes.vertex), -1)
+    star_line[np.concatenate(runs)] = np.repeat(run_line, [len(r) for r in runs])
+    v_line = np.full(mesh.vertex_count, -1)
+    v_line[nodes.vertex] = star_line
+    a = np.repeat(star_line, 2)
+    b = v_line[nodes.cross_neighbour.ravel()]
+    keep = (a >= 0) & (b >= 0) & (a != b)
+    n = len(line_ids)
+    graph = sp.coo_matrix((np.ones(keep.sum()), (a[keep], b[keep])), shape=(n, n)).tocsr()
+    graph = ((graph + graph.T) > 0).astype(np.int8)
+    degree = np.asarray(graph.sum(axis=1)).ravel()
+    count, _ = csgraph.connected_components(graph, directed=False)
+    if count > 1 or degree.max(initial=0) > 2 or (n > 1 and graph.nnz // 2 != n - 1):
+        raise InputError(f"{mesh.name}: the lines of family {'AB'[family]} do not follow one "
+                         "another in one sequence across the net (irregular vertices or a "
+                         "net with holes): mill the regular parts separately")
+    start = int(np.flatnonzero(degree <= 1)[0])
+    order_of_line = np.empty(n, dtype=np.int64)
+    order_of_line[csgraph.breadth_first_order(graph, start, directed=False,
+                                              return_predecessors=False)] = np.arange(n)
+    return runs, order_of_line[run_line]
+
+
+def _second_form(nodes: _Nodes, who: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """II(a, b) at nodes `who` from the discrete principal curvatures and directions
+    (0 where they are unknown)."""
+    k = nodes.principal[who]
+    e = nodes.principal_directions[who]
+    value = (k[:, 0] * np.sum(a * e[:, 0], axis=1) * np.sum(b * e[:, 0], axis=1)
+             + k[:, 1] * np.sum(a * e[:, 1], axis=1) * np.sum(b * e[:, 1], axis=1))
+    return np.where(np.isfinite(value), value, 0.0)
+
+
+def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle_radius: float,
+                        corner: float, max_stride: int, star_of_vertex: np.ndarray,
+                        towards: np.ndarray, trailing: np.ndarray) -> np.ndarray:
+    """(max_stride, s) predicted scallop between each node and the pass k lines on.
+
+    From every node the walk goes k steps along the other family towards the next pass,
+    through stars (NaN where it leaves them: no pass runs there). A point of the cutting
+    circle at lateral offset x from the contact trails it by ``b = r - sqrt(r^2 - x^2)``
+    and lies on the safety sphere; the target below it stands
+    ``(R - sqrt(R^2 - x^2)) + II(w, s) x b + II(s, s) b^2 / 2`` above the tangent plane
+    (w lateral, s trailing, the normal curvature across is 1/R, the one along the pass
+    ``k1 + k2 - 1/R``). What is left between two passes is where the two profiles cross,
+    found by bisection.
+
+    Parameters
+    ----------
+    trailing : (max_stride, s, 3) float, unit direction behind the contact at each node
+        for the passes of each stride (the motion reversed; passes alternate).
+    """
+    out = np.full((max_stride, len(nodes.vertex)), np.nan)
+    count = len(nodes.vertex)
+    rows = np.arange(count)
+    previous = nodes.vertex.copy()
+    current = nodes.cross_neighbour[rows, towards]
+    alive = current >= 0
+
+    def tangential(v, who):
+        n = nodes.normal[who]
+        v = v - np.sum(v * n, axis=1, keepdims=True) * n
+        return _unit(v)
+
+    def profile(who, lateral, behind):
+        """The material left beside node `who` as a function of the lateral offset."""
+        rs = safety[who] - corner
+        R = nodes.radius[who] - corner
+        k_sum = np.sum(nodes.principal[who], axis=1)
+        inverse = np.where(np.isfinite(R), 1.0 / np.where(np.isfinite(R), R, 1.0), 0.0)
+        k_along = np.where(np.isfinite(k_sum), k_sum - inverse, inverse)
+        k_mixed = _second_form(nodes, who, lateral, behind)
+
+        def left(x):
+            with np.errstate(invalid="ignore"):
+                b = circle_radius - np.sqrt(np.maximum(circle_radius**2 - x * x, 0))
+                d2 = x * x + b * b
+                h_cut = np.where(np.isfinite(rs), rs - np.sqrt(np.maximum(rs * rs - d2, 0)), 0.0)
+                across = np.where(np.isfinite(R), R - np.sqrt(np.maximum(R * R - x * x, 0)), 0.0)
+            h_target = across + k_mixed * x * b + k_along * b * b / 2
+            return np.where(x < circle_radius, h_cut - h_target, np.inf)
+
+        return left
+
+    for k in range(1, max_stride + 1):
+        if k > 1:
+            star = star_of_vertex[np.maximum(current, 0)]
+            alive &= star >= 0
+            candidates = nodes.cross_neighbour[np.maximum(star, 0)]
+            step = np.where(candidates[:, 0] == previous, candidates[:, 1], candidates[:, 0])
+            previous, current = current, np.where(alive, step, -1)
+            alive &= current >= 0
+        if not alive.any():
+            break
+        i = np.flatnonzero(alive & (star_of_vertex[np.maximum(current, 0)] >= 0))
+        q = current[i]
+        j = star_of_vertex[q]
+        w = np.linalg.norm(X[q] - nodes.point[i], axis=1)
+        lateral_i = tangential(X[q] - nodes.point[i], i)
+        lateral_j = tangential(nodes.point[i] - X[q], j)
+        near = profile(i, lateral_i, trailing[k - 1, i])
+        far = profile(j, lateral_j, trailing[k - 1, j])
+        lo, hi = np.zeros(len(i)), w.copy()
+        for _ in range(50):   # to 1e-15 of the spacing
+            mid = (lo + hi) / 2
+            near_higher = near(mid) > far(w - mid)
+            hi = np.where(near_higher, mid, hi)
+            lo = np.where(near_higher, lo, mid)
+        out[k - 1, i] = near(lo)
+    return out
+
+
+def _frames_between(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
+                    safety: np.ndarray) -> tuple[np.ndarray, list]:
+    """Cubic splines through one pass's node frames, by arc length."""
+    seg = np.linalg.norm(np.diff(contact, axis=0), axis=1)
+    s = np.r_[0.0, np.cumsum(seg)]
+    kind = "not-a-knot"   # exact on cubics: no end curvature forced to zero
+    splines = [CubicSpline(s, contact, bc_type=kind), CubicSpline(s, normal, bc_type=kind),
+               CubicSpline(s, cross, bc_type=kind)]
+    finite = np.isfinite(safety)
+    curvature = np.where(finite, 1.0 / np.where(finite, safety, 1.0), 0.0)
+    splines.append(CubicSpline(s, curvature, bc_type=kind))
+    return s, splines
+
+
+def _evaluate_frames(splines: list, t: np.ndarray) -> tuple:
+    p = splines[0](t)
+    n = _unit(splines[1](t))
+    c = splines[2](t)
+    c = _unit(c - np.sum(c * n, axis=1, keepdims=True) * n)
+    k = splines[3](t)
+    with np.errstate(divide="ignore"):
+        radius = np.where(np.abs(k) > 0, 1.0 / k, np.inf)
+    return p, n, c, radius
+
+
+def _refine_pass(splines: list, s: np.ndarray, tool: MillTool, tolerance: float) -> np.ndarray:
+    """Parameters of the CL points of one pass: the nodes, plus midpoints wherever the
+    planned tip path leaves the straight move between neighbours by more than `tolerance`
+    (the circle's centre trails the contact: the cutter cuts with its front)."""
+    def pose(t):
+        p, n, c, R = _evaluate_frames(splines, t)
+        tip, _, _ = circle_tool_pose(p, n, c, -splines[0](t, 1), R, tool.circle_radius_mm,
+                                     tool.corner_mm)
+        return tip
+    t = s.copy()
+    for _ in range(20):
+        mid = (t[:-1] + t[1:]) / 2
+        tips = pose(np.r_[t, mid])
+        a, b, m = tips[: len(t) - 1], tips[1: len(t)], tips[len(t):]
+        ab = b - a
+        lam = np.clip(np.sum((m - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0, 1)
+        error = np.linalg.norm(m - (a + lam[:, None] * ab), axis=1)
+        split = error > tolerance
+        if not split.any():
+            break
+        t = np.sort(np.r_[t, mid[split]])
+    return t
+
+
+def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -> MillPlan:
+    """Plan curvature-adaptive face milling passes along one family of an S-net.
+
+    Parameters
+    ----------
+    mesh : the net (model units ``settings.units``).
+    tool : a face mill (`parse_tool`).
+    settings : the options.
+
+    Returns
+    -------
+    MillPlan
+
+    Raises
+    ------
+    InputError
+        No regular star; spheres on both sides of the surface (the nodes named); a tool
+        larger than a safety sphere allows (the nodes and the largest diameter named);
+        lines that do not form one sequence.
+    """
+    started = time.perf_counter()
+    settings.check()
+    nodes, side = _net_nodes(mesh, settings)
+    family = 0 if settings.along == "A" else 1
+    r = tool.circle_radius_mm
+    if settings.margin_mm is None:
+        margin = default_margin_mm(nodes.point, nodes.radius, nodes.largest_curvature,
+                                   tool.circle_radius_mm, settings.discretization_share)
+        rule = (f"max over nodes of (R - 1 / k_max within r) + {settings.discretization_share:g}"
+                " x max R (R: Meusnier radius, k_max: larger principal curvature, r: cutting "
+                "circle radius)")
+    else:
+        margin = float(settings.margin_mm)
+        rule = "given (--margin)"
+    safety = nodes.radius - margin
+    too_small = np.flatnonzero(safety - tool.corner_mm < r * (1 + 1e-9))
+    if too_small.size:
+        largest = 2 * (float(np.min(safety)) - tool.corner_mm) + 2 * tool.corner_mm
+        raise InputError(
+            f"{mesh.name}: tool {tool.spec()} is larger than the safety spheres allow at "
+            f"{_describe_region(mesh, nodes.vertex[too_small])}: the safety "
+            f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
+            f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
+    runs, order = _line_sequence(mesh, nodes, family)
+    # orient the runs alike (so that passes alternate direction on the part), and note
+    # each node's forward direction along its run
+    reference = nodes.point[runs[int(np.argmin(order))]]
+    heading = reference[-1] - reference[0]
+    runs = [run if np.dot(nodes.point[run[-1]] - nodes.point[run[0]], heading) >= 0 else run[::-1]
+            for run in runs]
+    forward = np.zeros_like(nodes.point)
+    for run in runs:
+        forward[run] = _unit(np.gradient(nodes.point[run], axis=0))
+    X = mesh.vertices * settings.mm_per_unit
+    # which cross neighbour (0: the '-' one, 1: the '+' one) lies towards the next line
+    v_order = np.full(mesh.vertex_count, -1)
+    for run, o in zip(runs, order, strict=True):
+        v_order[nodes.vertex[run]] = o
+    own = v_order[nodes.vertex]
+    minus, plus = v_order[nodes.cross_neighbour[:, 0]], v_order[nodes.cross_neighbour[:, 1]]
+    towards = np.where((plus == own + 1) | (minus == own - 1), 1, 0)
+    lines = int(order.max()) + 1
+    max_stride = max(1, min(lines - 1, 12))
+    trailing = np.empty((max_stride, len(nodes.vertex), 3))
+    for k in range(1, max_stride + 1):
+        pass_number = (own - ((lines - 1) % k) // 2) // k
+        trailing[k - 1] = np.where((pass_number % 2 == 0)[:, None], -forward, forward)
+    per_node = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, max_stride,
+                                   mesh.star_of_vertex, towards, trailing)
+    # the prediction of stride k: between the lines the passes of that stride take
+    predicted = np.full(max_stride, np.inf)
+    for k in range(1, max_stride + 1):
+        on_pass = (own >= 0) & ((own - ((lines - 1) % k) // 2) % k == 0)
+        values = per_node[k - 1, on_pass]
+        if np.isfinite(values).any():
+            predicted[k - 1] = float(np.nanmax(values))
+    fits = np.flatnonzero(predicted <= settings.scallop_mm)
+    stride = int(fits.max()) + 1 if fits.size else 1
+    notes = []
+    residual = float(nodes.sphere_residual.max())
+    if residual > 1e-3:
+        notes.append(f"the net is not an S-net within 0.001 mm: a star's vertices lie up to "
+                     f"{residual:.3g} mm off their least-squares sphere (optimize it first)")
+    if not fits.size:
+        notes.append(f"even passes along every line leave a predicted scallop of "
+                     f"{predicted[0]:.4g} mm, above the limit {settings.scallop_mm:g} mm")
+    # passes: lines centred in the sequence, every stride-th
+    first = ((lines - 1) % stride) // 2
+    chosen = np.flatnonzero((order - first) % stride == 0)
+    chosen = chosen[np.argsort(order[chosen], kind="stable")]
+    parts = []
+    for number, run_index in enumerate(chosen):
+        run = runs[run_index]
+        # zig-zag: every other line of the stride reversed (as the prediction assumed)
+        if ((order[run_index] - first) // stride) % 2:
+            run = run[::-1]
+        normal = nodes.normal[run]
+        cross = nodes.cross[run]
+        # consistent cross tangent along the run (the discrete tangents may flip sign)
+        cross = cross * np.where(np.sum(cross * cross[:1], axis=1) < 0, -1.0, 1.0)[:, None]
+        s, splines = _frames_between(nodes.point[run], normal, cross, safety[run])
+        t = _refine_pass(splines, s, tool, settings.chordal_tolerance_mm)
+        p, n, c, R = _evaluate_frames(splines, t)
+        motion = _unit(splines[0](t, 1))
+        tip, axis, tilt = circle_tool_pose(p, n, c, -motion, R, r, tool.corner_mm)
+        vertex = np.full(len(t), -1)
+        at_node = np.searchsorted(t, s)
+        vertex[at_node] = nodes.vertex[run]
+        parts.append((np.full(len(t), number), p, n, c, tip, axis, np.degrees(tilt), R, vertex))
+    path = ToolPath(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
+    return MillPlan(net=mesh.name, tool=tool, settings=settings, path=path, margin_mm=margin,
+                    margin_rule=rule, stride=stride, lines=lines, predicted_scallop_mm=predicted,
+                    meusnier_radius_mm=nodes.radius, side=side, sphere_residual_mm=residual,
+                    seconds=time.perf_counter() - started, notes=notes)
+
