@@ -66,7 +66,7 @@ _EXPORTS = {
     "MoldResult": "fabplan.study.api",
     "StripResult": "fabplan.study.api",
     "ArcStructure": "fabplan.fabricate.arcs",
-    # "mill": the CNC milling stage adds its entry point here, from fabplan.study.api
+    "mill": "fabplan.study.api",
 }
 
 __all__ = [
@@ -102,6 +102,7 @@ __all__ = [
     "layout_net",
     "measure",
     "arcs",
+    "mill",
     "read_obj",
     "write_obj",
     "read_3dm",
@@ -137,6 +138,7 @@ if TYPE_CHECKING:  # what a type checker and an IDE see; at run time `__getattr_
         arcs,
         layout_net,
         measure,
+        mill,
         optimize,
         plan_molds,
         plan_strips,

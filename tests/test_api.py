@@ -20,7 +20,8 @@ from fabplan.io.records import json_text
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 PIPELINE = ["load_design", "layout_net", "optimize", "measure", "plan_molds", "plan_strips",
-            "run_study", "arcs", "read_obj", "write_obj", "read_3dm", "write_3dm", "write_glb"]
+            "run_study", "arcs", "mill", "read_obj", "write_obj", "read_3dm", "write_3dm",
+            "write_glb"]
 
 
 @pytest.fixture(scope="module")

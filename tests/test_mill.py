@@ -196,6 +196,18 @@ def test_tilt_follows_meusnier_theorem_on_a_sphere():
     assert np.allclose(plan.path.safety_radius[nodes], 297.0, atol=1e-6)
 
 
+def test_the_api_mills_arrays_with_keyword_options():
+    """`fabplan.mill` takes (V, F) and the tool spec, as the other pipeline calls do."""
+    import fabplan
+
+    grid = bowl_grid()
+    result = fabplan.mill((grid.vertices, grid.quads), "face:D=40", margin_mm=3.0, simulate=False)
+    tilt = np.radians(result.plan.path.tilt_deg)
+    assert np.allclose(20.0 / np.sin(tilt), result.plan.path.safety_radius, rtol=1e-9)
+    with pytest.raises(fabplan.InputError):
+        fabplan.mill(grid, "face:D=40", MillSettings(), margin_mm=3.0)
+
+
 def test_toroidal_cutter_corner_circle_on_the_shrunk_sphere():
     plan = plan_face_milling(bowl_grid(), parse_tool("face:D=40,corner=4"), MillSettings(margin_mm=2.0))
     p = plan.path

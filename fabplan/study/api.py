@@ -27,6 +27,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..fabricate.arcs import ArcStructure, arc_structure
+from ..fabricate.mill_report import MillResult, mill_net
+from ..fabricate.milling import MillSettings, MillTool, parse_tool
 from ..fabricate.molds import MoldPlan, MoldSettings
 from ..fabricate.molds import plan_molds as _plan_molds_impl
 from ..fabricate.strip_plan import StripPlan, schedule_rows
@@ -60,6 +62,7 @@ __all__ = [
     "plan_strips",
     "run_study",
     "arcs",
+    "mill",
     "read_obj",
     "write_obj",
     "read_3dm",
@@ -230,6 +233,21 @@ def plan_strips(net: NetLike, settings: StripSettings | None = None, **options: 
         raise InputError("give either settings or keyword options, not both")
     settings.check()
     return StripResult.of(_plan_strips_impl(as_mesh(net), settings))
+
+
+def mill(net: NetLike, tool: MillTool | str, settings: MillSettings | None = None, *,
+         simulate: bool = True, **options: Any) -> MillResult:
+    """Curvature-adaptive face milling of a net (``fabplan mill``): the tool as a
+    `MillTool` or its spec (``"face:D=50"``), `MillSettings` or its fields as keyword
+    options (``along="A", units="mm", scallop_mm=0.01``); with `simulate` the paths are
+    checked by the milling simulation against the conventional ball-end cut. The result's
+    ``record()`` is what ``mill.json`` holds."""
+    if settings is None:
+        settings = MillSettings(**options)
+    elif options:
+        raise InputError("give either settings or keyword options, not both")
+    return mill_net(as_mesh(net), parse_tool(tool) if isinstance(tool, str) else tool, settings,
+                    simulate=simulate)
 
 
 def run_study(study: Study | str | os.PathLike, **options: Any) -> StudyResult:
