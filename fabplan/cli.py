@@ -262,6 +262,8 @@ def _check_layout_options(args: argparse.Namespace, preset: Any) -> None:
         raise InputError(f"--triangles must lie between 100 and 5000000, got {args.triangles}")
     if args.max_iter is not None and args.max_iter < 1:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
+    if args.smoothing is not None and not 0 < args.smoothing <= 20:
+        raise InputError(f"--smoothing must lie in (0, 20] panels, got {args.smoothing}")
 
 
 def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
@@ -300,6 +302,7 @@ def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
 def _cmd_layout(args) -> int:
     from .design.load import load_design
     from .layout.picture import fairness_marks, write_layout_picture
+    from .layout.settings import LayoutSettings
     from .layout.surface_layout import glide, layout_angle, layout_surface
     from .solve.net_types import get_net
     from .solve.optimize import boundary_path
@@ -322,7 +325,10 @@ def _cmd_layout(args) -> int:
                                                 if design.source["scale"] != 1 else ""))
     _check_layout_size(design, args.panel_size, args.max_panels)
     start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
-    layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
+    settings_layout = (LayoutSettings() if args.smoothing is None else
+                       LayoutSettings(smoothing=args.smoothing, smoothing_tries=()))
+    layout = layout_surface(design, args.panel_size, angle=start, family=args.family,
+                            settings=settings_layout)
     settings, progress = _solver_options(args)
 
     result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
@@ -749,6 +755,11 @@ def _add_layout(sub: Any) -> None:
     p.add_argument("--triangles", type=int, default=40000,
                    help="triangles of a built-in surface's triangulation (default 40000)")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
+    p.add_argument("--smoothing", type=float, metavar="PANELS",
+                   help="smooth the principal directions over this many panels and no other "
+                        "(default: from half a panel, longer while the lattice leaves the design "
+                        "unclad; longer smoothing holds the lattice together near umbilics, "
+                        "shorter keeps the lines fairer after the solve)")
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
