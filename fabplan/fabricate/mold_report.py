@@ -474,16 +474,18 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True) -> str:
                                      "fabplan", scripts=viewer.viewer_assets() if view_3d else "")
 
 
-def mold_report_files(plan: MoldPlan, folder: str | os.PathLike) -> dict:
+def mold_report_files(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: bool = True) -> dict:
     """{path: text} of the three report files in `folder`."""
     folder = Path(folder)
-    return {folder / "report.html": mold_report_html(plan),
+    return {folder / "report.html": mold_report_html(plan, view_3d=view_3d),
             folder / "molds.json": json_text(plan.record()),
             folder / "panels.csv": plan.panels_csv()}
 
 
-def write_mold_report(plan: MoldPlan, folder: str | os.PathLike) -> list[Path]:
-    """Write ``report.html``, ``molds.json`` and ``panels.csv`` into `folder`, all or none.
+def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *,
+                      view_3d: bool = True) -> list[Path]:
+    """Write ``report.html``, ``molds.json`` and ``panels.csv`` into `folder`, all or none
+    (`view_3d`: the report with its interactive 3D view).
 
     Returns
     -------
@@ -491,5 +493,5 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike) -> list[Path]:
     """
     folder = Path(folder)
     with output_folder(folder) as staging:
-        write_texts(mold_report_files(plan, staging))
+        write_texts(mold_report_files(plan, staging, view_3d=view_3d))
     return [folder / name for name in ("report.html", "molds.json", "panels.csv")]

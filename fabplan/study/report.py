@@ -737,8 +737,11 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
                 [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
 
 
-def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
+def write_study(result: StudyResult, out_dir, *, progress=None, view_3d: bool = True) -> list[Path]:
     """Write every file of a study into `out_dir`, replacing the folder as a whole.
+
+    `progress` is called with a line per written candidate; `view_3d` puts the
+    interactive 3D view into ``report.html``.
 
     `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
     The time recorded as ``seconds_total`` (and shown in the report) is the run time
@@ -772,7 +775,8 @@ def write_study(result: StudyResult, out_dir, *, progress=None) -> list[Path]:
         output.write_texts({tmp / "study.json": json_text(record),
                             tmp / "candidates.csv": candidates_csv(result),
                             tmp / "report.html": study_html(result, pictures, outputs,
-                                                            seconds_total=total)})
+                                                            seconds_total=total,
+                                                            view_3d=view_3d)})
         kept = out_dir / CACHE_FOLDER
         if kept.is_dir():     # the finished candidates stay with the study, for --resume
             os.replace(kept, tmp / CACHE_FOLDER)
