@@ -161,9 +161,8 @@ def _cmd_optimize(args) -> int:
         print(format_summary(result.properties))
         print(f"{result.net}: {result.status} after {result.iterations} iterations in "
               f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
-    progress.summary(f"wrote {obj_path} and {json_path}" if not args.quiet else
-                     f"{result.net}: {result.status} after {result.iterations} iterations; "
-                     f"wrote {obj_path}")
+    print(f"wrote {obj_path} and {json_path}" if not args.quiet else
+          f"{result.net}: {result.status} after {result.iterations} iterations; wrote {obj_path}")
     if not result.converged:
         _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED

@@ -235,7 +235,7 @@ def mold_figure(plan: MoldPlan, *, title: str | None = None) -> str:
     ax = fig.subplots()
     figures.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
     labelled = figures.label_faces(ax, mesh.vertices, mesh.face_indices, mesh.face_sizes,
-                                   [str(int(m)) for m in plan.mold], view)
+                                   [str(int(m)) for m in plan.mold], view, normals=normals)
     ax.set_title(title or (f"{counted(plan.panel_count, 'panel')} on "
                            f"{counted(plan.mold_count, 'mold')}: one colour per mold"
                            + (f" ({fail.size} failures in red)" if fail.size else "")))

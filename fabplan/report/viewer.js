@@ -10,10 +10,11 @@
   var OVER = [0.84, 0.15, 0.16], NONE = [0.62, 0.62, 0.62], PLAIN = [0.86, 0.86, 0.84];
   var FAMILY = [[0.12, 0.37, 0.75], [0.88, 0.48, 0.0], [0.3, 0.3, 0.3]];
 
-  function decode(b64, Type) {
-    var bin = atob(b64), bytes = new Uint8Array(bin.length);
+  var TYPES = { f4: Float32Array, i4: Int32Array, u2: Uint16Array, u1: Uint8Array, i1: Int8Array };
+  function decode(text) {           // "TYPE:BASE64" (fabplan/report/viewer.py encode_array)
+    var cut = text.indexOf(':'), bin = atob(text.slice(cut + 1)), bytes = new Uint8Array(bin.length);
     for (var i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
-    return new Type(bytes.buffer);
+    return new TYPES[text.slice(0, cut)](bytes.buffer);
   }
   function ramp(t) {
     t = Math.min(Math.max(t, 0), 1) * (RAMP.length - 1);
@@ -116,8 +117,8 @@
       if (o) { self.scene.remove(o); o.geometry.dispose(); }
     });
     this.outline = null; this.pick = null;
-    var P = decode(s.positions, Float32Array), sizes = decode(s.face_sizes, Int32Array);
-    var idx = decode(s.face_indices, Int32Array), ntri = 0, f, j;
+    var P = decode(s.positions), sizes = decode(s.face_sizes);
+    var idx = decode(s.face_indices), ntri = 0, f, j;
     for (f = 0; f < sizes.length; f++) ntri += sizes[f] - 2;
     var corner = new Int32Array(3 * ntri), triFace = new Int32Array(ntri), t = 0, ptr = 0;
     this.facePtr = new Int32Array(sizes.length + 1);
@@ -143,24 +144,24 @@
     this.mesh = new THREE.Mesh(g, new THREE.MeshLambertMaterial({
       vertexColors: true, side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 }));
     this.scene.add(this.mesh);
-    var E = decode(s.edges, Int32Array), ne = E.length / 2, lp = new Float32Array(6 * ne);
+    var E = decode(s.edges), ne = E.length / 2, lp = new Float32Array(6 * ne);
     for (var e = 0; e < 2 * ne; e++) { lp[3 * e] = P[3 * E[e]]; lp[3 * e + 1] = P[3 * E[e] + 1]; lp[3 * e + 2] = P[3 * E[e] + 2]; }
     var lg = new THREE.BufferGeometry();
     lg.setAttribute('position', new THREE.BufferAttribute(lp, 3));
     lg.setAttribute('color', new THREE.BufferAttribute(new Float32Array(6 * ne), 3));
-    this.edgeFamily = decode(s.edge_family, Int32Array);
+    this.edgeFamily = decode(s.edge_family);
     this.lines = new THREE.LineSegments(lg, new THREE.LineBasicMaterial({ vertexColors: true, transparent: true }));
     this.scene.add(this.lines);
     this.gaps = null;
     if (s.gaps) {
       var gg = new THREE.BufferGeometry();
-      gg.setAttribute('position', new THREE.BufferAttribute(decode(s.gaps, Float32Array), 3));
+      gg.setAttribute('position', new THREE.BufferAttribute(decode(s.gaps), 3));
       gg.computeVertexNormals();
       this.gaps = new THREE.Mesh(gg, new THREE.MeshLambertMaterial({ color: 0xd62728, side: THREE.DoubleSide }));
       this.scene.add(this.gaps);
     }
     this.infoFields = s.info.map(function (q) { return { label: q.label, unit: q.unit, digits: q.digits, integer: q.integer,
-      values: decode(q.values, q.integer ? Int32Array : Float32Array) }; });
+      values: decode(q.values) }; });
     this.modeSelect.innerHTML = '';
     s.modes.forEach(function (m) { var o = el('option', '', m.label); o.value = m.key; self.modeSelect.appendChild(o); });
     var keep = this.mode && s.modes.some(function (m) { return m.key === self.mode; }) ? this.mode : s.modes[0].key;
@@ -173,8 +174,8 @@
     var s = this.data, m = s.modes.filter(function (x) { return x.key === key; })[0];
     this.mode = key; this.modeSelect.value = key;
     var col = this.mesh.geometry.attributes.color.array, n = this.corner.length, i, v, c;
-    var values = m.values ? decode(m.values, m.categorical ? Int32Array : Float32Array) : null;
-    var palette = m.palette ? decode(m.palette, Float32Array) : null;
+    var values = m.values ? decode(m.values) : null;
+    var palette = m.palette ? decode(m.palette) : null;
     var lo = m.range ? m.range[0] : 0, hi = m.range ? m.range[1] : 1, span = hi > lo ? hi - lo : 1;
     for (i = 0; i < n; i++) {
       if (!values) { c = PLAIN; }
@@ -233,7 +234,7 @@
     var d = R / Math.sin(this.camera.fov * Math.PI / 360) * 0.85, target = c.clone(), elev;
     if (name === 'eye') {
       // a person standing in front of the design, eyes at eye height above its lowest point
-      var D = 1.3 * d;
+      var D = 0.8 * d;
       this.camera.position.set(c.x + fx * D, c.y + fy * D, v.ground + v.eye_height);
     } else {
       elev = { front: 8, above: 30, top: 89.5 }[name] * Math.PI / 180;

@@ -50,16 +50,23 @@ _VIEWS = ("eye", "front", "above", "top")
 
 
 def encode_array(values: np.ndarray, dtype: str) -> str:
-    """Base64 of `values` as little-endian `dtype` (``"<f4"`` or ``"<i4"``), the form
-    ``viewer.js`` decodes into a typed array.
+    """``TYPE:BASE64`` of `values`, the form ``viewer.js`` decodes into a typed array.
+
+    `dtype` ``"f4"`` stores float32; ``"int"`` the smallest of int8, uint8, uint16, int32
+    that holds the values (mesh indices of up to 65,536 vertices take two bytes).
 
     Examples
     --------
-    >>> encode_array(np.array([1, 2]), "<i4")
-    'AQAAAAIAAAA='
+    >>> encode_array(np.array([1, 2]), "int"), encode_array(np.array([-1, 300]), "int")
+    ('u1:AQI=', 'i4://///ywBAAA=')
     """
-    data = np.ascontiguousarray(np.asarray(values).ravel(), dtype=dtype)
-    return base64.b64encode(data.tobytes()).decode("ascii")
+    v = np.asarray(values).ravel()
+    if dtype == "int":
+        lo, hi = (int(v.min()), int(v.max())) if v.size else (0, 0)
+        dtype = ("u1" if lo >= 0 and hi < 256 else "i1" if -128 <= lo and hi < 128 else
+                 "u2" if lo >= 0 and hi < 65536 else "i4")
+    data = np.ascontiguousarray(v, dtype="<" + dtype if dtype != "u1" and dtype != "i1" else dtype)
+    return dtype + ":" + base64.b64encode(data.tobytes()).decode("ascii")
 
 
 @dataclass
@@ -99,13 +106,17 @@ class ColourMode:
             return out
         v = np.asarray(self.values)
         if self.categorical:
-            out["values"] = encode_array(v, "<i4")
-            out["palette"] = encode_array(np.asarray(self.palette, float)[:, :3], "<f4")
+            out["values"] = encode_array(v, "int")
+            out["palette"] = encode_array(np.asarray(self.palette, float)[:, :3], "f4")
             return out
         finite = v[np.isfinite(v)]
         lo, hi = self.value_range or ((float(finite.min()), float(finite.max())) if finite.size
                                       else (0.0, 1.0))
-        out["values"] = encode_array(np.where(np.isfinite(v), v, np.nan), "<f4")
+        if hi - lo <= 1e-3 * max(abs(lo), abs(hi)):
+            # a constant (an isogonal net's angle): one colour in the middle of the scale
+            mid = 0.5 * (lo + hi)
+            lo, hi = mid - max(0.01 * abs(mid), 1e-9), mid + max(0.01 * abs(mid), 1e-9)
+        out["values"] = encode_array(np.where(np.isfinite(v), v, np.nan), "f4")
         out["range"] = [float(lo), float(hi) if hi > lo else float(lo) + 1e-9]
         return out
 
@@ -131,7 +142,7 @@ class PanelInfo:
     def to_json(self) -> dict:
         return {"label": self.label, "unit": self.unit, "digits": self.digits,
                 "integer": self.integer,
-                "values": encode_array(self.values, "<i4" if self.integer else "<f4")}
+                "values": encode_array(self.values, "int" if self.integer else "f4")}
 
 
 def scene_front(normals: np.ndarray, areas: np.ndarray, vertices: np.ndarray) -> tuple[np.ndarray, str]:
@@ -158,15 +169,20 @@ def scene_front(normals: np.ndarray, areas: np.ndarray, vertices: np.ndarray) ->
     >>> front.round(3).tolist(), initial
     ([0.0, -1.0], 'eye')
     """
-    mean = np.nansum(normals * areas[:, None], axis=0)
-    if np.linalg.norm(mean) > 0.3 * areas.sum():
+    weighted = np.nan_to_num(normals) * areas[:, None]
+    total = float(areas.sum())
+    sideways = float(np.linalg.norm(weighted[:, :2], axis=1).sum())   # area facing sideways
+    mean = weighted.sum(axis=0)
+    ring = sideways > 0.5 * total and np.linalg.norm(mean[:2]) < 0.3 * sideways
+    if not ring and np.linalg.norm(mean) > 0.3 * total:
         mean = mean / np.linalg.norm(mean)
         if abs(mean[2]) >= np.cos(np.radians(45)):
             span = np.ptp(vertices[:, :2], axis=0)
             azimuth = np.arctan2(span[1], span[0]) - np.radians(75)
             return np.array([np.cos(azimuth), np.sin(azimuth)]), "above"
         return mean[:2] / np.linalg.norm(mean[:2]), "eye"
-    # closed: look across the shorter horizontal axis, so the long side faces the viewer
+    # a ring (a stadium, a tower) or a closed surface: look across the shorter horizontal
+    # axis, so that its long side faces the viewer
     centred = vertices[:, :2] - vertices[:, :2].mean(axis=0)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     front = vt[-1] if vt.shape[0] > 1 else np.array([0.0, -1.0])
@@ -213,18 +229,18 @@ class ViewerScene:
         centre = 0.5 * (X.min(axis=0) + X.max(axis=0))   # float32 keeps mm on a 10 km site
         out = {
             "title": self.title,
-            "positions": encode_array(X - centre, "<f4"),
-            "face_sizes": encode_array(self.face_sizes, "<i4"),
-            "face_indices": encode_array(self.face_indices, "<i4"),
-            "edges": encode_array(self.edges, "<i4"),
-            "edge_family": encode_array(self.edge_family, "<i4"),
+            "positions": encode_array(X - centre, "f4"),
+            "face_sizes": encode_array(self.face_sizes, "int"),
+            "face_indices": encode_array(self.face_indices, "int"),
+            "edges": encode_array(self.edges, "int"),
+            "edge_family": encode_array(self.edge_family, "int"),
             "modes": [m.to_json() for m in self.modes],
             "info": [i.to_json() for i in self.info],
             "views": {"front": [float(v) for v in self.front], "initial": self.initial,
                       "ground": float(X[:, 2].min() - centre[2]), "eye_height": self.eye_height},
         }
         if self.gaps is not None and len(self.gaps):
-            out["gaps"] = encode_array(np.asarray(self.gaps, float) - centre, "<f4")
+            out["gaps"] = encode_array(np.asarray(self.gaps, float) - centre, "f4")
         return out
 
 

@@ -28,6 +28,7 @@ from ..layout.picture import fairness_marks, write_layout_picture
 from ..report import figures, html, viewer
 from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
+from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
 from .run import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
 
@@ -272,7 +273,8 @@ def comparison_figure(result: StudyResult) -> str:
 
 
 def _png_uri(path: Path) -> str:
-    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+    png = figures.compact_png(path.read_bytes())
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
 # ---------------------------------------------------------------------------- HTML
@@ -407,14 +409,7 @@ def _comparison_table(result: StudyResult) -> str:
 
 
 def _limits_table(result: StudyResult) -> str:
-    from dataclasses import asdict
-
-    limits = asdict(result.study.limits)
-    if not limits["planar_panels"]:
-        del limits["planarity_tolerance_mm"]
-    if not limits["congruent_strips"]:
-        del limits["congruence_tolerance_mm"]
-    rows = [list(limit_text(k, v)) for k, v in limits.items() if v is not None and v is not False]
+    rows = [list(limit_text(k, v)) for k, v in _limit_items(result)]
     return html.html_table(["limit", "value"], rows, caption="Fabrication limits")
 
 
@@ -485,23 +480,19 @@ def _check_value(key: str, value) -> str:
     return limit_text(key, value)[1]
 
 
-def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
-                       result: StudyResult, scene: int | None = None) -> str:
-    head = f"{c.rank}. {c.name}" if c.rank else c.name
-    if c.failed:
-        return html.html_section(head, html.html_paragraph(
-            f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
+def _check_rows(c: CandidateResult) -> list[list]:
+    return [[limit_text(ck["limit"], ck["bound"])[0],
+             _check_value(ck["limit"], ck["measured"]), _check_value(ck["limit"], ck["bound"]),
+             "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks]
+
+
+def _candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[list]]:
+    """The verdict of a measured candidate and its "quantity, value" rows."""
     m = c.metrics
     units = result.study.design.units
     verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
     if c.notes:
         verdict += " Note: " + "; ".join(c.notes) + "."
-    checks = html.html_table(
-        ["limit", "measured", "bound", "met", "what was measured"],
-        [[limit_text(ck["limit"], ck["bound"])[0],
-          _check_value(ck["limit"], ck["measured"]), _check_value(ck["limit"], ck["bound"]),
-          "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks],
-        caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
     types = m["molds"]["panel_types"]
     parameters = []
     for k, v in m["parameters"].items():
@@ -546,6 +537,21 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
         facts.append(["strips", f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} "
                       f"on {counted(s['sheets'], 'sheet')} ({100 * s['material_use']:.0f} % "
                       f"material use); {shape}"])
+    return verdict, facts
+
+
+def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
+                       result: StudyResult, scene: int | None = None) -> str:
+    head = f"{c.rank}. {c.name}" if c.rank else c.name
+    if c.failed:
+        return html.html_section(head, html.html_paragraph(
+            f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
+    units = result.study.design.units
+    molds = c.metrics["molds"]
+    verdict, facts = _candidate_facts(c, result)
+    checks = html.html_table(
+        ["limit", "measured", "bound", "met", "what was measured"], _check_rows(c),
+        caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
     parts = [html.html_paragraph(verdict, cls="note" if c.feasible else "fail"),
              html.html_table(["quantity", "value"], facts, caption="Measured"), checks]
     limit = result.study.limits.max_deviation_mm
@@ -666,6 +672,75 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
                           scripts=viewer.viewer_assets() if scenes else "")
 
 
+def _comparison_rows(result: StudyResult) -> tuple[list[str], list[list]]:
+    """The comparison table for print: fewer, wider columns than the page's."""
+    rows: list[list] = []
+    for c in result.ranked():
+        if c.failed:
+            rows.append(["", c.name, "failed", "", "", "", "", c.reasons[0]])
+            continue
+        m = c.metrics
+        rows.append([c.rank, c.name, "yes" if c.feasible else "no", m["molds"]["count"],
+                     m["panels"], f"{m['deviation_mm']['max']:.1f}", f"{c.cost:.0f}",
+                     c.candidate.describe()])
+    return (["rank", "candidate", "feasible", "molds [count]", "panels [count]",
+             "max deviation [mm]", "cost [cost units]", "net"], rows)
+
+
+def study_pdf(result: StudyResult, pictures: dict, *, seconds_total: float | None = None
+              ) -> PdfDocument:
+    """The printable report (``report.pdf``): the recommendation and comparison, then two
+    to four pages per candidate (verdict, measurements, checks, pictures)."""
+    study = result.study
+    seconds = result.seconds_run if seconds_total is None else seconds_total
+    doc = PdfDocument(f"Facade study: {study.name}",
+                      f"{_design_text(study)}, panel size {study.panel_size:g} "
+                      f"{study.design.units}, {counted(len(result.candidates), 'candidate')}, run "
+                      f"in {seconds:.0f} s. The interactive 3D view and the files are in "
+                      "report.html beside this file.")
+    first = doc.section("Recommendation and comparison").text(result.recommendation)
+    columns, rows = _comparison_rows(result)
+    first.table(columns, rows, widths=[0.5, 1.6, 0.7, 0.7, 0.7, 0.9, 0.8, 2.2])
+    first.text(_RANK_RULE, size=7.5, style="italic")
+    first.text(cost_line(result), size=7.5)
+    first.table(["limit", "value"], [list(limit_text(k, v)) for k, v in
+                                     _limit_items(result)], widths=[3, 1])
+    if "comparison" in pictures:
+        first.image(pictures["comparison"], "Molds and deviation of each candidate, in rank "
+                    "order: green meets every limit, red does not; dashed lines are the limits.")
+    for c in result.ranked():
+        head = f"{c.rank}. {c.name}" if c.rank else c.name
+        section = doc.section(head)
+        if c.failed:
+            section.text(f"{c.candidate.describe()}: failed. {c.error}")
+            continue
+        verdict, facts = _candidate_facts(c, result)
+        section.text(verdict)
+        section.table(["quantity", "value"], facts, widths=[1.2, 3])
+        section.table(["limit", "measured", "bound", "met", "what was measured"],
+                      _check_rows(c), widths=[1.6, 0.8, 0.8, 0.4, 2.6])
+        own = pictures.get(c.name, {})
+        for key, caption in (("deviation", "Deviation from the design (mm); red line on the "
+                                            "scale: the limit."),
+                             ("molds", "Panels coloured by mold; numbers are mold ids."),
+                             ("net", "The net on the design surface."),
+                             ("sheet", "First strip sheet as cut.")):
+            if key in own:
+                section.image(own[key], caption, max_height=0.4)
+    return doc
+
+
+def _limit_items(result: StudyResult) -> list[tuple[str, object]]:
+    from dataclasses import asdict
+
+    limits = asdict(result.study.limits)
+    if not limits["planar_panels"]:
+        del limits["planarity_tolerance_mm"]
+    if not limits["congruent_strips"]:
+        del limits["congruence_tolerance_mm"]
+    return [(k, v) for k, v in limits.items() if v is not None and v is not False]
+
+
 # ---------------------------------------------------------------------------- writing
 def holds_study(folder: Path) -> bool:
     """True when `folder` holds an earlier study (a ``study.json``, or the candidates an
@@ -737,11 +812,12 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
                 [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
 
 
-def write_study(result: StudyResult, out_dir, *, progress=None, view_3d: bool = True) -> list[Path]:
+def write_study(result: StudyResult, out_dir, *, progress=None, view_3d: bool = True,
+                pdf: bool = True) -> list[Path]:
     """Write every file of a study into `out_dir`, replacing the folder as a whole.
 
     `progress` is called with a line per written candidate; `view_3d` puts the
-    interactive 3D view into ``report.html``.
+    interactive 3D view into ``report.html``; `pdf` writes ``report.pdf`` beside it.
 
     `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
     The time recorded as ``seconds_total`` (and shown in the report) is the run time
@@ -751,7 +827,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None, view_3d: bool = 
     Returns
     -------
     list of Path: ``report.html``, ``study.json``, ``candidates.csv`` (the candidate
-    folders are listed in ``study.json``).
+    folders are listed in ``study.json``; ``report.pdf`` sits beside them).
     """
     say = progress or (lambda message: None)
     clock = time.perf_counter()
@@ -772,6 +848,8 @@ def write_study(result: StudyResult, out_dir, *, progress=None, view_3d: bool = 
             pictures["comparison"] = comparison_figure(result)
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
+        if pdf:
+            study_pdf(result, pictures, seconds_total=total).write(tmp / "report.pdf")
         output.write_texts({tmp / "study.json": json_text(record),
                             tmp / "candidates.csv": candidates_csv(result),
                             tmp / "report.html": study_html(result, pictures, outputs,
