@@ -358,7 +358,7 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True) -> str:
         ["panel surface", r["panel_surface"]],
         ["panels N", counted(r["panel_count"], "panel")],
         ["molds M", counted(r["mold_count"], "mold")],
-        ["M / sqrt(N) (count ratio)", f"{r['molds_per_sqrt_panels']:.3g}"],
+        ["M / sqrt(N)", f"{r['molds_per_sqrt_panels']:.3g} (ratio)"],
         ["panels per mold (mean / median / max)",
          f"{per_mold['mean']:.1f} / {per_mold['median']:g} / {per_mold['max']} panels"],
         ["panel types", ", ".join(counted(v, k.replace('_', ' ') + " panel")
@@ -371,8 +371,8 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True) -> str:
         ["Weingarten residual (rms distance from the line)",
          "–" if w.get("line_residual_rms") is None else
          f"{w['line_residual_rms'] * _PER_M:.3g} 1/m"],
-        ["Weingarten residual / curvature spread (ratio)",
-         "–" if w.get("thickness") is None else f"{w['thickness']:.3g}"],
+        ["Weingarten residual / curvature spread",
+         "–" if w.get("thickness") is None else f"{w['thickness']:.3g} (ratio)"],
         ["largest mold size",
          "no limit" if r["max_mold_size_mm"] is None else f"{r['max_mold_size_mm']:g} mm"],
         ["run time", f"{r['seconds']:.1f} s"],

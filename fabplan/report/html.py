@@ -112,6 +112,9 @@ def format_range(low, high, unit: str = "", digits: int = 4) -> str:
     return f"{text} {unit}" if unit and text != "–" else text
 
 
+_NUMBER = re.compile(r"^[-+]?(\d+(\.\d*)?|\.\d+)(e[-+]?\d+)?$", re.IGNORECASE)
+
+
 def _empty(value) -> bool:
     return value is None or (isinstance(value, str) and value.strip() in ("", "–"))
 
@@ -145,8 +148,9 @@ def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str
     for i, row in enumerate(rows):
         cells = []
         for value in row:
-            numeric = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-                value, (bool, np.bool_))
+            numeric = (isinstance(value, (int, float, np.integer, np.floating))
+                       and not isinstance(value, (bool, np.bool_))
+                       or isinstance(value, str) and _NUMBER.match(value) is not None)
             cls = ' class="num"' if numeric else ""
             cells.append(f"<td{cls}>{html.escape(format_value(value, digits))}</td>")
         tr = '<tr class="bad">' if i in bad else "<tr>"

@@ -1,4 +1,4 @@
-/* fabplan report 3D view: one viewer per <div class="fp-viewer">, its scenes in a
+/* fabplan report 3D view: one viewer per div.fp-viewer, its scenes in a
    <script type="application/json"> inside it (written by fabplan/report/viewer.py).
    Needs the global THREE of vendor/three.min.js. Renders on demand (no animation loop). */
 (function () {
