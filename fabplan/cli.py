@@ -22,6 +22,7 @@ from .io.output import atomic_path, check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
 from .net.validate import check_panel_size, load_net
+from .report.html import counted
 from .report.progress import Progress
 from .solve.net_types import NETS, check_angle, check_radius
 from .solve.optimize import check_net_input, optimize, read_fixed, read_handles
@@ -189,7 +190,7 @@ def _cmd_molds(args) -> int:
     with progress.stage("writing the report"):
         files = write_mold_report(plan, out, view_3d=not args.no_3d)
     if args.quiet:
-        print(f"{plan.panel_count} panels on {plan.mold_count} molds at "
+        print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')} at "
               f"{settings.tolerance_mm:g} mm; wrote {files[0]}")
     else:
         print(plan.summary())
@@ -442,8 +443,8 @@ def _cmd_strips(args) -> int:
         files = plan.write(out, previews=not args.no_previews)
     s = plan.summary()
     if args.quiet:
-        print(f"{s['strips']} strips, {s['parts']} parts on {s['sheets']} sheets; wrote "
-              f"{len(files)} files to {out}")
+        print(f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
+              f"{counted(s['sheets'], 'sheet')}; wrote {len(files)} files to {out}")
         return 0
     radius = s["radius_mm"]
     print(f"{s['strips']} strips ({s['strips_per_family'][0]} A, {s['strips_per_family'][1]} B), "
@@ -732,7 +733,8 @@ def _add_study(sub: Any) -> None:
     _add_max_panels(p)
     p.add_argument("--no-3d", action="store_true",
                    help="leave the interactive 3D view out of report.html")
-    _add_verbosity(p)
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="print only errors and a one-line summary")
     p.set_defaults(func=_cmd_study)
 
 

@@ -330,7 +330,10 @@ def test_the_report_links_every_file_relatively(study_run):
     """The Files list was plain text; it links each file relative to report.html."""
     _, out, record = study_run
     page = (out / "report.html").read_text(encoding="utf-8")
-    hrefs = re.findall(r'<a href="([^"]+)"', page)
+    links = re.findall(r'<a href="([^"]+)"', page)
+    hrefs = [h for h in links if not h.startswith("#")]
+    for anchor in set(links) - set(hrefs):     # the contents and the 3D view's links
+        assert f'id="{anchor[1:]}"' in page
     expected = set()
     for c in record["candidates"]:
         for value in c["outputs"].values():

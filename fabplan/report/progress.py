@@ -14,7 +14,7 @@ heartbeat thread here does; it needs no dependency.
 
 Usage::
 
-    progress = Progress.for_stream(sys.stderr, quiet=args.quiet, verbose=args.verbose)
+    progress = Progress(sys.stderr, quiet=args.quiet, verbose=args.verbose)
     with progress.stage("nesting parts", total=len(parts)) as stage:
         for part in parts:
             ...
@@ -118,11 +118,6 @@ class Progress:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.started = time.monotonic()
-
-    @classmethod
-    def for_stream(cls, stream: TextIO | None = None, **options) -> "Progress":
-        """Same as the constructor (reads better at a call site)."""
-        return cls(stream, **options)
 
     # ------------------------------------------------------------------ output
     def _write(self, text: str) -> None:

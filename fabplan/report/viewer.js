@@ -234,7 +234,7 @@
     var d = R / Math.sin(this.camera.fov * Math.PI / 360) * 0.85, target = c.clone(), elev;
     if (name === 'eye') {
       // a person standing in front of the design, eyes at eye height above its lowest point
-      var D = 0.8 * d;
+      var D = d;
       this.camera.position.set(c.x + fx * D, c.y + fy * D, v.ground + v.eye_height);
     } else {
       elev = { front: 8, above: 30, top: 89.5 }[name] * Math.PI / 180;

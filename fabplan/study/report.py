@@ -153,17 +153,20 @@ def _view(mesh):
 def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Face normals and a viewing frame for a heat map that must show `point`.
 
-    An open surface whose faces agree on a side is seen from that side (as the mold
-    pictures); a closed one (a ring, a barrel) from the side of `point`, so that the
-    worst point is not hidden behind the near wall.
+    A facade is seen from in front (as the mold pictures); a roof from 30 degrees above
+    and a closed surface (a ring, a barrel) from 10 degrees above, both from the side of
+    `point`, so that the worst point is on the near side, not hidden behind the near
+    wall or foreshortened at the far edge.
     """
     normals, view = _view(mesh)
-    if agreeing_normal(normals, mesh.face_areas) is None:
-        X = mesh.vertices
+    X = mesh.vertices
+    _, initial = viewer.scene_front(normals, mesh.face_areas, X)
+    roof = initial == "above"
+    if roof or agreeing_normal(normals, mesh.face_areas) is None:
         out = point - X.mean(axis=0)
         out[2] = 0.0
         if np.linalg.norm(out) > 1e-9 * np.ptp(X, axis=0).max():
-            view = figures.elevation_frame(out[:2], 10.0)
+            view = figures.elevation_frame(out[:2], 30.0 if roof else 10.0)
     return normals, view
 
 
