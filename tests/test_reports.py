@@ -218,3 +218,20 @@ def test_the_stadium_report_pdf_has_contents_and_numbered_pages(stadium_study):
         entry = re.search(re.escape(heading) + r"\s+page (\d+)", pages[0])
         assert entry, f"{heading} is not in the contents"
         assert pages[int(entry.group(1)) - 1].lstrip().startswith(heading)
+
+
+@pytest.mark.slow
+def test_the_molds_report_pdf_opens_with_contents_and_numbered_pages(cmc1_plan, tmp_path):
+    pypdf = pytest.importorskip("pypdf")
+    from fabplan.fabricate.mold_report import write_mold_report
+
+    files = write_mold_report(cmc1_plan, tmp_path / "molds", view_3d=False)
+    assert [f.name for f in files] == ["report.html", "report.pdf", "molds.json", "panels.csv"]
+    pages = [p.extract_text() for p in pypdf.PdfReader(str(files[1])).pages]
+    assert "Contents" in pages[0] and "cmc1.obj" in pages[0]
+    for number, text in enumerate(pages, start=1):
+        assert f"page {number} of {len(pages)}" in text
+    for section in ("Summary", "Pictures", "Molds"):
+        start = int(re.search(section + r"\s+page (\d+)", pages[0]).group(1))
+        assert pages[start - 1].lstrip().startswith(section)
+    assert f"{cmc1_plan.mold_count} molds" in pages[0] or "1 mold" in pages[0]

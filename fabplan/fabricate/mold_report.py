@@ -26,10 +26,11 @@ from ..net.geometry import (
 )
 from ..report import figures, html, viewer
 from ..report.html import counted
+from ..report.pdf import PdfDocument
 from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
 
 __all__ = ["explain_mold_count", "facade_view", "mold_figure", "mold_report_html", "mold_report_files",
-           "write_mold_report", "net_viewer_scene", "net_edges"]
+           "write_mold_report", "net_viewer_scene", "net_edges", "mold_pictures", "mold_report_pdf"]
 
 _PER_M = 1000.0  # curvatures are stored per mm; the pictures and tables show them per m
 
@@ -344,9 +345,18 @@ def _deviation_figure(plan: MoldPlan) -> str:
     return figures.figure_to_data_uri(fig)
 
 
-def mold_report_html(plan: MoldPlan, *, view_3d: bool = True) -> str:
+def mold_pictures(plan: MoldPlan) -> dict[str, str]:
+    """Data URIs of the report's pictures: ``molds``, ``isolines``, ``curvatures``,
+    ``deviations``."""
+    by_mold, isolines = _facade_figures(plan)
+    return {"molds": by_mold, "isolines": isolines, "curvatures": _curvature_figure(plan),
+            "deviations": _deviation_figure(plan)}
+
+
+def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
+                     pictures: dict[str, str] | None = None) -> str:
     """The self-contained HTML report of a mold plan (`view_3d`: with the interactive 3D
-    view, about 0.6 MB more)."""
+    view, about 0.6 MB more; `pictures`: `mold_pictures` when already drawn)."""
     r = plan.record()
     tol = r["tolerance_mm"]
     w = plan.weingarten
@@ -385,7 +395,8 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True) -> str:
                                      f"{', '.join(map(str, r['failures'][:20]))}"
                                      f"{' ...' if len(r['failures']) > 20 else ''}); see the "
                                      "panel table.", cls="fail"))
-    by_mold, isolines = _facade_figures(plan)
+    pictures = pictures or mold_pictures(plan)
+    by_mold, isolines = pictures["molds"], pictures["isolines"]
     ext, mdev, per = plan.mold_extent_mm(), plan.mold_deviation_mm(), plan.panels_per_mold
     mold_rows = [[j, MOLD_TYPES[plan.mold_type[j]], plan.mold_shape[j, 0] * _PER_M,
                   plan.mold_shape[j, 1] * _PER_M,
@@ -426,14 +437,14 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True) -> str:
                                  "one: both curvatures are constant along it, and the panels "
                                  "along it share a mold (Fig. 1b). Where the lines cross, the "
                                  "curvatures vary independently and more molds are needed."),
-            html.html_figure(_curvature_figure(plan),
+            html.html_figure(pictures["curvatures"],
                                "Left: every panel's principal curvatures and the fitted line "
                                "a k1 + b k2 = c. Right: the panels' curvatures in their placement "
                                "on their mold, coloured by mold, and the molds (crosses).",
                              how="Each dot is a panel, in 1/m (1 / radius). Dots close to a "
                                  "line mean few molds; the crosses on the right are the molds, "
                                  "numbered by mold id when there are at most 60."),
-            html.html_figure(_deviation_figure(plan),
+            html.html_figure(pictures["deviations"],
                                "Measured gaps of the panels to their molds (left) and panels "
                                "per mold (right).",
                              how=f"Left: how many panels have each gap, in mm; all must lie "
@@ -482,16 +493,56 @@ def mold_report_files(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
             folder / "panels.csv": plan.panels_csv()}
 
 
+def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None) -> PdfDocument:
+    """The printable report (``report.pdf``): summary, why this many molds, the pictures
+    and the molds table (the panels are in ``panels.csv``)."""
+    r = plan.record()
+    pictures = pictures or mold_pictures(plan)
+    doc = PdfDocument(f"Mold report: {Path(str(r['net'])).name}",
+                      f"{counted(r['panel_count'], 'panel')}, {counted(r['mold_count'], 'mold')} "
+                      f"at {r['tolerance_mm']:g} mm, made by fabplan. The 3D view is in "
+                      "report.html beside this file; every panel is in panels.csv.")
+    summary = doc.section("Summary")
+    summary.text(explain_mold_count(plan))
+    summary.table(["quantity", "value"], [
+        ["panels", counted(r["panel_count"], "panel")],
+        ["molds", counted(r["mold_count"], "mold")],
+        ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
+        ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
+        ["panels that do not fit", counted(len(r["failures"]), "panel")],
+    ], widths=[2, 1])
+    figures_section = doc.section("Pictures")
+    for key, caption in (("molds", "Panels coloured by mold; numbers are mold ids."),
+                         ("isolines", "Isolines of constant k1 (blue) and k2 (orange)."),
+                         ("curvatures", "Panels' principal curvatures (1/m) and the molds."),
+                         ("deviations", "Gaps of the panels to their molds (mm); panels per "
+                                        "mold.")):
+        figures_section.image(pictures[key], caption, max_height=0.38)
+    ext, mdev, per = plan.mold_extent_mm(), plan.mold_deviation_mm(), plan.panels_per_mold
+    doc.section("Molds").table(
+        ["mold id", "type", "k1 [1/m]", "k2 [1/m]", "size [mm]", "panels [count]",
+         "largest gap [mm]"],
+        [[j, MOLD_TYPES[plan.mold_type[j]], f"{plan.mold_shape[j, 0] * _PER_M:.4g}",
+          f"{plan.mold_shape[j, 1] * _PER_M:.4g}", f"{ext[j, 0]:.0f} x {ext[j, 1]:.0f}",
+          int(per[j]), f"{mdev[j]:.3g}"] for j in range(plan.mold_count)])
+    return doc
+
+
 def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *,
                       view_3d: bool = True) -> list[Path]:
-    """Write ``report.html``, ``molds.json`` and ``panels.csv`` into `folder`, all or none
-    (`view_3d`: the report with its interactive 3D view).
+    """Write ``report.html``, ``report.pdf``, ``molds.json`` and ``panels.csv`` into
+    `folder`, all or none (`view_3d`: the HTML report with its interactive 3D view).
 
     Returns
     -------
     list of Path, the files written.
     """
     folder = Path(folder)
+    pictures = mold_pictures(plan)
     with output_folder(folder) as staging:
-        write_texts(mold_report_files(plan, staging, view_3d=view_3d))
-    return [folder / name for name in ("report.html", "molds.json", "panels.csv")]
+        write_texts({staging / "report.html": mold_report_html(plan, view_3d=view_3d,
+                                                               pictures=pictures),
+                     staging / "molds.json": json_text(plan.record()),
+                     staging / "panels.csv": plan.panels_csv()})
+        mold_report_pdf(plan, pictures).write(staging / "report.pdf")
+    return [folder / name for name in ("report.html", "report.pdf", "molds.json", "panels.csv")]
