@@ -117,6 +117,14 @@ def test_a_stage_off_a_terminal_prints_a_line_every_interval():
     assert 3 <= sum(line.startswith("  ... nesting") for line in lines) <= 6
 
 
+def test_a_quick_stage_off_a_terminal_prints_nothing():
+    """A command that fails at once prints its one-line error alone."""
+    out = io.StringIO()
+    with Progress(out, terminal=False).stage("reading the design"):
+        pass
+    assert out.getvalue() == ""
+
+
 def test_a_stage_on_a_terminal_shows_a_bar_the_share_and_the_time_left():
     out = io.StringIO()
     progress = Progress(out, terminal=True)

@@ -2,9 +2,10 @@
 
 On a terminal a stage shows one live line: its name, a bar with the percentage and the
 time left when its size is known, else the time spent. Off a terminal (a pipe, a log
-file, CI) every stage prints a line when it starts and ends, and a line at least every
-`Progress.interval` seconds while it runs, so that a log shows the run is alive and where
-it is. ``quiet`` prints nothing but the final summary (errors are the caller's); ``verbose``
+file, CI) a stage that runs longer than `Progress.delay` prints a line then, one when it
+ends, and one at least every `Progress.interval` seconds in between, so that a log shows
+the run is alive and where it is; a quick stage prints nothing (a command that fails at
+once prints its one-line error alone). ``quiet`` prints nothing but the final summary (errors are the caller's); ``verbose``
 adds the solver's iterations.
 
 A small module of our own rather than tqdm or rich: both draw one line with carriage
@@ -59,6 +60,7 @@ class Stage:
         self.done = 0
         self.detail = ""
         self.started = time.monotonic()
+        self.shown = False           # its start line is printed (off a terminal)
 
     def advance(self, steps: int = 1, detail: str | None = None) -> None:
         """`steps` more of `total` are done; `detail` says what (shown with the next line)."""
@@ -99,10 +101,12 @@ class Progress:
     verbose : also print `iteration` lines (the solver's).
     interval : seconds between the lines of a running stage off a terminal (at most 5 s
         between lines is the promise; the default leaves a margin for a busy machine).
+    delay : seconds a stage runs before it prints its first line off a terminal.
     """
 
     def __init__(self, stream: TextIO | None = None, *, terminal: bool | None = None,
-                 quiet: bool = False, verbose: bool = False, interval: float = 3.0):
+                 quiet: bool = False, verbose: bool = False, interval: float = 3.0,
+                 delay: float = 1.0):
         self.stream = sys.stderr if stream is None else stream
         if terminal is None:
             isatty = getattr(self.stream, "isatty", None)
@@ -111,6 +115,7 @@ class Progress:
         self.quiet = quiet
         self.verbose = verbose and not quiet
         self.interval = interval
+        self.delay = delay
         self._stages: list[Stage] = []
         self._lock = threading.RLock()
         self._last_line = time.monotonic()
@@ -162,13 +167,12 @@ class Progress:
     # ------------------------------------------------------------------ stages
     @contextmanager
     def stage(self, name: str, total: int | None = None) -> Iterator[Stage]:
-        """Run a stage: a line at its start and end, and while it runs a live line (on a
-        terminal) or a line every `interval` seconds (off one)."""
+        """Run a stage: while it runs a live line (on a terminal), or (off one, once it
+        has run `delay` seconds) a line, then one every `interval` seconds and one at its
+        end."""
         stage = Stage(self, name, total)
         with self._lock:
             self._stages.append(stage)
-        if not self.terminal:
-            self.line(f"{name} ...")
         self._start_thread()
         ok = False
         try:
@@ -178,7 +182,7 @@ class Progress:
             with self._lock:
                 self._stages.remove(stage)
             spent = format_seconds(time.monotonic() - stage.started)
-            if ok:
+            if ok and (stage.shown or self.terminal):
                 self.line(f"{name}: done in {spent}")
             else:
                 with self._lock:
@@ -212,9 +216,17 @@ class Progress:
             with self._lock:
                 if not self._stages or self.quiet:
                     continue
+                now = time.monotonic()
                 if self.terminal:
                     self._draw_live()
-                elif time.monotonic() - self._last_line >= self.interval:
+                    continue
+                due = now - self._last_line >= self.interval
+                for stage in self._stages:
+                    if not stage.shown and (due or now - stage.started >= self.delay):
+                        stage.shown = True
+                        self.line(f"{stage.name} ...")
+                        due = False
+                if due:
                     self.line("  ... " + self._status())
 
     def _start_thread(self) -> None:
