@@ -5,8 +5,8 @@ time left when its size is known, else the time spent. Off a terminal (a pipe, a
 file, CI) a stage that runs longer than `Progress.delay` prints a line then, one when it
 ends, and one at least every `Progress.interval` seconds in between, so that a log shows
 the run is alive and where it is; a quick stage prints nothing (a command that fails at
-once prints its one-line error alone). ``quiet`` prints nothing but the final summary (errors are the caller's); ``verbose``
-adds the solver's iterations.
+once prints its one-line error alone). ``quiet`` prints nothing but the final summary
+(errors are the caller's); ``verbose`` adds the solver's iterations.
 
 A small module of our own rather than tqdm or rich: both draw one line with carriage
 returns, which a pipe records as a single growing line or not at all until the end, and
