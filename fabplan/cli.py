@@ -271,10 +271,9 @@ def _cmd_layout(args) -> int:
     _check_option_files((args.family, "a file of polylines"))
     family_file = args.family if args.family and Path(args.family).is_file() else None
     _check_outputs([out, out.with_suffix(".json"), picture], [args.surface, family_file])
-    progress = _progress(args)
-    with progress.stage("reading the design"):
-        design = load_design(args.surface, triangles=args.triangles)
+    design = load_design(args.surface, triangles=args.triangles)
     _check_layout_size(design, args.panel_size, args.max_panels)
+    progress = _progress(args)    # after the checks: a refusal is one line on its own
     with progress.stage("laying out the net"):
         start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
         layout = layout_surface(design, args.panel_size, angle=start, family=args.family)
