@@ -150,7 +150,8 @@ def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | N
         values=plan.mold, categorical=True, palette=colours)]
     info = [viewer.PanelInfo("mold", plan.mold, integer=True)]
     if deviation_mm is not None:
-        top = max(float(np.max(deviation_mm)), deviation_limit_mm or 0.0)
+        # the scale reaches past the limit, so that the limit's mark sits inside it
+        top = max(float(np.max(deviation_mm)), 1.15 * (deviation_limit_mm or 0.0))
         modes.append(viewer.ColourMode(
             "deviation", "deviation from the design [mm]",
             "Distance of the net from the design surface, measured at the vertices and blended "
