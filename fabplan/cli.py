@@ -23,6 +23,8 @@ from .io.output import atomic_path, check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
 from .net.validate import check_panel_size, load_net
+from .report.html import counted
+from .report.progress import Progress
 from .solve.net_types import NETS, check_angle, check_radius
 from .solve.optimize import check_net_input, optimize, read_fixed, read_handles
 from .solve.reference import load_reference
@@ -54,9 +56,16 @@ def _cmd_measure(args) -> int:
     return 0
 
 
-def _warn(message: str | None) -> None:
-    if message:
+def _warn(message: str | None, quiet: bool = False) -> None:
+    if message and not quiet:
         print(f"fabplan: warning: {message}", file=sys.stderr)
+
+
+def _progress(args) -> Progress:
+    """The run's progress output (`fabplan.report.progress`): a live line on a terminal,
+    a line per stage and every few seconds off one; -q none, -v the solver's iterations."""
+    return Progress(sys.stderr, quiet=getattr(args, "quiet", False),
+                    verbose=getattr(args, "verbose", False))
 
 
 def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
@@ -85,19 +94,27 @@ def _output_path(args) -> Path:
     return out
 
 
-def _solver_options(args) -> tuple:
-    """Solver settings from --max-iter, and a progress printer for a terminal (or -v)."""
+class _IterationReport:
+    """The solver's progress callback: each iteration to `progress` (a line each with -v;
+    the live line of `stage` on a terminal)."""
+
+    def __init__(self, progress: Progress):
+        self.progress = progress
+        self.stage: Any = None
+
+    def __call__(self, rec: Any) -> None:
+        if self.stage is not None:
+            self.stage.note(f"iteration {rec.iteration}, residual {rec.hard_residual:.2e}")
+        self.progress.iteration(f"iteration {rec.iteration:3d}  residual {rec.hard_residual:.3e}  "
+                                f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms")
+
+
+def _solver_options(args, progress: Progress) -> tuple[SolverSettings, _IterationReport]:
+    """Solver settings from --max-iter, and the callback that reports the iterations."""
     settings = SolverSettings()
     if args.max_iter is not None:
         settings.max_iterations = args.max_iter
-    show = (sys.stderr.isatty() or args.verbose) and not args.quiet
-
-    def progress(rec):
-        if show:
-            print(f"  iteration {rec.iteration:3d}  residual {rec.hard_residual:.3e}  "
-                  f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms", file=sys.stderr)
-
-    return settings, progress
+    return settings, _IterationReport(progress)
 
 
 def _warn_not_converged(result, json_path: Path) -> None:
@@ -168,19 +185,24 @@ def _cmd_optimize(args) -> int:
     reference = _reference(args.reference)
     fixed = read_fixed(args.fix, mesh)
     handles = read_handles(args.handle)
-    settings, progress = _solver_options(args)
-
-    result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
-                      reference=reference, fixed=fixed, handles=handles, settings=settings,
-                      coherent=args.coherent, guards=args.guards, progress=progress)
-    with _viewer_files(args, out, result.mesh, units=args.units) as viewers:
+    progress = _progress(args)
+    settings, report = _solver_options(args, progress)
+    with progress.stage("solving") as stage:
+        report.stage = stage
+        result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
+                          reference=reference, fixed=fixed, handles=handles, settings=settings,
+                          coherent=args.coherent, guards=args.guards, progress=report)
+    with progress.stage("writing the net"), \
+            _viewer_files(args, out, result.mesh, units=args.units) as viewers:
         obj_path, json_path = result.write(out)
-    print(format_summary(result.properties))
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items()
                        if isinstance(v, float))
-    print(f"{result.net}: {result.status} after {result.iterations} iterations in "
-          f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
-    print(f"wrote {_listing([obj_path, json_path, *viewers])}")
+    if not args.quiet:
+        print(format_summary(result.properties))
+        print(f"{result.net}: {result.status} after {result.iterations} iterations in "
+              f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
+    print(f"wrote {_listing([obj_path, json_path, *viewers])}" if not args.quiet else
+          f"{result.net}: {result.status} after {result.iterations} iterations; wrote {obj_path}")
     if not result.converged:
         _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
@@ -199,12 +221,20 @@ def _cmd_molds(args) -> int:
     check_output_folder(out)
     mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
-    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit))
-    plan = plan_molds(mesh, settings)
-    with _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
-        files = write_mold_report(plan, out) + viewers
-    print(plan.summary())
-    print(f"wrote {', '.join(str(f) for f in files)}")
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit),
+          args.quiet)
+    progress = _progress(args)
+    with progress.stage(f"fitting molds to {len(mesh.face_sizes)} panels"):
+        plan = plan_molds(mesh, settings)
+    with progress.stage("writing the report"), \
+            _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
+        files = write_mold_report(plan, out, view_3d=not args.no_3d) + viewers
+    if args.quiet:
+        print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')} at "
+              f"{settings.tolerance_mm:g} mm; wrote {files[0]}")
+    else:
+        print(plan.summary())
+        print(f"wrote {', '.join(str(f) for f in files)}")
     if not plan.fits_all:
         print(f"fabplan: warning: {plan.failures.size} panels do not fit a mold within "
               f"{settings.tolerance_mm:g} mm; they are listed in {out / 'report.html'}",
@@ -324,21 +354,24 @@ def _cmd_layout(args) -> int:
               f"{_units_said(design.units)}" + (f" (converted from {design.source['file_units']})"
                                                 if design.source["scale"] != 1 else ""))
     _check_layout_size(design, args.panel_size, args.max_panels)
-    start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
-    settings_layout = (LayoutSettings() if args.smoothing is None else
-                       LayoutSettings(smoothing=args.smoothing, smoothing_tries=()))
-    layout = layout_surface(design, args.panel_size, angle=start, family=args.family,
-                            settings=settings_layout)
-    settings, progress = _solver_options(args)
-
-    result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
-                   settings=settings, progress=progress)
+    progress = _progress(args)    # after the checks: a refusal is one line on its own
+    with progress.stage("laying out the net"):
+        start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
+        settings_layout = (LayoutSettings() if args.smoothing is None else
+                           LayoutSettings(smoothing=args.smoothing, smoothing_tries=()))
+        layout = layout_surface(design, args.panel_size, angle=start, family=args.family,
+                                settings=settings_layout)
+    settings, report = _solver_options(args, progress)
+    with progress.stage("solving on the design") as stage:
+        report.stage = stage
+        result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
+                       settings=settings, progress=report)
     angle = result.parameters.get("angle_deg")
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
              + (f", {layout.family}" if layout.family else
                 f", {angle:.4g} deg" if isinstance(angle, float) else ""))
     # the picture and the Rhino files land only with the net they show
-    with atomic_path(picture) as staged, \
+    with progress.stage("writing the net and its picture"), atomic_path(picture) as staged, \
             _viewer_files(args, out, result.mesh, units=args.units) as viewers:
         write_layout_picture(staged, design, result.mesh, title=title,
                              singular_points=layout.singular_points,
@@ -346,16 +379,22 @@ def _cmd_layout(args) -> int:
                              boundary_panels=result.boundary_panels)
         obj_path, json_path = result.write(out)
     props = result.properties
-    _print_layout_report(props, layout, json_path)
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items() if isinstance(v, float))
-    print(f"{result.net}: {result.status} after {result.iterations} iterations in "
-          f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
-          + (f" ({params})" if params else ""))
-    print(f"wrote {_listing([obj_path, json_path, boundary_path(obj_path), picture, *viewers])}")
-    for warning in layout_warnings(props):
-        print(f"fabplan: warning: {warning}", file=sys.stderr)
+    if args.quiet:
+        print(f"{result.net}: {result.status} after {result.iterations} iterations; wrote "
+              f"{obj_path}")
+    else:
+        _print_layout_report(props, layout, json_path)
+        print(f"{result.net}: {result.status} after {result.iterations} iterations in "
+              f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
+              + (f" ({params})" if params else ""))
+        print(f"wrote {_listing([obj_path, json_path, boundary_path(obj_path), picture, *viewers])}")
+        for warning in layout_warnings(props):
+            print(f"fabplan: warning: {warning}", file=sys.stderr)
     if not result.converged:
         _warn_not_converged(result, json_path)
+        if args.quiet:
+            return EXIT_NOT_CONVERGED
         if preset.radius == "param" or preset.planar_faces:
             print(f"fabplan: note: {preset.name} nets exist on special surfaces only; held this "
                   f"close to the design the net cannot become one. `fabplan optimize {obj_path} --net "
@@ -476,8 +515,9 @@ def _parse_layers(specs: list | None) -> dict:
 
 def _cmd_strips(args) -> int:
     from .fabricate.molds import UNITS
-    from .fabricate.strip_plan import plan_strips
-    from .fabricate.strips import StripSettings
+    from .fabricate.nesting import make_parts, nest_parts
+    from .fabricate.strip_plan import StripPlan
+    from .fabricate.strips import StripSettings, build_strips
     from .io.resources import check_panel_count
 
     _check_max_panels(args)
@@ -497,11 +537,27 @@ def _cmd_strips(args) -> int:
     check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
                       what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
                       fix="plan the strips of a coarser net or of parts of it")
-    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS[settings.units]))
-    plan = plan_strips(mesh, settings)
-    with _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
+    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS[settings.units]),
+          args.quiet)
+    # the stages of `plan_strips`, one by one so that each shows its progress
+    progress = _progress(args)
+    planning = time.perf_counter()
+    with progress.stage("unrolling the strips"):
+        strips = build_strips(mesh, settings)
+    with progress.stage(f"splitting {len(strips.strips)} strips into parts that fit the sheets"):
+        parts = make_parts(strips, settings)
+    with progress.stage(f"nesting {len(parts)} parts"):
+        nesting = nest_parts(parts, settings)
+    plan = StripPlan(strips=strips, parts=parts, nesting=nesting,
+                     seconds=time.perf_counter() - planning)
+    with progress.stage(f"writing {len(nesting.sheets)} sheets and checking them"), \
+            _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
         files = plan.write(out, previews=not args.no_previews) + viewers
     s = plan.summary()
+    if args.quiet:
+        print(f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
+              f"{counted(s['sheets'], 'sheet')}; wrote {len(files)} files to {out}")
+        return 0
     radius = s["radius_mm"]
     print(f"{s['strips']} strips ({s['strips_per_family'][0]} A, {s['strips_per_family'][1]} B), "
           f"{s['crossings']} crossings, {s['total_length_mm'] / 1000:.2f} m of strip, "
@@ -555,13 +611,9 @@ def _cmd_study(args) -> int:
     from .study.run import run_study
     from .study.spec import read_study, resolve_study
 
-    show = not args.quiet
     _check_max_panels(args)
-
-    def say(message: str) -> None:
-        if show:
-            print(message, file=sys.stderr, flush=True)
-
+    progress = _progress(args)
+    say = progress.say()
     started = time.perf_counter()
     out = Path(args.output)
     study = read_study(resolve_study(args.study))
@@ -575,11 +627,18 @@ def _cmd_study(args) -> int:
                                     progress=say, max_panels=args.max_panels, cache=cache,
                                     resume=args.resume)
     else:
-        result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
-                           resume=args.resume)
+        with progress.stage(f"running {len(study.candidates)} candidates"):
+            result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
+                               resume=args.resume)
     writing = time.perf_counter()
-    files = write_study(result, out, progress=say, rhino=args.rhino)
+    with progress.stage("writing the report and the candidates' files"):
+        files = write_study(result, out, progress=say, rhino=args.rhino, view_3d=not args.no_3d)
     done = time.perf_counter()
+    if args.quiet:
+        verdict = (f"recommended: {result.recommended}" if result.recommended else
+                   "no candidate meets the limits")
+        print(f"{verdict}; wrote {files[0]} in {done - started:.0f} s")
+        return 0
     for c in result.ranked():
         if c.failed:
             print(f"  {c.name:<28} failed: {c.error}")
@@ -640,6 +699,15 @@ def _add_max_panels(p: argparse.ArgumentParser) -> None:
                         "half the available memory holds, at least 20000)")
 
 
+def _add_verbosity(p: argparse.ArgumentParser) -> None:
+    """-q and -v, the same for every long-running command (`fabplan.report.progress`)."""
+    level = p.add_mutually_exclusive_group()
+    level.add_argument("-q", "--quiet", action="store_true",
+                       help="print only errors and a one-line summary")
+    level.add_argument("-v", "--verbose", action="store_true",
+                       help="also print every solver iteration")
+
+
 def _add_nets(sub: Any) -> None:
     p = sub.add_parser("nets", help="list the net types and their defining properties")
     p.set_defaults(func=_cmd_nets)
@@ -679,8 +747,7 @@ def _add_optimize(sub: Any) -> None:
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
     _add_3dm(p, units=True)
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
-    p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
+    _add_verbosity(p)
     p.set_defaults(func=_cmd_optimize)
 
 
@@ -699,6 +766,9 @@ def _add_molds(sub: Any) -> None:
                         "faces, else smooth)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     _add_3dm(p, units=False)
+    p.add_argument("--no-3d", action="store_true",
+                   help="leave the interactive 3D view out of report.html (0.6 MB smaller)")
+    _add_verbosity(p)
     p.set_defaults(func=_cmd_molds)
 
 
@@ -764,8 +834,7 @@ def _add_layout(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
     _add_3dm(p, units=True)
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
-    p.add_argument("-v", "--verbose", action="store_true", help="progress lines even off a terminal")
+    _add_verbosity(p)
     p.set_defaults(func=_cmd_layout)
 
 
@@ -812,6 +881,7 @@ def _add_strips(sub: Any) -> None:
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
     _add_3dm(p, units=False)
+    _add_verbosity(p)
     p.set_defaults(func=_cmd_strips)
 
 
@@ -861,7 +931,10 @@ def _add_study(sub: Any) -> None:
     p.add_argument("--3dm", dest="rhino", action="store_true",
                    help="also write every candidate's net as candidates/NAME/net.3dm (mesh, "
                         "polylines, panels per mold, strip curves) and net.glb")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--no-3d", action="store_true",
+                   help="leave the interactive 3D view out of report.html")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="print only errors and a one-line summary")
     p.set_defaults(func=_cmd_study)
 
 

@@ -75,12 +75,13 @@ def net(tmp_path) -> Path:
     return path
 
 
+# quiet (-q): the error must be the one line on standard error, without the stage lines
 COMMANDS = {
     "layout": lambda net, out, variant: [
-        "layout", "hyperbolic-paraboloid", "--net", "snet", "--triangles", "500",
+        "layout", "hyperbolic-paraboloid", "--net", "snet", "--triangles", "500", "-q",
         "--max-iter", "2", "--panel-size", ["4", "3"][variant], "-o", str(out / "net.obj")],
     "strips": lambda net, out, variant: [
-        "strips", str(net), "--height", ["40", "50"][variant], "--thickness", "4",
+        "strips", str(net), "--height", ["40", "50"][variant], "--thickness", "4", "-q",
         "--no-previews", "-o", str(out)],
 }
 

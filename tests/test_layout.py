@@ -447,9 +447,9 @@ def test_a_crumb_of_a_few_triangles_is_dropped_and_counted():
 
 
 def _layout_cli(out: Path, capsys, *args: str) -> tuple[dict, QuadMesh, str]:
-    """`fabplan layout ARGS --net snet -q -o OUT`: the measured properties, the net and
-    the warnings."""
-    main(["layout", *args, "--net", "snet", "-q", "-o", str(out)])
+    """`fabplan layout ARGS --net snet -o OUT`: the measured properties, the net and
+    standard error (its warnings and progress lines)."""
+    main(["layout", *args, "--net", "snet", "-o", str(out)])
     _, err = capsys.readouterr()
     return json.loads(out.with_suffix(".json").read_text())["properties"], QuadMesh.from_obj(out), err
 
@@ -498,7 +498,7 @@ def test_a_net_type_that_changes_the_surface_is_pointed_to_optimize(tmp_path, ca
     optimized with the dome as a reference surface (a built-in spec) it does."""
     first = tmp_path / "glide.obj"
     code = main(["layout", "paraboloid", "--net", "linear-weingarten", "--panel-size", "1",
-                 "--triangles", "6000", "-q", "-o", str(first)])
+                 "--triangles", "6000", "-o", str(first)])
     _, err = capsys.readouterr()
     assert code == 3 and "exist on special surfaces only" in err
     second = tmp_path / "free.obj"

@@ -17,12 +17,20 @@ from scipy.spatial.transform import Rotation
 
 from ..io.output import output_folder, write_texts
 from ..io.records import json_text
-from ..net.geometry import face_normals
-from ..report import figures, html
+from ..net.geometry import (
+    canonical_stars,
+    face_normals,
+    fit_star_spheres,
+    intersection_angles,
+    kink_angles,
+)
+from ..report import figures, html, viewer
+from ..report.html import counted
+from ..report.pdf import PdfDocument
 from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
 
 __all__ = ["explain_mold_count", "facade_view", "mold_figure", "mold_report_html", "mold_report_files",
-           "write_mold_report"]
+           "write_mold_report", "net_viewer_scene", "net_edges", "mold_pictures", "mold_report_pdf"]
 
 _PER_M = 1000.0  # curvatures are stored per mm; the pictures and tables show them per m
 
@@ -70,13 +78,155 @@ def _mold_colors(plan: MoldPlan) -> np.ndarray:
 
 
 def facade_view(mesh) -> tuple:
-    """Face normals and the viewing frame of the facade pictures."""
+    """Face normals and the viewing frame of the pictures: seen from where people see the
+    design (`fabplan.report.viewer.scene_front`): a facade or a ring from in front, 10
+    degrees above the horizon; a roof from 30 degrees above."""
     normals = face_normals(mesh.vertices, mesh)
-    return normals, figures.view_frame(mesh.vertices, normals, mesh.face_areas)
+    front, initial = viewer.scene_front(normals, mesh.face_areas, mesh.vertices)
+    elevation = 30.0 if initial == "above" else 10.0
+    return normals, figures.elevation_frame(front, elevation)
+
+
+def net_edges(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Every edge of a net once, with the family of the net's lines it belongs to.
+
+    Returns
+    -------
+    edges : (e, 2) int vertex ids; family : (e,) int, 0 or 1 (the two strip families),
+    -1 on edges of faces that are not quads.
+    """
+    idx, ptr, sizes = mesh.face_indices, mesh.face_indptr, mesh.face_sizes
+    face = np.repeat(np.arange(len(sizes)), sizes)
+    local = np.arange(len(idx)) - ptr[face]
+    nxt = np.where(local == sizes[face] - 1, ptr[face], np.arange(len(idx)) + 1)
+    pairs = np.sort(np.stack([idx, idx[nxt]], axis=1), axis=1)
+    family = np.asarray(mesh.edge_family)
+    # an edge seen from a quad keeps the quad's family over a non-quad's -1
+    order = np.lexsort((-family, pairs[:, 1], pairs[:, 0]))
+    pairs, family = pairs[order], family[order]
+    first = np.ones(len(pairs), bool)
+    first[1:] = np.any(pairs[1:] != pairs[:-1], axis=1)
+    return pairs[first], family[first]
+
+
+def _face_max(mesh, vertex_values: np.ndarray) -> np.ndarray:
+    face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+    out = np.full(len(mesh.face_sizes), -np.inf)
+    np.maximum.at(out, face, vertex_values[mesh.face_indices])
+    return out
+
+
+def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | None = None,
+                     deviation_limit_mm: float | None = None, gaps: np.ndarray | None = None,
+                     infinite_radius: float | None = None) -> viewer.ViewerScene:
+    """The 3D view of a net and its molds (`fabplan.report.viewer`).
+
+    Parameters
+    ----------
+    plan : the net's `MoldPlan` (its mesh, molds, panel curvatures).
+    title : the scene's name in the viewer.
+    deviation_mm : (n,) float, distance of every vertex from the design (mm), or None (the
+        molds report: the deviation mode then shows each panel's gap to its mold).
+    deviation_limit_mm : the limit marked on the deviation scale.
+    gaps : (g, 3, 3) float, triangles of the design the net leaves uncovered, or None.
+    infinite_radius : Meusnier radii above this (model units) show as planar (grey).
+
+    Returns
+    -------
+    `fabplan.report.viewer.ViewerScene` with the colour modes mold, deviation, Meusnier
+    radius, angle, kink and (with `gaps`) coverage gaps.
+    """
+    mesh = plan.mesh
+    X = mesh.vertices
+    units = plan.settings.units
+    normals = face_normals(X, mesh)
+    front, initial = viewer.scene_front(normals, mesh.face_areas, X)
+    colours = _mold_colors(plan)
+    per_m = _PER_M
+    modes = [viewer.ColourMode(
+        "mold", "mold (one colour per mold)",
+        f"Each colour is one mold ({counted(plan.mold_count, 'mold')}); click a panel for its "
+        "mold id, the row of the molds table.",
+        values=plan.mold, categorical=True, palette=colours)]
+    info = [viewer.PanelInfo("mold", plan.mold, integer=True)]
+    if deviation_mm is not None:
+        # the scale reaches past the limit, so that the limit's mark sits inside it
+        top = max(float(np.max(deviation_mm)), 1.15 * (deviation_limit_mm or 0.0))
+        modes.append(viewer.ColourMode(
+            "deviation", "deviation from the design [mm]",
+            "Distance of the net from the design surface, measured at the vertices and blended "
+            "across each panel; red is above the limit.",
+            values=deviation_mm, where="vertex", unit="mm", value_range=(0.0, top),
+            limit=deviation_limit_mm))
+        info.append(viewer.PanelInfo("deviation from the design (largest corner)",
+                                     _face_max(mesh, deviation_mm), "mm", 3))
+    else:
+        modes.append(viewer.ColourMode(
+            "deviation", "gap to its mold [mm]",
+            "Largest gap between a panel and its mold, measured on the densely sampled panel; "
+            "red is above the tolerance.", values=plan.deviation_mm, unit="mm",
+            value_range=(0.0, max(float(plan.deviation_mm.max()), plan.settings.tolerance_mm)),
+            limit=plan.settings.tolerance_mm))
+    info.append(viewer.PanelInfo("gap to its mold", plan.deviation_mm, "mm", 3))
+    info.append(viewer.PanelInfo("k1", plan.curvature[:, 0] * per_m, "1/m", 3))
+    info.append(viewer.PanelInfo("k2", plan.curvature[:, 1] * per_m, "1/m", 3))
+    stars = canonical_stars(X, mesh.stars)
+    if len(stars):
+        radius = np.full(mesh.vertex_count, np.nan)
+        radius[stars[:, 0]] = fit_star_spheres(X, stars).radius
+        if infinite_radius is not None:
+            radius[radius > infinite_radius] = np.nan
+        finite = radius[np.isfinite(radius)]
+        if finite.size:
+            modes.append(viewer.ColourMode(
+                "radius", f"Meusnier radius [{units}]",
+                "Radius of the sphere through each vertex and its four neighbours (blended "
+                "across the panels); one colour everywhere is a constant radius. Grey: "
+                "planar stars, boundary.", values=radius, where="vertex", unit=units,
+                value_range=(float(np.quantile(finite, 0.02)), float(np.quantile(finite, 0.98)))))
+            face_radius = np.where(np.isfinite(radius), radius, np.nan)
+            counts = np.bincount(np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes),
+                                 np.isfinite(face_radius[mesh.face_indices]),
+                                 minlength=len(mesh.face_sizes))
+            sums = np.bincount(np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes),
+                               np.nan_to_num(face_radius[mesh.face_indices]),
+                               minlength=len(mesh.face_sizes))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                info.append(viewer.PanelInfo("Meusnier radius (mean of corners)",
+                                             sums / counts, units))
+        angle = np.full(mesh.vertex_count, np.nan)
+        angle[stars[:, 0]] = np.degrees(intersection_angles(X, stars))
+        modes.append(viewer.ColourMode(
+            "angle", "angle between the families [deg]",
+            "Angle at which the net's two families of lines cross at each vertex; one colour "
+            "everywhere is a constant angle. Grey: boundary and irregular vertices.",
+            values=angle, where="vertex", unit="deg"))
+    pairs = mesh.interior_edge_faces
+    kink = np.zeros(len(mesh.face_sizes))
+    if len(pairs):
+        k = np.degrees(kink_angles(X, mesh))
+        np.maximum.at(kink, pairs[:, 0], k)
+        np.maximum.at(kink, pairs[:, 1], k)
+    modes.append(viewer.ColourMode(
+        "kink", "kink to the neighbours [deg]",
+        "Largest angle between a panel and its neighbours across an edge: 0 where the "
+        "panels continue each other smoothly.", values=kink, unit="deg"))
+    info.append(viewer.PanelInfo("kink", kink, "deg", 3))
+    if gaps is not None:
+        modes.append(viewer.ColourMode(
+            "gaps", "coverage gaps (red)",
+            f"Red: parts of the design no panel covers ({len(gaps)} design triangles); grey: "
+            "the panels."))
+    edges, family = net_edges(mesh)
+    return viewer.ViewerScene(title=title, vertices=X, face_sizes=mesh.face_sizes,
+                              face_indices=mesh.face_indices, modes=modes, info=info,
+                              edges=edges, edge_family=family, gaps=gaps, front=front,
+                              initial=initial, eye_height=1700.0 / plan.settings.mm_per_unit)
 
 
 def mold_figure(plan: MoldPlan, *, title: str | None = None) -> str:
-    """Data URI of the facade with its panels coloured by mold (failures red)."""
+    """Data URI of the design with its panels coloured by mold (failures red), seen from
+    where people see it (`facade_view`), mold ids written on the panels large enough."""
 
     mesh = plan.mesh
     normals, view = facade_view(mesh)
@@ -86,8 +236,14 @@ def mold_figure(plan: MoldPlan, *, title: str | None = None) -> str:
     fig = figures.new_figure((9, 7))
     ax = fig.subplots()
     figures.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
-    ax.set_title(title or (f"{plan.panel_count} panels on {plan.mold_count} molds: one colour "
-                           "per mold" + (f" ({fail.size} failures in red)" if fail.size else "")))
+    labelled = figures.label_faces(ax, mesh.vertices, mesh.face_indices, mesh.face_sizes,
+                                   [str(int(m)) for m in plan.mold], view, normals=normals)
+    ax.set_title(title or (f"{counted(plan.panel_count, 'panel')} on "
+                           f"{counted(plan.mold_count, 'mold')}: one colour per mold"
+                           + (f" ({fail.size} failures in red)" if fail.size else "")))
+    if labelled:
+        ax.text(0.0, -0.02, f"numbers: mold ids ({counted(labelled, 'panel')} large enough on "
+                "the picture to carry one)", transform=ax.transAxes, fontsize=8, va="top")
     return figures.figure_to_data_uri(fig)
 
 
@@ -190,30 +346,44 @@ def _deviation_figure(plan: MoldPlan) -> str:
     return figures.figure_to_data_uri(fig)
 
 
-def mold_report_html(plan: MoldPlan) -> str:
-    """The self-contained HTML report of a mold plan."""
+def mold_pictures(plan: MoldPlan) -> dict[str, str]:
+    """Data URIs of the report's pictures: ``molds``, ``isolines``, ``curvatures``,
+    ``deviations``."""
+    by_mold, isolines = _facade_figures(plan)
+    return {"molds": by_mold, "isolines": isolines, "curvatures": _curvature_figure(plan),
+            "deviations": _deviation_figure(plan)}
+
+
+def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
+                     pictures: dict[str, str] | None = None) -> str:
+    """The self-contained HTML report of a mold plan (`view_3d`: with the interactive 3D
+    view, about 0.6 MB more; `pictures`: `mold_pictures` when already drawn)."""
     r = plan.record()
     tol = r["tolerance_mm"]
     w = plan.weingarten
+    per_mold = r["panels_per_mold"]
     summary_rows = [
         ["net", r["net"]],
-        ["model units", f"{r['units']} ({r['mm_per_unit']:g} mm per unit)"],
-        ["tolerance", f"{tol:g} mm"],
+        ["model units", f"{r['units']} ({r['mm_per_unit']:g} mm per {r['units']})"],
+        ["tolerance (largest gap between a panel and its mold)", f"{tol:g} mm"],
         ["panel surface", r["panel_surface"]],
-        ["panels N", r["panel_count"]],
-        ["molds M", r["mold_count"]],
-        ["M / sqrt(N)", r["molds_per_sqrt_panels"]],
+        ["panels N", counted(r["panel_count"], "panel")],
+        ["molds M", counted(r["mold_count"], "mold")],
+        ["M / sqrt(N)", f"{r['molds_per_sqrt_panels']:.3g} (ratio)"],
         ["panels per mold (mean / median / max)",
-         f"{r['panels_per_mold']['mean']:.1f} / {r['panels_per_mold']['median']:g} / "
-         f"{r['panels_per_mold']['max']}"],
-        ["panel types", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in r["panel_types"].items())],
-        ["mold types", ", ".join(f"{v} {k}" for k, v in r["mold_types"].items())],
-        ["largest measured deviation", f"{r['max_deviation_mm']:.3f} mm"],
-        ["panels that do not fit", len(r["failures"])],
-        ["panels the verification moved to new molds", len(r["reassigned_by_verification"])],
-        ["Weingarten residual (rms distance from the line, 1/m)",
-         None if w.get("line_residual_rms") is None else w["line_residual_rms"] * _PER_M],
-        ["Weingarten residual / curvature spread", w.get("thickness")],
+         f"{per_mold['mean']:.1f} / {per_mold['median']:g} / {per_mold['max']} panels"],
+        ["panel types", ", ".join(counted(v, k.replace('_', ' ') + " panel")
+                                  for k, v in r["panel_types"].items())],
+        ["mold types", ", ".join(counted(v, k) for k, v in r["mold_types"].items())],
+        ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
+        ["panels that do not fit", counted(len(r["failures"]), "panel")],
+        ["panels the verification moved to new molds",
+         counted(len(r["reassigned_by_verification"]), "panel")],
+        ["Weingarten residual (rms distance from the line)",
+         "–" if w.get("line_residual_rms") is None else
+         f"{w['line_residual_rms'] * _PER_M:.3g} 1/m"],
+        ["Weingarten residual / curvature spread",
+         "–" if w.get("thickness") is None else f"{w['thickness']:.3g} (ratio)"],
         ["largest mold size",
          "no limit" if r["max_mold_size_mm"] is None else f"{r['max_mold_size_mm']:g} mm"],
         ["run time", f"{r['seconds']:.1f} s"],
@@ -222,11 +392,12 @@ def mold_report_html(plan: MoldPlan) -> str:
                                      "densely sampled panels placed by their exported matrices.",
                                      cls="note")
                if plan.fits_all else
-               html.html_paragraph(f"{len(r['failures'])} panels do not fit (faces "
+               html.html_paragraph(f"{counted(len(r['failures']), 'panel')} do not fit (faces "
                                      f"{', '.join(map(str, r['failures'][:20]))}"
                                      f"{' ...' if len(r['failures']) > 20 else ''}); see the "
                                      "panel table.", cls="fail"))
-    by_mold, isolines = _facade_figures(plan)
+    pictures = pictures or mold_pictures(plan)
+    by_mold, isolines = pictures["molds"], pictures["isolines"]
     ext, mdev, per = plan.mold_extent_mm(), plan.mold_deviation_mm(), plan.panels_per_mold
     mold_rows = [[j, MOLD_TYPES[plan.mold_type[j]], plan.mold_shape[j, 0] * _PER_M,
                   plan.mold_shape[j, 1] * _PER_M,
@@ -246,30 +417,50 @@ def mold_report_html(plan: MoldPlan) -> str:
     parts = [
         html.html_section("Summary", verdict, html.html_table(["quantity", "value"], summary_rows)),
         html.html_section("Why this many molds", html.html_paragraph(explain_mold_count(plan))),
+    ]
+    if view_3d:
+        scene = net_viewer_scene(plan, title=Path(str(r["net"])).name)
+        parts.append(html.html_section("3D view", viewer.viewer_block([scene])))
+    parts += [
         html.html_section(
             "Pictures",
-            html.html_figure(by_mold, "Panels coloured by mold (as in Fig. 1a of the paper)."),
+            html.html_figure(by_mold, "Panels coloured by mold (as in Fig. 1a of the paper), "
+                                      "seen from where people see the design.",
+                             how="One colour per mold; the number on a panel is its mold id, "
+                                 "the row of the molds table below (written where the panel "
+                                 "is large enough on the picture). Neighbouring molds can "
+                                 "share similar colours: trust the numbers, or click the panel "
+                                 "in the 3D view."),
             html.html_figure(isolines, "Isolines of constant k1 (blue) at 12 quantiles, and "
                                "of constant k2 (orange) at the values the fitted line "
-                               "a k1 + b k2 = c pairs with them. On a Weingarten surface each "
-                               "pair is one curve along which both curvatures are constant, and "
-                               "the panels along it share a mold (Fig. 1b); where the pairs "
-                               "cross, the curvatures vary independently."),
-            html.html_figure(_curvature_figure(plan),
+                               "a k1 + b k2 = c pairs with them.",
+                             how="On a Weingarten surface each blue line runs with an orange "
+                                 "one: both curvatures are constant along it, and the panels "
+                                 "along it share a mold (Fig. 1b). Where the lines cross, the "
+                                 "curvatures vary independently and more molds are needed."),
+            html.html_figure(pictures["curvatures"],
                                "Left: every panel's principal curvatures and the fitted line "
                                "a k1 + b k2 = c. Right: the panels' curvatures in their placement "
-                               "on their mold, coloured by mold, and the molds (crosses)."),
-            html.html_figure(_deviation_figure(plan),
-                               "Measured deviations (left) and panels per mold (right)."),
+                               "on their mold, coloured by mold, and the molds (crosses).",
+                             how="Each dot is a panel, in 1/m (1 / radius). Dots close to a "
+                                 "line mean few molds; the crosses on the right are the molds, "
+                                 "numbered by mold id when there are at most 60."),
+            html.html_figure(pictures["deviations"],
+                               "Measured gaps of the panels to their molds (left) and panels "
+                               "per mold (right).",
+                             how=f"Left: how many panels have each gap, in mm; all must lie "
+                                 f"left of the red tolerance line ({tol:g} mm). Right: one "
+                                 "bar per mold id, its height the panels cast on it."),
         ),
         html.html_section(
             "Molds",
             html.html_paragraph("Mold surface z = (k1 x^2 + k2 y^2) / 2 in mold coordinates "
                                   "(mm), centred on its apex; size is the rectangle centred on "
-                                  "the apex that holds all its panels."),
-            html.html_table(["mold", "type", "k1 [1/m]", "k2 [1/m]", "R1 [mm]", "R2 [mm]",
-                               "size x [mm]", "size y [mm]", "panels", "max deviation [mm]"],
-                              mold_rows)),
+                                  "the apex that holds all its panels. An empty radius is "
+                                  "infinite (a straight direction)."),
+            html.html_table(["mold id", "type", "k1 [1/m]", "k2 [1/m]", "R1 [mm]", "R2 [mm]",
+                               "size x [mm]", "size y [mm]", "panels [count]",
+                               "largest gap [mm]"], mold_rows)),
         html.html_section(
             "Panels",
             html.html_paragraph("Placement: the rigid motion taking the panel from model "
@@ -277,38 +468,82 @@ def mold_report_html(plan: MoldPlan) -> str:
                                   "per model unit, R the rotation given by its rotation vector "
                                   "(axis times angle) and t the translation; the full 4 x 4 "
                                   "matrices are in molds.json and panels.csv."),
-            html.html_details(f"{plan.panel_count} panels (click to open)", html.html_table(
-                ["face", "mold", "type", "k1 [1/m]", "k2 [1/m]", "rotation vector [deg]",
-                 "translation [mm]", "footprint x [mm]", "footprint y [mm]", "deviation [mm]",
+            html.html_details(f"{counted(plan.panel_count, 'panel')} (click to open)", html.html_table(
+                ["face id", "mold id", "type", "k1 [1/m]", "k2 [1/m]", "rotation vector [deg]",
+                 "translation [mm]", "footprint x [mm]", "footprint y [mm]", "gap to mold [mm]",
                  "status"], panel_rows,
                 bad_rows=plan.failures.tolist()))),
         html.html_section(
             "Files",
             html.html_paragraph("molds.json: the counts, every mold and every panel with its "
                                   "placement (schema: docs/molds-schema.md). panels.csv: one row "
-                                  "per panel. Curvatures there are in 1/mm, lengths in mm.")),
+                                  "per panel. Curvatures there are in 1/mm, lengths in mm. Both "
+                                  "sit beside this report in its folder.")),
     ]
     return html.html_page(f"Mold report: {Path(str(r['net'])).name}", parts,
-                            subtitle=f"{r['panel_count']} panels, {r['mold_count']} molds at "
-                                     f"{tol:g} mm, made by fabplan")
+                            subtitle=f"{counted(r['panel_count'], 'panel')}, "
+                                     f"{counted(r['mold_count'], 'mold')} at {tol:g} mm, made by "
+                                     "fabplan", scripts=viewer.viewer_assets() if view_3d else "")
 
 
-def mold_report_files(plan: MoldPlan, folder: str | os.PathLike) -> dict:
+def mold_report_files(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: bool = True) -> dict:
     """{path: text} of the three report files in `folder`."""
     folder = Path(folder)
-    return {folder / "report.html": mold_report_html(plan),
+    return {folder / "report.html": mold_report_html(plan, view_3d=view_3d),
             folder / "molds.json": json_text(plan.record()),
             folder / "panels.csv": plan.panels_csv()}
 
 
-def write_mold_report(plan: MoldPlan, folder: str | os.PathLike) -> list[Path]:
-    """Write ``report.html``, ``molds.json`` and ``panels.csv`` into `folder`, all or none.
+def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None) -> PdfDocument:
+    """The printable report (``report.pdf``): summary, why this many molds, the pictures
+    and the molds table (the panels are in ``panels.csv``)."""
+    r = plan.record()
+    pictures = pictures or mold_pictures(plan)
+    doc = PdfDocument(f"Mold report: {Path(str(r['net'])).name}",
+                      f"{counted(r['panel_count'], 'panel')}, {counted(r['mold_count'], 'mold')} "
+                      f"at {r['tolerance_mm']:g} mm, made by fabplan. The 3D view is in "
+                      "report.html beside this file; every panel is in panels.csv.")
+    summary = doc.section("Summary")
+    summary.text(explain_mold_count(plan))
+    summary.table(["quantity", "value"], [
+        ["panels", counted(r["panel_count"], "panel")],
+        ["molds", counted(r["mold_count"], "mold")],
+        ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
+        ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
+        ["panels that do not fit", counted(len(r["failures"]), "panel")],
+    ], widths=[2, 1])
+    figures_section = doc.section("Pictures")
+    for key, caption in (("molds", "Panels coloured by mold; numbers are mold ids."),
+                         ("isolines", "Isolines of constant k1 (blue) and k2 (orange)."),
+                         ("curvatures", "Panels' principal curvatures (1/m) and the molds."),
+                         ("deviations", "Gaps of the panels to their molds (mm); panels per "
+                                        "mold.")):
+        figures_section.image(pictures[key], caption, max_height=0.38)
+    ext, mdev, per = plan.mold_extent_mm(), plan.mold_deviation_mm(), plan.panels_per_mold
+    doc.section("Molds").table(
+        ["mold id", "type", "k1 [1/m]", "k2 [1/m]", "size [mm]", "panels [count]",
+         "largest gap [mm]"],
+        [[j, MOLD_TYPES[plan.mold_type[j]], f"{plan.mold_shape[j, 0] * _PER_M:.4g}",
+          f"{plan.mold_shape[j, 1] * _PER_M:.4g}", f"{ext[j, 0]:.0f} x {ext[j, 1]:.0f}",
+          int(per[j]), f"{mdev[j]:.3g}"] for j in range(plan.mold_count)])
+    return doc
+
+
+def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *,
+                      view_3d: bool = True) -> list[Path]:
+    """Write ``report.html``, ``report.pdf``, ``molds.json`` and ``panels.csv`` into
+    `folder`, all or none (`view_3d`: the HTML report with its interactive 3D view).
 
     Returns
     -------
     list of Path, the files written.
     """
     folder = Path(folder)
+    pictures = mold_pictures(plan)
     with output_folder(folder) as staging:
-        write_texts(mold_report_files(plan, staging))
-    return [folder / name for name in ("report.html", "molds.json", "panels.csv")]
+        write_texts({staging / "report.html": mold_report_html(plan, view_3d=view_3d,
+                                                               pictures=pictures),
+                     staging / "molds.json": json_text(plan.record()),
+                     staging / "panels.csv": plan.panels_csv()})
+        mold_report_pdf(plan, pictures).write(staging / "report.pdf")
+    return [folder / name for name in ("report.html", "report.pdf", "molds.json", "panels.csv")]

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import html
 import math
+import re
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -29,7 +30,15 @@ __all__ = [
     "format_value",
     "counted",
     "html_links",
+    "format_range",
+    "section_id",
+    "LINKS_NOTE",
+    "html_figure_grid",
 ]
+
+#: Said wherever a report links to its files.
+LINKS_NOTE = ("Links are relative to this report's folder: move or share the folder as a "
+              "whole and they keep working.")
 
 _STYLE = """
 body { font-family: system-ui, -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif;
@@ -49,6 +58,12 @@ figcaption { color: #444; font-size: 0.92em; margin-top: 0.3em; }
 details summary { cursor: pointer; font-weight: 600; margin: 0.6em 0; }
 .note { background: #f6f8fa; border-left: 4px solid #7a9cc6; padding: 0.6em 1em; }
 .fail { background: #fde2e2; border-left: 4px solid #c0392b; padding: 0.6em 1em; }
+.how { background: #fbf8ec; border-left: 4px solid #c9a227; padding: 0.4em 1em; font-size: 0.92em; }
+.figs { display: grid; grid-template-columns: repeat(auto-fit, minmax(440px, 1fr)); gap: 0 1.2em; }
+nav.toc { background: #f6f8fa; padding: 0.5em 1.2em; display: inline-block; }
+nav.toc ol { margin: 0.2em 0; padding-left: 1.4em; }
+figure img { max-height: 80vh; }
+@media print { h2 { page-break-before: auto; } th { position: static; } }
 """
 
 
@@ -84,8 +99,28 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
+def format_range(low, high, unit: str = "", digits: int = 4) -> str:
+    """``low .. high unit``, or a single value when both read the same.
+
+    Examples
+    --------
+    >>> format_range(44.0001, 44.0002, "deg"), format_range(2.06, 4.995, "m"), format_range(1, 2)
+    ('44 deg', '2.06 .. 4.995 m', '1 .. 2')
+    """
+    lo, hi = format_value(low, digits), format_value(high, digits)
+    text = lo if lo == hi else f"{lo} .. {hi}"
+    return f"{text} {unit}" if unit and text != "–" else text
+
+
+_NUMBER = re.compile(r"^[-+]?(\d+(\.\d*)?|\.\d+)(e[-+]?\d+)?$", re.IGNORECASE)
+
+
+def _empty(value) -> bool:
+    return value is None or (isinstance(value, str) and value.strip() in ("", "–"))
+
+
 def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str | None = None,
-               digits: int = 4, bad_rows: Iterable[int] = ()) -> str:
+               digits: int = 4, bad_rows: Iterable[int] = (), hide_empty: bool = False) -> str:
     """An HTML table; numbers are right-aligned and formatted by `format_value`.
 
     Parameters
@@ -94,6 +129,7 @@ def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str
     rows : rows of cell values (numbers, strings, None).
     caption : optional caption above the table.
     bad_rows : indices of rows to highlight (failures).
+    hide_empty : leave out the columns that are empty in every row.
 
     Examples
     --------
@@ -102,13 +138,19 @@ def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str
     '<tbody><tr><td class="num">1</td><td>–</td></tr></tbody></table>'
     """
     bad = set(bad_rows)
+    rows = [list(r) for r in rows]
+    if hide_empty and rows:
+        keep = [j for j in range(len(columns)) if not all(_empty(r[j]) for r in rows)]
+        columns = [columns[j] for j in keep]
+        rows = [[r[j] for j in keep] for r in rows]
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
     body = []
     for i, row in enumerate(rows):
         cells = []
         for value in row:
-            numeric = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-                value, (bool, np.bool_))
+            numeric = (isinstance(value, (int, float, np.integer, np.floating))
+                       and not isinstance(value, (bool, np.bool_))
+                       or isinstance(value, str) and _NUMBER.match(value) is not None)
             cls = ' class="num"' if numeric else ""
             cells.append(f"<td{cls}>{html.escape(format_value(value, digits))}</td>")
         tr = '<tr class="bad">' if i in bad else "<tr>"
@@ -139,10 +181,16 @@ def html_links(label: str, links: Sequence[tuple[str, str]]) -> str:
     return f"<p>{html.escape(label)}: {items}</p>"
 
 
-def html_figure(uri: str, caption: str, *, alt: str | None = None) -> str:
-    """An embedded picture with its caption."""
+def html_figure(uri: str, caption: str, *, alt: str | None = None, how: str | None = None) -> str:
+    """An embedded picture with its caption and, when given, a short "how to read this"."""
+    box = f'<div class="how"><b>How to read this:</b> {html.escape(how)}</div>' if how else ""
     return (f'<figure><img src="{uri}" alt="{html.escape(alt or caption)}">'
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+            f"<figcaption>{html.escape(caption)}</figcaption>{box}</figure>")
+
+
+def html_figure_grid(*figures: str) -> str:
+    """Figures side by side (two in a row on a wide page, one on a narrow one)."""
+    return f'<div class="figs">{"".join(figures)}</div>'
 
 
 def html_details(summary: str, *parts: str) -> str:
@@ -150,14 +198,43 @@ def html_details(summary: str, *parts: str) -> str:
     return f"<details><summary>{html.escape(summary)}</summary>{''.join(parts)}</details>"
 
 
-def html_section(title: str, *parts: str) -> str:
-    """A titled section of already built HTML parts."""
-    return f"<section><h2>{html.escape(title)}</h2>{''.join(parts)}</section>"
+def section_id(title: str) -> str:
+    """The anchor of a section: its title in lower case, words joined by hyphens.
+
+    Examples
+    --------
+    >>> section_id("2. Isogonal 60 deg: ok?")
+    '2-isogonal-60-deg-ok'
+    """
+    return "-".join(re.findall(r"[a-z0-9]+", title.lower())) or "section"
 
 
-def html_page(title: str, parts: Iterable[str], *, subtitle: str | None = None) -> str:
-    """A complete, self-contained HTML document."""
+def html_section(title: str, *parts: str, anchor: str | None = None) -> str:
+    """A titled section of already built HTML parts; its anchor (`section_id` of the title
+    unless given) is what the page's table of contents links to."""
+    return (f'<section id="{html.escape(anchor or section_id(title))}"><h2>{html.escape(title)}'
+            f"</h2>{''.join(parts)}</section>")
+
+
+_SECTION = re.compile(r'<section id="([^"]+)"><h2>(.*?)</h2>')
+
+
+def html_page(title: str, parts: Iterable[str], *, subtitle: str | None = None,
+              toc: bool = True, scripts: str = "") -> str:
+    """A complete, self-contained HTML document.
+
+    toc : put a table of contents of the sections (`html_section`) under the title.
+    scripts : HTML put at the end of the body (`fabplan.report.viewer.viewer_assets`).
+    """
     sub = f'<p class="subtitle">{html.escape(subtitle)}</p>' if subtitle else ""
+    body = "".join(parts)
+    nav = ""
+    if toc:
+        entries = _SECTION.findall(body)
+        if len(entries) > 1:
+            nav = ('<nav class="toc"><b>Contents</b><ol>'
+                   + "".join(f'<li><a href="#{a}">{t}</a></li>' for a, t in entries)
+                   + "</ol></nav>")
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>"
-            f"<body><h1>{html.escape(title)}</h1>{sub}{''.join(parts)}</body></html>\n")
+            f"<body><h1>{html.escape(title)}</h1>{sub}{nav}{body}{scripts}</body></html>\n")

@@ -15,24 +15,28 @@ import math
 import os
 import shutil
 import time
+from html import escape as html_escape
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..fabricate.mold_report import net_viewer_scene
 from ..io import output
 from ..io.records import json_text
 from ..layout.picture import fairness_marks, write_layout_picture
-from ..report import figures, html
+from ..report import figures, html, viewer
 from ..report.figures import agreeing_normal
-from ..report.html import counted
+from ..report.html import counted, format_range
+from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
 from .run import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
 
-__all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA"]
+__all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA", "LIMIT_NAMES",
+           "coverage_gap_triangles", "study_viewer_scenes"]
 
 STUDY_SCHEMA = "fabplan-study/1"
 
@@ -152,17 +156,20 @@ def _view(mesh):
 def deviation_view(mesh, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Face normals and a viewing frame for a heat map that must show `point`.
 
-    An open surface whose faces agree on a side is seen from that side (as the mold
-    pictures); a closed one (a ring, a barrel) from the side of `point`, so that the
-    worst point is not hidden behind the near wall.
+    A facade is seen from in front (as the mold pictures); a roof from 30 degrees above
+    and a closed surface (a ring, a barrel) from 10 degrees above, both from the side of
+    `point`, so that the worst point is on the near side, not hidden behind the near
+    wall or foreshortened at the far edge.
     """
     normals, view = _view(mesh)
-    if agreeing_normal(normals, mesh.face_areas) is None:
-        X = mesh.vertices
+    X = mesh.vertices
+    _, initial = viewer.scene_front(normals, mesh.face_areas, X)
+    roof = initial == "above"
+    if roof or agreeing_normal(normals, mesh.face_areas) is None:
         out = point - X.mean(axis=0)
         out[2] = 0.0
         if np.linalg.norm(out) > 1e-9 * np.ptp(X, axis=0).max():
-            view = figures.view_frame(X, out[None, :], np.ones(1))
+            view = figures.elevation_frame(out[:2], 30.0 if roof else 10.0)
     return normals, view
 
 
@@ -197,7 +204,8 @@ def deviation_figure(c: CandidateResult, design: DesignSurface, limit_mm: float,
     tri = mesh.triangles()
     tri_layer = np.repeat(layer, sizes - 2)
     polys = np.split(P[mesh.face_indices, :2], mesh.face_indptr[1:-1])
-    top = max(limit_mm, float(d.max()), 1e-9)
+    # the scale reaches past the limit, so that the limit's mark sits inside it
+    top = max(1.15 * limit_mm, float(d.max()), 1e-9)
     norm = Normalize(0.0, top)
     cmap = colormaps["viridis"]
     fig = figures.new_figure((8, 6))
@@ -228,7 +236,10 @@ def deviation_figure(c: CandidateResult, design: DesignSurface, limit_mm: float,
     ax.set_axis_off()
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.8)
     bar.set_label("distance from the design at the vertices [mm]")
-    bar.ax.axhline(limit_mm, color="#c0392b", lw=2)
+    bar.ax.axhline(limit_mm, color="white", lw=5)
+    bar.ax.axhline(limit_mm, color="#c0392b", lw=2.5)
+    bar.ax.text(-0.15, limit_mm, f"limit {limit_mm:g} ", color="#c0392b", fontweight="bold",
+                fontsize=9, ha="right", va="center", transform=bar.ax.get_yaxis_transform())
     ax.set_title(f"{c.name}: deviation from the design\nmax {d.max():.1f} mm (circled), "
                  f"limit {limit_mm:g} mm (red line on the scale)")
     return figures.figure_to_data_uri(fig)
@@ -268,7 +279,8 @@ def comparison_figure(result: StudyResult) -> str:
 
 
 def _png_uri(path: Path) -> str:
-    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+    png = figures.compact_png(path.read_bytes())
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
 # ---------------------------------------------------------------------------- HTML
@@ -277,10 +289,10 @@ def _png_uri(path: Path) -> str:
 INFINITE_RADIUS_FACTOR = 1e4
 
 
-def _fmt_range(r: dict | None, digits: int = 4) -> str:
+def _fmt_range(r: dict | None, unit: str = "", digits: int = 4) -> str:
     if not r:
         return ""
-    return f"{html.format_value(r['min'], digits)} .. {html.format_value(r['max'], digits)}"
+    return format_range(r["min"], r["max"], unit, digits)
 
 
 def radius_text(r: dict | float | None, unit: str, beyond: float, infinite: str) -> str:
@@ -328,9 +340,53 @@ def _strip_radius_text(result: StudyResult, r) -> str:
     return radius_text(r, "mm", beyond, "infinite (straight)")
 
 
+#: Human names of the limits of a study (`fabplan.study.spec.Limits`), with their units.
+LIMIT_NAMES = {
+    "max_deviation_mm": ("largest deviation from the design", "mm"),
+    "mold_tolerance_mm": ("largest gap between a panel and its mold", "mm"),
+    "max_molds": ("most molds", "molds"),
+    "planar_panels": ("panels must be flat", ""),
+    "planarity_tolerance_mm": ("largest distance of a panel corner from the panel's plane", "mm"),
+    "max_kink_deg": ("largest kink between neighbouring panels", "deg"),
+    "max_line_turn_deg": ("largest turn of a net line at a vertex", "deg"),
+    "min_strip_radius_mm": ("smallest arc radius of an unrolled strip", "mm"),
+    "max_strip_radius_mm": ("largest arc radius of an unrolled strip", "mm"),
+    "max_sheets": ("most sheets of strip material", "sheets"),
+    "congruent_strips": ("strips must be congruent (one bending jig)", ""),
+    "congruence_tolerance_mm": ("largest difference of a strip from the common arc", "mm"),
+    "min_coverage": ("smallest share of the design covered by panels", "%"),
+    "max_sphere_residual": ("largest sphere residual (of the mean edge length)", "ratio"),
+}
+
+_RANK_RULE = ("Rank: the candidates that meet every limit (feasible) come first, cheapest "
+              "first; then those that break a limit (red rows), cheapest first. So a cheaper "
+              "candidate that breaks a limit ranks below a dearer one that meets them all.")
+
+
+def limit_text(key: str, value) -> tuple[str, str]:
+    """The human name of a limit and its value with its unit.
+
+    Examples
+    --------
+    >>> limit_text("max_deviation_mm", 40.0)
+    ('largest deviation from the design', '40 mm')
+    >>> limit_text("min_coverage", 0.95)[1], limit_text("max_molds", 1)[1]
+    ('95 %', '1 mold')
+    """
+    name, unit = LIMIT_NAMES.get(key, (key.replace("_", " "), ""))
+    if isinstance(value, bool):
+        return name, "yes" if value else "no"
+    if unit == "%":
+        return name, f"{100 * value:g} %"
+    if unit in ("molds", "sheets"):
+        return name, counted(int(value), unit[:-1])
+    return name, f"{html.format_value(value)} {unit}".strip()
+
+
 def _comparison_table(result: StudyResult) -> str:
     rows: list[list[object]] = []
     bad: list[int] = []
+    units = result.study.design.units
     for c in result.ranked():
         m = c.metrics
         if c.failed:
@@ -352,32 +408,30 @@ def _comparison_table(result: StudyResult) -> str:
         if not c.feasible:
             bad.append(len(rows) - 1)
     return html.html_table(
-        ["rank", "candidate", "net", "feasible", "molds", "panels", "of them boundary panels",
-         "design covered [%]",
-         "max deviation [mm]",
-         "planarity [mm]", "max kink [deg]", "angle [deg]", "Meusnier radius",
-         "strip sheets", "cost", "note"], rows, caption="All candidates, best first", bad_rows=bad)
+        ["rank", "candidate", "net", "feasible", "molds [count]", "panels [count]",
+         "of them boundary panels [count]", "design covered [%]", "max deviation [mm]",
+         "planarity [mm]", "max kink [deg]", "angle [deg]", f"Meusnier radius [{units}]",
+         "strip sheets [count]", "cost [cost units]", "note"], rows,
+        caption="All candidates, best first. " + _RANK_RULE, bad_rows=bad, hide_empty=True)
 
 
 def _limits_table(result: StudyResult) -> str:
-    from dataclasses import asdict
-
-    limits = asdict(result.study.limits)
-    if not limits["planar_panels"]:
-        del limits["planarity_tolerance_mm"]
-    if not limits["congruent_strips"]:
-        del limits["congruence_tolerance_mm"]
-    rows = [[k, html.format_value(v)] for k, v in limits.items()
-            if v is not None and v is not False]
+    rows = [list(limit_text(k, v)) for k, v in _limit_items(result)]
     return html.html_table(["limit", "value"], rows, caption="Fabrication limits")
 
 
 def _cost_table(result: StudyResult) -> str:
     from dataclasses import asdict
 
-    rows = [[k.replace("_", " "), html.format_value(v)]
+    names = {"mold": "mold", "flat_panel": "flat panel", "single_curved_panel":
+             "single curved panel", "double_curved_panel": "double curved panel",
+             "sheet": "sheet of strip material", "deviation_mm": "mm of largest deviation"}
+    rows = [[names.get(k, k.replace("_", " ")), html.format_value(v)]
             for k, v in asdict(result.study.cost).items()]
-    return html.html_table(["per", "cost units"], rows, caption="Cost weights")
+    return html.html_table(["per", "weight [cost units]"], rows,
+                           caption="Cost weights (cost units are relative prices: by default a "
+                                   "flat panel costs 1, a mold 100; give them in a currency in "
+                                   "the study file to read costs in it)")
 
 
 def _coverage_text(coverage: float, full: float | None = None) -> str:
@@ -443,21 +497,27 @@ def cost_line(result: StudyResult) -> str:
     return text
 
 
-def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
-                       result: StudyResult) -> str:
-    head = f"{c.rank}. {c.name}" if c.rank else c.name
-    if c.failed:
-        return html.html_section(head, html.html_paragraph(
-            f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
+def _check_value(key: str, value) -> str:
+    if value is None or isinstance(value, str):
+        return html.format_value(value)
+    if key == "congruent_strips":        # its bound is the congruence tolerance
+        return f"{html.format_value(value)} mm"
+    return limit_text(key, value)[1]
+
+
+def _check_rows(c: CandidateResult) -> list[list]:
+    return [[limit_text(ck["limit"], ck["bound"])[0],
+             _check_value(ck["limit"], ck["measured"]), _check_value(ck["limit"], ck["bound"]),
+             "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks]
+
+
+def _candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[list]]:
+    """The verdict of a measured candidate and its "quantity, value" rows."""
     m = c.metrics
+    units = result.study.design.units
     verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
     if c.notes:
         verdict += " Note: " + "; ".join(c.notes) + "."
-    checks = html.html_table(
-        ["limit", "measured", "bound", "met", "what was measured"],
-        [[ck["limit"], html.format_value(ck["measured"]), html.format_value(ck["bound"]),
-          "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks],
-        caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
     types = m["molds"]["panel_types"]
     parameters = []
     for k, v in m["parameters"].items():
@@ -477,8 +537,8 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
         ["design covered", _coverage_text(m["coverage"], m.get("coverage_net"))],
         ["line turns", _turn_text(m.get("line_turn_deg"))],
         ["folds", _folds_text(m.get("folds"))],
-        ["edge length", _fmt_range(m["edge_length"])],
-        ["panel area", _fmt_range(m["panel_area"])],
+        ["edge length", _fmt_range(m["edge_length"], units)],
+        ["panel area", _fmt_range(m["panel_area"], f"{units}^2")],
         ["Meusnier radius", _meusnier_text(result, m["meusnier_radius"])
          if m["meusnier_radius"] else "-"],
         ["deviation from the design [mm]", f"max {m['deviation_mm']['max']:.2f}, mean "
@@ -489,8 +549,10 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
                    f"({molds['molds_per_sqrt_panels']:.2f} x sqrt of the panel count)")
          + f"; largest gap of a panel to its mold (flat panels: to a plane) "
            f"{molds['max_deviation_mm']:.2f} mm"],
-        ["sphere residual (max, of an edge)", html.format_value(m["sphere_residual_relative_max"])],
-        ["seconds", ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())],
+        ["sphere residual (largest, of the mean edge length)",
+         f"{html.format_value(m['sphere_residual_relative_max'])} of an edge"],
+        ["intersection angle", _fmt_range(m["intersection_angle_deg"], "deg") or "-"],
+        ["run time", ", ".join(f"{k} {v:.1f} s" for k, v in m["seconds"].items())],
     ]
     if m["strips"]:
         s = m["strips"]
@@ -501,18 +563,46 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
         facts.append(["strips", f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} "
                       f"on {counted(s['sheets'], 'sheet')} ({100 * s['material_use']:.0f} % "
                       f"material use); {shape}"])
+    return verdict, facts
+
+
+def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
+                       result: StudyResult, scene: int | None = None) -> str:
+    head = f"{c.rank}. {c.name}" if c.rank else c.name
+    if c.failed:
+        return html.html_section(head, html.html_paragraph(
+            f"{c.candidate.describe()}: failed. {c.error}", cls="fail"))
+    units = result.study.design.units
+    molds = c.metrics["molds"]
+    verdict, facts = _candidate_facts(c, result)
+    checks = html.html_table(
+        ["limit", "measured", "bound", "met", "what was measured"], _check_rows(c),
+        caption="Checks", bad_rows=[i for i, ck in enumerate(c.checks) if not ck["ok"]])
     parts = [html.html_paragraph(verdict, cls="note" if c.feasible else "fail"),
              html.html_table(["quantity", "value"], facts, caption="Measured"), checks]
-    captions = {"net": "The net on the design surface (grey), axes to scale",
-                "deviation": "Deviation heat map: the distance of the net from the design, "
-                             "measured at every vertex and interpolated across the panels; "
-                             "the largest is circled and labelled",
-                "molds": "Panels coloured by mold" + (" (all flat: no molds)"
-                                                      if molds["count"] == 0 else ""),
-                "sheet": "First strip sheet (as cut: red outline, magenta slits, blue labels)"}
-    for key, caption in captions.items():
-        if key in pictures:
-            parts.append(html.html_figure(pictures[key], caption))
+    limit = result.study.limits.max_deviation_mm
+    captions = {
+        "net": ("The net on the design surface (grey), axes to scale.",
+                f"The net's lines over the design; axes in {units}. Marks show where the "
+                "lines turn or the panels change size most."),
+        "deviation": ("Deviation heat map: the distance of the net from the design.",
+                      f"Colour is the distance in mm, measured at every vertex and blended "
+                      f"across the panels; the red line on the scale is the limit "
+                      f"({limit:g} mm), and the largest distance is circled."),
+        "molds": ("Panels coloured by mold" + (" (all flat: no molds)." if molds["count"] == 0
+                                               else "."),
+                  "One colour per mold; the number on a panel is its mold id, the row of "
+                  "molds.csv (written where the panel is large enough on the picture)."),
+        "sheet": ("First strip sheet as cut.",
+                  "Red: outlines to cut; magenta: slits; blue: engraved labels (strip ids)."),
+    }
+    figs = [html.html_figure(pictures[key], caption, how=how)
+            for key, (caption, how) in captions.items() if key in pictures]
+    if figs:
+        parts.append(html.html_figure_grid(*figs))
+    if scene is not None:
+        parts.append(f'<p><a href="#3d-view" data-fp-scene="{scene}">Show {html_escape(c.name)} '
+                     "in the 3D view</a></p>")
     links = []
     for key, value in outputs.items():
         for i, href in enumerate(value if isinstance(value, list) else [value]):
@@ -520,16 +610,67 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
                           href))
     if links:
         parts.append(html.html_links("Files", links))
+        parts.append(html.html_paragraph(html.LINKS_NOTE))
     return html.html_section(head, *parts)
 
 
+def coverage_gap_triangles(design: DesignSurface, mesh, *, gap: float) -> np.ndarray:
+    """(g, 3, 3) float: the design's triangles no panel covers, those whose centroid lies
+    farther than `gap` (model units) from the net."""
+    import igl
+
+    V, T = np.asarray(design.vertices, float), np.asarray(design.triangles, np.int64)
+    centroids = V[T].mean(axis=1)
+    tri = mesh.triangles()
+    sq, _, _ = igl.point_mesh_squared_distance(centroids, np.asarray(mesh.vertices, float),
+                                               np.asarray(tri, np.int64))
+    return V[T[np.asarray(sq) > gap * gap]]
+
+
+def study_viewer_scenes(result: StudyResult) -> tuple[list[viewer.ViewerScene], dict[str, int]]:
+    """The 3D view's scenes of a study, one per measured net (a candidate that ended at
+    an earlier one's net shows that one), and the scene index of every candidate."""
+    scenes: list[viewer.ViewerScene] = []
+    index: dict[str, int] = {}
+    limit = result.study.limits.max_deviation_mm
+    mm = result.study.design.mm_per_unit
+    for c in result.ranked():
+        if c.failed or c.net is None or c.molds is None:
+            continue
+        if c.same_net_as is not None and c.same_net_as in index:
+            index[c.name] = index[c.same_net_as]
+            continue
+        mesh = c.net.mesh
+        deviation = (c.deviation_mm if c.deviation_mm is not None else
+                     vertex_deviation_mm(mesh, result.design, mm))
+        gaps = (coverage_gap_triangles(result.design, mesh, gap=0.3 * mesh.mean_edge_length)
+                if c.metrics.get("coverage", 1.0) < 0.999 else None)
+        index[c.name] = len(scenes)
+        scenes.append(net_viewer_scene(
+            c.molds, title=f"{c.rank}. {c.name}", deviation_mm=deviation,
+            deviation_limit_mm=limit, gaps=gaps,
+            infinite_radius=INFINITE_RADIUS_FACTOR * result.design_size))
+    return scenes, index
+
+
+def _design_text(study) -> str:
+    source = study.design.source
+    if os.path.isfile(source):
+        return f"Design {study.design.label} (from {Path(source).name})"
+    return f"Design: built-in {study.design.label} surface"
+
+
 def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
-               seconds_total: float | None = None) -> str:
-    """The self-contained ``report.html`` (links to the candidates' files are relative)."""
+               seconds_total: float | None = None, view_3d: bool = True) -> str:
+    """The self-contained ``report.html`` (links to the candidates' files are relative).
+
+    `view_3d`: with the interactive 3D view of every candidate's net (three.js and the
+    meshes embedded; see `fabplan.report.viewer`).
+    """
     study = result.study
     seconds = result.seconds_run if seconds_total is None else seconds_total
-    sub = (f"Design {study.design.label}, panel size {study.panel_size:g} {study.design.units}, "
-           f"{len(result.candidates)} candidates, run in {seconds:.0f} s"
+    sub = (f"{_design_text(study)}, panel size {study.panel_size:g} {study.design.units}, "
+           f"{counted(len(result.candidates), 'candidate')}, run in {seconds:.0f} s"
            + (" including writing the files" if seconds_total is not None else ""))
     parts = []
     if study.description:
@@ -539,15 +680,91 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
                                                 cls="note" if result.recommended else "fail")))
     overview = [_comparison_table(result)]
     if "comparison" in pictures:
-        overview.append(html.html_figure(pictures["comparison"],
-                                           "Molds and deviation of each candidate"))
+        overview.append(html.html_figure(
+            pictures["comparison"], "Molds and deviation of each candidate, in rank order.",
+            how="One bar per candidate, green when it meets every limit, red when not; the "
+                "dashed lines are the limits. Left: molds for the curved panels; right: the "
+                "largest distance from the design in mm."))
     overview += [_limits_table(result), _cost_table(result),
                  html.html_paragraph(cost_line(result))]
     parts.append(html.html_section("Comparison", *overview))
+    scenes, index = study_viewer_scenes(result) if view_3d else ([], {})
+    if scenes:
+        parts.append(html.html_section("3D view", viewer.viewer_block(scenes), anchor="3d-view"))
     for c in result.ranked():
         parts.append(_candidate_section(c, pictures.get(c.name, {}), outputs.get(c.name, {}),
-                                        result))
-    return html.html_page(f"Facade study: {study.name}", parts, subtitle=sub)
+                                        result, scene=index.get(c.name)))
+    return html.html_page(f"Facade study: {study.name}", parts, subtitle=sub,
+                          scripts=viewer.viewer_assets() if scenes else "")
+
+
+def _comparison_rows(result: StudyResult) -> tuple[list[str], list[list]]:
+    """The comparison table for print: fewer, wider columns than the page's."""
+    rows: list[list] = []
+    for c in result.ranked():
+        if c.failed:
+            rows.append(["", c.name, "failed", "", "", "", "", c.reasons[0]])
+            continue
+        m = c.metrics
+        rows.append([c.rank, c.name, "yes" if c.feasible else "no", m["molds"]["count"],
+                     m["panels"], f"{m['deviation_mm']['max']:.1f}", f"{c.cost:.0f}",
+                     c.candidate.describe()])
+    return (["rank", "candidate", "feasible", "molds [count]", "panels [count]",
+             "max deviation [mm]", "cost [cost units]", "net"], rows)
+
+
+def study_pdf(result: StudyResult, pictures: dict, *, seconds_total: float | None = None
+              ) -> PdfDocument:
+    """The printable report (``report.pdf``): the recommendation and comparison, then two
+    to four pages per candidate (verdict, measurements, checks, pictures)."""
+    study = result.study
+    seconds = result.seconds_run if seconds_total is None else seconds_total
+    doc = PdfDocument(f"Facade study: {study.name}",
+                      f"{_design_text(study)}, panel size {study.panel_size:g} "
+                      f"{study.design.units}, {counted(len(result.candidates), 'candidate')}, run "
+                      f"in {seconds:.0f} s. The interactive 3D view and the files are in "
+                      "report.html beside this file.")
+    first = doc.section("Recommendation and comparison").text(result.recommendation)
+    columns, rows = _comparison_rows(result)
+    first.table(columns, rows, widths=[0.5, 1.6, 0.7, 0.7, 0.7, 0.9, 0.8, 2.2])
+    first.text(_RANK_RULE, size=7.5, style="italic")
+    first.text(cost_line(result), size=7.5)
+    first.table(["limit", "value"], [list(limit_text(k, v)) for k, v in
+                                     _limit_items(result)], widths=[3, 1])
+    if "comparison" in pictures:
+        first.image(pictures["comparison"], "Molds and deviation of each candidate, in rank "
+                    "order: green meets every limit, red does not; dashed lines are the limits.")
+    for c in result.ranked():
+        head = f"{c.rank}. {c.name}" if c.rank else c.name
+        section = doc.section(head)
+        if c.failed:
+            section.text(f"{c.candidate.describe()}: failed. {c.error}")
+            continue
+        verdict, facts = _candidate_facts(c, result)
+        section.text(verdict)
+        section.table(["quantity", "value"], facts, widths=[1.2, 3])
+        section.table(["limit", "measured", "bound", "met", "what was measured"],
+                      _check_rows(c), widths=[1.6, 0.8, 0.8, 0.4, 2.6])
+        own = pictures.get(c.name, {})
+        for key, caption in (("deviation", "Deviation from the design (mm); red line on the "
+                                            "scale: the limit."),
+                             ("molds", "Panels coloured by mold; numbers are mold ids."),
+                             ("net", "The net on the design surface."),
+                             ("sheet", "First strip sheet as cut.")):
+            if key in own:
+                section.image(own[key], caption, max_height=0.4)
+    return doc
+
+
+def _limit_items(result: StudyResult) -> list[tuple[str, object]]:
+    from dataclasses import asdict
+
+    limits = asdict(result.study.limits)
+    if not limits["planar_panels"]:
+        del limits["planarity_tolerance_mm"]
+    if not limits["congruent_strips"]:
+        del limits["congruence_tolerance_mm"]
+    return [(k, v) for k, v in limits.items() if v is not None and v is not False]
 
 
 # ---------------------------------------------------------------------------- writing
@@ -636,11 +853,14 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
                 [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
 
 
-def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False) -> list[Path]:
+def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False,
+                view_3d: bool = True, pdf: bool = True) -> list[Path]:
     """Write every file of a study into `out_dir`, replacing the folder as a whole.
 
-    With `rhino`, every candidate's folder also gets ``net.3dm`` (the net, its polylines,
-    its panels by mold and its strip curves) and ``net.glb``.
+    `progress` is called with a line per written candidate; `view_3d` puts the
+    interactive 3D view into ``report.html``; `pdf` writes ``report.pdf`` beside it. With
+    `rhino`, every candidate's folder also gets ``net.3dm`` (the net, its polylines, its
+    panels by mold and its strip curves) and ``net.glb``.
 
     `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
     The time recorded as ``seconds_total`` (and shown in the report) is the run time
@@ -650,7 +870,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
     Returns
     -------
     list of Path: ``report.html``, ``study.json``, ``candidates.csv`` (the candidate
-    folders are listed in ``study.json``).
+    folders are listed in ``study.json``; ``report.pdf`` sits beside them).
     """
     say = progress or (lambda message: None)
     clock = time.perf_counter()
@@ -672,10 +892,13 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
             pictures["comparison"] = comparison_figure(result)
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
+        if pdf:
+            study_pdf(result, pictures, seconds_total=total).write(tmp / "report.pdf")
         output.write_texts({tmp / "study.json": json_text(record),
                             tmp / "candidates.csv": candidates_csv(result),
                             tmp / "report.html": study_html(result, pictures, outputs,
-                                                            seconds_total=total)})
+                                                            seconds_total=total,
+                                                            view_3d=view_3d)})
         kept = out_dir / CACHE_FOLDER
         if kept.is_dir():     # the finished candidates stay with the study, for --resume
             os.replace(kept, tmp / CACHE_FOLDER)

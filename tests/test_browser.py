@@ -1,0 +1,186 @@
+"""The reports' interactive 3D view, opened in a real headless browser.
+
+Playwright drives Debian's chromium (``apt-get install chromium``; `.ci/run` installs
+it). WebGL runs on the CPU (SwiftShader). Screenshots of every state are saved in
+``tests/artifacts/`` (not versioned) to be looked at.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fabplan
+from fabplan.cli import main
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+ARTIFACTS = Path(__file__).parent / "artifacts"
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--no-first-run", "--disable-sync",
+        # WebGL on the CPU: chromium no longer falls back to SwiftShader by itself
+        "--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """A chromium with a fresh profile, or a skip that says what is missing."""
+    playwright_api = pytest.importorskip(
+        "playwright.sync_api", reason="Playwright is missing: pip install -e '.[test]'")
+    if not Path(CHROMIUM).is_file():
+        pytest.skip("chromium is missing: apt-get install -y chromium (.ci/run does)")
+    profile = tempfile.mkdtemp(prefix="fabplan-chromium-")
+    with playwright_api.sync_playwright() as p:
+        context = p.chromium.launch_persistent_context(
+            profile, executable_path=CHROMIUM, args=ARGS,
+            headless=True, viewport={"width": 1200, "height": 900})
+        yield context
+        context.close()
+    shutil.rmtree(profile, ignore_errors=True)
+
+
+class Report:
+    """A report page with its 3D view ready, and the console errors it logged."""
+
+    def __init__(self, context, path: Path):
+        self.page = context.new_page()
+        self.errors: list[str] = []
+        self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
+        self.page.on("pageerror", lambda e: self.errors.append(f"uncaught: {e}"))
+        self.page.goto(path.resolve().as_uri())
+        self.page.wait_for_function("window.fabplanViewers && window.fabplanViewers.length > 0",
+                                    timeout=30_000)
+        self.view = self.page.locator("div.fp-viewer").first
+        self.view.scroll_into_view_if_needed()
+        self.canvas = self.view.locator("canvas")
+
+    def pixels(self, name: str) -> np.ndarray:
+        """(h, w, 3) uint8 of the canvas, saved as tests/artifacts/NAME.png."""
+        from PIL import Image
+
+        self.page.wait_for_timeout(150)
+        png = self.canvas.screenshot()
+        ARTIFACTS.mkdir(exist_ok=True)
+        (ARTIFACTS / f"{name}.png").write_bytes(png)
+        self.view.screenshot(path=str(ARTIFACTS / f"{name}-with-legend.png"))
+        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+    def js(self, expression: str):
+        return self.page.evaluate(expression)
+
+    def click_face(self, face: int) -> tuple[int, int | None]:
+        """Click where `face` is drawn; the face id and mold id the info line shows (the
+        face hit may be a nearer one hiding `face`)."""
+        point = self.js(f"window.fabplanViewers[0].screenPointOfFace({face})")
+        self.page.mouse.click(point["x"], point["y"])
+        info = self.view.locator(".fp-info")
+        shown = info.locator('[data-key="face"] .fp-value')
+        if shown.count() == 0:
+            return -1, None
+        mold = info.locator('[data-key="mold"] .fp-value').inner_text()
+        return int(shown.inner_text()), int(mold)
+
+
+def _drawn(pixels: np.ndarray) -> float:
+    """Share of the canvas not in the background colour."""
+    background = np.array([0xF4, 0xF5, 0xF7])
+    return float(np.mean(np.abs(pixels.astype(int) - background).sum(axis=2) > 24))
+
+
+def _changed(a: np.ndarray, b: np.ndarray) -> float:
+    """Share of the pixels that differ clearly between two pictures."""
+    return float(np.mean(np.abs(a.astype(int) - b.astype(int)).sum(axis=2) > 30))
+
+
+def _check_view(context, report: Path, molds_json_of, name: str) -> Report:
+    """The properties every report's 3D view must have; returns the page for more."""
+    page = Report(context, report)
+    first = page.pixels(f"{name}-mold")
+    assert _drawn(first) > 0.05, "the 3D view drew (almost) nothing"
+    assert len(np.unique(first.reshape(-1, 3), axis=0)) > 50, "the 3D view is flat colour"
+    modes = page.js("window.fabplanViewers[0].data.modes.map(m => m.key)")
+    assert {"mold", "deviation", "kink"} <= set(modes)
+    page.js("window.fabplanViewers[0].setMode('deviation')")
+    deviation = page.pixels(f"{name}-deviation")
+    assert _changed(first, deviation) > 0.02, "switching the colour mode changed no pixels"
+    legend = page.view.locator(".fp-legend").inner_text()
+    assert "mm" in legend
+    for view in ("front", "top", "eye"):
+        page.js(f"window.fabplanViewers[0].setView('{view}')")
+        assert _drawn(page.pixels(f"{name}-view-{view}")) > 0.01, f"nothing seen from {view}"
+    page.js("window.fabplanViewers[0].setMode('mold')")
+    faces = page.js("window.fabplanViewers[0].triFace.length")
+    molds = molds_json_of(page.js("window.fabplanViewers[0].index"))
+    picked = set()
+    for face in np.linspace(0, faces - 1, 25).astype(int):
+        face = int(page.js(f"window.fabplanViewers[0].triFace[{face}]"))
+        shown, mold = page.click_face(face)
+        if shown < 0:
+            continue                      # the face is off the picture from this view
+        picked.add(shown)
+        assert mold == molds[shown], f"face {shown}: the view says mold {mold}, molds.json " \
+                                     f"{molds[shown]}"
+    assert len(picked) >= 5, f"only {len(picked)} panels could be clicked"
+    page.pixels(f"{name}-picked")
+    return page
+
+
+@pytest.fixture(scope="module")
+def molds_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("molds") / "wein99"
+    assert main(["molds", str(fabplan.data_path("wein99.obj")), "--tolerance-mm", "5", "-q",
+                 "-o", str(out)]) == 0
+    return out
+
+
+def _mold_of_face(path: Path) -> dict:
+    return {p["face"]: p["mold"] for p in json.loads(path.read_text())["panels"]}
+
+
+def test_the_molds_report_3d_view_draws_recolours_and_names_the_mold_of_a_clicked_panel(
+        browser, molds_report):
+    molds = _mold_of_face(molds_report / "molds.json")
+    page = _check_view(browser, molds_report / "report.html", lambda scene: molds, "molds")
+    page.js("document.querySelector('input.fp-strips').click()")
+    strips = page.pixels("molds-strips-by-family")
+    assert _drawn(strips) > 0.05
+    assert page.errors == [], page.errors
+
+
+def test_the_stadium_study_3d_view_shows_every_candidate_and_its_molds(browser, stadium_study):
+    out, run = stadium_study
+    assert run.code == 0, run.lines[-5:]
+    record = json.loads((out / "study.json").read_text())
+    scenes = {}                              # scene index -> candidate folder
+    page = Report(browser, out / "report.html")
+    titles = page.js("window.fabplanViewers[0].scenes.map(s => s.title)")
+    for i, title in enumerate(titles):
+        scenes[i] = title.split(". ", 1)[1]
+    measured = [c["name"] for c in record["candidates"] if not c["error"] and not c["same_net_as"]]
+    assert sorted(scenes.values()) == sorted(measured)
+    page.page.close()
+
+    def molds_of_scene(scene: int) -> dict:
+        return _mold_of_face(out / "candidates" / scenes[scene] / "molds.json")
+
+    page = _check_view(browser, out / "report.html", molds_of_scene, "stadium")
+    first = page.pixels("stadium-scene-0")
+    page.js("window.fabplanViewers[0].setScene(1)")
+    second = page.pixels("stadium-scene-1")
+    assert _changed(first, second) > 0.01, "another candidate looks the same"
+    shown, mold = page.click_face(int(page.js("window.fabplanViewers[0].triFace[0]")))
+    if shown >= 0:
+        assert mold == molds_of_scene(1)[shown]
+    modes = page.js("window.fabplanViewers[0].data.modes.map(m => m.key)")
+    assert {"radius", "angle"} <= set(modes)
+    for mode in ("radius", "angle", "kink") + (("gaps",) if "gaps" in modes else ()):
+        page.js(f"window.fabplanViewers[0].setMode('{mode}')")
+        assert _drawn(page.pixels(f"stadium-{mode}")) > 0.05
+    assert page.errors == [], page.errors
