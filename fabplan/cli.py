@@ -258,13 +258,19 @@ def _cmd_mill(args) -> int:
     check_output_folder(out)
     _check_outputs([out / name for name in MILL_FILES], [args.net])
     mesh = load_net(args.net)
-    result = mill_net(mesh, tool, settings, simulate=not args.no_simulation,
-                      simulation=SimulationSettings(step_mm=args.sim_step))
-    files = write_mill_report(result, out)
-    print(result.summary())
-    print(f"wrote {', '.join(str(f) for f in files)}")
-    for note in result.plan.notes:
-        _warn(note)
+    progress = _progress(args)
+    with progress.stage("planning the passes and simulating the cut"):
+        result = mill_net(mesh, tool, settings, simulate=not args.no_simulation,
+                          simulation=SimulationSettings(step_mm=args.sim_step))
+    with progress.stage("writing the tool paths and the report"):
+        files = write_mill_report(result, out)
+    if args.quiet:
+        print(f"{counted(result.plan.path.pass_count, 'pass', 'passes')}; wrote {files[0]}")
+    else:
+        print(result.summary())
+        print(f"wrote {', '.join(str(f) for f in files)}")
+        for note in result.plan.notes:
+            _warn(note)
     if not result.gouge_free and result.simulation is not None:
         print(f"fabplan: warning: the simulated cut gouges the target by "
               f"{result.simulation.max_gouge_mm:.4g} mm: give a larger --margin "
@@ -589,9 +595,15 @@ def _cmd_arcs(args) -> int:
         raise InputError(f"{out}: the output must be a .3dm or a .dxf file")
     _check_outputs([out, out.with_suffix(".json")], [args.net])
     mesh = load_net(args.net, quads=False)
-    arcs = arc_structure(mesh)
-    files = write_arcs(arcs, out, units=args.units)
+    progress = _progress(args)
+    with progress.stage("the arcs"):
+        arcs = arc_structure(mesh)
+    with progress.stage("writing the arcs"):
+        files = write_arcs(arcs, out, units=args.units)
     s = arcs.summary()
+    if args.quiet:
+        print(f"{counted(s['arcs'], 'arc')}; wrote {files[0]}")
+        return 0
     sources = ", ".join(f"{count} {name}" for name, count in s["plane_sources"].items() if count)
     print(f"{s['arcs']} arcs ({s['straight_arcs']} straight): radius {s['radius']['min']:.4g} .. "
           f"{s['radius']['max']:.4g}, angle {s['angle_deg']['min']:.3g} .. "
@@ -796,6 +808,7 @@ def _add_mill(sub: Any) -> None:
     p.add_argument("--no-simulation", action="store_true",
                    help="plan only: no simulated scallop, gouge check or comparison")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
+    _add_verbosity(p)
     p.set_defaults(func=_cmd_mill)
 
 
@@ -904,6 +917,7 @@ def _add_arcs(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True, metavar="OUT.3dm|OUT.dxf",
                    help="the arcs as Rhino ArcCurves or DXF ARC entities; the report goes to "
                         "OUT.json")
+    _add_verbosity(p)
     p.set_defaults(func=_cmd_arcs)
 
 
