@@ -260,4 +260,5 @@ def test_a_3dm_that_cannot_be_written_leaves_nothing(tmp_path, patch_file, capsy
 def test_molds_without_3dm_write_no_rhino_files(tmp_path, patch_file):
     out = tmp_path / "molds"
     assert main(["molds", str(patch_file), "--tolerance-mm", "5", "-o", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["molds.json", "panels.csv", "report.html"]
+    assert sorted(p.name for p in out.iterdir()) == ["molds.json", "panels.csv", "report.html",
+                                                     "report.pdf"]
