@@ -18,11 +18,12 @@ its edges, so the strip between the net and the boundary is cut into *boundary p
    parameter boundary land on the design's boundary curve.
 
 Pieces smaller than `min_panel` of a full panel join the neighbour they share the longest
-side with. Unclad regions that do not reach the design boundary (a hole the layout left
-open around a singularity of the directions) are cut the same way, by the lines that end
-on their rim: their pieces are *patches*, reported with their places. Coverage is measured
-by areas on the design: every region's share of each design triangle in the parameter
-plane, times that triangle's area.
+side with; those left that small are *extensions*, cut as part of the full panel beside
+them. Unclad regions that do not reach the design boundary (a hole the layout left open
+around a singularity of the directions) are cut the same way, by the lines that end on
+their rim: their pieces are *patches*. Coverage is measured on the surface, independently
+of the plane: samples of the design count as clad when a panel lies straight above or
+below them (`_under`).
 """
 
 from __future__ import annotations
@@ -159,8 +160,9 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     design, h = layout.design, layout.panel_size
     chart = layout.chart
     p_net = chart.parameters_of(mesh.vertices)
-    faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
-    cell = float(np.median(shapely.area(faces)))
+    # a full panel in the plane: about one unit square of the lattice
+    cell = float(np.median(np.abs(chart.param_area))) * h * h / float(np.median(design.face_areas))
+    cell = cell if np.isfinite(cell) and cell > 0 else 1.0
     # every overlay is snap-rounded to this grid (a ten-millionth of a panel), so that a
     # vertex on a boundary segment to rounding is noded there
     grid = 1e-7 * cell ** 0.5
@@ -370,18 +372,6 @@ class ParameterChart:
         bary = igl.barycentric_coordinates(foot, X[:, 0].copy(), X[:, 1].copy(), X[:, 2].copy())
         return np.einsum("mk,mkj->mj", bary, self.P[tri])
 
-    def area_on_design(self, regions: np.ndarray) -> np.ndarray:
-        """(r,) float, the area on the design of regions of the parameter plane: each
-        one's share of every parameter triangle it meets, times the triangle's area."""
-        regions = np.asarray(regions, dtype=object)
-        if len(regions) == 0:
-            return np.zeros(0)
-        region, tri = self.tree.query(regions, predicate="intersects")
-        ok = self.usable[tri]
-        region, tri = region[ok], tri[ok]
-        share = shapely.area(shapely.intersection(regions[region], self.triangles[tri]))
-        scale = self.design.face_areas[tri] / np.abs(self.param_area[tri])
-        return np.bincount(region, weights=share * scale, minlength=len(regions))
 
 
 def _barycentric(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -425,13 +415,13 @@ def _face_polygons(mesh: QuadMesh, p: np.ndarray, maps: list) -> np.ndarray:
         images = np.stack([sign * corner_p + shift for sign, shift in maps])   # (m, c, 2)
         pick = np.argmin(np.linalg.norm(images - anchor[None], axis=2), axis=0)
         corner_p = images[pick, np.arange(len(idx))]
-    rings = np.split(corner_p, ptr[1:-1])
-    polygons = [shapely.polygons(r) for r in rings]
-    out = np.array(polygons, dtype=object)
-    for sign, shift in maps[1:]:
-        out = np.concatenate([out, np.array([shapely.polygons(sign * r + shift) for r in rings],
-                                            dtype=object)])
-    return out
+    # a closed ring per face: its corners and the first again
+    closing = np.insert(corner_p, ptr[1:], corner_p[ptr[:-1]], axis=0)
+    ring_of = np.repeat(np.arange(len(sizes)), sizes + 1)
+    out = [shapely.polygons(shapely.linearrings(closing, indices=ring_of))]
+    out += [shapely.polygons(shapely.linearrings(sign * closing + shift, indices=ring_of))
+            for sign, shift in maps[1:]]
+    return np.concatenate(out)
 
 
 def _clipped_rays(mesh: QuadMesh, p: np.ndarray, unclad, free: np.ndarray, grid: float
