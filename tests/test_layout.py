@@ -631,3 +631,18 @@ def test_a_cross_field_turning_a_quarter_around_a_point_has_index_a_quarter(turn
     inner = np.flatnonzero(np.nan_to_num(index) != 0)
     assert len(inner) == 1 and index[inner[0]] == turns / 4
     assert np.linalg.norm(disk.vertices[inner[0], :2]) < 0.5
+
+
+def test_distance_to_a_built_in_reference_is_measured_to_the_exact_surface():
+    """A net whose vertices lie on the exact saddle is 0 from it, although its
+    triangulation's chords are off the surface between their corners."""
+    from fabplan.net.measure import measure_net
+
+    design = load_design("hyperbolic-paraboloid:width=6,depth=4,rise=2", triangles=800)
+    s = design.parametric
+    u, v = np.meshgrid(np.linspace(-5.3, 5.3, 12), np.linspace(-3.3, 3.3, 9), indexing="ij")
+    net = QuadMesh.grid(s.points(u, v))
+    record = measure_net(net, reference=design.reference)
+    assert record["distance_to_reference"]["max"] <= 1e-9
+    chords = np.linalg.norm(design.reference.closest_points(net.vertices)[0] - net.vertices, axis=1)
+    assert chords.max() > 1e-4      # what the triangles alone would have said

@@ -237,8 +237,12 @@ class DesignSurface:
 
     @cached_property
     def reference(self) -> ReferenceSurface:
-        """The closest-point structure (libigl AABB tree) on this mesh."""
-        return ReferenceSurface(self.vertices, self.triangles)
+        """The closest-point structure (libigl AABB tree) on this mesh; for a parametric
+        design its distances are measured to the exact surface (`distances`)."""
+        surface = ReferenceSurface(self.vertices, self.triangles)
+        if self.parametric is not None and self.uv is not None:
+            surface.exact_distances = self.distances
+        return surface
 
     @cached_property
     def face_normals(self) -> np.ndarray:
