@@ -263,7 +263,7 @@ def _cmd_mill(args) -> int:
         result = mill_net(mesh, tool, settings, simulate=not args.no_simulation,
                           simulation=SimulationSettings(step_mm=args.sim_step))
     with progress.stage("writing the tool paths and the report"):
-        files = write_mill_report(result, out)
+        files = write_mill_report(result, out, rhino=args.rhino)
     if args.quiet:
         print(f"{counted(result.plan.path.pass_count, 'pass', 'passes')}; wrote {files[0]}")
     else:
@@ -808,6 +808,9 @@ def _add_mill(sub: Any) -> None:
     p.add_argument("--no-simulation", action="store_true",
                    help="plan only: no simulated scallop, gouge check or comparison")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
+    p.add_argument("--3dm", dest="rhino", action="store_true",
+                   help="also write the tool paths as DIR/paths.3dm (a polyline of cutter tips "
+                        "and one of contact points per pass, in mm)")
     _add_verbosity(p)
     p.set_defaults(func=_cmd_mill)
 

@@ -388,3 +388,28 @@ def test_a_net_off_its_spheres_is_planned_with_a_note():
     assert any("not an S-net" in note for note in plan.notes)
     sphere = plan_face_milling(bowl_grid(), parse_tool("face:D=20"), MillSettings())
     assert sphere.sphere_residual_mm < 1e-9 and not sphere.notes
+
+
+def test_3dm_holds_one_tip_polyline_per_pass_as_in_the_cl_file(tmp_path):
+    """`--3dm`: the tool paths in Rhino, read back with rhino3dm, are the CL file's tips."""
+    import rhino3dm
+
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    out = tmp_path / "out"
+    assert main(["mill", str(net), "--tool", "face:D=40", "--units", "mm", "--no-simulation",
+                 "--3dm", "-q", "-o", str(out)]) == 0
+    rows, passes = goto_rows(out / "path.cl")
+    doc = rhino3dm.File3dm.Read(str(out / "paths.3dm"))
+    assert doc.Settings.ModelUnitSystem == rhino3dm.UnitSystem.Millimeters
+    layers = {layer.Index: layer.Name for layer in doc.Layers}
+    tips = {}
+    for obj in doc.Objects:
+        if layers[obj.Attributes.LayerIndex] == "tool tips":
+            line = obj.Geometry.TryGetPolyline()
+            tips[int(obj.Attributes.GetUserString("pass"))] = np.array(
+                [[p.X, p.Y, p.Z] for p in line])
+    count = max(p for p in passes if p is not None) + 1
+    assert sorted(tips) == list(range(1, count + 1))
+    for k in range(count):
+        cl = rows[[p == k for p in passes], :3]
+        assert np.allclose(tips[k + 1], cl, atol=1e-6)

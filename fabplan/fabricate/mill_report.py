@@ -18,6 +18,7 @@ import numpy as np
 from ..io.cldata import cldata_text
 from ..io.output import output_folder, write_texts
 from ..io.records import json_text
+from ..io.rhino_write import Rhino3dmWriter
 from ..net.mesh import QuadMesh
 from ..report import figures, html
 from .mill_simulation import (
@@ -290,9 +291,31 @@ def mill_report_files(result: MillResult, folder: str | os.PathLike) -> dict:
             folder / "report.html": mill_report_html(result)}
 
 
-def write_mill_report(result: MillResult, folder: str | os.PathLike) -> list[Path]:
-    """Write the four files into `folder`, all or none; returns their paths."""
+def mill_drawing(result: MillResult) -> Rhino3dmWriter:
+    """The tool paths as a Rhino document (mm, the frame of the CL file): one polyline of
+    cutter tips per pass on layer ``tool tips`` and of contact points on layer
+    ``contacts``, named and user-texted by pass as in ``path.cl``."""
+    path = result.plan.path
+    doc = Rhino3dmWriter("mm")
+    doc.layer("tool tips", (200, 40, 40, 255))
+    doc.layer("contacts", (40, 90, 200, 255))
+    for number, part in enumerate(path.pass_slices()):
+        text = {"pass": number + 1}
+        doc.add_polyline(path.tip[part], layer="tool tips", name=f"pass {number + 1}",
+                         user_text=text)
+        doc.add_polyline(path.contact[part], layer="contacts", name=f"pass {number + 1}",
+                         user_text=text)
+    return doc
+
+
+def write_mill_report(result: MillResult, folder: str | os.PathLike, *,
+                      rhino: bool = False) -> list[Path]:
+    """Write the four files into `folder`, all or none, and with `rhino` also
+    ``paths.3dm`` (`mill_drawing`); returns their paths."""
     folder = Path(folder)
+    names = MILL_FILES + (("paths.3dm",) if rhino else ())
     with output_folder(folder) as staging:
         write_texts(mill_report_files(result, staging))
-    return [folder / name for name in MILL_FILES]
+        if rhino:
+            mill_drawing(result).write(staging / "paths.3dm")
+    return [folder / name for name in names]
