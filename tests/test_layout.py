@@ -119,9 +119,10 @@ def test_freeform_facade_mesh_through_the_cli(facade_stl, tmp_path, capsys):
                  "-o", str(out)])
     stdout, stderr = capsys.readouterr()
     assert code == 0, stderr
-    assert stderr == ""
-    assert sorted(p.name for p in out.parent.iterdir()) == ["facade.json", "facade.obj",
-                                                           "facade.png"]
+    # progress lines only: no warning, no error
+    assert not [line for line in stderr.splitlines() if line.startswith("fabplan:")], stderr
+    assert sorted(p.name for p in out.parent.iterdir()) == ["facade.boundary.obj", "facade.json",
+                                                           "facade.obj", "facade.png"]
     assert facade_stl.read_bytes() == original
     design = load_design(facade_stl)
     assert len(design.triangles) >= 20000 and design.repairs["welded_vertices"] > 0
@@ -463,11 +464,14 @@ def test_low_coverage_is_measured_and_warned_about(tmp_path, capsys):
     X, faces = net.vertices, net.faces
     design = load_design("paraboloid", triangles=20000)
     area = sum(0.5 * np.linalg.norm(np.cross(X[f[2]] - X[f[0]], X[f[3]] - X[f[1]])) for f in faces)
-    assert props["coverage"] == pytest.approx(area / design.area, rel=1e-3)
-    if props["coverage"] < 0.9:
-        assert f"covers only {100 * props['coverage']:.0f} % of the design" in err
+    # the full panels' share, sampled on the design, against their area: the two measures
+    # agree to the panels' curvature and the net's distance from the design
+    assert props["coverage_net"] == pytest.approx(area / design.area, abs=0.02)
+    assert props["coverage"] >= props["coverage_net"]
+    if props["coverage"] < 0.999:
+        assert f"cover only {100 * props['coverage']:.1f} % of the design" in err
     else:
-        assert "covers only" not in err
+        assert "cover only" not in err
 
 
 def test_distance_to_a_parametric_design_is_measured_to_the_exact_surface(tmp_path, capsys):
