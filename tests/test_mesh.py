@@ -620,3 +620,15 @@ def test_families_on_a_mesh_of_more_than_46341_faces():
     # the first family (v1, v3) of every star runs along one and the same grid direction
     along_i = np.abs(X[stars[:, 1], 0] - X[stars[:, 0], 0]) > 0.5
     assert along_i.all() or not along_i.any()
+
+
+def test_with_vertices_measures_its_own_positions_regression():
+    """A moved net shares its combinatorics, not its areas or edge lengths: a study's
+    candidate solved from a measured start reported the start's panel areas."""
+    u, v = np.meshgrid(np.arange(4.0), np.arange(3.0), indexing="ij")
+    mesh = QuadMesh.grid(np.stack([u, v, 0 * u], axis=-1))
+    assert np.allclose(mesh.face_areas, 1.0) and mesh.mean_edge_length == pytest.approx(1.0)
+    moved = mesh.with_vertices(2 * mesh.vertices)
+    assert np.allclose(moved.face_areas, 4.0)
+    assert moved.mean_edge_length == pytest.approx(2.0)
+    assert moved.edges is mesh.edges                       # the topology is shared

@@ -126,7 +126,8 @@ class QuadMesh:
         new.__dict__.update({k: v for k, v in self.__dict__.items() if k != "vertices"})
         new.vertices = np.array(vertices, dtype=np.float64).reshape(-1, 3)
         new.normals = None if normals is None else np.array(normals, dtype=np.float64)
-        new.__dict__.pop("mean_edge_length", None)
+        for name in _GEOMETRIC_CACHE:      # measured on the old positions
+            new.__dict__.pop(name, None)
         return new
 
     def write_obj(self, path: str | os.PathLike, header: str = "") -> None:
@@ -431,6 +432,11 @@ class QuadMesh:
     def __repr__(self) -> str:
         return (f"QuadMesh({self.name!r}, vertices={self.vertex_count}, faces={len(self.face_sizes)},"
                 f" stars={len(self.stars)})")
+
+
+# the cached properties of a `QuadMesh` that depend on its vertex positions (the others
+# are its combinatorics, which `with_vertices` shares)
+_GEOMETRIC_CACHE = ("face_areas", "mean_edge_length")
 
 
 def load_mesh(path: str | os.PathLike) -> QuadMesh:
