@@ -379,9 +379,9 @@ def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, 
     assert before["feasible"] and measured > 0.01
     path = _write_study(tmp_path, round(measured / 2, 6))
     (tmp_path / "out").mkdir()                      # an empty folder is used as it is
-    assert main(["study", str(path), "-o", str(tmp_path / "out"), "-q"]) == 0
+    assert main(["study", str(path), "-o", str(tmp_path / "out")]) == 0
     again = json.loads((tmp_path / "out" / "study.json").read_text(encoding="utf-8"))
-    # the last line states the whole time, including writing the files
+    # the last line (without -q) states the whole time, including writing the files
     last = capsys.readouterr().out.strip().splitlines()[-1]
     total, run, write = map(int, re.search(r"in (\d+) s: (\d+) s to run the candidates, "
                                            r"(\d+) s to write the files$", last).groups())

@@ -7,9 +7,9 @@ edge, and the boundary panel is that surface cut to the boundary outline. What i
 checked is how far that surface stays from the design over the boundary panel: every
 outline point (on the design) is placed by the neighbour's placement and its gap to the
 mold measured (`fabplan.fabricate.molds.placement_deviations`, an upper bound of the
-distance). A panel whose gap exceeds the allowed deviation needs a mold of its own:
-counted as one more mold each (an upper bound: such panels are few and rarely share a
-shape).
+distance). Beside a flat panel, a boundary panel is flat stock cut in its own plane: its
+gap is that of its outline to its best-fitting plane. The gaps are design deviations: a
+study checks them against its deviation limit, so the mold count does not depend on it.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..layout.trim import BoundaryPanels
-from .molds import MoldPlan, placement_deviations
+from .molds import MOLD_TYPES, MoldPlan, placement_deviations
 
 __all__ = ["BoundaryMolds", "boundary_molds", "boundary_panels_csv"]
 
@@ -31,17 +31,15 @@ class BoundaryMolds:
     Attributes
     ----------
     neighbour_face : (p,) int, the full panel each boundary panel continues (-1: none).
-    mold : (p,) int, the mold it is cut from (its neighbour's), -1 where it needs its own.
+    mold : (p,) int, the mold it is cut from (its neighbour's; -1 without a neighbour).
     deviation_mm : (p,) float, the largest gap between the panel's outline on the design
         and its neighbour's mold surface (mm; inf without a neighbour).
-    limit_mm : the gap allowed.
     extension : (p,) bool, slivers made as part of their neighbour (not panels).
     """
 
     neighbour_face: np.ndarray
     mold: np.ndarray
     deviation_mm: np.ndarray
-    limit_mm: float
     extension: np.ndarray
 
     @property
@@ -63,7 +61,6 @@ class BoundaryMolds:
             "extensions_of_full_panels": int(self.extension.sum()),
             "cut_from_neighbour_mold": int(fits.sum()),
             "own_molds": self.own_molds,
-            "deviation_limit_mm": self.limit_mm,
             "deviation_max_mm": float(self.deviation_mm[fits].max()) if fits.any() else None,
             "mold": self.mold.tolist(),
             "neighbour_face": self.neighbour_face.tolist(),
@@ -86,15 +83,13 @@ def boundary_panels_csv(panels: BoundaryPanels, molds: BoundaryMolds) -> str:
     return "\n".join(rows) + "\n"
 
 
-def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> BoundaryMolds:
+def boundary_molds(plan: MoldPlan, panels: BoundaryPanels) -> BoundaryMolds:
     """The molds of a net's boundary panels (see the module's text).
 
     Parameters
     ----------
     plan : the `MoldPlan` of the net the panels border.
     panels : its `BoundaryPanels` (model units, as the net).
-    limit_mm : the largest gap between a boundary panel and the design allowed on its
-        neighbour's mold.
 
     Returns
     -------
@@ -103,17 +98,30 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> B
     p = panels.count
     face = np.asarray(panels.neighbour_face, dtype=np.int64)
     if p == 0:
-        return BoundaryMolds(face, np.zeros(0, np.int64), np.zeros(0), float(limit_mm),
-                             np.zeros(0, bool))
+        return BoundaryMolds(face, np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool))
     # the outline points of every panel, padded by repeating its first point
     size = max(len(q) for q in panels.polygons)
     idx = np.array([np.r_[q, np.full(size - len(q), q[0])] for q in panels.polygons])
     points = panels.vertices[idx]                                   # (p, s, 3)
     deviation = np.full(p, np.inf)
     has = face >= 0
-    if has.any():
-        f = face[has]
-        deviation[has] = placement_deviations(points[has], plan.placement[f],
-                                              plan.mold_shape[plan.mold[f]])
-    mold = np.where(has & (deviation <= limit_mm), plan.mold[np.maximum(face, 0)], -1)
-    return BoundaryMolds(face, mold, deviation, float(limit_mm), np.asarray(panels.extension, bool))
+    neighbour_mold = plan.mold[np.maximum(face, 0)]
+    # beside a flat panel a boundary panel is flat stock too, cut in its own plane: its
+    # gap is that of its outline to its best-fitting plane, and it needs no mold
+    flat = has & (np.asarray(plan.mold_type)[neighbour_mold] == MOLD_TYPES.index("plane"))
+    curved = has & ~flat
+    if curved.any():
+        f = face[curved]
+        deviation[curved] = placement_deviations(points[curved], plan.placement[f],
+                                                 plan.mold_shape[plan.mold[f]])
+    if flat.any():
+        deviation[flat] = [_plane_gap(panels.vertices[panels.polygons[k]]) * plan.settings.mm_per_unit
+                           for k in np.flatnonzero(flat)]
+    mold = np.where(has, neighbour_mold, -1)
+    return BoundaryMolds(face, mold, deviation, np.asarray(panels.extension, bool))
+
+
+def _plane_gap(points: np.ndarray) -> float:
+    """Largest distance of points (k, 3) from their least-squares plane (model units)."""
+    centred = points - points.mean(axis=0)
+    return float(np.abs(centred @ np.linalg.svd(centred)[2][2]).max())
