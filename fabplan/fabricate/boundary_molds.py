@@ -8,8 +8,10 @@ checked is how far that surface stays from the design over the boundary panel: e
 outline point (on the design) is placed by the neighbour's placement and its gap to the
 mold measured (`fabplan.fabricate.molds.placement_deviations`, an upper bound of the
 distance). Beside a flat panel, a boundary panel is flat stock cut in its own plane: its
-gap is that of its outline to its best-fitting plane. The gaps are design deviations: a
-study checks them against its deviation limit, so the mold count does not depend on it.
+gap is that of its outline to its best-fitting plane. A curved boundary panel whose gap
+exceeds the allowed deviation from the design needs a mold of its own: counted as one
+more mold each (an upper bound: such panels are few and rarely share a shape). So the
+mold count of a study depends on its deviation limit, through its boundary panels.
 """
 
 from __future__ import annotations
@@ -31,15 +33,17 @@ class BoundaryMolds:
     Attributes
     ----------
     neighbour_face : (p,) int, the full panel each boundary panel continues (-1: none).
-    mold : (p,) int, the mold it is cut from (its neighbour's; -1 without a neighbour).
+    mold : (p,) int, the mold it is cut from (its neighbour's), -1 where it needs its own.
     deviation_mm : (p,) float, the largest gap between the panel's outline on the design
         and its neighbour's mold surface (mm; inf without a neighbour).
+    limit_mm : the gap allowed on a neighbour's mold.
     extension : (p,) bool, slivers made as part of their neighbour (not panels).
     """
 
     neighbour_face: np.ndarray
     mold: np.ndarray
     deviation_mm: np.ndarray
+    limit_mm: float
     extension: np.ndarray
 
     @property
@@ -61,6 +65,7 @@ class BoundaryMolds:
             "extensions_of_full_panels": int(self.extension.sum()),
             "cut_from_neighbour_mold": int(fits.sum()),
             "own_molds": self.own_molds,
+            "deviation_limit_mm": self.limit_mm,
             "deviation_max_mm": float(self.deviation_mm[fits].max()) if fits.any() else None,
             "mold": self.mold.tolist(),
             "neighbour_face": self.neighbour_face.tolist(),
@@ -83,13 +88,15 @@ def boundary_panels_csv(panels: BoundaryPanels, molds: BoundaryMolds) -> str:
     return "\n".join(rows) + "\n"
 
 
-def boundary_molds(plan: MoldPlan, panels: BoundaryPanels) -> BoundaryMolds:
+def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> BoundaryMolds:
     """The molds of a net's boundary panels (see the module's text).
 
     Parameters
     ----------
     plan : the `MoldPlan` of the net the panels border.
     panels : its `BoundaryPanels` (model units, as the net).
+    limit_mm : the largest gap between a curved boundary panel and the design allowed on
+        its neighbour's mold.
 
     Returns
     -------
@@ -98,7 +105,8 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels) -> BoundaryMolds:
     p = panels.count
     face = np.asarray(panels.neighbour_face, dtype=np.int64)
     if p == 0:
-        return BoundaryMolds(face, np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool))
+        return BoundaryMolds(face, np.zeros(0, np.int64), np.zeros(0), float(limit_mm),
+                             np.zeros(0, bool))
     # the outline points of every panel, padded by repeating its first point
     size = max(len(q) for q in panels.polygons)
     idx = np.array([np.r_[q, np.full(size - len(q), q[0])] for q in panels.polygons])
@@ -117,8 +125,8 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels) -> BoundaryMolds:
     if flat.any():
         deviation[flat] = [_plane_gap(panels.vertices[panels.polygons[k]]) * plan.settings.mm_per_unit
                            for k in np.flatnonzero(flat)]
-    mold = np.where(has, neighbour_mold, -1)
-    return BoundaryMolds(face, mold, deviation, np.asarray(panels.extension, bool))
+    mold = np.where(flat | (curved & (deviation <= limit_mm)), neighbour_mold, -1)
+    return BoundaryMolds(face, mold, deviation, float(limit_mm), np.asarray(panels.extension, bool))
 
 
 def _plane_gap(points: np.ndarray) -> float:

@@ -397,7 +397,7 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
                                                   units=units))
     bounds = None
     if net.boundary_panels is not None:
-        bounds = boundary_molds(molds, net.boundary_panels)
+        bounds = boundary_molds(molds, net.boundary_panels, study.limits.max_deviation_mm)
     seconds["molds"] = time.perf_counter() - clock
     say(f"    {molds_text(mold_metrics(molds, bounds))} for {counted(molds.panel_count, 'panel')}"
         + (f" and {counted(bounds.count, 'boundary panel')}" if bounds is not None else "")
