@@ -225,14 +225,20 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     best: SurfaceLayout | None = None
     best_coverage = -1.0
     refusal: InputError | None = None
-    tried = []
-    for length in (s.smoothing, *(x for x in s.smoothing_tries if x > s.smoothing)):
+    tried: list[dict[str, float | None]] = []
+    lengths = [s.smoothing, *(x for x in s.smoothing_tries if x > s.smoothing)]
+    for k, length in enumerate(lengths):
         try:
             layout = _layout_once(design, h, angle, family, replace(s, smoothing=length))
         except InputError as exc:      # this smoothing leaves no usable lattice
             refusal = refusal or exc
             tried.append({"smoothing_panels": length, "coverage": 0.0})
             continue
+        if best is None and k == len(lengths) - 1:
+            # the only layout there is: nothing to compare its coverage with
+            best = layout
+            tried.append({"smoothing_panels": length, "coverage": None})
+            break
         # judged with the boundary panels the net will get: the staircase along the
         # boundary is theirs to clad; what they cannot reach are the lattice's own holes
         try:
