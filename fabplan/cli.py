@@ -753,9 +753,10 @@ def _add_optimize(sub: Any) -> None:
     guards.add_argument("--guards", dest="guards", action="store_const", const=True,
                         help="solve with the guards against folding from the start (face normals "
                              "within 75 deg of the reference's, star angles within 15..165 deg); "
-                             "by default they are added only when a first solve folds")
+                             "by default they are added only when a first solve folds, and "
+                             "then a smoothed copy of the start is tried too")
     guards.add_argument("--no-guards", dest="guards", action="store_const", const=False,
-                        help="never add the guards against folding")
+                        help="never add the guards against folding, nor retry a folded solve")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
     _add_3dm(p, units=True)

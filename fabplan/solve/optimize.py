@@ -41,6 +41,7 @@ from .constraints import (
 )
 from .net_types import get_net, net_constraints
 from .reference import ReferenceSurface
+from .smoothing import smoothed_vertices
 from .solver import GuidedProjection, IterationRecord, SolverSettings
 
 __all__ = [
@@ -168,7 +169,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     if fairness:
         families.append(Fairness())
     families.append(EdgeCollapseBarrier())
-    if reference is None and (closeness or glide):
+    if reference is None and (closeness or glide or guards):
         reference = ReferenceSurface.from_mesh(mesh)
     if glide:
         assert reference is not None
@@ -337,9 +338,12 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     extra : further constraint families to solve with (e.g. prescribed levels).
     guards : the constraints against folding (`fabplan.solve.constraints.guards`): face
         normals within 75 degrees of the reference's, star angles within 15 to 165
-        degrees. None (default): solve without them and, when that net folds, solve again
-        from the start with them, keeping the better result; True: from the start; False:
-        never.
+        degrees. None (default): solve without them and, when that net folds (or has
+        degenerate stars or collapsed edges), solve again with them, then from a smoothed
+        copy of the start (`fabplan.solve.smoothing`) without and with them, still pulled
+        towards the start, until one converges fold-free; the best is kept (the
+        parameters say which: ``guards``, ``smoothed_start``). True: with them from the
+        start; False: never, and no retry.
     progress : called after every iteration with its record.
 
     Returns
@@ -362,31 +366,43 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
 
-    def make(with_guards: bool) -> GuidedProjection:
-        return build_solver(mesh, net, angle=angle, radius=radius, reference=reference, fixed=held,
-                            settings=settings, fairness=fairness, coherent=coherent,
+    def make(with_guards: bool, start_mesh: QuadMesh = mesh,
+             start_reference: ReferenceSurface | None = reference) -> GuidedProjection:
+        return build_solver(start_mesh, net, angle=angle, radius=radius, reference=start_reference,
+                            fixed=held, settings=settings, fairness=fairness, coherent=coherent,
                             closeness=closeness, glide=glide, glide_boundary=glide_boundary,
                             surface_tolerance=surface_tolerance, extra=extra, guards=with_guards)
 
-    solver = make(bool(guards))
-    _solve(solver, handle_ids, targets, progress)
-    folds = measure_folds(mesh, solver.vertices, reference=solver.reference)
-    unreachable = handle_ids.size and solver.status != "converged"
-    if guards is None and (folds.folded or folds.degenerate) and not unreachable:
-        retry = make(True)
-        _solve(retry, handle_ids, targets, progress)
-        retry_folds = measure_folds(mesh, retry.vertices, reference=retry.reference)
-        if _rank(retry, retry_folds) < _rank(solver, folds):
-            solver, folds = retry, retry_folds
+    def attempt(name: str, solver: GuidedProjection) -> Attempt:
+        stop = _solve(solver, handle_ids, targets, progress)
+        return Attempt(name, solver, measure_folds(mesh, solver.vertices, reference=solver.reference),
+                       stop)
+
+    first = attempt("guards" if guards else "plain", make(bool(guards)))
+    attempts = [first]
+    unreachable = handle_ids.size and first.solver.status != "converged"
+    if guards is None and (first.folds.folded or first.folds.degenerate) and not unreachable:
+        # a start far from every net of the type: first the guards against folding, then
+        # the same two solves from a smoothed start, still pulled towards the original
+        attempts.append(attempt("guards", make(True)))
+        if not attempts[-1].succeeded:
+            base = first.solver.reference
+            smooth = mesh.with_vertices(smoothed_vertices(mesh, held=held))
+            attempts.append(attempt("smoothed start", make(False, smooth, base)))
+            if not attempts[-1].succeeded:
+                attempts.append(attempt("smoothed start with guards", make(True, smooth, base)))
+    chosen = min(attempts, key=Attempt.rank)
+    solver, folds, stop = chosen.solver, chosen.folds, chosen.stop
     if handle_ids.size and solver.status != "converged":
         raise SolverError(f"the handles ask for a net that cannot be reached ({solver.status} after "
-                          f"{len(solver.history) - 1} iterations): "
+                          f"{len(solver.history) - 1} iterations{_stopped_at(stop)}): "
                           f"{describe_unmet(unmet_constraints(solver))}")
     seconds = time.perf_counter() - start
     result_mesh = mesh.with_vertices(solver.vertices, normals=solver_normals(solver))
     parameters = {"angle_deg": angle, "radius": radius, **solved_parameters(solver),
                   "coherent": coherent, "fixed_vertices": int(len(solver.fixed)),
                   "guards": any(isinstance(c, NormalCone) for c in solver.constraints),
+                  "smoothed_start": chosen.name.startswith("smoothed"),
                   "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)}}
     status = solver.status
     if status == "converged" and (folds.folded or folds.degenerate):
@@ -401,31 +417,79 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         linear_solver=solver.linear_solver,
         history=[h.as_dict() for h in solver.history],
         properties=measure_net(result_mesh, reference=solver.reference),
-        message=_explain(solver, status, folds, mesh, angle),
+        message=_explain(solver, status, folds, mesh, angle, attempts if len(attempts) > 1 else []),
     )
 
 
-def _rank(solver: GuidedProjection, folds: FoldReport) -> tuple:
-    """Sort key of a finished solve: fold-free first, then converged, then residual."""
-    hard = solver.history[-1].hard_residual if solver.history else np.inf
-    return (folds.folded, folds.degenerate, solver.status != "converged", hard)
+@dataclass
+class Attempt:
+    """One solve of `optimize`: the plain one, or a retry after it folded."""
+
+    name: str                   # "plain", "guards", "smoothed start", ...
+    solver: GuidedProjection
+    folds: FoldReport           # measured on the net it ends with
+    stop: Stage | None          # the handle stage its continuation gave up at, if it did
+
+    @property
+    def succeeded(self) -> bool:
+        """Converged, fold-free and without degenerate stars or collapsed edges."""
+        return self.solver.status == "converged" and not (self.folds.folded or self.folds.degenerate)
+
+    def rank(self) -> tuple:
+        """Sort key: fold-free first, then converged, then by hard residual."""
+        history = self.solver.history
+        hard = history[-1].hard_residual if history else np.inf
+        return (self.folds.folded, self.folds.degenerate, self.solver.status != "converged", hard)
+
+    def outcome(self) -> str:
+        """A few words: how this solve ended."""
+        if self.solver.status == "converged":
+            return "folded" if self.folds.folded else "degenerate"
+        return self.solver.status
 
 
 # a prescribed angle this far (degrees) from the start's is reached in stages
 CONTINUATION_STEP_DEG = 10.0
+# a prescribed Meusnier radius more than this factor from the start's (or less than its
+# inverse) is reached in stages, each this factor at most from the one before
+CONTINUATION_RADIUS_FACTOR = 1.5
+# at most this many stages for the angle and radius together (and 10 for the handles)
+MAX_STAGES = 12
 # each stage but the last is solved to this tolerance, in at most this many iterations
 STAGE_TOLERANCE, STAGE_ITERATIONS = 1e-4, 25
 
 
+@dataclass
+class Stage:
+    """One stage of a continuation: what it sets, and how far along the way it is.
+
+    Attributes
+    ----------
+    apply : sets the stage's targets on the solver.
+    kind : "targets" (the prescribed angle and radius), "handles" or "" (a plain solve).
+    step, steps : the stage's number (from 1) among the stages of its kind.
+    """
+
+    apply: Callable[[], None]
+    kind: str = ""
+    step: int = 1
+    steps: int = 1
+
+
 def _solve(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarray,
-           progress: Callable[[IterationRecord], None] | None) -> None:
-    """Run the solver; a far target (an angle or handles far from the start) is moved
-    there in stages, each solved to a loose tolerance, the last to the full one."""
-    stages = _stages(solver, handle_ids, targets)
+           progress: Callable[[IterationRecord], None] | None) -> Stage | None:
+    """Run the solver; a far target (an angle, a radius or handles far from the start) is
+    moved there in stages, each solved to a loose tolerance, the last to the full one.
+
+    Returns None when every stage ran, or the handle stage that could not be solved: the
+    stages after it move the handles farther still, so solving them would only spend the
+    time of a longer give-up.
+    """
+    stages = _continuation_stages(solver, handle_ids, targets)
     final = solver.settings
-    k = 0
+    k, stop = 0, None
     while k < len(stages):
-        stages[k]()
+        stages[k].apply()
         last = k == len(stages) - 1
         solver.settings = final if last else replace(
             final, tolerance=max(final.tolerance, STAGE_TOLERANCE),
@@ -433,37 +497,93 @@ def _solve(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarray
         if k:
             solver.restart_soft_terms()
         status = solver.run(callback=progress)
-        # a stage out of reach: the ones between it and the last are farther still, so
-        # the last (the real targets) is solved right away
-        k = k + 1 if status == "converged" or last else len(stages) - 1
+        if status == "converged" or last:
+            k += 1
+        elif stages[k].kind == "handles":
+            stop = stages[k]
+            break
+        else:
+            # a target stage out of reach: the ones between it and the last are farther
+            # still, so the last (the real targets) is solved right away
+            k = len(stages) - 1
     solver.settings = final
+    return stop
 
 
-def _stages(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarray) -> list:
-    """The stages of a solve, as functions that set their targets on the solver: the
-    prescribed angle moved from the start's in steps of at most `CONTINUATION_STEP_DEG`,
-    then the handles moved in steps of at most one mean edge."""
-    stages: list = []
-    family = next((c for c in solver.constraints
-                   if isinstance(c, ConstantAngle) and c.cosine is not None), None)
-    if family is not None and family.cosine is not None:
-        goal = float(np.degrees(np.arccos(np.clip(family.cosine, -1.0, 1.0))))
+def _continuation_stages(solver: GuidedProjection, handle_ids: np.ndarray,
+                        targets: np.ndarray) -> list[Stage]:
+    """The stages of a solve: the prescribed angle moved from the start's in steps of at
+    most `CONTINUATION_STEP_DEG` and the prescribed Meusnier radius in factors of at most
+    `CONTINUATION_RADIUS_FACTOR`, together; then the handles moved in steps of at most
+    one mean edge."""
+    moves: list[tuple[Callable[[float], None], int]] = []   # (set at fraction t, steps)
+    angle = next((c for c in solver.constraints
+                  if isinstance(c, ConstantAngle) and c.cosine is not None), None)
+    if angle is not None and angle.cosine is not None:
+        goal = float(np.degrees(np.arccos(np.clip(angle.cosine, -1.0, 1.0))))
         here = float(np.degrees(np.median(intersection_angles(solver.state.X, solver.state.stars))))
-        count = max(1, int(np.ceil(abs(goal - here) / CONTINUATION_STEP_DEG)))
-        for c in np.cos(np.radians(here + (goal - here) * np.arange(1, count + 1) / count)):
-            stages.append(lambda c=float(c): setattr(family, "cosine", c))
+
+        def set_angle(t: float, family: ConstantAngle = angle) -> None:
+            family.cosine = float(np.cos(np.radians(here + (goal - here) * t)))
+
+        moves.append((set_angle, int(np.ceil(abs(goal - here) / CONTINUATION_STEP_DEG))))
+    radius = next((c for c in solver.constraints if isinstance(c, ConstantCurvature)
+                   and c.curvature is not None and c.curvature != 0.0), None)
+    if radius is not None and radius.curvature is not None and "sphere" in solver.state.blocks:
+        moves.append(_curvature_move(radius, radius.curvature,
+                                     float(np.median(2 * solver.variable("sphere")[:, 0]))))
+    stages: list[Stage] = []
+    count = min(MAX_STAGES, max([1] + [steps for _, steps in moves]))
+    if moves and count > 1:
+        for i in range(1, count + 1):
+            def apply(t: float = i / count) -> None:
+                for move, _ in moves:
+                    move(t)
+            stages.append(Stage(apply, "targets", i, count))
     if handle_ids.size:
         begin = solver.vertices[handle_ids]
         far = float(np.linalg.norm(targets - begin, axis=1).max()) / solver.length_scale
         count = int(min(10, max(1, np.ceil(far))))
-        for t in np.arange(1, count + 1) / count:
-            stages.append(lambda t=t: solver.set_vertices(handle_ids, begin + t * (targets - begin)))
-    return stages or [lambda: None]
+        for i in range(1, count + 1):
+            def place(t: float = i / count) -> None:
+                solver.set_vertices(handle_ids, begin + t * (targets - begin))
+            stages.append(Stage(place, "handles", i, count))
+    return stages or [Stage(lambda: None)]
+
+
+def _curvature_move(family: ConstantCurvature, goal: float,
+                    here: float) -> tuple[Callable[[float], None], int]:
+    """Set the prescribed normal curvature (normalized units) at a fraction of the way from
+    the start's median to the goal, and the number of steps the way needs: geometric steps
+    (the radius changes by the same factor in each) when both have one sign, else equal
+    steps, each at most what a factor `CONTINUATION_RADIUS_FACTOR` takes near the goal."""
+    log_factor = np.log(CONTINUATION_RADIUS_FACTOR)
+    if here * goal > 0:
+        ratio = goal / here
+        steps = int(np.ceil(abs(np.log(ratio)) / log_factor - 1e-9))
+
+        def move(t: float) -> None:
+            family.curvature = goal if t >= 1 else float(here * ratio ** t)
+    else:     # flat, or curved the other way: no geometric path
+        steps = int(np.ceil(abs(goal - here) / (abs(goal) * (1 - 1 / CONTINUATION_RADIUS_FACTOR))))
+
+        def move(t: float) -> None:
+            family.curvature = goal if t >= 1 else float(here + (goal - here) * t)
+    return move, steps
+
+
+def _stopped_at(stage: Stage | None) -> str:
+    """Where a handle continuation gave up, for the message (empty when it had one step)."""
+    if stage is None or stage.steps < 2:
+        return ""
+    return (f", at step {stage.step} of {stage.steps} towards them; the steps beyond it "
+            "were not tried")
 
 
 def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: QuadMesh,
-             angle: float | None) -> str:
-    """One line: what stood in the way of a converged net, and what to try."""
+             angle: float | None, attempts: list[Attempt]) -> str:
+    """One line: what stood in the way of a converged net, and what to try; `attempts`
+    are the solves tried when there were more than one."""
     if status == "converged":
         return ""
     parts = []
@@ -480,6 +600,16 @@ def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: Qu
                          "type, or the type may not exist on this surface")
         if folds.folded or folds.degenerate:
             parts.append(f"on the net written {folds.describe()}")
+    if attempts:
+        tried = ", ".join(f"{a.name} {a.outcome()}" for a in attempts)
+        written = next(a.name for a in attempts if a.solver is solver)
+        parts.append(f"tried {len(attempts)} solves ({tried}); the net written is the {written} one")
+        start_folds = measure_folds(start, reference=solver.reference)
+        if start_folds.folded:
+            parts.append(f"the input itself folds ({start_folds.describe()}): repair or smooth it")
+        else:
+            parts.append("the input is too far from any net of this type for a fold-free one "
+                         "near it: smooth it, or lay a net out on its design with `fabplan layout`")
     if angle is not None and len(start.stars):
         here = float(np.degrees(np.median(intersection_angles(start.vertices,
                                                               canonical_stars(start.vertices,
