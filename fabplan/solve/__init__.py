@@ -2,7 +2,7 @@
 
 Owns: the solver (`solver`), constraint families (`constraints`), sparse linear algebra
 backends (`linalg`), the catalogue of net types (`net_types`), optimization presets
-(`optimize`), handles (`edit`) and reference surfaces with exact closest points
-(`reference`).
+(`optimize`), handles (`edit`), reference surfaces with exact closest points
+(`reference`) and the smoothed start of a retry (`smoothing`).
 May import: `fabplan.net`, `fabplan.report`, `fabplan.io`, `fabplan.errors`.
 """
