@@ -756,7 +756,44 @@ def _assign_by_type(data: _Panels, panel_type: np.ndarray, cylinder: np.ndarray,
         shapes.append(stage.molds)
         types.append(np.full(len(stage.molds), t))
         count += len(stage.molds)
-    return mold, variant, np.concatenate(shapes), np.concatenate(types)
+    return _merge_curved_molds(data, mold, variant, np.concatenate(shapes),
+                               np.concatenate(types), tolerance)
+
+
+def _merge_curved_molds(data: _Panels, mold: np.ndarray, variant: np.ndarray,
+                        shapes: np.ndarray, types: np.ndarray, tolerance: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Drop the cylinder or paraboloid molds whose panels all fit the other curved molds.
+
+    A single curved panel may sit on a doubly curved mold (and a doubly curved one on a
+    cylinder, within the tolerance). Without this, a looser tolerance that lets a few
+    panels pass as single curved would give them a cylinder mold of their own beside the
+    paraboloid mold that already fits them: more molds at a looser tolerance.
+    """
+    curved = np.flatnonzero(types[mold] > 0)
+    kept = np.flatnonzero(types > 0)
+    if len(np.unique(types[kept])) < 2:
+        return mold, variant, shapes, types
+    local = np.full(len(shapes), -1)
+    local[kept] = np.arange(len(kept))
+    dev, var = _gap_matrix(_subset(data, curved), shapes[kept])
+    members = local[mold[curved]]
+    # a panel's own mold fits it on the assignment samples, whatever the gap matrix's
+    # reach cut says
+    dev[np.arange(len(curved)), members] = np.minimum(dev[np.arange(len(curved)), members],
+                                                      tolerance)
+    tagged = np.column_stack([shapes[kept], kept])         # which molds survive
+    members, tagged, dev, var = _remove_molds(members, tagged, dev, var, tolerance)
+    survivors = tagged[:, 2].astype(np.int64)
+    if len(survivors) == len(kept):
+        return mold, variant, shapes, types
+    moved = survivors[members] != mold[curved]
+    variant = variant.copy()
+    variant[curved[moved]] = var[np.flatnonzero(moved), members[moved]]
+    mold = mold.copy()
+    mold[curved] = survivors[members]
+    mold, shapes, types = _drop_empty(mold, shapes, types)
+    return mold, variant, shapes, types
 
 
 def _subset(data: _Panels, idx: np.ndarray) -> _Panels:
