@@ -694,6 +694,13 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
         mold, mold_shape, mold_type = _drop_empty(mold, np.concatenate([mold_shape, new[2]]),
                                                   np.concatenate([mold_type, new[3]]))
         placement, _ = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+    # a panel classified single curved on the assignment samples but cast on a doubly
+    # curved mold (`_merge_curved_molds`) was never checked against a cylinder on the
+    # dense ones: classify it there
+    moved = np.flatnonzero((panel_type == 1) & (mold_type[mold] != 1))
+    if moved.size:
+        data = _panel_data(dense[moved], shapes.point[moved], frames[moved], kk[moved], mm, work)
+        panel_type[moved] = np.maximum(panel_type[moved], _classify(data, work)[0])
     q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
     footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
     deviation = placement_deviations(dense, placement, mold_shape[mold])

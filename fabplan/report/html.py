@@ -16,7 +16,7 @@ from __future__ import annotations
 import html
 import math
 import re
-from typing import Iterable, Sequence
+from typing import Iterable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -34,6 +34,7 @@ __all__ = [
     "section_id",
     "LINKS_NOTE",
     "html_figure_grid",
+    "Cell",
 ]
 
 #: Said wherever a report links to its files.
@@ -148,6 +149,14 @@ def format_range(low, high, unit: str = "", digits: int = 4) -> str:
 _NUMBER = re.compile(r"^[-+]?(\d+(\.\d*)?|\.\d+)(e[-+]?\d+)?$", re.IGNORECASE)
 
 
+class Cell(NamedTuple):
+    """A table cell shown as `text` and sorted by `value` (a number rounded for the page
+    still sorts by its full value)."""
+
+    text: str
+    value: float
+
+
 def _empty(value) -> bool:
     return value is None or (isinstance(value, str) and value.strip() in ("", "–"))
 
@@ -184,6 +193,10 @@ def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str
     for i, row in enumerate(rows):
         cells = []
         for value in row:
+            if isinstance(value, Cell):
+                full = f' data-v="{float(value.value)!r}"' if sortable else ""
+                cells.append(f'<td class="num"{full}>{html.escape(value.text)}</td>')
+                continue
             numeric = (isinstance(value, (int, float, np.integer, np.floating))
                        and not isinstance(value, (bool, np.bool_))
                        or isinstance(value, str) and _NUMBER.match(value) is not None)

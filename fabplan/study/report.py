@@ -457,6 +457,11 @@ def pareto_text(result: StudyResult) -> str:
     return text.strip()
 
 
+def _rounded(value: float | None, digits: int) -> html.Cell | str:
+    """A number shown to `digits` decimals that sorts by its full value."""
+    return "" if value is None else html.Cell(f"{value:.{digits}f}", value)
+
+
 def _comparison_table(result: StudyResult) -> str:
     """All candidates, sortable by any column; a sweep's panel size and mold tolerance
     get columns of their own."""
@@ -480,12 +485,12 @@ def _comparison_table(result: StudyResult) -> str:
             c.rank, c.name, c.candidate.describe(), *asked, "yes" if c.feasible else "no",
             m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
             (m.get("boundary_panels") or {}).get("count", 0),
-            f"{100 * m['coverage']:.1f}",
-            f"{m['deviation_mm']['max']:.1f}", f"{m['planarity_mm']['max']:.2f}",
-            f"{m['kink_deg']['max']:.2f}", _fmt_range(m["intersection_angle_deg"]),
+            _rounded(100 * m["coverage"], 1), _rounded(m["deviation_mm"]["max"], 1),
+            _rounded(m["planarity_mm"]["max"], 2), _rounded(m["kink_deg"]["max"], 2),
+            _fmt_range(m["intersection_angle_deg"]),
             _meusnier_text(result, m["meusnier_radius"]) if m["meusnier_radius"] else "",
             "" if s is None else f"{s['sheets']}{' (congruent)' if s['congruent'] else ''}",
-            f"{c.cost:.0f}", "yes" if c.pareto else "",
+            _rounded(c.cost, 0), "yes" if c.pareto else "",
             f"the same net as {c.same_net_as}" if c.same_net_as else ""])
         if not c.feasible:
             bad.append(len(rows) - 1)

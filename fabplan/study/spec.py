@@ -737,6 +737,8 @@ def _values(t: _Table, key: str, unit: str, *, free: bool = True) -> Sequence[fl
             out.append(None)
         elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0:
             out.append(float(v))
+        elif not free and not isinstance(value, list):
+            t.fail(key, f"must be a positive number ({unit}), got {v!r}")
         else:
             t.fail(key, f"must be {chr(34) + 'free' + chr(34) + ', ' if free else ''}a positive "
                    f"number ({unit}), a list of them or {{ from = .., to = .., step = .. }} "
