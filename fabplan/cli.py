@@ -12,7 +12,7 @@ import argparse
 import os
 import sys
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -631,20 +631,25 @@ def _cmd_study(args) -> int:
     study = read_study(resolve_study(args.study))
     check_output_folder(out)
     cache = _study_cache(out, study) if args.resume else None
-    if args.workers is not None or args.scheduler is not None:
-        from .study.parallel import run_study_parallel, worker_count
+    with ExitStack() as stack:
+        client = None
+        if args.workers is not None or args.scheduler is not None:
+            from .study.parallel import dask_client, run_study_parallel, worker_count
 
-        workers = None if args.workers is None else worker_count(args.workers)
-        result = run_study_parallel(study, workers=workers, scheduler=args.scheduler,
-                                    progress=say, max_panels=args.max_panels, cache=cache,
-                                    resume=args.resume)
-    else:
-        with progress.stage(f"running {len(study.candidates)} candidates"):
-            result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
-                               resume=args.resume)
-    writing = time.perf_counter()
-    with progress.stage("writing the report and the candidates' files"):
-        files = write_study(result, out, progress=say, rhino=args.rhino, view_3d=not args.no_3d)
+            workers = None if args.workers is None else worker_count(args.workers)
+            client = stack.enter_context(dask_client(workers, args.scheduler))
+            result = run_study_parallel(study, client=client, progress=say,
+                                        max_panels=args.max_panels, cache=cache,
+                                        resume=args.resume)
+        else:
+            with progress.stage(f"running {len(study.candidates)} candidates"):
+                result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
+                                   resume=args.resume)
+        writing = time.perf_counter()
+        # with workers, they make the candidates' files too
+        with progress.stage("writing the report and the candidates' files"):
+            files = write_study(result, out, progress=say, rhino=args.rhino,
+                                view_3d=not args.no_3d, client=client)
     done = time.perf_counter()
     if args.quiet:
         verdict = (f"recommended: {result.recommended}" if result.recommended else

@@ -184,3 +184,35 @@ def test_the_stadium_study_3d_view_shows_every_candidate_and_its_molds(browser, 
         page.js(f"window.fabplanViewers[0].setMode('{mode}')")
         assert _drawn(page.pixels(f"stadium-{mode}")) > 0.05
     assert page.errors == [], page.errors
+
+
+def test_the_study_table_sorts_by_a_clicked_column(browser, stadium_study):
+    """A click on a header sorts the candidates by that column, a second click the other
+    way; numbers sort as numbers, by their full value."""
+    out, run = stadium_study
+    assert run.code == 0, run.lines[-5:]
+    record = json.loads((out / "study.json").read_text())
+    deviation = {c["name"]: c["metrics"]["deviation_mm"]["max"] for c in record["candidates"]
+                 if not c["error"]}
+    page = browser.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto((out / "report.html").resolve().as_uri())
+    table = page.locator("table.sortable").first
+    headers = table.locator("thead th").all_inner_texts()
+    name_col, dev_col = headers.index("candidate"), headers.index("max deviation [mm]")
+
+    def names() -> list[str]:
+        return page.evaluate(f"""Array.from(document.querySelector('table.sortable').tBodies[0]
+            .rows).map(r => r.cells[{name_col}].textContent.trim())""")
+
+    ranked = names()
+    table.locator("thead th").nth(dev_col).click()
+    ascending = [n for n in names() if n in deviation]
+    assert ascending == sorted(deviation, key=deviation.get)
+    assert ascending != [n for n in ranked if n in deviation]   # the click changed the order
+    table.locator("thead th").nth(dev_col).click()
+    assert [n for n in names() if n in deviation] == ascending[::-1]
+    assert table.locator("thead th").nth(dev_col).get_attribute("aria-sort") == "descending"
+    assert errors == []
+    page.close()

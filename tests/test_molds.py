@@ -384,3 +384,19 @@ def test_isolines_of_a_linear_function_are_straight_and_at_their_level():
     values = seg[..., 0] + 0.5 * seg[..., 1]
     assert np.allclose(values, np.array([-1.0, 0.25, 1.5])[level][:, None])
     assert len(np.unique(level)) == 3
+
+
+def test_a_looser_tolerance_never_needs_more_molds():
+    """Regression: at 5 mm some saddle panels pass as single curved and got a cylinder
+    mold of their own beside the paraboloid mold that fits them all (2 molds at 5 mm,
+    1 at 2 mm). Curved molds whose panels all fit another curved mold are dropped."""
+    from fabplan.design.load import load_design
+    from fabplan.layout.surface_layout import glide, layout_surface
+
+    design = load_design("hyperbolic-paraboloid:width=6,depth=6,rise=1.5", triangles=4000)
+    net = glide(layout_surface(design, 1.0, angle=90.0), "snet").mesh
+    plans = {t: plan_molds(net, tolerance_mm=t, units="m") for t in (2.0, 5.0)}
+    assert (plans[5.0].panel_type == 1).any()              # the case the merge is for
+    assert plans[5.0].mold_count <= plans[2.0].mold_count
+    for t, plan in plans.items():
+        assert plan.fits_all and plan.deviation_mm.max() <= t

@@ -694,6 +694,13 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
         mold, mold_shape, mold_type = _drop_empty(mold, np.concatenate([mold_shape, new[2]]),
                                                   np.concatenate([mold_type, new[3]]))
         placement, _ = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+    # a panel classified single curved on the assignment samples but cast on a doubly
+    # curved mold (`_merge_curved_molds`) was never checked against a cylinder on the
+    # dense ones: classify it there
+    moved = np.flatnonzero((panel_type == 1) & (mold_type[mold] != 1))
+    if moved.size:
+        data = _panel_data(dense[moved], shapes.point[moved], frames[moved], kk[moved], mm, work)
+        panel_type[moved] = np.maximum(panel_type[moved], _classify(data, work)[0])
     q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
     footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
     deviation = placement_deviations(dense, placement, mold_shape[mold])
@@ -756,7 +763,44 @@ def _assign_by_type(data: _Panels, panel_type: np.ndarray, cylinder: np.ndarray,
         shapes.append(stage.molds)
         types.append(np.full(len(stage.molds), t))
         count += len(stage.molds)
-    return mold, variant, np.concatenate(shapes), np.concatenate(types)
+    return _merge_curved_molds(data, mold, variant, np.concatenate(shapes),
+                               np.concatenate(types), tolerance)
+
+
+def _merge_curved_molds(data: _Panels, mold: np.ndarray, variant: np.ndarray,
+                        shapes: np.ndarray, types: np.ndarray, tolerance: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Drop the cylinder or paraboloid molds whose panels all fit the other curved molds.
+
+    A single curved panel may sit on a doubly curved mold (and a doubly curved one on a
+    cylinder, within the tolerance). Without this, a looser tolerance that lets a few
+    panels pass as single curved would give them a cylinder mold of their own beside the
+    paraboloid mold that already fits them: more molds at a looser tolerance.
+    """
+    curved = np.flatnonzero(types[mold] > 0)
+    kept = np.flatnonzero(types > 0)
+    if len(np.unique(types[kept])) < 2:
+        return mold, variant, shapes, types
+    local = np.full(len(shapes), -1)
+    local[kept] = np.arange(len(kept))
+    dev, var = _gap_matrix(_subset(data, curved), shapes[kept])
+    members = local[mold[curved]]
+    # a panel's own mold fits it on the assignment samples, whatever the gap matrix's
+    # reach cut says
+    dev[np.arange(len(curved)), members] = np.minimum(dev[np.arange(len(curved)), members],
+                                                      tolerance)
+    tagged = np.column_stack([shapes[kept], kept])         # which molds survive
+    members, tagged, dev, var = _remove_molds(members, tagged, dev, var, tolerance)
+    survivors = tagged[:, 2].astype(np.int64)
+    if len(survivors) == len(kept):
+        return mold, variant, shapes, types
+    moved = survivors[members] != mold[curved]
+    variant = variant.copy()
+    variant[curved[moved]] = var[np.flatnonzero(moved), members[moved]]
+    mold = mold.copy()
+    mold[curved] = survivors[members]
+    mold, shapes, types = _drop_empty(mold, shapes, types)
+    return mold, variant, shapes, types
 
 
 def _subset(data: _Panels, idx: np.ndarray) -> _Panels:

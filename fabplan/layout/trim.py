@@ -708,6 +708,8 @@ def _neighbour_faces(polygons: list, mesh: QuadMesh) -> np.ndarray:
     at = np.clip(np.searchsorted(key[order], b * n + a), 0, len(key) - 1)
     found = key[order][at] == b * n + a
     a, b, panel, corner = a[found], b[found], panel[found], order[at[found]]
+    if not len(panel):              # no panel runs along a net side (all meet at corners)
+        return out
     length = np.linalg.norm(mesh.vertices[a] - mesh.vertices[b], axis=1)
     best = np.lexsort((-length, panel))
     first = best[np.r_[True, panel[best][1:] != panel[best][:-1]]]

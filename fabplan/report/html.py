@@ -16,7 +16,7 @@ from __future__ import annotations
 import html
 import math
 import re
-from typing import Iterable, Sequence
+from typing import Iterable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -34,6 +34,7 @@ __all__ = [
     "section_id",
     "LINKS_NOTE",
     "html_figure_grid",
+    "Cell",
 ]
 
 #: Said wherever a report links to its files.
@@ -63,8 +64,41 @@ details summary { cursor: pointer; font-weight: 600; margin: 0.6em 0; }
 nav.toc { background: #f6f8fa; padding: 0.5em 1.2em; display: inline-block; }
 nav.toc ol { margin: 0.2em 0; padding-left: 1.4em; }
 figure img { max-height: 80vh; }
+table.sortable th { cursor: pointer; user-select: none; }
+table.sortable th[aria-sort="ascending"]::after { content: " \\25B2"; font-size: 0.7em; }
+table.sortable th[aria-sort="descending"]::after { content: " \\25BC"; font-size: 0.7em; }
 @media print { h2 { page-break-before: auto; } th { position: static; } }
 """
+
+# Click a header of a sortable table to sort its rows by that column (again: the other
+# way). Numbers sort by the value in data-v (as written, not as rounded on the page);
+# empty cells go last either way.
+_SORT_SCRIPT = """<script>
+document.querySelectorAll("table.sortable").forEach(function (table) {
+  table.querySelectorAll("thead th").forEach(function (th, col) {
+    th.title = "sort by this column";
+    th.addEventListener("click", function () {
+      var up = th.getAttribute("aria-sort") !== "ascending";
+      table.querySelectorAll("thead th").forEach(function (h) { h.removeAttribute("aria-sort"); });
+      th.setAttribute("aria-sort", up ? "ascending" : "descending");
+      var body = table.tBodies[0], rows = Array.prototype.slice.call(body.rows);
+      function key(row) {
+        var td = row.cells[col]; if (!td) return null;
+        if (td.hasAttribute("data-v")) return parseFloat(td.getAttribute("data-v"));
+        var t = td.textContent.trim(); return (t === "" || t === "\u2013") ? null : t;
+      }
+      rows.sort(function (a, b) {
+        var x = key(a), y = key(b);
+        if (x === null || y === null) return (x === null) - (y === null);
+        var c = (typeof x === "number" && typeof y === "number") ? x - y
+                : String(x).localeCompare(String(y), undefined, {numeric: true});
+        return up ? c : -c;
+      });
+      rows.forEach(function (r) { body.appendChild(r); });
+    });
+  });
+});
+</script>"""
 
 
 def format_value(value, digits: int = 4) -> str:
@@ -115,12 +149,21 @@ def format_range(low, high, unit: str = "", digits: int = 4) -> str:
 _NUMBER = re.compile(r"^[-+]?(\d+(\.\d*)?|\.\d+)(e[-+]?\d+)?$", re.IGNORECASE)
 
 
+class Cell(NamedTuple):
+    """A table cell shown as `text` and sorted by `value` (a number rounded for the page
+    still sorts by its full value)."""
+
+    text: str
+    value: float
+
+
 def _empty(value) -> bool:
     return value is None or (isinstance(value, str) and value.strip() in ("", "–"))
 
 
 def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str | None = None,
-               digits: int = 4, bad_rows: Iterable[int] = (), hide_empty: bool = False) -> str:
+               digits: int = 4, bad_rows: Iterable[int] = (), hide_empty: bool = False,
+               sortable: bool = False) -> str:
     """An HTML table; numbers are right-aligned and formatted by `format_value`.
 
     Parameters
@@ -130,6 +173,8 @@ def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str
     caption : optional caption above the table.
     bad_rows : indices of rows to highlight (failures).
     hide_empty : leave out the columns that are empty in every row.
+    sortable : a click on a header sorts the rows by that column (`html_page` adds the
+        script); numeric cells carry their full value in ``data-v``.
 
     Examples
     --------
@@ -148,15 +193,24 @@ def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str
     for i, row in enumerate(rows):
         cells = []
         for value in row:
+            if isinstance(value, Cell):
+                full = f' data-v="{float(value.value)!r}"' if sortable else ""
+                cells.append(f'<td class="num"{full}>{html.escape(value.text)}</td>')
+                continue
             numeric = (isinstance(value, (int, float, np.integer, np.floating))
                        and not isinstance(value, (bool, np.bool_))
                        or isinstance(value, str) and _NUMBER.match(value) is not None)
             cls = ' class="num"' if numeric else ""
+            if sortable and numeric:
+                number = _NUMBER.match(value) if isinstance(value, str) else None
+                exact = float(number.group(0)) if number is not None else float(value)
+                cls += f' data-v="{exact!r}"'
             cells.append(f"<td{cls}>{html.escape(format_value(value, digits))}</td>")
         tr = '<tr class="bad">' if i in bad else "<tr>"
         body.append(tr + "".join(cells) + "</tr>")
     cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    table = '<table class="sortable">' if sortable else "<table>"
+    return f"{table}{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
 def html_paragraph(text: str, *, cls: str | None = None) -> str:
@@ -235,6 +289,8 @@ def html_page(title: str, parts: Iterable[str], *, subtitle: str | None = None,
             nav = ('<nav class="toc"><b>Contents</b><ol>'
                    + "".join(f'<li><a href="#{a}">{t}</a></li>' for a, t in entries)
                    + "</ol></nav>")
+    if 'class="sortable"' in body:
+        scripts = _SORT_SCRIPT + scripts
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>"
             f"<body><h1>{html.escape(title)}</h1>{sub}{nav}{body}{scripts}</body></html>\n")

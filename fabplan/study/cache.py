@@ -61,15 +61,19 @@ class CandidateCache:
 
         self._pickle = cloudpickle
         self.folder = Path(out_dir) / CACHE_FOLDER
+        self._study = study
         record = study.record()
         self._common = json.dumps({
             "fabplan": __version__, "design": record["design"], "files": _file_digests(study),
-            "panel_size": record["panel_size"], "limits": record["limits"],
             "strips": record["strips"], "max_iterations": record["max_iterations"],
         }, sort_keys=True, default=str)
 
     def key(self, candidate: Candidate) -> str:
-        text = self._common + json.dumps(asdict(candidate), sort_keys=True, default=str)
+        # the candidate's own panel size and limits, so that a sweep that grows keeps
+        # the candidates it had
+        own = {"candidate": asdict(candidate), "panel_size": self._study.panel_size_of(candidate),
+               "limits": asdict(self._study.limits_of(candidate))}
+        text = self._common + json.dumps(own, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def load(self, candidate: Candidate) -> CandidateResult | None:

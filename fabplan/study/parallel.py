@@ -6,7 +6,8 @@ candidate (whose molds and strips are reused). The parallel run keeps both, in t
 steps, so that its `study.json` is the serial one apart from timings:
 
 1. every candidate's net is solved in a task of its own (its layout computed there; the
-   baseline layout at 90 deg, computed first, travels with the tasks);
+   baseline layout at 90 deg, computed first, travels with the tasks); candidates that
+   differ only in their mold tolerance share one solve, as in the serial run;
 2. the client finds the candidates that ended at the same net as an earlier one, in the
    order of the study, as the serial run does;
 3. every candidate's molds, strips and measurements are made in a task, a twin's after
@@ -21,9 +22,10 @@ with its message, and the others go on; a worker that dies has its task retried
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
@@ -31,11 +33,12 @@ from ..errors import FabplanError, InputError
 from .run import (
     CandidateResult,
     StudyResult,
-    earlier_same_net,
     fabricate_candidate,
     judge_study,
     prepare_design,
+    shared_solve,
     solve_candidate,
+    twin_of,
 )
 
 if TYPE_CHECKING:
@@ -44,7 +47,7 @@ if TYPE_CHECKING:
     from .cache import CandidateCache
     from .spec import Candidate, Study
 
-__all__ = ["run_study_parallel", "RETRIES", "worker_count"]
+__all__ = ["run_study_parallel", "RETRIES", "worker_count", "dask_client"]
 
 RETRIES = 2   # a task whose worker died is run again this many times
 
@@ -75,7 +78,8 @@ def _solve_task(study: Study, design: DesignSurface, baseline: SurfaceLayout,
                 candidate: Candidate) -> CandidateResult:
     clock = time.perf_counter()
     try:
-        result = solve_candidate(study, design, candidate, {90.0: baseline}, {}, _quiet)
+        result = solve_candidate(study, design, candidate, {(90.0, study.panel_size): baseline},
+                                 {}, _quiet)
     except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
         result = _failed(candidate, exc)
     result.metrics.setdefault("seconds", {})["solve_task"] = time.perf_counter() - clock
@@ -113,6 +117,25 @@ def _connect(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
     cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
                            dashboard_address=None)
     return Client(cluster), cluster
+
+
+@contextlib.contextmanager
+def dask_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[Any]:
+    """A Dask client for a study's run and files: a `LocalCluster` of `workers` processes
+    (one thread each), or the running scheduler at `scheduler`; closed on exit.
+
+    Raises
+    ------
+    InputError
+        dask.distributed is not installed, or the scheduler cannot be reached.
+    """
+    client, cluster = _connect(workers, scheduler)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: str | None = None,
@@ -166,18 +189,24 @@ def _run_on(client: Any, study: Study, design: DesignSurface, baseline: SurfaceL
         say(f"  {sum(k is not None for k in kept)} of {len(candidates)} candidates taken from "
             "the cache")
     todo = [i for i, k in enumerate(kept) if k is None]
+    # one solve per solve key: a sweep of mold tolerances shares its nets
+    keys = [c.solve_key for c in candidates]
+    by_key = {keys[i]: k for i, k in enumerate(kept) if k is not None}
+    unique = [i for i in todo if keys[i] not in by_key and
+              next(j for j in todo if keys[j] == keys[i]) == i]
     shared = client.scatter([study, design, baseline], broadcast=True, hash=False)
     clock = time.perf_counter()
     solving = [client.submit(_solve_task, *shared, candidates[i], key=f"solve-{i}-{candidates[i].name}",
-                             pure=False, retries=RETRIES) for i in todo]
-    fresh = iter(_gather(solving, [candidates[i] for i in todo], "solved", say, clock, as_completed))
-    solved = [k if k is not None else next(fresh) for k in kept]
+                             pure=False, retries=RETRIES) for i in unique]
+    fresh = _gather(solving, [candidates[i] for i in unique], "solved", say, clock, as_completed)
+    by_key.update({keys[i]: r for i, r in zip(unique, fresh, strict=True)})
+    solved: list[CandidateResult] = [
+        k if k is not None else by_key[keys[i]] if i in unique else
+        shared_solve(by_key[keys[i]], candidates[i]) for i, k in enumerate(kept)]
     # twins in the order of the study, as the serial run finds them
     twins: list[int | None] = []
-    for i, s in enumerate(solved):
-        earlier = [r for j, r in enumerate(solved[:i]) if twins[j] is None]
-        twin = earlier_same_net(s.net.mesh, earlier, study.panel_size) if s.net else None
-        twins.append(None if twin is None else next(j for j, r in enumerate(solved) if r is twin))
+    for i in range(len(candidates)):
+        twins.append(twin_of(i, candidates, [r.net for r in solved], twins, study))
     clock = time.perf_counter()
     made: list[Any] = list(kept)
     for i in todo:

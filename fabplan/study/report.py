@@ -13,11 +13,10 @@ import csv
 import io
 import math
 import os
-import shutil
 import time
 from html import escape as html_escape
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,10 +29,11 @@ from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
-from .run import CandidateResult, StudyResult, molds_text, vertex_deviation_mm
+from .run import CandidateResult, StudyResult, cost_drivers, molds_text, vertex_deviation_mm
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
+    from .spec import Study
 
 __all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA", "LIMIT_NAMES",
            "coverage_gap_triangles", "study_viewer_scenes"]
@@ -42,14 +42,17 @@ STUDY_SCHEMA = "fabplan-study/1"
 
 
 # ---------------------------------------------------------------------------- records
-def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None) -> dict:
+def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None,
+                      study: Study) -> dict:
     return {
         "name": c.name,
         "net": c.candidate.net,
         "description": c.candidate.describe(),
         "baseline": c.candidate.baseline,
         "recommended": c.name == recommended,
-        "requested": {"angle_deg": c.candidate.angle, "radius": c.candidate.radius},
+        "requested": {"angle_deg": c.candidate.angle, "radius": c.candidate.radius,
+                      "panel_size": study.panel_size_of(c.candidate),
+                      "mold_tolerance_mm": study.limits_of(c.candidate).mold_tolerance_mm},
         "feasible": c.feasible,
         "reasons": c.reasons,
         "same_net_as": c.same_net_as,
@@ -60,6 +63,7 @@ def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None
         "cost": c.cost,
         "cost_terms": c.cost_terms,
         "rank": c.rank,
+        "pareto": c.pareto,
         "outputs": outputs,
     }
 
@@ -86,7 +90,8 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
         "recommended": result.recommended,
         "recommendation": result.recommendation,
         "sheets_charged": result.sheets_charged,
-        "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended)
+        "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended,
+                                         result.study)
                        for c in result.candidates],
         "seconds_run": result.seconds_run,
         "seconds_total": result.seconds_run if seconds_total is None else seconds_total,
@@ -95,7 +100,8 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
     }
 
 
-_CSV_COLUMNS = ["rank", "name", "net", "feasible", "cost", "molds", "panels", "boundary_panels",
+_CSV_COLUMNS = ["rank", "name", "net", "panel_size", "mold_tolerance_mm", "feasible", "cost",
+                "molds", "panels", "boundary_panels",
                 "planar", "single_curved", "double_curved", "coverage", "coverage_full_panels",
                 "folded", "deviation_max_mm",
                 "deviation_p95_mm",
@@ -103,15 +109,18 @@ _CSV_COLUMNS = ["rank", "name", "net", "feasible", "cost", "molds", "panels", "b
                 "radius_min", "radius_max", "sheets", "strips_congruent", "seconds", "reasons"]
 
 
-def _row(c: CandidateResult) -> dict:
+def _row(c: CandidateResult, study: Study) -> dict:
     m = c.metrics
+    asked = {"name": c.name, "net": c.candidate.net,
+             "panel_size": _num(study.panel_size_of(c.candidate)),
+             "mold_tolerance_mm": _num(study.limits_of(c.candidate).mold_tolerance_mm)}
     if c.failed:
-        return {"name": c.name, "net": c.candidate.net, "feasible": "no",
+        return {**asked, "feasible": "no",
                 "reasons": "; ".join(c.reasons), "seconds": _num(m.get("seconds", {}).get("total"))}
     types = m["molds"]["panel_types"]
     angle, radius, strips = m["intersection_angle_deg"], m["meusnier_radius"], m["strips"]
     return {
-        "rank": c.rank, "name": c.name, "net": c.candidate.net,
+        **asked, "rank": c.rank,
         "feasible": "yes" if c.feasible else "no", "cost": _num(c.cost),
         "molds": m["molds"]["count"], "panels": m["panels"],
         "boundary_panels": (m.get("boundary_panels") or {}).get("count", 0),
@@ -142,7 +151,7 @@ def candidates_csv(result: StudyResult) -> str:
     writer = csv.DictWriter(buffer, fieldnames=_CSV_COLUMNS, lineterminator="\n")
     writer.writeheader()
     for c in result.ranked():
-        writer.writerow(_row(c))
+        writer.writerow(_row(c, result.study))
     return buffer.getvalue()
 
 
@@ -278,6 +287,59 @@ def comparison_figure(result: StudyResult) -> str:
     return figures.figure_to_data_uri(fig)
 
 
+#: Studies with at least this many measured candidates get the Pareto plot.
+PARETO_MIN_CANDIDATES = 3
+
+
+def pareto_figure(result: StudyResult) -> str:
+    """Data URI: the cost drivers of every measured candidate (molds and, with strips,
+    sheets against the largest deviation), feasible ones filled, the Pareto-optimal ones
+    (`fabplan.study.run.pareto_optimal`) ringed and named, the recommended one starred."""
+    done = [c for c in result.ranked() if not c.failed]
+    drivers = cost_drivers(done)
+    limits = result.study.limits
+    axes_x = [(0, "molds [count]", limits.max_molds)]
+    if drivers[:, 1].any():
+        axes_x.append((1, "strip sheets [count]", limits.max_sheets))
+    from matplotlib.ticker import MaxNLocator
+
+    fig = figures.new_figure((6.2 * len(axes_x), 5.2))
+    feasible = np.array([c.feasible for c in done])
+    optimal = np.array([c.pareto for c in done])
+    best = np.array([c.name == result.recommended for c in done])
+    for k, (column, label, limit) in enumerate(axes_x):
+        ax = fig.add_subplot(1, len(axes_x), k + 1)
+        x, y = drivers[:, column], drivers[:, 2]
+        ax.scatter(x[feasible], y[feasible], s=42, color="#2e8b57", label="feasible", zorder=3)
+        ax.scatter(x[~feasible], y[~feasible], s=42, marker="x", color="#c0392b",
+                   label="not feasible", zorder=3)
+        ax.scatter(x[optimal], y[optimal], s=150, facecolors="none", edgecolors="black",
+                   lw=1.2, label="Pareto-optimal", zorder=4)
+        if best.any():
+            ax.scatter(x[best], y[best], s=260, marker="*", color="#f1c40f",
+                       edgecolors="black", lw=0.8, label="recommended", zorder=5)
+        # one label per point: candidates at the same place share it
+        named: dict[tuple[float, float], list[str]] = {}
+        for c, xi, yi in zip(done, x, y, strict=True):
+            if c.pareto or c.name == result.recommended:
+                named.setdefault((float(xi), round(float(yi), 1)), []).append(c.name)
+        for (xi, yi), names in named.items():
+            ax.annotate(",\n".join(names), (xi, yi), xytext=(6, 4), textcoords="offset points",
+                        fontsize=7)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.axhline(limits.max_deviation_mm, color="black", ls="--", lw=1)
+        if limit is not None:
+            ax.axvline(limit, color="black", ls="--", lw=1)
+        ax.set_xlabel(label)
+        ax.set_ylabel("largest deviation from the design [mm]")
+        ax.grid(alpha=0.3)
+        if k == 0:
+            ax.legend(fontsize=8, loc="best")
+    fig.suptitle("Cost drivers of every candidate (lower left is better; dashed: limits)")
+    fig.tight_layout()
+    return figures.figure_to_data_uri(fig)
+
+
 def _png_uri(path: Path) -> str:
     png = figures.compact_png(path.read_bytes())
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
@@ -383,36 +445,65 @@ def limit_text(key: str, value) -> tuple[str, str]:
     return name, f"{html.format_value(value)} {unit}".strip()
 
 
+def pareto_text(result: StudyResult) -> str:
+    """The Pareto-optimal candidates in words, and whether the recommended one is one."""
+    optimal = [c.name for c in result.ranked() if c.pareto]
+    text = (f"Pareto-optimal: {', '.join(optimal)}." if optimal else "")
+    best = next((c for c in result.candidates if c.name == result.recommended), None)
+    if best is not None and not best.pareto:
+        text += (f" The recommended {best.name} is not among them: the cost also counts "
+                 "panels by type and weighs the drivers, and a cheaper point may break a "
+                 "limit.")
+    return text.strip()
+
+
+def _rounded(value: float | None, digits: int) -> html.Cell | str:
+    """A number shown to `digits` decimals that sorts by its full value."""
+    return "" if value is None else html.Cell(f"{value:.{digits}f}", value)
+
+
 def _comparison_table(result: StudyResult) -> str:
+    """All candidates, sortable by any column; a sweep's panel size and mold tolerance
+    get columns of their own."""
     rows: list[list[object]] = []
     bad: list[int] = []
-    units = result.study.design.units
+    study = result.study
+    units = study.design.units
+    swept = study.swept
     for c in result.ranked():
         m = c.metrics
+        asked = ([study.panel_size_of(c.candidate)] if "panel_size" in swept else []) + \
+            ([study.limits_of(c.candidate).mold_tolerance_mm]
+             if "mold_tolerance_mm" in swept else [])
         if c.failed:
-            rows.append(["", c.name, c.candidate.describe(), "failed", "", "", "", "", "", "", "",
-                         "", "", "", "", c.reasons[0]])
+            rows.append(["", c.name, c.candidate.describe(), *asked, "failed",
+                         *[""] * 12, c.reasons[0]])
             bad.append(len(rows) - 1)
             continue
         s = m["strips"]
         rows.append([
-            c.rank, c.name, c.candidate.describe(), "yes" if c.feasible else "no",
+            c.rank, c.name, c.candidate.describe(), *asked, "yes" if c.feasible else "no",
             m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
             (m.get("boundary_panels") or {}).get("count", 0),
-            f"{100 * m['coverage']:.1f}",
-            f"{m['deviation_mm']['max']:.1f}", f"{m['planarity_mm']['max']:.2f}",
-            f"{m['kink_deg']['max']:.2f}", _fmt_range(m["intersection_angle_deg"]),
+            _rounded(100 * m["coverage"], 1), _rounded(m["deviation_mm"]["max"], 1),
+            _rounded(m["planarity_mm"]["max"], 2), _rounded(m["kink_deg"]["max"], 2),
+            _fmt_range(m["intersection_angle_deg"]),
             _meusnier_text(result, m["meusnier_radius"]) if m["meusnier_radius"] else "",
             "" if s is None else f"{s['sheets']}{' (congruent)' if s['congruent'] else ''}",
-            f"{c.cost:.0f}", f"the same net as {c.same_net_as}" if c.same_net_as else ""])
+            _rounded(c.cost, 0), "yes" if c.pareto else "",
+            f"the same net as {c.same_net_as}" if c.same_net_as else ""])
         if not c.feasible:
             bad.append(len(rows) - 1)
+    asked_columns = ([f"panel size [{units}]"] if "panel_size" in swept else []) + \
+        (["mold tolerance [mm]"] if "mold_tolerance_mm" in swept else [])
     return html.html_table(
-        ["rank", "candidate", "net", "feasible", "molds [count]", "panels [count]",
-         "of them boundary panels [count]", "design covered [%]", "max deviation [mm]",
-         "planarity [mm]", "max kink [deg]", "angle [deg]", f"Meusnier radius [{units}]",
-         "strip sheets [count]", "cost [cost units]", "note"], rows,
-        caption="All candidates, best first. " + _RANK_RULE, bad_rows=bad, hide_empty=True)
+        ["rank", "candidate", "net", *asked_columns, "feasible", "molds [count]",
+         "panels [count]", "of them boundary panels [count]", "design covered [%]",
+         "max deviation [mm]", "planarity [mm]", "max kink [deg]", "angle [deg]",
+         f"Meusnier radius [{units}]", "strip sheets [count]", "cost [cost units]",
+         "Pareto-optimal", "note"], rows,
+        caption="All candidates, best first (click a column's header to sort by it). "
+        + _RANK_RULE, bad_rows=bad, hide_empty=True, sortable=True)
 
 
 def _limits_table(result: StudyResult) -> str:
@@ -685,6 +776,14 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
             how="One bar per candidate, green when it meets every limit, red when not; the "
                 "dashed lines are the limits. Left: molds for the curved panels; right: the "
                 "largest distance from the design in mm."))
+    if "pareto" in pictures:
+        overview.append(html.html_figure(
+            pictures["pareto"], "Cost drivers: molds (and strip sheets) against the largest "
+            "deviation from the design, one point per candidate.",
+            how="Green dots meet every limit, red crosses do not; dashed lines are the limits. "
+                "Ringed and named are the Pareto-optimal candidates: no other candidate needs "
+                "at most as many molds and sheets and deviates at most as far, with one of "
+                "them less. The star is the recommended one. " + pareto_text(result)))
     overview += [_limits_table(result), _cost_table(result),
                  html.html_paragraph(cost_line(result))]
     parts.append(html.html_section("Comparison", *overview))
@@ -734,6 +833,10 @@ def study_pdf(result: StudyResult, pictures: dict, *, seconds_total: float | Non
     if "comparison" in pictures:
         first.image(pictures["comparison"], "Molds and deviation of each candidate, in rank "
                     "order: green meets every limit, red does not; dashed lines are the limits.")
+    if "pareto" in pictures:
+        first.image(pictures["pareto"], "Cost drivers of every candidate: ringed are the "
+                    "Pareto-optimal ones, the star is the recommended one. "
+                    + pareto_text(result))
     for c in result.ranked():
         head = f"{c.rank}. {c.name}" if c.rank else c.name
         section = doc.section(head)
@@ -786,15 +889,15 @@ def check_output_folder(folder: str | os.PathLike) -> None:
     output.check_output_folder(folder, accept=holds_study)
 
 
-def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
-                     twin: Path | None = None, rhino: bool = False) -> tuple:
-    """Write one candidate's files into `folder`; `twin` is the folder of the earlier
-    candidate whose net (and strip plan) this one shares, if any: its checked strip files
-    are copied rather than made and read back a second time."""
+def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: DesignSurface,
+                     say, twin_strips: dict[str, bytes] | None = None,
+                     rhino: bool = False) -> tuple:
+    """Write one candidate's files into `folder`; `twin_strips` are the strip files
+    (``strips/NAME``: bytes) of the earlier candidate whose net and strip plan this one
+    shares, if any: they are copied rather than made and read back a second time."""
     from ..fabricate.boundary_molds import boundary_panels_csv
     from ..fabricate.dxf import preview_png, sheet_document
 
-    study = result.study
     net, molds_plan = c.net, c.molds
     if net is None or molds_plan is None:
         raise ValueError(f"candidate {c.name!r} has no net to write (it failed)")
@@ -811,12 +914,12 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
         outputs["boundary_panels"] = "net.boundary.obj"
         outputs["boundary_panels_csv"] = "boundary-panels.csv"
     title = f"{c.name}: {c.candidate.describe()}"
-    write_layout_picture(folder / "net.png", result.design, net.mesh, title=title,
+    write_layout_picture(folder / "net.png", design, net.mesh, title=title,
                          singular_points=c.layout.singular_points if c.layout else None,
                          marks=fairness_marks(net.properties),
                          boundary_panels=net.boundary_panels)
     pictures = {"net": _png_uri(folder / "net.png"),
-                "deviation": deviation_figure(c, result.design, study.limits.max_deviation_mm,
+                "deviation": deviation_figure(c, design, study.limits.max_deviation_mm,
                                               study.design.mm_per_unit)}
     from ..fabricate.mold_report import mold_figure
 
@@ -826,8 +929,10 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
                                        f", {counted(molds['count'], 'mold')} for the curved "
                                        "ones (one colour per mold)"))
     if c.strips is not None:
-        if twin is not None and (twin / "strips").is_dir():
-            shutil.copytree(twin / "strips", folder / "strips")
+        if twin_strips:
+            (folder / "strips").mkdir()
+            for name, data in twin_strips.items():
+                output.path_inside(folder, *name.split("/")).write_bytes(data)
             files = sorted((folder / "strips").iterdir())
         else:
             files = c.strips.write(folder / "strips", previews=False)
@@ -853,14 +958,100 @@ def _candidate_files(c: CandidateResult, folder: Path, result: StudyResult, say,
                 [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
 
 
+def candidate_file_bytes(c: CandidateResult, study: Study, design: DesignSurface,
+                         twin_files: dict[str, bytes] | None = None, rhino: bool = False
+                         ) -> tuple[dict[str, bytes], dict, dict]:
+    """One candidate's files made in a folder of its own and returned as bytes, so that
+    a Dask worker, on this machine or another, can make them (see `write_study`).
+
+    Parameters
+    ----------
+    twin_files : the files of the candidate whose strips this one shares (its
+        ``strips/`` are copied).
+
+    Returns
+    -------
+    files : path inside the candidate's folder -> bytes.
+    outputs, pictures : as the serial writer gives them.
+    """
+    import tempfile
+
+    strips = None if twin_files is None else {
+        k: v for k, v in twin_files.items() if k.startswith("strips/")}
+    with tempfile.TemporaryDirectory(prefix="fabplan-candidate-") as tmp:
+        folder = Path(tmp) / "candidate"
+        outputs, pictures = _candidate_files(c, folder, study, design, lambda message: None,
+                                             twin_strips=strips, rhino=rhino)
+        files = {p.relative_to(folder).as_posix(): p.read_bytes()
+                 for p in sorted(folder.rglob("*")) if p.is_file()}
+    return files, outputs, pictures
+
+
+def _files_task(c: CandidateResult, study: Study, design: DesignSurface,
+                twin_made: tuple | None, rhino: bool) -> tuple[dict[str, bytes], dict, dict]:
+    """`candidate_file_bytes` given what the strip twin's task made (or None)."""
+    return candidate_file_bytes(c, study, design, None if twin_made is None else twin_made[0],
+                                rhino=rhino)
+
+
+def _strip_twin(c: CandidateResult, by_name: dict[str, CandidateResult]) -> str | None:
+    """The candidate whose strip files `c` takes (the same net and strip plan), or None."""
+    twin = None if c.twin is None else by_name.get(c.twin)
+    shared = twin is not None and twin.strips is not None and twin.strips is c.strips
+    return twin.name if shared and twin is not None else None
+
+
+def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) -> tuple:
+    """Every measured candidate's folder in `tmp`; on the workers of `client` when given
+    (each makes its files in memory, see `candidate_file_bytes`; this process writes
+    them), else here. Returns the outputs and pictures by candidate name."""
+    outputs, pictures = {}, {}
+    by_name = {c.name: c for c in result.candidates}
+    done = [c for c in result.candidates if not c.failed]
+    if client is None:
+        for c in done:
+            # names are checked when the study is read; this guards the API too
+            folder = output.path_inside(tmp, "candidates", c.name)
+            twin = _strip_twin(c, by_name)
+            strips = None if twin is None else {
+                p.relative_to(folder.parent / twin).as_posix(): p.read_bytes()
+                for p in sorted((folder.parent / twin / "strips").rglob("*")) if p.is_file()}
+            outputs[c.name], pictures[c.name] = _candidate_files(
+                c, folder, result.study, result.design, say, twin_strips=strips, rhino=rhino)
+        return outputs, pictures
+    from distributed import as_completed
+
+    study, design = client.scatter([result.study, result.design], broadcast=True, hash=False)
+    futures: dict[str, Any] = {}
+    for c in done:                         # in the study's order: a twin comes after its own
+        twin = _strip_twin(c, by_name)
+        futures[c.name] = client.submit(
+            _files_task, c, study, design, None if twin is None else futures[twin], rhino,
+            key=f"files-{c.name}", pure=False)
+    names = {f.key: name for name, f in futures.items()}
+    for future in as_completed(list(futures.values())):
+        name = names[future.key]
+        files, outputs[name], pictures[name] = future.result()
+        folder = output.path_inside(tmp, "candidates", name)
+        for relative, data in files.items():
+            path = output.path_inside(folder, *relative.split("/"))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
+        say(f"    wrote {name}")
+    return outputs, pictures
+
+
 def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False,
-                view_3d: bool = True, pdf: bool = True) -> list[Path]:
+                view_3d: bool = True, pdf: bool = True, client: Any = None) -> list[Path]:
     """Write every file of a study into `out_dir`, replacing the folder as a whole.
 
     `progress` is called with a line per written candidate; `view_3d` puts the
     interactive 3D view into ``report.html``; `pdf` writes ``report.pdf`` beside it. With
     `rhino`, every candidate's folder also gets ``net.3dm`` (the net, its polylines, its
     panels by mold and its strip curves) and ``net.glb``.
+
+    With a Dask `client` (``distributed.Client``), the candidates' files are made on its
+    workers, in parallel (`candidate_file_bytes`), and written here.
 
     `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
     The time recorded as ``seconds_total`` (and shown in the report) is the run time
@@ -876,20 +1067,11 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
     clock = time.perf_counter()
     out_dir = Path(out_dir)
     with output.output_folder(out_dir, replace=True, accept=holds_study) as tmp:
-        outputs, pictures = {}, {}
-        by_name = {c.name: c for c in result.candidates}
-        for c in result.candidates:
-            if not c.failed:
-                twin = None if c.same_net_as is None else by_name.get(c.same_net_as)
-                shared = twin is not None and twin.strips is not None and twin.strips is c.strips
-                # names are checked when the study is read; this guards the API too
-                folder = output.path_inside(tmp, "candidates", c.name)
-                outputs[c.name], pictures[c.name] = _candidate_files(
-                    c, folder, result, say,
-                    twin=folder.parent / twin.name if twin is not None and shared else None,
-                    rhino=rhino)
+        outputs, pictures = _write_candidates(result, tmp, say, rhino, client)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
+        if sum(not c.failed for c in result.candidates) >= PARETO_MIN_CANDIDATES:
+            pictures["pareto"] = pareto_figure(result)
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
         if pdf:

@@ -56,7 +56,7 @@ __all__ = [
     "mold_metrics",
     "molds_text",
     "same_net",
-    "earlier_same_net",
+    "twin_of",
     "start_angle",
     "verdict",
     "candidate_cost",
@@ -64,6 +64,12 @@ __all__ = [
     "recommend",
     "is_lamella_study",
     "SAME_NET_TOLERANCE",
+    "baseline_of",
+    "cost_drivers",
+    "pareto_optimal",
+    "shared_solve",
+    "Layouts",
+    "Starts",
 ]
 
 
@@ -81,8 +87,12 @@ class CandidateResult:
     reasons : the verdict in plain words (the failed checks, or what was met).
     cost, cost_terms : the ranking cost and its parts (None for a failed candidate).
     rank : 1 for the best candidate.
+    pareto : no other measured candidate is at least as good in every cost driver (molds,
+        strip sheets, largest deviation) and better in one (`cost_drivers`).
     same_net_as : name of an earlier candidate that ended at the same net (see
-        `same_net`), or None.
+        `same_net`) and planned its molds at this one's mold tolerance, or None.
+    twin : name of an earlier candidate that ended at the same net, at any mold
+        tolerance (its strips are this one's), or None.
     notes : remarks beside the verdict (that it is the same net as another candidate).
     net, molds, strips, layout : the objects behind the metrics (for the files).
     boundary_molds : the molds of the net's boundary panels (`BoundaryMolds`), or None.
@@ -99,7 +109,9 @@ class CandidateResult:
     cost: float | None = None
     cost_terms: dict = field(default_factory=dict)
     rank: int | None = None
+    pareto: bool = False
     same_net_as: str | None = None
+    twin: str | None = None
     deviation_mm: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
     net: OptimizationResult | None = None
@@ -184,20 +196,23 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     say = progress or (lambda message: None)
     start = time.perf_counter()
     design, baseline = prepare_design(study, say, max_panels)
-    layouts = {90.0: baseline}
-    starts: dict[float, OptimizationResult] = {}
+    layouts: Layouts = {(90.0, study.panel_size): baseline}
+    starts: Starts = {}
+    solves: dict[tuple, CandidateResult] = {}
     results: list[CandidateResult] = []
     count = len(study.candidates)
     for i, candidate in enumerate(study.candidates, 1):
         kept = cache.load(candidate) if cache is not None and resume else None
         if kept is not None:
             say(f"[{i}/{count}] {candidate.name}: taken from the cache")
+            solves.setdefault(candidate.solve_key, kept)
             results.append(kept)
             continue
         say(f"[{i}/{count}] {candidate.name}: {candidate.describe()}")
         clock = time.perf_counter()
         try:
-            result = _run_candidate(study, design, candidate, layouts, starts, results, say)
+            result = _run_candidate(study, design, candidate, layouts, starts, solves, results,
+                                    say)
         except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             reason = str(exc) if isinstance(exc, FabplanError) else \
                 f"{type(exc).__name__}: {exc} ({_where(exc)})"
@@ -229,9 +244,10 @@ def prepare_design(study: Study, say: Callable[[str], None],
     design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
     say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
         f"{design.area:.4g} {study.design.units}^2")
-    check_panel_count(design.area / study.panel_size**2, max_panels=max_panels,
+    smallest = min(study.panel_size_of(c) for c in study.candidates)
+    check_panel_count(design.area / smallest**2, max_panels=max_panels,
                       what=f"{study.path or study.name}: layouts of panel size "
-                           f"{study.panel_size:g} {study.design.units} on a design of area "
+                           f"{smallest:g} {study.design.units} on a design of area "
                            f"{design.area:.4g} {study.design.units}^2",
                       fix="give a larger panels.size")
     return design, layout_surface(design, study.panel_size, angle=90.0)
@@ -258,7 +274,7 @@ def judge_study(study: Study, design: DesignSurface, results: list[CandidateResu
             judged.append(replace(r, checks=[], feasible=False, cost=None, cost_terms={},
                                   rank=None, notes=[]))
             continue
-        checks = verdict(r.metrics, study.limits)
+        checks = verdict(r.metrics, study.limits_of(r.candidate))
         feasible = all(c["ok"] for c in checks)
         cost, terms = candidate_cost(r.metrics, study.cost, charge_sheets=charge_sheets)
         notes = [f"the same net as {r.same_net_as} (the same panels, every vertex within "
@@ -268,6 +284,9 @@ def judge_study(study: Study, design: DesignSurface, results: list[CandidateResu
                               reasons=_reasons(checks, feasible), cost=cost, cost_terms=terms,
                               rank=None, notes=notes))
     rank_candidates(judged)
+    measured = [r for r in judged if not r.failed]
+    for r, optimal in zip(measured, pareto_optimal(cost_drivers(measured)), strict=True):
+        r.pareto = bool(optimal)
     recommended, text = recommend(judged, study, sheets_charged=charge_sheets)
     return StudyResult(study, design, judged, recommended, text, sheets_charged=charge_sheets,
                        seconds_run=seconds_run)
@@ -297,14 +316,32 @@ def same_net(a: QuadMesh, b: QuadMesh, tolerance: float) -> bool:
     return bool(np.abs(a.vertices - b.vertices).max(initial=0.0) <= tolerance)
 
 
-def earlier_same_net(mesh: QuadMesh, earlier: list[CandidateResult],
-                     panel_size: float) -> CandidateResult | None:
-    """The first of the `earlier` candidates that ended at the net `mesh` (within
-    `SAME_NET_TOLERANCE` of the panel size), not counting those that are themselves the
-    net of another; None when there is none."""
-    return next((r for r in earlier if not r.failed and r.net is not None and
-                 r.same_net_as is None and
-                 same_net(r.net.mesh, mesh, SAME_NET_TOLERANCE * panel_size)), None)
+def twin_of(i: int, candidates: list[Candidate], nets: list[OptimizationResult | None],
+            twins: list[int | None], study: Study) -> int | None:
+    """The earlier candidate whose net candidate `i` ended at, or None.
+
+    Candidates are compared in the order of the study, each with the earlier ones that
+    are options of their own (no twin, or a twin planned at another mold tolerance). Of
+    those that ended at the same net (`same_net` within `SAME_NET_TOLERANCE` of the panel
+    size), one at candidate `i`'s mold tolerance comes first: its molds and strips are
+    `i`'s; else the first, whose strips are `i`'s.
+
+    Parameters
+    ----------
+    i : the candidate's index in `candidates` (the study's order).
+    nets : solved net of every candidate up to `i` (None for a failed one).
+    twins : what this function gave for every candidate before `i`.
+    """
+    net = nets[i]
+    if net is None:
+        return None
+    tolerance = [study.limits_of(c).mold_tolerance_mm for c in candidates[:i + 1]]
+    own = [j for j, t in enumerate(twins[:i]) if t is None or tolerance[t] != tolerance[j]]
+    size = study.panel_size_of(candidates[i])
+    same = [j for j in own if (other := nets[j]) is not None and
+            same_net(other.mesh, net.mesh, SAME_NET_TOLERANCE * size)]
+    same.sort(key=lambda j: tolerance[j] != tolerance[i])
+    return same[0] if same else None
 
 
 def _where(exc: BaseException) -> str:
@@ -313,20 +350,45 @@ def _where(exc: BaseException) -> str:
     return f"{frame.filename.rsplit('/', 1)[-1]}:{frame.lineno}"
 
 
+#: Layouts of a study by start angle (degrees) and panel size (model units).
+Layouts = dict[tuple[float, float], "SurfaceLayout"]
+#: Gliding S-nets that the nets leaving the design start from, keyed as `Layouts`.
+Starts = dict[tuple[float, float], "OptimizationResult"]
+
+
 def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
-                   layouts: dict[float, SurfaceLayout], starts: dict[float, OptimizationResult],
+                   layouts: Layouts, starts: Starts, solves: dict[tuple, CandidateResult],
                    earlier: list[CandidateResult], say: Callable[[str], None]) -> CandidateResult:
-    """Solve one candidate and plan its molds and strips (the serial path)."""
-    solved = solve_candidate(study, design, candidate, layouts, starts, say)
-    twin = earlier_same_net(solved.net.mesh, earlier, study.panel_size) if solved.net else None
-    return fabricate_candidate(study, design, solved, twin, say)
+    """Solve one candidate and plan its molds and strips (the serial path). Candidates
+    that differ only in their mold tolerance share the solve kept in `solves`."""
+    if candidate.solve_key in solves:
+        say("    its net is that of an earlier candidate of the sweep")
+        solved = shared_solve(solves[candidate.solve_key], candidate)
+    else:
+        solved = solve_candidate(study, design, candidate, layouts, starts, say)
+        solves[candidate.solve_key] = solved
+    names = [r.name for r in earlier]
+    twins = [None if r.twin is None else names.index(r.twin) for r in earlier]
+    j = twin_of(len(earlier), [*(r.candidate for r in earlier), candidate],
+                [*(r.net for r in earlier), solved.net], twins, study)
+    return fabricate_candidate(study, design, solved, None if j is None else earlier[j], say)
+
+
+def shared_solve(solved: CandidateResult, candidate: Candidate) -> CandidateResult:
+    """The solved half of `candidate` taken from another candidate's (`solved`) with the
+    same `Candidate.solve_key`: the same net, no seconds of its own (or the same failure)."""
+    if solved.failed:
+        return CandidateResult(candidate, error=solved.error, reasons=list(solved.reasons))
+    return CandidateResult(candidate, metrics={"seconds": {"layout": 0.0, "optimize": 0.0}},
+                           net=solved.net, layout=solved.layout)
 
 
 def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
-                    layouts: dict[float, SurfaceLayout], starts: dict[float, OptimizationResult],
+                    layouts: Layouts, starts: Starts,
                     say: Callable[[str], None]) -> CandidateResult:
-    """The first half of a candidate: its layout (cached in `layouts` by start angle) and
-    its solved net (an S-net start for the nets that leave the design, cached in `starts`).
+    """The first half of a candidate: its layout (cached in `layouts` by start angle and
+    panel size) and its solved net (an S-net start for the nets that leave the design,
+    cached in `starts`).
 
     Returns
     -------
@@ -340,11 +402,12 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     seconds: dict[str, float] = {}
     clock = time.perf_counter()
     angle = start_angle(candidate, design)
-    if angle != 90.0:
-        say(f"    layout at {angle:g} deg")
-    if angle not in layouts:
-        layouts[angle] = layout_surface(design, study.panel_size, angle=angle)
-    layout = layouts[angle]
+    size = study.panel_size_of(candidate)
+    key = (angle, size)
+    if key not in layouts:
+        say(f"    layout at {angle:g} deg, panel size {size:g}")
+        layouts[key] = layout_surface(design, size, angle=angle)
+    layout = layouts[key]
     seconds["layout"] = time.perf_counter() - clock
     settings = SolverSettings(max_iterations=study.max_iterations)
 
@@ -357,11 +420,11 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         net = glide(layout, candidate.net, angle=candidate.angle, settings=settings,
                     progress=report)
         if candidate.net == "snet":
-            starts[angle] = net
+            starts[key] = net
     else:
-        if angle not in starts:
-            starts[angle] = glide(layout, "snet", settings=settings)
-        net = optimize(starts[angle].mesh, candidate.net, angle=candidate.angle,
+        if key not in starts:
+            starts[key] = glide(layout, "snet", settings=settings)
+        net = optimize(starts[key].mesh, candidate.net, angle=candidate.angle,
                        radius=candidate.radius, reference=design.reference, settings=settings,
                        progress=report)
         add_boundary_panels(net, layout)
@@ -376,7 +439,9 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     """The second half of a candidate: molds, strips and every measurement of its net.
 
     A `twin` is an earlier candidate that ended at the same net (CMC on a saddle ending at
-    the minimal surface): its molds and strips are this candidate's, not planned again.
+    the minimal surface): its strips are this candidate's, not planned again, and so are
+    its molds when they were planned at this candidate's mold tolerance; only then is the
+    candidate the twin's net (`same_net_as`) rather than an option of its own.
     """
     from ..fabricate.boundary_molds import boundary_molds
     from ..fabricate.molds import MoldSettings, plan_molds
@@ -386,15 +451,19 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     net, candidate = solved.net, solved.candidate
     assert net is not None
     seconds = dict(solved.metrics.get("seconds", {}))
+    tolerance = study.limits_of(candidate).mold_tolerance_mm
+    same_molds = (twin is not None and twin.molds is not None
+                  and twin.molds.settings.tolerance_mm == tolerance)
     if twin is not None:
-        say(f"    the same net as {twin.name}: its molds and strips are reused")
+        say(f"    the same net as {twin.name}: its {'molds and ' if same_molds else ''}strips "
+            "are reused")
     clock = time.perf_counter()
     units = study.design.units
-    if twin is not None and twin.molds is not None:
+    if same_molds:
+        assert twin is not None and twin.molds is not None
         molds = twin.molds
     else:
-        molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=study.limits.mold_tolerance_mm,
-                                                  units=units))
+        molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=tolerance, units=units))
     bounds = None
     if net.boundary_panels is not None:
         bounds = boundary_molds(molds, net.boundary_panels, study.limits.max_deviation_mm)
@@ -423,7 +492,8 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
                            layout=solved.layout, boundary_molds=bounds,
-                           same_net_as=twin.name if twin is not None else None,
+                           same_net_as=twin.name if same_molds and twin is not None else None,
+                           twin=twin.name if twin is not None else None,
                            deviation_mm=deviation)
 
 
@@ -786,6 +856,29 @@ def candidate_cost(metrics: dict, weights: CostWeights, *,
     return float(sum(terms.values())), terms
 
 
+def cost_drivers(results: list[CandidateResult]) -> np.ndarray:
+    """(n, 3) float, what makes each measured candidate dear: molds, strip sheets (0
+    without strips) and the largest deviation from the design (mm)."""
+    return np.array([[r.metrics["molds"]["count"], (r.metrics.get("strips") or {}).get("sheets", 0),
+                      r.metrics["deviation_mm"]["max"]] for r in results],
+                    dtype=np.float64).reshape(-1, 3)
+
+
+def pareto_optimal(points: np.ndarray) -> np.ndarray:
+    """(n,) bool, the points no other point dominates (at most as large in every column
+    and smaller in one): the Pareto front of costs to be minimised.
+
+    Examples
+    --------
+    >>> pareto_optimal(np.array([[1, 5], [2, 2], [3, 3], [1, 5], [4, 1.0]])).tolist()
+    [True, True, False, True, True]
+    """
+    p = np.asarray(points, dtype=np.float64)
+    no_worse = (p[:, None, :] <= p[None, :, :]).all(axis=2)   # [j, i]: j is nowhere worse
+    better = (p[:, None, :] < p[None, :, :]).any(axis=2)      # [j, i]: j is better somewhere
+    return np.asarray(~(no_worse & better).any(axis=0), dtype=bool)
+
+
 def rank_candidates(results: list[CandidateResult]) -> None:
     """Set `rank`: feasible candidates by cost, then the others by failed checks, cost. A
     candidate that ended at the net of another ranks right after it (their costs differ by
@@ -829,7 +922,6 @@ def recommend(results: list[CandidateResult], study: Study, *,
     baseline's. A candidate that ended at the same net as an earlier one is named as that
     net, not as another option.
     """
-    base = next((r for r in results if r.candidate.baseline and not r.failed), None)
     feasible = sorted((r for r in results if r.feasible), key=_by_rank)
     if not feasible:
         measured = sorted((r for r in results if not r.failed), key=_by_rank)
@@ -840,6 +932,7 @@ def recommend(results: list[CandidateResult], study: Study, *,
                       f"({best.candidate.describe()}), which fails: "
                       + "; ".join(best.reasons) + ".")
     best = feasible[0]
+    base = baseline_of(best.candidate, results)
     limits = study.limits
     words = [f"Recommended: {best.name} ({best.candidate.describe()})."]
     said = None                        # a candidate whose failure is already told
@@ -875,6 +968,15 @@ def recommend(results: list[CandidateResult], study: Study, *,
                                             if r.same_net_as else "")
             for r in infeasible) + ".")
     return best.name, " ".join(words)
+
+
+def baseline_of(candidate: Candidate, results: list[CandidateResult]) -> CandidateResult | None:
+    """The measured baseline a candidate is compared with: the one of its panel size and
+    mold tolerance in a sweep, else the first."""
+    bases = [r for r in results if r.candidate.baseline and not r.failed]
+    return next((r for r in bases if r.candidate.panel_size == candidate.panel_size and
+                 r.candidate.mold_tolerance_mm == candidate.mold_tolerance_mm),
+                bases[0] if bases else None)
 
 
 def _achievements(best: CandidateResult, base: CandidateResult | None, study: Study) -> list[str]:

@@ -29,7 +29,7 @@ import math
 import os
 import re
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
@@ -208,6 +208,10 @@ class Candidate:
     start_angle : intersection angle of the layout the candidate starts from (degrees);
         None: the candidate's angle, or one suited to the design (see
         `fabplan.study.start_angle`).
+    panel_size : its panel size (model units) when the study sweeps ``[panels] size``;
+        None: the study's.
+    mold_tolerance_mm : its mold tolerance when the study sweeps
+        ``[limits] mold_tolerance_mm``; None: the study's.
     """
 
     name: str
@@ -216,6 +220,14 @@ class Candidate:
     radius: float | None = None
     baseline: bool = False
     start_angle: float | None = None
+    panel_size: float | None = None
+    mold_tolerance_mm: float | None = None
+
+    @property
+    def solve_key(self) -> tuple:
+        """What its net depends on: candidates with the same key (a sweep of mold
+        tolerances) share one solve."""
+        return (self.net, self.angle, self.radius, self.start_angle, self.panel_size)
 
     @property
     def glides(self) -> bool:
@@ -232,12 +244,20 @@ class Candidate:
             parts.append(f"radius {self.radius:g}")
         elif get_net(self.net).radius == "param":
             parts.append("free radius")
+        if self.panel_size is not None:
+            parts.append(f"panels {self.panel_size:g}")
+        if self.mold_tolerance_mm is not None:
+            parts.append(f"mold tolerance {self.mold_tolerance_mm:g} mm")
         return ", ".join(parts)
 
 
 @dataclass(frozen=True)
 class Study:
-    """A validated study (see `read_study`)."""
+    """A validated study (see `read_study`).
+
+    `panel_size` and ``limits.mold_tolerance_mm`` are the first values of a sweep; each
+    candidate of a sweep carries its own (`panel_size_of`, `limits_of`).
+    """
 
     name: str
     path: Path | None
@@ -251,6 +271,27 @@ class Study:
     max_iterations: int = 100
     extra: dict = field(default_factory=dict)
 
+    def panel_size_of(self, candidate: Candidate) -> float:
+        """The panel size (model units) a candidate is laid out with."""
+        return self.panel_size if candidate.panel_size is None else candidate.panel_size
+
+    def limits_of(self, candidate: Candidate) -> Limits:
+        """The limits a candidate is judged by (its own mold tolerance in a sweep)."""
+        if candidate.mold_tolerance_mm is None:
+            return self.limits
+        return replace(self.limits, mold_tolerance_mm=candidate.mold_tolerance_mm)
+
+    @property
+    def swept(self) -> dict[str, list[float]]:
+        """The swept study-wide values (``panel_size``, ``mold_tolerance_mm``) with more
+        than one value, in the order of the file."""
+        out: dict[str, list[float]] = {}
+        for key in ("panel_size", "mold_tolerance_mm"):
+            values = [getattr(c, key) for c in self.candidates if c.baseline]
+            if len(values) > 1 and None not in values:
+                out[key] = sorted(set(values), key=values.index)
+        return out
+
     def record(self) -> dict:
         """The study as JSON (what `study.json` says was asked)."""
         from dataclasses import asdict
@@ -261,6 +302,7 @@ class Study:
             "description": self.description,
             "design": asdict(self.design),
             "panel_size": self.panel_size,
+            **({"sweep": self.swept} if self.swept else {}),
             "limits": asdict(self.limits),
             "strips": None if self.strips is None else
             {**asdict(self.strips), "nets": self.strips.nets if isinstance(self.strips.nets, str)
@@ -448,19 +490,24 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     meta.done()
 
     panels = _Table(top.get("panels", {}), "panels", file)
-    panel_size = panels.number("size", required=True, unit="model units")
+    if not panels.has("size"):
+        panels.missing("size", "give a positive number (model units)")
+    sizes = _values(panels, "size", "model units", free=False)
     panels.done()
 
     design = _design(_Table(top.get("design", None) or {}, "design", file), folder)
-    _check_panel_units(panel_size, design, file)
+    for size in sizes:
+        _check_panel_units(size, design, file)
     strips = _strips(_Table(top.get("strips"), "strips", file)) if top.has("strips") else None
-    limits = _limits(_Table(top.get("limits", None) or {}, "limits", file),
-                     congruence_tolerance_mm=strips.congruence_tolerance_mm if strips else 0.1)
+    limits, tolerances = _limits(_Table(top.get("limits", None) or {}, "limits", file),
+                                 congruence_tolerance_mm=strips.congruence_tolerance_mm
+                                 if strips else 0.1)
     cost = _cost(_Table(top.get("cost", {}), "cost", file))
-    candidates = _candidates(top.get("candidates", "auto"), file)
+    candidates = _sweep(_candidates(top.get("candidates", "auto"), file), sizes, tolerances,
+                        file)
     top.done()
     return Study(name=name, path=path, description=description, design=design,
-                 panel_size=panel_size, limits=limits, strips=strips, cost=cost,
+                 panel_size=sizes[0], limits=limits, strips=strips, cost=cost,
                  candidates=candidates, max_iterations=max_iterations)
 
 
@@ -572,10 +619,14 @@ def _check_surface(spec: str, t: _Table) -> None:
         t.fail("parameters", f"do not describe a surface: {exc}")
 
 
-def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
+def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits, list[float]]:
+    """The limits (with the first mold tolerance) and every mold tolerance swept."""
+    if not t.has("mold_tolerance_mm"):
+        t.missing("mold_tolerance_mm", "give a positive number (mm)")
+    tolerances = _values(t, "mold_tolerance_mm", "mm", free=False)
     limits = Limits(
         max_deviation_mm=t.number("max_deviation_mm", required=True, unit="mm"),
-        mold_tolerance_mm=t.number("mold_tolerance_mm", required=True, unit="mm"),
+        mold_tolerance_mm=tolerances[0],
         max_molds=t.number("max_molds", integer=True),
         planar_panels=t.boolean("planar_panels"),
         planarity_tolerance_mm=t.number("planarity_tolerance_mm", 2.0, unit="mm"),
@@ -600,7 +651,7 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> Limits:
     if lo is not None and hi is not None and lo > hi:
         t.fail("min_strip_radius_mm", f"({lo:g}) is larger than max_strip_radius_mm ({hi:g})")
     t.done()
-    return limits
+    return limits, tolerances
 
 
 def _strips(t: _Table) -> StripOptions:
@@ -640,33 +691,60 @@ def _cost(t: _Table) -> CostWeights:
     return CostWeights(**weights)
 
 
-def _values(t: _Table, key: str, unit: str) -> list[float | None]:
-    """A parameter as a list of values: a number, "free", a list, or {from, to, step}."""
+#: Most values one swept key may take.
+MAX_SWEEP_VALUES = 50
+
+
+@overload
+def _values(t: _Table, key: str, unit: str, *, free: Literal[False]) -> list[float]: ...
+@overload
+def _values(t: _Table, key: str, unit: str, *, free: bool = ...) -> list[float | None]: ...
+def _values(t: _Table, key: str, unit: str, *, free: bool = True) -> Sequence[float | None]:
+    """A parameter as a list of values: a number, ``"free"`` (with `free`), a list, or a
+    sweep ``{from, to, step}`` or ``{from, to, count}`` (both ends included)."""
     value = t.get(key)
-    if value is None or value == "free":
+    if free and (value is None or value == "free"):
         return [None]
     if isinstance(value, dict):
         sweep = _Table(value, f"{t.where}.{key}", t.file)
         lo = sweep.number("from", required=True, unit=unit)
         hi = sweep.number("to", required=True, unit=unit)
-        step = sweep.number("step", required=True, unit=unit)
-        sweep.done()
+        if sweep.has("step") == sweep.has("count"):
+            t.fail(key, "is a sweep: give either 'step' or 'count' with 'from' and 'to'")
         if hi < lo:
             t.fail(key, f"sweeps from {lo:g} down to {hi:g}: 'to' must not be below 'from'")
-        count = int(math.floor((hi - lo) / step + 1e-9)) + 1
-        if count > 50:
-            t.fail(key, f"sweep has {count} values; at most 50")
+        if sweep.has("count"):
+            count = sweep.number("count", 1, integer=True)
+            if count == 1 and hi > lo:
+                t.fail(key, "is a sweep of count 1: 'from' and 'to' must then be equal")
+            step = (hi - lo) / max(count - 1, 1)
+        else:
+            step = sweep.number("step", required=True, unit=unit)
+            count = int(math.floor((hi - lo) / step + 1e-9)) + 1
+        sweep.done()
+        if count > MAX_SWEEP_VALUES:
+            t.fail(key, f"sweep has {count} values; at most {MAX_SWEEP_VALUES}")
+        # rounded, so that names and cache keys read 1.25, not 1.2500000000000002
         return [round(lo + i * step, 9) for i in range(count)]
     items = value if isinstance(value, list) else [value]
+    if not items:
+        t.fail(key, "is an empty list")
+    if len(items) > MAX_SWEEP_VALUES:
+        t.fail(key, f"lists {len(items)} values; at most {MAX_SWEEP_VALUES}")
     out: list[float | None] = []
     for v in items:
-        if v == "free":
+        if free and v == "free":
             out.append(None)
         elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0:
             out.append(float(v))
+        elif not free and not isinstance(value, list):
+            t.fail(key, f"must be a positive number ({unit}), got {v!r}")
         else:
-            t.fail(key, f"must be \"free\", a positive number ({unit}), a list of them or "
-                   f"{{ from = .., to = .., step = .. }}; got {v!r}")
+            t.fail(key, f"must be {chr(34) + 'free' + chr(34) + ', ' if free else ''}a positive "
+                   f"number ({unit}), a list of them or {{ from = .., to = .., step = .. }} "
+                   f"(or count = .. instead of step); got {v!r}")
+    if len(set(out)) < len(out):
+        t.fail(key, f"lists a value twice: {items!r}")
     return out
 
 
@@ -724,6 +802,44 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
             raise InputError(f"{file}: two candidates are both called {c.name!r}; give them "
                              "different names (candidates[].name)")
     return tuple(out)
+
+
+def _sweep(candidates: tuple[Candidate, ...], sizes: list[float], tolerances: list[float],
+           file: str) -> tuple[Candidate, ...]:
+    """Every candidate (the baseline included) at every swept panel size and mold
+    tolerance, named with the swept values (``isogonal-60-p1.5-t2``); unswept studies
+    keep their candidates as they are."""
+    if len(sizes) == 1 and len(tolerances) == 1:
+        return candidates
+    out = []
+    for c in candidates:
+        for size in sizes:
+            for tolerance in tolerances:
+                name = c.name
+                if len(sizes) > 1:
+                    name += f"-p{size:g}"
+                if len(tolerances) > 1:
+                    name += f"-t{tolerance:g}"
+                out.append(replace(c, name=name,
+                                   panel_size=size if len(sizes) > 1 else None,
+                                   mold_tolerance_mm=tolerance if len(tolerances) > 1 else None))
+    if len(out) > MAX_CANDIDATES:
+        raise InputError(f"{file}: the sweep makes {len(out)} candidates "
+                         f"({len(candidates)} nets x {len(sizes)} panel sizes x "
+                         f"{len(tolerances)} mold tolerances); at most {MAX_CANDIDATES}")
+    for c in out:
+        if not SAFE_NAME.fullmatch(c.name):
+            raise InputError(f"{file}: candidate name {c.name!r} {_SAFE_NAME_RULE}")
+    names = [c.name for c in out]
+    twice = next((n for n in names if names.count(n) > 1), None)
+    if twice is not None:
+        raise InputError(f"{file}: two candidates of the sweep are both called {twice!r}; "
+                         "give the candidates different names (candidates[].name)")
+    return tuple(out)
+
+
+#: Most candidates a study may expand into (a sweep of sweeps grows fast).
+MAX_CANDIDATES = 1000
 
 
 SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._+-]{0,63}")
