@@ -132,8 +132,21 @@ def _listing(paths: list[Path]) -> str:
 
 
 def _viewer_paths(args: argparse.Namespace, base: Path) -> list[Path]:
-    """OUT.3dm and OUT.glb when `--3dm` asks for them (checked before any work)."""
-    return [base.with_suffix(".3dm"), base.with_suffix(".glb")] if args.rhino else []
+    """OUT.3dm and OUT.glb when `--3dm` asks for them, OUT.html when `--html` does
+    (checked before any work)."""
+    return ([base.with_suffix(".3dm"), base.with_suffix(".glb")] if args.rhino else []) + (
+        [base.with_suffix(".html")] if getattr(args, "html", False) else [])
+
+
+@contextmanager
+def _html_file(args: argparse.Namespace, base: Path) -> Iterator[Path | None]:
+    """With `--html`: the staged path of ``BASE.html``, moved into place when the block
+    (writing the command's other files) succeeds, and gone when it fails."""
+    if not args.html:
+        yield None
+        return
+    with atomic_path(base.with_suffix(".html")) as staged:
+        yield staged
 
 
 @contextmanager
@@ -192,9 +205,23 @@ def _cmd_optimize(args) -> int:
         result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                           reference=reference, fixed=fixed, handles=handles, settings=settings,
                           coherent=args.coherent, guards=args.guards, progress=report)
-    with progress.stage("writing the net"), \
+    with progress.stage("writing the net" + (" and its page" if args.html else "")), \
+            _html_file(args, out) as page, \
             _viewer_files(args, out, result.mesh, units=args.units) as viewers:
+        if page is not None:
+            from .layout.view import net_view_html
+            from .solve.reference import ReferenceSurface
+
+            page.write_text(net_view_html(
+                result, title=f"{result.net} net: {out.name}",
+                subtitle=f"fabplan optimize {Path(args.input).name}: {result.status} after "
+                         f"{counted(result.iterations, 'iteration')}; model units {args.units}",
+                surface=reference if reference is not None else ReferenceSurface.from_mesh(mesh),
+                deviation_from="the reference", units=args.units,
+                picture_caption=f"{result.net} net {out.name}"), encoding="utf-8")
         obj_path, json_path = result.write(out)
+    if page is not None:
+        viewers = [out.with_suffix(".html"), *viewers]
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items()
                        if isinstance(v, float))
     if not args.quiet:
@@ -377,13 +404,27 @@ def _cmd_layout(args) -> int:
              + (f", {layout.family}" if layout.family else
                 f", {angle:.4g} deg" if isinstance(angle, float) else ""))
     # the picture and the Rhino files land only with the net they show
-    with progress.stage("writing the net and its picture"), atomic_path(picture) as staged, \
+    with progress.stage("writing the net and its picture" + (" and page" if args.html else "")), \
+            atomic_path(picture) as staged, _html_file(args, out) as page, \
             _viewer_files(args, out, result.mesh, units=args.units) as viewers:
         write_layout_picture(staged, design, result.mesh, title=title,
                              singular_points=layout.singular_points,
                              marks=fairness_marks(result.properties),
                              boundary_panels=result.boundary_panels)
+        if page is not None:
+            from .layout.view import net_view_html
+
+            page.write_text(net_view_html(
+                result, title=f"Layout: {title}",
+                subtitle=f"fabplan layout {args.surface}: {result.status} after "
+                         f"{counted(result.iterations, 'iteration')}; model units {args.units}",
+                surface=design, units=args.units, picture_png=staged.read_bytes(),
+                picture_caption=f"{picture.name}: the net (blue) on the design (grey), boundary "
+                                "panels green, the places its lines turn most marked"),
+                encoding="utf-8")
         obj_path, json_path = result.write(out)
+    if page is not None:
+        viewers = [out.with_suffix(".html"), *viewers]
     props = result.properties
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items() if isinstance(v, float))
     if args.quiet:
@@ -764,6 +805,7 @@ def _add_optimize(sub: Any) -> None:
                         help="never add the guards against folding, nor retry a folded solve")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
+    _add_html(p)
     _add_3dm(p, units=True)
     _add_verbosity(p)
     p.set_defaults(func=_cmd_optimize)
@@ -855,6 +897,7 @@ def _add_layout(sub: Any) -> None:
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
+    _add_html(p)
     _add_3dm(p, units=True)
     _add_verbosity(p)
     p.set_defaults(func=_cmd_layout)
@@ -905,6 +948,14 @@ def _add_strips(sub: Any) -> None:
     _add_3dm(p, units=False)
     _add_verbosity(p)
     p.set_defaults(func=_cmd_strips)
+
+
+def _add_html(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--html", action="store_true",
+                   help="also write OUT.html: a page that opens offline with the net in an "
+                        "interactive 3D view (colour by deviation, Meusnier radius, angle, "
+                        "kink, line turn; boundary panels green), its key numbers and its "
+                        "picture (about 0.7 MB, most of it the viewer)")
 
 
 def _add_3dm(p: argparse.ArgumentParser, *, units: bool) -> None:

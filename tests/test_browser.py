@@ -216,3 +216,131 @@ def test_the_study_table_sorts_by_a_clicked_column(browser, stadium_study):
     assert table.locator("thead th").nth(dev_col).get_attribute("aria-sort") == "descending"
     assert errors == []
     page.close()
+
+
+# ------------------------------------------------------------------ one net's page (--html)
+@pytest.fixture(scope="module")
+def dome_page(tmp_path_factory):
+    """`fabplan layout paraboloid --html`: a dome with boundary panels all round."""
+    out = tmp_path_factory.mktemp("dome") / "dome.obj"
+    assert main(["layout", "paraboloid", "--net", "snet", "--panel-size", "1", "--triangles",
+                 "8000", "--html", "-q", "-o", str(out)]) == 0
+    return out
+
+
+def _obj(path: Path) -> tuple[int, list[list[int]]]:
+    """Vertex count and faces (0-based) of an OBJ file."""
+    lines = path.read_text().splitlines()
+    faces = [[int(t.split("/")[0]) - 1 for t in line.split()[1:]]
+             for line in lines if line.startswith("f ")]
+    return sum(line.startswith("v ") for line in lines), faces
+
+
+def _greenish(pixels: np.ndarray) -> np.ndarray:
+    p = pixels.astype(int)
+    return (p[..., 1] > p[..., 0] + 15) & (p[..., 1] > p[..., 2] + 15)
+
+
+def _click_layer_panel(page: Report, panel: int) -> dict:
+    """Click where boundary panel `panel` is drawn; the info line's items by key."""
+    point = page.js(f"window.fabplanViewers[0].screenPointOfFace({panel}, true)")
+    page.page.mouse.click(point["x"], point["y"])
+    items = page.view.locator(".fp-info .fp-item")
+    return {items.nth(i).get_attribute("data-key"): items.nth(i).locator(".fp-value").inner_text()
+            for i in range(items.count())}
+
+
+def test_the_layout_page_3d_view_recolours_and_draws_its_boundary_panels(browser, dome_page):
+    n_net, net_faces = _obj(dome_page)
+    _, outlines = _obj(dome_page.with_name("dome.boundary.obj"))
+    page = Report(browser, dome_page.with_suffix(".html"))
+    viewer = "window.fabplanViewers[0]"
+    page.js(f"{viewer}.setView('above')")
+    first = page.pixels("layout-deviation")
+    assert _drawn(first) > 0.05, "the 3D view drew (almost) nothing"
+    assert len(np.unique(first.reshape(-1, 3), axis=0)) > 50, "the 3D view is flat colour"
+    modes = page.js(f"{viewer}.data.modes.map(m => m.key)")
+    assert {"deviation", "radius", "angle", "kink", "turn", "gaps"} <= set(modes)
+    assert "mm" in page.view.locator(".fp-legend").inner_text()
+    page.js(f"{viewer}.setMode('radius')")
+    radius = page.pixels("layout-radius")
+    assert _changed(first, radius) > 0.02, "switching the colour mode changed no pixels"
+    assert " m" in page.view.locator(".fp-legend").inner_text()
+    page.js(f"{viewer}.setMode('turn')")
+    assert _changed(radius, page.pixels("layout-turn")) > 0.02
+
+    # the boundary panels: drawn green (hatched) where the net leaves the design's rim
+    page.js(f"{viewer}.setMode('deviation')")
+    on = page.pixels("layout-boundary-on")
+    page.js("document.querySelector('input.fp-layer').click()")
+    off = page.pixels("layout-boundary-off")
+    gone = np.abs(on.astype(int) - off.astype(int)).sum(axis=2) > 30
+    assert gone.mean() > 0.01, "hiding the boundary panels changed no pixels"
+    assert _greenish(on)[gone].mean() > 0.6, "the boundary panels are not drawn green"
+    assert "boundary panel" not in page.view.locator(".fp-legend").inner_text()
+    page.js("document.querySelector('input.fp-layer').click()")
+    assert "boundary panel" in page.view.locator(".fp-legend").inner_text()
+
+    # picked, a boundary panel names itself, its kind and the full panel it continues
+    kinds = page.js(f"Array.from({viewer}.layer.info[0].values)")
+    names = page.js(f"{viewer}.layer.info[0].names")
+    assert len(kinds) == len(outlines), "the view lacks boundary panels of dome.boundary.obj"
+    trimmed = [k for k, kind in enumerate(kinds) if kind == 0]
+    picked, sharing, last = 0, 0, -1
+    for panel in trimmed:
+        shown = _click_layer_panel(page, panel)
+        if "layer" not in shown:
+            continue                      # hidden behind the net from this view
+        picked, last = picked + 1, panel
+        k = int(shown["layer"])
+        assert shown["kind"] == names[kinds[k]]
+        face = int(shown["continues face"])
+        assert 0 <= face < len(net_faces)
+        on_net = {v for v in outlines[k] if v < n_net}
+        sharing += bool(on_net & set(net_faces[face])) or not on_net
+    assert picked >= 5, f"only {picked} boundary panels could be clicked"
+    assert sharing >= 0.8 * picked, "the face a boundary panel continues is not beside it"
+    _click_layer_panel(page, last)
+    page.pixels("layout-boundary-picked")
+    # hidden, they are not picked: the same click reaches the net or nothing
+    page.js("document.querySelector('input.fp-layer').click()")
+    assert "layer" not in _click_layer_panel(page, trimmed[0])
+    assert page.errors == [], page.errors
+
+
+def test_the_stadium_3d_view_shows_boundary_panels_on_their_molds(browser, stadium_study):
+    """Every candidate's boundary panels are drawn; a clicked one names the mold it is cut
+    from, as its candidate's boundary-panels.csv does."""
+    import csv
+
+    out, run = stadium_study
+    assert run.code == 0, run.lines[-5:]
+    page = Report(browser, out / "report.html")
+    viewer = "window.fabplanViewers[0]"
+    titles = page.js(f"{viewer}.scenes.map(s => s.title)")
+    assert all(page.js(f"!!{viewer}.scenes.map(s => s.layer)[{i}]") for i in range(len(titles)))
+    page.js(f"{viewer}.setView('front')")
+    on = page.pixels("stadium-boundary-on")
+    page.js("document.querySelector('input.fp-layer').click()")
+    off = page.pixels("stadium-boundary-off")
+    assert _changed(on, off) > 0.005, "hiding the boundary panels changed no pixels"
+    page.js("document.querySelector('input.fp-layer').click()")
+    name = titles[0].split(". ", 1)[1]
+    with open(out / "candidates" / name / "boundary-panels.csv", newline="") as handle:
+        rows = {int(r["panel"]): r for r in csv.DictReader(handle)}
+    count = page.js(f"{viewer}.layer.count")
+    assert count == len(rows)
+    picked, last = 0, -1
+    for panel in np.linspace(0, count - 1, 30).astype(int):
+        shown = _click_layer_panel(page, int(panel))
+        if "layer" not in shown:
+            continue
+        picked, last = picked + 1, int(panel)
+        row = rows[int(shown["layer"])]
+        assert shown["continues face"] == row["neighbour_face"]
+        mold = shown["cut from mold"]
+        assert mold == row["mold"] or (row["mold"] == "own" and mold.startswith("a mold of its own"))
+    assert picked >= 5, f"only {picked} boundary panels could be clicked"
+    _click_layer_panel(page, last)
+    page.pixels("stadium-boundary-picked")
+    assert page.errors == [], page.errors

@@ -21,9 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..layout.trim import BoundaryPanels
+from ..report.viewer import PanelInfo
 from .molds import MOLD_TYPES, MoldPlan, placement_deviations
 
-__all__ = ["BoundaryMolds", "boundary_molds", "boundary_panels_csv"]
+__all__ = ["BoundaryMolds", "boundary_molds", "boundary_panels_csv", "boundary_mold_info"]
 
 
 @dataclass
@@ -86,6 +87,16 @@ def boundary_panels_csv(panels: BoundaryPanels, molds: BoundaryMolds) -> str:
         rows.append(f"{k},{kind[k]},{panels.neighbour_face[k]},{mold},{gap},{corners[k]},"
                     f"{panels.area[k]:.9g}")
     return "\n".join(rows) + "\n"
+
+
+def boundary_mold_info(molds: BoundaryMolds) -> list[PanelInfo]:
+    """What the 3D view shows of a picked boundary panel's mold (`fabplan.layout.view.
+    boundary_layer`): the mold it is cut from (that of the full panel it continues, the
+    id of the molds table) or a mold of its own, and its gap to that mold (mm)."""
+    gap = np.where(np.isfinite(molds.deviation_mm), molds.deviation_mm, np.nan)
+    return [PanelInfo("cut from mold", molds.mold, integer=True,
+                      absent=f"a mold of its own (over {molds.limit_mm:g} mm from its neighbour's)"),
+            PanelInfo("gap to the mold", gap, "mm", 3)]
 
 
 def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> BoundaryMolds:

@@ -17,13 +17,8 @@ from scipy.spatial.transform import Rotation
 
 from ..io.output import output_folder, write_texts
 from ..io.records import json_text
-from ..net.geometry import (
-    canonical_stars,
-    face_normals,
-    fit_star_spheres,
-    intersection_angles,
-    kink_angles,
-)
+from ..net.geometry import face_normals
+from ..net.view import net_edges, net_scene
 from ..report import figures, html, viewer
 from ..report.html import counted
 from ..report.pdf import PdfDocument
@@ -87,35 +82,6 @@ def facade_view(mesh) -> tuple:
     return normals, figures.elevation_frame(front, elevation)
 
 
-def net_edges(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Every edge of a net once, with the family of the net's lines it belongs to.
-
-    Returns
-    -------
-    edges : (e, 2) int vertex ids; family : (e,) int, 0 or 1 (the two strip families),
-    -1 on edges of faces that are not quads.
-    """
-    idx, ptr, sizes = mesh.face_indices, mesh.face_indptr, mesh.face_sizes
-    face = np.repeat(np.arange(len(sizes)), sizes)
-    local = np.arange(len(idx)) - ptr[face]
-    nxt = np.where(local == sizes[face] - 1, ptr[face], np.arange(len(idx)) + 1)
-    pairs = np.sort(np.stack([idx, idx[nxt]], axis=1), axis=1)
-    family = np.asarray(mesh.edge_family)
-    # an edge seen from a quad keeps the quad's family over a non-quad's -1
-    order = np.lexsort((-family, pairs[:, 1], pairs[:, 0]))
-    pairs, family = pairs[order], family[order]
-    first = np.ones(len(pairs), bool)
-    first[1:] = np.any(pairs[1:] != pairs[:-1], axis=1)
-    return pairs[first], family[first]
-
-
-def _face_max(mesh, vertex_values: np.ndarray) -> np.ndarray:
-    face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
-    out = np.full(len(mesh.face_sizes), -np.inf)
-    np.maximum.at(out, face, vertex_values[mesh.face_indices])
-    return out
-
-
 def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | None = None,
                      deviation_limit_mm: float | None = None, gaps: np.ndarray | None = None,
                      infinite_radius: float | None = None) -> viewer.ViewerScene:
@@ -134,94 +100,33 @@ def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | N
     Returns
     -------
     `fabplan.report.viewer.ViewerScene` with the colour modes mold, deviation, Meusnier
-    radius, angle, kink and (with `gaps`) coverage gaps.
+    radius, angle, kink and (with `gaps`) coverage gaps (`fabplan.net.view.net_scene`).
     """
-    mesh = plan.mesh
-    X = mesh.vertices
-    units = plan.settings.units
-    normals = face_normals(X, mesh)
-    front, initial = viewer.scene_front(normals, mesh.face_areas, X)
-    colours = _mold_colors(plan)
-    per_m = _PER_M
-    modes = [viewer.ColourMode(
+    settings = plan.settings
+    scene = net_scene(plan.mesh, title=title, units=settings.units,
+                      mm_per_unit=settings.mm_per_unit, deviation_mm=deviation_mm,
+                      deviation_limit_mm=deviation_limit_mm, gaps=gaps,
+                      infinite_radius=infinite_radius)
+    molds = viewer.ColourMode(
         "mold", "mold (one colour per mold)",
         f"Each colour is one mold ({counted(plan.mold_count, 'mold')}); click a panel for its "
         "mold id, the row of the molds table.",
-        values=plan.mold, categorical=True, palette=colours)]
-    info = [viewer.PanelInfo("mold", plan.mold, integer=True)]
-    if deviation_mm is not None:
-        # the scale reaches past the limit, so that the limit's mark sits inside it
-        top = max(float(np.max(deviation_mm)), 1.15 * (deviation_limit_mm or 0.0))
-        modes.append(viewer.ColourMode(
-            "deviation", "deviation from the design [mm]",
-            "Distance of the net from the design surface, measured at the vertices and blended "
-            "across each panel; red is above the limit.",
-            values=deviation_mm, where="vertex", unit="mm", value_range=(0.0, top),
-            limit=deviation_limit_mm))
-        info.append(viewer.PanelInfo("deviation from the design (largest corner)",
-                                     _face_max(mesh, deviation_mm), "mm", 3))
-    else:
-        modes.append(viewer.ColourMode(
+        values=plan.mold, categorical=True, palette=_mold_colors(plan))
+    scene.modes.insert(0, molds)
+    if deviation_mm is None:
+        scene.modes.insert(1, viewer.ColourMode(
             "deviation", "gap to its mold [mm]",
             "Largest gap between a panel and its mold, measured on the densely sampled panel; "
             "red is above the tolerance.", values=plan.deviation_mm, unit="mm",
-            value_range=(0.0, max(float(plan.deviation_mm.max()), plan.settings.tolerance_mm)),
-            limit=plan.settings.tolerance_mm))
-    info.append(viewer.PanelInfo("gap to its mold", plan.deviation_mm, "mm", 3))
-    info.append(viewer.PanelInfo("k1", plan.curvature[:, 0] * per_m, "1/m", 3))
-    info.append(viewer.PanelInfo("k2", plan.curvature[:, 1] * per_m, "1/m", 3))
-    stars = canonical_stars(X, mesh.stars)
-    if len(stars):
-        radius = np.full(mesh.vertex_count, np.nan)
-        radius[stars[:, 0]] = fit_star_spheres(X, stars).radius
-        if infinite_radius is not None:
-            radius[radius > infinite_radius] = np.nan
-        finite = radius[np.isfinite(radius)]
-        if finite.size:
-            modes.append(viewer.ColourMode(
-                "radius", f"Meusnier radius [{units}]",
-                "Radius of the sphere through each vertex and its four neighbours (blended "
-                "across the panels); one colour everywhere is a constant radius. Grey: "
-                "planar stars, boundary.", values=radius, where="vertex", unit=units,
-                value_range=(float(np.quantile(finite, 0.02)), float(np.quantile(finite, 0.98)))))
-            face_radius = np.where(np.isfinite(radius), radius, np.nan)
-            counts = np.bincount(np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes),
-                                 np.isfinite(face_radius[mesh.face_indices]),
-                                 minlength=len(mesh.face_sizes))
-            sums = np.bincount(np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes),
-                               np.nan_to_num(face_radius[mesh.face_indices]),
-                               minlength=len(mesh.face_sizes))
-            with np.errstate(invalid="ignore", divide="ignore"):
-                info.append(viewer.PanelInfo("Meusnier radius (mean of corners)",
-                                             sums / counts, units))
-        angle = np.full(mesh.vertex_count, np.nan)
-        angle[stars[:, 0]] = np.degrees(intersection_angles(X, stars))
-        modes.append(viewer.ColourMode(
-            "angle", "angle between the families [deg]",
-            "Angle at which the net's two families of lines cross at each vertex; one colour "
-            "everywhere is a constant angle. Grey: boundary and irregular vertices.",
-            values=angle, where="vertex", unit="deg"))
-    pairs = mesh.interior_edge_faces
-    kink = np.zeros(len(mesh.face_sizes))
-    if len(pairs):
-        k = np.degrees(kink_angles(X, mesh))
-        np.maximum.at(kink, pairs[:, 0], k)
-        np.maximum.at(kink, pairs[:, 1], k)
-    modes.append(viewer.ColourMode(
-        "kink", "kink to the neighbours [deg]",
-        "Largest angle between a panel and its neighbours across an edge: 0 where the "
-        "panels continue each other smoothly.", values=kink, unit="deg"))
-    info.append(viewer.PanelInfo("kink", kink, "deg", 3))
-    if gaps is not None:
-        modes.append(viewer.ColourMode(
-            "gaps", "coverage gaps (red)",
-            f"Red: parts of the design no panel covers ({len(gaps)} design triangles); grey: "
-            "the panels."))
-    edges, family = net_edges(mesh)
-    return viewer.ViewerScene(title=title, vertices=X, face_sizes=mesh.face_sizes,
-                              face_indices=mesh.face_indices, modes=modes, info=info,
-                              edges=edges, edge_family=family, gaps=gaps, front=front,
-                              initial=initial, eye_height=1700.0 / plan.settings.mm_per_unit)
+            value_range=(0.0, max(float(plan.deviation_mm.max()), settings.tolerance_mm)),
+            limit=settings.tolerance_mm))
+    # mold first, the deviation from the design (when given) next, then the mold's numbers
+    at = 1 if deviation_mm is not None else 0
+    scene.info[at:at] = [viewer.PanelInfo("gap to its mold", plan.deviation_mm, "mm", 3),
+                         viewer.PanelInfo("k1", plan.curvature[:, 0] * _PER_M, "1/m", 3),
+                         viewer.PanelInfo("k2", plan.curvature[:, 1] * _PER_M, "1/m", 3)]
+    scene.info.insert(0, viewer.PanelInfo("mold", plan.mold, integer=True))
+    return scene
 
 
 def mold_figure(plan: MoldPlan, *, title: str | None = None) -> str:

@@ -78,6 +78,9 @@ class BoundaryPanels:
     boundary_distance_max : largest distance of a point flagged `on_boundary` from the
         design's boundary curve (the exact one for a built-in design), in panel sizes.
     seconds : time taken.
+    triangles : (t, 3) int into `vertices`, the panels cut into triangles in the plane of
+        the parametrization (concave outlines stay whole), or None; triangle_panel :
+        (t,) int, the panel of each (see `panel_triangles`).
     """
 
     vertices: np.ndarray
@@ -95,6 +98,8 @@ class BoundaryPanels:
     extension: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     boundary_distance_max: float = 0.0
     seconds: float = 0.0
+    triangles: np.ndarray | None = None
+    triangle_panel: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -105,6 +110,33 @@ class BoundaryPanels:
     def panel_count(self) -> int:
         """The boundary panels made as panels of their own (not extensions)."""
         return int(np.sum(~self.extension))
+
+    def panel_triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """The panels as triangles: (t, 3) int into `vertices` and (t,) int, the panel of
+        each; those of the trimming when kept, else a fan from each outline's first point
+        (right for the convex outlines of most boundary panels).
+
+        Examples
+        --------
+        >>> panels = BoundaryPanels(np.zeros((5, 3)), [np.array([0, 1, 2, 3]), np.array([1, 4, 2])],
+        ...                         0, np.zeros(5, bool), np.zeros(5, bool), np.zeros(2, int),
+        ...                         np.ones(2), 1.0, 1.0, 1.0)
+        >>> triangles, panel = panels.panel_triangles()
+        >>> triangles.tolist(), panel.tolist()
+        ([[0, 1, 2], [0, 2, 3], [1, 4, 2]], [0, 0, 1])
+        """
+        if self.triangles is not None and self.triangle_panel is not None:
+            return np.asarray(self.triangles, np.int64), np.asarray(self.triangle_panel, np.int64)
+        if not self.polygons:
+            return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+        sizes = np.array([len(q) for q in self.polygons])
+        ids = np.concatenate(self.polygons).astype(np.int64)
+        start = np.r_[0, np.cumsum(sizes)[:-1]]
+        panel = np.repeat(np.arange(len(sizes)), np.maximum(sizes - 2, 0))
+        j = np.arange(len(panel)) - np.repeat(np.r_[0, np.cumsum(np.maximum(sizes - 2, 0))[:-1]],
+                                              np.maximum(sizes - 2, 0)) + 1
+        first = start[panel]
+        return np.stack([ids[first], ids[first + j], ids[first + j + 1]], axis=1), panel
 
     def corner_counts(self) -> np.ndarray:
         """(p,) int, corners of each panel: net vertices and ends of the extended lines
@@ -232,7 +264,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         coverage=float(weight[on_any].sum() / weight.sum()),
         flipped=flipped[~extension[flipped]], patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
-        seconds=time.perf_counter() - clock)
+        seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner)
 
 
 def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout

@@ -22,6 +22,10 @@
     return [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2])];
   }
   function css(c) { return 'rgb(' + c.map(function (v) { return Math.round(255 * v); }).join(',') + ')'; }
+  function hatch(c) {               // the layer's look: its colour with darker diagonal stripes
+    var dark = css(c.map(function (v) { return 0.55 * v; }));
+    return 'repeating-linear-gradient(45deg, ' + dark + ' 0 2px, ' + css(c) + ' 2px 6px)';
+  }
   function fmt(v, digits) {
     if (v === null || v === undefined || !isFinite(v)) return '–';
     return Number(v.toPrecision(digits || 4)).toString();
@@ -58,6 +62,14 @@
     this.stripsBox.onchange = function () { self.colourEdges(); self.render(); };
     lab.appendChild(this.stripsBox); lab.appendChild(document.createTextNode(' strips by family (A blue, B orange)'));
     bar.appendChild(lab);
+    // the scene's second set of panels (boundary panels), shown unless unticked
+    this.layerLabel = el('label', 'fp-layer-label');
+    this.layerBox = el('input', 'fp-layer'); this.layerBox.type = 'checkbox'; this.layerBox.checked = true;
+    this.layerBox.onchange = function () { self.showLayer(this.checked); };
+    this.layerText = el('span', '', ''); this.layerSwatch = el('span', 'fp-swatch');
+    this.layerLabel.appendChild(this.layerBox); this.layerLabel.appendChild(document.createTextNode(' '));
+    this.layerLabel.appendChild(this.layerSwatch); this.layerLabel.appendChild(this.layerText);
+    bar.appendChild(this.layerLabel);
     root.appendChild(bar);
     this.holder = el('div', 'fp-canvas');
     root.appendChild(this.holder);
@@ -113,7 +125,7 @@
     var s = this.scenes[i], self = this;
     this.index = i; this.data = s;
     if (this.sceneSelect) this.sceneSelect.value = i;
-    [this.mesh, this.lines, this.gaps, this.outline].forEach(function (o) {
+    [this.mesh, this.lines, this.gaps, this.outline, this.layerMesh, this.layerLines].forEach(function (o) {
       if (o) { self.scene.remove(o); o.geometry.dispose(); }
     });
     this.outline = null; this.pick = null;
@@ -160,14 +172,67 @@
       this.gaps = new THREE.Mesh(gg, new THREE.MeshLambertMaterial({ color: 0xd62728, side: THREE.DoubleSide }));
       this.scene.add(this.gaps);
     }
-    this.infoFields = s.info.map(function (q) { return { label: q.label, unit: q.unit, digits: q.digits, integer: q.integer,
-      values: decode(q.values) }; });
+    this.infoFields = s.info.map(decodeInfo);
+    this.buildLayer(s.layer);
     this.modeSelect.innerHTML = '';
     s.modes.forEach(function (m) { var o = el('option', '', m.label); o.value = m.key; self.modeSelect.appendChild(o); });
     var keep = this.mode && s.modes.some(function (m) { return m.key === self.mode; }) ? this.mode : s.modes[0].key;
     this.setMode(keep);
     this.colourEdges();
     this.setView(s.views.initial);
+  };
+
+  function decodeInfo(q) {
+    return { label: q.label, unit: q.unit, digits: q.digits, integer: q.integer, names: q.names,
+      absent: q.absent, values: decode(q.values) };
+  }
+
+  /* the scene's layer of extra panels (boundary panels): triangles in one colour, their
+     outlines darker, picked by panel */
+  Viewer.prototype.buildLayer = function (L) {
+    this.layerMesh = this.layerLines = this.layer = null;
+    this.layerLabel.style.display = L ? '' : 'none';
+    if (!L) return;
+    var P = decode(L.positions), T = decode(L.triangles), sizes = decode(L.face_sizes), idx = decode(L.face_indices);
+    var pos = new Float32Array(3 * T.length), c, k, q;
+    for (c = 0; c < T.length; c++) for (q = 0; q < 3; q++) pos[3 * c + q] = P[3 * T[c] + q];
+    var g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(pos, 3));
+    g.computeVertexNormals();
+    var col = new THREE.Color(L.colour[0], L.colour[1], L.colour[2]);
+    var material = new THREE.MeshLambertMaterial({ color: col, side: THREE.DoubleSide,
+      polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
+    // hatched, so that no mold colour or colour scale can be taken for them
+    material.onBeforeCompile = function (shader) {
+      shader.fragmentShader = shader.fragmentShader.replace('#include <dithering_fragment>',
+        '#include <dithering_fragment>\n\tif (mod(gl_FragCoord.x + gl_FragCoord.y, 8.0) < 3.0) gl_FragColor.rgb *= 0.55;');
+    };
+    this.layerMesh = new THREE.Mesh(g, material);
+    var ptr = new Int32Array(sizes.length + 1), nseg = 0;
+    for (k = 0; k < sizes.length; k++) { ptr[k + 1] = ptr[k] + sizes[k]; nseg += sizes[k]; }
+    var lp = new Float32Array(6 * nseg), e = 0;
+    for (k = 0; k < sizes.length; k++) for (var j = ptr[k]; j < ptr[k + 1]; j++) {
+      var a = idx[j], b = idx[j + 1 < ptr[k + 1] ? j + 1 : ptr[k]];
+      for (q = 0; q < 3; q++) { lp[6 * e + q] = P[3 * a + q]; lp[6 * e + 3 + q] = P[3 * b + q]; }
+      e++;
+    }
+    var lg = new THREE.BufferGeometry();
+    lg.setAttribute('position', new THREE.BufferAttribute(lp, 3));
+    this.layerLines = new THREE.LineSegments(lg, new THREE.LineBasicMaterial({ color: col.clone().multiplyScalar(0.45) }));
+    this.layer = { label: L.label, how: L.how, colour: L.colour, P: P, ptr: ptr, idx: idx,
+      triPanel: decode(L.triangle_panel), count: sizes.length, info: L.info.map(decodeInfo) };
+    this.layerSwatch.style.background = hatch(L.colour);
+    this.layerText.textContent = ' ' + L.toggle;
+    this.scene.add(this.layerMesh); this.scene.add(this.layerLines);
+    this.showLayer(this.layerBox.checked, true);
+  };
+
+  Viewer.prototype.showLayer = function (on, quiet) {
+    if (!this.layer) return;
+    this.layerBox.checked = on;
+    this.layerMesh.visible = this.layerLines.visible = on;
+    if (!on && this.pick && this.pick.layer) { this.pick = null; this.showInfo(-1); }
+    if (!quiet) { this.drawLegend(this.data.modes.filter(function (m) { return m.key === this.mode; }, this)[0]); this.render(); }
   };
 
   Viewer.prototype.setMode = function (key) {
@@ -197,6 +262,17 @@
   Viewer.prototype.drawLegend = function (m) {
     var L = this.legend;
     L.innerHTML = '';
+    this.drawScale(m);
+    if (this.layer && this.layerBox.checked) {
+      var item = el('div', 'fp-layer-how'), swatch = el('span', 'fp-swatch');
+      swatch.style.background = hatch(this.layer.colour);
+      item.appendChild(swatch); item.appendChild(document.createTextNode(' ' + this.layer.how));
+      L.appendChild(item);
+    }
+  };
+
+  Viewer.prototype.drawScale = function (m) {
+    var L = this.legend;
     if (m.categorical || !m.values) { L.appendChild(el('span', 'fp-how', m.how)); return; }
     var lo = m.range[0], hi = m.range[1], scale = el('div', 'fp-scale');
     var stops = RAMP.map(function (c, i) { return css(c) + ' ' + (100 * i / (RAMP.length - 1)).toFixed(0) + '%'; });
@@ -255,45 +331,60 @@
     var rect = this.renderer.domElement.getBoundingClientRect();
     var ndc = new THREE.Vector2(2 * (x - rect.left) / rect.width - 1, 1 - 2 * (y - rect.top) / rect.height);
     this.raycaster.setFromCamera(ndc, this.camera);
-    var hit = this.raycaster.intersectObject(this.mesh, false)[0];
+    var hit = this.raycaster.intersectObject(this.mesh, false)[0], onLayer = false;
+    if (this.layer && this.layerMesh.visible) {
+      var other = this.raycaster.intersectObject(this.layerMesh, false)[0];
+      if (other && (!hit || other.distance < hit.distance)) { hit = other; onLayer = true; }
+    }
     if (!hit) { if (pin) { this.pick = null; this.showInfo(-1); } return -1; }
-    var face = this.triFace[hit.faceIndex];
-    this.pick = { face: face, pinned: !!pin };
-    this.showInfo(face);
+    var face = onLayer ? this.layer.triPanel[hit.faceIndex] : this.triFace[hit.faceIndex];
+    this.pick = { face: face, layer: onLayer, pinned: !!pin };
+    this.showInfo(face, onLayer);
     return face;
   };
 
-  Viewer.prototype.showInfo = function (face) {
-    var self = this;
+  Viewer.prototype.showInfo = function (face, onLayer) {
+    var self = this, L = onLayer ? this.layer : null;
     if (this.outline) { this.scene.remove(this.outline); this.outline.geometry.dispose(); this.outline = null; }
     if (face < 0) { this.info.textContent = 'Click or hover a panel for its numbers.'; this.render(); return; }
-    var a = this.facePtr[face], b = this.facePtr[face + 1], pts = new Float32Array(3 * (b - a));
-    for (var k = a; k < b; k++) for (var q = 0; q < 3; q++) pts[3 * (k - a) + q] = this.P[3 * this.faceIndices[k] + q];
+    var ptr = L ? L.ptr : this.facePtr, ids = L ? L.idx : this.faceIndices, P = L ? L.P : this.P;
+    var a = ptr[face], b = ptr[face + 1], pts = new Float32Array(3 * (b - a));
+    for (var k = a; k < b; k++) for (var q = 0; q < 3; q++) pts[3 * (k - a) + q] = P[3 * ids[k] + q];
     var og = new THREE.BufferGeometry();
     og.setAttribute('position', new THREE.BufferAttribute(pts, 3));
     this.outline = new THREE.LineLoop(og, new THREE.LineBasicMaterial({ color: 0xffd400, depthTest: false }));
     this.outline.renderOrder = 10;
     this.scene.add(this.outline);
     this.info.innerHTML = '';
-    var item = el('span', 'fp-item'); item.dataset.key = 'face';
-    item.appendChild(el('b', '', 'face ')); item.appendChild(el('span', 'fp-value', String(face)));
+    var item = el('span', 'fp-item'); item.dataset.key = L ? 'layer' : 'face';
+    item.appendChild(el('b', '', (L ? L.label : 'face') + ' ')); item.appendChild(el('span', 'fp-value', String(face)));
     this.info.appendChild(item);
-    this.infoFields.forEach(function (q) {
+    (L ? L.info : this.infoFields).forEach(function (q) {
       var v = q.values[face], it = el('span', 'fp-item');
       it.dataset.key = q.label;
       it.appendChild(el('b', '', q.label + ' '));
-      it.appendChild(el('span', 'fp-value', q.integer ? String(v) : fmt(v, q.digits)));
-      if (q.unit && isFinite(v)) it.appendChild(document.createTextNode(' ' + q.unit));
+      var text = q.names ? (q.names[v] === undefined ? String(v) : q.names[v])
+        : q.integer ? (v < 0 && q.absent ? q.absent : String(v)) : fmt(v, q.digits);
+      it.appendChild(el('span', 'fp-value', text));
+      if (q.unit && isFinite(v) && !q.names) it.appendChild(document.createTextNode(' ' + q.unit));
       self.info.appendChild(it);
     });
     this.render();
   };
 
-  /* client coordinates of a face's centroid on screen (for tests and links) */
-  Viewer.prototype.screenPointOfFace = function (face) {
-    var a = this.facePtr[face], b = this.facePtr[face + 1], p = new THREE.Vector3();
-    for (var k = a; k < b; k++) p.add(new THREE.Vector3(this.P[3 * this.faceIndices[k]], this.P[3 * this.faceIndices[k] + 1], this.P[3 * this.faceIndices[k] + 2]));
-    p.multiplyScalar(1 / (b - a)).project(this.camera);
+  /* client coordinates of a face's centroid on screen (for tests and links); with
+     onLayer, of a panel of the layer (a triangle's centroid: outlines may be concave) */
+  Viewer.prototype.screenPointOfFace = function (face, onLayer) {
+    var L = onLayer ? this.layer : null, p = new THREE.Vector3(), k;
+    if (L) {
+      var T = decode(this.data.layer.triangles), t = L.triPanel.indexOf(face);
+      for (k = 0; k < 3; k++) p.add(new THREE.Vector3(L.P[3 * T[3 * t + k]], L.P[3 * T[3 * t + k] + 1], L.P[3 * T[3 * t + k] + 2]));
+      p.multiplyScalar(1 / 3).project(this.camera);
+    } else {
+      var a = this.facePtr[face], b = this.facePtr[face + 1];
+      for (k = a; k < b; k++) p.add(new THREE.Vector3(this.P[3 * this.faceIndices[k]], this.P[3 * this.faceIndices[k] + 1], this.P[3 * this.faceIndices[k] + 2]));
+      p.multiplyScalar(1 / (b - a)).project(this.camera);
+    }
     var rect = this.renderer.domElement.getBoundingClientRect();
     return { x: rect.left + (p.x + 1) / 2 * rect.width, y: rect.top + (1 - p.y) / 2 * rect.height };
   };

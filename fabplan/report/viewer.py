@@ -10,7 +10,9 @@ What the viewer offers: orbit (drag), zoom (wheel), pan (right-drag); views from
 level, from the front, from 30 degrees above and from the top; colour modes given by the
 scene (`ColourMode`: by mold, deviation, Meusnier radius, angle, kink, coverage gaps);
 click or hover a panel for its numbers (`PanelInfo`); the net's edges coloured by
-family (the two strip families) on request.
+family (the two strip families) on request; a second set of panels in a colour of its
+own (`PanelLayer`: the boundary panels between a net and the design boundary), shown or
+hidden by a check box and picked like the net's.
 
 This module knows nothing of nets or molds: `fabplan.fabricate.mold_report` builds the
 scenes of a net.
@@ -30,6 +32,7 @@ import numpy as np
 __all__ = [
     "ColourMode",
     "PanelInfo",
+    "PanelLayer",
     "ViewerScene",
     "encode_array",
     "scene_front",
@@ -43,8 +46,9 @@ VIEWER_HELP = ("How to use the 3D view: drag to orbit, scroll to zoom, right-dra
                "shift-drag) to pan. The buttons show the design from eye level (a person "
                "1.7 m tall standing in front of it), from the front, from 30 degrees above "
                "and from the top. Click a panel to pin its numbers (face id, mold id, "
-               "deviation, curvatures); hover to read them. It needs WebGL; the static "
-               "pictures further down show the same.")
+               "deviation, curvatures); hover to read them. Boundary panels, where a net "
+               "has them, are drawn green and can be hidden with their check box. It needs "
+               "WebGL; the static pictures further down show the same.")
 
 _VIEWS = ("eye", "front", "above", "top")
 
@@ -131,6 +135,9 @@ class PanelInfo:
     values : (f,) one value per face.
     unit : its unit ("" for ids and counts).
     digits : significant digits; integer : shown as an integer (ids).
+    names : texts the (integer) values index, shown instead of the number (a kind).
+    absent : with `integer`, the text shown for a negative value (an id that is none,
+        e.g. ``"own mold"``); the value itself when empty.
     """
 
     label: str
@@ -138,11 +145,62 @@ class PanelInfo:
     unit: str = ""
     digits: int = 4
     integer: bool = False
+    names: Sequence[str] | None = None
+    absent: str = ""
 
     def to_json(self) -> dict:
-        return {"label": self.label, "unit": self.unit, "digits": self.digits,
-                "integer": self.integer,
-                "values": encode_array(self.values, "int" if self.integer else "f4")}
+        integer = self.integer or self.names is not None
+        out = {"label": self.label, "unit": self.unit, "digits": self.digits,
+               "integer": integer, "absent": self.absent,
+               "values": encode_array(self.values, "int" if integer else "f4")}
+        if self.names is not None:
+            out["names"] = list(self.names)
+        return out
+
+
+@dataclass
+class PanelLayer:
+    """Panels drawn beside a scene's net in one colour of their own, picked on their own.
+
+    The boundary panels of a net laid out on a design (`fabplan.layout.trim`) are such a
+    layer: polygons with many outline points, concave where the design boundary is, so
+    they come already cut into triangles.
+
+    Attributes
+    ----------
+    label : what the panels are (``"boundary panel"``), shown with the picked panel's id
+        and beside the check box that shows or hides them.
+    vertices : (m, 3) float, model units (the scene's own, not re-centred).
+    face_sizes : (p,) int and face_indices : (sum of sizes,) int, each panel's outline.
+    triangles : (t, 3) int into `vertices`; triangle_panel : (t,) int, the panel of each.
+    info : the numbers shown for a picked panel (its id always comes first).
+    colour : (3,) float RGB in [0, 1] of the panels (green, as in the static pictures).
+    how : one sentence under the view saying what the panels are.
+    toggle : the text beside the check box (default: their number and `label`).
+    """
+
+    label: str
+    vertices: np.ndarray
+    face_sizes: np.ndarray
+    face_indices: np.ndarray
+    triangles: np.ndarray
+    triangle_panel: np.ndarray
+    info: list[PanelInfo] = field(default_factory=list)
+    colour: tuple[float, float, float] = (0.40, 0.80, 0.45)
+    how: str = ""
+    toggle: str = ""
+
+    def to_json(self, centre: np.ndarray) -> dict:
+        n = len(self.face_sizes)
+        return {"label": self.label, "how": self.how,
+                "toggle": self.toggle or f"{n} {self.label}{'' if n == 1 else 's'}",
+                "positions": encode_array(np.asarray(self.vertices, float) - centre, "f4"),
+                "face_sizes": encode_array(self.face_sizes, "int"),
+                "face_indices": encode_array(self.face_indices, "int"),
+                "triangles": encode_array(self.triangles, "int"),
+                "triangle_panel": encode_array(self.triangle_panel, "int"),
+                "colour": [float(c) for c in self.colour],
+                "info": [i.to_json() for i in self.info]}
 
 
 def scene_front(normals: np.ndarray, areas: np.ndarray, vertices: np.ndarray) -> tuple[np.ndarray, str]:
@@ -207,6 +265,7 @@ class ViewerScene:
     front : (2,) horizontal unit vector towards the viewer (`scene_front`); initial : the
         first view, one of ``eye``, ``front``, ``above``, ``top``.
     eye_height : 1.7 m in model units.
+    layer : more panels shown beside the net (`PanelLayer`: its boundary panels), or None.
     """
 
     title: str
@@ -221,6 +280,7 @@ class ViewerScene:
     front: np.ndarray = field(default_factory=lambda: np.array([0.0, -1.0]))
     initial: str = "front"
     eye_height: float = 1.7
+    layer: PanelLayer | None = None
 
     def to_json(self) -> dict:
         if self.initial not in _VIEWS:
@@ -241,6 +301,8 @@ class ViewerScene:
         }
         if self.gaps is not None and len(self.gaps):
             out["gaps"] = encode_array(np.asarray(self.gaps, float) - centre, "f4")
+        if self.layer is not None and len(self.layer.face_sizes):
+            out["layer"] = self.layer.to_json(centre)
         return out
 
 
@@ -258,8 +320,11 @@ _CSS = """
 .fp-limit span { position: absolute; top: 24px; left: -3em; width: 8em; text-align: center;
                  font-weight: 600; }
 .fp-info { margin-top: 0.3em; font-size: 0.92em; min-height: 1.4em; }
-.fp-item { margin-right: 1.2em; white-space: nowrap; }
+.fp-item { margin-right: 1.2em; white-space: nowrap; display: inline-block; }
 .fp-how { color: #444; }
+.fp-swatch { display: inline-block; width: 0.9em; height: 0.9em; border: 1px solid #555;
+             vertical-align: -0.1em; }
+.fp-layer-how { margin-top: 0.3em; color: #444; }
 @media print { .fp-viewer { display: none; } }
 """
 

@@ -124,6 +124,27 @@ class NetResult(OptimizationResult):
         """The record written beside the OBJ (status, parameters, measured properties)."""
         return self.record()
 
+    def write_html(self, path: str | os.PathLike, *, surface: Any = None,
+                   units: str = "m") -> Path:
+        """Write the net's page, as ``fabplan layout --html`` does (atomically): its key
+        numbers, its interactive 3D view with its boundary panels, and a picture.
+
+        surface : what the deviation mode measures to (with ``distances(points)``):
+            default the design the net was laid out on (`layout_net`); None without one.
+        units : the model units (``"m"``, ``"mm"``, ...).
+        """
+        from ..io.output import write_texts
+        from ..layout.view import net_view_html
+
+        design = getattr(self.layout, "design", None)
+        surface = surface if surface is not None else design
+        path = Path(path)
+        write_texts({path: net_view_html(
+            self, title=f"{self.net} net: {path.stem}", surface=surface, units=units,
+            deviation_from="the design" if surface is not None and surface is design
+            else "the reference")})
+        return path
+
 
 @dataclass
 class Measurement:

@@ -720,7 +720,13 @@ def coverage_gap_triangles(design: DesignSurface, mesh, *, gap: float) -> np.nda
 
 def study_viewer_scenes(result: StudyResult) -> tuple[list[viewer.ViewerScene], dict[str, int]]:
     """The 3D view's scenes of a study, one per measured net (a candidate that ended at
-    an earlier one's net shows that one), and the scene index of every candidate."""
+    an earlier one's net shows that one), and the scene index of every candidate.
+
+    A net with boundary panels shows them green, each with the full panel and the mold it
+    is cut from; its coverage gaps are the design's parts neither covers."""
+    from ..fabricate.boundary_molds import boundary_mold_info
+    from ..layout.view import boundary_layer, uncovered_triangles
+
     scenes: list[viewer.ViewerScene] = []
     index: dict[str, int] = {}
     limit = result.study.limits.max_deviation_mm
@@ -734,13 +740,25 @@ def study_viewer_scenes(result: StudyResult) -> tuple[list[viewer.ViewerScene], 
         mesh = c.net.mesh
         deviation = (c.deviation_mm if c.deviation_mm is not None else
                      vertex_deviation_mm(mesh, result.design, mm))
-        gaps = (coverage_gap_triangles(result.design, mesh, gap=0.3 * mesh.mean_edge_length)
-                if c.metrics.get("coverage", 1.0) < 0.999 else None)
+        panels = c.net.boundary_panels
+        trimmed = panels is not None and panels.count > 0
+        gaps = None
+        if c.metrics.get("coverage", 1.0) < 0.999:
+            # the panels, boundary panels included, against the design
+            V, T = mesh.vertices, mesh.triangles()
+            if trimmed:
+                V, T = panels.vertices, np.vstack([T, panels.panel_triangles()[0]])
+            gaps = uncovered_triangles(result.design, V, T, gap=0.3 * mesh.mean_edge_length)
         index[c.name] = len(scenes)
-        scenes.append(net_viewer_scene(
+        scene = net_viewer_scene(
             c.molds, title=f"{c.rank}. {c.name}", deviation_mm=deviation,
             deviation_limit_mm=limit, gaps=gaps,
-            infinite_radius=INFINITE_RADIUS_FACTOR * result.design_size))
+            infinite_radius=INFINITE_RADIUS_FACTOR * result.design_size)
+        if trimmed:
+            scene.layer = boundary_layer(
+                panels, units=result.study.design.units,
+                info=boundary_mold_info(c.boundary_molds) if c.boundary_molds is not None else ())
+        scenes.append(scene)
     return scenes, index
 
 
