@@ -137,7 +137,7 @@ def run_case(name: str, path: Path, worker_counts: list[int], folder: Path) -> l
             client = Client(cluster)
             cluster_seconds = time.perf_counter() - clock
             clock = time.perf_counter()
-            result = run_study_parallel(study, client=client)
+            result = run_study_parallel(study, client=client, files=True)
         run_seconds = time.perf_counter() - clock
         clock = time.perf_counter()
         write_study(result, folder / f"{name}-{workers}", client=client if workers else None)

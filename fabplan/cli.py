@@ -681,7 +681,7 @@ def _cmd_study(args) -> int:
             client = stack.enter_context(dask_client(workers, args.scheduler))
             result = run_study_parallel(study, client=client, progress=say,
                                         max_panels=args.max_panels, cache=cache,
-                                        resume=args.resume)
+                                        resume=args.resume, files=True, rhino=args.rhino)
         else:
             with progress.stage(f"running {len(study.candidates)} candidates"):
                 result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,

@@ -650,3 +650,21 @@ def test_distance_to_a_built_in_reference_is_measured_to_the_exact_surface():
     assert record["distance_to_reference"]["max"] <= 1e-9
     chords = np.linalg.norm(design.reference.closest_points(net.vertices)[0] - net.vertices, axis=1)
     assert chords.max() > 1e-4      # what the triangles alone would have said
+
+
+def test_a_pickled_layout_leaves_its_chart_behind_and_makes_it_again():
+    """A study's workers exchange layouts: the chart cache (several times the layout's
+    size) is not sent, and a received layout makes the same chart again."""
+    import cloudpickle  # what Dask sends with: built-in designs hold lambdas
+
+    from fabplan.layout.surface_layout import layout_surface
+
+    design = load_design("hyperbolic-paraboloid:width=6,depth=6,rise=1.5", triangles=3000)
+    layout = layout_surface(design, 1.0, angle=90.0)
+    bare = len(cloudpickle.dumps(layout))
+    chart = layout.chart
+    assert len(cloudpickle.dumps(layout)) < 1.2 * bare          # the cache stays home
+    received = cloudpickle.loads(cloudpickle.dumps(layout))
+    assert "chart" not in vars(received)
+    np.testing.assert_array_equal(received.chart.P, chart.P)
+    np.testing.assert_array_equal(received.vertex_keys, layout.vertex_keys)

@@ -156,6 +156,13 @@ class SurfaceLayout:
         made once and shared by every net laid out from this layout."""
         return ParameterChart(self.design, self.parameters)
 
+    def __getstate__(self) -> dict:
+        # the chart is a cache about six times the layout's size: a layout sent to another
+        # process (a study's Dask workers) makes it again when it needs it
+        state = dict(self.__dict__)
+        state.pop("chart", None)
+        return state
+
     def record(self) -> dict:
         """JSON-ready summary (written with the optimized net)."""
         mesh = self.mesh

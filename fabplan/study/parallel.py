@@ -1,17 +1,20 @@
 """A study's candidates run in parallel: in local processes or on a Dask cluster.
 
 The candidates of a study are independent but for two things the serial run shares:
-the layouts (one per start angle) and the nets that end at the same net as an earlier
-candidate (whose molds and strips are reused). The parallel run keeps both, in three
-steps, so that its `study.json` is the serial one apart from timings:
+the layouts (one per start angle and panel size) and the nets that end at the same net as
+an earlier candidate (whose molds and strips are reused). The parallel run keeps both, so
+that its `study.json` is the serial one apart from timings, as a pipeline of tasks:
 
 1. every candidate's net is solved in a task of its own (its layout computed there; the
-   baseline layout at 90 deg, computed first, travels with the tasks); candidates that
-   differ only in their mold tolerance share one solve, as in the serial run;
-2. the client finds the candidates that ended at the same net as an earlier one, in the
-   order of the study, as the serial run does;
-3. every candidate's molds, strips and measurements are made in a task, a twin's after
-   (and from) its original's.
+   baseline layout at 90 deg is a task of its own that the candidates starting from it
+   wait for); candidates that differ only in their mold tolerance share one solve, as in
+   the serial run;
+2. as the solves finish, the client takes their nets (only the meshes travel) and finds,
+   in the order of the study, the candidates that ended at the same net as an earlier
+   one, as the serial run does;
+3. each candidate's molds, strips and measurements are made in a task as soon as every
+   earlier candidate's net is known, from its solve's result where it lies (a twin's
+   after, and from, its original's).
 
 The engine is Dask (`dask.distributed`): `LocalCluster` for ``--workers N`` on this
 machine, or a running scheduler for ``--scheduler tcp://HOST:PORT``, whose workers have
@@ -35,15 +38,17 @@ from .run import (
     StudyResult,
     fabricate_candidate,
     judge_study,
-    prepare_design,
+    load_study_design,
     shared_solve,
     solve_candidate,
+    start_angle,
     twin_of,
 )
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
     from ..layout.surface_layout import SurfaceLayout
+    from ..net.mesh import QuadMesh
     from .cache import CandidateCache
     from .spec import Candidate, Study
 
@@ -74,20 +79,21 @@ def _failed(candidate: Candidate, exc: BaseException) -> CandidateResult:
     return CandidateResult(candidate, error=reason, reasons=[reason])
 
 
-def _solve_task(study: Study, design: DesignSurface, baseline: SurfaceLayout,
-                candidate: Candidate) -> CandidateResult:
-    clock = time.perf_counter()
-    try:
-        result = solve_candidate(study, design, candidate, {(90.0, study.panel_size): baseline},
-                                 {}, _quiet)
-    except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-        result = _failed(candidate, exc)
-    result.metrics.setdefault("seconds", {})["solve_task"] = time.perf_counter() - clock
-    return result
+def _baseline_task(study: Study, design: DesignSurface) -> SurfaceLayout:
+    from ..layout.surface_layout import layout_surface
+
+    return layout_surface(design, study.panel_size, angle=90.0)
+
+
+def _solved_mesh(solved: CandidateResult) -> QuadMesh | None:
+    """What the client needs of a solve to find twins: its net's mesh (None: failed)."""
+    return None if solved.net is None else solved.net.mesh
 
 
 def _fabricate_task(study: Study, design: DesignSurface, solved: CandidateResult,
-                    twin: CandidateResult | None) -> CandidateResult:
+                    candidate: Candidate, twin: CandidateResult | None) -> CandidateResult:
+    if solved.candidate != candidate:          # a solve shared in a sweep of tolerances
+        solved = shared_solve(solved, candidate)
     if solved.failed:
         return solved
     clock = time.perf_counter()
@@ -141,7 +147,8 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
 def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: str | None = None,
                        progress: Callable[[str], None] | None = None,
                        client: Any = None, max_panels: int | None = None,
-                       cache: CandidateCache | None = None, resume: bool = False) -> StudyResult:
+                       cache: CandidateCache | None = None, resume: bool = False,
+                       files: bool = False, rhino: bool = False) -> StudyResult:
     """Run every candidate of `study` on Dask workers and judge them (see the module).
 
     Parameters
@@ -154,6 +161,10 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
     max_panels : refuse a study whose layouts would have more panels (see `run_study`).
     cache, resume : finished candidates are kept in `cache`; with `resume` those it holds
         are taken from it (see `fabplan.study.cache`).
+    files : the workers also make every candidate's files as soon as it is measured
+        (`fabplan.study.report.candidate_file_bytes`, with `rhino` as in `write_study`),
+        beside the other candidates' computation; they come back in
+        `StudyResult.made_files` for `write_study` to write.
 
     Raises
     ------
@@ -163,25 +174,25 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
     """
     say = progress or _quiet
     start = time.perf_counter()
-    own = client is None
-    cluster = None
-    if own:
-        client, cluster = _connect(workers, scheduler)
-    try:
-        design, baseline = prepare_design(study, say, max_panels)
-        results = _run_on(client, study, design, baseline, say, cache, resume)
-    finally:
-        if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+    with contextlib.ExitStack() as stack:
+        if client is None:
+            client = stack.enter_context(dask_client(workers, scheduler))
+        design = load_study_design(study, say, max_panels)
+        results, made = _run_on(client, study, design, say, cache, resume,
+                                files=files, rhino=rhino)
+    result = judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+    result.made_files = made
+    return result
 
 
-def _run_on(client: Any, study: Study, design: DesignSurface, baseline: SurfaceLayout,
-            say: Callable[[str], None], cache: CandidateCache | None,
-            resume: bool) -> list[CandidateResult]:
+def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str], None],
+            cache: CandidateCache | None, resume: bool, *, files: bool = False,
+            rhino: bool = False) -> tuple[list[CandidateResult], dict[str, tuple]]:
+    """The candidates' results in the order of the study, and the files the workers made
+    of them (with `files`) by name."""
     from distributed import as_completed
+
+    from .report import candidate_files_task
 
     candidates = list(study.candidates)
     kept = [cache.load(c) if cache is not None and resume else None for c in candidates]
@@ -189,35 +200,99 @@ def _run_on(client: Any, study: Study, design: DesignSurface, baseline: SurfaceL
         say(f"  {sum(k is not None for k in kept)} of {len(candidates)} candidates taken from "
             "the cache")
     todo = [i for i, k in enumerate(kept) if k is None]
-    # one solve per solve key: a sweep of mold tolerances shares its nets
+    shared = client.scatter([study, design], broadcast=True, hash=False)
+    baseline = client.submit(_baseline_task, *shared, key="baseline-layout", pure=False,
+                             retries=RETRIES)
+    layouts = {(90.0, study.panel_size): baseline}
+    # one solve per solve key (a sweep of mold tolerances shares its nets); a kept
+    # candidate lends its net to the others of its key
     keys = [c.solve_key for c in candidates]
-    by_key = {keys[i]: k for i, k in enumerate(kept) if k is not None}
-    unique = [i for i in todo if keys[i] not in by_key and
-              next(j for j in todo if keys[j] == keys[i]) == i]
-    shared = client.scatter([study, design, baseline], broadcast=True, hash=False)
+    solves: dict[tuple, Any] = {keys[i]: k for i, k in enumerate(kept) if k is not None}
+    meshes: dict[tuple, QuadMesh | None] = {
+        keys[i]: k.net.mesh if k.net is not None else None for i, k in enumerate(kept)
+        if k is not None}
     clock = time.perf_counter()
-    solving = [client.submit(_solve_task, *shared, candidates[i], key=f"solve-{i}-{candidates[i].name}",
-                             pure=False, retries=RETRIES) for i in unique]
-    fresh = _gather(solving, [candidates[i] for i in unique], "solved", say, clock, as_completed)
-    by_key.update({keys[i]: r for i, r in zip(unique, fresh, strict=True)})
-    solved: list[CandidateResult] = [
-        k if k is not None else by_key[keys[i]] if i in unique else
-        shared_solve(by_key[keys[i]], candidates[i]) for i, k in enumerate(kept)]
-    # twins in the order of the study, as the serial run finds them
-    twins: list[int | None] = []
-    for i in range(len(candidates)):
-        twins.append(twin_of(i, candidates, [r.net for r in solved], twins, study))
-    clock = time.perf_counter()
-    made: list[Any] = list(kept)
+    waiting: dict[Any, tuple] = {}
     for i in todo:
-        original = twins[i]
-        made[i] = client.submit(
-            _fabricate_task, shared[0], shared[1], solved[i],
-            None if original is None else made[original],
-            key=f"fabricate-{i}-{candidates[i].name}", pure=False, retries=RETRIES)
+        if keys[i] in solves:
+            continue
+        # only the candidates that start from the baseline layout wait for it
+        starts_there = (start_angle(candidates[i], design) == 90.0
+                        and study.panel_size_of(candidates[i]) == study.panel_size)
+        solves[keys[i]] = client.submit(_solve_task_with, *shared,
+                                        layouts if starts_there else {}, candidates[i],
+                                        key=f"solve-{i}-{candidates[i].name}", pure=False,
+                                        retries=RETRIES)
+        waiting[client.submit(_solved_mesh, solves[keys[i]], key=f"net-{i}", pure=False)] = \
+            keys[i]
+    try:
+        baseline.result()                  # no baseline layout: nothing can be compared
+    except FabplanError:
+        client.cancel(list(waiting) + [f for f in solves.values() if hasattr(f, "key")])
+        raise
+    made: list[Any] = list(kept)
+    making: list[Any] = [None] * len(candidates)      # the files' futures
+    twins: list[int | None] = []
+
+    def submit_ready() -> None:
+        """Molds and strips of every candidate whose net and earlier ones' are known."""
+        while len(twins) < len(candidates) and keys[len(twins)] in meshes:
+            i = len(twins)
+            twins.append(twin_of(i, candidates, [meshes[k] for k in keys[:i + 1]], twins, study))
+            if kept[i] is None:
+                original = twins[i]
+                made[i] = client.submit(
+                    _fabricate_task, *shared, solves[keys[i]], candidates[i],
+                    None if original is None else made[original],
+                    key=f"fabricate-{i}-{candidates[i].name}", pure=False, retries=RETRIES)
+            if files:
+                # made beside the others' solves: a worker that waits for the order of
+                # the study has something to do
+                twin = twins[i]
+                making[i] = client.submit(
+                    candidate_files_task, made[i], *shared,
+                    None if twin is None else making[twin], rhino,
+                    key=f"files-{i}-{candidates[i].name}", pure=False, retries=RETRIES)
+
+    submit_ready()
+    failed = 0
+    for n, future in enumerate(as_completed(list(waiting)), 1):
+        key = waiting[future]
+        try:
+            meshes[key] = future.result()
+        except Exception:   # a lost worker after its retries: its candidates fail below
+            meshes[key] = None
+        failed += meshes[key] is None
+        left = len(waiting) - n
+        eta = (time.perf_counter() - clock) / n * left
+        say(f"  {n} of {len(waiting)} solved, {left} to go, {failed} failed"
+            + (f", about {eta:.0f} s left" if left else ""))
+        submit_ready()
     done = iter(_gather([made[i] for i in todo], [candidates[i] for i in todo], "measured", say,
                         clock, as_completed, cache))
-    return [k if k is not None else next(done) for k in kept]
+    results = [k if k is not None else next(done) for k in kept]
+    made_files: dict[str, tuple] = {}
+    for c, future in zip(candidates, making, strict=True):
+        try:
+            made_one = None if future is None else future.result()
+        except Exception:   # a lost worker after its retries: `write_study` makes them
+            made_one = None
+        if made_one is not None:
+            made_files[c.name] = made_one
+    return results, made_files
+
+
+def _solve_task_with(study: Study, design: DesignSurface, layouts: dict,
+                     candidate: Candidate) -> CandidateResult:
+    """`solve_candidate` in a task: `layouts` holds the baseline layout (a future the
+    worker has resolved)."""
+    clock = time.perf_counter()
+    try:
+        result = solve_candidate(study, design, candidate, dict(layouts), {}, _quiet)
+    except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        result = _failed(candidate, exc)
+    result.metrics.setdefault("seconds", {})["solve_task"] = time.perf_counter() - clock
+    return result
 
 
 def _gather(futures: list, candidates: list, verb: str, say: Callable[[str], None],

@@ -36,7 +36,8 @@ if TYPE_CHECKING:
     from .spec import Study
 
 __all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA", "LIMIT_NAMES",
-           "coverage_gap_triangles", "study_viewer_scenes"]
+           "coverage_gap_triangles", "study_viewer_scenes", "candidate_file_bytes",
+           "candidate_files_task"]
 
 STUDY_SCHEMA = "fabplan-study/1"
 
@@ -1005,27 +1006,46 @@ def candidate_file_bytes(c: CandidateResult, study: Study, design: DesignSurface
     return files, outputs, pictures
 
 
-def _files_task(c: CandidateResult, study: Study, design: DesignSurface,
-                twin_made: tuple | None, rhino: bool) -> tuple[dict[str, bytes], dict, dict]:
-    """`candidate_file_bytes` given what the strip twin's task made (or None)."""
-    return candidate_file_bytes(c, study, design, None if twin_made is None else twin_made[0],
-                                rhino=rhino)
+def candidate_files_task(c: CandidateResult, study: Study, design: DesignSurface,
+                         twin_made: tuple | None, rhino: bool = False) -> tuple | None:
+    """`candidate_file_bytes` as a Dask task: `twin_made` is what the task of the
+    candidate's twin (`CandidateResult.twin`) made, whose strip files this one takes when
+    both have strips (the same strip plan, see `fabricate_candidate`); None for a failed
+    candidate."""
+    if c.failed:
+        return None
+    twin_files = twin_made[0] if twin_made is not None and c.strips is not None else None
+    return candidate_file_bytes(c, study, design, twin_files, rhino=rhino)
 
 
 def _strip_twin(c: CandidateResult, by_name: dict[str, CandidateResult]) -> str | None:
     """The candidate whose strip files `c` takes (the same net and strip plan), or None."""
     twin = None if c.twin is None else by_name.get(c.twin)
-    shared = twin is not None and twin.strips is not None and twin.strips is c.strips
+    shared = twin is not None and twin.strips is not None and c.strips is not None
     return twin.name if shared and twin is not None else None
 
 
+def _write_files(folder: Path, files: dict[str, bytes]) -> None:
+    for relative, data in files.items():
+        path = output.path_inside(folder, *relative.split("/"))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+
+
 def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) -> tuple:
-    """Every measured candidate's folder in `tmp`; on the workers of `client` when given
-    (each makes its files in memory, see `candidate_file_bytes`; this process writes
-    them), else here. Returns the outputs and pictures by candidate name."""
+    """Every measured candidate's folder in `tmp`: from the files a parallel run's workers
+    made already (`StudyResult.made_files`), else made on the workers of `client` (each
+    in memory, see `candidate_file_bytes`; this process writes them), else here. Returns
+    the outputs and pictures by candidate name."""
     outputs, pictures = {}, {}
     by_name = {c.name: c for c in result.candidates}
     done = [c for c in result.candidates if not c.failed]
+    if all(c.name in result.made_files for c in done):
+        for c in done:
+            files, outputs[c.name], pictures[c.name] = result.made_files[c.name]
+            _write_files(output.path_inside(tmp, "candidates", c.name), files)
+            say(f"    wrote {c.name}")
+        return outputs, pictures
     if client is None:
         for c in done:
             # names are checked when the study is read; this guards the API too
@@ -1044,17 +1064,13 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
     for c in done:                         # in the study's order: a twin comes after its own
         twin = _strip_twin(c, by_name)
         futures[c.name] = client.submit(
-            _files_task, c, study, design, None if twin is None else futures[twin], rhino,
-            key=f"files-{c.name}", pure=False)
+            candidate_files_task, c, study, design, None if twin is None else futures[twin],
+            rhino, key=f"files-{c.name}", pure=False)
     names = {f.key: name for name, f in futures.items()}
     for future in as_completed(list(futures.values())):
         name = names[future.key]
         files, outputs[name], pictures[name] = future.result()
-        folder = output.path_inside(tmp, "candidates", name)
-        for relative, data in files.items():
-            path = output.path_inside(folder, *relative.split("/"))
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(data)
+        _write_files(output.path_inside(tmp, "candidates", name), files)
         say(f"    wrote {name}")
     return outputs, pictures
 
@@ -1069,7 +1085,8 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
     panels by mold and its strip curves) and ``net.glb``.
 
     With a Dask `client` (``distributed.Client``), the candidates' files are made on its
-    workers, in parallel (`candidate_file_bytes`), and written here.
+    workers, in parallel (`candidate_file_bytes`), and written here; a parallel run that
+    made them already (`run_study_parallel` with ``files=True``) only has them written.
 
     `out_dir` may be new, empty, or hold an earlier study (see `check_output_folder`).
     The time recorded as ``seconds_total`` (and shown in the report) is the run time

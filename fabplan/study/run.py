@@ -49,6 +49,7 @@ __all__ = [
     "run_study",
     "judge_study",
     "prepare_design",
+    "load_study_design",
     "solve_candidate",
     "fabricate_candidate",
     "measure_candidate",
@@ -142,6 +143,9 @@ class StudyResult:
     recommendation : the recommendation in plain words.
     sheets_charged : whether strip sheets enter the cost (only when every measured
         candidate has strips, see `judge_study`).
+    made_files : the candidates' files a parallel run's workers made beside the
+        computation (name -> what `fabplan.study.report.candidate_file_bytes` returns),
+        for `write_study` to write; empty otherwise.
     seconds_run : wall time from loading the design to the last verdict (writing the
         files is not included: `fabplan.study_report.write_study` adds it).
     """
@@ -153,6 +157,7 @@ class StudyResult:
     recommendation: str
     sheets_charged: bool = False
     seconds_run: float = 0.0
+    made_files: dict = field(default_factory=dict)
 
     @property
     def baseline(self) -> CandidateResult:
@@ -236,9 +241,24 @@ def prepare_design(study: Study, say: Callable[[str], None],
         When the design cannot be loaded, the layouts would need more panels than
         `max_panels`, or the baseline layout is impossible.
     """
+    from ..layout.surface_layout import layout_surface
+
+    design = load_study_design(study, say, max_panels)
+    return design, layout_surface(design, study.panel_size, angle=90.0)
+
+
+def load_study_design(study: Study, say: Callable[[str], None],
+                      max_panels: int | None = None) -> DesignSurface:
+    """The study's design, checked for the panel count of its smallest panel size.
+
+    Raises
+    ------
+    InputError
+        When the design cannot be loaded or the layouts would need more panels than
+        `max_panels`.
+    """
     from ..design.load import load_design
     from ..io.resources import check_panel_count
-    from ..layout.surface_layout import layout_surface
 
     source, triangles = study.design.source, study.design.triangles
     design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
@@ -250,7 +270,7 @@ def prepare_design(study: Study, say: Callable[[str], None],
                            f"{smallest:g} {study.design.units} on a design of area "
                            f"{design.area:.4g} {study.design.units}^2",
                       fix="give a larger panels.size")
-    return design, layout_surface(design, study.panel_size, angle=90.0)
+    return design
 
 
 def judge_study(study: Study, design: DesignSurface, results: list[CandidateResult], *,
@@ -316,7 +336,7 @@ def same_net(a: QuadMesh, b: QuadMesh, tolerance: float) -> bool:
     return bool(np.abs(a.vertices - b.vertices).max(initial=0.0) <= tolerance)
 
 
-def twin_of(i: int, candidates: list[Candidate], nets: list[OptimizationResult | None],
+def twin_of(i: int, candidates: list[Candidate], nets: list[QuadMesh | None],
             twins: list[int | None], study: Study) -> int | None:
     """The earlier candidate whose net candidate `i` ended at, or None.
 
@@ -329,7 +349,7 @@ def twin_of(i: int, candidates: list[Candidate], nets: list[OptimizationResult |
     Parameters
     ----------
     i : the candidate's index in `candidates` (the study's order).
-    nets : solved net of every candidate up to `i` (None for a failed one).
+    nets : solved net (its mesh) of every candidate up to `i` (None for a failed one).
     twins : what this function gave for every candidate before `i`.
     """
     net = nets[i]
@@ -339,7 +359,7 @@ def twin_of(i: int, candidates: list[Candidate], nets: list[OptimizationResult |
     own = [j for j, t in enumerate(twins[:i]) if t is None or tolerance[t] != tolerance[j]]
     size = study.panel_size_of(candidates[i])
     same = [j for j in own if (other := nets[j]) is not None and
-            same_net(other.mesh, net.mesh, SAME_NET_TOLERANCE * size)]
+            same_net(other, net, SAME_NET_TOLERANCE * size)]
     same.sort(key=lambda j: tolerance[j] != tolerance[i])
     return same[0] if same else None
 
@@ -370,7 +390,8 @@ def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     names = [r.name for r in earlier]
     twins = [None if r.twin is None else names.index(r.twin) for r in earlier]
     j = twin_of(len(earlier), [*(r.candidate for r in earlier), candidate],
-                [*(r.net for r in earlier), solved.net], twins, study)
+                [r.net.mesh if r.net is not None else None for r in [*earlier, solved]], twins,
+                study)
     return fabricate_candidate(study, design, solved, None if j is None else earlier[j], say)
 
 
