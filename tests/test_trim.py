@@ -162,3 +162,32 @@ def test_layout_writes_the_boundary_panels_beside_the_net(tmp_path):
     assert np.array_equal(V[:len(net_v)], net_v)        # the net's vertices, numbered alike
     assert len(faces) == trimmed["count"] + len(trimmed["extensions"])
     assert all(len(f) >= 3 for f in faces)
+
+
+def test_no_patch_clads_what_the_net_already_clads():
+    """Regression: around the pole of a paraboloid dome the plane's sheets overlap, and
+    four "holes" there lay under net faces (4-6 cm away): the design was clad twice."""
+    import igl
+
+    from fabplan.design.load import load_design
+    from fabplan.layout.surface_layout import glide, layout_surface
+
+    design = load_design("paraboloid", triangles=8000)
+    net = glide(layout_surface(design, 1.0, angle=90.0), "snet")
+    panels = net.boundary_panels
+    assert panels is not None and panels.coverage >= 0.999
+    T = panels.vertices[panels.triangles]
+    centres = T.mean(axis=1)
+    d2, _, closest = igl.point_mesh_squared_distance(
+        centres, net.mesh.vertices, np.asarray(net.mesh.triangles(), np.int64))
+    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    area = 0.5 * np.linalg.norm(normal, axis=1)
+    normal /= 2 * area[:, None]
+    distance = np.sqrt(d2)
+    # a net face straight above or below (not a rim edge beside a hole)
+    along = np.abs(np.sum((closest - centres) * normal, axis=1))
+    near = (distance < 0.25 * panels.panel_size) & (along >= 0.95 * distance)
+    owner = panels.triangle_panel
+    share = (np.bincount(owner, area * near, minlength=panels.count)
+             / np.bincount(owner, area, minlength=panels.count))
+    assert share[panels.patch].max(initial=0.0) <= 0.5

@@ -236,8 +236,16 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching)
     patch = patch[sane]
-    # coverage is measured on the surface, independently of the plane (`_under`)
     triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    # near a singular point the plane's sheets overlap, and a "hole" there may lie under
+    # net faces on the surface: such a patch would clad the design twice
+    double = patch & (_share_under(vertices, triangles, owner, len(pieces), mesh, h) > 0.5)
+    if double.any():
+        pieces, patch = pieces[~double], patch[~double]
+        vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+            pieces, mesh, p_net, chart, boundary, rays, tol, touching)
+        triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    # coverage is measured on the surface, independently of the plane (`_under`)
     samples, normals, weight = _design_samples(design)
     on_net = _under(samples, normals, mesh.vertices, mesh.triangles(), h)
     on_any = on_net | _under(samples, normals, vertices, triangles, h)
@@ -687,6 +695,19 @@ def _design_samples(design: DesignSurface) -> tuple[np.ndarray, np.ndarray, np.n
     weights = np.array([[4, 1, 1], [1, 4, 1], [1, 1, 4], [1, 1, 1]]) / np.array([[6], [6], [6], [3]])
     points = np.einsum("sk,tkj->tsj", weights, X).reshape(-1, 3)
     return points, np.repeat(design.face_normals, 4, axis=0), np.repeat(design.face_areas / 4, 4)
+
+
+def _share_under(vertices: np.ndarray, triangles: np.ndarray, owner: np.ndarray, count: int,
+                 mesh: QuadMesh, h: float) -> np.ndarray:
+    """(count,) float, the share of each piece's area (triangles (t, 3) of `vertices`,
+    `owner` (t,) their piece) that the net's faces already cover (`_under`)."""
+    T = vertices[triangles]
+    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    area = 0.5 * np.linalg.norm(normal, axis=1)
+    normal = normal / np.maximum(2.0 * area, 1e-300)[:, None]
+    under = _under(T.mean(axis=1), normal, mesh.vertices, mesh.triangles(), h)
+    total = np.bincount(owner, area, minlength=count)
+    return np.bincount(owner, area * under, minlength=count) / np.maximum(total, 1e-300)
 
 
 def _under(points: np.ndarray, normals: np.ndarray, V: np.ndarray, F: np.ndarray, h: float
