@@ -13,7 +13,9 @@ process (``PYTHONPATH`` set to the checkout). Wall and CPU times (user + system,
 process and its children) are recorded, with ``uptime`` before and after.
 
 The files are then compared, sheet by sheet: the DXF bytes with the header's dates and
-GUIDs (and ezdxf's creation stamp) masked, every LWPOLYLINE's points and bulges read back
+GUIDs (and ezdxf's creation stamp) masked and the CLASSES and OBJECTS sections sorted
+(ezdxf writes some in an order that changes from run to run, in the earlier code too),
+every LWPOLYLINE's points and bulges read back
 with ezdxf (largest difference in mm), and the preview PNGs pixel by pixel. The table is
 printed and written to ``benchmarks/results/strips-<date>.json``.
 """
@@ -47,10 +49,12 @@ def run_strips(checkout: Path, out: Path, extra: list[str]) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     env = dict(os.environ, PYTHONPATH=str(checkout))
     code = "import sys; from fabplan.cli import main; sys.exit(main())"
+    command = [str(ROOT / c) if c.endswith(".obj") else c for c in COMMAND]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", code, *COMMAND, "-o", str(out), *extra], cwd=ROOT,
-                   env=env, check=True, capture_output=True)
+    # run outside both checkouts: `python -c` puts the working folder first on the path
+    subprocess.run([sys.executable, "-c", code, *command, "-o", str(out), *extra],
+                   cwd=out.parent, env=env, check=True, capture_output=True)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -58,13 +62,29 @@ def run_strips(checkout: Path, out: Path, extra: list[str]) -> dict:
 
 
 def masked_lines(data: bytes) -> list[bytes]:
-    """The lines of a DXF file with the dates, GUIDs and ezdxf's creation stamp masked."""
+    """The lines of a DXF file with the dates, GUIDs and ezdxf's creation stamp masked, and
+    the classes and objects sorted (ezdxf writes some in an order that changes from run
+    to run)."""
     lines = data.split(b"\n")
     for i in range(len(lines) - 2):
         if lines[i].strip() in STAMPS:
             lines[i + 2] = b"<date>"
-    return [re.sub(rb"\{[0-9A-F-]{36}\}", b"<guid>", re.sub(rb" @ \d{4}-\S*", b" @ <time>", line))
-            for line in lines]
+    lines = [re.sub(rb"\{[0-9A-F-]{36}\}", b"<guid>", re.sub(rb" @ \d{4}-\S*", b" @ <time>", line))
+             for line in lines]
+    pairs = [(lines[i].strip(), lines[i + 1]) for i in range(0, len(lines) - 1, 2)]
+    for name in (b"CLASSES", b"OBJECTS"):
+        start = next((i for i in range(len(pairs) - 1) if pairs[i] == (b"0", b"SECTION")
+                      and pairs[i + 1] == (b"2", name)), None)
+        if start is None:
+            continue
+        stop = next(i for i in range(start, len(pairs)) if pairs[i] == (b"0", b"ENDSEC"))
+        chunks: list[list] = []
+        for pair in pairs[start + 2:stop]:
+            if pair[0] == b"0" or not chunks:
+                chunks.append([])
+            chunks[-1].append(pair)
+        pairs[start + 2:stop] = [pair for c in sorted(chunks) for pair in c]
+    return [b"%s\n%s" % p for p in pairs]
 
 
 def polylines(path: Path) -> list[tuple[str, bool, np.ndarray]]:

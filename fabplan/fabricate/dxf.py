@@ -628,7 +628,9 @@ def _draw_preview(lines: list, colours: list, texts: list, size: tuple, path, ti
     for x, y, text, rotation, height, colour in texts:
         ax.text(x, y, text, rotation=rotation, ha="center", va="center",
                 fontsize=max(2.0, height * scale * 72 / 1.4), color=colour, rotation_mode="anchor")
-    ax.add_collection(LineCollection(lines, colors=colours, linewidths=0.6))
+    # one (n, 3) array: matplotlib converts a list of colours one by one
+    ax.add_collection(LineCollection(lines, colors=np.asarray(colours, dtype=np.float64).reshape(-1, 3),
+                                     linewidths=0.6))
     ax.plot([0, W, W, 0, 0], [0, 0, H, H, 0], color="0.6", lw=0.8)
     ax.set_xlim(-0.01 * W, 1.01 * W)
     ax.set_ylim(-0.01 * H, 1.01 * H)
