@@ -32,8 +32,25 @@ from ezdxf.math import bulge_to_arc
 import fabplan
 from fabplan.cli import main
 from fabplan.errors import FabplanError, InputError
-from fabplan.fabricate.dxf import check_sheet, segment_problems
-from fabplan.fabricate.nesting import Nesting, Placement, Sheet, check_nesting
+from fabplan.fabricate import strip_plan
+from fabplan.fabricate.dxf import (
+    SheetGeometry,
+    check_sheet,
+    geometry_document,
+    geometry_preview_png,
+    preview_png,
+    segment_problems,
+    sheet_geometry,
+    write_sheet_file,
+)
+from fabplan.fabricate.nesting import (
+    Nesting,
+    Placement,
+    Sheet,
+    _Candidate,
+    _lowest_fit,
+    check_nesting,
+)
 from fabplan.fabricate.strip_plan import plan_strips
 from fabplan.fabricate.strips import StripSettings, build_strips, fit_arc_runs, strip_polylines
 from fabplan.net.generate import rotational_snet, rotational_weingarten_snet
@@ -445,6 +462,150 @@ def test_custom_layers(const_net, tmp_path):
     assert {layer.dxf.name: layer.color for layer in doc.layers
                     if layer.dxf.name not in ("0", "Defpoints")} == \
         {"LASER_CUT": 2, "LASER_SLOT": 3, "MARK": 4}
+
+
+# ---------------------------------------------------------------------- written as planned
+def _placed_rows(plan, placement) -> np.ndarray:
+    """A part's outline rows ``x, y, bulge`` on its sheet, from the placement's angle and
+    offset (a rotation keeps the bulges)."""
+    a = math.radians(placement.angle_deg)
+    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    outline = plan.parts[placement.part].outline
+    return np.column_stack([outline[:, :2] @ R.T + placement.offset, outline[:, 2]])
+
+
+@pytest.mark.parametrize("run", ["text_run", "stroke_run"])
+def test_written_dxf_holds_the_planned_parts_to_1e9_mm(run, request):
+    """The files are no longer read back when written: read them here, independently."""
+    plan, out, files = request.getfixturevalue(run)
+    record = json.loads((out / "strips.json").read_text())
+    settings = plan.strips.settings
+    for sheet in plan.nesting.sheets:
+        name = record["parts"][sheet.placements[0].part]["file"]
+        doc = ezdxf.readfile(out / name)
+        assert len(doc.audit().errors) == 0
+        msp = doc.modelspace()
+        cut = [np.array(list(e.get_points("xyb"))) for e in msp.query("LWPOLYLINE")
+               if e.dxf.layer == settings.layers["cut"][0]]
+        slits = [np.array(list(e.get_points("xy"))) for e in msp.query("LWPOLYLINE")
+                 if e.dxf.layer == settings.layers["slit"][0]]
+        assert len(cut) == len(sheet.placements)
+        assert len(slits) == sum(len(plan.parts[p.part].slits) for p in sheet.placements)
+        for rows, placement in zip(cut, sheet.placements, strict=True):
+            expected = _placed_rows(plan, placement)
+            assert rows.shape == expected.shape
+            assert np.abs(rows - expected).max() < 1e-9
+        k = 0
+        for placement in sheet.placements:
+            a = math.radians(placement.angle_deg)
+            R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+            for rect in plan.parts[placement.part].slits:
+                assert np.abs(slits[k] - (rect[:, :2] @ R.T + placement.offset)).max() < 1e-9
+                k += 1
+
+
+def _masked(data: bytes) -> list:
+    """DXF lines with the header's dates and GUIDs and ezdxf's creation stamp masked."""
+    lines = data.split(b"\n")
+    for i in range(len(lines) - 2):
+        if lines[i].strip() in (b"$TDCREATE", b"$TDUCREATE", b"$TDUPDATE", b"$TDUUPDATE"):
+            lines[i + 2] = b""
+    return [re.sub(rb"\{[0-9A-F-]{36}\}", b"", re.sub(rb" @ \d{4}-\S*", b"", line))
+            for line in lines]
+
+
+@pytest.mark.slow
+def test_sheets_written_in_two_processes_equal_those_written_in_one(stroke_run, tmp_path,
+                                                                    monkeypatch):
+    plan, out, files = stroke_run
+    monkeypatch.setattr(strip_plan, "SHEETS_PER_PROCESS", 1)
+    two = plan.write(tmp_path, workers=2)
+    assert [f.name for f in two] == [f.name for f in files]
+    for f in _dxf_files(files):
+        assert _masked((tmp_path / f.name).read_bytes()) == _masked(f.read_bytes())
+    assert (tmp_path / "strips.csv").read_bytes() == (out / "strips.csv").read_bytes()
+
+
+@pytest.mark.slow
+def test_a_sheet_failing_in_a_worker_process_leaves_no_files(stroke_run, tmp_path, monkeypatch):
+    plan, _, _ = stroke_run
+    assert len(plan.nesting.sheets) >= 2
+    (tmp_path / "keep.txt").write_text("earlier")
+    real = strip_plan.write_sheet_file
+
+    def failing(geom, settings, path):
+        if path.name.endswith("-002.dxf"):
+            raise FabplanError(f"{path.name}: refused")
+        return real(geom, settings, path)
+
+    # the worker processes are forked from this one and see the patched function
+    monkeypatch.setattr(strip_plan, "write_sheet_file", failing)
+    monkeypatch.setattr(strip_plan, "SHEETS_PER_PROCESS", 1)
+    with pytest.raises(FabplanError, match="-002.dxf: refused"):
+        plan.write(tmp_path, workers=2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.txt"]
+
+
+def test_sheet_geometry_preview_equals_the_document_preview(text_run, stroke_run, tmp_path):
+    from matplotlib.image import imread
+
+    for plan, _, _ in (text_run, stroke_run):
+        settings = plan.strips.settings
+        geom = sheet_geometry(plan.nesting, [plan.nesting.sheets[0]], settings)
+        geometry_preview_png(geom, settings, tmp_path / "a.png", title="sheet 1")
+        preview_png(geometry_document(geom, settings), tmp_path / "b.png", settings.sheet_mm,
+                    title="sheet 1")
+        a, b = imread(tmp_path / "a.png"), imread(tmp_path / "b.png")
+        assert a.shape == b.shape and np.array_equal(a, b)
+        assert (a[..., :3] < 0.5).any()  # something is drawn
+
+
+def test_write_sheet_file_refuses_overlapping_outlines_before_writing(tmp_path):
+    settings = _settings()
+    square = np.array([[10, 10, 0], [200, 10, 0], [200, 100, 0], [10, 100, 0]], dtype=float)
+    geom = SheetGeometry(size=settings.sheet_mm, sheet_count=1, layers=["cut", "cut"],
+                         shapes=[square, square + [100, 20, 0]], closed=[True, True])
+    with pytest.raises(FabplanError, match="bad.dxf: two outlines are closer than the spacing"):
+        write_sheet_file(geom, settings, tmp_path / "bad.dxf")
+    assert not (tmp_path / "bad.dxf").exists()
+    geom.shapes[1] = square + [300, 0, 0]
+    digest = write_sheet_file(geom, settings, tmp_path / "good.dxf")
+    import hashlib
+
+    assert hashlib.sha256((tmp_path / "good.dxf").read_bytes()).hexdigest() == digest
+    assert check_sheet(tmp_path / "good.dxf", settings).outlines[1][0, 0] == 310.0
+
+
+def test_write_sheet_file_notices_bytes_changed_on_the_way_to_disk(tmp_path, monkeypatch):
+    from pathlib import Path
+
+    settings = _settings()
+    square = np.array([[10, 10, 0], [200, 10, 0], [200, 100, 0], [10, 100, 0]], dtype=float)
+    geom = SheetGeometry(size=settings.sheet_mm, sheet_count=1, layers=["cut"],
+                         shapes=[square], closed=[True])
+    write = Path.write_bytes
+    monkeypatch.setattr(Path, "write_bytes", lambda self, data: write(self, data[:-1]))
+    with pytest.raises(FabplanError, match="differs from the bytes written"):
+        write_sheet_file(geom, settings, tmp_path / "sheet.dxf")
+
+
+def test_lowest_fit_equals_measuring_every_window():
+    """Ruling places out by sampled cells finds the same place as the full measure."""
+    rng = np.random.default_rng(7)
+    for trial in range(200):
+        n, nx = 300, int(rng.integers(1, 120))
+        S = np.maximum.accumulate(rng.random(n)) * rng.uniform(0, 900) if trial % 2 else \
+            rng.random(n) * rng.uniform(0, 900)
+        lower = rng.random(nx) * 80
+        height = float(lower.max() + rng.uniform(0, 400))
+        probes = np.unique(np.linspace(0, nx - 1, min(nx, 16)).astype(np.intp))
+        c = _Candidate(angle=0.0, shift=np.zeros(2), lower=lower, upper=lower, pad=0,
+                       height=height, probes=probes)
+        y = np.maximum((np.lib.stride_tricks.sliding_window_view(S, nx) - lower).max(axis=1), 0)
+        ok = np.flatnonzero(y + height <= 1000.0)
+        expected = None if ok.size == 0 else (int(ok[np.argmin(y[ok] + height)]),
+                                               float(y[ok[np.argmin(y[ok] + height)]]))
+        assert _lowest_fit(S, c, 1000.0) == expected
 
 
 # ---------------------------------------------------------------------- checks of the checks

@@ -5,14 +5,18 @@ and colours configurable): closed LWPOLYLINE outlines with bulges on the cut lay
 slit rectangles on the slit layer (their mouths run `slit_overcut_mm` past the strip edge,
 so cutting the slits first and the outline after frees them cleanly), and engravings on
 the engrave layer: labels as single-stroke polylines, as glyph outlines, or as TEXT, plus
-the orientation arrows and splice marks. Files are built in a temporary folder, read back
-(``ezdxf.readfile`` and ``ezdxf.recover.readfile``), audited and checked (closed outlines
-inside the sheet and apart, no zero-length or duplicate segments) before they are moved
-into place.
+the orientation arrows and splice marks. A sheet's entities are first gathered as plain
+arrays (`SheetGeometry`), from which its document and its preview are drawn. Each document
+is audited (``doc.audit()``) and checked in memory (closed outlines inside the sheet and
+apart, no zero-length or duplicate segments) before it is written; the bytes on disk are
+compared with those written by their SHA-256. `check_sheet` reads a written file back
+with ezdxf and runs the same checks.
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
 import math
 import os
 from dataclasses import dataclass
@@ -31,22 +35,32 @@ from ezdxf.layouts import BaseLayout
 
 from ..errors import FabplanError, InputError
 from ..report.figures import new_figure
-from .nesting import Label, bulge_polygon
+from .nesting import Label, bulge_points, bulge_polygon
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .nesting import Nesting, Sheet
+    from .nesting import Nesting
     from .strips import StripSettings
 
 __all__ = [
     "STROKE_FONT",
     "stroke_text",
     "outline_text",
+    "SheetGeometry",
+    "sheet_geometry",
+    "label_polylines",
+    "geometry_document",
     "sheet_document",
+    "dxf_bytes",
+    "write_sheet_file",
     "SheetDrawing",
+    "sheet_drawing",
     "read_sheet",
+    "check_drawing",
+    "check_document",
     "check_sheet",
     "segment_problems",
     "preview_png",
+    "geometry_preview_png",
 ]
 
 SHEET_GAP_MM = 100.0
@@ -197,44 +211,128 @@ def _new_document(settings: "StripSettings", *, frames: bool = False):
     return doc
 
 
-def _add_sheet(msp, layout: "Nesting", sheet: "Sheet", settings: "StripSettings",
-               dx: float = 0.0) -> None:
-    cut, slit, engrave = (str(settings.layers[k][0]) for k in ("cut", "slit", "engrave"))
-    for placement in sheet.placements:
-        part = layout.parts[placement.part]
-        M = placement.matrix()
-        M[0, 2] += dx
+@dataclass
+class SheetGeometry:
+    """The entities of one sheet file as plain arrays, in the order they are written (mm).
 
-        def tf(P: np.ndarray, M=M) -> list:
-            return (np.asarray(P)[:, :2] @ M[:, :2].T + M[:, 2]).tolist()
+    Small enough to send to another process, and all that is needed to build the file's
+    document (`geometry_document`) and its preview (`geometry_preview_png`).
 
-        # a rotation keeps bulges (angles and their signs)
-        rows = np.column_stack([tf(part.outline), part.outline[:, 2]])
-        msp.add_lwpolyline(rows.tolist(), format="xyb", close=True, dxfattribs={"layer": cut})
-        for rect in part.slits:
-            msp.add_lwpolyline(tf(rect), format="xy", close=True, dxfattribs={"layer": slit})
-        for mark in part.marks:
-            msp.add_lwpolyline(tf(mark), format="xy", close=False, dxfattribs={"layer": engrave})
-        angle = math.degrees(math.atan2(M[1, 0], M[0, 0]))
-        for label in part.labels:
-            pos = tf(np.array([label.position]))[0]
-            placed = Label(label.text, (pos[0], pos[1]), label.angle_deg + angle, label.height,
-                           label.kind)
+    Attributes
+    ----------
+    size : (width, height) of one sheet.
+    sheet_count : sheets side by side in the file.
+    layers : list of str, each entity's layer kind: ``"cut"``, ``"slit"``, ``"engrave"``
+        or ``"sheet"`` (the frames drawn when several sheets share the file).
+    shapes : list, each entity's geometry: (m, 3) float rows ``x, y, bulge`` on the cut
+        layer, (m, 2) float points on the others, or a `Label` placed on the sheet (its
+        strokes, outlines or TEXT follow `StripSettings.labels`).
+    closed : list of bool, whether each polyline is closed.
+    """
+
+    size: tuple[float, float]
+    sheet_count: int
+    layers: list[str]
+    shapes: list
+    closed: list[bool]
+
+
+def sheet_geometry(layout: "Nesting", sheets: list, settings: "StripSettings") -> SheetGeometry:
+    """The entities of a file holding `sheets`, side by side when there are several.
+
+    Parameters
+    ----------
+    layout : the nesting result.
+    sheets : list of Sheet to draw; sheet k sits at x = k (width + `SHEET_GAP_MM`).
+    settings : sheet size.
+
+    Returns
+    -------
+    SheetGeometry, per part: its outline, slits, marks and labels in that order, then the
+    sheet's frame when there are several sheets.
+    """
+    W, H = settings.sheet_mm
+    frames = len(sheets) > 1
+    geom = SheetGeometry(size=(W, H), sheet_count=len(sheets), layers=[], shapes=[], closed=[])
+
+    def add(kind: str, shape, closed: bool) -> None:
+        geom.layers.append(kind)
+        geom.shapes.append(shape)
+        geom.closed.append(closed)
+
+    for k, sheet in enumerate(sheets):
+        dx = k * (W + SHEET_GAP_MM)
+        for placement in sheet.placements:
+            part = layout.parts[placement.part]
+            M = placement.matrix()
+            M[0, 2] += dx
+
+            def tf(P: np.ndarray, M=M) -> np.ndarray:
+                return np.asarray(P)[:, :2] @ M[:, :2].T + M[:, 2]
+
+            # a rotation keeps bulges (angles and their signs)
+            add("cut", np.column_stack([tf(part.outline), part.outline[:, 2]]), True)
+            for rect in part.slits:
+                add("slit", tf(rect), True)
+            for mark in part.marks:
+                add("engrave", tf(mark), False)
+            angle = math.degrees(math.atan2(M[1, 0], M[0, 0]))
+            for label in part.labels:
+                pos = tf(np.array([label.position]))[0].tolist()
+                add("engrave", Label(label.text, (pos[0], pos[1]), label.angle_deg + angle,
+                                     label.height, label.kind), False)
+        if frames:
+            add("sheet", np.array([(dx, 0), (dx + W, 0), (dx + W, H), (dx, H)], dtype=np.float64),
+                True)
+    return geom
+
+
+def label_polylines(label: Label, style: str) -> tuple[list, bool]:
+    """The polylines that engrave a placed label: glyph outlines (closed) for ``"outline"``,
+    single strokes (open) otherwise; none for ``"text"`` (written as TEXT)."""
+    if style == "text":
+        return [], False
+    if style == "outline":
+        return outline_text(label), True
+    return stroke_text(label), False
+
+
+def geometry_document(geom: SheetGeometry, settings: "StripSettings") -> Drawing:
+    """The ezdxf document of a sheet file's entities (R2010, millimetres).
+
+    Parameters
+    ----------
+    geom : the entities, from `sheet_geometry`.
+    settings : layers and label style.
+    """
+    doc = _new_document(settings, frames=geom.sheet_count > 1)
+    msp = doc.modelspace()
+    names = {kind: str(settings.layers[kind][0]) for kind in ("cut", "slit", "engrave")}
+    names["sheet"] = SHEET_LAYER[0]
+    for kind, shape, closed in zip(geom.layers, geom.shapes, geom.closed, strict=True):
+        attribs = {"layer": names[kind]}
+        if isinstance(shape, Label):
             if settings.labels == "text":
-                msp.add_text(placed.text, height=placed.height, rotation=placed.angle_deg,
-                             dxfattribs={"layer": engrave}).set_placement(
-                    pos, align=TextEntityAlignment.MIDDLE_CENTER)
-            elif settings.labels == "outline":
-                for P in outline_text(placed):
-                    msp.add_lwpolyline(P.tolist(), format="xy", close=True,
-                                       dxfattribs={"layer": engrave})
-            else:
-                for P in stroke_text(placed):
-                    msp.add_lwpolyline(P.tolist(), format="xy", close=False,
-                                       dxfattribs={"layer": engrave})
+                msp.add_text(shape.text, height=shape.height, rotation=shape.angle_deg,
+                             dxfattribs=attribs).set_placement(
+                    shape.position, align=TextEntityAlignment.MIDDLE_CENTER)
+                continue
+            lines, shut = label_polylines(shape, settings.labels)
+            for P in lines:
+                msp.add_lwpolyline(P.tolist(), format="xy", close=shut, dxfattribs=attribs)
+        else:
+            msp.add_lwpolyline(shape.tolist(), format="xyb" if shape.shape[1] == 3 else "xy",
+                               close=closed, dxfattribs=attribs)
+    W, H = geom.size
+    width = geom.sheet_count * W + (geom.sheet_count - 1) * SHEET_GAP_MM
+    doc.header["$EXTMIN"] = (0, 0, 0)
+    doc.header["$EXTMAX"] = (width, H, 0)
+    doc.header["$LIMMIN"] = (0, 0)
+    doc.header["$LIMMAX"] = (width, H)
+    return doc
 
 
-def sheet_document(layout: "Nesting", sheets: list, settings: "StripSettings"):
+def sheet_document(layout: "Nesting", sheets: list, settings: "StripSettings") -> Drawing:
     """An ezdxf document with the given sheets, side by side when there are several.
 
     Parameters
@@ -243,22 +341,41 @@ def sheet_document(layout: "Nesting", sheets: list, settings: "StripSettings"):
     sheets : list of Sheet to draw; sheet k sits at x = k (width + `SHEET_GAP_MM`).
     settings : layers and label style.
     """
-    frames = len(sheets) > 1
-    doc = _new_document(settings, frames=frames)
-    msp = doc.modelspace()
-    W, H = settings.sheet_mm
-    for k, sheet in enumerate(sheets):
-        dx = k * (W + SHEET_GAP_MM)
-        _add_sheet(msp, layout, sheet, settings, dx)
-        if frames:
-            msp.add_lwpolyline([(dx, 0), (dx + W, 0), (dx + W, H), (dx, H)], close=True,
-                               dxfattribs={"layer": SHEET_LAYER[0]})
-    width = len(sheets) * W + (len(sheets) - 1) * SHEET_GAP_MM
-    doc.header["$EXTMIN"] = (0, 0, 0)
-    doc.header["$EXTMAX"] = (width, H, 0)
-    doc.header["$LIMMIN"] = (0, 0)
-    doc.header["$LIMMAX"] = (width, H)
-    return doc
+    return geometry_document(sheet_geometry(layout, sheets, settings), settings)
+
+
+def dxf_bytes(doc: Drawing) -> bytes:
+    """The bytes of an ASCII DXF file of `doc`, as ``doc.saveas`` writes them."""
+    stream = io.StringIO()
+    doc.write(stream)
+    return doc.encode(stream.getvalue())
+
+
+def write_sheet_file(geom: SheetGeometry, settings: "StripSettings",
+                     path: str | os.PathLike) -> str:
+    """Build, check and write one sheet file; return the SHA-256 of its bytes.
+
+    The document is exported to bytes, then audited and checked in memory
+    (`check_document`); only then are the bytes written, and those on disk are hashed
+    again and compared with them, which stands in for reading the whole file back.
+
+    Raises
+    ------
+    FabplanError
+        When a check fails or the file on disk differs from the bytes written.
+    """
+    path = Path(path)
+    doc = geometry_document(geom, settings)
+    # export first: the audit may reorder the OBJECTS section (in an order that changes
+    # from run to run), and the file should be what the document exports as built
+    data = dxf_bytes(doc)
+    check_document(doc, settings, geom.sheet_count, name=path.name)
+    digest = hashlib.sha256(data).hexdigest()
+    path.write_bytes(data)
+    if hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+        raise FabplanError(f"{path.name}: the file on disk differs from the bytes written; "
+                           "check the disk and write the plan again")
+    return digest
 
 
 # ---------------------------------------------------------------------- reading back
@@ -299,6 +416,33 @@ def _lwpolylines(layout: BaseLayout) -> Iterator[LWPolyline]:
             yield e
 
 
+def sheet_drawing(doc: Drawing, layers: dict, *, audit_errors: int = 0,
+                  recover_errors: int = 0) -> SheetDrawing:
+    """What a sheet document holds, in memory or read from a file.
+
+    Parameters
+    ----------
+    doc : the document.
+    layers : kind -> (name, colour), as in `StripSettings.layers`.
+    audit_errors, recover_errors : the error counts to record.
+    """
+    cut, slit, engrave = (str(layers[k][0]) for k in ("cut", "slit", "engrave"))
+    msp = doc.modelspace()
+    outlines, closed_o, slits, closed_s = [], [], [], []
+    for e in _lwpolylines(msp):
+        if e.dxf.layer == cut:
+            outlines.append(np.array(list(e.get_points("xyb")), dtype=np.float64))
+            closed_o.append(bool(e.closed))
+        elif e.dxf.layer == slit:
+            slits.append(np.array(list(e.get_points("xy")), dtype=np.float64))
+            closed_s.append(bool(e.closed))
+    engravings = len(msp.query(f'*[layer=="{engrave}"]'))
+    return SheetDrawing(outlines=outlines, outline_closed=closed_o, slits=slits,
+                        slit_closed=closed_s, engravings=engravings,
+                        insunits=int(doc.header.get("$INSUNITS", 0)), version=doc.dxfversion,
+                        audit_errors=audit_errors, recover_errors=recover_errors, doc=doc)
+
+
 def read_sheet(path: str | os.PathLike, layers: dict, *, recover_too: bool = True) -> SheetDrawing:
     """Read a sheet DXF back with ezdxf and audit it.
 
@@ -311,23 +455,8 @@ def read_sheet(path: str | os.PathLike, layers: dict, *, recover_too: bool = Tru
     doc = ezdxf.readfile(str(path))
     auditor = doc.audit()
     recover_errors = len(recover.readfile(str(path))[1].errors) if recover_too else 0
-    cut, slit, engrave = (str(layers[k][0]) for k in ("cut", "slit", "engrave"))
-    msp = doc.modelspace()
-    outlines, closed_o, slits, closed_s = [], [], [], []
-    for e in _lwpolylines(msp):
-        if e.dxf.layer == cut:
-            outlines.append(np.array(list(e.get_points("xyb")), dtype=np.float64))
-            closed_o.append(bool(e.closed))
-        elif e.dxf.layer == slit:
-            slits.append(np.array(list(e.get_points("xy")), dtype=np.float64))
-            closed_s.append(bool(e.closed))
-    engravings = len(msp.query(f'*[layer=="{engrave}"]'))
-    drawing = SheetDrawing(outlines=outlines, outline_closed=closed_o, slits=slits,
-                           slit_closed=closed_s, engravings=engravings,
-                           insunits=int(doc.header.get("$INSUNITS", 0)), version=doc.dxfversion,
-                           audit_errors=len(auditor.errors), recover_errors=recover_errors)
-    drawing.doc = doc
-    return drawing
+    return sheet_drawing(doc, layers, audit_errors=len(auditor.errors),
+                         recover_errors=recover_errors)
 
 
 def segment_problems(doc_or_path: str | os.PathLike | Drawing) -> list:
@@ -368,20 +497,18 @@ def segment_problems(doc_or_path: str | os.PathLike | Drawing) -> list:
     return problems
 
 
-def check_sheet(path: str | os.PathLike, settings: "StripSettings", sheet_count: int = 1) -> SheetDrawing:
-    """Read a written sheet file back and check it as a cutter would need it.
+def check_drawing(d: SheetDrawing, settings: "StripSettings", sheet_count: int = 1, *,
+                  name: str = "sheet") -> SheetDrawing:
+    """Check a sheet as a cutter would need it; `name` names it in the messages.
 
-    Checks: R2010, $INSUNITS 4, no audit errors (plain and recover reader), closed cut and
-    slit polylines, outlines inside their sheet and `spacing_mm` apart, no zero-length or
-    duplicate segments.
+    Checks: R2010, $INSUNITS 4, no audit errors, closed cut and slit polylines, outlines
+    inside their sheet and `spacing_mm` apart, no zero-length or duplicate segments.
 
     Raises
     ------
     FabplanError
         Naming the file and the first failed check.
     """
-    d = read_sheet(path, settings.layers, recover_too=False)
-    name = Path(path).name
     if d.version != "AC1024":
         raise FabplanError(f"{name}: DXF version {d.version}, expected R2010 (AC1024)")
     if d.insunits != 4:
@@ -401,10 +528,37 @@ def check_sheet(path: str | os.PathLike, settings: "StripSettings", sheet_count:
     pairs = tree.query(polys, predicate="dwithin", distance=max(settings.spacing_mm - 1e-3, 0))
     if any(a < b for a, b in pairs.T):
         raise FabplanError(f"{name}: two outlines are closer than the spacing")
-    problems = segment_problems(d.doc if d.doc is not None else path)
-    if problems:
-        raise FabplanError(f"{name}: {problems[0]}")
+    if d.doc is not None:
+        problems = segment_problems(d.doc)
+        if problems:
+            raise FabplanError(f"{name}: {problems[0]}")
     return d
+
+
+def check_document(doc: Drawing, settings: "StripSettings", sheet_count: int = 1, *,
+                   name: str = "sheet") -> SheetDrawing:
+    """Audit a sheet document in memory (``doc.audit()``) and check it (`check_drawing`).
+
+    Raises
+    ------
+    FabplanError
+        Naming `name` and the first failed check.
+    """
+    auditor = doc.audit()
+    d = sheet_drawing(doc, settings.layers, audit_errors=len(auditor.errors))
+    return check_drawing(d, settings, sheet_count, name=name)
+
+
+def check_sheet(path: str | os.PathLike, settings: "StripSettings", sheet_count: int = 1) -> SheetDrawing:
+    """Read a written sheet file back with ezdxf and check it (`check_drawing`).
+
+    Raises
+    ------
+    FabplanError
+        Naming the file and the first failed check.
+    """
+    d = read_sheet(path, settings.layers, recover_too=False)
+    return check_drawing(d, settings, sheet_count, name=Path(path).name)
 
 
 def preview_png(doc, path, size: tuple, *, title: str = "") -> None:
@@ -414,32 +568,69 @@ def preview_png(doc, path, size: tuple, *, title: str = "") -> None:
     its insertion point; the sheet's outline is drawn in grey.
     """
     from ezdxf.colors import aci2rgb
-    from matplotlib.collections import LineCollection
 
-    from .nesting import bulge_points
+    colours = {layer.dxf.name: np.array(aci2rgb(layer.color)) / 255 for layer in doc.layers}
+    lines, cols, texts = [], [], []
+    for e in doc.modelspace():
+        colour = colours.get(e.dxf.layer, np.zeros(3))
+        if e.dxftype() == "LWPOLYLINE":
+            rows = np.array(list(e.get_points("xyb")), dtype=np.float64)
+            lines.append(_preview_line(rows, bool(e.closed)))
+            cols.append(colour)
+        elif e.dxftype() == "TEXT":
+            at = e.dxf.align_point if e.dxf.hasattr("align_point") else e.dxf.insert
+            texts.append((at.x, at.y, e.dxf.text, e.dxf.rotation, e.dxf.height, colour))
+    _draw_preview(lines, cols, texts, size, path, title)
+
+
+def geometry_preview_png(geom: SheetGeometry, settings: "StripSettings", path, *,
+                         title: str = "") -> None:
+    """Draw a sheet file's entities from their arrays, as `preview_png` draws the document
+    (the same picture, without building or reading the document)."""
+    from ezdxf.colors import aci2rgb
+
+    colours = {kind: np.array(aci2rgb(int(settings.layers[kind][1]))) / 255
+               for kind in ("cut", "slit", "engrave")}
+    colours["sheet"] = np.array(aci2rgb(SHEET_LAYER[1])) / 255
+    lines, cols, texts = [], [], []
+    for kind, shape, closed in zip(geom.layers, geom.shapes, geom.closed, strict=True):
+        if isinstance(shape, Label):
+            if settings.labels == "text":
+                texts.append((shape.position[0], shape.position[1], shape.text, shape.angle_deg,
+                              shape.height, colours[kind]))
+                continue
+            strokes, shut = label_polylines(shape, settings.labels)
+            lines += [_preview_line(P, shut) for P in strokes]
+            cols += [colours[kind]] * len(strokes)
+        else:
+            lines.append(_preview_line(shape, closed))
+            cols.append(colours[kind])
+    _draw_preview(lines, cols, texts, geom.size, path, title)
+
+
+def _preview_line(rows: np.ndarray, closed: bool) -> np.ndarray:
+    """(p, 2) points drawing a polyline, arcs flattened to 0.2 mm, closed ones closed."""
+    if rows.shape[1] == 3 and np.any(np.abs(rows[:, 2]) >= 1e-12):
+        P = bulge_points(rows, closed=closed, tolerance_mm=0.2)
+    else:
+        P = rows[:, :2]
+    return np.vstack([P, P[:1]]) if closed else P
+
+
+def _draw_preview(lines: list, colours: list, texts: list, size: tuple, path, title: str) -> None:
+    """One figure: the polylines as one LineCollection, the texts, the sheet in grey."""
+    from matplotlib.collections import LineCollection
 
     W, H = size
     scale = 14.0 / max(W, H)
     fig = new_figure((max(W * scale, 2), max(H * scale, 2) + (0.3 if title else 0)), dpi=100)
     ax = fig.add_axes((0, 0, 1, 1 if not title else H * scale / (H * scale + 0.3)))
-    colours = {layer.dxf.name: np.array(aci2rgb(layer.color)) / 255 for layer in doc.layers}
-    lines, cols = [], []
-    for e in doc.modelspace():
-        colour = colours.get(e.dxf.layer, np.zeros(3))
-        if e.dxftype() == "LWPOLYLINE":
-            rows = np.array(list(e.get_points("xyb")), dtype=np.float64)
-            P = bulge_points(rows, closed=bool(e.closed), tolerance_mm=0.2)
-            if e.closed:
-                P = np.vstack([P, P[:1]])
-            lines.append(P)
-            cols.append(colour)
-        elif e.dxftype() == "TEXT":
-            at = e.dxf.align_point if e.dxf.hasattr("align_point") else e.dxf.insert
-            x, y = at.x, at.y
-            ax.text(x, y, e.dxf.text, rotation=e.dxf.rotation, ha="center", va="center",
-                    fontsize=max(2.0, e.dxf.height * scale * 72 / 1.4), color=colour,
-                    rotation_mode="anchor")
-    ax.add_collection(LineCollection(lines, colors=cols, linewidths=0.6))
+    for x, y, text, rotation, height, colour in texts:
+        ax.text(x, y, text, rotation=rotation, ha="center", va="center",
+                fontsize=max(2.0, height * scale * 72 / 1.4), color=colour, rotation_mode="anchor")
+    # one (n, 3) array: matplotlib converts a list of colours one by one
+    ax.add_collection(LineCollection(lines, colors=np.asarray(colours, dtype=np.float64).reshape(-1, 3),
+                                     linewidths=0.6))
     ax.plot([0, W, W, 0, 0], [0, 0, H, H, 0], color="0.6", lw=0.8)
     ax.set_xlim(-0.01 * W, 1.01 * W)
     ax.set_ylim(-0.01 * H, 1.01 * H)
@@ -447,4 +638,5 @@ def preview_png(doc, path, size: tuple, *, title: str = "") -> None:
     ax.axis("off")
     if title:
         fig.suptitle(title, fontsize=9, y=0.995)
-    fig.savefig(path, dpi=110, facecolor="white")
+    # zlib level 3 instead of 6: the same pixels, a third more bytes, encoded in half the time
+    fig.savefig(path, dpi=110, facecolor="white", pil_kwargs={"compress_level": 3})

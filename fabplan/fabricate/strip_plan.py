@@ -13,17 +13,21 @@ import json
 import math
 import os
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..io.output import output_folder
 from ..io.records import json_text
 from ..net.mesh import QuadMesh
-from .dxf import check_sheet, preview_png, sheet_document
+from .dxf import SheetGeometry, geometry_preview_png, sheet_geometry, write_sheet_file
 from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts
 from .strips import StripSet, StripSettings, build_strips
 
-__all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan"]
+__all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan", "SHEETS_PER_PROCESS"]
+
+SHEETS_PER_PROCESS = 8
+"""Fewest sheets per process when sheets are written in several processes."""
 
 
 @dataclass
@@ -52,15 +56,16 @@ class StripPlan:
         return rec
 
     def write(self, out_dir: str | os.PathLike, *, name: str = "strips",
-              previews: bool = True) -> list[Path]:
+              previews: bool = True, workers: int | None = 1) -> list[Path]:
         """Write DXF sheets, the schedule (CSV, JSON) and preview PNGs into `out_dir`.
 
-        Everything is built in a temporary folder beside `out_dir`, every DXF is read back
-        and audited there, and only then are the files moved into place: a failed run
-        leaves no partial output. Files of an earlier run listed in ``NAME.json`` are
-        replaced. Returns the written paths.
+        Everything is built in a temporary folder beside `out_dir`, every DXF is audited
+        and checked before it is written there, and only then are the files moved into
+        place: a failed run leaves no partial output. Files of an earlier run listed in
+        ``NAME.json`` are replaced. `workers` processes write the sheets (None: one per
+        CPU). Returns the written paths.
         """
-        return write_plan(self, out_dir, name=name, previews=previews)
+        return write_plan(self, out_dir, name=name, previews=previews, workers=workers)
 
 
 def plan_strips(mesh: QuadMesh, settings: StripSettings) -> StripPlan:
@@ -169,12 +174,23 @@ def _plan_record(plan: StripPlan, files: list, sheet_files: dict) -> dict:
 
 
 def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "strips",
-               previews: bool = True) -> list[Path]:
+               previews: bool = True, workers: int | None = 1) -> list[Path]:
     """Write the DXF sheets, schedule (CSV and JSON) and preview PNGs of a plan.
 
-    All files are built and checked (`check_sheet`) in a staging folder first, then moved
-    into `out_dir` (`fabplan.io.output.output_folder`); on any failure nothing is left
-    behind. Files of an earlier run with the same `name` (listed in its JSON) are removed.
+    Every sheet's document is audited and checked in memory before it is written, and the
+    bytes on disk are compared with those written (`fabplan.fabricate.dxf.write_sheet_file`).
+    All files are built in a staging folder first, then moved into `out_dir`
+    (`fabplan.io.output.output_folder`); on any failure nothing is left behind. Files of an
+    earlier run with the same `name` (listed in its JSON) are removed.
+
+    Parameters
+    ----------
+    plan : the strip plan.
+    out_dir : the output folder.
+    name : the stem of every file.
+    previews : also draw one PNG per sheet.
+    workers : processes that write the sheets; None for one per CPU. One writes them in
+        this process, as do several for fewer than `SHEETS_PER_PROCESS` sheets each.
 
     Returns
     -------
@@ -188,25 +204,25 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
         files: list[str] = []
         sheet_files: dict = {}
         digits = max(3, len(str(len(layout.sheets))))
+        jobs = []
         for sheet in layout.sheets:
             if settings.one_file and not previews:
                 continue
-            doc = sheet_document(layout, [sheet], settings)
             stem = f"{name}-sheet-{sheet.index:0{digits}d}"
-            if not settings.one_file:
-                doc.saveas(tmp / f"{stem}.dxf")
-                doc = check_sheet(tmp / f"{stem}.dxf", settings).doc
-                files.append(f"{stem}.dxf")
-                sheet_files[sheet.index] = f"{stem}.dxf"
-            if previews:
-                title = (f"sheet {sheet.index} of {len(layout.sheets)}: "
-                         f"{', '.join(layout.parts[p.part].id for p in sheet.placements)}")
-                preview_png(doc, tmp / f"{stem}.png", (W, H), title=title)
-                files.append(f"{stem}.png")
+            dxf = None if settings.one_file else f"{stem}.dxf"
+            png = f"{stem}.png" if previews else None
+            title = (f"sheet {sheet.index} of {len(layout.sheets)}: "
+                     f"{', '.join(layout.parts[p.part].id for p in sheet.placements)}")
+            jobs.append(_SheetJob(sheet_geometry(layout, [sheet], settings), dxf, png, title))
+            if dxf is not None:
+                files.append(dxf)
+                sheet_files[sheet.index] = dxf
+            if png is not None:
+                files.append(png)
+        _run_sheet_jobs(jobs, settings, tmp, workers)
         if settings.one_file:
-            doc = sheet_document(layout, layout.sheets, settings)
-            doc.saveas(tmp / f"{name}-sheets.dxf")
-            check_sheet(tmp / f"{name}-sheets.dxf", settings, len(layout.sheets))
+            write_sheet_file(sheet_geometry(layout, layout.sheets, settings), settings,
+                             tmp / f"{name}-sheets.dxf")
             files.insert(0, f"{name}-sheets.dxf")
             sheet_files = {s.index: f"{name}-sheets.dxf" for s in layout.sheets}
         rows = schedule_rows(plan)
@@ -221,6 +237,45 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
     for target in stale:
         target.unlink(missing_ok=True)
     return [out_dir / f for f in files]
+
+
+@dataclass
+class _SheetJob:
+    """One sheet's files: its entities, the DXF and PNG names (None: not written)."""
+
+    geometry: SheetGeometry
+    dxf: str | None
+    png: str | None
+    title: str
+
+
+def _write_sheet_jobs(jobs: list[_SheetJob], settings: StripSettings, folder: Path) -> None:
+    """Write the DXF (checked) and the preview of each job into `folder`."""
+    for job in jobs:
+        if job.dxf is not None:
+            write_sheet_file(job.geometry, settings, folder / job.dxf)
+        if job.png is not None:
+            geometry_preview_png(job.geometry, settings, folder / job.png, title=job.title)
+
+
+def _run_sheet_jobs(jobs: list[_SheetJob], settings: StripSettings, folder: Path,
+                    workers: int | None) -> None:
+    """Run the jobs here or spread over `workers` processes.
+
+    Each job is independent (its own document and files), so the processes only receive
+    plain arrays and return nothing but errors. A plan of few sheets is written here: a
+    process costs about as much to start as a sheet to write.
+    """
+    count = min((os.cpu_count() or 1) if workers is None else workers,
+                len(jobs) // SHEETS_PER_PROCESS)
+    if count <= 1:
+        _write_sheet_jobs(jobs, settings, folder)
+        return
+    # interleaved batches: the first sheets hold the longest parts and take the longest
+    batches = [jobs[k::4 * count] for k in range(4 * count)]
+    with ProcessPoolExecutor(max_workers=count) as pool:
+        for future in [pool.submit(_write_sheet_jobs, b, settings, folder) for b in batches if b]:
+            future.result()
 
 
 def _stale_files(out_dir: Path, name: str, files: list[str]) -> list[Path]:

@@ -16,7 +16,7 @@ import resource
 from ..errors import InputError
 
 __all__ = ["BYTES_PER_PANEL", "MIN_MAX_PANELS", "available_memory", "default_max_panels",
-           "check_panel_count"]
+           "check_panel_count", "worker_count"]
 
 BYTES_PER_PANEL = 40_000
 """Peak memory per panel of a layout with its gliding solve, in bytes: 0.31 GB for 6,500
@@ -100,3 +100,16 @@ raise the limit with --max-panels
               if gigabytes >= 0.1 else f"{1000 * gigabytes:.0f} MB")
     raise InputError(f"{what}: about {size} panels (about {memory} of memory), more than the "
                      f"limit of {limit:,}: {fix}, or raise the limit with --max-panels")
+
+
+def worker_count(spec: str | int) -> int:
+    """The number of local worker processes for ``--workers`` (``auto``: the cores)."""
+    if spec == "auto":
+        return max(1, os.cpu_count() or 1)
+    try:
+        n = int(spec)
+    except ValueError:
+        raise InputError(f"--workers must be a number or 'auto', got {spec!r}") from None
+    if not 1 <= n <= 512:
+        raise InputError(f"--workers must lie between 1 and 512, got {n}")
+    return n

@@ -26,13 +26,13 @@ with its message, and the others go on; a worker that dies has its task retried
 from __future__ import annotations
 
 import contextlib
-import os
 import time
 from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
 from ..errors import FabplanError, InputError
+from ..io.resources import worker_count
 from .run import (
     CandidateResult,
     StudyResult,
@@ -55,19 +55,6 @@ if TYPE_CHECKING:
 __all__ = ["run_study_parallel", "RETRIES", "worker_count", "dask_client"]
 
 RETRIES = 2   # a task whose worker died is run again this many times
-
-
-def worker_count(spec: str | int) -> int:
-    """The number of local worker processes for ``--workers`` (``auto``: the cores)."""
-    if spec == "auto":
-        return max(1, os.cpu_count() or 1)
-    try:
-        n = int(spec)
-    except ValueError:
-        raise InputError(f"--workers must be a number or 'auto', got {spec!r}") from None
-    if not 1 <= n <= 512:
-        raise InputError(f"--workers must lie between 1 and 512, got {n}")
-    return n
 
 
 def _quiet(message: str) -> None:
