@@ -244,3 +244,41 @@ def test_the_molds_report_pdf_opens_with_contents_and_numbered_pages(cmc1_plan, 
         start = int(re.search(section + r"\s+page (\d+)", pages[0]).group(1))
         assert pages[start - 1].lstrip().startswith(section)
     assert f"{cmc1_plan.mold_count} molds" in pages[0] or "1 mold" in pages[0]
+
+
+def test_the_study_says_where_the_design_makes_lines_kink(tmp_path):
+    """A paraboloid of revolution has an umbilic at its pole: the map of |k1 - k2| says
+    so, and the report places the sharpest turn of the lines on it and says whether the
+    design forces it."""
+    import numpy as np
+
+    from fabplan.layout.picture import curvature_difference_at
+    from fabplan.study.report import kink_text, write_study
+    from fabplan.study.run import run_study
+    from fabplan.study.spec import parse_study
+
+    study = parse_study("""
+[design]
+surface = "paraboloid"
+triangles = 6000
+[panels]
+size = 1.0
+[limits]
+max_deviation_mm = 100
+mold_tolerance_mm = 3
+[[candidates]]
+net = "isogonal"
+angle = 80
+""")
+    result = run_study(study)
+    design = result.design
+    pole = design.vertices[np.argmin(design.vertices[:, 2])]
+    rim = design.vertices[np.argmax(design.vertices[:, 2])]
+    share = curvature_difference_at(design, 1.0, np.array([pole, rim]))
+    assert share[0] < 0.1 < 1.0 < share[1]
+    text = kink_text(result)
+    assert re.search(r"turn most, by \d+ deg, at \(-?\d", text) and "% of its median" in text
+    assert ("near an umbilic" in text) != ("comes from the layout" in text)
+    write_study(result, tmp_path / "out", view_3d=False, pdf=False)
+    page = (tmp_path / "out" / "report.html").read_text(encoding="utf-8")
+    assert 'id="curvature"' in page and "Where the design makes lines kink" in page

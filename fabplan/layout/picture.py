@@ -14,7 +14,8 @@ from ..net.mesh import QuadMesh
 from ..report.figures import net_view_angles, new_figure
 from .trim import BoundaryPanels
 
-__all__ = ["write_layout_picture", "fairness_marks"]
+__all__ = ["write_layout_picture", "fairness_marks", "curvature_difference_figure",
+           "curvature_difference_at"]
 
 
 def fairness_marks(properties: dict) -> dict[str, list]:
@@ -92,3 +93,77 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", bbox_inches="tight")
     return path
+
+
+def _curvature_difference(design: DesignSurface, panel_size: float) -> np.ndarray:
+    """(t,) float, |k1 - k2| of every design triangle times the panel size: how far a
+    panel's two principal curvatures part (near 0 the principal directions, and the
+    lines of every S-net with them, are not determined)."""
+    from .directions import face_principal_frames
+
+    k1, k2, _ = face_principal_frames(design)
+    return np.abs(k1 - k2) * panel_size
+
+
+def curvature_difference_at(design: DesignSurface, panel_size: float,
+                            points: np.ndarray) -> np.ndarray:
+    """(m,) float, `_curvature_difference` at the design triangles nearest to `points`
+    (m, 3), relative to its area-weighted median over the design (1: a typical place;
+    below about 0.2: near an umbilic)."""
+    from scipy.spatial import cKDTree
+
+    value = _curvature_difference(design, panel_size)
+    order = np.argsort(value)
+    weight = np.cumsum(design.face_areas[order])
+    median = value[order][np.searchsorted(weight, 0.5 * weight[-1])]
+    centres = design.vertices[design.triangles].mean(axis=1)
+    nearest = cKDTree(centres).query(np.atleast_2d(points))[1]
+    return value[nearest] / max(float(median), 1e-300)
+
+
+def curvature_difference_figure(design: DesignSurface, panel_size: float, *,
+                                marks: dict | None = None,
+                                singular_points: np.ndarray | None = None,
+                                title: str = "") -> str:
+    """Data URI: the design coloured by |k1 - k2| times the panel size (dark: near an
+    umbilic, where the principal directions turn fast or are not defined and a net's
+    lines must kink), seen as `write_layout_picture` sees it, with `marks` ({label:
+    point (3,)}) and the direction field's `singular_points`."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from ..report.figures import figure_to_data_uri
+
+    value = _curvature_difference(design, panel_size)
+    T = design.triangles
+    step = max(1, int(math.ceil(len(T) / 30000)))     # a coarser sample keeps it quick
+    fig = new_figure((8, 6.5))
+    ax = fig.add_subplot(projection="3d")
+    ax.computed_zorder = False
+    top = float(np.quantile(value, 0.98)) or 1.0
+    norm, cmap = Normalize(0.0, top), colormaps["magma"]
+    ax.add_collection3d(Poly3DCollection(design.vertices[T[::step]],
+                                         facecolor=cmap(norm(value[::step])), edgecolor="none"))
+    if singular_points is not None and len(singular_points):
+        ax.scatter(*np.asarray(singular_points).T, color="white", edgecolor="black", s=30,
+                   depthshade=False, label="singularities of the direction field")
+    for (label, point), style in zip((marks or {}).items(), ("v", "s", "D", "^"), strict=False):
+        ax.scatter(*np.asarray(point, float)[:, None], color="lime", edgecolor="black",
+                   marker=style, s=80, depthshade=False, label=label, zorder=10)
+    elevation, azimuth = net_view_angles(design)
+    ax.view_init(elev=elevation, azim=azimuth)
+    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
+    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
+    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
+        getattr(ax, f"set_{axis}lim")(a, b)
+    ax.set_box_aspect(span)
+    ax.set_axis_off()
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7)
+    bar.set_label("|k1 - k2| x panel size (dark: near an umbilic)")
+    if title:
+        ax.set_title(title, fontsize=9)
+    if marks or (singular_points is not None and len(singular_points)):
+        ax.legend(loc="lower left", fontsize=8)
+    return figure_to_data_uri(fig)

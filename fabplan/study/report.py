@@ -23,7 +23,12 @@ import numpy as np
 from ..fabricate.mold_report import net_viewer_scene
 from ..io import output
 from ..io.records import json_text
-from ..layout.picture import fairness_marks, write_layout_picture
+from ..layout.picture import (
+    curvature_difference_at,
+    curvature_difference_figure,
+    fairness_marks,
+    write_layout_picture,
+)
 from ..report import figures, html, viewer
 from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
@@ -446,6 +451,47 @@ def limit_text(key: str, value) -> tuple[str, str]:
     return name, f"{html.format_value(value)} {unit}".strip()
 
 
+def _sharpest_turn(result: StudyResult) -> tuple[CandidateResult, float, np.ndarray] | None:
+    """The recommended candidate (else the first measured one), the largest turn of its
+    lines (degrees) and where it is (3,), or None when it has no turn measured."""
+    measured = [c for c in result.ranked() if not c.failed and c.net is not None]
+    best = next((c for c in measured if c.name == result.recommended), None)
+    c = best or (measured[0] if measured else None)
+    if c is None or c.net is None:
+        return None
+    turn = ((c.net.properties.get("fairness") or {}).get("line_turn_deg") or {})
+    if turn.get("point") is None or turn.get("max") is None:
+        return None
+    return c, float(turn["max"]), np.asarray(turn["point"], dtype=np.float64)
+
+
+#: Where |k1 - k2| is below this share of its median over the design, the design itself
+#: makes the lines kink (near an umbilic).
+NEAR_UMBILIC = 0.25
+
+
+def kink_text(result: StudyResult) -> str:
+    """Where the sharpest turn of the lines lies, and whether the design forces it (near
+    an umbilic, `NEAR_UMBILIC`) or the layout does."""
+    kinked = _sharpest_turn(result)
+    if kinked is None:
+        return ""
+    c, turn, point = kinked
+    share = float(curvature_difference_at(result.design, result.study.panel_size_of(c.candidate),
+                                          point)[0])
+    where = ", ".join(f"{x:.1f}" for x in point)
+    head = (f"The lines of {c.name} turn most, by {turn:.0f} deg, at ({where}) "
+            f"{result.study.design.units}, where |k1 - k2| is {100 * share:.0f} % of its "
+            "median over the design")
+    if share < NEAR_UMBILIC:
+        return (head + ": near an umbilic, so the design forces the turn; every net whose "
+                "lines follow the principal directions turns there, and only smaller panels "
+                "make the kink per panel smaller.")
+    return (head + ": the principal directions are well defined there, so the turn comes "
+            "from the layout, not from the design; a longer smoothing of the directions "
+            "(`fabplan layout --smoothing`) or another start angle may lower it.")
+
+
 def pareto_text(result: StudyResult) -> str:
     """The Pareto-optimal candidates in words, and whether the recommended one is one."""
     optimal = [c.name for c in result.ranked() if c.pareto]
@@ -806,6 +852,14 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
     overview += [_limits_table(result), _cost_table(result),
                  html.html_paragraph(cost_line(result))]
     parts.append(html.html_section("Comparison", *overview))
+    if "curvature" in pictures:
+        parts.append(html.html_section("Where the design makes lines kink", html.html_figure(
+            pictures["curvature"], "The design coloured by how far its principal "
+            "curvatures part over a panel, with the sharpest turn of the lines marked.",
+            how="Dark is near an umbilic: the two principal curvatures nearly agree, so the "
+                "principal directions, and the lines of every net that follows them, turn "
+                "fast or are not defined there; white dots are the direction field's "
+                "singular points. " + kink_text(result)), anchor="curvature"))
     scenes, index = study_viewer_scenes(result) if view_3d else ([], {})
     if scenes:
         parts.append(html.html_section("3D view", viewer.viewer_block(scenes), anchor="3d-view"))
@@ -856,6 +910,9 @@ def study_pdf(result: StudyResult, pictures: dict, *, seconds_total: float | Non
         first.image(pictures["pareto"], "Cost drivers of every candidate: ringed are the "
                     "Pareto-optimal ones, the star is the recommended one. "
                     + pareto_text(result))
+    if "curvature" in pictures:
+        first.image(pictures["curvature"], "The design's |k1 - k2| over a panel (dark: near "
+                    "an umbilic). " + kink_text(result))
     for c in result.ranked():
         head = f"{c.rank}. {c.name}" if c.rank else c.name
         section = doc.section(head)
@@ -1107,6 +1164,14 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
             pictures["comparison"] = comparison_figure(result)
         if sum(not c.failed for c in result.candidates) >= PARETO_MIN_CANDIDATES:
             pictures["pareto"] = pareto_figure(result)
+        kinked = _sharpest_turn(result)
+        if kinked is not None:
+            c, turn, point = kinked
+            pictures["curvature"] = curvature_difference_figure(
+                result.design, result.study.panel_size_of(c.candidate),
+                marks={f"{c.name}: lines turn most ({turn:.0f} deg)": point},
+                singular_points=c.layout.singular_points if c.layout is not None else None,
+                title="The design's curvature: where its principal directions are weak")
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
         if pdf:
