@@ -53,21 +53,25 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
     T = design.triangles
     if len(T) > 30000:  # a coarser sample of the surface keeps the picture quick
         T = T[:: int(math.ceil(len(T) / 30000))]
+    # autolim off everywhere: the limits are set below, and matplotlib pads the faces of
+    # polygons of different sizes with uninitialised memory that autoscaling would read
+    # (NaN or infinite limits, at random)
     ax.add_collection3d(Poly3DCollection(design.vertices[T], facecolor=(0.85, 0.85, 0.85, 0.35),
-                                         edgecolor="none"))
+                                         edgecolor="none"), autolim=False)
     for curve in design.boundary_curves():
         loop = np.vstack([curve, curve[:1]])
         ax.plot(loop[:, 0], loop[:, 1], loop[:, 2], color="black", lw=0.8)
     ax.add_collection3d(Poly3DCollection([mesh.vertices[f] for f in mesh.faces],
                                          facecolor=(0.55, 0.7, 0.95, 0.9),
-                                         edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4))
+                                         edgecolor=(0.1, 0.2, 0.5, 1.0), linewidths=0.4),
+                       autolim=False)
     trimmed = boundary_panels is not None and boundary_panels.count > 0
     if trimmed:
         assert boundary_panels is not None
         ax.add_collection3d(Poly3DCollection(
             [boundary_panels.vertices[p] for p in boundary_panels.polygons],
             facecolor=(0.55, 0.85, 0.55, 0.9), edgecolor=(0.1, 0.4, 0.1, 1.0), linewidths=0.4,
-            label=f"boundary panels ({boundary_panels.count})"))
+            label=f"boundary panels ({boundary_panels.count})"), autolim=False)
     irregular = mesh.vertices[mesh.irregular_vertices]
     if len(irregular):
         ax.scatter(*irregular.T, color="red", s=18, depthshade=False, label="irregular vertices")
@@ -145,7 +149,8 @@ def curvature_difference_figure(design: DesignSurface, panel_size: float, *,
     top = float(np.quantile(value, 0.98)) or 1.0
     norm, cmap = Normalize(0.0, top), colormaps["magma"]
     ax.add_collection3d(Poly3DCollection(design.vertices[T[::step]],
-                                         facecolor=cmap(norm(value[::step])), edgecolor="none"))
+                                         facecolor=cmap(norm(value[::step])), edgecolor="none"),
+                       autolim=False)
     if singular_points is not None and len(singular_points):
         ax.scatter(*np.asarray(singular_points).T, color="white", edgecolor="black", s=30,
                    depthshade=False, label="singularities of the direction field")
