@@ -63,3 +63,12 @@ def patch_of(mesh: QuadMesh, fraction: float, *, name: str = "patch.obj") -> Qua
     renumber = np.full(len(X), -1)
     renumber[used] = np.arange(len(used))
     return QuadMesh(X[used], [renumber[f] for f in faces], name=name)
+
+
+def without_timings(value):
+    """A JSON record without its timings (keys naming seconds), to compare runs."""
+    if isinstance(value, dict):
+        return {k: without_timings(v) for k, v in value.items() if "second" not in k}
+    if isinstance(value, list):
+        return [without_timings(v) for v in value]
+    return value

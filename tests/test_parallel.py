@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import without_timings
 
 from fabplan.cli import main
 from fabplan.errors import InputError
@@ -58,16 +59,8 @@ radius = 0.01
 """
 
 
-def _without_timings(value):
-    if isinstance(value, dict):
-        return {k: _without_timings(v) for k, v in value.items() if "second" not in k}
-    if isinstance(value, list):
-        return [_without_timings(v) for v in value]
-    return value
-
-
 def _record(folder: Path) -> dict:
-    return _without_timings(json.loads((folder / "study.json").read_text(encoding="utf-8")))
+    return without_timings(json.loads((folder / "study.json").read_text(encoding="utf-8")))
 
 
 @pytest.fixture(scope="module")

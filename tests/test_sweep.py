@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import without_timings
 
 from fabplan.cli import main
 from fabplan.errors import InputError
@@ -174,14 +175,6 @@ def test_the_report_compares_the_sweep(swept):
         assert (out / "candidates" / c["name"] / "net.obj").is_file()
 
 
-def _without_timings(value):
-    if isinstance(value, dict):
-        return {k: _without_timings(v) for k, v in value.items() if "second" not in k}
-    if isinstance(value, list):
-        return [_without_timings(v) for v in value]
-    return value
-
-
 @pytest.mark.slow
 def test_a_sweep_on_two_workers_is_the_serial_sweep(tmp_path, capsys):
     """Twelve candidates, six solves (the tolerances share them), the same study.json as
@@ -195,7 +188,7 @@ def test_a_sweep_on_two_workers_is_the_serial_sweep(tmp_path, capsys):
                  "--no-3d", "--workers", "2"]) == 0
     err = capsys.readouterr().err
     assert "6 of 6 solved" in err and "12 of 12 measured" in err
-    serial, parallel = (_without_timings(json.loads((tmp_path / name / "study.json").read_text(
+    serial, parallel = (without_timings(json.loads((tmp_path / name / "study.json").read_text(
         encoding="utf-8"))) for name in ("serial", "parallel"))
     assert parallel == serial
     # the workers made the candidates' files: the same files, byte for byte (JSON: but
@@ -204,7 +197,7 @@ def test_a_sweep_on_two_workers_is_the_serial_sweep(tmp_path, capsys):
     for name in ("serial", "parallel"):
         folder = tmp_path / name / "candidates"
         made[name] = {p.relative_to(folder).as_posix():
-                      _without_timings(json.loads(p.read_text(encoding="utf-8")))
+                      without_timings(json.loads(p.read_text(encoding="utf-8")))
                       if p.suffix == ".json" else p.read_bytes()
                       for p in folder.rglob("*") if p.is_file()}
     assert made["parallel"].keys() == made["serial"].keys()

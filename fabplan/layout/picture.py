@@ -32,6 +32,19 @@ def fairness_marks(properties: dict) -> dict[str, list]:
     return marks
 
 
+def _frame_design(ax, design: DesignSurface) -> None:
+    """Look at the design from `net_view_angles`, its bounding box filling the axes at one
+    scale on all three axes, without the axes themselves."""
+    elevation, azimuth = net_view_angles(design)
+    ax.view_init(elev=elevation, azim=azimuth)
+    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
+    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
+    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
+        getattr(ax, f"set_{axis}lim")(a, b)
+    ax.set_box_aspect(span)                       # equal scale on all three axes
+    ax.set_axis_off()
+
+
 def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: QuadMesh, *,
                          title: str = "", singular_points: np.ndarray | None = None,
                          marks: dict | None = None,
@@ -82,14 +95,7 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
         point = mesh.vertices[where] if isinstance(where, (int, np.integer)) else np.asarray(where)
         ax.scatter(*point[:, None], color="magenta", edgecolor="black", marker=style, s=70,
                    depthshade=False, label=label, zorder=10)
-    elevation, azimuth = net_view_angles(design)
-    ax.view_init(elev=elevation, azim=azimuth)
-    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
-    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
-    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
-        getattr(ax, f"set_{axis}lim")(a, b)
-    ax.set_box_aspect(span)                       # equal scale on all three axes
-    ax.set_axis_off()
+    _frame_design(ax, design)
     if title:
         ax.set_title(title, fontsize=9)
     if trimmed or len(irregular) or marks or (singular_points is not None and len(singular_points)):
@@ -157,14 +163,7 @@ def curvature_difference_figure(design: DesignSurface, panel_size: float, *,
     for (label, point), style in zip((marks or {}).items(), ("v", "s", "D", "^"), strict=False):
         ax.scatter(*np.asarray(point, float)[:, None], color="lime", edgecolor="black",
                    marker=style, s=80, depthshade=False, label=label, zorder=10)
-    elevation, azimuth = net_view_angles(design)
-    ax.view_init(elev=elevation, azim=azimuth)
-    lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
-    span = np.maximum(hi - lo, 1e-3 * (hi - lo).max())
-    for axis, a, b in zip("xyz", lo, lo + span, strict=True):
-        getattr(ax, f"set_{axis}lim")(a, b)
-    ax.set_box_aspect(span)
-    ax.set_axis_off()
+    _frame_design(ax, design)
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.7)
     bar.set_label("|k1 - k2| x panel size (dark: near an umbilic)")
     if title:
