@@ -215,7 +215,7 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
     try:
         baseline.result()                  # no baseline layout: nothing can be compared
     except FabplanError:
-        client.cancel(list(waiting) + [f for f in solves.values() if hasattr(f, "key")])
+        client.cancel([*waiting, *(solves[key] for key in waiting.values())])
         raise
     made: list[Any] = list(kept)
     making: list[Any] = [None] * len(candidates)      # the files' futures

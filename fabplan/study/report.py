@@ -58,7 +58,7 @@ def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None
         "recommended": c.name == recommended,
         "requested": {"angle_deg": c.candidate.angle, "radius": c.candidate.radius,
                       "panel_size": study.panel_size_of(c.candidate),
-                      "mold_tolerance_mm": study.limits_of(c.candidate).mold_tolerance_mm},
+                      "mold_tolerance_mm": study.mold_tolerance_of(c.candidate)},
         "feasible": c.feasible,
         "reasons": c.reasons,
         "same_net_as": c.same_net_as,
@@ -119,7 +119,7 @@ def _row(c: CandidateResult, study: Study) -> dict:
     m = c.metrics
     asked = {"name": c.name, "net": c.candidate.net,
              "panel_size": _num(study.panel_size_of(c.candidate)),
-             "mold_tolerance_mm": _num(study.limits_of(c.candidate).mold_tolerance_mm)}
+             "mold_tolerance_mm": _num(study.mold_tolerance_of(c.candidate))}
     if c.failed:
         return {**asked, "feasible": "no",
                 "reasons": "; ".join(c.reasons), "seconds": _num(m.get("seconds", {}).get("total"))}
@@ -520,7 +520,7 @@ def _comparison_table(result: StudyResult) -> str:
     for c in result.ranked():
         m = c.metrics
         asked = ([study.panel_size_of(c.candidate)] if "panel_size" in swept else []) + \
-            ([study.limits_of(c.candidate).mold_tolerance_mm]
+            ([study.mold_tolerance_of(c.candidate)]
              if "mold_tolerance_mm" in swept else [])
         if c.failed:
             rows.append(["", c.name, c.candidate.describe(), *asked, "failed",

@@ -355,7 +355,7 @@ def twin_of(i: int, candidates: list[Candidate], nets: list[QuadMesh | None],
     net = nets[i]
     if net is None:
         return None
-    tolerance = [study.limits_of(c).mold_tolerance_mm for c in candidates[:i + 1]]
+    tolerance = [study.mold_tolerance_of(c) for c in candidates[:i + 1]]
     own = [j for j, t in enumerate(twins[:i]) if t is None or tolerance[t] != tolerance[j]]
     size = study.panel_size_of(candidates[i])
     same = [j for j in own if (other := nets[j]) is not None and
@@ -387,8 +387,8 @@ def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     else:
         solved = solve_candidate(study, design, candidate, layouts, starts, say)
         solves[candidate.solve_key] = solved
-    names = [r.name for r in earlier]
-    twins = [None if r.twin is None else names.index(r.twin) for r in earlier]
+    position = {r.name: k for k, r in enumerate(earlier)}
+    twins = [None if r.twin is None else position[r.twin] for r in earlier]
     j = twin_of(len(earlier), [*(r.candidate for r in earlier), candidate],
                 [r.net.mesh if r.net is not None else None for r in [*earlier, solved]], twins,
                 study)
@@ -472,7 +472,7 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     net, candidate = solved.net, solved.candidate
     assert net is not None
     seconds = dict(solved.metrics.get("seconds", {}))
-    tolerance = study.limits_of(candidate).mold_tolerance_mm
+    tolerance = study.mold_tolerance_of(candidate)
     same_molds = (twin is not None and twin.molds is not None
                   and twin.molds.settings.tolerance_mm == tolerance)
     if twin is not None:

@@ -275,11 +275,17 @@ class Study:
         """The panel size (model units) a candidate is laid out with."""
         return self.panel_size if candidate.panel_size is None else candidate.panel_size
 
+    def mold_tolerance_of(self, candidate: Candidate) -> float:
+        """The mold tolerance (mm) a candidate's molds are planned at."""
+        if candidate.mold_tolerance_mm is None:
+            return self.limits.mold_tolerance_mm
+        return candidate.mold_tolerance_mm
+
     def limits_of(self, candidate: Candidate) -> Limits:
         """The limits a candidate is judged by (its own mold tolerance in a sweep)."""
         if candidate.mold_tolerance_mm is None:
             return self.limits
-        return replace(self.limits, mold_tolerance_mm=candidate.mold_tolerance_mm)
+        return replace(self.limits, mold_tolerance_mm=self.mold_tolerance_of(candidate))
 
     @property
     def swept(self) -> dict[str, list[float]]:
