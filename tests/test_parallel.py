@@ -177,3 +177,18 @@ def test_an_interrupted_study_resumes_with_only_the_missing_candidates(serial, t
     assert resumed.stderr.count("taken from the cache") == 2
     assert resumed.stderr.count("] ") - resumed.stderr.count("taken from the cache") == 3
     assert _record(out) == expected
+
+
+@pytest.mark.slow
+def test_an_impossible_baseline_on_workers_is_one_line(tmp_path):
+    """Regression: the baseline layout runs on a worker; its refusal was raised there and
+    the worker logged its traceback on the terminal beside the one-line message."""
+    text = STUDY.replace("size = 0.7", "size = 3.9")
+    (tmp_path / "big.toml").write_text(text, encoding="utf-8")
+    run = subprocess.run([sys.executable, "-m", "fabplan.cli", "study", str(tmp_path / "big.toml"),
+                          "-o", str(tmp_path / "out"), "--workers", "1", "-q"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2
+    assert "Traceback" not in run.stderr, run.stderr
+    assert "too large for the surface" in run.stderr
+    assert not (tmp_path / "out").exists()

@@ -66,10 +66,15 @@ def _failed(candidate: Candidate, exc: BaseException) -> CandidateResult:
     return CandidateResult(candidate, error=reason, reasons=[reason])
 
 
-def _baseline_task(study: Study, design: DesignSurface) -> SurfaceLayout:
+def _baseline_task(study: Study, design: DesignSurface) -> SurfaceLayout | FabplanError:
+    """The baseline layout, or why there is none: returned, not raised, because a worker
+    logs a raised error with its traceback on the user's terminal."""
     from ..layout.surface_layout import layout_surface
 
-    return layout_surface(design, study.panel_size, angle=90.0)
+    try:
+        return layout_surface(design, study.panel_size, angle=90.0)
+    except FabplanError as exc:
+        return exc
 
 
 def _solved_mesh(solved: CandidateResult) -> QuadMesh | None:
@@ -212,11 +217,10 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
                                         retries=RETRIES)
         waiting[client.submit(_solved_mesh, solves[keys[i]], key=f"net-{i}", pure=False)] = \
             keys[i]
-    try:
-        baseline.result()                  # no baseline layout: nothing can be compared
-    except FabplanError:
+    refused = baseline.result()
+    if isinstance(refused, FabplanError):     # no baseline layout: nothing can be compared
         client.cancel([*waiting, *(solves[key] for key in waiting.values())])
-        raise
+        raise refused
     made: list[Any] = list(kept)
     making: list[Any] = [None] * len(candidates)      # the files' futures
     twins: list[int | None] = []
@@ -274,7 +278,10 @@ def _solve_task_with(study: Study, design: DesignSurface, layouts: dict,
     """`solve_candidate` in a task: `layouts` holds the baseline layout (a future the
     worker has resolved)."""
     clock = time.perf_counter()
+    refused = next((v for v in layouts.values() if isinstance(v, FabplanError)), None)
     try:
+        if refused is not None:
+            raise refused
         result = solve_candidate(study, design, candidate, dict(layouts), {}, _quiet)
     except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
         result = _failed(candidate, exc)
