@@ -198,7 +198,7 @@ def _cone_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_ConeNodes, str
                          "valence 4): there is no Mannheim sphere to mill with")
     X = mesh.vertices * settings.mm_per_unit
     given = mesh.normals is not None
-    N = _unit(mesh.normals) if given else vertex_contact_normals(mesh, X, stars)
+    N = _unit(mesh.normals) if mesh.normals is not None else vertex_contact_normals(mesh, X, stars)
     spheres = fit_mannheim_spheres(X, N, stars)
     worst = int(np.argmax(spheres.residual))
     if not np.isfinite(spheres.residual).all() or spheres.residual[worst] > settings.mannheim_tolerance_mm:
@@ -277,7 +277,9 @@ def _radius_field(nodes: _ConeNodes):
     def field(points: np.ndarray) -> np.ndarray:
         q = points @ frame.T
         values = linear(q) if linear is not None else np.full(len(q), np.nan)
-        return np.where(np.isfinite(values), values, nearest(q))
+        outside = ~np.isfinite(values)
+        values[outside] = nearest(q[outside])
+        return values
 
     return field
 
@@ -542,8 +544,10 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
     parts = []
     tilt = 90.0 - tool.angle_deg
 
+    widest = tool.end_radius_mm / np.cos(a)   # splines between nodes must not pass it
+
     def tip_of(p, n, c, R, motion):
-        return cone_tool_pose(p, n, c, R, tool.angle_deg, tool.radius_mm)[0]
+        return cone_tool_pose(p, n, c, np.minimum(R, widest), tool.angle_deg, tool.radius_mm)[0]
 
     for number, run_index in enumerate(chosen):
         run = runs[run_index]
@@ -553,6 +557,7 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
                                  safety[run])
         t = refine_pass(splines, s, tip_of, settings.chordal_tolerance_mm)
         p, n, u, R = evaluate_pass_frames(splines, t)
+        R = np.minimum(R, widest)
         tip, axis, _ = cone_tool_pose(p, n, u, R, tool.angle_deg, tool.radius_mm)
         vertex = np.full(len(t), -1)
         vertex[np.searchsorted(t, s)] = nodes.vertex[run]

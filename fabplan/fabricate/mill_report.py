@@ -21,6 +21,7 @@ from ..io.records import json_text
 from ..io.rhino_write import Rhino3dmWriter
 from ..net.mesh import QuadMesh
 from ..report import figures, html
+from .flank_milling import plan_flank_milling
 from .mill_simulation import (
     Cutter,
     HeightTarget,
@@ -30,7 +31,6 @@ from .mill_simulation import (
     height_target,
     simulate_milling,
 )
-from .flank_milling import plan_flank_milling
 from .milling import MillPlan, MillSettings, MillTool, plan_face_milling
 
 __all__ = ["MillResult", "mill_net", "mill_report_html", "mill_report_files", "write_mill_report",
