@@ -35,7 +35,7 @@ RADIUS_Y_MM = 70.0     # hollow across y
 HALF_MM = 30.0         # half side of the grid in its own (diagonal) coordinates
 STEP_MM = 3.0
 TOOL = "cone:angle=45,length=10,tip=24"
-SCALLOP_MM = 0.06
+SCALLOP_MM = 0.025
 
 
 def saddle_start() -> QuadMesh:

@@ -79,7 +79,7 @@ def cone_milled(tmp_path_factory):
     assert main(["optimize", str(start), "--net", "sstar", "--units", "mm", "-q",
                  "-o", str(folder / "net.obj")]) == 0
     code = main(["mill", str(folder / "net.obj"), "--tool", TOOL, "--sim-step", "1.0",
-                 "--scallop", "0.06", "-q", "-o", str(folder / "out")])
+                 "--scallop", "0.025", "-q", "-o", str(folder / "out")])
     assert code == 0
     return folder / "out", folder / "net.obj"
 
@@ -179,8 +179,10 @@ def test_cone_cut_of_the_sstar_example_has_no_gouge(cone_milled):
     record = json.loads((out / "mill.json").read_text())
     assert record["gouge_check"]["passed"]
     assert record["simulation"]["max_gouge_mm"] <= 0.005
-    # the prediction assumes the cut is the developable of each line: an upper estimate
-    assert 0 < record["simulation"]["max_scallop_mm"] <= record["predicted_scallop_mm"]
+    # second-order prediction (developable ahead, end circle behind) against the sweep on
+    # a 1 mm grid, which samples the cusps up to 0.5 mm off their crest
+    assert record["simulation"]["max_scallop_mm"] == pytest.approx(record["predicted_scallop_mm"],
+                                                                   rel=0.25)
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 3 and "Mannheim radius" in html
 
@@ -220,7 +222,9 @@ def refused(tmp_path: Path, capsys, net: Path, *options: str) -> str:
     err = capsys.readouterr().err
     assert code == 2
     assert not out.exists()
-    assert len(err.strip().splitlines()) == 1
+    # one line of message; a busy machine may show the stage's progress line before it
+    lines = [line for line in err.strip().splitlines() if not line.endswith(" ...")]
+    assert len(lines) == 1 and lines[0].startswith("fabplan: error: ")
     return err
 
 
@@ -320,4 +324,6 @@ def test_cone_example_mills_its_sstar_net_without_gouge(tmp_path):
     assert record["gouge_check"]["max_gouge_mm"] <= 0.005
     assert record["simulation_settings"]["step_mm"] == 0.5
     assert result.plan.path.pass_count == record["passes"]
-    assert record["simulation"]["max_scallop_mm"] <= record["predicted_scallop_mm"]
+    simulated, predicted = record["simulation"]["max_scallop_mm"], record["predicted_scallop_mm"]
+    assert simulated == pytest.approx(predicted, rel=0.10)
+    assert predicted <= example.SCALLOP_MM

@@ -185,6 +185,7 @@ class _ConeNodes:
     tangent: np.ndarray          # (s, 3) unit tangent of the pass family's line
     radius: np.ndarray           # (s,) Mannheim radius (> 0 on the tool side)
     ruling_curvature: np.ndarray  # (s,) II(u, u) towards the tool
+    cross_curvature: np.ndarray  # (s,) II(n x u, n x u) towards the tool
     residual: np.ndarray         # (s,) plane misfit of the Mannheim sphere (mm)
     foot_offset: np.ndarray      # (s,) Mannheim sphere's touching point to the node (mm)
     cross_neighbour: np.ndarray  # (s, 2) vertex ids along the other family: (-, +)
@@ -254,6 +255,7 @@ def _cone_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_ConeNodes, str
     return _ConeNodes(
         vertex=stars[:, 0], point=X[stars[:, 0]], normal=n, ruling=ruling, tangent=tangent,
         radius=sign * rho, ruling_curvature=normal_curvatures(X, sign * N, stars, ruling),
+        cross_curvature=normal_curvatures(X, sign * N, stars, _unit(np.cross(n, ruling))),
         residual=spheres.residual, foot_offset=np.linalg.norm(foot - X[stars[:, 0]], axis=1),
         cross_neighbour=neighbours, node_of_vertex=node_of_vertex), side
 
@@ -413,50 +415,63 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
 
 # ------------------------------------------------------------------------ scallop prediction
 def _predicted_scallops(nodes: _ConeNodes, X: np.ndarray, safety: np.ndarray, tool: MillTool,
-                        max_stride: int, star_of_vertex: np.ndarray,
+                        max_stride: int, node_of_vertex: np.ndarray,
                         towards: np.ndarray) -> np.ndarray:
     """(max_stride, s) predicted scallop between each node's pass and the pass k lines on.
 
-    The cut of a pass is the developable of its line: above a point of the target at
+    The flank's cut is the developable of the pass's line: above a point of the target at
     distance w from the line (in the tangent plane, across the line) it stands
     ``g w^2 / 2`` high, ``g = -II(u, u) / sin^2(u, t)`` (second order: the developable and
-    the surface share their second fundamental form but for the rank-one difference along
-    the ruling). A pass reaches as far across as its flank does, ahead of or behind the
-    contact; what is left between two passes is the largest lower envelope of the two
-    profiles over the gap between them (inf where the flanks leave a band uncut).
+    the surface share their second fundamental form but for a rank-one difference that
+    vanishes along the line), as far across as the flank reaches, ahead of the contact
+    (towards the tip) or behind it. Where the contact circle is the flank's wide end, the
+    end circle cuts behind the contact: it lies on the safety sphere and is tangent to
+    ``f = n x u``, so it stands ``(1 / R_s - II(f, f)) (w / cos(u, t))^2 / 2`` above the
+    target, as far as ``r_end cos(u, t)``. What is left between two passes is the largest
+    lower envelope of the two profiles over the gap between them (inf where they leave a
+    band uncut).
     """
     out = np.full((max_stride, len(nodes.vertex)), np.nan)
     rows = np.arange(len(nodes.vertex))
     ahead, behind = _flank_reach(safety, tool)
-    sin = np.linalg.norm(np.cross(nodes.ruling, nodes.tangent), axis=1)
+    cos = np.abs(np.sum(nodes.ruling * nodes.tangent, axis=1))
+    sin = np.sqrt(np.maximum(1 - cos * cos, 0))
     g = np.maximum(-nodes.ruling_curvature, 0) / np.maximum(sin, 1e-12) ** 2
+    end_circle = behind <= 1e-9
+    g_rim = np.maximum(1 / safety - nodes.cross_curvature, 0) / np.maximum(cos, 1e-12) ** 2
+    rim_reach = np.where(end_circle, tool.end_radius_mm * cos, 0.0)
     previous = nodes.vertex.copy()
     current = nodes.cross_neighbour[rows, towards]
     alive = current >= 0
-    f = np.linspace(0.0, 1.0, 129)
+    f = np.linspace(0.0, 1.0, 257)
+
+    def profile(who, ahead_side, w):
+        """Height left at distance w (r, m) across the line of nodes `who` (r,)."""
+        reach = np.where(ahead_side, ahead[who], behind[who]) * sin[who]
+        flank = np.where(w <= reach[:, None] * (1 + 1e-9), g[who, None] * w**2 / 2, np.inf)
+        rim_ok = (~ahead_side & end_circle[who])[:, None] & (w <= rim_reach[who, None])
+        rim = np.where(rim_ok, g_rim[who, None] * w**2 / 2, np.inf)
+        return np.minimum(flank, rim)
+
     for k in range(1, max_stride + 1):
         if k > 1:
-            star = star_of_vertex[np.maximum(current, 0)]
+            star = node_of_vertex[np.maximum(current, 0)]
             alive &= star >= 0
             candidates = nodes.cross_neighbour[np.maximum(star, 0)]
             step = np.where(candidates[:, 0] == previous, candidates[:, 1], candidates[:, 0])
             previous, current = current, np.where(alive, step, -1)
             alive &= current >= 0
-        i = np.flatnonzero(alive & (star_of_vertex[np.maximum(current, 0)] >= 0))
+        i = np.flatnonzero(alive & (node_of_vertex[np.maximum(current, 0)] >= 0))
         if not i.size:
             break
-        j = star_of_vertex[current[i]]
+        j = node_of_vertex[current[i]]
         gap = nodes.point[j] - nodes.point[i]
         gap -= np.sum(gap * nodes.normal[i], axis=1, keepdims=True) * nodes.normal[i]
         across_i = gap - np.sum(gap * nodes.tangent[i], axis=1, keepdims=True) * nodes.tangent[i]
         width = np.linalg.norm(across_i, axis=1)
-        # how far each pass's flank reaches towards the other, across its line
-        reach_i = np.where(np.sum(nodes.ruling[i] * gap, axis=1) > 0, ahead[i], behind[i]) * sin[i]
-        reach_j = np.where(np.sum(nodes.ruling[j] * gap, axis=1) < 0, ahead[j], behind[j]) * sin[j]
         x = width[:, None] * f[None, :]
-        near = np.where(x <= reach_i[:, None] * (1 + 1e-9), g[i, None] * x**2 / 2, np.inf)
-        far = np.where(width[:, None] - x <= reach_j[:, None] * (1 + 1e-9),
-                       g[j, None] * (width[:, None] - x) ** 2 / 2, np.inf)
+        near = profile(i, np.sum(nodes.ruling[i] * gap, axis=1) > 0, x)
+        far = profile(j, np.sum(nodes.ruling[j] * gap, axis=1) < 0, width[:, None] - x)
         out[k - 1, i] = np.minimum(near, far).max(axis=1)
     return out
 
