@@ -522,6 +522,7 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
     else:
         margin = float(settings.margin_mm)
         rule = "given (--margin)"
+        share = 0.0   # a given margin is checked on the geometry alone, as for face mills
     safety = _check_cone(mesh, nodes, field, margin, tool, settings, share)
     runs, order = line_sequence(mesh, nodes.vertex, nodes.cross_neighbour, family,
                                 nodes.node_of_vertex)
