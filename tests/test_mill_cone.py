@@ -172,6 +172,7 @@ def test_cl_file_carries_the_cone(cone_milled):
     assert record["tilt_deg"] == {"min": 45.0, "max": 45.0}
     assert record["mannheim_residual_max_mm"] < 1e-6
     assert record["passes"] >= 10 and record["path_length_mm"] > 0
+    assert any("next to the boundary" in note for note in record["notes"])
 
 
 def test_cone_cut_of_the_sstar_example_has_no_gouge(cone_milled):

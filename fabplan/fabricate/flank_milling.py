@@ -551,6 +551,10 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
     fits = np.flatnonzero(predicted <= settings.scallop_mm)
     stride = int(fits.max()) + 1 if fits.size else 1
     notes = []
+    left_out = len(mesh.stars) - len(nodes.vertex)
+    if left_out:
+        notes.append(f"{left_out} of {len(mesh.stars)} stars, those next to the boundary, carry "
+                     "no pass: their rulings rest on boundary normals a single sphere holds")
     if not fits.size:
         notes.append(f"even passes along every line leave a predicted scallop of "
                      f"{predicted[0]:.4g} mm, above the limit {settings.scallop_mm:g} mm")
