@@ -260,24 +260,24 @@ def _cone_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_ConeNodes, str
         cross_neighbour=neighbours, node_of_vertex=node_of_vertex), side
 
 
-def _radius_field(nodes: _ConeNodes):
-    """Mannheim radius at points (k, 3) near the part: linear over the nodes seen along the
-    mean normal, the nearest node's outside their hull."""
+def _radius_field(points: np.ndarray, normals: np.ndarray, radius: np.ndarray):
+    """Mannheim radius at points (k, 3) near the part: linear over the nodes `points` (s, 3)
+    seen along their mean normal, the nearest node's outside their hull."""
     from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
 
-    up = _unit(nodes.normal.mean(axis=0))
+    up = _unit(normals.mean(axis=0))
     helper = np.array([1.0, 0, 0]) if abs(up[0]) < 0.9 else np.array([0, 1.0, 0])
     ex = _unit(helper - up * (helper @ up))
     frame = np.stack([ex, np.cross(up, ex)])
-    xy = nodes.point @ frame.T
-    nearest = NearestNDInterpolator(xy, nodes.radius)
+    xy = points @ frame.T
+    nearest = NearestNDInterpolator(xy, radius)
     try:
-        linear = LinearNDInterpolator(xy, nodes.radius)
+        linear = LinearNDInterpolator(xy, radius)
     except Exception:   # fewer than three nodes off one line: no triangulation
         linear = None
 
-    def field(points: np.ndarray) -> np.ndarray:
-        q = points @ frame.T
+    def field(at: np.ndarray) -> np.ndarray:
+        q = at @ frame.T
         values = linear(q) if linear is not None else np.full(len(q), np.nan)
         outside = ~np.isfinite(values)
         values[outside] = nearest(q[outside])
@@ -308,8 +308,8 @@ def _flank_reach(safety: np.ndarray, tool: MillTool) -> tuple[np.ndarray, np.nda
     return (rc - tool.radius_mm) / np.sin(a), np.maximum(tool.end_radius_mm - rc, 0) / np.sin(a)
 
 
-def _flank_excess(nodes: _ConeNodes, field, safety: np.ndarray, tool: MillTool, share_mm: float
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def _flank_excess(points: np.ndarray, ruling: np.ndarray, field, safety: np.ndarray,
+                  tool: MillTool, share_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """(s, m) how far each flank circle's sphere exceeds the Mannheim sphere where it lies,
     less the discretization share: ``R_s - t tan(a) - rho(p + t u) + share`` at positions
     t (s, m) along the ruling over the flank (t > 0 towards the tip), and those t."""
@@ -317,13 +317,14 @@ def _flank_excess(nodes: _ConeNodes, field, safety: np.ndarray, tool: MillTool, 
     f = np.linspace(0.0, 1.0, _FLANK_SAMPLES)
     t = np.concatenate([-behind[:, None] * f[::-1][None, :-1],
                         np.maximum(ahead, 0)[:, None] * f[None, :]], axis=1)
-    points = nodes.point[:, None, :] + t[..., None] * nodes.ruling[:, None, :]
-    rho_there = field(points.reshape(-1, 3)).reshape(t.shape)
+    at = points[:, None, :] + t[..., None] * ruling[:, None, :]
+    rho_there = field(at.reshape(-1, 3)).reshape(t.shape)
     tan = np.tan(np.radians(tool.angle_deg))
     return safety[:, None] - t * tan - rho_there + share_mm, t
 
 
-def default_cone_margin_mm(nodes: _ConeNodes, field, tool: MillTool, share_mm: float) -> float:
+def default_cone_margin_mm(points: np.ndarray, normals: np.ndarray, ruling: np.ndarray,
+                           radius: np.ndarray, tool: MillTool, share_mm: float) -> float:
     """The margin of docs/milling.md for a cone: every circle of the flank inside the
     Mannheim sphere of the surface where the flank lies, less a share of the radius.
 
@@ -331,20 +332,41 @@ def default_cone_margin_mm(nodes: _ConeNodes, field, tool: MillTool, share_mm: f
     tip) is the contact circle of a sphere of radius ``R_s - t tan(a)`` touching the
     tangent plane on the ruling: second-order contact analysis of the cone against the
     surface shows the flank stays above it where that radius is at most the dual
-    curvature radius there, ``rho(p + t u)``. With ``R_s = min(rho - margin, R_end)``:
+    curvature radius there, ``rho(p + t u)`` (interpolated over the nodes). With
+    ``R_s = min(rho - margin, R_end)``:
 
     ``margin = max over nodes with R_s = rho - margin, and flank points t, of
     (rho_i - rho(p_i + t u_i) - t tan(a)) + share``
 
     The flank positions depend on the margin: the rule is iterated to its fixed point.
+
+    Parameters
+    ----------
+    points : (s, 3) float, nodes (mm).
+    normals : (s, 3) float, unit normals towards the tool.
+    ruling : (s, 3) float, unit rulings towards the tip.
+    radius : (s,) float, Mannheim radii (mm, > 0).
+    tool : the cone.
+    share_mm : the discretization share (mm).
+
+    Examples
+    --------
+    >>> g = np.arange(0.0, 30.0, 3.0)
+    >>> P = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2) @ np.eye(2, 3)
+    >>> N, U = np.tile([0.0, 0, 1], (len(P), 1)), np.tile([1.0, 0, 0], (len(P), 1))
+    >>> tool = MillTool("cone", 24.0, 0.0, 10.0, 45.0)    # R_end = 44 mm
+    >>> default_cone_margin_mm(P, N, U, 40 + P[:, 0] / 10, tool, 0.25)   # all at R_end
+    0.25
     """
+    field = _radius_field(points, normals, radius)
     margin = share_mm
+    widest = tool.end_radius_mm / np.cos(np.radians(tool.angle_deg))
     for _ in range(60):
-        safety = safety_radii(nodes.radius, margin, tool)
-        excess, _ = _flank_excess(nodes, field, safety, tool, share_mm)
-        free = safety < tool.end_radius_mm / np.cos(np.radians(tool.angle_deg))
+        safety = safety_radii(radius, margin, tool)
+        excess, _ = _flank_excess(points, ruling, field, safety, tool, share_mm)
+        free = safety < widest
         new = max(share_mm, float((margin + excess[free].max(axis=1)).max()) if free.any() else share_mm)
-        if abs(new - margin) <= 1e-9 * max(1.0, margin) or new >= nodes.radius.min():
+        if abs(new - margin) <= 1e-9 * max(1.0, margin) or new >= radius.min():
             return new
         margin = new
     return margin
@@ -372,7 +394,7 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
         # no margin helps a flank whose wide end is too flat: say so rather than the tip
         least = safety_radii(nodes.radius, share_mm, tool)
         if np.all(least * np.cos(a) > tool.radius_mm):
-            excess, t = _flank_excess(nodes, field, least, tool, share_mm)
+            excess, t = _flank_excess(nodes.point, nodes.ruling, field, least, tool, share_mm)
             wide = (excess > 1e-9 * np.maximum(nodes.radius, 1.0)[:, None]) & (t < 0)
             if wide.any():
                 raise too_wide(np.flatnonzero(wide.any(axis=1)), float(excess[wide].max()))
@@ -384,7 +406,7 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
             f"less the margin {margin:.4g} mm) is not wider than the tip "
             f"({tool.diameter_mm:g} mm); use tip < {fits:.4g} mm, a smaller angle or a "
             "smaller --margin")
-    excess, t = _flank_excess(nodes, field, safety, tool, share_mm)
+    excess, t = _flank_excess(nodes.point, nodes.ruling, field, safety, tool, share_mm)
     bad = excess > 1e-9 * np.maximum(nodes.radius, 1.0)[:, None]
     if (bad & (t < 0)).any():
         wide = bad & (t < 0)
@@ -414,7 +436,7 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
 
 
 # ------------------------------------------------------------------------ scallop prediction
-def _predicted_scallops(nodes: _ConeNodes, X: np.ndarray, safety: np.ndarray, tool: MillTool,
+def _predicted_scallops(nodes: _ConeNodes, safety: np.ndarray, tool: MillTool,
                         max_stride: int, node_of_vertex: np.ndarray,
                         towards: np.ndarray) -> np.ndarray:
     """(max_stride, s) predicted scallop between each node's pass and the pass k lines on.
@@ -512,9 +534,10 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
             for s in (1.0, -1.0)]
     if lean[1] > lean[0]:
         nodes.ruling = -nodes.ruling
-    field = _radius_field(nodes)
+    field = _radius_field(nodes.point, nodes.normal, nodes.radius)
     if settings.margin_mm is None:
-        margin = default_cone_margin_mm(nodes, field, tool, share)
+        margin = default_cone_margin_mm(nodes.point, nodes.normal, nodes.ruling, nodes.radius,
+                                        tool, share)
         rule = (f"max over nodes and flank points of (rho - rho(p + t u) - t tan a) + "
                 f"{settings.discretization_share:g} x max rho (rho: Mannheim radius, t: position "
                 "along the ruling towards the tip, a: the cone's half angle); safety radius "
@@ -530,7 +553,6 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
     heading = reference[-1] - reference[0]
     runs = [run if np.dot(nodes.point[run[-1]] - nodes.point[run[0]], heading) >= 0 else run[::-1]
             for run in runs]
-    X = mesh.vertices * settings.mm_per_unit
     v_order = np.full(mesh.vertex_count, -1)
     for run, o in zip(runs, order, strict=True):
         v_order[nodes.vertex[run]] = o
@@ -539,7 +561,7 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
     towards = np.where((plus == own + 1) | (minus == own - 1), 1, 0)
     lines = int(order.max()) + 1
     max_stride = max(1, min(lines - 1, 12))
-    per_node = _predicted_scallops(nodes, X, safety, tool, max_stride, nodes.node_of_vertex,
+    per_node = _predicted_scallops(nodes, safety, tool, max_stride, nodes.node_of_vertex,
                                    towards)
     predicted = np.full(max_stride, np.inf)
     for k in range(1, max_stride + 1):
