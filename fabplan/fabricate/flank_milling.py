@@ -109,8 +109,10 @@ def cone_tool_pose(contact: np.ndarray, normal: np.ndarray, ruling: np.ndarray,
 class ConePlan(MillPlan):
     """A flank-milling plan: `MillPlan` whose spheres are the Mannheim spheres.
 
-    Attributes (besides those of `MillPlan`, where ``meusnier_radius_mm`` holds the
-    Mannheim radii and ``sphere_residual_mm`` the largest misfit of a star's planes)
+    Besides those of `MillPlan` (where ``meusnier_radius_mm`` holds the nodes' Mannheim
+    radii and ``sphere_residual_mm`` the largest misfit of their stars' planes, in mm):
+
+    Attributes
     ----------
     ruling_curvature : (s,) float, normal curvature of the target along the pass family's
         ruling at the nodes, towards the tool (1/mm; negative: curving away).
@@ -193,6 +195,8 @@ class _ConeNodes:
 
 
 def _cone_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_ConeNodes, str]:
+    """The nodes with their Mannheim spheres, rulings and curvatures on the mill side, and
+    that side; refuses a net that is not an S*-net or whose spheres switch sides."""
     stars = mesh.stars
     if len(stars) == 0:
         raise InputError(f"{mesh.name}: the net has no regular vertex star (interior vertex of "
