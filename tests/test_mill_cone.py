@@ -255,10 +255,17 @@ def test_a_cone_on_a_dome_side_curving_towards_it_is_refused(tmp_path, capsys):
     assert "curves towards the tool along the rulings" in err and "saddle" in err
 
 
-def test_a_cone_too_wide_for_the_safety_spheres_is_refused(tmp_path, capsys, cone_milled):
+def test_a_cone_too_long_for_the_safety_spheres_is_refused(tmp_path, capsys, cone_milled):
+    """Its flank widens beyond the smallest Mannheim sphere (47 mm): the fitting length is
+    named, and it fits."""
     _, net = cone_milled
     err = refused(tmp_path, capsys, net, "--tool", "cone:angle=45,length=20,tip=30")
-    assert "too wide for the safety spheres" in err and "diameter <=" in err
+    assert "too long (too wide) for the safety spheres" in err
+    longest = float(re.search(r"use length <= ([0-9.]+) mm", err).group(1))
+    assert 0 < longest < 20
+    out = tmp_path / "fits"
+    assert main(["mill", str(net), "--tool", f"cone:angle=45,length={longest * 0.99:.4f},tip=30",
+                 "--no-simulation", "-q", "-o", str(out)]) == 0
 
 
 def test_a_given_margin_moves_the_contact_circle_towards_the_tip(tmp_path, cone_milled):

@@ -381,15 +381,21 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
     """The safety radii (s,); refuses a cone that cannot touch or would cut into the
     target (`InputError`)."""
     a = np.radians(tool.angle_deg)
-    widest = 2 * max(float(nodes.radius.min()) - share_mm, 0.0) * np.cos(a)
+    widest = max(float(nodes.radius.min()) - share_mm, 0.0) * np.cos(a)   # radius
 
-    def too_wide(where: np.ndarray, excess: float) -> InputError:
+    def too_big(where: np.ndarray, excess: float) -> InputError:
+        # the flank's circles grow towards its wide end: a shorter flank (or a narrower
+        # angle) is what fits; a flank ahead of the contact never needs more than its end
+        longest = (widest - tool.radius_mm) / np.tan(a)
+        fix = (f"use length <= {longest:.4g} mm (a flank ending at a diameter <= "
+               f"{2 * widest:.4g} mm)" if longest > 0 else
+               f"use a tip narrower than {2 * widest:.4g} mm")
         return InputError(
-            f"{mesh.name}: tool {tool.spec()} is too wide for the safety spheres at "
-            f"{describe_region(mesh, nodes.vertex[where])}: the wide end of its flank "
-            f"(diameter {2 * tool.end_radius_mm:.4g} mm) is flatter than the Mannheim spheres "
-            f"there (its circle needs a sphere {excess:.4g} mm larger than they allow); use a "
-            f"flank ending at a diameter <= {widest:.4g} mm or a smaller angle")
+            f"{mesh.name}: tool {tool.spec()} is too long (too wide) for the safety spheres at "
+            f"{describe_region(mesh, nodes.vertex[where])}: its flank ends at a diameter of "
+            f"{2 * tool.end_radius_mm:.4g} mm, whose circle needs a sphere up to {excess:.4g} mm "
+            f"larger than the Mannheim spheres where the flank lies allow; {fix}, or a smaller "
+            "angle")
 
     safety = safety_radii(nodes.radius, margin, tool)
     rc = safety * np.cos(a)
@@ -399,9 +405,9 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
         least = safety_radii(nodes.radius, share_mm, tool)
         if np.all(least * np.cos(a) > tool.radius_mm):
             excess, t = _flank_excess(nodes.point, nodes.ruling, field, least, tool, share_mm)
-            wide = (excess > 1e-9 * np.maximum(nodes.radius, 1.0)[:, None]) & (t < 0)
-            if wide.any():
-                raise too_wide(np.flatnonzero(wide.any(axis=1)), float(excess[wide].max()))
+            bad = excess > 1e-9 * np.maximum(nodes.radius, 1.0)[:, None]
+            if bad.any():
+                raise too_big(np.flatnonzero(bad.any(axis=1)), float(excess.max()))
         fits = max(2 * float(rc.min()), 0.0)
         raise InputError(
             f"{mesh.name}: tool {tool.spec()} is too wide for the safety spheres at "
@@ -412,17 +418,8 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
             "smaller --margin")
     excess, t = _flank_excess(nodes.point, nodes.ruling, field, safety, tool, share_mm)
     bad = excess > 1e-9 * np.maximum(nodes.radius, 1.0)[:, None]
-    if (bad & (t < 0)).any():
-        wide = bad & (t < 0)
-        raise too_wide(np.flatnonzero(wide.any(axis=1)), float(excess[wide].max()))
     if bad.any():
-        node = np.flatnonzero(bad.any(axis=1))
-        raise InputError(
-            f"{mesh.name}: tool {tool.spec()} is too long for the safety spheres at "
-            f"{describe_region(mesh, nodes.vertex[node])}: its narrow part reaches where the "
-            f"Mannheim spheres are smaller than its circles (by up to {float(excess.max()):.4g} "
-            f"mm of sphere radius with margin {margin:.4g} mm); use a shorter flank, a larger "
-            "angle or a larger --margin")
+        raise too_big(np.flatnonzero(bad.any(axis=1)), float(excess.max()))
     ahead, behind_reach = _flank_reach(safety, tool)
     reach = np.maximum(ahead, behind_reach)
     dig = np.maximum(nodes.ruling_curvature, 0) * reach**2 / 2
