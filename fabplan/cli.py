@@ -851,9 +851,9 @@ def _add_mill(sub: Any) -> None:
     p.add_argument("--units", choices=["mm", "m"], default="mm",
                    help="unit of the net's coordinates (default mm)")
     p.add_argument("--margin", type=float, metavar="MM",
-                   help="Meusnier (cone: Mannheim) radius minus safety sphere radius "
-                        "(default: the rule of docs/milling.md, which keeps the cut above the "
-                        "target)")
+                   help="Meusnier radius minus safety sphere radius (cone: Mannheim radius "
+                        "minus at least this) (default: the rule of docs/milling.md, which keeps "
+                        "the cut above the target)")
     p.add_argument("--scallop", type=float, default=0.01, metavar="MM",
                    help="largest predicted scallop height between passes (default 0.01)")
     p.add_argument("--side", choices=["auto", "+", "-"], default="auto",
