@@ -12,16 +12,20 @@ The tool is a cone of revolution (half angle ``a``, tip radius ``r0``, flank len
 along the axis) cutting with its flank. At a node ``p`` of a pass (normal ``n`` towards
 the tool, ruling ``u`` of the pass family pointing to the tool's tip), the *safety sphere*
 is the Mannheim sphere shrunk by the margin, touching the tangent plane at ``p``: radius
-``R_s = rho - margin``, centre ``c = p + R_s n``. The cone touches the tangent plane along
-the ruling and is circumscribed to the safety sphere: its apex lies on the ruling at
-``R_s / tan(a)`` from ``p``, its axis runs through ``c`` and is tilted by ``90 - a``
-degrees from ``n``, and it touches the sphere along the circle of radius ``R_s cos(a)``
-through ``p``: the flank's circle of that radius is the contact circle. Moved along the
-line, the cone touches the developable of the line along its rulings at every instant:
-the cut is that developable, whatever the margin, as long as the cone stays inside the
-developable's osculating cones (margin rule below). Where the surface curves away from the
-tool along the ruling (on a saddle on the side of the Mannheim spheres) the developable
-stays above the surface and the flank leaves material between passes, like a scallop.
+``R_s = rho - margin``, centre ``c = p + R_s n`` (smaller still, ``r_end / cos(a)``, where
+the flank's wide end, radius ``r_end``, would otherwise not reach the contact circle). The
+cone touches the tangent plane along the ruling and is circumscribed to the safety sphere:
+its apex lies on the ruling at ``R_s / tan(a)`` from ``p``, its axis runs through ``c`` and
+is tilted by ``90 - a`` degrees from ``n``, and it touches the sphere along the circle of
+radius ``R_s cos(a)`` through ``p``: the flank's circle of that radius is the contact
+circle. Moved along the line, the cone touches the developable of the line along its
+rulings at every instant: the cut is that developable, whatever the margin, as long as the
+cone stays inside the developable's osculating cones (margin rule below). Where the
+surface curves away from the tool along the ruling (on a saddle on the side of the
+Mannheim spheres) the developable stays above the surface and the flank leaves material
+between passes, like a scallop. The nodes are the stars whose four neighbours are star
+centres: the rulings use the neighbours' normals, and a boundary vertex's normal is held
+by a single sphere.
 
 Conventions as in `fabplan.fabricate.milling`: lengths in millimetres, angles in degrees
 at the interface, the mill side is the side of the Mannheim sphere centres.
