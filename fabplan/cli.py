@@ -835,24 +835,31 @@ def _add_molds(sub: Any) -> None:
 
 
 def _add_mill(sub: Any) -> None:
-    p = sub.add_parser("mill", help="curvature-adaptive face milling paths from the Meusnier "
-                                    "spheres of an S-net, checked by simulation (CL + CSV + "
-                                    "mill.json + report.html)")
-    p.add_argument("net", help="the S-net (OBJ), a regular quad net")
-    p.add_argument("--tool", required=True, metavar="face:D=MM[,corner=MM][,length=MM]",
-                   help="cylindrical face mill of diameter D (toroidal with a corner radius)")
+    p = sub.add_parser("mill", help="curvature-adaptive milling paths, checked by simulation "
+                                    "(CL + CSV + mill.json + report.html): face milling from the "
+                                    "Meusnier spheres of an S-net, flank milling with a cone from "
+                                    "the Mannheim spheres of an S*-net")
+    p.add_argument("net", help="the S-net, or for a cone the S*-net with its vn normals (OBJ), "
+                               "a regular quad net")
+    p.add_argument("--tool", required=True,
+                   metavar="face:D=MM[,corner=MM][,length=MM]|cone:angle=DEG,length=MM[,tip=MM]",
+                   help="cylindrical face mill of diameter D (toroidal with a corner radius), or "
+                        "a conical flank mill: half angle between axis and flank, flank length "
+                        "along the axis, tip diameter (default 0)")
     p.add_argument("--along", choices=["A", "B"], default="A",
                    help="family whose lines the passes follow (A: the first, default)")
     p.add_argument("--units", choices=["mm", "m"], default="mm",
                    help="unit of the net's coordinates (default mm)")
     p.add_argument("--margin", type=float, metavar="MM",
-                   help="Meusnier radius minus safety sphere radius (default: the rule of "
-                        "docs/milling.md, which keeps the cut above the target)")
+                   help="Meusnier radius minus safety sphere radius (cone: Mannheim radius "
+                        "minus at least this) (default: the rule of docs/milling.md, which keeps "
+                        "the cut above the target)")
     p.add_argument("--scallop", type=float, default=0.01, metavar="MM",
                    help="largest predicted scallop height between passes (default 0.01)")
     p.add_argument("--side", choices=["auto", "+", "-"], default="auto",
-                   help="side the tool comes from: that of the Meusnier spheres (auto), of the "
-                        "face normals (+) or the other (-)")
+                   help="side the tool comes from: that of the Meusnier (cone: Mannheim) "
+                        "spheres (auto), of the face normals (cone: the vn normals) (+) or the "
+                        "other (-)")
     p.add_argument("--sim-step", type=float, default=0.5, metavar="MM",
                    help="grid step of the milling simulation (default 0.5)")
     p.add_argument("--no-simulation", action="store_true",

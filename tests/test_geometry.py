@@ -328,3 +328,22 @@ def test_orthogonal_net_mean_curvature_is_normal_curvature(cmc1):
     # ... which accounts for the difference exactly: H - kn = -cos(theta) (k1 - k2) / 2
     assert np.allclose((H - fit.curvature)[defined], (-np.cos(theta) * (k1 - k2) / 2)[defined],
                        rtol=0, atol=1e-13)
+
+
+def test_normal_curvatures_of_contact_elements_match_the_quadric():
+    """Second fundamental form fitted to the normals of a star on z = x^2/100 - y^2/160:
+    II(d, d) = cos^2 / 50 - sin^2 / 80 at the saddle point, for every direction d."""
+    from fabplan.net.geometry import normal_curvatures
+
+    u = np.arange(-2.0, 2.1, 1.0) * 0.5
+    x, y = np.meshgrid(u, u, indexing="ij")
+    grid = QuadMesh.grid(np.stack([x, y, x**2 / 100 - y**2 / 160], axis=-1))
+    normals = np.column_stack([-grid.vertices[:, 0] / 50, grid.vertices[:, 1] / 80,
+                               np.ones(grid.vertex_count)])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    centre = int(np.flatnonzero(np.all(grid.vertices[grid.stars[:, 0], :2] == 0, axis=1))[0])
+    angles = np.radians(np.arange(0.0, 180.0, 15.0))
+    d = np.column_stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)])
+    stars = np.repeat(grid.stars[centre:centre + 1], len(d), axis=0)
+    k = normal_curvatures(grid.vertices, normals, stars, d)
+    assert np.allclose(k, np.cos(angles) ** 2 / 50 - np.sin(angles) ** 2 / 80, rtol=1e-3, atol=1e-7)

@@ -21,6 +21,7 @@ from ..io.records import json_text
 from ..io.rhino_write import Rhino3dmWriter
 from ..net.mesh import QuadMesh
 from ..report import figures, html
+from .flank_milling import plan_flank_milling
 from .mill_simulation import (
     Cutter,
     HeightTarget,
@@ -81,7 +82,8 @@ class MillResult:
             record["gouge_check"] = {"tolerance_mm": settings.gouge_tolerance_mm,
                                      "max_gouge_mm": sim.max_gouge_mm,
                                      "passed": self.gouge_free}
-            record["scallop_simulated_over_predicted"] = sim.max_scallop_mm / predicted
+            record["scallop_simulated_over_predicted"] = (
+                sim.max_scallop_mm / predicted if 0 < predicted < np.inf else None)
         if conv is not None and sim is not None:
             record["conventional"] = {
                 "tool": f"ball end D={self.plan.tool.diameter_mm:g} mm, axis along the normal",
@@ -117,16 +119,17 @@ def _median_between(sim: SimulationResult) -> float:
 
 def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate: bool = True,
              simulation: SimulationSettings | None = None, conventional: bool = True) -> MillResult:
-    """Plan face milling on a net and check it by simulation.
+    """Plan face milling on an S-net, or flank milling with a cone on an S*-net, and check
+    it by simulation.
 
     Parameters
     ----------
     mesh : the net.
-    tool, settings : see `plan_face_milling`.
+    tool, settings : see `plan_face_milling` and `plan_flank_milling` (for a cone).
     simulate : run the simulation (the target is the thin-plate spline through the net's
         vertices, seen from the mean tool-side normal).
     simulation : its resolution.
-    conventional : also simulate the conventional ball-end path.
+    conventional : also simulate the conventional ball-end path (face mills only).
 
     Returns
     -------
@@ -134,7 +137,8 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
     """
     sim_settings = simulation or SimulationSettings()
     started = time.perf_counter()
-    plan = plan_face_milling(mesh, tool, settings)
+    cone = tool.kind == "cone"
+    plan = plan_flank_milling(mesh, tool, settings) if cone else plan_face_milling(mesh, tool, settings)
     seconds = {"plan": plan.seconds}
     target = adaptive = ball = None
     if simulate:
@@ -144,12 +148,15 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
         target = height_target(mesh.vertices * settings.mm_per_unit, mesh.triangles(), up,
                                step_mm=sim_settings.step_mm)
         seconds["target"] = time.perf_counter() - clock
-        cutter = Cutter("flat", tool.radius_mm, min(tool.body_length_mm, sim_settings.body_mm),
-                        tool.corner_mm)
+        if cone:   # the whole flank cuts
+            cutter = Cutter("cone", tool.radius_mm, tool.length_mm, angle_deg=tool.angle_deg)
+        else:
+            cutter = Cutter("flat", tool.radius_mm, min(tool.body_length_mm, sim_settings.body_mm),
+                            tool.corner_mm)
         adaptive = simulate_milling(target, cutter, path.tip, path.axis, path.contact,
                                     path.pass_id, sim_settings)
         seconds["simulate"] = adaptive.seconds
-        if conventional:
+        if conventional and not cone:
             tips, axes = ball_end_path(path.contact, path.normal, tool.radius_mm)
             ball_cutter = Cutter("ball", tool.radius_mm,
                                  tool.radius_mm + min(tool.body_length_mm, sim_settings.body_mm))
@@ -225,15 +232,22 @@ def _tilt_figure(result: MillResult) -> str:
 def mill_report_html(result: MillResult) -> str:
     """The self-contained report page."""
     r = result.record()
+    cone = result.plan.tool.kind == "cone"
+    spheres = "mannheim_radius_mm" if cone else "meusnier_radius_mm"
     rows = [("tool", r["tool"]["spec"]), ("passes", f"{r['passes']} along family {r['along']} "
                                                     f"(every {r['stride']}. of {r['lines']} lines)"),
             ("margin [mm]", f"{r['margin_mm']:.4g} ({r['margin_rule']})"),
             ("tilt [deg]", f"{r['tilt_deg']['min']:.3f} .. {r['tilt_deg']['max']:.3f}"),
-            ("Meusnier radius [mm]", f"{r['meusnier_radius_mm']['min']:.4g} .. "
-                                     f"{r['meusnier_radius_mm']['max']:.4g}"),
+            (f"{'Mannheim' if cone else 'Meusnier'} radius [mm]",
+             f"{r[spheres]['min']:.4g} .. {r[spheres]['max']:.4g}"),
             ("path length [mm]", f"{r['path_length_mm']:.1f}"),
             ("cutter locations", r["cutter_locations"]),
             ("predicted scallop [mm]", f"{r['predicted_scallop_mm']:.4g}")]
+    if cone:
+        rows += [("contact circle diameter [mm]", f"{r['contact_diameter_mm']['min']:.4g} .. "
+                                                  f"{r['contact_diameter_mm']['max']:.4g}"),
+                 ("ruling curvature [1/mm]", f"{r['ruling_curvature_per_mm']['min']:.3g} .. "
+                                             f"{r['ruling_curvature_per_mm']['max']:.3g}")]
     parts = []
     if "simulation" in r:
         rows += [("simulated scallop [mm]", f"{r['simulation']['max_scallop_mm']:.4g}"),
@@ -262,10 +276,12 @@ def mill_report_html(result: MillResult) -> str:
                                              "Material left above the target (scallop height map)."))
     figures_html.append(html.html_figure(_tilt_figure(result), "Tool tilt along each pass."))
     parts.append(html.html_section("Pictures", *figures_html))
+    direction = ("ruling (towards the tip), tilt, safety sphere radius and contact circle "
+                 "radius" if cone else "cross tangent, tilt and safety sphere radius")
     parts.append(html.html_section("Files", html.html_paragraph(
         "path.cl: APT CLDATA (GOTO/x, y, z, i, j, k in mm: tool tip and axis). path.csv: the same "
-        "locations with contact point, normal, cross tangent, tilt and safety sphere radius. "
-        "mill.json: every number of this page.")))
+        f"locations with contact point, normal, {direction}. mill.json: every number of this "
+        "page.")))
     return html.html_page(f"Milling report: {Path(str(r['net'])).name}", parts,
                           subtitle=f"{r['tool']['spec']}, {r['passes']} passes, made by fabplan")
 
@@ -283,9 +299,12 @@ def mill_report_files(result: MillResult, folder: str | os.PathLike) -> dict:
     header = [f"fabplan mill {plan.tool.spec()} along {plan.settings.along}",
               f"margin {plan.margin_mm:.6g} mm, tilt {path.tilt_deg.min():.4f} .. "
               f"{path.tilt_deg.max():.4f} deg"]
+    cone = plan.tool.kind == "cone"
     cl = cldata_text(path.tip, path.axis, path.pass_id, part=Path(str(plan.net)).stem,
                      diameter_mm=plan.tool.diameter_mm, corner_mm=plan.tool.corner_mm,
-                     length_mm=plan.tool.body_length_mm, pass_comments=comments, header=header)
+                     length_mm=plan.tool.length_mm if cone else plan.tool.body_length_mm,
+                     side_angle_deg=plan.tool.angle_deg if cone else 0.0,
+                     pass_comments=comments, header=header)
     return {folder / "path.cl": cl, folder / "path.csv": plan.csv(),
             folder / "mill.json": json_text(result.record()),
             folder / "report.html": mill_report_html(result)}

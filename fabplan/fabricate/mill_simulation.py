@@ -15,6 +15,9 @@ cut above the target between two neighbouring passes (inside the strip their con
 paths bound), the *gouge* the largest depth of the cut below the target anywhere on the
 part. Units are millimetres.
 
+A conical flank mill is a truncated cone: the entry is the lower crossing of the vertical
+line with the cone's quadric within the slab of its length, or the tip's end face.
+
 The same simulation runs the conventional finishing path: a ball-end cutter of the same
 diameter normal to the surface, through the same contact points (`ball_end_path`).
 """
@@ -49,16 +52,26 @@ class Cutter:
 
     Attributes
     ----------
-    kind : ``"flat"`` (cylinder, sharp or with a corner radius) or ``"ball"``.
-    radius_mm : cutter radius.
-    length_mm : length of the cylindrical body above the tip.
+    kind : ``"flat"`` (cylinder, sharp or with a corner radius), ``"ball"`` or ``"cone"``
+        (a truncated cone of revolution widening from the tip).
+    radius_mm : cutter radius (cone: the radius of its tip, 0 for a sharp cone).
+    length_mm : length of the body above the tip along the axis.
     corner_mm : corner radius of a toroidal cutter (``"flat"`` only).
+    angle_deg : half angle of a cone, between its axis and its flank.
     """
 
     kind: str
     radius_mm: float
     length_mm: float
     corner_mm: float = 0.0
+    angle_deg: float = 0.0
+
+    @property
+    def widest_radius_mm(self) -> float:
+        """Largest distance of the cutter's surface from its axis."""
+        if self.kind == "cone":
+            return self.radius_mm + self.length_mm * float(np.tan(np.radians(self.angle_deg)))
+        return self.radius_mm
 
 
 @dataclass
@@ -184,6 +197,41 @@ def _cylinder_entry(dx, dy, tz, axis, radius, length):
     return np.where(lo <= hi, tz + lo, np.inf)
 
 
+def _cone_entry(dx, dy, tz, axis, tip_radius, angle, length):
+    """Height where the vertical line at offset (dx, dy) from the tip enters the truncated
+    cone standing on the tip along `axis`: radius ``tip_radius + h tan(angle)`` at height
+    h in ``[0, length]`` (inf: misses). The solid is convex: the entry is the lower end of
+    the slab interval where it lies inside the cone, or the lower crossing of the flank."""
+    ax, ay, az = axis[..., 0], axis[..., 1], axis[..., 2]
+    tan2 = np.tan(angle) ** 2
+    apex = tip_radius / np.tan(angle)     # axial distance from the apex to the tip
+    wa = dx * ax + dy * ay                # axial coordinate w.a = wa + az z (z from the tip)
+    rho2 = dx * dx + dy * dy
+    slab_lo = -wa / az
+    slab_hi = (length - wa) / az
+
+    def inside(z):
+        h = wa + az * z
+        return rho2 + z * z - h * h - tan2 * (h + apex) ** 2
+
+    # inside(z) = A z^2 + B z + C
+    A = 1 - az * az - tan2 * az * az
+    B = -2 * wa * az - 2 * tan2 * (wa + apex) * az
+    C = rho2 - wa * wa - tan2 * (wa + apex) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        disc = B * B - 4 * A * C
+        root = np.sqrt(np.maximum(disc, 0))
+        flat = np.abs(A) < 1e-12
+        r1 = np.where(flat, -C / np.where(B == 0, 1.0, B), (-B - root) / (2 * np.where(flat, 1.0, A)))
+        r2 = np.where(flat, np.inf, (-B + root) / (2 * np.where(flat, 1.0, A)))
+    candidates = [np.where(inside(slab_lo) <= 1e-12 * np.maximum(rho2, 1.0), slab_lo, np.inf)]
+    for r in (r1, r2):
+        ok = (disc >= 0) & np.isfinite(r) & (r >= slab_lo) & (r <= slab_hi)
+        candidates.append(np.where(ok, r, np.inf))
+    lowest = np.minimum.reduce(candidates)
+    return np.where(np.isfinite(lowest), tz + lowest, np.inf)
+
+
 def _sphere_entry(dx, dy, cz, radius):
     rho2 = dx * dx + dy * dy
     return np.where(rho2 <= radius * radius, cz - np.sqrt(np.maximum(radius * radius - rho2, 0)),
@@ -215,9 +263,15 @@ def entry_heights(cutter: Cutter, tip: np.ndarray, axis: np.ndarray, x: np.ndarr
     >>> float(entry_heights(b, np.array([0.0, 0, 0]), np.array([0.0, 0, 1]), np.array(3.0),
     ...                     np.array(4.0)))
     5.0
+    >>> k = Cutter("cone", 2.0, 10.0, angle_deg=45.0)
+    >>> entry_heights(k, np.zeros(3), np.array([0.0, 0, 1]), np.array([1.0, 5.0, 13.0]),
+    ...               np.zeros(3)).round(12).tolist()
+    [0.0, 3.0, inf]
     """
     dx, dy, tz = x - tip[..., 0], y - tip[..., 1], tip[..., 2]
     r = cutter.radius_mm
+    if cutter.kind == "cone":
+        return _cone_entry(dx, dy, tz, axis, r, np.radians(cutter.angle_deg), cutter.length_mm)
     if cutter.kind == "ball":
         centre_dx, centre_dy = dx - r * axis[..., 0], dy - r * axis[..., 1]
         cz = tz + r * axis[..., 2]
@@ -403,7 +457,7 @@ def _sweep_pass(target: HeightTarget, cutter: Cutter, tip: np.ndarray, axis: np.
     parts = np.maximum(1, np.ceil(seg / settings.pose_spacing_mm)).astype(np.int64)
     frac = (np.arange(parts.sum()) - np.repeat(np.cumsum(parts) - parts, parts)) / np.repeat(parts, parts)
     param = np.r_[np.repeat(np.arange(len(seg)), parts) + frac, len(tip) - 1.0]
-    reach = cutter.radius_mm + cutter.length_mm * np.linalg.norm(pose_axes[:, :2], axis=1).max() + step
+    reach = cutter.widest_radius_mm + cutter.length_mm * np.linalg.norm(pose_axes[:, :2], axis=1).max() + step
     half = int(np.ceil(reach / step))
     offsets = np.arange(-half, half + 1)
     oy, ox = np.meshgrid(offsets, offsets, indexing="ij")

@@ -50,6 +50,11 @@ __all__ = [
     "circle_tool_pose",
     "plan_face_milling",
     "default_margin_mm",
+    "describe_region",
+    "line_sequence",
+    "pass_frames",
+    "evaluate_pass_frames",
+    "refine_pass",
 ]
 
 _MM_PER_UNIT = {"mm": 1.0, "m": 1000.0}
@@ -61,20 +66,25 @@ class MillTool:
 
     Attributes
     ----------
-    kind : ``"face"``, a cylindrical (face) mill cutting with its base circle.
-    diameter_mm : cutter diameter D.
+    kind : ``"face"``, a cylindrical (face) mill cutting with its base circle, or
+        ``"cone"``, a conical flank mill cutting with its side (a cone of revolution).
+    diameter_mm : face: cutter diameter D; cone: diameter of the tip (the small end, 0
+        for a sharp tip).
     corner_mm : corner radius c of a toroidal (bull-nose) cutter, 0 for a sharp edge.
-    length_mm : length of the cutter body the simulation sweeps (default: D).
+    length_mm : face: length of the cutter body the simulation sweeps (default: D); cone:
+        length of the conical flank along the axis, from the tip.
+    angle_deg : cone: half the opening angle, between the axis and the flank (0 < a < 90).
     """
 
     kind: str
     diameter_mm: float
     corner_mm: float = 0.0
     length_mm: float = 0.0
+    angle_deg: float = 0.0
 
     @property
     def radius_mm(self) -> float:
-        """Cutter radius D / 2."""
+        """Cutter radius D / 2 (cone: the tip's radius)."""
         return self.diameter_mm / 2
 
     @property
@@ -87,47 +97,81 @@ class MillTool:
         """Length of the cutter body (``length_mm``, or D when not given)."""
         return self.length_mm if self.length_mm > 0 else self.diameter_mm
 
+    @property
+    def end_radius_mm(self) -> float:
+        """Cone: radius of the flank's wide end, ``tip radius + length tan(angle)``."""
+        return self.radius_mm + self.length_mm * float(np.tan(np.radians(self.angle_deg)))
+
     def spec(self) -> str:
-        """The tool as the CLI writes it (``face:D=50,corner=2``)."""
+        """The tool as the CLI writes it (``face:D=50,corner=2``, ``cone:angle=20,length=30,tip=6``)."""
+        if self.kind == "cone":
+            return (f"cone:angle={self.angle_deg:g},length={self.length_mm:g}"
+                    + (f",tip={self.diameter_mm:g}" if self.diameter_mm else ""))
         text = f"{self.kind}:D={self.diameter_mm:g}"
         return text + (f",corner={self.corner_mm:g}" if self.corner_mm else "")
 
     def to_json(self) -> dict:
+        if self.kind == "cone":
+            return {"kind": "cone", "angle_deg": self.angle_deg, "length_mm": self.length_mm,
+                    "tip_diameter_mm": self.diameter_mm,
+                    "end_diameter_mm": 2 * self.end_radius_mm, "spec": self.spec()}
         return {"kind": self.kind, "diameter_mm": self.diameter_mm, "corner_mm": self.corner_mm,
                 "length_mm": self.body_length_mm, "spec": self.spec()}
 
 
+_TOOL_FORMS = "face:D=MM[,corner=MM][,length=MM] or cone:angle=DEG,length=MM[,tip=MM]"
+_TOOL_KEYS = {"face": ("d", "corner", "length"), "cone": ("angle", "length", "tip")}
+
+
 def parse_tool(spec: str) -> MillTool:
-    """A `MillTool` from ``face:D=50[,corner=R][,length=L]`` (millimetres).
+    """A `MillTool` from ``face:D=50[,corner=R][,length=L]`` or
+    ``cone:angle=DEG,length=L[,tip=D]`` (millimetres, degrees).
 
     Examples
     --------
     >>> parse_tool("face:D=50,corner=2").circle_radius_mm
     23.0
+    >>> round(parse_tool("cone:angle=45,length=10,tip=4").end_radius_mm, 12)
+    12.0
     >>> parse_tool("ball:D=10")
     Traceback (most recent call last):
     ...
     fabplan.errors.InputError: --tool ball:D=10: unknown tool kind 'ball'; fabplan mill plans \
-face mills: face:D=MM[,corner=MM][,length=MM]
+face mills or conical flank mills: face:D=MM[,corner=MM][,length=MM] or \
+cone:angle=DEG,length=MM[,tip=MM]
     """
     kind, _, rest = spec.partition(":")
-    if kind != "face":
+    if kind not in _TOOL_KEYS:
         raise InputError(f"--tool {spec}: unknown tool kind {kind!r}; fabplan mill plans face "
-                         "mills: face:D=MM[,corner=MM][,length=MM]")
+                         f"mills or conical flank mills: {_TOOL_FORMS}")
+    keys = _TOOL_KEYS[kind]
     values: dict[str, float] = {}
     for item in filter(None, rest.split(",")):
         key, eq, value = item.partition("=")
         key = key.strip().lower()
-        if not eq or key not in ("d", "corner", "length"):
-            raise InputError(f"--tool {spec}: cannot read {item!r}; expected D=MM, corner=MM "
-                             "or length=MM")
+        if not eq or key not in keys:
+            expected = ("D=MM, corner=MM or length=MM" if kind == "face"
+                        else "angle=DEG, length=MM or tip=MM")
+            raise InputError(f"--tool {spec}: cannot read {item!r}; expected {expected}")
         try:
             number = float(value)
         except ValueError:
-            raise InputError(f"--tool {spec}: {key} must be a number of mm, got {value!r}") from None
+            unit = "degrees" if key == "angle" else "mm"
+            raise InputError(f"--tool {spec}: {key} must be a number of {unit}, got {value!r}") from None
         if not (np.isfinite(number) and number >= 0):
-            raise InputError(f"--tool {spec}: {key} must be a finite length >= 0, got {value}")
+            raise InputError(f"--tool {spec}: {key} must be a finite value >= 0, got {value}")
         values[key] = number
+    if kind == "cone":
+        angle, length = values.get("angle"), values.get("length")
+        if angle is None or not 0.5 <= angle <= 85:
+            raise InputError(f"--tool {spec}: the cone's half angle (between axis and flank) "
+                             "must lie in 0.5 .. 85 degrees")
+        if length is None or not 0.1 <= length <= 1000:
+            raise InputError(f"--tool {spec}: the flank length must lie in 0.1 .. 1000 mm")
+        tip = values.get("tip", 0.0)
+        if tip > 1000:
+            raise InputError(f"--tool {spec}: the tip diameter must lie in 0 .. 1000 mm")
+        return MillTool("cone", tip, 0.0, length, angle)
     diameter = values.get("d")
     if diameter is None or not 0.1 <= diameter <= 1000:
         raise InputError(f"--tool {spec}: the diameter D must lie in 0.1 .. 1000 mm")
@@ -156,6 +200,10 @@ class MillSettings:
         the difference between the discrete spheres and the smooth surface they sample.
     flat_curvature : normal curvatures (1/mm) below this in magnitude count as flat:
         a sphere of infinite radius, millable from either side.
+    mannheim_tolerance_mm : cone: largest distance of a star's five tangent planes from
+        their Mannheim sphere for the net to count as an S*-net.
+    flank_dig_mm : cone: largest depth the straight flank may reach below the target along
+        its contact line where the target curves towards the tool.
     """
 
     along: str = "A"
@@ -166,6 +214,8 @@ class MillSettings:
     chordal_tolerance_mm: float = 0.001
     discretization_share: float = 0.005
     flat_curvature: float = 1e-9
+    mannheim_tolerance_mm: float = 0.001
+    flank_dig_mm: float = 0.001
 
     @property
     def mm_per_unit(self) -> float:
@@ -239,7 +289,8 @@ class ToolPath:
     pass_id : (k,) int, pass of each location (0, 1, ...).
     contact : (k, 3) float, contact point on the target.
     normal : (k, 3) float, unit normal at the contact, towards the tool.
-    cross : (k, 3) float, unit tangent of the other family's line at the contact.
+    cross : (k, 3) float, unit cutting direction at the contact: the tangent of the other
+        family's line (face mill), or the ruling, pointing to the tool's tip (cone).
     tip : (k, 3) float, centre of the cutter's end face (the CL point).
     axis : (k, 3) float, unit tool axis (tip to spindle).
     tilt_deg : (k,) float, angle between axis and normal.
@@ -389,7 +440,7 @@ class _Nodes:
     cross_neighbour: np.ndarray  # (s, 2) vertex ids along the other family: (-, +)
 
 
-def _describe_region(mesh: QuadMesh, vertices: np.ndarray) -> str:
+def describe_region(mesh: QuadMesh, vertices: np.ndarray) -> str:
     """The vertices (the first eight) and their bounding box in model units, for messages."""
     X = mesh.vertices[vertices]
     lo, hi = X.min(axis=0), X.max(axis=0)
@@ -425,7 +476,7 @@ def _net_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_Nodes, str]:
     if wrong.size:
         raise InputError(
             f"{mesh.name}: the Meusnier spheres switch sides: at "
-            f"{_describe_region(mesh, stars[wrong, 0])} they lie on the {'-+'[side == '-']} "
+            f"{describe_region(mesh, stars[wrong, 0])} they lie on the {'-+'[side == '-']} "
             f"side, the others on the {side} side; a face mill can only cut from the side of "
             "the spheres: split the net there and mill the parts from their own sides")
     f = 0 if settings.along == "A" else 1
@@ -496,8 +547,19 @@ def default_margin_mm(points: np.ndarray, radius: np.ndarray, largest_curvature:
     return float(np.max(R - 1.0 / reach) + share * R.max())
 
 
-def _line_sequence(mesh: QuadMesh, nodes: _Nodes, family: int) -> tuple[list, np.ndarray]:
+def line_sequence(mesh: QuadMesh, vertex: np.ndarray, cross_neighbour: np.ndarray,
+                  family: int, node_of_vertex: np.ndarray | None = None
+                  ) -> tuple[list, np.ndarray]:
     """The lines of `family` holding stars, in order across the net.
+
+    Parameters
+    ----------
+    mesh : the net.
+    vertex : (s,) int, the centre vertex of each star (``mesh.stars[:, 0]``).
+    cross_neighbour : (s, 2) int, each star's two neighbours along the other family.
+    family : 0 (A) or 1 (B).
+    node_of_vertex : (n,) int, the node (index into `vertex`) centred at each vertex or -1;
+        default ``mesh.star_of_vertex`` (every star is a node).
 
     Returns
     -------
@@ -506,7 +568,7 @@ def _line_sequence(mesh: QuadMesh, nodes: _Nodes, family: int) -> tuple[list, np
     order : (runs,) int, position of each run's line in the sequence of lines.
     """
     lines = mesh.polylines
-    s_of_v = mesh.star_of_vertex
+    s_of_v = mesh.star_of_vertex if node_of_vertex is None else node_of_vertex
     runs, line_of_run = [], []
     for i in np.flatnonzero(lines.family == family):
         s = s_of_v[lines.vertices[i]]
@@ -522,12 +584,12 @@ def _line_sequence(mesh: QuadMesh, nodes: _Nodes, family: int) -> tuple[list, np
         raise InputError(f"{mesh.name}: no line of family {'AB'[family]} runs through two regular "
                          "stars: nothing to mill along")
     line_ids, run_line = np.unique(np.array(line_of_run), return_inverse=True)
-    star_line = np.full(len(nodes.vertex), -1)
+    star_line = np.full(len(vertex), -1)
     star_line[np.concatenate(runs)] = np.repeat(run_line, [len(r) for r in runs])
     v_line = np.full(mesh.vertex_count, -1)
-    v_line[nodes.vertex] = star_line
+    v_line[vertex] = star_line
     a = np.repeat(star_line, 2)
-    b = v_line[nodes.cross_neighbour.ravel()]
+    b = v_line[cross_neighbour.ravel()]
     keep = (a >= 0) & (b >= 0) & (a != b)
     n = len(line_ids)
     graph = sp.coo_matrix((np.ones(keep.sum()), (a[keep], b[keep])), shape=(n, n)).tocsr()
@@ -634,9 +696,20 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
     return out
 
 
-def _frames_between(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
-                    safety: np.ndarray) -> tuple[np.ndarray, list]:
-    """Cubic splines through one pass's node frames, by arc length."""
+def pass_frames(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
+                safety: np.ndarray) -> tuple[np.ndarray, list]:
+    """Cubic splines through one pass's node frames, by arc length.
+
+    Parameters
+    ----------
+    contact, normal, cross : (k, 3) float, the nodes' contact points (mm), unit normals and
+        unit cutting directions.
+    safety : (k,) float, safety sphere radii (mm, inf where flat); splined as curvature.
+
+    Returns
+    -------
+    s : (k,) float, arc length of the nodes; splines : list of four `CubicSpline`.
+    """
     seg = np.linalg.norm(np.diff(contact, axis=0), axis=1)
     s = np.r_[0.0, np.cumsum(seg)]
     kind = "not-a-knot"   # exact on cubics: no end curvature forced to zero
@@ -648,7 +721,9 @@ def _frames_between(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
     return s, splines
 
 
-def _evaluate_frames(splines: list, t: np.ndarray) -> tuple:
+def evaluate_pass_frames(splines: list, t: np.ndarray) -> tuple:
+    """Contact (k, 3), unit normal (k, 3), unit cutting direction in the tangent plane
+    (k, 3) and safety radius (k,) at arc lengths `t` (k,) of `pass_frames` splines."""
     p = splines[0](t)
     n = _unit(splines[1](t))
     c = splines[2](t)
@@ -659,15 +734,20 @@ def _evaluate_frames(splines: list, t: np.ndarray) -> tuple:
     return p, n, c, radius
 
 
-def _refine_pass(splines: list, s: np.ndarray, tool: MillTool, tolerance: float) -> np.ndarray:
+def refine_pass(splines: list, s: np.ndarray, tip_of, tolerance: float) -> np.ndarray:
     """Parameters of the CL points of one pass: the nodes, plus midpoints wherever the
-    planned tip path leaves the straight move between neighbours by more than `tolerance`
-    (the circle's centre trails the contact: the cutter cuts with its front)."""
+    planned tip path leaves the straight move between neighbours by more than `tolerance`.
+
+    Parameters
+    ----------
+    splines, s : the pass's frames by arc length (`pass_frames`).
+    tip_of : ``tip_of(p, n, c, R, motion) -> (k, 3)`` tool tips of frames (contact, normal,
+        cutting direction, safety radius, unit motion), all (k, 3) or (k,).
+    tolerance : chordal tolerance (mm).
+    """
     def pose(t):
-        p, n, c, R = _evaluate_frames(splines, t)
-        tip, _, _ = circle_tool_pose(p, n, c, -splines[0](t, 1), R, tool.circle_radius_mm,
-                                     tool.corner_mm)
-        return tip
+        p, n, c, R = evaluate_pass_frames(splines, t)
+        return tip_of(p, n, c, R, _unit(splines[0](t, 1)))
     t = s.copy()
     for _ in range(20):
         mid = (t[:-1] + t[1:]) / 2
@@ -705,6 +785,9 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     """
     started = time.perf_counter()
     settings.check()
+    if tool.kind != "face":
+        raise InputError(f"{mesh.name}: tool {tool.spec()} is not a face mill: plan cones with "
+                         "fabplan.fabricate.flank_milling.plan_flank_milling")
     nodes, side = _net_nodes(mesh, settings)
     family = 0 if settings.along == "A" else 1
     r = tool.circle_radius_mm
@@ -723,10 +806,10 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
         largest = 2 * (float(np.min(safety)) - tool.corner_mm) + 2 * tool.corner_mm
         raise InputError(
             f"{mesh.name}: tool {tool.spec()} is larger than the safety spheres allow at "
-            f"{_describe_region(mesh, nodes.vertex[too_small])}: the safety "
+            f"{describe_region(mesh, nodes.vertex[too_small])}: the safety "
             f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
             f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
-    runs, order = _line_sequence(mesh, nodes, family)
+    runs, order = line_sequence(mesh, nodes.vertex, nodes.cross_neighbour, family)
     # orient the runs alike (so that passes alternate direction on the part), and note
     # each node's forward direction along its run
     reference = nodes.point[runs[int(np.argmin(order))]]
@@ -783,9 +866,10 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
         cross = nodes.cross[run]
         # consistent cross tangent along the run (the discrete tangents may flip sign)
         cross = cross * np.where(np.sum(cross * cross[:1], axis=1) < 0, -1.0, 1.0)[:, None]
-        s, splines = _frames_between(nodes.point[run], normal, cross, safety[run])
-        t = _refine_pass(splines, s, tool, settings.chordal_tolerance_mm)
-        p, n, c, R = _evaluate_frames(splines, t)
+        s, splines = pass_frames(nodes.point[run], normal, cross, safety[run])
+        t = refine_pass(splines, s, lambda p, n, c, R, motion: circle_tool_pose(
+            p, n, c, -motion, R, r, tool.corner_mm)[0], settings.chordal_tolerance_mm)
+        p, n, c, R = evaluate_pass_frames(splines, t)
         motion = _unit(splines[0](t, 1))
         tip, axis, tilt = circle_tool_pose(p, n, c, -motion, R, r, tool.corner_mm)
         vertex = np.full(len(t), -1)

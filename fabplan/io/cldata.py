@@ -4,13 +4,15 @@ Written::
 
     PARTNO/NAME
     UNITS/MM
-    CUTTER/D, R, 0, 0, 0, 0, L
+    CUTTER/D, R, 0, 0, 0, B, L
     MULTAX/ON
     $$ pass 1: ...
     GOTO/x, y, z, i, j, k
     ...
     FINI
 
+``CUTTER`` is the APT seven-parameter cutter: diameter at the tip D, corner radius R, side
+angle B (0 for a cylinder; the half angle of a conical flank mill) and height L.
 ``GOTO`` carries the tool tip (the centre of the cutter's end) and the unit tool axis
 pointing from the tip to the spindle. Between passes the tool retracts along its axis
 (``$$ retract`` then a ``GOTO`` above the last point and above the next pass's first).
@@ -60,8 +62,8 @@ def _goto(p: np.ndarray, a: np.ndarray) -> str:
 
 def cldata_text(tip: np.ndarray, axis: np.ndarray, pass_id: np.ndarray, *, part: str,
                 diameter_mm: float, corner_mm: float = 0.0, length_mm: float = 0.0,
-                pass_comments: list | None = None, retract_mm: float = 5.0,
-                header: list | None = None) -> str:
+                side_angle_deg: float = 0.0, pass_comments: list | None = None,
+                retract_mm: float = 5.0, header: list | None = None) -> str:
     """The CL file of a tool path, in millimetres.
 
     Parameters
@@ -70,7 +72,10 @@ def cldata_text(tip: np.ndarray, axis: np.ndarray, pass_id: np.ndarray, *, part:
     axis : (k, 3) float, unit tool axes.
     pass_id : (k,) int, passes in order (locations of a pass are consecutive).
     part : PARTNO text.
-    diameter_mm, corner_mm, length_mm : the CUTTER statement.
+    diameter_mm, corner_mm, length_mm : the CUTTER statement (diameter at the tip, corner
+        radius, height).
+    side_angle_deg : the CUTTER's side angle (its sixth parameter, the angle between the
+        flank and the axis): a taper of a conical cutter, 0 for a cylinder.
     pass_comments : one text per pass for its ``$$`` line.
     retract_mm : distance the tool lifts along its axis between passes.
     header : further ``$$`` lines at the top.
@@ -85,7 +90,8 @@ def cldata_text(tip: np.ndarray, axis: np.ndarray, pass_id: np.ndarray, *, part:
     passes = np.unique(pass_id)
     comments = pass_comments or [f"pass {int(p) + 1}" for p in passes]
     lines = [f"PARTNO/{part.replace(chr(10), ' ')[:66]}", "UNITS/MM",
-             f"CUTTER/{diameter_mm:g}, {corner_mm:g}, 0, 0, 0, 0, {length_mm:g}", "MULTAX/ON"]
+             f"CUTTER/{diameter_mm:g}, {corner_mm:g}, 0, 0, 0, {side_angle_deg:g}, {length_mm:g}",
+             "MULTAX/ON"]
     lines += [f"$$ {h}" for h in (header or [])]
     previous_end = None
     for number, p in enumerate(passes):

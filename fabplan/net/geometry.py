@@ -34,6 +34,7 @@ __all__ = [
     "fit_mannheim_spheres",
     "ruling_directions",
     "ruling_angles",
+    "normal_curvatures",
 ]
 
 
@@ -355,3 +356,50 @@ def ruling_angles(X: np.ndarray, N: np.ndarray, stars: np.ndarray) -> np.ndarray
     r1, r2 = ruling_directions(X, N, stars)
     c = np.abs(np.sum(_unit(r1) * _unit(r2), axis=1))
     return np.arccos(np.clip(c, 0.0, 1.0))
+
+
+def normal_curvatures(X: np.ndarray, N: np.ndarray, stars: np.ndarray,
+                      directions: np.ndarray) -> np.ndarray:
+    """Normal curvature of the surface sampled by contact elements, in given directions.
+
+    The shape operator ``S`` (``dn = -S dp`` in the tangent plane of the star centre) is
+    fitted by least squares to the normal differences towards the four neighbours; the
+    result is ``II(d, d) = d . S d``, positive where the surface curves towards ``N``.
+    (The neighbours' heights alone leave the mixed term open: a star's four neighbours lie
+    on two lines through its centre.)
+
+    Parameters
+    ----------
+    X : (n, 3) float, contact points.
+    N : (n, 3) float, unit normals.
+    stars : (s, 5) int
+    directions : (s, 3) float, unit tangent directions at the star centres.
+
+    Returns
+    -------
+    (s,) float, normal curvatures (1 / model units).
+
+    Examples
+    --------
+    >>> u = np.radians(np.array([0.0, 10, 0, -10, 0]))
+    >>> v = np.radians(np.array([0.0, 0, 10, 0, -10]))
+    >>> P = 100 * np.stack([np.sin(u) * np.cos(v), np.sin(v), -np.cos(u) * np.cos(v)], 1)
+    >>> k = normal_curvatures(P, -P / 100, np.arange(5)[None], np.array([[1.0, 0, 0]]))
+    >>> round(float(k[0]), 9)
+    0.01
+    """
+    n0 = N[stars[:, 0]]
+    helper = np.where(np.abs(n0[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    b1 = _unit(np.cross(n0, helper))
+    b2 = np.cross(n0, b1)
+    dP = X[stars[:, 1:]] - X[stars[:, :1]]
+    dN = N[stars[:, 1:]] - N[stars[:, :1]]
+    p1, p2 = np.sum(dP * b1[:, None], axis=2), np.sum(dP * b2[:, None], axis=2)
+    q1, q2 = np.sum(dN * b1[:, None], axis=2), np.sum(dN * b2[:, None], axis=2)
+    zero = np.zeros_like(p1)
+    # unknowns (s11, s12, s22): -dn1 = s11 p1 + s12 p2, -dn2 = s12 p1 + s22 p2
+    A = np.concatenate([np.stack([p1, p2, zero], axis=2), np.stack([zero, p1, p2], axis=2)], axis=1)
+    b = -np.concatenate([q1, q2], axis=1)
+    s = np.linalg.solve(np.einsum("sij,sik->sjk", A, A), np.einsum("sij,si->sj", A, b)[..., None])[..., 0]
+    d1, d2 = np.sum(directions * b1, axis=1), np.sum(directions * b2, axis=1)
+    return s[:, 0] * d1 * d1 + 2 * s[:, 1] * d1 * d2 + s[:, 2] * d2 * d2

@@ -258,8 +258,9 @@ def plan_strips(net: NetLike, settings: StripSettings | None = None, **options: 
 
 def mill(net: NetLike, tool: MillTool | str, settings: MillSettings | None = None, *,
          simulate: bool = True, **options: Any) -> MillResult:
-    """Curvature-adaptive face milling of a net (``fabplan mill``): the tool as a
-    `MillTool` or its spec (``"face:D=50"``), `MillSettings` or its fields as keyword
+    """Curvature-adaptive milling of a net (``fabplan mill``): face milling of an S-net, or
+    flank milling of an S*-net with a cone; the tool as a `MillTool` or its spec
+    (``"face:D=50"``, ``"cone:angle=45,length=10,tip=24"``), `MillSettings` or its fields as keyword
     options (``along="A", units="mm", scallop_mm=0.01``); with `simulate` the paths are
     checked by the milling simulation against the conventional ball-end cut. The result's
     ``record()`` is what ``mill.json`` holds."""
