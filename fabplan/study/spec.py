@@ -106,6 +106,9 @@ class Limits:
     ----------
     max_deviation_mm : largest distance of a net vertex from the design surface.
     mold_tolerance_mm : largest gap between a panel and its mold.
+    max_panel_step_mm : largest step between the molds of neighbouring panels at a shared
+        edge (`fabplan.fabricate.molds.panel_steps`); None: not checked (every candidate's
+        molds still measure and report it).
     max_molds : most molds the budget allows.
     planar_panels : panels must be flat (glass): face planarity within
         `planarity_tolerance_mm`.
@@ -130,6 +133,7 @@ class Limits:
     max_deviation_mm: float
     mold_tolerance_mm: float
     max_molds: int | None = None
+    max_panel_step_mm: float | None = None
     planar_panels: bool = False
     planarity_tolerance_mm: float = 2.0
     max_kink_deg: float | None = None
@@ -634,6 +638,7 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits,
         max_deviation_mm=t.number("max_deviation_mm", required=True, unit="mm"),
         mold_tolerance_mm=tolerances[0],
         max_molds=t.number("max_molds", integer=True),
+        max_panel_step_mm=t.number("max_panel_step_mm", unit="mm"),
         planar_panels=t.boolean("planar_panels"),
         planarity_tolerance_mm=t.number("planarity_tolerance_mm", 2.0, unit="mm"),
         max_kink_deg=t.number("max_kink_deg", unit="degrees"),
