@@ -205,7 +205,7 @@ def _cmd_optimize(args) -> int:
         result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                           reference=reference, fixed=fixed, handles=handles, settings=settings,
                           coherent=args.coherent, guards=args.guards,
-                          settle_free=args.settle_free, progress=report)
+                          settle_free=0.0 if args.settle_free else None, progress=report)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             _html_file(args, out) as page, \
             _viewer_files(args, out, result.mesh, units=args.units) as viewers:

@@ -6,6 +6,7 @@ import numpy as np
 
 from fabplan.net.free_vertices import free_vertices, settle_free_vertices
 from fabplan.net.generate import height_field_grid
+from fabplan.net.quadrics import edge_steps, face_frames, face_neighbourhoods, fit_height_fields
 from fabplan.solve.optimize import optimize
 
 R = 20.0  # radius of the test sphere (model units)
@@ -41,9 +42,34 @@ def test_settling_keeps_held_vertices_and_is_recorded():
     X = net.vertices.copy()
     X[free_vertices(net), 2] += 0.3
     start = net.with_vertices(X)
-    result = optimize(start, "snet", settle_free=True, fixed=np.array([corner]))
+    result = optimize(start, "snet", settle_free=0.0, fixed=np.array([corner]))
     record = result.parameters["free_vertices"]
     assert record["count"] == 4 and record["settled"] and record["largest_move"] > 0.1
     assert np.allclose(result.mesh.vertices[corner], X[corner])
     plain = optimize(start, "snet")
     assert plain.parameters["free_vertices"] == {"count": 4, "settled": False, "largest_move": 0.0}
+
+
+def test_only_tips_whose_faces_step_move_when_a_step_is_given():
+    net = height_field_grid(7, 7, _cap, spacing=1.0)
+    free = free_vertices(net)
+    X = net.vertices.copy()
+    lifted = np.flatnonzero(free)[:2]
+    X[lifted[0], :2] += 0.3                               # far off: its face steps
+    X[lifted[0], 2] += 0.4
+    X[lifted[1], 2] += 1e-4                               # a tenth of a millimetre
+    start = net.with_vertices(X)
+    # the steps of the two tips' faces against their neighbours, measured as the settling does
+    origin, frame, scale = face_frames(start)
+    vertices, weight = face_neighbourhoods(start, ignore=free)
+    steps = edge_steps(start, origin, frame, scale,
+                       fit_height_fields(X[vertices], weight, origin, frame, scale), (0.25, 0.5, 0.75))
+    pairs = start.interior_edge_faces
+    face_of = [next(f for f, face in enumerate(start.faces) if v in face) for v in lifted]
+    far, near = (steps[np.any(pairs == f, axis=1)].max() for f in face_of)
+    assert far > 100 * near
+    _, moved = settle_free_vertices(start, step=np.sqrt(far * near))
+    assert moved[lifted[0]] > 0.1 and moved[lifted[1]] == 0.0
+    assert np.count_nonzero(moved) == 1
+    _, none = settle_free_vertices(start, step=10.0)
+    assert not none.any()

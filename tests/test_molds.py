@@ -209,7 +209,7 @@ def test_wein99_report_files_agree_and_embed_their_pictures(wein99_run):
         matrix = np.array([float(row[f"m{r}{c}"]) for r in range(4) for c in range(4)])
         assert np.allclose(matrix.reshape(4, 4), panel["placement"], rtol=1e-10, atol=1e-6)
     page = (out / "report.html").read_text()
-    assert page.count('<img src="data:image/png;base64,') == 4
+    assert page.count('<img src="data:image/png;base64,') == 5      # with the step map
     # nothing fetched: no address in an attribute or a style (the vendored three.js names
     # the XHTML namespace in a string, which is no fetch)
     fetched = r"(?:src|href|action)\s*=\s*[\"']?(?:https?:)?//|url\(\s*[\"']?(?:https?:)?//"
@@ -516,9 +516,8 @@ def test_a_study_limits_the_step_between_neighbouring_panels():
 
     def check(limit):
         limits = Limits(max_deviation_mm=1e9, mold_tolerance_mm=1.0, max_panel_step_mm=limit)
-        found = [c for c in verdict(metrics, limits) if c["limit"] == "max_panel_step_mm"]
-        return found[0] if found else None
+        return next(c for c in verdict(metrics, limits) if c["limit"] == "max_panel_step_mm")
 
-    assert check(None) is None                     # not asked for: not checked
+    assert check(None)["bound"] == 2.0             # not given: twice the mold tolerance
     assert check(step * 1.01)["ok"] and not check(step * 0.99)["ok"]
     assert f"{step:.2f} mm" in check(step * 0.99)["text"]

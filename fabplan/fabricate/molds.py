@@ -55,6 +55,7 @@ from .panels import (
     panel_shapes,
     placement_frames,
     surface_model,
+    surface_steps,
 )
 
 __all__ = [
@@ -73,6 +74,10 @@ __all__ = [
 ]
 
 UNITS = {"m": 1000.0, "mm": 1.0}
+
+STEP_ROUNDS = 3
+"""Rounds of casting the panels of over-limit steps on closer molds (tolerance halved in
+each round)."""
 """Millimetres per model unit for each accepted ``units`` name (molds and strips)."""
 
 TOLERANCE_RANGE_MM = (0.01, 1000.0)
@@ -592,6 +597,11 @@ class MoldPlan:
     step_mm : (i,) float, the step between the molds of the two panels of every interior
         edge (`panel_steps`), in the order of ``mesh.interior_edge_faces``.
     kink_deg : (i,) float, the largest angle between those two molds' normals there.
+    surface_step_mm : (i,) float, how far the two panels' surfaces themselves differ along
+        every interior edge (`fabplan.fabricate.panels.surface_steps`): the part of a step
+        no mold can close.
+    recast_for_steps : (k,) int, panels at edges whose first molds stepped apart by more
+        than twice the tolerance, cast again on molds that fit them closer.
     seconds : run time.
     """
 
@@ -612,6 +622,8 @@ class MoldPlan:
     reassigned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     step_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     kink_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    surface_step_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    recast_for_steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
 
@@ -741,6 +753,7 @@ class MoldPlan:
             "fits_all": self.fits_all,
             "failures": self.failures.tolist(),
             "reassigned_by_verification": self.reassigned.tolist(),
+            "recast_for_steps": self.recast_for_steps.tolist(),
             "weingarten": self.weingarten,
             "curvature_reach_per_mm": {"median_panel": self.curvature_reach(0.5),
                                        "large_panels": self.curvature_reach(0.9)},
@@ -759,11 +772,15 @@ class MoldPlan:
             "max_mm": self.max_step_mm,
             "median_mm": float(np.median(self.step_mm)) if self.step_mm.size else 0.0,
             "max_kink_deg": float(self.kink_deg.max()) if self.kink_deg.size else 0.0,
+            "panel_surfaces_max_mm": (float(self.surface_step_mm.max())
+                                      if self.surface_step_mm.size else 0.0),
             "fractions": [float(v) for v in self.settings.step_fractions],
             "over_limit": [{"faces": [int(a), int(b)], "vertices": [int(u), int(v)],
-                            "step_mm": float(d)}
-                           for (a, b), (u, v), d in zip(pairs[over].tolist(), edges[over].tolist(),
-                                                        self.step_mm[over].tolist(), strict=True)],
+                            "step_mm": float(d), "panel_surfaces_mm": float(g)}
+                           for (a, b), (u, v), d, g in zip(
+                               pairs[over].tolist(), edges[over].tolist(),
+                               self.step_mm[over].tolist(), self.surface_step_mm[over].tolist(),
+                               strict=True)],
         }
 
     def panels_csv(self) -> str:
@@ -855,16 +872,40 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
     dense = panel_samples(mesh, surfaces, settings.verify_level)
     placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
     over = np.flatnonzero(deviation > tol)
-    if over.size:
-        data = _panel_data(dense[over], shapes.point[over], frames[over], kk[over], mm, work)
+
+    def recast(faces: np.ndarray, tolerance: float) -> None:
+        """Classify `faces` again on the dense samples (at the working tolerance) and give
+        them new molds of their own at `tolerance` (mm)."""
+        nonlocal mold, mold_shape, mold_type, placement
+        data = _panel_data(dense[faces], shapes.point[faces], frames[faces], kk[faces], mm,
+                           tolerance)
         dense_type, cylinder = _classify(data, work)
-        panel_type[over] = np.maximum(panel_type[over], dense_type)
-        new = _assign_by_type(data, panel_type[over], cylinder, work, settings.rounds)
-        mold[over] = new[0] + len(mold_shape)
-        variant[over] = new[1]
+        panel_type[faces] = np.maximum(panel_type[faces], dense_type)
+        new = _assign_by_type(data, panel_type[faces], cylinder, tolerance, settings.rounds)
+        mold[faces] = new[0] + len(mold_shape)
+        variant[faces] = new[1]
         mold, mold_shape, mold_type = _drop_empty(mold, np.concatenate([mold_shape, new[2]]),
                                                   np.concatenate([mold_type, new[3]]))
         placement, _ = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+
+    if over.size:
+        recast(over, work)
+    # neighbours whose molds step apart by more than twice the tolerance: the panels of those
+    # edges are cast on molds of their own that fit them closer, halving the gap each round
+    # (a step is at most the two gaps plus what the panel surfaces differ by: where these
+    # alone take up the limit, closer molds cannot help and would only add molds)
+    fractions = np.asarray(settings.step_fractions, float)
+    step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
+    surface_step = surface_steps(mesh, surfaces, fractions) * mm
+    closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= 2.0 * tol
+    stepped = np.zeros(0, np.int64)
+    for k in range(1, STEP_ROUNDS + 1):
+        faces = np.unique(mesh.interior_edge_faces[(step > 2.0 * tol) & closable])
+        if faces.size == 0:
+            break
+        stepped = np.union1d(stepped, faces)
+        recast(faces, work * 0.5**k)
+        step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
     # a panel classified single curved on the assignment samples but cast on a doubly
     # curved mold (`_merge_curved_molds`) was never checked against a cylinder on the
     # dense ones: classify it there
@@ -872,6 +913,7 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
     if moved.size:
         data = _panel_data(dense[moved], shapes.point[moved], frames[moved], kk[moved], mm, work)
         panel_type[moved] = np.maximum(panel_type[moved], _classify(data, work)[0])
+    clock["steps"] = time.perf_counter() - start - sum(clock.values())
     q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
     footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
     deviation = placement_deviations(dense, placement, mold_shape[mold])
@@ -888,15 +930,13 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
                           f"larger than the largest mold ({limit:g} mm)")
     curvature = np.column_stack([shapes.k1, shapes.k2]) / mm
     weingarten = weingarten_fit(curvature[:, 0], curvature[:, 1])
-    step, kink = panel_steps(mesh, placement, mold_shape[mold], mm,
-                             fractions=np.asarray(settings.step_fractions, float))
-    clock["steps"] = time.perf_counter() - start - sum(clock.values())
     return MoldPlan(mesh=mesh, settings=settings, panel_surface=model, panel_type=panel_type,
                     curvature=curvature, mold_type=mold_type, mold_shape=mold_shape,
                     panel_shape=kk[np.arange(n), variant], mold=mold,
                     placement=placement, deviation_mm=deviation, footprint_mm=footprint,
                     problem=problem, weingarten=weingarten, reassigned=over,
-                    step_mm=step, kink_deg=kink,
+                    step_mm=step, kink_deg=kink, surface_step_mm=surface_step,
+                    recast_for_steps=stepped,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
 
 

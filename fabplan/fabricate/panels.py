@@ -38,6 +38,7 @@ from ..net.free_vertices import free_vertices
 from ..net.geometry import face_planarity
 from ..net.quadrics import (
     CORNER_WEIGHT,
+    edge_steps,
     face_frames,
     face_neighbourhoods,
     fit_height_fields,
@@ -56,6 +57,7 @@ __all__ = [
     "panel_shapes",
     "panel_samples",
     "placement_frames",
+    "surface_steps",
 ]
 
 SURFACE_MODELS = ("smooth", "corners")
@@ -307,3 +309,16 @@ def placement_frames(shapes: PanelShapes) -> tuple[np.ndarray, np.ndarray]:
     kk = np.stack([np.stack([k1, k2], -1), np.stack([k2, k1], -1),
                    np.stack([-k1, -k2], -1), np.stack([-k2, -k1], -1)], axis=1)
     return frames, kk
+
+
+
+def surface_steps(mesh, surfaces: PanelSurfaces, fractions: np.ndarray) -> np.ndarray:
+    """How far the surfaces of the two panels of every interior edge differ along it
+    (`fabplan.net.quadrics.edge_steps`): what a step keeps even with exact molds.
+
+    Returns
+    -------
+    (i,) float, model units, for the edges in the order of ``mesh.interior_edge_faces``.
+    """
+    return edge_steps(mesh, surfaces.origin, surfaces.frame, surfaces.scale,
+                      surfaces.coefficients, fractions)

@@ -14,7 +14,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .quadrics import face_frames, face_neighbourhoods, fit_height_fields, height_field_values
+from .quadrics import (
+    edge_steps,
+    face_frames,
+    face_neighbourhoods,
+    fit_height_fields,
+    height_field_values,
+)
 
 __all__ = ["free_vertices", "settle_free_vertices"]
 
@@ -33,7 +39,11 @@ def free_vertices(mesh) -> np.ndarray:
     return ~held
 
 
-def settle_free_vertices(mesh, keep: np.ndarray | None = None):
+STEP_FRACTIONS = (0.25, 0.5, 0.75)
+"""Where along an edge the faces' surfaces are compared (`settle_free_vertices`)."""
+
+
+def settle_free_vertices(mesh, keep: np.ndarray | None = None, step: float = 0.0):
     """The net with every free vertex (`free_vertices`) moved onto the surface its
     neighbourhood continues.
 
@@ -47,6 +57,10 @@ def settle_free_vertices(mesh, keep: np.ndarray | None = None):
     ----------
     mesh : `fabplan.net.mesh.QuadMesh`.
     keep : (k,) int, vertices that stay where they are (fixed vertices, handles).
+    step : only the free corners of faces whose surface differs from a neighbour's by more
+        than this along their shared edge (model units; `fabplan.net.quadrics.edge_steps`)
+        move: the others bend their faces too little to matter and stay where the solve
+        left them. 0 moves them all.
 
     Returns
     -------
@@ -67,8 +81,8 @@ def settle_free_vertices(mesh, keep: np.ndarray | None = None):
     if keep is not None:
         movable[np.asarray(keep, dtype=np.int64)] = False
     a, b = np.concatenate([mesh.edges, mesh.edges[:, ::-1]]).T
-    step = movable[a] & ~free[b]
-    neighbour = sp.csr_matrix((np.ones(int(step.sum())), (a[step], b[step])), shape=(n, n))
+    toward = movable[a] & ~free[b]
+    neighbour = sp.csr_matrix((np.ones(int(toward.sum())), (a[toward], b[toward])), shape=(n, n))
     keep = held_face[face]
     at = sp.csr_matrix((np.ones(int(keep.sum())), (mesh.face_indices[keep], face[keep])),
                        shape=(n, nf))
@@ -78,10 +92,18 @@ def settle_free_vertices(mesh, keep: np.ndarray | None = None):
     v, f = pairs.row, pairs.col
     origin, frame, scale = face_frames(mesh)
     vertices, weight = face_neighbourhoods(mesh, ring=True, ignore=free)
-    used = np.unique(f)
-    coefficients = np.zeros((nf, 6))
-    coefficients[used] = fit_height_fields(X[vertices[used]], weight[used], origin[used],
-                                           frame[used], scale[used])
+    coefficients = fit_height_fields(X[vertices], weight, origin, frame, scale)
+    if step > 0:
+        # only the free corners of faces that step against a neighbour
+        over = edge_steps(mesh, origin, frame, scale, coefficients, STEP_FRACTIONS) > step
+        stepping = np.zeros(nf, bool)
+        stepping[mesh.interior_edge_faces[over].ravel()] = True
+        corner_of = np.zeros(n, bool)
+        corner_of[mesh.face_indices[stepping[face]]] = True
+        chosen = corner_of[v]
+        v, f = v[chosen], f[chosen]
+        if v.size == 0:
+            return mesh, np.zeros(n)
     q = np.einsum("pj,pij->pi", X[v] - origin[f], frame[f]) / scale[f, None]
     lift = (height_field_values(coefficients[f], q[:, :2]) - q[:, 2]) * scale[f]
     target = X[v] + lift[:, None] * frame[f, 2]

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from .geometry import face_normals
 
 __all__ = ["CORNER_WEIGHT", "face_frames", "face_neighbourhoods", "fit_height_fields",
-           "height_field_values"]
+           "height_field_values", "edge_steps"]
 
 CORNER_WEIGHT = 1.0e6
 """Least-squares weight of a face's own corners against 1 for its neighbours' vertices."""
@@ -129,3 +129,46 @@ def height_field_values(coefficients: np.ndarray, xy: np.ndarray) -> np.ndarray:
     x, y = xy[..., 0], xy[..., 1]
     return (c[..., 0] + c[..., 1] * x + c[..., 2] * y
             + 0.5 * (c[..., 3] * x * x + 2 * c[..., 4] * x * y + c[..., 5] * y * y))
+
+
+def edge_steps(mesh, origin: np.ndarray, frame: np.ndarray, scale: np.ndarray,
+               coefficients: np.ndarray, fractions: np.ndarray) -> np.ndarray:
+    """How far the height fields of the two faces of every interior edge differ along it.
+
+    At points of the edge's chord (`fractions` of the way from its first vertex), the point
+    is lifted along face A's normal onto A's height field and measured along B's normal
+    against B's, and the other way round.
+
+    Parameters
+    ----------
+    mesh : `fabplan.net.mesh.QuadMesh`.
+    origin, frame, scale : the face frames (`face_frames`); coefficients : (f, 6) their
+        height fields (`fit_height_fields`).
+    fractions : (t,) float.
+
+    Returns
+    -------
+    (i,) float, model units, the largest over the points and both directions, for the edges
+    in the order of ``mesh.interior_edge_faces``.
+    """
+    pairs, edges = mesh.interior_edge_faces, mesh.interior_edges
+    if len(pairs) == 0:
+        return np.zeros(0)
+    t = np.asarray(fractions, float)
+    X = mesh.vertices
+    P = (1 - t[None, :, None]) * X[edges[:, :1]] + t[None, :, None] * X[edges[:, 1:]]  # (i, t, 3)
+
+    def local(face: np.ndarray, q: np.ndarray) -> np.ndarray:
+        d = q - origin[face][:, None, :]
+        return np.einsum("etj,eij->eti", d, frame[face]) / scale[face, None, None]
+
+    step = np.zeros(len(pairs))
+    for a, b in ((0, 1), (1, 0)):
+        A, B = pairs[:, a], pairs[:, b]
+        c = local(A, P)
+        lift = height_field_values(coefficients[A][:, None, :], c[..., :2]) - c[..., 2]
+        on_a = P + (lift * scale[A, None])[..., None] * frame[A][:, None, 2, :]
+        c = local(B, on_a)
+        gap = np.abs(height_field_values(coefficients[B][:, None, :], c[..., :2]) - c[..., 2])
+        step = np.maximum(step, (gap * scale[B, None]).max(axis=1))
+    return step

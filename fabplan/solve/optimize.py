@@ -310,7 +310,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              coherent: bool = False, closeness: bool = True, glide: bool = False,
              glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
              extra: tuple = (), guards: bool | None = None,
-             settle_free: bool = False,
+             settle_free: float | None = None,
              progress: Callable[[IterationRecord], None] | None = None
              ) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
@@ -350,8 +350,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         condition of the net holds) onto the surface the net continues
         (`fabplan.net.free_vertices.settle_free_vertices`), so that the faces at them are
         patches of the net's own surface, at the price of their distance from the
-        reference. The parameters record how many there are and how far they moved
-        (``free_vertices``).
+        reference: those of faces whose surface steps against a neighbour's by more than
+        this (model units; 0: all of them). None (default): none. The parameters record
+        how many there are and how far they moved (``free_vertices``).
     progress : called after every iteration with its record.
 
     Returns
@@ -408,8 +409,10 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     result_mesh = mesh.with_vertices(solver.vertices, normals=solver_normals(solver))
     free = free_vertices(result_mesh)
     moved = np.zeros(result_mesh.vertex_count)
-    if settle_free and free.any():
-        result_mesh, moved = settle_free_vertices(result_mesh, keep=held)
+    # planar faces hold every corner, tips included: nothing is free to settle
+    faces_held = any(c.name == "planar-faces" for c in solver.constraints)
+    if settle_free is not None and free.any() and not faces_held:
+        result_mesh, moved = settle_free_vertices(result_mesh, keep=held, step=settle_free)
         if moved.any():
             folds = measure_folds(mesh, result_mesh.vertices, reference=solver.reference)
     seconds = time.perf_counter() - start

@@ -107,8 +107,7 @@ class Limits:
     max_deviation_mm : largest distance of a net vertex from the design surface.
     mold_tolerance_mm : largest gap between a panel and its mold.
     max_panel_step_mm : largest step between the molds of neighbouring panels at a shared
-        edge (`fabplan.fabricate.molds.panel_steps`); None: not checked (every candidate's
-        molds still measure and report it).
+        edge (`fabplan.fabricate.molds.panel_steps`); None: twice `mold_tolerance_mm`.
     max_molds : most molds the budget allows.
     planar_panels : panels must be flat (glass): face planarity within
         `planarity_tolerance_mm`.
@@ -145,6 +144,12 @@ class Limits:
     congruence_tolerance_mm: float = 0.1
     min_coverage: float | None = None
     max_sphere_residual: float = 1e-6
+
+    @property
+    def panel_step_limit_mm(self) -> float:
+        """`max_panel_step_mm`, or twice the mold tolerance when not given."""
+        return (self.max_panel_step_mm if self.max_panel_step_mm is not None
+                else 2.0 * self.mold_tolerance_mm)
 
 
 @dataclass(frozen=True)
