@@ -204,7 +204,8 @@ def _cmd_optimize(args) -> int:
         report.stage = stage
         result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                           reference=reference, fixed=fixed, handles=handles, settings=settings,
-                          coherent=args.coherent, guards=args.guards, progress=report)
+                          coherent=args.coherent, guards=args.guards,
+                          settle_free=0.0 if args.settle_free else None, progress=report)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             _html_file(args, out) as page, \
             _viewer_files(args, out, result.mesh, units=args.units) as viewers:
@@ -262,9 +263,15 @@ def _cmd_molds(args) -> int:
     else:
         print(plan.summary())
         print(f"wrote {', '.join(str(f) for f in files)}")
-    if not plan.fits_all:
+    if plan.failures.size:
         print(f"fabplan: warning: {plan.failures.size} panels do not fit a mold within "
               f"{settings.tolerance_mm:g} mm; they are listed in {out / 'report.html'}",
+              file=sys.stderr)
+        return EXIT_NOT_CONVERGED
+    if not plan.fits_all:
+        print(f"fabplan: warning: the molds of neighbouring panels step up to "
+              f"{plan.max_step_mm:.2f} mm apart at {plan.steps_over.size} shared edges "
+              f"(limit {plan.step_limit_mm:g} mm); see the step map in {out / 'report.html'}",
               file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
@@ -805,6 +812,10 @@ def _add_optimize(sub: Any) -> None:
                              "then a smoothed copy of the start is tried too")
     guards.add_argument("--no-guards", dest="guards", action="store_const", const=False,
                         help="never add the guards against folding, nor retry a folded solve")
+    p.add_argument("--settle-free", action="store_true",
+                   help="move the vertices in no star (zigzag boundary tips, patch corners), "
+                        "which no condition of the net holds, onto the surface the net "
+                        "continues, so that the panels at them meet their neighbours' molds")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
     _add_html(p)

@@ -72,3 +72,45 @@ def without_timings(value):
     if isinstance(value, list):
         return [without_timings(v) for v in value]
     return value
+
+
+def closest_on_mold(q: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Closest points of molds z = (k1 x^2 + k2 y^2) / 2 (mm), written apart from the
+    planner: c_x = q_x / (1 + k1 t), c_y = q_y / (1 + k2 t), t = c_z - q_z by Newton."""
+    k1, k2 = k[:, 0], k[:, 1]
+    x, y, z = q.T
+    t = 0.5 * (k1 * x * x + k2 * y * y) - z
+    for _ in range(40):
+        a, b = 1.0 + k1 * t, 1.0 + k2 * t
+        g = 0.5 * (k1 * x * x / a**2 + k2 * y * y / b**2) - z - t
+        dg = -(k1 * k1 * x * x / a**3 + k2 * k2 * y * y / b**3) - 1.0
+        t = t - g / dg
+    return np.column_stack([x / (1 + k1 * t), y / (1 + k2 * t), z + t])
+
+
+def edge_midpoint_steps(record: dict, mesh: QuadMesh) -> np.ndarray:
+    """Step at the midpoint of every shared edge from the exported placements (mm): the
+    point put on panel A's mold, measured against panel B's mold, both ways."""
+    X = mesh.vertices
+    shapes = {m["id"]: (m["k1"], m["k2"]) for m in record["molds"]}
+    M = np.array([p["placement"] for p in record["panels"]])
+    K = np.array([shapes[p["mold"]] for p in record["panels"]])
+    faces_of: dict = {}
+    for f, face in enumerate(mesh.faces):
+        for a, b in zip(face, np.roll(face, -1), strict=True):
+            faces_of.setdefault((min(a, b), max(a, b)), []).append(f)
+    pairs = [(e, fs) for e, fs in faces_of.items() if len(fs) == 2]
+    mid = np.array([0.5 * (X[a] + X[b]) for (a, b), _ in pairs])
+    fa = np.array([fs[0] for _, fs in pairs])
+    fb = np.array([fs[1] for _, fs in pairs])
+
+    def into(F, p):
+        return np.einsum("pij,pj->pi", M[F][:, :3, :3], p) + M[F][:, :3, 3]
+
+    step = np.zeros(len(pairs))
+    for A, B in ((fa, fb), (fb, fa)):
+        on_a = closest_on_mold(into(A, mid), K[A])
+        back = np.linalg.solve(M[A][:, :3, :3], (on_a - M[A][:, :3, 3])[..., None])[..., 0]
+        qb = into(B, back)
+        step = np.maximum(step, np.linalg.norm(qb - closest_on_mold(qb, K[B]), axis=1))
+    return step

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import edge_midpoint_steps
 
 import fabplan
 from fabplan.cli import main
@@ -90,10 +91,35 @@ def _panel_surface(X: np.ndarray, faces: list, i: int, neighbours: set, model: s
     return origin, frame, scale, coef
 
 
+def _held_vertices(faces: list, n: int) -> np.ndarray:
+    """(n,) bool, vertices in a star: an interior vertex with four edges and four faces, or
+    one of its edge neighbours (written from the docs, not from the planner)."""
+    edge_faces: dict = {}
+    for face in faces:
+        for a, b in zip(face, np.roll(face, -1), strict=True):
+            edge_faces.setdefault(frozenset((int(a), int(b))), []).append(face)
+    nbrs: dict = {}
+    interior = np.ones(n, bool)
+    for e, fs in edge_faces.items():
+        a, b = tuple(e)
+        nbrs.setdefault(a, set()).add(b)
+        nbrs.setdefault(b, set()).add(a)
+        if len(fs) == 1:
+            interior[a] = interior[b] = False
+    count = np.bincount(np.concatenate(faces), minlength=n)
+    held = np.zeros(n, bool)
+    for v, nb in nbrs.items():
+        if interior[v] and len(nb) == 4 and count[v] == 4:
+            held[v] = True
+            held[list(nb)] = True
+    return held
+
+
 def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> np.ndarray:
     """Largest gap of every panel from its exported mold, computed from scratch (mm)."""
     rng = np.random.default_rng(seed)
     X, faces = mesh.vertices, mesh.faces
+    held = _held_vertices(faces, len(X))
     at_vertex: dict = {}
     for f, face in enumerate(faces):
         for v in face:
@@ -103,7 +129,9 @@ def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> 
     gaps = np.zeros(len(faces))
     for panel in record["panels"]:
         i = panel["face"]
-        neighbours = {int(v) for c in faces[i] for f in at_vertex[int(c)] for v in faces[f]}
+        # vertices in no star are no neighbours of a smooth fit (docs/molds-schema.md)
+        neighbours = {int(v) for c in faces[i] for f in at_vertex[int(c)] for v in faces[f]
+                      if held[v]} | {int(v) for v in faces[i]}
         origin, frame, scale, coef = _panel_surface(X, faces, i, neighbours,
                                                     record["panel_surface"])
         corners = ((X[faces[i]] - origin) @ frame.T / scale)[:, :2]
@@ -130,7 +158,9 @@ def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> 
 def _assert_every_panel_fits(record: dict, mesh: QuadMesh) -> None:
     tol = record["tolerance_mm"]
     gaps = _recheck(record, mesh)
-    assert record["fits_all"] and record["failures"] == []
+    assert record["failures"] == []
+    # fits_all also asks that neighbours meet: no step over twice the tolerance
+    assert record["fits_all"] == (not record["panel_steps"]["over_limit"])
     assert gaps.max() <= tol + 1e-6, (gaps.max(), int(gaps.argmax()))
     reported = np.array([p["deviation_mm"] for p in record["panels"]])
     assert reported.max() <= tol
@@ -180,7 +210,7 @@ def test_wein99_report_files_agree_and_embed_their_pictures(wein99_run):
         matrix = np.array([float(row[f"m{r}{c}"]) for r in range(4) for c in range(4)])
         assert np.allclose(matrix.reshape(4, 4), panel["placement"], rtol=1e-10, atol=1e-6)
     page = (out / "report.html").read_text()
-    assert page.count('<img src="data:image/png;base64,') == 4
+    assert page.count('<img src="data:image/png;base64,') == 5      # with the step map
     # nothing fetched: no address in an attribute or a style (the vendored three.js names
     # the XHTML namespace in a string, which is no fetch)
     fetched = r"(?:src|href|action)\s*=\s*[\"']?(?:https?:)?//|url\(\s*[\"']?(?:https?:)?//"
@@ -400,3 +430,53 @@ def test_a_looser_tolerance_never_needs_more_molds():
     assert plans[5.0].mold_count <= plans[2.0].mold_count
     for t, plan in plans.items():
         assert plan.fits_all and plan.deviation_mm.max() <= t
+
+
+# ----------------------------------------------------------------------------- steps
+def test_neighbouring_panels_meet_on_wein99_rechecked_from_the_export(wein99_run, wein99):
+    record = json.loads((wein99_run[1] / "molds.json").read_text())
+    steps = record["panel_steps"]
+    mine = edge_midpoint_steps(record, wein99)
+    assert steps["edge_count"] == len(mine) == len(wein99.interior_edges)
+    # the plan measures at the quarter points too: never less than the midpoints show
+    assert mine.max() <= steps["max_mm"] + 1e-6
+    assert steps["max_mm"] <= 2 * record["tolerance_mm"] and steps["over_limit"] == []
+    assert record["mold_count"] <= 21 and record["fits_all"]
+    bound = record["mold_count_bound"]
+    assert 1 <= bound["molds"] <= record["mold_count"]
+
+
+def test_a_step_over_twice_the_tolerance_fails_the_plan():
+    # a twisted surface whose twist grows across it, at 1 mm on 2 m panels: every panel
+    # fits a mold, but neighbouring molds step apart by more than 2 mm
+    net = height_field_grid(8, 8, lambda x, y: 0.002 * x * x * y + 0.01 * x * y, spacing=2.0)
+    plan = plan_molds(net, tolerance_mm=1.0, units="m")
+    record = plan.record()
+    mine = edge_midpoint_steps(record, net)
+    assert record["failures"] == []
+    assert mine.max() > 2.0 and not record["fits_all"]
+    over = record["panel_steps"]["over_limit"]
+    assert over and over[0]["step_mm"] == pytest.approx(record["panel_steps"]["max_mm"])
+    assert {tuple(sorted(o["faces"])) for o in over} <= {
+        tuple(sorted(p)) for p in net.interior_edge_faces.tolist()}
+
+
+def test_a_study_limits_the_step_between_neighbouring_panels():
+    from fabplan.study.run import measure_candidate, verdict
+    from fabplan.study.spec import Limits
+
+    design = fabplan.load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5", triangles=4000)
+    result = fabplan.glide(fabplan.layout_surface(design, 1.5), "snet")
+    plan = fabplan.plan_molds(result.mesh, tolerance_mm=1.0)
+    metrics = measure_candidate(result, design, plan, None, mm_per_unit=1000.0)
+    step = metrics["molds"]["max_panel_step_mm"]
+    assert step == plan.max_step_mm > 0
+    assert metrics["molds"]["panel_steps_over"] == plan.steps_over.size
+
+    def check(limit):
+        limits = Limits(max_deviation_mm=1e9, mold_tolerance_mm=1.0, max_panel_step_mm=limit)
+        return next(c for c in verdict(metrics, limits) if c["limit"] == "max_panel_step_mm")
+
+    assert check(None)["bound"] == 2.0             # not given: twice the mold tolerance
+    assert check(step * 1.01)["ok"] and not check(step * 0.99)["ok"]
+    assert f"{step:.2f} mm" in check(step * 0.99)["text"]

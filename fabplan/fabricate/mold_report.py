@@ -24,7 +24,8 @@ from ..report.html import counted
 from ..report.pdf import PdfDocument
 from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
 
-__all__ = ["explain_mold_count", "facade_view", "mold_figure", "mold_report_html", "mold_report_files",
+__all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "mold_report_html",
+           "mold_report_files",
            "write_mold_report", "net_viewer_scene", "net_edges", "mold_pictures", "mold_report_pdf"]
 
 _PER_M = 1000.0  # curvatures are stored per mm; the pictures and tables show them per m
@@ -149,6 +150,38 @@ def mold_figure(plan: MoldPlan, *, title: str | None = None) -> str:
     if labelled:
         ax.text(0.0, -0.02, f"numbers: mold ids ({counted(labelled, 'panel')} large enough on "
                 "the picture to carry one)", transform=ax.transAxes, fontsize=8, va="top")
+    return figures.figure_to_data_uri(fig)
+
+
+def step_figure(plan: MoldPlan) -> str:
+    """Data URI of the step map: every panel coloured by the largest step between its mold
+    and a neighbour's at their shared edges, edges over the limit drawn in red."""
+    import matplotlib as mpl
+
+    mesh = plan.mesh
+    normals, view = facade_view(mesh)
+    pairs = mesh.interior_edge_faces
+    worst = np.zeros(plan.panel_count)
+    if len(pairs):
+        np.maximum.at(worst, pairs[:, 0], plan.step_mm)
+        np.maximum.at(worst, pairs[:, 1], plan.step_mm)
+    limit = plan.step_limit_mm
+    cmap = mpl.colormaps["viridis"]
+    colors = cmap(np.clip(worst / limit, 0.0, 1.0))
+    fig = figures.new_figure((9, 7))
+    ax = fig.subplots()
+    figures.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
+    over = plan.steps_over
+    if over.size:
+        from matplotlib.collections import LineCollection
+
+        segments = (mesh.vertices[mesh.interior_edges[over]] @ view.T)[..., :2]
+        ax.add_collection(LineCollection(segments, colors=[(0.85, 0.1, 0.1)], linewidths=1.5,
+                                         zorder=10))
+    sm = mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(0.0, limit), cmap=cmap)
+    fig.colorbar(sm, ax=ax, shrink=0.7, label="largest step to a neighbour's mold [mm]")
+    ax.set_title(f"Steps between neighbouring panels' molds: largest {plan.max_step_mm:.2f} mm, "
+                 f"{over.size} edges over {limit:g} mm")
     return figures.figure_to_data_uri(fig)
 
 
@@ -282,6 +315,14 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
         ["mold types", ", ".join(counted(v, k) for k, v in r["mold_types"].items())],
         ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
         ["panels that do not fit", counted(len(r["failures"]), "panel")],
+        ["largest step between neighbouring panels' molds",
+         f"{r['panel_steps']['max_mm']:.3f} mm (limit {r['panel_steps']['limit_mm']:g} mm)"],
+        ["shared edges with a step over the limit",
+         f"{len(r['panel_steps']['over_limit'])} of {r['panel_steps']['edge_count']}"],
+        ["largest angle between neighbouring molds at shared edges",
+         f"{r['panel_steps']['max_kink_deg']:.2f} deg"],
+        ["fewest molds possible (curvature set length / reach of one mold)",
+         counted(r["mold_count_bound"]["molds"], "mold")],
         ["panels the verification moved to new molds",
          counted(len(r["reassigned_by_verification"]), "panel")],
         ["Weingarten residual (rms distance from the line)",
@@ -293,14 +334,23 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
          "no limit" if r["max_mold_size_mm"] is None else f"{r['max_mold_size_mm']:g} mm"],
         ["run time", f"{r['seconds']:.1f} s"],
     ]
-    verdict = (html.html_paragraph(f"Every panel fits its mold within {tol:g} mm, measured on "
-                                     "densely sampled panels placed by their exported matrices.",
-                                     cls="note")
-               if plan.fits_all else
-               html.html_paragraph(f"{counted(len(r['failures']), 'panel')} do not fit (faces "
-                                     f"{', '.join(map(str, r['failures'][:20]))}"
-                                     f"{' ...' if len(r['failures']) > 20 else ''}); see the "
-                                     "panel table.", cls="fail"))
+    steps = r["panel_steps"]
+    if plan.fits_all:
+        verdict = html.html_paragraph(
+            f"Every panel fits its mold within {tol:g} mm, measured on densely sampled panels "
+            "placed by their exported matrices, and neighbouring panels meet: the largest step "
+            f"between their molds at a shared edge is {steps['max_mm']:.2f} mm (limit "
+            f"{steps['limit_mm']:g} mm).", cls="note")
+    elif len(r["failures"]):
+        verdict = html.html_paragraph(f"{counted(len(r['failures']), 'panel')} do not fit (faces "
+                                      f"{', '.join(map(str, r['failures'][:20]))}"
+                                      f"{' ...' if len(r['failures']) > 20 else ''}); see the "
+                                      "panel table.", cls="fail")
+    else:
+        verdict = html.html_paragraph(
+            f"Every panel fits its mold, but {counted(len(steps['over_limit']), 'shared edge')} "
+            f"have a step over {steps['limit_mm']:g} mm between the two panels' molds (largest "
+            f"{steps['max_mm']:.2f} mm); see the step map.", cls="fail")
     pictures = pictures or mold_pictures(plan)
     by_mold, isolines = pictures["molds"], pictures["isolines"]
     ext, mdev, per = plan.mold_extent_mm(), plan.mold_deviation_mm(), plan.panels_per_mold
@@ -356,6 +406,13 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
                              how=f"Left: how many panels have each gap, in mm; all must lie "
                                  f"left of the red tolerance line ({tol:g} mm). Right: one "
                                  "bar per mold id, its height the panels cast on it."),
+            html.html_figure(step_figure(plan),
+                               "Step map: each panel coloured by the largest step between its "
+                               "mold and a neighbour's mold, measured at points of their shared "
+                               "edges (a point put on one mold, its distance from the other); "
+                               "edges over twice the tolerance in red.",
+                             how="A fabricator sees the step where two finished panels meet; "
+                                 "yellow panels reach the limit of twice the tolerance."),
         ),
         html.html_section(
             "Molds",

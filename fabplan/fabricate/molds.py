@@ -55,6 +55,7 @@ from .panels import (
     panel_shapes,
     placement_frames,
     surface_model,
+    surface_steps,
 )
 
 __all__ = [
@@ -67,9 +68,16 @@ __all__ = [
     "plan_molds",
     "mold_heights",
     "placement_deviations",
+    "closest_mold_points",
+    "panel_steps",
+    "mold_count_bound",
 ]
 
 UNITS = {"m": 1000.0, "mm": 1.0}
+
+STEP_ROUNDS = 3
+"""Rounds of casting the panels of over-limit steps on closer molds (tolerance halved in
+each round)."""
 """Millimetres per model unit for each accepted ``units`` name (molds and strips)."""
 
 TOLERANCE_RANGE_MM = (0.01, 1000.0)
@@ -98,6 +106,8 @@ class MoldSettings:
     reserve : fraction of the tolerance kept in reserve while assigning, for what lies
         between the assignment samples; the verification uses the full tolerance.
     rounds : cap on the refit / reassign / remove rounds.
+    step_fractions : where along every shared edge the step between the two panels' molds
+        is measured (fractions of the edge from its first vertex).
     """
 
     tolerance_mm: float = 5.0
@@ -108,6 +118,7 @@ class MoldSettings:
     verify_level: int = 12
     reserve: float = 0.01
     rounds: int = 8
+    step_fractions: tuple[float, ...] = (0.25, 0.5, 0.75)
 
     def check(self) -> None:
         """Refuse impossible settings with a one-line `InputError`."""
@@ -188,6 +199,121 @@ def _offset_gap(U: np.ndarray, Z: np.ndarray, K: np.ndarray) -> tuple[np.ndarray
     r = Z - 0.5 * (U[..., 0] * K[..., None, 0] + U[..., 1] * K[..., None, 1])
     hi, lo = r.max(axis=-1), r.min(axis=-1)
     return 0.5 * (hi - lo), 0.5 * (hi + lo)
+
+
+# ----------------------------------------------------------------------------- steps
+def closest_mold_points(q: np.ndarray, shape: np.ndarray, iterations: int = 8) -> np.ndarray:
+    """Closest points of molds ``z = (k1 x^2 + k2 y^2) / 2`` to points in mold coordinates.
+
+    Newton's method on ``(x, y)`` from the point's own ``(x, y)``; a mold over a panel is
+    nearly flat (``k r`` small), so a few steps reach machine precision.
+
+    Parameters
+    ----------
+    q : (..., 3) float, mm; shape : (..., 2) float, ``(k1, k2)`` (1/mm).
+
+    Returns
+    -------
+    (..., 3) float, mm.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> closest_mold_points(np.array([0.0, 0.0, 7.0]), np.array([0.0, 0.0]))
+    array([0., 0., 0.])
+    """
+    k1, k2 = shape[..., 0], shape[..., 1]
+    x, y = q[..., 0].copy(), q[..., 1].copy()
+    for _ in range(iterations):
+        r = 0.5 * (k1 * x * x + k2 * y * y) - q[..., 2]
+        gx, gy = x - q[..., 0] + r * k1 * x, y - q[..., 1] + r * k2 * y
+        hxx = 1 + (k1 * x) ** 2 + r * k1
+        hyy = 1 + (k2 * y) ** 2 + r * k2
+        hxy = k1 * x * k2 * y
+        det = hxx * hyy - hxy * hxy
+        x, y = x - (hyy * gx - hxy * gy) / det, y - (hxx * gy - hxy * gx) / det
+    return np.stack([x, y, 0.5 * (k1 * x * x + k2 * y * y)], axis=-1)
+
+
+def _mold_normals(c: np.ndarray, shape: np.ndarray) -> np.ndarray:
+    """(..., 3) unit normals of molds at their points c (..., 3), mold coordinates."""
+    n = np.stack([-shape[..., 0] * c[..., 0], -shape[..., 1] * c[..., 1], np.ones_like(c[..., 0])], -1)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def panel_steps(mesh: QuadMesh, placement: np.ndarray, shape: np.ndarray, mm: float, *,
+                fractions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The step and the kink between the molds of the two panels of every interior edge.
+
+    At points of the edge's chord (`fractions` of the way from its first vertex) the point
+    is put on panel A's mold (its closest point there, through A's placement) and measured
+    against panel B's mold (the distance to B's closest point); and the other way round.
+    This is the step a fabricator sees between the two finished panels.
+
+    Parameters
+    ----------
+    mesh : the net; placement : (p, 4, 4) model -> mold coordinates (mm) of every panel;
+    shape : (p, 2) ``(k1, k2)`` of every panel's mold (1/mm); mm : millimetres per unit.
+    fractions : (t,) float, default ``(0.25, 0.5, 0.75)``.
+
+    Returns
+    -------
+    step : (i,) float, mm, the largest over the points and both directions, for the edges
+        in the order of ``mesh.interior_edge_faces``.
+    kink : (i,) float, degrees, the largest angle between the two molds' normals there.
+    """
+    pairs, edges = mesh.interior_edge_faces, mesh.interior_edges
+    if len(pairs) == 0:
+        return np.zeros(0), np.zeros(0)
+    t = np.array([0.25, 0.5, 0.75]) if fractions is None else np.asarray(fractions, float)
+    X = mesh.vertices
+    P = (1 - t[None, :, None]) * X[edges[:, :1]] + t[None, :, None] * X[edges[:, 1:]]  # (i, t, 3)
+    step = np.zeros(len(pairs))
+    kink = np.zeros(len(pairs))
+    for a, b in ((0, 1), (1, 0)):
+        A, B = placement[pairs[:, a]], placement[pairs[:, b]]
+        qa = np.einsum("eij,etj->eti", A[:, :3, :3], P) + A[:, None, :3, 3]
+        ca = closest_mold_points(qa, shape[pairs[:, a], None, :])
+        # back to model coordinates (A's block is mm times a rotation), then into B's mold
+        Ra = A[:, :3, :3] / mm
+        pa = np.einsum("eji,etj->eti", Ra, ca - A[:, None, :3, 3]) / mm
+        qb = np.einsum("eij,etj->eti", B[:, :3, :3], pa) + B[:, None, :3, 3]
+        cb = closest_mold_points(qb, shape[pairs[:, b], None, :])
+        step = np.maximum(step, np.linalg.norm(qb - cb, axis=2).max(axis=1))
+        na = np.einsum("eji,etj->eti", Ra, _mold_normals(ca, shape[pairs[:, a], None, :]))
+        nb = np.einsum("eji,etj->eti", B[:, :3, :3] / mm, _mold_normals(cb, shape[pairs[:, b], None, :]))
+        cos = np.abs(np.sum(na * nb, axis=2)).min(axis=1)
+        kink = np.maximum(kink, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    return step, kink
+
+
+def mold_count_bound(curvature: np.ndarray, reach: float) -> tuple[float, int]:
+    """The fewest molds any plan can use, by the length of the panels' curvature set.
+
+    The panels' ``(k1, k2)`` (1/mm) are spread along their principal axis over a length
+    ``L`` (the largest minus the smallest projection); one mold absorbs panels within
+    `reach` of its own curvatures, an interval ``2 reach`` long, so at least
+    ``ceil(L / (2 reach))`` molds are needed (a cloud that fills an area needs more).
+
+    Returns
+    -------
+    (L, bound): length in 1/mm and molds.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mold_count_bound(np.array([[0.0, 1.0], [3.0, 1.0], [1.0, 1.0]]), 0.5)
+    (3.0, 3)
+    """
+    k = np.asarray(curvature, float)
+    k = k[np.all(np.isfinite(k), axis=1)]
+    if len(k) < 2 or not (reach > 0) or not math.isfinite(reach):
+        return 0.0, 1
+    c = k - k.mean(axis=0)
+    axis = np.linalg.svd(c, full_matrices=False)[2][0]
+    proj = c @ axis
+    length = float(proj.max() - proj.min())
+    return length, max(1, math.ceil(length / (2.0 * reach) - 1e-9))
 
 
 # ----------------------------------------------------------------------------- the panels
@@ -468,6 +594,14 @@ class MoldPlan:
     weingarten : `weingarten_fit` of the panel curvatures (1/mm).
     reassigned : (k,) int, panels the dense verification found above the tolerance on their
         first mold, classified again and moved to new molds.
+    step_mm : (i,) float, the step between the molds of the two panels of every interior
+        edge (`panel_steps`), in the order of ``mesh.interior_edge_faces``.
+    kink_deg : (i,) float, the largest angle between those two molds' normals there.
+    surface_step_mm : (i,) float, how far the two panels' surfaces themselves differ along
+        every interior edge (`fabplan.fabricate.panels.surface_steps`): the part of a step
+        no mold can close.
+    recast_for_steps : (k,) int, panels at edges whose first molds stepped apart by more
+        than twice the tolerance, cast again on molds that fit them closer.
     seconds : run time.
     """
 
@@ -486,6 +620,10 @@ class MoldPlan:
     problem: list[str | None]
     weingarten: dict
     reassigned: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    step_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    kink_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    surface_step_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    recast_for_steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
 
@@ -504,8 +642,28 @@ class MoldPlan:
         return np.array([i for i, p in enumerate(self.problem) if p], dtype=np.int64)
 
     @property
+    def step_limit_mm(self) -> float:
+        """Largest step allowed between neighbouring panels: twice the tolerance."""
+        return 2.0 * self.settings.tolerance_mm
+
+    @property
+    def steps_over(self) -> np.ndarray:
+        """(k,) int, interior edges (rows of ``mesh.interior_edge_faces``) whose step
+        exceeds `step_limit_mm`."""
+        return np.flatnonzero(self.step_mm > self.step_limit_mm)
+
+    @property
+    def max_step_mm(self) -> float:
+        return float(self.step_mm.max()) if self.step_mm.size else 0.0
+
+    @property
     def fits_all(self) -> bool:
-        return self.failures.size == 0
+        """Every panel fits its mold and no step between neighbours exceeds the limit."""
+        return self.failures.size == 0 and self.steps_over.size == 0
+
+    def mold_count_bound(self) -> tuple[float, int]:
+        """`mold_count_bound` of the panels' curvatures at the median panel's reach."""
+        return mold_count_bound(self.curvature, self.curvature_reach(0.5))
 
     @property
     def panels_per_mold(self) -> np.ndarray:
@@ -570,8 +728,9 @@ class MoldPlan:
                 "problem": self.problem[i],
             })
         n = self.panel_count
+        length, bound = self.mold_count_bound()
         return {
-            "schema": "fabplan-molds/1",
+            "schema": "fabplan-molds/2",
             "net": str(getattr(self.mesh, "name", "")),
             "units": self.settings.units,
             "mm_per_unit": mm,
@@ -587,15 +746,41 @@ class MoldPlan:
             "panels_per_mold": {"min": int(per.min()), "median": float(np.median(per)),
                                 "mean": float(per.mean()), "max": int(per.max())},
             "max_deviation_mm": float(self.deviation_mm.max()),
+            "panel_steps": self._steps_record(),
+            "mold_count_bound": {"curvature_set_length_per_mm": length,
+                                 "mold_reach_per_mm": self.curvature_reach(0.5),
+                                 "molds": bound},
             "fits_all": self.fits_all,
             "failures": self.failures.tolist(),
             "reassigned_by_verification": self.reassigned.tolist(),
+            "recast_for_steps": self.recast_for_steps.tolist(),
             "weingarten": self.weingarten,
             "curvature_reach_per_mm": {"median_panel": self.curvature_reach(0.5),
                                        "large_panels": self.curvature_reach(0.9)},
             "seconds": self.seconds,
             "molds": molds,
             "panels": panels,
+        }
+
+    def _steps_record(self) -> dict:
+        pairs, edges = self.mesh.interior_edge_faces, self.mesh.interior_edges
+        over = self.steps_over
+        over = over[np.argsort(-self.step_mm[over], kind="stable")]
+        return {
+            "limit_mm": self.step_limit_mm,
+            "edge_count": int(len(self.step_mm)),
+            "max_mm": self.max_step_mm,
+            "median_mm": float(np.median(self.step_mm)) if self.step_mm.size else 0.0,
+            "max_kink_deg": float(self.kink_deg.max()) if self.kink_deg.size else 0.0,
+            "panel_surfaces_max_mm": (float(self.surface_step_mm.max())
+                                      if self.surface_step_mm.size else 0.0),
+            "fractions": [float(v) for v in self.settings.step_fractions],
+            "over_limit": [{"faces": [int(a), int(b)], "vertices": [int(u), int(v)],
+                            "step_mm": float(d), "panel_surfaces_mm": float(g)}
+                           for (a, b), (u, v), d, g in zip(
+                               pairs[over].tolist(), edges[over].tolist(),
+                               self.step_mm[over].tolist(), self.surface_step_mm[over].tolist(),
+                               strict=True)],
         }
 
     def panels_csv(self) -> str:
@@ -625,8 +810,11 @@ class MoldPlan:
             f"{r['mold_types']['cylinder']} cylinder, {r['mold_types']['paraboloid']} paraboloid); "
             f"M / sqrt(N) = {r['molds_per_sqrt_panels']:.2f}",
             f"largest deviation {r['max_deviation_mm']:.3f} mm; "
-            + ("every panel fits its mold" if self.fits_all else
+            + ("every panel fits its mold" if self.failures.size == 0 else
                f"{len(r['failures'])} panels do not fit (faces {r['failures'][:10]})"),
+            f"largest step between neighbouring panels' molds {self.max_step_mm:.3f} mm "
+            f"(limit {self.step_limit_mm:g} mm, {self.steps_over.size} shared edges over it); "
+            f"at least {r['mold_count_bound']['molds']} molds by the curvature set's length",
         ]
         if w.get("thickness") is not None:
             lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
@@ -684,16 +872,40 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
     dense = panel_samples(mesh, surfaces, settings.verify_level)
     placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
     over = np.flatnonzero(deviation > tol)
-    if over.size:
-        data = _panel_data(dense[over], shapes.point[over], frames[over], kk[over], mm, work)
+
+    def recast(faces: np.ndarray, tolerance: float) -> None:
+        """Classify `faces` again on the dense samples (at the working tolerance) and give
+        them new molds of their own at `tolerance` (mm)."""
+        nonlocal mold, mold_shape, mold_type, placement
+        data = _panel_data(dense[faces], shapes.point[faces], frames[faces], kk[faces], mm,
+                           tolerance)
         dense_type, cylinder = _classify(data, work)
-        panel_type[over] = np.maximum(panel_type[over], dense_type)
-        new = _assign_by_type(data, panel_type[over], cylinder, work, settings.rounds)
-        mold[over] = new[0] + len(mold_shape)
-        variant[over] = new[1]
+        panel_type[faces] = np.maximum(panel_type[faces], dense_type)
+        new = _assign_by_type(data, panel_type[faces], cylinder, tolerance, settings.rounds)
+        mold[faces] = new[0] + len(mold_shape)
+        variant[faces] = new[1]
         mold, mold_shape, mold_type = _drop_empty(mold, np.concatenate([mold_shape, new[2]]),
                                                   np.concatenate([mold_type, new[3]]))
         placement, _ = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+
+    if over.size:
+        recast(over, work)
+    # neighbours whose molds step apart by more than twice the tolerance: the panels of those
+    # edges are cast on molds of their own that fit them closer, halving the gap each round
+    # (a step is at most the two gaps plus what the panel surfaces differ by: where these
+    # alone take up the limit, closer molds cannot help and would only add molds)
+    fractions = np.asarray(settings.step_fractions, float)
+    step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
+    surface_step = surface_steps(mesh, surfaces, fractions) * mm
+    closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= 2.0 * tol
+    stepped = np.zeros(0, np.int64)
+    for k in range(1, STEP_ROUNDS + 1):
+        faces = np.unique(mesh.interior_edge_faces[(step > 2.0 * tol) & closable])
+        if faces.size == 0:
+            break
+        stepped = np.union1d(stepped, faces)
+        recast(faces, work * 0.5**k)
+        step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
     # a panel classified single curved on the assignment samples but cast on a doubly
     # curved mold (`_merge_curved_molds`) was never checked against a cylinder on the
     # dense ones: classify it there
@@ -701,6 +913,7 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
     if moved.size:
         data = _panel_data(dense[moved], shapes.point[moved], frames[moved], kk[moved], mm, work)
         panel_type[moved] = np.maximum(panel_type[moved], _classify(data, work)[0])
+    clock["steps"] = time.perf_counter() - start - sum(clock.values())
     q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
     footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
     deviation = placement_deviations(dense, placement, mold_shape[mold])
@@ -722,6 +935,8 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
                     panel_shape=kk[np.arange(n), variant], mold=mold,
                     placement=placement, deviation_mm=deviation, footprint_mm=footprint,
                     problem=problem, weingarten=weingarten, reassigned=over,
+                    step_mm=step, kink_deg=kink, surface_step_mm=surface_step,
+                    recast_for_steps=stepped,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
 
 

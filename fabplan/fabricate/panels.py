@@ -11,9 +11,10 @@ fit sees:
 
 ``smooth``
     the panel's corners (weight `CORNER_WEIGHT`, so the panel passes through them) and the
-    corners of every face that shares a vertex with it (weight 1): the panel follows the
-    smooth surface the net samples (its osculating paraboloid), and neighbouring panels meet
-    at the net's vertices. This is the panel of a curved-panel facade (Weingarten S-nets).
+    corners of every face that shares a vertex with it (weight 1), vertices in no star
+    excepted: the panel follows the smooth surface the net samples (its osculating
+    paraboloid), and neighbouring panels meet at the net's vertices. This is the panel of
+    a curved-panel facade (Weingarten S-nets).
 ``corners``
     the panel's corners only, with the least curvature that passes through them: a planar
     face gives a flat panel, a twisted quad its hyperbolic paraboloid. This is the panel of
@@ -31,10 +32,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..errors import InputError
-from ..net.geometry import face_normals, face_planarity
+from ..net.free_vertices import free_vertices
+from ..net.geometry import face_planarity
+from ..net.quadrics import (
+    CORNER_WEIGHT,
+    edge_steps,
+    face_frames,
+    face_neighbourhoods,
+    fit_height_fields,
+    height_field_values,
+)
 
 __all__ = [
     "CORNER_WEIGHT",
@@ -48,14 +57,10 @@ __all__ = [
     "panel_shapes",
     "panel_samples",
     "placement_frames",
+    "surface_steps",
 ]
 
-CORNER_WEIGHT = 1.0e6
-"""Least-squares weight of a panel's own corners against 1 for its neighbours' vertices."""
-
 SURFACE_MODELS = ("smooth", "corners")
-
-_RIDGE = 1.0e-9  # relative weight pulling undetermined curvature terms to zero
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -65,14 +70,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 def _face_of_corner(mesh) -> np.ndarray:
     return np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
-
-
-def _corner_means(mesh) -> np.ndarray:
-    """(f, 3) mean of each face's corners."""
-    face = _face_of_corner(mesh)
-    X = mesh.vertices[mesh.face_indices]
-    total = np.stack([np.bincount(face, X[:, d], minlength=len(mesh.face_sizes)) for d in range(3)], 1)
-    return total / mesh.face_sizes[:, None]
 
 
 def check_panels(mesh) -> None:
@@ -129,32 +126,12 @@ def surface_model(mesh, tolerance: float, model: str = "auto") -> str:
 
 
 def panel_neighbourhoods(mesh, model: str = "smooth") -> tuple[np.ndarray, np.ndarray]:
-    """The vertices each panel's surface is fitted to.
-
-    Returns
-    -------
-    vertices : (f, m) int, padded with the face's first corner.
-    weight : (f, m) float, `CORNER_WEIGHT` for the face's corners, 1 for the other vertices
-        of faces sharing a vertex with it (``smooth`` only), 0 for padding.
-    """
-    nf, n = len(mesh.face_sizes), mesh.vertex_count
-    face = _face_of_corner(mesh)
-    incidence = sp.csr_matrix((np.ones(len(face)), (face, mesh.face_indices)), shape=(nf, n))
-    if model == "smooth":
-        reach = (incidence @ (incidence.T @ incidence)).tocsr()
-    else:
-        reach = incidence.copy()
-    reach.sort_indices()
-    counts = np.diff(reach.indptr)
-    m = int(counts.max())
-    row = np.repeat(np.arange(nf), counts)
-    col = np.arange(len(row)) - reach.indptr[row]
-    vertices = np.repeat(mesh.face_indices[mesh.face_indptr[:-1]][:, None], m, axis=1)
-    vertices[row, col] = reach.indices
-    weight = np.zeros((nf, m))
-    is_corner = np.asarray(incidence[row, reach.indices]).ravel() > 0
-    weight[row, col] = np.where(is_corner, CORNER_WEIGHT, 1.0)
-    return vertices, weight
+    """The vertices each panel's surface is fitted to (`fabplan.net.quadrics.face_neighbourhoods`):
+    for ``smooth`` also the vertices of the faces sharing a vertex with it, except vertices in
+    no star (`fabplan.net.free_vertices`: nothing of the net holds them, so they say nothing of
+    its surface), which count only as their own faces' corners."""
+    return face_neighbourhoods(mesh, ring=model == "smooth",
+                               ignore=free_vertices(mesh) if model == "smooth" else None)
 
 
 @dataclass(frozen=True)
@@ -183,10 +160,7 @@ class PanelSurfaces:
 
     def height(self, xy: np.ndarray) -> np.ndarray:
         """(f, s) scaled heights of the surfaces at scaled plane points ``xy`` (f, s, 2)."""
-        c = self.coefficients[:, None, :]
-        x, y = xy[..., 0], xy[..., 1]
-        return (c[..., 0] + c[..., 1] * x + c[..., 2] * y
-                + 0.5 * (c[..., 3] * x * x + 2 * c[..., 4] * x * y + c[..., 5] * y * y))
+        return height_field_values(self.coefficients[:, None, :], xy)
 
     def to_model(self, xyz: np.ndarray) -> np.ndarray:
         """(f, s, 3) model coordinates of scaled face-frame points (f, s, 3)."""
@@ -209,27 +183,9 @@ def fit_panel_surfaces(mesh, model: str = "smooth") -> PanelSurfaces:
         raise InputError(f"unknown panel surface model {model!r}: use smooth or corners")
     X = mesh.vertices
     sizes, ptr = mesh.face_sizes, mesh.face_indptr
-    nf = len(sizes)
-    normal = face_normals(X, mesh)
-    origin = _corner_means(mesh)
-    first = X[mesh.face_indices[ptr[:-1]]] - origin
-    xaxis = _unit(first - np.sum(first * normal, axis=1, keepdims=True) * normal)
-    frame = np.stack([xaxis, np.cross(normal, xaxis), normal], axis=1)
-    face = _face_of_corner(mesh)
-    d2 = np.sum((X[mesh.face_indices] - origin[face]) ** 2, axis=1)
-    scale = np.sqrt(np.bincount(face, d2, minlength=nf) / sizes)
-
+    origin, frame, scale = face_frames(mesh)
     vertices, weight = panel_neighbourhoods(mesh, model)
-    P = np.einsum("fmj,fij->fmi", X[vertices] - origin[:, None, :], frame) / scale[:, None, None]
-    x, y, z = P[..., 0], P[..., 1], P[..., 2]
-    A = np.stack([np.ones_like(x), x, y, 0.5 * x * x, x * y, 0.5 * y * y], axis=2)
-    AtW = A.transpose(0, 2, 1) * weight[:, None, :]
-    normal_matrix = AtW @ A
-    # A tiny ridge on the curvature terms settles what the points leave free (a lone quad
-    # of the corners model): the least-curved surface through the corners.
-    ridge = _RIDGE * weight.sum(axis=1)[:, None] * np.array([0, 0, 0, 1, 1, 1.0])
-    normal_matrix[:, np.arange(6), np.arange(6)] += ridge
-    coefficients = np.linalg.solve(normal_matrix, (AtW @ z[..., None]))[..., 0]
+    coefficients = fit_height_fields(X[vertices], weight, origin, frame, scale)
 
     k_max = int(sizes.max())
     slot = np.minimum(np.arange(k_max), sizes[:, None] - 1)
@@ -353,3 +309,16 @@ def placement_frames(shapes: PanelShapes) -> tuple[np.ndarray, np.ndarray]:
     kk = np.stack([np.stack([k1, k2], -1), np.stack([k2, k1], -1),
                    np.stack([-k1, -k2], -1), np.stack([-k2, -k1], -1)], axis=1)
     return frames, kk
+
+
+
+def surface_steps(mesh, surfaces: PanelSurfaces, fractions: np.ndarray) -> np.ndarray:
+    """How far the surfaces of the two panels of every interior edge differ along it
+    (`fabplan.net.quadrics.edge_steps`): what a step keeps even with exact molds.
+
+    Returns
+    -------
+    (i,) float, model units, for the edges in the order of ``mesh.interior_edge_faces``.
+    """
+    return edge_steps(mesh, surfaces.origin, surfaces.frame, surfaces.scale,
+                      surfaces.coefficients, fractions)

@@ -15,6 +15,7 @@ from ..io.obj import format_obj
 from ..io.output import write_texts
 from ..io.records import json_text
 from ..net.folds import FoldReport, fold_edge_mask, measure_folds
+from ..net.free_vertices import free_vertices, settle_free_vertices
 from ..net.geometry import (
     canonical_stars,
     face_normals,
@@ -309,6 +310,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              coherent: bool = False, closeness: bool = True, glide: bool = False,
              glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
              extra: tuple = (), guards: bool | None = None,
+             settle_free: float | None = None,
              progress: Callable[[IterationRecord], None] | None = None
              ) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
@@ -344,6 +346,13 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         towards the start, until one converges fold-free; the best is kept (the
         parameters say which: ``guards``, ``smoothed_start``). True: with them from the
         start; False: never, and no retry.
+    settle_free : move the vertices in no star (the tips of a zigzag boundary, which no
+        condition of the net holds) onto the surface the net continues
+        (`fabplan.net.free_vertices.settle_free_vertices`), so that the faces at them are
+        patches of the net's own surface, at the price of their distance from the
+        reference: those of faces whose surface steps against a neighbour's by more than
+        this (model units; 0: all of them). None (default): none. The parameters record
+        how many there are and how far they moved (``free_vertices``).
     progress : called after every iteration with its record.
 
     Returns
@@ -397,12 +406,22 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         raise SolverError(f"the handles ask for a net that cannot be reached ({solver.status} after "
                           f"{len(solver.history) - 1} iterations{_stopped_at(stop)}): "
                           f"{describe_unmet(unmet_constraints(solver))}")
-    seconds = time.perf_counter() - start
     result_mesh = mesh.with_vertices(solver.vertices, normals=solver_normals(solver))
+    free = free_vertices(result_mesh)
+    moved = np.zeros(result_mesh.vertex_count)
+    # planar faces hold every corner, tips included: nothing is free to settle
+    faces_held = any(c.name == "planar-faces" for c in solver.constraints)
+    if settle_free is not None and free.any() and not faces_held:
+        result_mesh, moved = settle_free_vertices(result_mesh, keep=held, step=settle_free)
+        if moved.any():
+            folds = measure_folds(mesh, result_mesh.vertices, reference=solver.reference)
+    seconds = time.perf_counter() - start
     parameters = {"angle_deg": angle, "radius": radius, **solved_parameters(solver),
                   "coherent": coherent, "fixed_vertices": int(len(solver.fixed)),
                   "guards": any(isinstance(c, NormalCone) for c in solver.constraints),
                   "smoothed_start": chosen.name.startswith("smoothed"),
+                  "free_vertices": {"count": int(free.sum()), "settled": bool(moved.any()),
+                                    "largest_move": float(moved.max(initial=0.0))},
                   "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)}}
     status = solver.status
     if status == "converged" and (folds.folded or folds.degenerate):

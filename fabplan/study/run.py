@@ -445,9 +445,13 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     else:
         if key not in starts:
             starts[key] = glide(layout, "snet", settings=settings)
+        # a net that leaves the design: a zigzag tip (a vertex in no star) whose face would
+        # step against its neighbours by more than the step limit follows the surface the
+        # net continues instead of the design, so that the panels meet
+        step = study.limits_of(candidate).panel_step_limit_mm / study.design.mm_per_unit
         net = optimize(starts[key].mesh, candidate.net, angle=candidate.angle,
                        radius=candidate.radius, reference=design.reference, settings=settings,
-                       progress=report)
+                       settle_free=step, progress=report)
         add_boundary_panels(net, layout)
     seconds["optimize"] = time.perf_counter() - clock
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
@@ -544,6 +548,16 @@ def vertex_deviation_mm(mesh: QuadMesh, design: DesignSurface, mm_per_unit: floa
     return design.distances(mesh.vertices) * mm_per_unit
 
 
+def _free_vertex_record(net: OptimizationResult, mm_per_unit: float) -> dict | None:
+    """How many vertices of the net are in no star, and how far the solve settled them
+    onto the surface the net continues (mm); None for a net solved before this was recorded."""
+    free = net.parameters.get("free_vertices")
+    if free is None:
+        return None
+    return {"count": free["count"], "settled": free["settled"],
+            "largest_move_mm": free["largest_move"] * mm_per_unit}
+
+
 def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: MoldPlan,
                       strips: StripPlan | None, *, mm_per_unit: float,
                       deviation_mm: np.ndarray | None = None,
@@ -609,6 +623,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "meusnier_radius": _pick(props.get("meusnier_radius")),
         "folds": _fold_counts(props.get("folds")),
         "line_turn_deg": (props.get("fairness") or {}).get("line_turn_deg"),
+        "free_vertices": _free_vertex_record(net, mm_per_unit),
         "molds": mold_metrics(molds, boundary),
         "strips": None,
     }
@@ -663,7 +678,10 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
     ``failures``, ``max_deviation_mm`` (largest panel-to-mold gap, flat panels measured
     against a plane), ``molds_per_sqrt_panels`` (``count / sqrt(panels)``),
     ``panel_types``, ``mold_types`` (the plane type counts the plane flat panels are
-    checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any).
+    checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any),
+    ``max_panel_step_mm`` (largest step between neighbouring panels' molds at a shared
+    edge), ``panel_steps_over`` (shared edges whose step exceeds twice the tolerance) and
+    ``bound`` (the fewest molds the panels' curvature set allows, `MoldPlan.mold_count_bound`).
     """
     curved = np.asarray(plan.mold_type) > 0
     per_mold = plan.panels_per_mold.copy()
@@ -684,6 +702,9 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
         "all_panels_flat": count == 0,
         "fits_all": bool(plan.fits_all),
         "failures": int(plan.failures.size),
+        "max_panel_step_mm": plan.max_step_mm,
+        "panel_steps_over": int(plan.steps_over.size),
+        "bound": plan.mold_count_bound()[1],
         "max_deviation_mm": float(np.max(plan.deviation_mm)),
         "molds_per_sqrt_panels": count / math.sqrt(panels),
         "panel_types": {t: int(np.sum(panel_type == i)) for i, t in enumerate(PANEL_TYPES)},
@@ -750,12 +771,21 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
         + f" (limit {limits.max_deviation_mm:g} mm)"))
     molds = metrics["molds"]
+    panels_fit = molds["failures"] == 0
     checks.append(_check(
-        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"],
-        molds["fits_all"],
+        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"], panels_fit,
         f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
-        f"{molds['max_deviation_mm']:.2f} mm)" if molds["fits_all"] else
+        f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
         f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
+    step = molds.get("max_panel_step_mm")
+    if step is not None:
+        step_limit = limits.panel_step_limit_mm
+        checks.append(_check(
+            "max_panel_step_mm", step_limit, step, step <= step_limit,
+            f"neighbouring panels meet: the largest step between their molds is {step:.2f} mm "
+            f"(limit {step_limit:g} mm)" if step <= step_limit else
+            f"the molds of neighbouring panels step up to {step:.2f} mm apart at "
+            f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
     if limits.max_molds is not None:
         n = molds["count"]
         needs = "it needs no molds: all panels are flat" if n == 0 else \

@@ -106,6 +106,8 @@ class Limits:
     ----------
     max_deviation_mm : largest distance of a net vertex from the design surface.
     mold_tolerance_mm : largest gap between a panel and its mold.
+    max_panel_step_mm : largest step between the molds of neighbouring panels at a shared
+        edge (`fabplan.fabricate.molds.panel_steps`); None: twice `mold_tolerance_mm`.
     max_molds : most molds the budget allows.
     planar_panels : panels must be flat (glass): face planarity within
         `planarity_tolerance_mm`.
@@ -130,6 +132,7 @@ class Limits:
     max_deviation_mm: float
     mold_tolerance_mm: float
     max_molds: int | None = None
+    max_panel_step_mm: float | None = None
     planar_panels: bool = False
     planarity_tolerance_mm: float = 2.0
     max_kink_deg: float | None = None
@@ -141,6 +144,12 @@ class Limits:
     congruence_tolerance_mm: float = 0.1
     min_coverage: float | None = None
     max_sphere_residual: float = 1e-6
+
+    @property
+    def panel_step_limit_mm(self) -> float:
+        """`max_panel_step_mm`, or twice the mold tolerance when not given."""
+        return (self.max_panel_step_mm if self.max_panel_step_mm is not None
+                else 2.0 * self.mold_tolerance_mm)
 
 
 @dataclass(frozen=True)
@@ -634,6 +643,7 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits,
         max_deviation_mm=t.number("max_deviation_mm", required=True, unit="mm"),
         mold_tolerance_mm=tolerances[0],
         max_molds=t.number("max_molds", integer=True),
+        max_panel_step_mm=t.number("max_panel_step_mm", unit="mm"),
         planar_panels=t.boolean("planar_panels"),
         planarity_tolerance_mm=t.number("planarity_tolerance_mm", 2.0, unit="mm"),
         max_kink_deg=t.number("max_kink_deg", unit="degrees"),
