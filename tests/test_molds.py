@@ -480,3 +480,41 @@ def test_a_study_limits_the_step_between_neighbouring_panels():
     assert check(None)["bound"] == 2.0             # not given: twice the mold tolerance
     assert check(step * 1.01)["ok"] and not check(step * 0.99)["ok"]
     assert f"{step:.2f} mm" in check(step * 0.99)["text"]
+
+
+def test_panels_of_a_net_on_an_exact_design_are_its_patches():
+    design = fabplan.load_design("torus", triangles=6000)
+    net = fabplan.glide(fabplan.layout_surface(design, 1.0), "snet").mesh
+    record = plan_molds(net, tolerance_mm=1.0, units="m", design=design).record()
+    assert record["panel_surface"] == "design" and record["failures"] == []
+    assert plan_molds(net, tolerance_mm=1.0, units="m").record()["panel_surface"] == "smooth"
+    # rechecked apart from the planner: random points of every face, moved onto the exact
+    # design (its own closest points), against the exported mold and placement
+    rng = np.random.default_rng(3)
+    molds = {m["id"]: m for m in record["molds"]}
+    worst = 0.0
+    for panel in record["panels"]:
+        corners = net.vertices[net.faces[panel["face"]]]
+        centre = corners.mean(axis=0)
+        j = rng.integers(0, len(corners), 30)
+        a, b = rng.random(30), rng.random(30)
+        flip = a + b > 1
+        a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+        p = centre + a[:, None] * (corners[j] - centre) \
+            + b[:, None] * (corners[(j + 1) % len(corners)] - centre)
+        q = design.closest_points(p) @ np.array(panel["placement"])[:3, :3].T \
+            + np.array(panel["placement"])[:3, 3]
+        mold = molds[panel["mold"]]
+        gap = np.abs(q[:, 2] - 0.5 * (mold["k1"] * q[:, 0] ** 2 + mold["k2"] * q[:, 1] ** 2))
+        worst = max(worst, float(gap.max()))
+    assert worst <= 1.02 * record["tolerance_mm"]
+    # patches of one surface: the molds of neighbours meet within twice the tolerance
+    steps = edge_midpoint_steps(record, net)
+    assert steps.max() <= record["panel_steps"]["max_mm"] + 1e-6 <= 2 * record["tolerance_mm"]
+    assert record["panel_steps"]["panel_surfaces_max_mm"] == 0.0
+
+
+def test_the_design_panel_surface_needs_an_exact_design():
+    net = height_field_grid(5, 5, lambda x, y: 0.1 * x * y)
+    with pytest.raises(InputError, match="built-in or NURBS"):
+        plan_molds(net, tolerance_mm=1.0, panel_surface="design")

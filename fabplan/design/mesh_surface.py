@@ -186,24 +186,34 @@ class DesignSurface:
         self.triangles = T
 
     # ------------------------------------------------------------------ derived data
-    def distances(self, points: np.ndarray) -> np.ndarray:
-        """(m,) float, distance of each point from the design.
+    @property
+    def exact(self) -> bool:
+        """Whether the design has an exact surface beside its triangles (a built-in or NURBS
+        design), which `closest_points` and `distances` then use."""
+        return self.parametric is not None and self.uv is not None
 
-        For a parametric design the distance is to the exact surface: its closest point is
-        found by Gauss-Newton from the one on the triangulation (which alone would measure
-        to the chords, off the surface by up to the triangulation's chord error). Elsewhere
-        it is the distance to the triangle mesh.
+    def closest_points(self, points: np.ndarray) -> np.ndarray:
+        """(m, 3) float, the closest point of the design to each point.
+
+        For a parametric design it lies on the exact surface: found by Gauss-Newton from the
+        one on the triangulation (which alone lies on the chords, off the surface by up to
+        the triangulation's chord error). Elsewhere it lies on the triangle mesh.
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         foot, _, tri = self.reference.closest_points(points)
-        if self.parametric is None or self.uv is None:
-            return np.linalg.norm(foot - points, axis=1)
+        if not self.exact:
+            return foot
         corners = self.vertices[self.triangles[tri]]
         bary = igl.barycentric_coordinates(foot, corners[:, 0].copy(), corners[:, 1].copy(),
                                            corners[:, 2].copy())
         start = np.einsum("mk,mkj->mj", bary, self.triangle_uv(tri))
         uv = self.parametric.closest_parameters(points, start)
-        return np.linalg.norm(self.parametric.points(uv[:, 0], uv[:, 1]) - points, axis=1)
+        return self.parametric.points(uv[:, 0], uv[:, 1])
+
+    def distances(self, points: np.ndarray) -> np.ndarray:
+        """(m,) float, distance of each point from the design (`closest_points`)."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return np.linalg.norm(self.closest_points(points) - points, axis=1)
 
     def triangle_uv(self, tri: np.ndarray) -> np.ndarray:
         """(m, 3, 2) float, parameters of the corners of triangles `tri`, a triangle across

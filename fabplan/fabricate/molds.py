@@ -50,6 +50,8 @@ from ..net.weingarten import weingarten_fit
 from .panels import (
     SURFACE_MODELS,
     check_panels,
+    design_panel_samples,
+    fit_design_panels,
     fit_panel_surfaces,
     panel_samples,
     panel_shapes,
@@ -99,7 +101,8 @@ class MoldSettings:
     units : unit of the net's coordinates, ``"m"`` or ``"mm"``.
     max_mold_size_mm : largest mold side (mm); a panel whose footprint on its mold is
         larger is a failure. None: no limit.
-    panel_surface : ``"auto"``, ``"smooth"`` or ``"corners"`` (see `fabplan.panels`).
+    panel_surface : ``"auto"``, ``"smooth"``, ``"corners"`` or ``"design"`` (see
+        `fabplan.fabricate.panels`; ``"design"`` needs the design the net lies on).
     cover_level : sample grid steps per fan-triangle side while assigning (60 points on a
         quad at 4).
     verify_level : the same for the verification (364 points on a quad at 12).
@@ -822,7 +825,8 @@ class MoldPlan:
         return "\n".join(lines)
 
 
-def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: Any) -> MoldPlan:
+def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design=None,
+               **options: Any) -> MoldPlan:
     """Find few molds that fit every panel of a net, and verify every panel on its mold.
 
     Parameters
@@ -830,6 +834,9 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
     mesh : `fabplan.mesh.QuadMesh` (faces of any size).
     settings : `MoldSettings`; or give its fields as keyword options
         (``plan_molds(mesh, tolerance_mm=5, units="m")``).
+    design : the `fabplan.design.DesignSurface` the net lies on, when it was laid out on one
+        and held there: with an exact surface (a built-in or NURBS design) the panels are
+        its patches (panel surface ``design``, `fabplan.fabricate.panels`).
 
     Returns
     -------
@@ -852,12 +859,21 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
     work = settings.working_tolerance_mm
     clock: dict[str, float] = {}
 
-    model = surface_model(mesh, tol / mm, settings.panel_surface)
-    surfaces = fit_panel_surfaces(mesh, model)
+    model = surface_model(mesh, tol / mm, settings.panel_surface, design)
+
+    def samples(level: int) -> np.ndarray:
+        if model == "design":
+            return design_panel_samples(mesh, surfaces, design, level)
+        return panel_samples(mesh, surfaces, level)
+
+    if model == "design":
+        surfaces = fit_design_panels(mesh, design, settings.cover_level)
+    else:
+        surfaces = fit_panel_surfaces(mesh, model)
     shapes = panel_shapes(surfaces)
     frames, kk = placement_frames(shapes)
     kk = kk / mm
-    points = panel_samples(mesh, surfaces, settings.cover_level)
+    points = samples(settings.cover_level)
     data = _panel_data(points, shapes.point, frames, kk, mm, work)
     clock["panel model"] = time.perf_counter() - start
 
@@ -869,7 +885,7 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
 
     # verification on dense samples; a panel found above the tolerance is classified again
     # on them (it may be more curved than the assignment samples showed) and gets a new mold
-    dense = panel_samples(mesh, surfaces, settings.verify_level)
+    dense = samples(settings.verify_level)
     placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
     over = np.flatnonzero(deviation > tol)
 
@@ -896,7 +912,9 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, **options: 
     # alone take up the limit, closer molds cannot help and would only add molds)
     fractions = np.asarray(settings.step_fractions, float)
     step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
-    surface_step = surface_steps(mesh, surfaces, fractions) * mm
+    # patches of one design share their edges; the other panels' surfaces may differ there
+    surface_step = (np.zeros(len(mesh.interior_edge_faces)) if model == "design"
+                    else surface_steps(mesh, surfaces, fractions) * mm)
     closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= 2.0 * tol
     stepped = np.zeros(0, np.int64)
     for k in range(1, STEP_ROUNDS + 1):

@@ -20,8 +20,15 @@ fit sees:
     face gives a flat panel, a twisted quad its hyperbolic paraboloid. This is the panel of
     a planar-quad (or ruled) paneling.
 
+``design`` (a net laid out on a design with an exact surface: a built-in or NURBS design)
+    the panel is the patch of the design over the face: the ``smooth`` panel's points
+    moved to their closest points on the exact design (`design_panel_samples`), and its
+    quadric (for its curvatures and frame) the least-squares fit of those. Neighbouring
+    panels are patches of one surface and share their edges exactly.
+
 `surface_model` picks ``corners`` for a net whose faces are all flat within the tolerance
-(its panels are meant to be cut flat) and ``smooth`` otherwise.
+(its panels are meant to be cut flat), else ``design`` when an exact design is given and
+``smooth`` otherwise.
 
 Distances are in model units, curvatures in inverse model units; the principal curvatures
 are signed with respect to the face normal (positive when the panel bends towards it).
@@ -29,7 +36,7 @@ are signed with respect to the face normal (positive when the panel bends toward
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -58,9 +65,11 @@ __all__ = [
     "panel_samples",
     "placement_frames",
     "surface_steps",
+    "design_panel_samples",
+    "fit_design_panels",
 ]
 
-SURFACE_MODELS = ("smooth", "corners")
+SURFACE_MODELS = ("smooth", "corners", "design")
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -98,9 +107,10 @@ def check_panels(mesh) -> None:
                          "coincide or lie on a line); remove or repair it")
 
 
-def surface_model(mesh, tolerance: float, model: str = "auto") -> str:
+def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> str:
     """The panel surface model to use: ``model`` itself, or for ``"auto"`` ``"corners"`` when
-    every face lies within `tolerance` (model units) of a plane and ``"smooth"`` otherwise.
+    every face lies within `tolerance` (model units) of a plane, else ``"design"`` when
+    `design` (a `fabplan.design.DesignSurface`) has an exact surface, else ``"smooth"``.
 
     Examples
     --------
@@ -111,7 +121,11 @@ def surface_model(mesh, tolerance: float, model: str = "auto") -> str:
     ('corners', 'smooth')
     """
     if model not in ("auto",) + SURFACE_MODELS:
-        raise InputError(f"unknown panel surface model {model!r}: use auto, smooth or corners")
+        raise InputError(f"unknown panel surface model {model!r}: use auto, smooth, corners or design")
+    exact = design is not None and design.exact
+    if model == "design" and not exact:
+        raise InputError("the panel surface 'design' needs a net laid out on a built-in or NURBS "
+                         "design (an exact surface)")
     if model != "auto":
         return model
     X = mesh.vertices
@@ -122,7 +136,7 @@ def surface_model(mesh, tolerance: float, model: str = "auto") -> str:
         starts = mesh.face_indptr[:-1][mesh.face_sizes == k]
         polys = mesh.face_indices[starts[:, None] + np.arange(k)]
         flat &= bool(np.all(face_planarity(X, polys) <= tolerance))
-    return "corners" if flat else "smooth"
+    return "corners" if flat else ("design" if exact else "smooth")
 
 
 def panel_neighbourhoods(mesh, model: str = "smooth") -> tuple[np.ndarray, np.ndarray]:
@@ -179,8 +193,8 @@ def fit_panel_surfaces(mesh, model: str = "smooth") -> PanelSurfaces:
     -------
     PanelSurfaces
     """
-    if model not in SURFACE_MODELS:
-        raise InputError(f"unknown panel surface model {model!r}: use smooth or corners")
+    if model not in ("smooth", "corners"):
+        raise InputError(f"fit_panel_surfaces fits smooth or corners panels, not {model!r}")
     X = mesh.vertices
     sizes, ptr = mesh.face_sizes, mesh.face_indptr
     origin, frame, scale = face_frames(mesh)
@@ -322,3 +336,26 @@ def surface_steps(mesh, surfaces: PanelSurfaces, fractions: np.ndarray) -> np.nd
     """
     return edge_steps(mesh, surfaces.origin, surfaces.frame, surfaces.scale,
                       surfaces.coefficients, fractions)
+
+
+def design_panel_samples(mesh, surfaces: PanelSurfaces, design, level: int) -> np.ndarray:
+    """`panel_samples` moved onto the exact design: the points of the patch of `design` over
+    every face (model ``design``; `surfaces` are the ``smooth`` ones the points start from).
+
+    Returns
+    -------
+    (f, s, 3) float model coordinates, padded like `panel_samples`.
+    """
+    points = panel_samples(mesh, surfaces, level)
+    return design.closest_points(points.reshape(-1, 3)).reshape(points.shape)
+
+
+def fit_design_panels(mesh, design, level: int) -> PanelSurfaces:
+    """The quadrics of the patches of `design` over the faces (model ``design``): each
+    face's least-squares height field of its `design_panel_samples` at `level`, in the
+    frame of its ``smooth`` panel."""
+    smooth = fit_panel_surfaces(mesh, "smooth")
+    points = design_panel_samples(mesh, smooth, design, level)
+    coefficients = fit_height_fields(points, np.ones(points.shape[:2]), smooth.origin,
+                                     smooth.frame, smooth.scale)
+    return replace(smooth, coefficients=coefficients, model="design")

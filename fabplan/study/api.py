@@ -239,10 +239,12 @@ def measure(net: NetLike, *, reference: ReferenceSurface | None = None) -> Measu
     return Measurement(mesh=mesh, properties=measure_net(mesh, reference=reference))
 
 
-def plan_molds(net: NetLike, settings: MoldSettings | None = None, **options: Any) -> MoldResult:
+def plan_molds(net: NetLike, settings: MoldSettings | None = None, *, design: Any = None,
+               **options: Any) -> MoldResult:
     """The molds of a net's panels (``fabplan molds``): `MoldSettings`, or its fields as
-    keyword options (``tolerance_mm=5, units="m"``)."""
-    return MoldResult.of(_plan_molds_impl(as_mesh(net), settings, **options))
+    keyword options (``tolerance_mm=5, units="m"``); `design`: the design the net lies on
+    (its panels are then patches of it, `fabplan.fabricate.molds.plan_molds`)."""
+    return MoldResult.of(_plan_molds_impl(as_mesh(net), settings, design=design, **options))
 
 
 def plan_strips(net: NetLike, settings: StripSettings | None = None, **options: Any) -> StripResult:

@@ -488,7 +488,9 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
         assert twin is not None and twin.molds is not None
         molds = twin.molds
     else:
-        molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=tolerance, units=units))
+        # a net held on the design: its panels are patches of the design itself
+        molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=tolerance, units=units),
+                           design=design if candidate.glides else None)
     bounds = None
     if net.boundary_panels is not None:
         bounds = boundary_molds(molds, net.boundary_panels, study.limits.max_deviation_mm)
