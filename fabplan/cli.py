@@ -425,8 +425,10 @@ def _cmd_layout(args) -> int:
             from .layout.view import net_view_html
 
             # marks given as a vertex id are put where the vertex is
-            marks = {label: result.mesh.vertices[int(at)] if np.ndim(at) == 0 else at
-                     for label, at in fairness_marks(result.properties).items()}
+            marks = {}
+            for label, at in fairness_marks(result.properties).items():
+                where = np.asarray(at)
+                marks[label] = result.mesh.vertices[int(where)] if where.ndim == 0 else where
             kinks = curvature_difference_figure(
                 design, args.panel_size, marks=marks, singular_points=layout.singular_points,
                 title=f"|k1 - k2| of {Path(design.name).name}, panel {args.panel_size:g}")
