@@ -419,15 +419,33 @@ def _cmd_layout(args) -> int:
                              marks=fairness_marks(result.properties),
                              boundary_panels=result.boundary_panels)
         if page is not None:
+            import numpy as np
+
+            from .layout.picture import curvature_difference_figure, kink_text
             from .layout.view import net_view_html
 
+            # marks given as a vertex id are put where the vertex is
+            marks = {}
+            for label, at in fairness_marks(result.properties).items():
+                where = np.asarray(at)
+                marks[label] = result.mesh.vertices[int(where)] if where.ndim == 0 else where
+            kinks = curvature_difference_figure(
+                design, args.panel_size, marks=marks, singular_points=layout.singular_points,
+                title=f"|k1 - k2| of {Path(design.name).name}, panel {args.panel_size:g}")
             page.write_text(net_view_html(
                 result, title=f"Layout: {title}",
                 subtitle=f"fabplan layout {args.surface}: {result.status} after "
                          f"{counted(result.iterations, 'iteration')}; model units {args.units}",
                 surface=design, units=args.units, picture_png=staged.read_bytes(),
                 picture_caption=f"{picture.name}: the net (blue) on the design (grey), boundary "
-                                "panels green, the places its lines turn most marked"),
+                                "panels green, the places its lines turn most marked",
+                figures_after=((kinks, "Where the design makes lines kink: the design coloured "
+                                "by |k1 - k2| times the panel size. "
+                                + kink_text(design, args.panel_size, result.properties),
+                                "Dark places are near umbilics: there the principal directions "
+                                "turn fast or are not defined, and the lines of any S-net "
+                                "must turn with them. The marks are the net's sharpest turns "
+                                "and the direction field's singular points."),)),
                 encoding="utf-8")
         obj_path, json_path = result.write(out)
     if page is not None:

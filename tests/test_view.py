@@ -69,7 +69,9 @@ def test_layout_html_holds_the_net_its_boundary_panels_and_its_numbers(dome_layo
     props = record["properties"]
     # self-contained: no file or network reference, the picture embedded
     assert not re.search(r'(src|href)="(https?:|file:|[^"#d][^"]*\.(js|png|css))', page)
-    assert page.count('<img src="data:image/png;base64,') == 1
+    # the picture and the design's |k1 - k2| map, which says where the lines turn most
+    assert page.count('<img src="data:image/png;base64,') == 2
+    assert "Where the design makes lines kink" in page and "|k1 - k2| is" in page
     scene, = page_scenes(page)
     assert len(decoded(scene["face_sizes"])) == props["faces"]
     modes = [m["key"] for m in scene["modes"]]

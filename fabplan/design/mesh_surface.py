@@ -201,7 +201,7 @@ class DesignSurface:
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         foot, _, tri = self.reference.closest_points(points)
-        if not self.exact:
+        if self.parametric is None or self.uv is None:
             return foot
         corners = self.vertices[self.triangles[tri]]
         bary = igl.barycentric_coordinates(foot, corners[:, 0].copy(), corners[:, 1].copy(),

@@ -825,7 +825,7 @@ class MoldPlan:
         return "\n".join(lines)
 
 
-def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design=None,
+def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: Any = None,
                **options: Any) -> MoldPlan:
     """Find few molds that fit every panel of a net, and verify every panel on its mold.
 

@@ -15,7 +15,11 @@ from ..report.figures import net_view_angles, new_figure
 from .trim import BoundaryPanels
 
 __all__ = ["write_layout_picture", "fairness_marks", "curvature_difference_figure",
-           "curvature_difference_at"]
+           "curvature_difference_at", "kink_text", "NEAR_UMBILIC"]
+
+#: Where |k1 - k2| is below this share of its median over the design, the design itself
+#: makes the lines kink (near an umbilic).
+NEAR_UMBILIC = 0.25
 
 
 def fairness_marks(properties: dict) -> dict[str, list]:
@@ -129,6 +133,29 @@ def curvature_difference_at(design: DesignSurface, panel_size: float,
     centres = design.vertices[design.triangles].mean(axis=1)
     nearest = cKDTree(centres).query(np.atleast_2d(points))[1]
     return value[nearest] / max(float(median), 1e-300)
+
+
+def kink_text(design: DesignSurface, panel_size: float, properties: dict, *,
+              name: str = "the net", units: str = "") -> str:
+    """Where the lines of a measured net (its `properties`, `fabplan.net.measure`) turn
+    most, and whether the design forces it (near an umbilic, `NEAR_UMBILIC`) or the
+    layout does; "" when no turn was measured."""
+    turn = ((properties.get("fairness") or {}).get("line_turn_deg") or {})
+    if turn.get("point") is None or turn.get("max") is None:
+        return ""
+    point = np.asarray(turn["point"], dtype=np.float64)
+    share = float(curvature_difference_at(design, panel_size, point)[0])
+    where = ", ".join(f"{x:.1f}" for x in point)
+    head = (f"The lines of {name} turn most, by {float(turn['max']):.0f} deg, at ({where})"
+            f"{' ' + units if units else ''}, where |k1 - k2| is {100 * share:.0f} % of its "
+            "median over the design")
+    if share < NEAR_UMBILIC:
+        return (head + ": near an umbilic, so the design forces the turn; every net whose "
+                "lines follow the principal directions turns there, and only smaller panels "
+                "make the kink per panel smaller.")
+    return (head + ": the principal directions are well defined there, so the turn comes "
+            "from the layout, not from the design; a longer smoothing of the directions "
+            "(`fabplan layout --smoothing`) or another start angle may lower it.")
 
 
 def curvature_difference_figure(design: DesignSurface, panel_size: float, *,

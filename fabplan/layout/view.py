@@ -240,7 +240,8 @@ def _polygon_normals(X: np.ndarray, polygons: list, fallback: np.ndarray) -> np.
 
 def net_view_html(result: Any, *, title: str, subtitle: str = "", surface: Any = None,
                   deviation_from: str = "the design", units: str = "m",
-                  picture_png: bytes | None = None, picture_caption: str = "") -> str:
+                  picture_png: bytes | None = None, picture_caption: str = "",
+                  figures_after: tuple = ()) -> str:
     """The page of one net (see the module's text).
 
     Parameters
@@ -256,6 +257,8 @@ def net_view_html(result: Any, *, title: str, subtitle: str = "", surface: Any =
     picture_png : the static picture the command wrote (``OUT.png`` of a layout); without
         it one is drawn (`net_picture_uri`).
     picture_caption : its caption.
+    figures_after : ``(data URI, caption, how to read it)`` of further pictures, shown
+        after it (the design's |k1 - k2| map of a layout).
 
     Returns
     -------
@@ -293,7 +296,9 @@ def net_view_html(result: Any, *, title: str, subtitle: str = "", surface: Any =
         html.html_section("3D view", viewer.viewer_block([scene], caption=_VIEW_HELP),
                           anchor="3d-view"),
         html.html_section("Picture", html.html_figure(picture, picture_caption or title,
-                                                      how=_PICTURE_HOW)),
+                                                      how=_PICTURE_HOW),
+                          *(html.html_figure(uri, caption, how=how)
+                            for uri, caption, how in figures_after)),
     ]
     return html.html_page(title, parts, subtitle=subtitle or None,
                           scripts=viewer.viewer_assets())

@@ -14,6 +14,7 @@ Coordinates are divided by the face's RMS corner distance (`scale`) before the f
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import scipy.sparse as sp
 
 from .geometry import face_normals
@@ -51,8 +52,8 @@ def face_frames(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     nf = len(sizes)
     face = _face_of_corner(mesh)
     corners = X[mesh.face_indices]
-    origin = np.stack([np.bincount(face, corners[:, d], minlength=nf) for d in range(3)], 1)
-    origin /= sizes[:, None]
+    origin = np.stack([np.bincount(face, corners[:, d], minlength=nf) for d in range(3)], 1) \
+        / sizes[:, None]
     normal = face_normals(X, mesh)
     first = X[mesh.face_indices[ptr[:-1]]] - origin
     xaxis = _unit(first - np.sum(first * normal, axis=1, keepdims=True) * normal)
@@ -132,7 +133,7 @@ def height_field_values(coefficients: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 
 def edge_steps(mesh, origin: np.ndarray, frame: np.ndarray, scale: np.ndarray,
-               coefficients: np.ndarray, fractions: np.ndarray) -> np.ndarray:
+               coefficients: np.ndarray, fractions: npt.ArrayLike) -> np.ndarray:
     """How far the height fields of the two faces of every interior edge differ along it.
 
     At points of the edge's chord (`fractions` of the way from its first vertex), the point

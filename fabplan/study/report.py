@@ -24,11 +24,11 @@ from ..fabricate.mold_report import net_viewer_scene
 from ..io import output
 from ..io.records import json_text
 from ..layout.picture import (
-    curvature_difference_at,
     curvature_difference_figure,
     fairness_marks,
     write_layout_picture,
 )
+from ..layout.picture import kink_text as layout_kink_text
 from ..report import figures, html, viewer
 from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
@@ -412,6 +412,7 @@ def _strip_radius_text(result: StudyResult, r) -> str:
 LIMIT_NAMES = {
     "max_deviation_mm": ("largest deviation from the design", "mm"),
     "mold_tolerance_mm": ("largest gap between a panel and its mold", "mm"),
+    "max_panel_step_mm": ("largest step between neighbouring panels' molds", "mm"),
     "max_molds": ("most molds", "molds"),
     "planar_panels": ("panels must be flat", ""),
     "planarity_tolerance_mm": ("largest distance of a panel corner from the panel's plane", "mm"),
@@ -451,45 +452,26 @@ def limit_text(key: str, value) -> tuple[str, str]:
     return name, f"{html.format_value(value)} {unit}".strip()
 
 
-def _sharpest_turn(result: StudyResult) -> tuple[CandidateResult, float, np.ndarray] | None:
-    """The recommended candidate (else the first measured one), the largest turn of its
-    lines (degrees) and where it is (3,), or None when it has no turn measured."""
+def _sharpest_turn(result: StudyResult) -> CandidateResult | None:
+    """The recommended candidate (else the first measured one) when its lines' largest
+    turn was measured, else None."""
     measured = [c for c in result.ranked() if not c.failed and c.net is not None]
     best = next((c for c in measured if c.name == result.recommended), None)
     c = best or (measured[0] if measured else None)
     if c is None or c.net is None:
         return None
     turn = ((c.net.properties.get("fairness") or {}).get("line_turn_deg") or {})
-    if turn.get("point") is None or turn.get("max") is None:
-        return None
-    return c, float(turn["max"]), np.asarray(turn["point"], dtype=np.float64)
-
-
-#: Where |k1 - k2| is below this share of its median over the design, the design itself
-#: makes the lines kink (near an umbilic).
-NEAR_UMBILIC = 0.25
+    return None if turn.get("point") is None or turn.get("max") is None else c
 
 
 def kink_text(result: StudyResult) -> str:
     """Where the sharpest turn of the lines lies, and whether the design forces it (near
-    an umbilic, `NEAR_UMBILIC`) or the layout does."""
-    kinked = _sharpest_turn(result)
-    if kinked is None:
+    an umbilic) or the layout does (`fabplan.layout.picture.kink_text`)."""
+    c = _sharpest_turn(result)
+    if c is None or c.net is None:
         return ""
-    c, turn, point = kinked
-    share = float(curvature_difference_at(result.design, result.study.panel_size_of(c.candidate),
-                                          point)[0])
-    where = ", ".join(f"{x:.1f}" for x in point)
-    head = (f"The lines of {c.name} turn most, by {turn:.0f} deg, at ({where}) "
-            f"{result.study.design.units}, where |k1 - k2| is {100 * share:.0f} % of its "
-            "median over the design")
-    if share < NEAR_UMBILIC:
-        return (head + ": near an umbilic, so the design forces the turn; every net whose "
-                "lines follow the principal directions turns there, and only smaller panels "
-                "make the kink per panel smaller.")
-    return (head + ": the principal directions are well defined there, so the turn comes "
-            "from the layout, not from the design; a longer smoothing of the directions "
-            "(`fabplan layout --smoothing`) or another start angle may lower it.")
+    return layout_kink_text(result.design, result.study.panel_size_of(c.candidate),
+                            c.net.properties, name=c.name, units=result.study.design.units)
 
 
 def pareto_text(result: StudyResult) -> str:
@@ -1164,12 +1146,12 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
             pictures["comparison"] = comparison_figure(result)
         if sum(not c.failed for c in result.candidates) >= PARETO_MIN_CANDIDATES:
             pictures["pareto"] = pareto_figure(result)
-        kinked = _sharpest_turn(result)
-        if kinked is not None:
-            c, turn, point = kinked
+        c = _sharpest_turn(result)
+        if c is not None and c.net is not None:
+            turn = c.net.properties["fairness"]["line_turn_deg"]
             pictures["curvature"] = curvature_difference_figure(
                 result.design, result.study.panel_size_of(c.candidate),
-                marks={f"{c.name}: lines turn most ({turn:.0f} deg)": point},
+                marks={f"{c.name}: lines turn most ({turn['max']:.0f} deg)": turn["point"]},
                 singular_points=c.layout.singular_points if c.layout is not None else None,
                 title="The design's curvature: where its principal directions are weak")
         total = result.seconds_run + time.perf_counter() - clock
