@@ -100,8 +100,10 @@ def _start(args: list[str], log: Path) -> subprocess.Popen:
 
 @pytest.mark.slow
 def test_a_dask_cluster_survives_a_killed_worker(serial, tmp_path):
-    """A real scheduler and two workers on loopback; one is killed with SIGKILL while the
-    candidates run: its tasks are retried on the other, and the study is the serial one."""
+    """A real scheduler and two workers on loopback, the second joining after the study has
+    started; the first is killed with SIGKILL while the candidates run: its tasks, and the
+    study and design they read, are computed again on the other, and the study is the
+    serial one."""
     folder, expected = serial
     dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
     scheduler_file = tmp_path / "scheduler.json"
@@ -113,15 +115,25 @@ def test_a_dask_cluster_survives_a_killed_worker(serial, tmp_path):
                 break
             time.sleep(0.1)
         address = json.loads(scheduler_file.read_text())["address"]
-        for k in range(2):
-            procs.append(_start([sys.executable, "-m", "distributed.cli.dask_worker", address,
-                                 "--nthreads", "1", "--no-dashboard", "--name", f"w{k}"],
-                                tmp_path / f"worker{k}.log"))
+
+        def worker(k: int) -> subprocess.Popen:
+            return _start([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                           "--nthreads", "1", "--no-dashboard", "--name", f"w{k}"],
+                          tmp_path / f"worker{k}.log")
+
+        procs.append(worker(0))
+        for _ in range(300):
+            if "Registered to" in (tmp_path / "worker0.log").read_text(errors="replace"):
+                break
+            time.sleep(0.1)
         study = subprocess.Popen(
             [sys.executable, "-m", "fabplan.cli", "study", str(folder / "small.toml"), "-o",
              str(tmp_path / "cluster"), "--scheduler", address],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        # kill a worker once the first candidates are solved (it holds tasks or results)
+        line = study.stderr.readline()           # the study has connected and submitted
+        procs.append(worker(1))
+        # kill the first worker once the first candidates are solved (it holds the inputs,
+        # tasks and results)
         line = ""
         while "of 5 solved" not in line and study.poll() is None:
             line = study.stderr.readline()

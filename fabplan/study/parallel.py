@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import uuid
 from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
@@ -59,6 +60,19 @@ RETRIES = 2   # a task whose worker died is run again this many times
 
 def _quiet(message: str) -> None:
     pass
+
+
+def _value(value: Any) -> Any:
+    return value
+
+
+def shared_inputs(client: Any, *values: Any) -> list[Any]:
+    """Futures of values every task reads (the study, the design): tasks of their own, not
+    scattered data, so that the scheduler can compute them again on another worker when
+    the workers holding them are lost (scattered data is lost with them, and a worker that
+    joins late has none)."""
+    return [client.submit(_value, v, key=f"input-{k}-{uuid.uuid4().hex}", pure=False)
+            for k, v in enumerate(values)]
 
 
 def _failed(candidate: Candidate, exc: BaseException) -> CandidateResult:
@@ -192,7 +206,7 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
         say(f"  {sum(k is not None for k in kept)} of {len(candidates)} candidates taken from "
             "the cache")
     todo = [i for i, k in enumerate(kept) if k is None]
-    shared = client.scatter([study, design], broadcast=True, hash=False)
+    shared = shared_inputs(client, study, design)
     baseline = client.submit(_baseline_task, *shared, key="baseline-layout", pure=False,
                              retries=RETRIES)
     layouts = {(90.0, study.panel_size): baseline}

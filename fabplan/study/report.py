@@ -1098,7 +1098,9 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
         return outputs, pictures
     from distributed import as_completed
 
-    study, design = client.scatter([result.study, result.design], broadcast=True, hash=False)
+    from .parallel import shared_inputs
+
+    study, design = shared_inputs(client, result.study, result.design)
     futures: dict[str, Any] = {}
     for c in done:                         # in the study's order: a twin comes after its own
         twin = _strip_twin(c, by_name)
