@@ -53,12 +53,11 @@ from .milling import (
     MillPlan,
     MillSettings,
     MillTool,
-    ToolPath,
+    choose_stride,
     describe_region,
-    evaluate_pass_frames,
-    line_sequence,
-    pass_frames,
-    refine_pass,
+    pass_lines,
+    trace_passes,
+    walk_across_lines,
 )
 
 __all__ = ["ConePlan", "cone_tool_pose", "plan_flank_milling", "default_cone_margin_mm",
@@ -159,14 +158,8 @@ class ConePlan(MillPlan):
     def csv(self) -> str:
         """One row per cutter location: pass, vertex, tip, axis, contact, normal, ruling
         (towards the tip), tilt, safety sphere radius and contact circle radius (mm, deg)."""
-        p = self.path
-        head = ("pass,vertex,x,y,z,i,j,k,contact_x,contact_y,contact_z,normal_x,normal_y,"
-                "normal_z,ruling_x,ruling_y,ruling_z,tilt_deg,safety_radius_mm,contact_radius_mm")
-        table = np.column_stack([p.tip, p.axis, p.contact, p.normal, p.cross, p.tilt_deg,
-                                 p.safety_radius, self.contact_radius_mm()])
-        rows = [f"{int(a)},{int(b)}," + ",".join(f"{v:.12g}" for v in row)
-                for a, b, row in zip(p.pass_id, p.vertex, table, strict=True)]
-        return "\n".join([head, *rows]) + "\n"
+        return self.path.csv(cross_name="ruling",
+                             extra={"contact_radius_mm": self.contact_radius_mm()})
 
     def summary(self) -> str:
         r = self.record()
@@ -459,7 +452,6 @@ def _predicted_scallops(nodes: _ConeNodes, safety: np.ndarray, tool: MillTool,
     band uncut).
     """
     out = np.full((max_stride, len(nodes.vertex)), np.nan)
-    rows = np.arange(len(nodes.vertex))
     ahead, behind = _flank_reach(safety, tool)
     cos = np.abs(np.sum(nodes.ruling * nodes.tangent, axis=1))
     sin = np.sqrt(np.maximum(1 - cos * cos, 0))
@@ -467,9 +459,6 @@ def _predicted_scallops(nodes: _ConeNodes, safety: np.ndarray, tool: MillTool,
     end_circle = behind <= 1e-9
     g_rim = np.maximum(1 / safety - nodes.cross_curvature, 0) / np.maximum(cos, 1e-12) ** 2
     rim_reach = np.where(end_circle, tool.end_radius_mm * cos, 0.0)
-    previous = nodes.vertex.copy()
-    current = nodes.cross_neighbour[rows, towards]
-    alive = current >= 0
     f = np.linspace(0.0, 1.0, 257)
 
     def profile(who, ahead_side, w):
@@ -480,18 +469,9 @@ def _predicted_scallops(nodes: _ConeNodes, safety: np.ndarray, tool: MillTool,
         rim = np.where(rim_ok, g_rim[who, None] * w**2 / 2, np.inf)
         return np.minimum(flank, rim)
 
-    for k in range(1, max_stride + 1):
-        if k > 1:
-            star = node_of_vertex[np.maximum(current, 0)]
-            alive &= star >= 0
-            candidates = nodes.cross_neighbour[np.maximum(star, 0)]
-            step = np.where(candidates[:, 0] == previous, candidates[:, 1], candidates[:, 0])
-            previous, current = current, np.where(alive, step, -1)
-            alive &= current >= 0
-        i = np.flatnonzero(alive & (node_of_vertex[np.maximum(current, 0)] >= 0))
-        if not i.size:
-            break
-        j = node_of_vertex[current[i]]
+    for k, i, q in walk_across_lines(nodes.vertex, nodes.cross_neighbour, node_of_vertex, towards,
+                                     max_stride):
+        j = node_of_vertex[q]
         gap = nodes.point[j] - nodes.point[i]
         gap -= np.sum(gap * nodes.normal[i], axis=1, keepdims=True) * nodes.normal[i]
         across_i = gap - np.sum(gap * nodes.tangent[i], axis=1, keepdims=True) * nodes.tangent[i]
@@ -552,68 +532,33 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
         rule = "given (--margin)"
         share = 0.0   # a given margin is checked on the geometry alone, as for face mills
     safety = _check_cone(mesh, nodes, field, margin, tool, settings, share)
-    runs, order = line_sequence(mesh, nodes.vertex, nodes.cross_neighbour, family,
-                                nodes.node_of_vertex)
-    reference = nodes.point[runs[int(np.argmin(order))]]
-    heading = reference[-1] - reference[0]
-    runs = [run if np.dot(nodes.point[run[-1]] - nodes.point[run[0]], heading) >= 0 else run[::-1]
-            for run in runs]
-    v_order = np.full(mesh.vertex_count, -1)
-    for run, o in zip(runs, order, strict=True):
-        v_order[nodes.vertex[run]] = o
-    own = v_order[nodes.vertex]
-    minus, plus = v_order[nodes.cross_neighbour[:, 0]], v_order[nodes.cross_neighbour[:, 1]]
-    towards = np.where((plus == own + 1) | (minus == own - 1), 1, 0)
-    lines = int(order.max()) + 1
-    max_stride = max(1, min(lines - 1, 12))
-    per_node = _predicted_scallops(nodes, safety, tool, max_stride, nodes.node_of_vertex,
-                                   towards)
-    predicted = np.full(max_stride, np.inf)
-    for k in range(1, max_stride + 1):
-        on_pass = (own >= 0) & ((own - ((lines - 1) % k) // 2) % k == 0)
-        values = per_node[k - 1, on_pass]
-        values = values[~np.isnan(values)]
-        if values.size:
-            predicted[k - 1] = float(values.max())
-    fits = np.flatnonzero(predicted <= settings.scallop_mm)
-    stride = int(fits.max()) + 1 if fits.size else 1
+    lines = pass_lines(mesh, nodes.point, nodes.vertex, nodes.cross_neighbour, family,
+                       nodes.node_of_vertex)
+    per_node = _predicted_scallops(nodes, safety, tool, lines.max_stride, nodes.node_of_vertex,
+                                   lines.towards)
+    predicted, stride = choose_stride(per_node, lines, settings.scallop_mm)
     notes = []
     left_out = len(mesh.stars) - len(nodes.vertex)
     if left_out:
         notes.append(f"{left_out} of {len(mesh.stars)} stars, those next to the boundary, carry "
                      "no pass: their rulings rest on boundary normals a single sphere holds")
-    if not fits.size:
+    if predicted[stride - 1] > settings.scallop_mm:
         notes.append(f"even passes along every line leave a predicted scallop of "
                      f"{predicted[0]:.4g} mm, above the limit {settings.scallop_mm:g} mm")
-    first = ((lines - 1) % stride) // 2
-    chosen = np.flatnonzero((order - first) % stride == 0)
-    chosen = chosen[np.argsort(order[chosen], kind="stable")]
-    parts = []
     tilt = 90.0 - tool.angle_deg
-
     widest = tool.end_radius_mm / np.cos(a)   # splines between nodes must not pass it
 
-    def tip_of(p, n, c, R, motion):
-        return cone_tool_pose(p, n, c, np.minimum(R, widest), tool.angle_deg, tool.radius_mm)[0]
-
-    for number, run_index in enumerate(chosen):
-        run = runs[run_index]
-        if ((order[run_index] - first) // stride) % 2:
-            run = run[::-1]
-        s, splines = pass_frames(nodes.point[run], nodes.normal[run], nodes.ruling[run],
-                                 safety[run])
-        t = refine_pass(splines, s, tip_of, settings.chordal_tolerance_mm)
-        p, n, u, R = evaluate_pass_frames(splines, t)
+    def pose(p, n, u, R, motion):
         R = np.minimum(R, widest)
         tip, axis, _ = cone_tool_pose(p, n, u, R, tool.angle_deg, tool.radius_mm)
-        vertex = np.full(len(t), -1)
-        vertex[np.searchsorted(t, s)] = nodes.vertex[run]
-        parts.append((np.full(len(t), number), p, n, u, tip, axis, np.full(len(t), tilt), R,
-                      vertex))
-    path = ToolPath(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
+        return tip, axis, np.full(len(p), tilt), R
+
+    path = trace_passes([(nodes.point[run], nodes.normal[run], nodes.ruling[run], safety[run],
+                          nodes.vertex[run]) for run in lines.pass_runs(stride)],
+                        pose, settings.chordal_tolerance_mm)
     ahead, behind = _flank_reach(safety, tool)
     return ConePlan(net=mesh.name, tool=tool, settings=settings, path=path, margin_mm=margin,
-                    margin_rule=rule, stride=stride, lines=lines, predicted_scallop_mm=predicted,
+                    margin_rule=rule, stride=stride, lines=lines.count, predicted_scallop_mm=predicted,
                     meusnier_radius_mm=nodes.radius, side=side,
                     sphere_residual_mm=float(nodes.residual.max()),
                     seconds=time.perf_counter() - started, notes=notes,

@@ -24,6 +24,7 @@ Reference: Pellis et al., "Principal Symmetric Meshes", sections 2.1.7 and 3.2.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,6 +56,11 @@ __all__ = [
     "pass_frames",
     "evaluate_pass_frames",
     "refine_pass",
+    "PassLines",
+    "pass_lines",
+    "choose_stride",
+    "walk_across_lines",
+    "trace_passes",
 ]
 
 _MM_PER_UNIT = {"mm": 1.0, "m": 1000.0}
@@ -328,6 +334,46 @@ class ToolPath:
         same = np.diff(self.pass_id) == 0
         return float(step[same].sum())
 
+    def csv(self, *, cross_name: str = "cross", extra: dict[str, np.ndarray] | None = None) -> str:
+        """The cutter locations as CSV text, one row per location: pass, vertex, tip
+        (``x, y, z``), axis (``i, j, k``), contact, normal, cutting direction, tilt (deg)
+        and safety sphere radius (mm), then the `extra` columns.
+
+        Parameters
+        ----------
+        cross_name : name of the cutting direction in its columns' heads (``cross_x`` ...).
+        extra : column head -> (k,) float, columns appended in their order.
+
+        Returns
+        -------
+        str, the head line and one line per location (numbers to 12 significant digits),
+        each ending in a newline.
+
+        Examples
+        --------
+        >>> path = ToolPath(np.array([0]), np.zeros((1, 3)), np.array([[0.0, 0, 1]]),
+        ...                 np.array([[1.0, 0, 0]]), np.array([[0.0, 0, 2]]),
+        ...                 np.array([[0.0, 0, 1]]), np.array([0.0]), np.array([np.inf]),
+        ...                 np.array([7]))
+        >>> text = path.csv(cross_name="ruling", extra={"flag": np.array([1.5])})
+        >>> text.splitlines()[0].split(",")[14:]
+        ['ruling_x', 'ruling_y', 'ruling_z', 'tilt_deg', 'safety_radius_mm', 'flag']
+        >>> text.splitlines()[1]
+        '0,7,0,0,2,0,0,1,0,0,0,0,0,1,1,0,0,0,inf,1.5'
+        >>> empty = ToolPath(*(array[:0] for array in vars(path).values()))
+        >>> empty.csv() == path.csv().splitlines()[0] + "\\n"   # the head alone
+        True
+        """
+        extra = extra or {}
+        head = ",".join(["pass", "vertex", "x", "y", "z", "i", "j", "k",
+                         *(f"{name}_{c}" for name in ("contact", "normal", cross_name) for c in "xyz"),
+                         "tilt_deg", "safety_radius_mm", *extra])
+        table = np.column_stack([self.tip, self.axis, self.contact, self.normal, self.cross,
+                                 self.tilt_deg, self.safety_radius, *extra.values()])
+        rows = [f"{int(a)},{int(b)}," + ",".join(f"{v:.12g}" for v in row)
+                for a, b, row in zip(self.pass_id, self.vertex, table, strict=True)]
+        return "\n".join([head, *rows]) + "\n"
+
 
 @dataclass
 class MillPlan:
@@ -405,14 +451,7 @@ class MillPlan:
     def csv(self) -> str:
         """One row per cutter location: pass, vertex, tip, axis, contact, normal, cross
         tangent, tilt and safety sphere radius (mm, degrees)."""
-        p = self.path
-        head = ("pass,vertex,x,y,z,i,j,k,contact_x,contact_y,contact_z,normal_x,normal_y,"
-                "normal_z,cross_x,cross_y,cross_z,tilt_deg,safety_radius_mm")
-        table = np.column_stack([p.tip, p.axis, p.contact, p.normal, p.cross, p.tilt_deg,
-                                 p.safety_radius])
-        rows = [f"{int(a)},{int(b)}," + ",".join(f"{v:.12g}" for v in row)
-                for a, b, row in zip(p.pass_id, p.vertex, table, strict=True)]
-        return "\n".join([head, *rows]) + "\n"
+        return self.path.csv()
 
     def summary(self) -> str:
         r = self.record()
@@ -607,6 +646,164 @@ def line_sequence(mesh: QuadMesh, vertex: np.ndarray, cross_neighbour: np.ndarra
     return runs, order_of_line[run_line]
 
 
+@dataclass
+class PassLines:
+    """The lines a plan's passes may run along, in order across the net (`pass_lines`).
+
+    Attributes
+    ----------
+    runs : list of (m,) int arrays, node indices along each run (a contiguous stretch of
+        nodes on one line), all oriented alike so that alternate passes run back and forth.
+    order : (runs,) int, position of each run's line in the sequence of lines.
+    node_line : (s,) int, position of each node's line in the sequence, -1 off every run.
+    towards : (s,) int, which cross neighbour of each node (0: the '-' one, 1: the '+'
+        one) lies towards the next line.
+    count : number of lines.
+    """
+
+    runs: list
+    order: np.ndarray
+    node_line: np.ndarray
+    towards: np.ndarray
+    count: int
+
+    @property
+    def max_stride(self) -> int:
+        """Largest stride a plan tries: passes along every k-th line, k < count, k <= 12."""
+        return max(1, min(self.count - 1, 12))
+
+    def first_line(self, stride: int) -> int:
+        """Position of the first pass's line when passes run along every `stride`-th line:
+        the passes are centred in the sequence."""
+        return ((self.count - 1) % stride) // 2
+
+    def on_pass(self, stride: int) -> np.ndarray:
+        """(s,) bool, the nodes on the lines of the passes of `stride`."""
+        return (self.node_line >= 0) & ((self.node_line - self.first_line(stride)) % stride == 0)
+
+    def pass_runs(self, stride: int) -> list:
+        """The runs the passes of `stride` follow, in pass order, every other one reversed
+        (zig-zag)."""
+        first = self.first_line(stride)
+        chosen = np.flatnonzero((self.order - first) % stride == 0)
+        chosen = chosen[np.argsort(self.order[chosen], kind="stable")]
+        return [self.runs[i][::-1] if ((self.order[i] - first) // stride) % 2 else self.runs[i]
+                for i in chosen]
+
+
+def pass_lines(mesh: QuadMesh, point: np.ndarray, vertex: np.ndarray, cross_neighbour: np.ndarray,
+               family: int, node_of_vertex: np.ndarray | None = None) -> PassLines:
+    """The lines of `family` holding nodes, in order across the net (`line_sequence`), their
+    runs oriented like the first line's.
+
+    Parameters
+    ----------
+    mesh : the net.
+    point : (s, 3) float, the nodes' positions.
+    vertex, cross_neighbour, family, node_of_vertex : as for `line_sequence`.
+
+    Returns
+    -------
+    PassLines
+
+    Examples
+    --------
+    >>> g = np.arange(5.0)
+    >>> net = QuadMesh.grid(np.stack(np.meshgrid(g, g, [0.0], indexing="ij"), -1)[:, :, 0])
+    >>> stars = net.stars
+    >>> lines = pass_lines(net, net.vertices[stars[:, 0]], stars[:, 0], stars[:, [4, 2]], 0)
+    >>> lines.count, lines.max_stride, lines.first_line(2), len(lines.pass_runs(2))
+    (3, 2, 0, 2)
+    """
+    runs, order = line_sequence(mesh, vertex, cross_neighbour, family, node_of_vertex)
+    reference = point[runs[int(np.argmin(order))]]
+    heading = reference[-1] - reference[0]
+    runs = [run if np.dot(point[run[-1]] - point[run[0]], heading) >= 0 else run[::-1]
+            for run in runs]
+    v_order = np.full(mesh.vertex_count, -1)
+    for run, o in zip(runs, order, strict=True):
+        v_order[vertex[run]] = o
+    own = v_order[vertex]
+    minus, plus = v_order[cross_neighbour[:, 0]], v_order[cross_neighbour[:, 1]]
+    towards = np.where((plus == own + 1) | (minus == own - 1), 1, 0)
+    return PassLines(runs=runs, order=order, node_line=own, towards=towards,
+                     count=int(order.max()) + 1)
+
+
+def choose_stride(per_node: np.ndarray, lines: PassLines,
+                  scallop_mm: float) -> tuple[np.ndarray, int]:
+    """The predicted scallop of every stride, and the largest stride within `scallop_mm`.
+
+    Parameters
+    ----------
+    per_node : (max_stride, s) float, predicted scallop between each node and the line k
+        lines on, for k = 1 .. max_stride (NaN where no pass runs there).
+    lines : the lines of the passes.
+    scallop_mm : the largest scallop allowed.
+
+    Returns
+    -------
+    predicted : (max_stride,) float, for each stride the largest prediction over the nodes
+        on its passes (inf where none is finite).
+    stride : int, the largest stride whose prediction keeps the limit; 1 when none does.
+
+    Examples
+    --------
+    >>> lines = PassLines([], np.arange(4), np.arange(4), np.ones(4, int), 4)
+    >>> per_node = np.array([[0.002, 0.003, 0.002, np.nan],
+    ...                      [0.008, 0.020, 0.009, np.nan],
+    ...                      [0.030, np.nan, np.nan, np.nan]])
+    >>> predicted, stride = choose_stride(per_node, lines, 0.01)
+    >>> predicted.tolist(), stride
+    ([0.003, 0.009, 0.03], 2)
+    """
+    predicted = np.full(len(per_node), np.inf)
+    for k in range(1, len(per_node) + 1):
+        values = per_node[k - 1, lines.on_pass(k)]
+        if np.isfinite(values).any():
+            predicted[k - 1] = float(np.nanmax(values))
+    fits = np.flatnonzero(predicted <= scallop_mm)
+    return predicted, int(fits.max()) + 1 if fits.size else 1
+
+
+def walk_across_lines(vertex: np.ndarray, cross_neighbour: np.ndarray, node_of_vertex: np.ndarray,
+                      towards: np.ndarray, max_stride: int
+                      ) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """Walk from every node along the other family towards the next line, one line further
+    at each step, as long as the walk passes through nodes.
+
+    Parameters
+    ----------
+    vertex : (s,) int, the nodes' vertices.
+    cross_neighbour : (s, 2) int, each node's two neighbours along the other family.
+    node_of_vertex : (n,) int, the node centred at each vertex, -1 for none.
+    towards : (s,) int, which cross neighbour (0 or 1) lies towards the next line.
+    max_stride : the most steps.
+
+    Yields
+    ------
+    k : int, the steps taken, 1 .. max_stride; the walk ends before the first k at which
+        no walk reaches a node.
+    i : (r,) int, the nodes whose walk reaches a node k lines on.
+    q : (r,) int, the vertices of the nodes reached.
+    """
+    previous = vertex.copy()
+    current = cross_neighbour[np.arange(len(vertex)), towards]
+    alive = current >= 0
+    for k in range(1, max_stride + 1):
+        if k > 1:
+            node = node_of_vertex[np.maximum(current, 0)]
+            alive &= node >= 0
+            candidates = cross_neighbour[np.maximum(node, 0)]
+            step = np.where(candidates[:, 0] == previous, candidates[:, 1], candidates[:, 0])
+            previous, current = current, np.where(alive, step, -1)
+            alive &= current >= 0
+        i = np.flatnonzero(alive & (node_of_vertex[np.maximum(current, 0)] >= 0))
+        if not i.size:
+            return
+        yield k, i, current[i]
+
+
 def _second_form(nodes: _Nodes, who: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """II(a, b) at nodes `who` from the discrete principal curvatures and directions
     (0 where they are unknown)."""
@@ -637,11 +834,6 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
         for the passes of each stride (the motion reversed; passes alternate).
     """
     out = np.full((max_stride, len(nodes.vertex)), np.nan)
-    count = len(nodes.vertex)
-    rows = np.arange(count)
-    previous = nodes.vertex.copy()
-    current = nodes.cross_neighbour[rows, towards]
-    alive = current >= 0
 
     def tangential(v, who):
         n = nodes.normal[who]
@@ -668,18 +860,8 @@ def _predicted_scallops(nodes: _Nodes, X: np.ndarray, safety: np.ndarray, circle
 
         return left
 
-    for k in range(1, max_stride + 1):
-        if k > 1:
-            star = star_of_vertex[np.maximum(current, 0)]
-            alive &= star >= 0
-            candidates = nodes.cross_neighbour[np.maximum(star, 0)]
-            step = np.where(candidates[:, 0] == previous, candidates[:, 1], candidates[:, 0])
-            previous, current = current, np.where(alive, step, -1)
-            alive &= current >= 0
-        if not alive.any():
-            break
-        i = np.flatnonzero(alive & (star_of_vertex[np.maximum(current, 0)] >= 0))
-        q = current[i]
+    for k, i, q in walk_across_lines(nodes.vertex, nodes.cross_neighbour, star_of_vertex, towards,
+                                     max_stride):
         j = star_of_vertex[q]
         w = np.linalg.norm(X[q] - nodes.point[i], axis=1)
         lateral_i = tangential(X[q] - nodes.point[i], i)
@@ -763,6 +945,37 @@ def refine_pass(splines: list, s: np.ndarray, tip_of, tolerance: float) -> np.nd
     return t
 
 
+def trace_passes(passes: Iterable[tuple[np.ndarray, ...]],
+                 pose: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+                 tolerance_mm: float) -> ToolPath:
+    """The cutter locations of passes through node frames: each pass splined through its
+    nodes (`pass_frames`), refined to the chordal tolerance (`refine_pass`) and posed.
+
+    Parameters
+    ----------
+    passes : in pass order, each pass's nodes as (contact (m, 3) float in mm, unit normal
+        (m, 3), unit cutting direction (m, 3), safety radius (m,) in mm, vertex (m,) int).
+    pose : ``pose(p, n, c, R, motion) -> (tip, axis, tilt_deg, R)``: tool tips (k, 3),
+        axes (k, 3), tilts (k,) and the safety radii the tool keeps (k,) at frames (contact,
+        normal, cutting direction, safety radius, unit motion).
+    tolerance_mm : chordal tolerance.
+
+    Returns
+    -------
+    ToolPath
+    """
+    parts = []
+    for number, (contact, normal, cross, safety, node_vertex) in enumerate(passes):
+        s, splines = pass_frames(contact, normal, cross, safety)
+        t = refine_pass(splines, s, lambda *frame: pose(*frame)[0], tolerance_mm)
+        p, n, c, R = evaluate_pass_frames(splines, t)
+        tip, axis, tilt_deg, R = pose(p, n, c, R, _unit(splines[0](t, 1)))
+        vertex = np.full(len(t), -1)
+        vertex[np.searchsorted(t, s)] = node_vertex
+        parts.append((np.full(len(t), number), p, n, c, tip, axis, tilt_deg, R, vertex))
+    return ToolPath(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
+
+
 def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -> MillPlan:
     """Plan curvature-adaptive face milling passes along one family of an S-net.
 
@@ -809,76 +1022,42 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
             f"{describe_region(mesh, nodes.vertex[too_small])}: the safety "
             f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
             f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
-    runs, order = line_sequence(mesh, nodes.vertex, nodes.cross_neighbour, family)
-    # orient the runs alike (so that passes alternate direction on the part), and note
-    # each node's forward direction along its run
-    reference = nodes.point[runs[int(np.argmin(order))]]
-    heading = reference[-1] - reference[0]
-    runs = [run if np.dot(nodes.point[run[-1]] - nodes.point[run[0]], heading) >= 0 else run[::-1]
-            for run in runs]
+    lines = pass_lines(mesh, nodes.point, nodes.vertex, nodes.cross_neighbour, family)
+    # each node's forward direction along its run (the runs are oriented alike)
     forward = np.zeros_like(nodes.point)
-    for run in runs:
+    for run in lines.runs:
         forward[run] = _unit(np.gradient(nodes.point[run], axis=0))
     X = mesh.vertices * settings.mm_per_unit
-    # which cross neighbour (0: the '-' one, 1: the '+' one) lies towards the next line
-    v_order = np.full(mesh.vertex_count, -1)
-    for run, o in zip(runs, order, strict=True):
-        v_order[nodes.vertex[run]] = o
-    own = v_order[nodes.vertex]
-    minus, plus = v_order[nodes.cross_neighbour[:, 0]], v_order[nodes.cross_neighbour[:, 1]]
-    towards = np.where((plus == own + 1) | (minus == own - 1), 1, 0)
-    lines = int(order.max()) + 1
-    max_stride = max(1, min(lines - 1, 12))
+    max_stride = lines.max_stride
     trailing = np.empty((max_stride, len(nodes.vertex), 3))
     for k in range(1, max_stride + 1):
-        pass_number = (own - ((lines - 1) % k) // 2) // k
+        pass_number = (lines.node_line - lines.first_line(k)) // k
         trailing[k - 1] = np.where((pass_number % 2 == 0)[:, None], -forward, forward)
     per_node = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, max_stride,
-                                   mesh.star_of_vertex, towards, trailing)
-    # the prediction of stride k: between the lines the passes of that stride take
-    predicted = np.full(max_stride, np.inf)
-    for k in range(1, max_stride + 1):
-        on_pass = (own >= 0) & ((own - ((lines - 1) % k) // 2) % k == 0)
-        values = per_node[k - 1, on_pass]
-        if np.isfinite(values).any():
-            predicted[k - 1] = float(np.nanmax(values))
-    fits = np.flatnonzero(predicted <= settings.scallop_mm)
-    stride = int(fits.max()) + 1 if fits.size else 1
+                                   mesh.star_of_vertex, lines.towards, trailing)
+    predicted, stride = choose_stride(per_node, lines, settings.scallop_mm)
     notes = []
     residual = float(nodes.sphere_residual.max())
     if residual > 1e-3:
         notes.append(f"the net is not an S-net within 0.001 mm: a star's vertices lie up to "
                      f"{residual:.3g} mm off their least-squares sphere (optimize it first)")
-    if not fits.size:
+    if predicted[stride - 1] > settings.scallop_mm:
         notes.append(f"even passes along every line leave a predicted scallop of "
                      f"{predicted[0]:.4g} mm, above the limit {settings.scallop_mm:g} mm")
-    # passes: lines centred in the sequence, every stride-th
-    first = ((lines - 1) % stride) // 2
-    chosen = np.flatnonzero((order - first) % stride == 0)
-    chosen = chosen[np.argsort(order[chosen], kind="stable")]
-    parts = []
-    for number, run_index in enumerate(chosen):
-        run = runs[run_index]
-        # zig-zag: every other line of the stride reversed (as the prediction assumed)
-        if ((order[run_index] - first) // stride) % 2:
-            run = run[::-1]
-        normal = nodes.normal[run]
+    passes = []
+    for run in lines.pass_runs(stride):
         cross = nodes.cross[run]
         # consistent cross tangent along the run (the discrete tangents may flip sign)
         cross = cross * np.where(np.sum(cross * cross[:1], axis=1) < 0, -1.0, 1.0)[:, None]
-        s, splines = pass_frames(nodes.point[run], normal, cross, safety[run])
-        t = refine_pass(splines, s, lambda p, n, c, R, motion: circle_tool_pose(
-            p, n, c, -motion, R, r, tool.corner_mm)[0], settings.chordal_tolerance_mm)
-        p, n, c, R = evaluate_pass_frames(splines, t)
-        motion = _unit(splines[0](t, 1))
+        passes.append((nodes.point[run], nodes.normal[run], cross, safety[run], nodes.vertex[run]))
+
+    def pose(p, n, c, R, motion):
         tip, axis, tilt = circle_tool_pose(p, n, c, -motion, R, r, tool.corner_mm)
-        vertex = np.full(len(t), -1)
-        at_node = np.searchsorted(t, s)
-        vertex[at_node] = nodes.vertex[run]
-        parts.append((np.full(len(t), number), p, n, c, tip, axis, np.degrees(tilt), R, vertex))
-    path = ToolPath(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
+        return tip, axis, np.degrees(tilt), R
+
+    path = trace_passes(passes, pose, settings.chordal_tolerance_mm)
     return MillPlan(net=mesh.name, tool=tool, settings=settings, path=path, margin_mm=margin,
-                    margin_rule=rule, stride=stride, lines=lines, predicted_scallop_mm=predicted,
+                    margin_rule=rule, stride=stride, lines=lines.count, predicted_scallop_mm=predicted,
                     meusnier_radius_mm=nodes.radius, side=side, sphere_residual_mm=residual,
                     seconds=time.perf_counter() - started, notes=notes)
 
