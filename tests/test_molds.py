@@ -80,7 +80,7 @@ def _panel_surface(X: np.ndarray, faces: list, i: int, neighbours: set, model: s
     u /= np.linalg.norm(u)
     frame = np.stack([u, np.cross(n, u), n])
     scale = math.sqrt(np.mean(np.sum((C - origin) ** 2, axis=1)))
-    ids = sorted(set(face.tolist()) | (neighbours if model == "smooth" else set()))
+    ids = sorted(set(face.tolist()) | (neighbours if model == "local_fit" else set()))
     w = np.array([1e6 if v in set(face.tolist()) else 1.0 for v in ids])
     x, y, z = ((X[ids] - origin) @ frame.T / scale).T
     A = np.column_stack([np.ones_like(x), x, y, x * x / 2, x * y, y * y / 2])
@@ -129,7 +129,7 @@ def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> 
     gaps = np.zeros(len(faces))
     for panel in record["panels"]:
         i = panel["face"]
-        # vertices in no star are no neighbours of a smooth fit (docs/molds-schema.md)
+        # vertices in no star are no neighbours of a local fit (docs/molds-schema.md)
         neighbours = {int(v) for c in faces[i] for f in at_vertex[int(c)] for v in faces[f]
                       if held[v]} | {int(v) for v in faces[i]}
         origin, frame, scale, coef = _panel_surface(X, faces, i, neighbours,
@@ -189,7 +189,7 @@ def test_wein99_needs_at_most_sqrt_n_molds_and_every_panel_fits(wein99_run, wein
     assert n == 1601 and record["units"] == "m" and record["tolerance_mm"] == 5.0
     assert record["mold_count"] <= math.sqrt(n)
     assert record["molds_per_sqrt_panels"] == pytest.approx(record["mold_count"] / math.sqrt(n))
-    assert record["panel_surface"] == "smooth" and record["reassigned_by_verification"] == []
+    assert record["panel_surface"] == "local_fit" and record["reassigned_by_verification"] == []
     assert sum(record["panel_types"].values()) == n
     # the panels' curvatures lie on a line a k1 + b k2 = c: a thin band of their spread
     assert record["weingarten"]["thickness"] < 0.05
@@ -247,7 +247,7 @@ def test_a_cylinder_has_single_curved_panels_on_cylinder_molds_of_its_radius():
     net = cylinder_helical(radius=5.0)
     plan = plan_molds(net, tolerance_mm=1.0, units="m")
     record = plan.record()
-    assert record["panel_surface"] == "smooth"
+    assert record["panel_surface"] == "local_fit"
     assert record["panel_types"]["single_curved"] == len(net.faces)
     assert record["mold_types"] == {"plane": 0, "cylinder": record["mold_count"], "paraboloid": 0}
     for mold in record["molds"]:
@@ -262,14 +262,14 @@ def test_flat_faces_on_a_cylinder_are_planar_unless_the_smooth_surface_is_asked_
     net = cylinder_rulings()
     flat = plan_molds(net, tolerance_mm=5.0).record()
     assert flat["panel_surface"] == "corners" and flat["panel_types"]["planar"] == len(net.faces)
-    smooth = plan_molds(net, tolerance_mm=1.0, panel_surface="smooth").record()
-    assert smooth["panel_types"]["single_curved"] == len(net.faces)
-    _assert_every_panel_fits(smooth, net)
+    local = plan_molds(net, tolerance_mm=1.0, panel_surface="local_fit").record()
+    assert local["panel_types"]["single_curved"] == len(net.faces)
+    _assert_every_panel_fits(local, net)
 
 
 def test_panels_of_one_curvature_share_one_mold_in_any_orientation():
     net = sphere_patch(radius=10.0)
-    record = plan_molds(net, tolerance_mm=1.0, units="m", panel_surface="smooth").record()
+    record = plan_molds(net, tolerance_mm=1.0, units="m", panel_surface="local_fit").record()
     assert record["panel_types"]["double_curved"] == len(net.faces)
     assert record["mold_count"] == 1
     k1, k2 = record["molds"][0]["k1"], record["molds"][0]["k2"]
@@ -306,7 +306,7 @@ def test_panels_the_coarse_assignment_misjudged_are_caught_by_the_dense_verifica
                             rotation_deg=25.0)
     coarse = plan_molds(net, settings=MoldSettings(tolerance_mm=1.0, cover_level=1, reserve=0.0))
     fine = plan_molds(net, tolerance_mm=1.0)
-    assert coarse.panel_surface == fine.panel_surface == "smooth"
+    assert coarse.panel_surface == fine.panel_surface == "local_fit"
     assert np.array_equal(coarse.panel_type, fine.panel_type)
     assert coarse.reassigned.size > 0 and fine.reassigned.size == 0
     assert coarse.mold_count >= fine.mold_count
@@ -385,7 +385,7 @@ def test_the_python_api_refuses_bad_settings_with_input_errors():
 
 
 def test_report_files_can_be_built_in_memory_for_other_reports():
-    plan = plan_molds(sphere_patch(n=5), tolerance_mm=1.0, panel_surface="smooth")
+    plan = plan_molds(sphere_patch(n=5), tolerance_mm=1.0, panel_surface="local_fit")
     files = mold_report_files(plan, "somewhere")
     assert sorted(p.name for p in files) == ["molds.json", "panels.csv", "report.html"]
     assert json.loads(files[Path("somewhere") / "molds.json"])["mold_count"] == plan.mold_count
@@ -487,7 +487,7 @@ def test_panels_of_a_net_on_an_exact_design_are_its_patches():
     net = fabplan.glide(fabplan.layout_surface(design, 1.0), "snet").mesh
     record = plan_molds(net, tolerance_mm=1.0, units="m", design=design).record()
     assert record["panel_surface"] == "design" and record["failures"] == []
-    assert plan_molds(net, tolerance_mm=1.0, units="m").record()["panel_surface"] == "smooth"
+    assert plan_molds(net, tolerance_mm=1.0, units="m").record()["panel_surface"] == "local_fit"
     # rechecked apart from the planner: random points of every face, moved onto the exact
     # design (its own closest points), against the exported mold and placement
     rng = np.random.default_rng(3)

@@ -101,7 +101,7 @@ class MoldSettings:
     units : unit of the net's coordinates, ``"m"`` or ``"mm"``.
     max_mold_size_mm : largest mold side (mm); a panel whose footprint on its mold is
         larger is a failure. None: no limit.
-    panel_surface : ``"auto"``, ``"smooth"``, ``"corners"`` or ``"design"`` (see
+    panel_surface : ``"auto"``, ``"local_fit"``, ``"corners"`` or ``"design"`` (see
         `fabplan.fabricate.panels`; ``"design"`` needs the design the net lies on).
     cover_level : sample grid steps per fan-triangle side while assigning (60 points on a
         quad at 4).
@@ -137,8 +137,9 @@ class MoldSettings:
         s = self.max_mold_size_mm
         if s is not None and not (math.isfinite(s) and s > 0):
             raise InputError(f"the largest mold size must be a positive number of millimetres, got {s}")
-        if self.panel_surface not in ("auto",) + SURFACE_MODELS:
-            raise InputError(f"unknown panel surface {self.panel_surface!r}: use auto, smooth or corners")
+        if self.panel_surface not in ("auto", "smooth") + SURFACE_MODELS:   # smooth: local_fit
+            raise InputError(f"unknown panel surface {self.panel_surface!r}: use auto, "
+                             "local_fit, corners or design")
         if self.cover_level < 1 or self.verify_level < 1:
             raise InputError("the sample levels must be at least 1")
 
@@ -579,7 +580,7 @@ class MoldPlan:
     ----------
     mesh : the net (`fabplan.mesh.QuadMesh`).
     settings : the `MoldSettings` used.
-    panel_surface : the panel surface model used (``"smooth"`` or ``"corners"``).
+    panel_surface : the panel surface model used (``"local_fit"`` or ``"corners"``).
     panel_type : (p,) int, index into `PANEL_TYPES`.
     curvature : (p, 2) float, signed principal curvatures ``k1 >= k2`` of every panel
         with respect to its face normal (1/mm).

@@ -6,29 +6,30 @@ frame (origin at the mean of its corners, ``z`` along its Newell normal)::
     z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2) / 2
 
 fitted by weighted least squares, and its outline is the face's polygon projected into the
-face plane and lifted onto that surface. Two surface models differ only in the points the
-fit sees:
+face plane and lifted onto that surface. The surface models differ in the points the fit
+sees:
 
-``smooth``
+``local_fit``
     the panel's corners (weight `CORNER_WEIGHT`, so the panel passes through them) and the
     corners of every face that shares a vertex with it (weight 1), vertices in no star
-    excepted: the panel follows the smooth surface the net samples (its osculating
-    paraboloid), and neighbouring panels meet at the net's vertices. This is the panel of
-    a curved-panel facade (Weingarten S-nets).
+    excepted: the panel follows the surface the net samples (its osculating paraboloid).
+    Neighbouring panels meet at the net's vertices; along the edge between them their
+    quadrics, each fitted to its own neighbourhood, may differ (`surface_steps`). This is
+    the panel of a curved-panel net off any design (Weingarten S-nets).
 ``corners``
     the panel's corners only, with the least curvature that passes through them: a planar
     face gives a flat panel, a twisted quad its hyperbolic paraboloid. This is the panel of
     a planar-quad (or ruled) paneling.
 
 ``design`` (a net laid out on a design with an exact surface: a built-in or NURBS design)
-    the panel is the patch of the design over the face: the ``smooth`` panel's points
+    the panel is the patch of the design over the face: the ``local_fit`` panel's points
     moved to their closest points on the exact design (`design_panel_samples`), and its
     quadric (for its curvatures and frame) the least-squares fit of those. Neighbouring
     panels are patches of one surface and share their edges exactly.
 
 `surface_model` picks ``corners`` for a net whose faces are all flat within the tolerance
 (its panels are meant to be cut flat), else ``design`` when an exact design is given and
-``smooth`` otherwise.
+``local_fit`` otherwise.
 
 Distances are in model units, curvatures in inverse model units; the principal curvatures
 are signed with respect to the face normal (positive when the panel bends towards it).
@@ -69,7 +70,7 @@ __all__ = [
     "fit_design_panels",
 ]
 
-SURFACE_MODELS = ("smooth", "corners", "design")
+SURFACE_MODELS = ("local_fit", "corners", "design")
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -110,18 +111,19 @@ def check_panels(mesh) -> None:
 def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> str:
     """The panel surface model to use: ``model`` itself, or for ``"auto"`` ``"corners"`` when
     every face lies within `tolerance` (model units) of a plane, else ``"design"`` when
-    `design` (a `fabplan.design.DesignSurface`) has an exact surface, else ``"smooth"``.
+    `design` (a `fabplan.design.DesignSurface`) has an exact surface, else ``"local_fit"``.
 
     Examples
     --------
     >>> import numpy as np
     >>> from fabplan.net.generate import height_field_grid
     >>> flat = height_field_grid(4, 4, lambda x, y: 0 * x)
-    >>> surface_model(flat, 0.001), surface_model(flat, 0.001, "smooth")
-    ('corners', 'smooth')
+    >>> surface_model(flat, 0.001), surface_model(flat, 0.001, "local_fit")
+    ('corners', 'local_fit')
     """
+    model = "local_fit" if model == "smooth" else model       # its earlier name
     if model not in ("auto",) + SURFACE_MODELS:
-        raise InputError(f"unknown panel surface model {model!r}: use auto, smooth, corners or design")
+        raise InputError(f"unknown panel surface model {model!r}: use auto, local_fit, corners or design")
     exact = design is not None and design.exact
     if model == "design" and not exact:
         raise InputError("the panel surface 'design' needs a net laid out on a built-in or NURBS "
@@ -136,16 +138,16 @@ def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> s
         starts = mesh.face_indptr[:-1][mesh.face_sizes == k]
         polys = mesh.face_indices[starts[:, None] + np.arange(k)]
         flat &= bool(np.all(face_planarity(X, polys) <= tolerance))
-    return "corners" if flat else ("design" if exact else "smooth")
+    return "corners" if flat else ("design" if exact else "local_fit")
 
 
-def panel_neighbourhoods(mesh, model: str = "smooth") -> tuple[np.ndarray, np.ndarray]:
+def panel_neighbourhoods(mesh, model: str = "local_fit") -> tuple[np.ndarray, np.ndarray]:
     """The vertices each panel's surface is fitted to (`fabplan.net.quadrics.face_neighbourhoods`):
-    for ``smooth`` also the vertices of the faces sharing a vertex with it, except vertices in
+    for ``local_fit`` also the vertices of the faces sharing a vertex with it, except vertices in
     no star (`fabplan.net.free_vertices`: nothing of the net holds them, so they say nothing of
     its surface), which count only as their own faces' corners."""
-    return face_neighbourhoods(mesh, ring=model == "smooth",
-                               ignore=free_vertices(mesh) if model == "smooth" else None)
+    return face_neighbourhoods(mesh, ring=model == "local_fit",
+                               ignore=free_vertices(mesh) if model == "local_fit" else None)
 
 
 @dataclass(frozen=True)
@@ -162,7 +164,7 @@ class PanelSurfaces:
         ``z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2) / 2`` in scaled coordinates.
     corners : (f, k_max, 2) float, the corners projected into the face plane (scaled), padded
         by repeating the last corner.
-    model : the surface model, ``"smooth"`` or ``"corners"``.
+    model : the surface model, ``"local_fit"`` or ``"corners"``.
     """
 
     origin: np.ndarray
@@ -181,20 +183,20 @@ class PanelSurfaces:
         return self.origin[:, None, :] + self.scale[:, None, None] * (xyz @ self.frame)
 
 
-def fit_panel_surfaces(mesh, model: str = "smooth") -> PanelSurfaces:
+def fit_panel_surfaces(mesh, model: str = "local_fit") -> PanelSurfaces:
     """Fit the quadratic surface of every panel (see the module notes).
 
     Parameters
     ----------
     mesh : `fabplan.mesh.QuadMesh`, faces of any size; check it with `check_panels` first.
-    model : ``"smooth"`` or ``"corners"``.
+    model : ``"local_fit"`` or ``"corners"``.
 
     Returns
     -------
     PanelSurfaces
     """
-    if model not in ("smooth", "corners"):
-        raise InputError(f"fit_panel_surfaces fits smooth or corners panels, not {model!r}")
+    if model not in ("local_fit", "corners"):
+        raise InputError(f"fit_panel_surfaces fits local_fit or corners panels, not {model!r}")
     X = mesh.vertices
     sizes, ptr = mesh.face_sizes, mesh.face_indptr
     origin, frame, scale = face_frames(mesh)
@@ -340,7 +342,7 @@ def surface_steps(mesh, surfaces: PanelSurfaces, fractions: np.ndarray) -> np.nd
 
 def design_panel_samples(mesh, surfaces: PanelSurfaces, design, level: int) -> np.ndarray:
     """`panel_samples` moved onto the exact design: the points of the patch of `design` over
-    every face (model ``design``; `surfaces` are the ``smooth`` ones the points start from).
+    every face (model ``design``; `surfaces` are the ``local_fit`` ones the points start from).
 
     Returns
     -------
@@ -353,9 +355,9 @@ def design_panel_samples(mesh, surfaces: PanelSurfaces, design, level: int) -> n
 def fit_design_panels(mesh, design, level: int) -> PanelSurfaces:
     """The quadrics of the patches of `design` over the faces (model ``design``): each
     face's least-squares height field of its `design_panel_samples` at `level`, in the
-    frame of its ``smooth`` panel."""
-    smooth = fit_panel_surfaces(mesh, "smooth")
-    points = design_panel_samples(mesh, smooth, design, level)
-    coefficients = fit_height_fields(points, np.ones(points.shape[:2]), smooth.origin,
-                                     smooth.frame, smooth.scale)
-    return replace(smooth, coefficients=coefficients, model="design")
+    frame of its ``local_fit`` panel."""
+    local = fit_panel_surfaces(mesh, "local_fit")
+    points = design_panel_samples(mesh, local, design, level)
+    coefficients = fit_height_fields(points, np.ones(points.shape[:2]), local.origin,
+                                     local.frame, local.scale)
+    return replace(local, coefficients=coefficients, model="design")

@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import contextlib
 import time
-import uuid
 from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
 from ..errors import FabplanError, InputError
 from ..io.resources import worker_count
+from .inputs import shared_inputs
 from .run import (
     CandidateResult,
     StudyResult,
@@ -60,19 +60,6 @@ RETRIES = 2   # a task whose worker died is run again this many times
 
 def _quiet(message: str) -> None:
     pass
-
-
-def _value(value: Any) -> Any:
-    return value
-
-
-def shared_inputs(client: Any, *values: Any) -> list[Any]:
-    """Futures of values every task reads (the study, the design): tasks of their own, not
-    scattered data, so that the scheduler can compute them again on another worker when
-    the workers holding them are lost (scattered data is lost with them, and a worker that
-    joins late has none)."""
-    return [client.submit(_value, v, key=f"input-{k}-{uuid.uuid4().hex}", pure=False)
-            for k, v in enumerate(values)]
 
 
 def _failed(candidate: Candidate, exc: BaseException) -> CandidateResult:

@@ -1098,7 +1098,7 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
         return outputs, pictures
     from distributed import as_completed
 
-    from .parallel import shared_inputs
+    from .inputs import shared_inputs
 
     study, design = shared_inputs(client, result.study, result.design)
     futures: dict[str, Any] = {}
