@@ -158,6 +158,8 @@ class SparseSPDSolver:
         # cholmod: the cvxopt matrix holding the pattern; the factorization is a _Pardiso,
         # a cvxopt CHOLMOD factor or a scipy SuperLU (the last two untyped)
         self._matrix: Any = None
+        self._values: Any = None
+        self._values_view = np.zeros(0)
         self._factor: _Pardiso | Any = None
 
     def factor(self, upper: sp.csr_matrix) -> None:
@@ -171,11 +173,16 @@ class SparseSPDSolver:
 
             if self._matrix is None:
                 n = upper.shape[0]
-                cols = np.repeat(np.arange(n), np.diff(upper.indptr))
+                rows = matrix(np.asarray(upper.indices, dtype=np.int64))
+                cols = matrix(np.repeat(np.arange(n, dtype=np.int64), np.diff(upper.indptr)))
                 # built with ones so that no structural entry is dropped, then refilled
-                self._matrix = spmatrix(1.0, upper.indices.tolist(), cols.tolist(), (n, n))
+                self._matrix = spmatrix(1.0, rows, cols, (n, n))
                 self._factor = cholmod.symbolic(self._matrix)
-            self._matrix.V = matrix(upper.data)
+                # the values pass through one buffer (a numpy view of it), not a new matrix
+                self._values = matrix(0.0, (upper.nnz, 1))
+                self._values_view = np.asarray(self._values)[:, 0]
+            self._values_view[:] = upper.data
+            self._matrix.V = self._values
             try:
                 cholmod.numeric(self._matrix, self._factor)
             except ArithmeticError:
