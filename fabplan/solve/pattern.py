@@ -401,17 +401,18 @@ def _family_layout(cols: np.ndarray, node_of: np.ndarray, offset_of: np.ndarray,
     # the entry pairs i <= j of a row, pair-major (as the solver multiplies them)
     first_entry, second_entry = np.triu_indices(k)
     group_pair = pair_of_groups[group[first_entry], group[second_entry]]
-    same = group[first_entry] == group[second_entry]
     offsets = offset_of[cols].T.copy()                                  # (k, m) uint8
     op, oq = offsets[first_entry], offsets[second_entry]
-    # a product's row in its node pair is the offset of its variable that comes first
-    swap = np.empty(op.shape, dtype=bool)
-    swap[~same] = (a > b)[group_pair[~same]]
-    swap[same] = op[same] > oq[same]
+    # a product's row in its node pair is the offset of its variable that comes first:
+    # the node that comes first, or where both groups name one node, the smaller offset
+    one_node = (a == b) & (a >= 0)                                      # (group pairs, m)
+    swap = (a > b)[group_pair]
+    tied = np.flatnonzero(one_node.any(axis=1)[group_pair])
+    swap[tied] |= one_node[group_pair[tied]] & (op[tied] > oq[tied])
     within = np.where(swap, (oq << 3) | op, (op << 3) | oq)
     # a row naming one variable at two entries adds their product twice
-    repeated = np.flatnonzero(same & (first_entry != second_entry))
-    twice = (op[repeated] == oq[repeated]) & (head_nodes[group[first_entry[repeated]]] >= 0)
+    repeated = tied[first_entry[tied] != second_entry[tied]]
+    twice = one_node[group_pair[repeated]] & (op[repeated] == oq[repeated])
     multiplicity = None
     if twice.any():
         multiplicity = np.ones(op.shape)
