@@ -171,7 +171,9 @@ def test_pattern_arrays_are_read_only(cmc1):
     solver = build_solver(cmc1, "snet")
     solver.run(0)
     with pytest.raises(ValueError):
-        solver.pattern.slots[0] = 0
+        solver.pattern.indices[0] = 0
+    with pytest.raises(ValueError):
+        solver.pattern.diagonal[0] = 0
 
 
 def test_a_second_solver_on_the_same_structure_reuses_the_pattern(wein99):

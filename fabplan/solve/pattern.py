@@ -246,7 +246,8 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
 
     Returns
     -------
-    `NormalPattern` (its arrays read-only, so that solvers can share it): the upper
+    `NormalPattern`, shared by solvers (read-only but for the arrays `np.bincount` reads,
+    which it would copy): the upper
     triangle has every ``(p, q)``, ``p <= q``, that some row's entries name, and the
     diagonal, columns sorted within each row; the same as ranking every product's key.
 
@@ -355,7 +356,8 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
             slot += _RANK_BELOW[word]
             slot[pair_owner < 0] = nnz
             at += word.size
-    for array in (indptr, indices, diagonal, slots):
+    # slots and gradient columns stay writeable: np.bincount copies read-only input
+    for array in (indptr, indices, diagonal):
         array.flags.writeable = False
     return NormalPattern(families=tuple(families), indptr=indptr, indices=indices,
                          diagonal=diagonal, slots=slots, key=key)
@@ -420,11 +422,9 @@ def _family_layout(cols: np.ndarray, node_of: np.ndarray, offset_of: np.ndarray,
     order = np.argsort(group_pair, kind="stable")
     bounds = np.flatnonzero(np.r_[True, np.diff(group_pair[order]) != 0]) if k else \
         np.zeros(0, dtype=np.int64)
-    gradient_cols = np.where(cols < 0, nfree, cols)
-    for array in (gradient_cols, multiplicity):
-        if array is not None:
-            array.flags.writeable = False
-    family = FamilyPattern(gradient_cols, op.shape, multiplicity)
+    if multiplicity is not None:
+        multiplicity.flags.writeable = False
+    family = FamilyPattern(np.where(cols < 0, nfree, cols), op.shape, multiplicity)
     return family, _FamilyLayout(m, len(gi), group_pair, within, order, bounds), node_keys
 
 
@@ -437,7 +437,7 @@ class PatternCache:
     max_bytes : memory the kept patterns may hold together; the newest pattern is kept
         whatever its size (its solver holds it anyway).
 
-    Safe to share between threads: patterns are read-only.
+    Safe to share between threads: solvers only read patterns.
     """
 
     def __init__(self, max_entries: int = 4, max_bytes: int = 1 << 30) -> None:

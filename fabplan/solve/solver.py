@@ -227,14 +227,15 @@ class GuidedProjection:
             start += out.size
             if J.size == 0:
                 continue
-            np.multiply(J.T, w, out=columns)           # the weighted Jacobian, entry-major
+            np.multiply(J, w, out=entries)              # the weighted Jacobian
+            np.copyto(columns, entries.T)                # and entry-major
             k, pair = len(columns), 0
             for i in range(k):     # entries of a row, not rows: k <= 16 broadcast multiplies
                 np.multiply(columns[i], columns[i:], out=out[pair:pair + k - i])
                 pair += k - i
             if f.multiplicity is not None:
                 out *= f.multiplicity
-            np.multiply(columns.T, w * r[:, None], out=entries)
+            entries *= (w * r)[:, None]
             gradient += np.bincount(f.gradient_cols.ravel(), weights=entries.ravel(),
                                     minlength=nfree + 1)
         data = np.bincount(pat.slots, weights=buffers.products, minlength=nnz + 1)[:nnz]
