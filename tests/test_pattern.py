@@ -185,6 +185,16 @@ def test_a_second_solver_on_the_same_structure_reuses_the_pattern(wein99):
     second.run(0)
     assert second.pattern is first.pattern
     assert pattern_cache.hits == 1
+    if first.linear_solver == "cholmod":       # and CHOLMOD's matrix of the pattern
+        first.run(1)
+        shared = first.pattern.shared["cholmod"]
+        second.run(2)
+        assert second.pattern.shared["cholmod"] is shared
+        pattern_cache.clear()
+        alone = build_solver(noisy(wein99, 0.02, seed=4), "linear-weingarten")
+        alone.run(2)
+        assert alone.pattern.shared["cholmod"] is not shared
+        assert np.array_equal(alone.vertices, second.vertices)
 
 
 def test_pattern_is_rebuilt_when_the_held_set_or_the_topology_changes(wein99, cmc1):

@@ -143,9 +143,14 @@ class SparseSPDSolver:
     backend : "auto", "pardiso", "cholmod" or "superlu".
     unknowns : size of the systems, for "auto": PARDISO from `PARDISO_MIN_UNKNOWNS`
         on, when installed; CHOLMOD otherwise.
+    shared : a dictionary kept with the sparsity pattern (`NormalPattern.shared`): what
+        the backend builds from the pattern alone is left there for the next solver of
+        the same pattern (CHOLMOD's matrix of the pattern, a quarter second at 30k
+        vertices); each solver works on its own copy.
     """
 
-    def __init__(self, backend: str = "auto", unknowns: int | None = None) -> None:
+    def __init__(self, backend: str = "auto", unknowns: int | None = None, *,
+                 shared: dict | None = None) -> None:
         names = available_backends()
         if backend == "auto":
             small = unknowns is None or unknowns < PARDISO_MIN_UNKNOWNS
@@ -155,6 +160,7 @@ class SparseSPDSolver:
         if backend not in names:
             raise FabplanError(f"linear solver backend {backend!r} is not installed")
         self.backend = backend
+        self._shared = shared
         # cholmod: the cvxopt matrix holding the pattern; the factorization is a _Pardiso,
         # a cvxopt CHOLMOD factor or a scipy SuperLU (the last two untyped)
         self._matrix: Any = None
@@ -169,14 +175,19 @@ class SparseSPDSolver:
                 self._factor = _Pardiso(upper)
             self._factor.factor(upper.data)
         elif self.backend == "cholmod":
-            from cvxopt import cholmod, matrix, spmatrix
+            from cvxopt import cholmod, matrix, sparse, spmatrix
 
             if self._matrix is None:
-                n = upper.shape[0]
-                rows = matrix(np.asarray(upper.indices, dtype=np.int64))
-                cols = matrix(np.repeat(np.arange(n, dtype=np.int64), np.diff(upper.indptr)))
-                # built with ones so that no structural entry is dropped, then refilled
-                self._matrix = spmatrix(1.0, rows, cols, (n, n))
+                pattern = None if self._shared is None else self._shared.get("cholmod")
+                if pattern is None:
+                    n = upper.shape[0]
+                    rows = matrix(np.asarray(upper.indices, dtype=np.int64))
+                    cols = matrix(np.repeat(np.arange(n, dtype=np.int64), np.diff(upper.indptr)))
+                    # built with ones so that no structural entry is dropped, then refilled
+                    pattern = spmatrix(1.0, rows, cols, (n, n))
+                    if self._shared is not None:
+                        self._shared["cholmod"] = pattern
+                self._matrix = sparse([pattern])       # a copy: its values are this solver's
                 self._factor = cholmod.symbolic(self._matrix)
                 # the values pass through one buffer (a numpy view of it), not a new matrix
                 self._values = matrix(0.0, (upper.nnz, 1))

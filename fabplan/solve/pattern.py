@@ -24,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -86,6 +86,8 @@ class NormalPattern:
     slots : (products,) int, every family's products' positions in ``indices``,
         concatenated; ``nnz`` for a product on a held variable.
     key : the `pattern_key` it was built for.
+    shared : what linear solver backends build from the pattern alone, kept for the
+        next solver of the pattern (see `fabplan.solve.linalg.SparseSPDSolver`).
     """
 
     families: tuple
@@ -94,6 +96,7 @@ class NormalPattern:
     diagonal: np.ndarray
     slots: np.ndarray
     key: bytes = b""
+    shared: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def nnz(self) -> int:
@@ -101,11 +104,12 @@ class NormalPattern:
 
     @property
     def nbytes(self) -> int:
-        """Memory held by the pattern's arrays."""
+        """Memory held by the pattern's arrays (and, roughly, what backends left in
+        `shared`: a matrix of the pattern each)."""
         arrays = [self.indptr, self.indices, self.diagonal, self.slots]
         arrays += [a for f in self.families for a in (f.gradient_cols, f.multiplicity)
                    if a is not None]
-        return sum(a.nbytes for a in arrays)
+        return sum(a.nbytes for a in arrays) + 16 * self.nnz * len(self.shared)
 
 
 def rank_keys(keys: np.ndarray, bound: int) -> tuple[np.ndarray, np.ndarray]:

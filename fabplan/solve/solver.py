@@ -357,6 +357,8 @@ class GuidedProjection:
             for c in self.constraints:
                 c.prepare(self.state)
             self._pattern = self._build_pattern()
+            self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free),
+                                           shared=self._pattern.shared)
         first = self.run_start = len(self.history)
         self.status = "iteration cap"
         self.best, self._damping_scale, self.monotone = None, 1.0, False
