@@ -146,7 +146,7 @@ class SparseSPDSolver:
     shared : a dictionary kept with the sparsity pattern (`NormalPattern.shared`): what
         the backend builds from the pattern alone is left there for the next solver of
         the same pattern (CHOLMOD's matrix of the pattern, a quarter second at 30k
-        vertices); each solver works on its own copy.
+        vertices); the next solver works on a copy of it.
     """
 
     def __init__(self, backend: str = "auto", unknowns: int | None = None, *,
@@ -175,7 +175,7 @@ class SparseSPDSolver:
                 self._factor = _Pardiso(upper)
             self._factor.factor(upper.data)
         elif self.backend == "cholmod":
-            from cvxopt import cholmod, matrix, sparse, spmatrix
+            from cvxopt import cholmod, matrix, spmatrix
 
             if self._matrix is None:
                 pattern = None if self._shared is None else self._shared.get("cholmod")
@@ -184,10 +184,12 @@ class SparseSPDSolver:
                     rows = matrix(np.asarray(upper.indices, dtype=np.int64))
                     cols = matrix(np.repeat(np.arange(n, dtype=np.int64), np.diff(upper.indptr)))
                     # built with ones so that no structural entry is dropped, then refilled
-                    pattern = spmatrix(1.0, rows, cols, (n, n))
+                    self._matrix = spmatrix(1.0, rows, cols, (n, n))
                     if self._shared is not None:
-                        self._shared["cholmod"] = pattern
-                self._matrix = sparse([pattern])       # a copy: its values are this solver's
+                        # the next solver copies its structure (its values it overwrites)
+                        self._shared["cholmod"] = self._matrix
+                else:
+                    self._matrix = 1.0 * pattern     # a copy, explicit zeros kept (unlike `sparse`)
                 self._factor = cholmod.symbolic(self._matrix)
                 # the values pass through one buffer (a numpy view of it), not a new matrix
                 self._values = matrix(0.0, (upper.nnz, 1))

@@ -45,7 +45,7 @@ MAX_NODE_WIDTH = 8          # variables per node: a node pair's variable pairs f
 _CHUNK = 1 << 20            # elements of the temporaries: fresh memory is slow to touch
 
 # popcount of every byte, and of its bits below bit b (at byte * 8 + b)
-_POPCOUNT = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).sum(axis=1).astype(np.int64)
+_POPCOUNT = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).sum(axis=1).astype(np.uint8)
 _RANK_BELOW = np.array([bin(v & ((1 << b) - 1)).count("1") for v in range(256) for b in range(8)],
                        dtype=np.int64)
 # the diagonal of a node w wide: bits 9 a for a < w
@@ -318,16 +318,19 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     counts = _POPCOUNT[row_bytes]
     pair_row = pairs // max(nodes, 1)
     segment = np.searchsorted(pair_row, np.arange(nodes))      # (P, P) starts node P's pairs
-    row_lengths = np.add.reduceat(counts, segment, axis=0)[node, offset] if nodes \
-        else np.zeros(0, dtype=np.int64)
+    row_lengths = np.add.reduceat(counts, segment, axis=0, dtype=np.int64)[node, offset] \
+        if nodes else np.zeros(0, dtype=np.int64)
     indptr = np.zeros(nfree + 1, dtype=np.int64)
     np.cumsum(row_lengths, out=indptr[1:])
-    before = np.cumsum(counts, axis=0)
-    before -= counts
-    before -= before[segment][pair_row]
-    starts = indptr[np.minimum(first[pair_row][:, None] + np.arange(8), nfree)] + before
-    # the start of the row of each (pair, a) and the row's byte, in one word
-    packed = (starts.ravel() << 8) | row_bytes.ravel()
+    # the start of the row of each (pair, a), shifted, with the row's byte: one word each
+    packed = np.cumsum(counts, axis=0, dtype=np.int64)
+    packed -= counts
+    packed -= packed[segment][pair_row]
+    packed += indptr[np.minimum(first[pair_row][:, None] + np.arange(8), nfree)]
+    diagonal = packed[segment[node], offset]
+    packed <<= 8
+    packed |= row_bytes
+    packed = packed.ravel()
     indices = np.empty(int(indptr[-1]), dtype=np.int64)
     step = _CHUNK // 64
     for t in range(0, len(pairs), step):       # chunks of node pairs: small temporaries
@@ -337,7 +340,6 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
         b = present & 7
         indices[(word >> 8) + _RANK_BELOW[((word & 0xFF) << 3) | b]] = \
             first[pairs[present >> 6] % max(nodes, 1)] + b
-    diagonal = starts[segment[node], offset]
 
     # 4. every product's slot: the start of its row in its node pair, plus the bits before it
     nnz = len(indices)
