@@ -283,3 +283,14 @@ def test_solve_with_the_built_pattern_matches_the_ranked_one_exactly(wein99, mon
     assert [h["hard_residual"] for h in built.history] == \
         [h["hard_residual"] for h in reference.history]
     assert np.array_equal(built.mesh.vertices, reference.mesh.vertices)
+
+
+@pytest.mark.parametrize("n, bound", [(0, 8), (1, 1), (1000, 50), (100_000, 10**12),
+                                      (200_000, 2**62)])   # the last: sorted in ranges
+def test_rank_keys_is_unique_with_inverse_and_leaves_the_keys(n, bound):
+    keys = np.random.default_rng(n).integers(0, bound, n)
+    kept = keys.copy()
+    distinct, position = rank_keys(keys, bound)
+    expected, inverse = np.unique(keys, return_inverse=True)
+    assert np.array_equal(keys, kept)
+    assert np.array_equal(distinct, expected) and np.array_equal(position, inverse)

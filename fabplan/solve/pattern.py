@@ -147,22 +147,25 @@ def rank_keys(keys: np.ndarray, bound: int) -> tuple[np.ndarray, np.ndarray]:
     high = keys >> low_bits
     for part in range(int(high.max()) + 1 if n else 0):
         mine = np.flatnonzero(high == part) if low_bits < key_bits else slice(None)
-        packed = (keys[mine] - (part << low_bits)) << index_bits
+        # a copy, worked on in place (fresh memory is slow to touch)
+        packed = keys.copy() if isinstance(mine, slice) else keys[mine]
+        packed -= part << low_bits
+        packed <<= index_bits
         packed |= np.arange(len(packed))
         packed.sort()
         low = packed >> index_bits
         new = np.empty(len(low), dtype=bool)
         new[:1] = True
         np.not_equal(low[1:], low[:-1], out=new[1:])
-        starts = np.flatnonzero(new)
-        rank = np.repeat(np.arange(found, found + len(starts)), np.diff(np.r_[starts, len(low)]))
-        order = packed & ((1 << index_bits) - 1)
+        rank = np.cumsum(new)
+        rank += found - 1
+        packed &= (1 << index_bits) - 1             # the keys' indices, in sorted order
         if isinstance(mine, slice):
-            position[order] = rank
+            position[packed] = rank
         else:
-            position[mine[order]] = rank
-        distinct.append(low[starts] + (part << low_bits))
-        found += len(starts)
+            position[mine[packed]] = rank
+        distinct.append(low[new] + (part << low_bits))
+        found += int(rank[-1]) - found + 1 if len(rank) else 0
     return (np.concatenate(distinct) if distinct else np.zeros(0, dtype=np.int64)), position
 
 
