@@ -10,8 +10,10 @@ a solve that went well before goes the same way now. The solver keeps the best i
 (judged by a caller's test, e.g. fold-free and near the design, then by the hard
 residual) and returns to it when it stops short of the tolerance.
 
-The sparsity pattern of the normal equations is fixed for the whole run: it is analysed
-once, and each iteration only refills values (one `np.bincount`) and refactors numerically.
+The sparsity pattern of the normal equations is fixed for the whole run: it is built once
+from the structure of the variables (`fabplan.solve.pattern`; solvers of the same topology
+and held set share it), analysed once, and each iteration only refills values (one
+`np.bincount` into the same matrix) and refactors numerically.
 Coordinates are normalized (centroid at the origin, mean edge length 1) so that weights,
 tolerances and the regularization mean the same on every net.
 """
