@@ -178,22 +178,27 @@ class SparseSPDSolver:
             from cvxopt import cholmod, matrix, spmatrix
 
             if self._matrix is None:
+                # the values pass through one buffer (a numpy view of it), not a new matrix
+                self._values = matrix(1.0, (upper.nnz, 1))
+                self._values_view = np.asarray(self._values)[:, 0]
                 pattern = None if self._shared is None else self._shared.get("cholmod")
                 if pattern is None:
                     n = upper.shape[0]
                     rows = matrix(np.asarray(upper.indices, dtype=np.int64))
-                    cols = matrix(np.repeat(np.arange(n, dtype=np.int64), np.diff(upper.indptr)))
+                    # the column of every entry, counted up in place (fresh memory is slow)
+                    cols = matrix(0, (upper.nnz, 1), "i")
+                    column = np.asarray(cols)[:, 0]
+                    starts = upper.indptr[1:-1]
+                    np.add.at(column, starts[starts < upper.nnz], 1)
+                    np.cumsum(column, out=column)
                     # built with ones so that no structural entry is dropped, then refilled
-                    self._matrix = spmatrix(1.0, rows, cols, (n, n))
+                    self._matrix = spmatrix(self._values, rows, cols, (n, n))
                     if self._shared is not None:
                         # the next solver copies its structure (its values it overwrites)
                         self._shared["cholmod"] = self._matrix
                 else:
                     self._matrix = 1.0 * pattern     # a copy, explicit zeros kept (unlike `sparse`)
                 self._factor = cholmod.symbolic(self._matrix)
-                # the values pass through one buffer (a numpy view of it), not a new matrix
-                self._values = matrix(0.0, (upper.nnz, 1))
-                self._values_view = np.asarray(self._values)[:, 0]
             self._values_view[:] = upper.data
             self._matrix.V = self._values
             try:
