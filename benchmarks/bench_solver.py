@@ -405,6 +405,8 @@ def main(argv: list[str] | None = None) -> int:
                              "commit's tree), alternating with this one; a side-by-side table")
     parser.add_argument("--repeat", type=int, default=1,
                         help="rounds of --compare (each round runs both codes once per case)")
+    parser.add_argument("--first", choices=["new", "old"], default="new",
+                        help="the code that runs first in odd rounds of --compare")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--worker-profile", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -423,6 +425,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{env['cpus']} CPUs, net {NET}, noise {NOISE:.0%} of the mean edge", flush=True)
     records = []
     codes = [("new", None)] + ([("old", args.compare.resolve())] if args.compare else [])
+    if args.first == "old":
+        codes.reverse()
     for round_ in range(1, (args.repeat if args.compare else 1) + 1):
         for name in names:
             # alternate which code runs first, so that neither always finds the machine warm
