@@ -446,7 +446,9 @@ class PatternCache:
     max_bytes : memory the kept patterns may hold together; the newest pattern is kept
         whatever its size (its solver holds it anyway).
 
-    Safe to share between threads: solvers only read patterns.
+    Safe to share between threads: solvers only read patterns. A pattern takes about 8
+    bytes per product and 16 per entry (some 0.25 GB at 30k vertices, 0.8 GB at 100k) and
+    stays after its solve; `clear` frees them.
     """
 
     def __init__(self, max_entries: int = 4, max_bytes: int = 1 << 30) -> None:
