@@ -272,12 +272,12 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     """
     free = np.asarray(free, dtype=np.int64)
     nfree = len(free)
-    col_map = np.full(blocks.size, -1, dtype=np.int64)
+    col_map = np.full(blocks.size, nfree, dtype=np.int64)     # nfree: held
     col_map[free] = np.arange(nfree)
     node, first = variable_nodes(blocks, free)
     nodes = len(first)
     offset = np.arange(nfree) - first[node]
-    node_of = np.append(node, -1)       # at index -1: a held column has no node
+    node_of = np.append(node, -1)       # at index nfree: a held column has no node
     offset_of = np.append(offset, 0).astype(np.uint8)
 
     # 1. the node pairs of every row, one per pair of its entry groups
@@ -285,15 +285,18 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     keys = [np.arange(nodes, dtype=np.int64) * (nodes + 1)]          # the diagonal's first
     for c in columns:
         cols = col_map[np.asarray(c, dtype=np.int64)]
-        family, layout, node_keys = _family_layout(cols, node_of, offset_of, nodes, nfree)
+        family, layout, node_keys = _family_layout(cols, node_of, offset_of, nodes)
         families.append(family)
         layouts.append(layout)
         keys.append(node_keys.ravel())
     all_keys = np.concatenate(keys)
     valid = all_keys >= 0
-    pairs, position = rank_keys(all_keys[valid], max(nodes * nodes, 1))
-    pair_index = np.full(len(all_keys), -1, dtype=np.int64)
-    pair_index[valid] = position
+    if valid.all():                    # nothing held: no copies (fresh memory is slow)
+        pairs, pair_index = rank_keys(all_keys, max(nodes * nodes, 1))
+    else:
+        pairs, position = rank_keys(all_keys[valid], max(nodes * nodes, 1))
+        pair_index = np.full(len(all_keys), -1, dtype=np.int64)
+        pair_index[valid] = position
     owners, at = [], nodes
     for layout in layouts:
         owners.append(pair_index[at:at + layout.pairs * layout.rows].reshape(layout.pairs, layout.rows))
@@ -394,10 +397,12 @@ class _FamilyLayout:
     bounds: np.ndarray
 
 
-def _family_layout(cols: np.ndarray, node_of: np.ndarray, offset_of: np.ndarray, nodes: int,
-                   nfree: int) -> tuple[FamilyPattern, _FamilyLayout, np.ndarray]:
+def _family_layout(cols: np.ndarray, node_of: np.ndarray, offset_of: np.ndarray,
+                   nodes: int) -> tuple[FamilyPattern, _FamilyLayout, np.ndarray]:
     """A family's `FamilyPattern`, its layout, and the (group pairs, m) keys ``P nodes + Q``
-    of the node pairs its rows couple (-1 where a held variable has none)."""
+    of the node pairs its rows couple (-1 where a held variable has none). `cols` are free
+    columns, the number of free variables for a held one (the last entry of `node_of`
+    and `offset_of`); they become the family's gradient columns."""
     m, k = cols.shape
     row_nodes = node_of[cols]
     group = _entry_groups(row_nodes)
@@ -433,7 +438,7 @@ def _family_layout(cols: np.ndarray, node_of: np.ndarray, offset_of: np.ndarray,
         np.zeros(0, dtype=np.int64)
     if multiplicity is not None:
         multiplicity.flags.writeable = False
-    family = FamilyPattern(np.where(cols < 0, nfree, cols), op.shape, multiplicity)
+    family = FamilyPattern(cols, op.shape, multiplicity)
     return family, _FamilyLayout(m, len(gi), group_pair, within, order, bounds), node_keys
 
 
