@@ -155,6 +155,9 @@ def test_pattern_of_mixed_blocks_and_repeated_variables_is_the_ranked_one():
         built = normal_pattern(columns, blocks, free)
         assert_same_pattern(built, ranked_pattern(columns, blocks, free))
         assert built.families[3].multiplicity is not None
+    nothing_free = normal_pattern(columns, blocks, np.zeros(0, dtype=np.int64))
+    assert nothing_free.nnz == 0 and nothing_free.indptr.tolist() == [0]
+    assert (nothing_free.slots == 0).all()
 
 
 def test_variable_nodes_split_at_held_variables():

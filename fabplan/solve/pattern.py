@@ -351,6 +351,9 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     nnz = len(indices)
     slots = np.empty(sum(layout.within.size for layout in layouts), dtype=np.int64)
     at = 0
+    if not nnz:                         # every variable held: every product too
+        slots.fill(nnz)
+        layouts, owners = [], []
     for layout, owner in zip(layouts, owners, strict=True):
         p, m = layout.within.shape
         step = max(1, _CHUNK // max(m, 1))
