@@ -117,6 +117,51 @@ def _median(values: list[float]) -> float | None:
     return values[mid] if len(values) % 2 else (values[mid - 1] + values[mid]) / 2
 
 
+def _timing_hooks() -> dict:
+    """Time the set-up and the numeric factorizations from outside the solver, the same way
+    on this checkout and on older ones: the solver's pattern construction
+    (`GuidedProjection._build_pattern`), each linear solver's first factorization (symbolic
+    analysis and its matrices) and CHOLMOD's numeric factorizations. Lists of seconds."""
+    from fabplan.solve import linalg
+    from fabplan.solve import solver as solver_module
+
+    times: dict = {"pattern": [], "analysis": [], "numeric": []}
+
+    def timed(function, into: str):
+        def wrapper(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                times[into].append(time.perf_counter() - t0)
+        return wrapper
+
+    solver_class = solver_module.GuidedProjection
+    solver_class._build_pattern = timed(solver_class._build_pattern, "pattern")
+    try:
+        from cvxopt import cholmod
+    except ImportError:
+        cholmod = None
+    else:
+        cholmod.numeric = timed(cholmod.numeric, "numeric")
+    factor = linalg.SparseSPDSolver.factor
+    analysed: set = set()
+
+    def first_factor_timed(self, upper):
+        if id(self) in analysed:
+            return factor(self, upper)
+        analysed.add(id(self))
+        before, t0 = len(times["numeric"]), time.perf_counter()
+        try:
+            return factor(self, upper)
+        finally:
+            numeric = sum(times["numeric"][before:])
+            times["analysis"].append(time.perf_counter() - t0 - numeric)
+
+    linalg.SparseSPDSolver.factor = first_factor_timed
+    return times
+
+
 def run_case(name: str, profile: bool = False, max_iterations: int | None = None,
              backend: str = "auto") -> dict:
     """Generate, perturb and optimize one case in this process; the record of the run."""
@@ -131,6 +176,7 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
     setup_seconds = time.perf_counter() - t0
     before_gb = _peak_gb()
     settings = SolverSettings(backend=backend)
+    hooks = _timing_hooks()
     if max_iterations is not None:
         settings.max_iterations = max_iterations
     profiler = cProfile.Profile() if profile else None
@@ -144,15 +190,18 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
     steps = [h for h in result.history if h["step"] > 0]
     props = result.properties
     L = result.mesh.mean_edge_length
+    numeric = hooks["numeric"]
+    median_iteration = _median([h["seconds"] for h in steps])
     record = {
         "case": name,
+        "fabplan": str(Path(fabplan.__file__).resolve().parent),
         "net": NET,
         "vertices": net.vertex_count,
         "stars": int(len(net.stars)),
         "backend": result.linear_solver,
         "status": result.status,
         "iterations": result.iterations,
-        "median_iteration_seconds": _median([h["seconds"] for h in steps]),
+        "median_iteration_seconds": median_iteration,
         "first_iteration_seconds": steps[0]["seconds"] if steps else None,
         "median_assembly_seconds": _median([h["assembly_seconds"] for h in steps]),
         "median_factor_seconds": _median([h["factor_seconds"] for h in steps]),
@@ -160,6 +209,19 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
         "share": {k: sum(h[f"{k}_seconds"] for h in steps) / max(sum(h["seconds"] for h in steps), 1e-300)
                   for k in ("assembly", "factor", "solve")},
         "solver_seconds": result.seconds,
+        # set-up: the normal equations' pattern, plus the first factorization's symbolic
+        # analysis and matrices (that factorization's numeric part not counted)
+        "setup_seconds": sum(hooks["pattern"]) + sum(hooks["analysis"]),
+        "pattern_seconds": sum(hooks["pattern"]),
+        "analysis_seconds": sum(hooks["analysis"]),
+        # CHOLMOD's numeric factorizations alone (None with another backend)
+        "median_numeric_seconds": _median(numeric),
+        "numeric_seconds": numeric,
+        "iteration_over_numeric": (median_iteration / _median(numeric)
+                                   if numeric and median_iteration else None),
+        "linear_algebra_over_numeric": (
+            _median([h["assembly_seconds"] + h["factor_seconds"] + h["solve_seconds"] for h in steps])
+            / _median(numeric) if numeric and steps else None),
         "optimize_wall_seconds": wall,
         # about 1 when the run had a core to itself (the solver's work is single-threaded);
         # well below 1 when other processes competed for the CPUs
@@ -191,8 +253,14 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
 
 # ---------------------------------------------------------------------------- driver side
 def run_in_subprocess(name: str, profile: bool, max_iterations: int | None,
-                      timeout: float | None, backend: str = "auto") -> dict:
+                      timeout: float | None, backend: str = "auto",
+                      package: Path | None = None) -> dict:
+    """Run one case in a new Python process; `package`: the checkout whose fabplan it
+    imports (default: this one)."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--backend", backend]
+    root = str(package or Path(__file__).resolve().parent.parent)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [root] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
     if profile:
         cmd.append("--worker-profile")
     if max_iterations is not None:
@@ -200,7 +268,7 @@ def run_in_subprocess(name: str, profile: bool, max_iterations: int | None,
     load = os.getloadavg()[0]  # a busy neighbour process slows every number down
     t0 = time.perf_counter()
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
     except subprocess.TimeoutExpired:
         return {"case": name, "status": f"timeout after {timeout:g} s"}
     if proc.returncode != 0:
@@ -209,7 +277,32 @@ def run_in_subprocess(name: str, profile: bool, max_iterations: int | None,
     record = json.loads(proc.stdout.strip().splitlines()[-1])
     record["process_seconds"] = time.perf_counter() - t0
     record["load_average_before"] = load
+    record["load_average_after"] = os.getloadavg()[0]
     return record
+
+
+def comparison_table(records: list[dict]) -> str:
+    """One line per run of `--compare`: set-up, iteration, factorization and whole solve."""
+    head = ("| case | vertices | code | run | iterations | set-up s (pattern + analysis) "
+            "| s / iteration | numeric factorization s | iteration / factorization "
+            "| assembly + factor + solve / factorization | whole solve s | final hard residual "
+            "| load before / after |")
+    lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+    for r in records:
+        if "median_iteration_seconds" not in r:
+            lines.append(f"| {r['case']} | | {r.get('code', '')} | {r.get('run', '')} | "
+                         f"{r['status']} | | | | | | | | |")
+            continue
+        lines.append(
+            f"| {r['case']} | {r['vertices']:,} | {r['code']} | {r['run']} | {r['iterations']} "
+            f"| {r['setup_seconds']:.2f} ({r['pattern_seconds']:.2f} + {r['analysis_seconds']:.2f}) "
+            f"| {_fmt(r['median_iteration_seconds'], '.3f')} "
+            f"| {_fmt(r['median_numeric_seconds'], '.3f')} "
+            f"| {_fmt(r['iteration_over_numeric'], '.2f')} "
+            f"| {_fmt(r['linear_algebra_over_numeric'], '.2f')} "
+            f"| {r['solver_seconds']:.2f} | {r['final_hard_residual']:.3e} "
+            f"| {r['load_average_before']:.2f} / {r['load_average_after']:.2f} |")
+    return "\n".join(lines)
 
 
 def _fmt(value, spec: str, missing: str = "n/a") -> str:
@@ -243,6 +336,14 @@ def markdown_table(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _git(root: Path, *args: str) -> str | None:
+    try:
+        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True,
+                              timeout=30).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
 def environment() -> dict:
     import numpy
     import scipy
@@ -252,11 +353,7 @@ def environment() -> dict:
     root = Path(fabplan.__file__).resolve().parent.parent
 
     def git(*args):
-        try:
-            return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True,
-                                  timeout=30).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            return None
+        return _git(root, *args)
 
     return {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
@@ -303,6 +400,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--backend", default="auto",
                         help="linear solver backend: auto, pardiso, cholmod or superlu")
     parser.add_argument("--output", type=Path, default=None, help="JSON file to write")
+    parser.add_argument("--compare", type=Path, default=None, metavar="CHECKOUT",
+                        help="also run every case with the fabplan package of CHECKOUT (an older "
+                             "commit's tree), alternating with this one; a side-by-side table")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="rounds of --compare (each round runs both codes once per case)")
+    parser.add_argument("--first", choices=["new", "old"], default="new",
+                        help="the code that runs first in odd rounds of --compare")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--worker-profile", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -320,13 +424,23 @@ def main(argv: list[str] | None = None) -> int:
           f"{', uncommitted changes' if env['git_uncommitted_package_files'] else ''}), "
           f"{env['cpus']} CPUs, net {NET}, noise {NOISE:.0%} of the mean edge", flush=True)
     records = []
-    for name in names:
-        print(f"running {name} ...", flush=True)
-        records.append(run_in_subprocess(name, False, args.max_iterations, args.timeout, args.backend))
-        r = records[-1]
-        print(f"  {r['status']}, {r.get('iterations')} iterations, "
-              f"{_fmt(r.get('median_iteration_seconds'), '.3f')} s/iteration, "
-              f"peak {_fmt(r.get('peak_rss_gb'), '.2f')} GB", flush=True)
+    codes = [("new", None)] + ([("old", args.compare.resolve())] if args.compare else [])
+    if args.first == "old":
+        codes.reverse()
+    for round_ in range(1, (args.repeat if args.compare else 1) + 1):
+        for name in names:
+            # alternate which code runs first, so that neither always finds the machine warm
+            for code, package in (codes if round_ % 2 else codes[::-1]):
+                print(f"running {name}{f' ({code}, round {round_})' if args.compare else ''} ...",
+                      flush=True)
+                records.append(run_in_subprocess(name, False, args.max_iterations, args.timeout,
+                                                 args.backend, package))
+                r = records[-1]
+                r["code"], r["run"] = code, round_
+                print(f"  {r['status']}, {r.get('iterations')} iterations, "
+                      f"set-up {_fmt(r.get('setup_seconds'), '.2f')} s, "
+                      f"{_fmt(r.get('median_iteration_seconds'), '.3f')} s/iteration, "
+                      f"peak {_fmt(r.get('peak_rss_gb'), '.2f')} GB", flush=True)
     profiles = {}
     for name in args.profile:
         print(f"profiling {name} ...", flush=True)
@@ -339,7 +453,11 @@ def main(argv: list[str] | None = None) -> int:
         else:
             print(f"  {r['status']}", flush=True)
 
-    table = markdown_table(records)
+    table = markdown_table([r for r in records if r["code"] == "new"] if args.compare else records)
+    if args.compare:
+        table += "\n\n" + comparison_table(records)
+        env["compare"] = {"old": str(args.compare.resolve()),
+                          "old_commit": _git(args.compare.resolve(), "rev-parse", "HEAD")}
     print()
     print(table)
     print()

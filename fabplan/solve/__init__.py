@@ -1,7 +1,8 @@
 """The guided-projection solver (Algorithm 1 of the paper) and what it solves for.
 
-Owns: the solver (`solver`), constraint families (`constraints`), sparse linear algebra
-backends (`linalg`), the catalogue of net types (`net_types`), optimization presets
+Owns: the solver (`solver`), constraint families (`constraints`), the normal equations'
+sparsity pattern and its cache (`pattern`), sparse linear algebra backends (`linalg`), the
+catalogue of net types (`net_types`), optimization presets
 (`optimize`), handles (`edit`), reference surfaces with exact closest points
 (`reference`) and the smoothed start of a retry (`smoothing`).
 May import: `fabplan.net`, `fabplan.report`, `fabplan.io`, `fabplan.errors`.

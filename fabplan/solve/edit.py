@@ -2,7 +2,8 @@
 
 A `NetEditor` keeps one solver alive: the pattern of the normal equations and the
 symbolic factorization are computed once, every drag step runs one iteration, and a
-release runs a few more, as in the paper's editing loop (section 4.5).
+release runs a few more, as in the paper's editing loop (section 4.5). Another editor with
+the same handles on the same net takes the pattern from `fabplan.solve.pattern`'s cache.
 """
 
 from __future__ import annotations

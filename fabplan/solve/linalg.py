@@ -143,9 +143,14 @@ class SparseSPDSolver:
     backend : "auto", "pardiso", "cholmod" or "superlu".
     unknowns : size of the systems, for "auto": PARDISO from `PARDISO_MIN_UNKNOWNS`
         on, when installed; CHOLMOD otherwise.
+    shared : a dictionary kept with the sparsity pattern (`NormalPattern.shared`): what
+        the backend builds from the pattern alone is left there for the next solver of
+        the same pattern (CHOLMOD's matrix of the pattern, a quarter second at 30k
+        vertices); the next solver works on a copy of it.
     """
 
-    def __init__(self, backend: str = "auto", unknowns: int | None = None) -> None:
+    def __init__(self, backend: str = "auto", unknowns: int | None = None, *,
+                 shared: dict | None = None) -> None:
         names = available_backends()
         if backend == "auto":
             small = unknowns is None or unknowns < PARDISO_MIN_UNKNOWNS
@@ -155,9 +160,12 @@ class SparseSPDSolver:
         if backend not in names:
             raise FabplanError(f"linear solver backend {backend!r} is not installed")
         self.backend = backend
+        self._shared = shared
         # cholmod: the cvxopt matrix holding the pattern; the factorization is a _Pardiso,
         # a cvxopt CHOLMOD factor or a scipy SuperLU (the last two untyped)
         self._matrix: Any = None
+        self._values: Any = None
+        self._values_view = np.zeros(0)
         self._factor: _Pardiso | Any = None
 
     def factor(self, upper: sp.csr_matrix) -> None:
@@ -170,12 +178,29 @@ class SparseSPDSolver:
             from cvxopt import cholmod, matrix, spmatrix
 
             if self._matrix is None:
-                n = upper.shape[0]
-                cols = np.repeat(np.arange(n), np.diff(upper.indptr))
-                # built with ones so that no structural entry is dropped, then refilled
-                self._matrix = spmatrix(1.0, upper.indices.tolist(), cols.tolist(), (n, n))
+                # the values pass through one buffer (a numpy view of it), not a new matrix
+                self._values = matrix(1.0, (upper.nnz, 1))
+                self._values_view = np.asarray(self._values)[:, 0]
+                pattern = None if self._shared is None else self._shared.get("cholmod")
+                if pattern is None:
+                    n = upper.shape[0]
+                    rows = matrix(np.asarray(upper.indices, dtype=np.int64))
+                    # the column of every entry, counted up in place (fresh memory is slow)
+                    cols = matrix(0, (upper.nnz, 1), "i")
+                    column = np.asarray(cols)[:, 0]
+                    starts = upper.indptr[1:-1]
+                    np.add.at(column, starts[starts < upper.nnz], 1)
+                    np.cumsum(column, out=column)
+                    # built with ones so that no structural entry is dropped, then refilled
+                    self._matrix = spmatrix(self._values, rows, cols, (n, n))
+                    if self._shared is not None:
+                        # the next solver copies its structure (its values it overwrites)
+                        self._shared["cholmod"] = self._matrix
+                else:
+                    self._matrix = 1.0 * pattern     # a copy, explicit zeros kept (unlike `sparse`)
                 self._factor = cholmod.symbolic(self._matrix)
-            self._matrix.V = matrix(upper.data)
+            self._values_view[:] = upper.data
+            self._matrix.V = self._values
             try:
                 cholmod.numeric(self._matrix, self._factor)
             except ArithmeticError:

@@ -10,8 +10,10 @@ a solve that went well before goes the same way now. The solver keeps the best i
 (judged by a caller's test, e.g. fold-free and near the design, then by the hard
 residual) and returns to it when it stops short of the tolerance.
 
-The sparsity pattern of the normal equations is fixed for the whole run: it is analysed
-once, and each iteration only refills values (one `np.bincount`) and refactors numerically.
+The sparsity pattern of the normal equations is fixed for the whole run: it is built once
+from the structure of the variables (`fabplan.solve.pattern`; solvers of the same topology
+and held set share it), analysed once, and each iteration only refills values (one
+`np.bincount` into the same matrix) and refactors numerically.
 Coordinates are normalized (centroid at the origin, mean edge length 1) so that weights,
 tolerances and the regularization mean the same on every net.
 """
@@ -29,6 +31,7 @@ from ..errors import SolverError
 from ..net.geometry import canonical_stars
 from .constraints import Constraint, NetState, VariableBlocks
 from .linalg import SparseSPDSolver
+from .pattern import NormalPattern, normal_pattern, pattern_cache, pattern_key
 
 if TYPE_CHECKING:
     from ..net.mesh import QuadMesh
@@ -97,82 +100,6 @@ class IterationRecord:
         return dict(self.__dict__)
 
 
-@dataclass
-class _FamilyPattern:
-    """Where one family's Jacobian entries land in the normal equations.
-
-    A row with ``k`` entries gives the ``k (k + 1) / 2`` products of its entry pairs
-    ``i <= j``; they are stored pair-major, ``(p, m)``, so that the pairs of entry ``i``
-    come out of one broadcast multiply of column ``i`` with columns ``i..k-1``.
-    """
-
-    gradient_cols: np.ndarray  # (m, k) free-variable column of each entry, nfree if fixed
-    shape: tuple               # (p, m): the family's block in the shared product buffer
-    multiplicity: np.ndarray | None = None  # (p, m) 2 where a row repeats a variable
-
-
-@dataclass
-class _Pattern:
-    families: list             # _FamilyPattern per constraint family
-    indptr: np.ndarray         # upper triangle of J^T J + eps I, CSR (= lower, CSC)
-    indices: np.ndarray
-    diagonal: np.ndarray       # (nfree,) positions of the diagonal entries
-    slots: np.ndarray          # all families' slots, concatenated
-    products: np.ndarray       # buffer for all families' products, same length
-
-
-def _rank(keys: np.ndarray, bound: int) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted distinct keys and the position of every key among them.
-
-    Parameters
-    ----------
-    keys : (n,) int64, values in ``[0, bound)``.
-    bound : exclusive upper bound of the keys.
-
-    Returns
-    -------
-    distinct : (u,) int64, the sorted distinct keys.
-    position : (n,) int64, ``distinct[position] == keys``.
-
-    Each key is packed with its index into one int64 and sorted (``np.sort`` is far
-    faster than ``argsort`` or a search of tens of millions of keys); when key and index
-    need more than 63 bits the keys are sorted in ranges of their high bits.
-
-    Examples
-    --------
-    >>> distinct, position = _rank(np.array([7, 3, 7, 0]), 8)
-    >>> distinct.tolist(), position.tolist()
-    ([0, 3, 7], [2, 1, 2, 0])
-    """
-    keys = np.asarray(keys, dtype=np.int64)
-    n = len(keys)
-    index_bits = max(1, (n - 1).bit_length())
-    key_bits = max(1, (int(bound) - 1).bit_length())
-    low_bits = min(key_bits, 63 - index_bits)
-    position = np.empty(n, dtype=np.int64)
-    distinct, found = [], 0
-    high = keys >> low_bits
-    for part in range(int(high.max()) + 1 if n else 0):
-        mine = np.flatnonzero(high == part) if low_bits < key_bits else slice(None)
-        packed = (keys[mine] - (part << low_bits)) << index_bits
-        packed |= np.arange(len(packed))
-        packed.sort()
-        low = packed >> index_bits
-        new = np.empty(len(low), dtype=bool)
-        new[:1] = True
-        np.not_equal(low[1:], low[:-1], out=new[1:])
-        starts = np.flatnonzero(new)
-        rank = np.repeat(np.arange(found, found + len(starts)), np.diff(np.r_[starts, len(low)]))
-        order = packed & ((1 << index_bits) - 1)
-        if isinstance(mine, slice):
-            position[order] = rank
-        else:
-            position[mine[order]] = rank
-        distinct.append(low[starts] + (part << low_bits))
-        found += len(starts)
-    return (np.concatenate(distinct) if distinct else np.zeros(0, dtype=np.int64)), position
-
-
 class GuidedProjection:
     """Solve a set of constraint families on a quad mesh.
 
@@ -219,7 +146,9 @@ class GuidedProjection:
         self.free = np.flatnonzero(free)
         self.history: list[IterationRecord] = []
         self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free))
-        self._pattern: _Pattern | None = None
+        self._pattern: NormalPattern | None = None
+        self._buffers: _AssemblyBuffers | None = None    # reused by every assembly
+        self._upper: sp.csr_matrix | None = None        # the normal equations, refilled
         self.status = "not started"
         self.admissible = admissible
         self.best: _Iterate | None = None    # the best iterate seen (see `run`)
@@ -254,75 +183,70 @@ class GuidedProjection:
         self._held[np.searchsorted(self.fixed, ids[held])] = positions[held]
 
     # -------------------------------------------------------------- assembly
-    def _build_pattern(self) -> _Pattern:
+    def _build_pattern(self) -> NormalPattern:
         """Fix the sparsity of the normal equations once for the whole run.
 
         Row ``i`` of ``J`` contributes ``J[i, p] J[i, q]`` to entry ``(p, q)`` of ``J^T J``;
-        every product is mapped once to its slot in the upper triangle, so each iteration
-        assembles ``J^T J`` with a single `np.bincount` over all families, keeping exact
-        zeros as entries (the factorization's symbolic analysis stays valid).
+        every product has its slot in the upper triangle (`fabplan.solve.pattern`), so each
+        iteration assembles ``J^T J`` with a single `np.bincount` over all families, keeping
+        exact zeros as entries (the factorization's symbolic analysis stays valid). A
+        pattern built for the same columns and free variables before (another candidate
+        on this topology, a solve with the same handles) is taken from `pattern_cache`.
         """
         state = self.state
-        nfree = len(self.free)
-        col_map = np.full(state.blocks.size, -1)
-        col_map[self.free] = np.arange(nfree)
-        families, pair_keys = [], []
-        for c in self.constraints:
-            cols = col_map[np.asarray(c.columns(state))]
-            # J^T J is symmetric: the pairs p <= q of a row's entries fill its upper triangle
-            first, second = np.triu_indices(cols.shape[1])
-            cp, cq = cols.T[first], cols.T[second]            # (p, m), pair-major
-            lo, hi = np.minimum(cp, cq), np.maximum(cp, cq)
-            # -1 marks a pair on a held variable: it has no slot
-            pair_keys.append(np.where(lo >= 0, lo * nfree + hi, -1))
-            # a row naming one variable at two entries adds their product twice
-            twice = (cp == cq) & (first != second)[:, None]
-            families.append(_FamilyPattern(
-                np.where(cols < 0, nfree, cols), cp.shape,
-                np.where(twice, 2.0, 1.0) if twice.any() else None))
-        # the diagonal first (always present), then every family's pairs
-        keys = np.concatenate([np.arange(nfree) * (nfree + 1)] + [k.ravel() for k in pair_keys])
-        valid = keys >= 0
-        ukeys, ranks = _rank(keys if valid.all() else keys[valid], nfree * nfree)
-        slots = np.full(len(keys), len(ukeys))   # held pairs: a dummy slot past the end
-        slots[valid] = ranks
-        return _Pattern(families=families,
-                        indptr=np.searchsorted(ukeys // nfree, np.arange(nfree + 1)),
-                        indices=ukeys % nfree, diagonal=slots[:nfree],
-                        slots=slots[nfree:], products=np.empty(len(keys) - nfree))
+        columns = [np.asarray(c.columns(state)) for c in self.constraints]
+        key = pattern_key(columns, state.blocks, self.free)
+        pattern = pattern_cache.get(key)
+        if pattern is None:
+            pattern = pattern_cache.put(normal_pattern(columns, state.blocks, self.free, key=key))
+        return pattern
 
     @property
-    def pattern(self) -> _Pattern:
+    def pattern(self) -> NormalPattern:
         """The fixed sparsity pattern of the normal equations (built by the first `run`)."""
         if self._pattern is None:
             raise SolverError("the solver has not been run yet: no sparsity pattern")
         return self._pattern
 
-    def _assemble(self, jacobians: list, residuals: list,
+    def _assemble(self, jacobians: list, residuals: list, weights: list[float],
                   damping: float) -> tuple[sp.csr_matrix, np.ndarray]:
-        """Upper triangle of ``J^T J + damping I`` (CSR) and the gradient ``J^T r``."""
+        """Upper triangle of ``J^T J + damping I`` (CSR) and the gradient ``J^T r`` of the
+        weighted system (`jacobians` and `residuals` unweighted, one row weight per family).
+
+        The matrix is one object for the whole run (its index arrays are the pattern's) and
+        the per-family buffers are reused: an iteration only computes values.
+        """
         pat = self.pattern
-        nnz, nfree = len(pat.indices), len(self.free)
+        nnz, nfree = pat.nnz, len(self.free)
+        if self._buffers is None:
+            self._buffers = _AssemblyBuffers.for_pattern(pat)
+        buffers = self._buffers
         gradient = np.zeros(nfree + 1)
         start = 0
-        for f, J, r in zip(pat.families, jacobians, residuals, strict=True):
-            out = pat.products[start:start + int(np.prod(f.shape))].reshape(f.shape)
+        for f, J, r, w, columns, entries in zip(pat.families, jacobians, residuals, weights,
+                                                buffers.columns, buffers.entries, strict=True):
+            out = buffers.products[start:start + int(np.prod(f.shape))].reshape(f.shape)
             start += out.size
             if J.size == 0:
                 continue
-            columns = np.ascontiguousarray(J.T)
+            np.multiply(J, w, out=entries)              # the weighted Jacobian
+            np.copyto(columns, entries.T)                # and entry-major
             k, pair = len(columns), 0
             for i in range(k):     # entries of a row, not rows: k <= 16 broadcast multiplies
                 np.multiply(columns[i], columns[i:], out=out[pair:pair + k - i])
                 pair += k - i
             if f.multiplicity is not None:
                 out *= f.multiplicity
-            gradient += np.bincount(f.gradient_cols.ravel(), weights=(J * r[:, None]).ravel(),
+            entries *= (w * r)[:, None]
+            gradient += np.bincount(f.gradient_cols.ravel(), weights=entries.ravel(),
                                     minlength=nfree + 1)
-        data = np.bincount(pat.slots, weights=pat.products, minlength=nnz + 1)[:nnz]
+        data = np.bincount(pat.slots, weights=buffers.products, minlength=nnz + 1)[:nnz]
         data[pat.diagonal] += damping
-        upper = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(nfree, nfree))
-        return upper, gradient[:nfree]
+        if self._upper is None:
+            self._upper = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(nfree, nfree))
+        else:
+            self._upper.data = data
+        return self._upper, gradient[:nfree]
 
     def _factor(self, upper: sp.csr_matrix, damping: float) -> None:
         """Factor, adding damping when rounding makes the matrix lose definiteness."""
@@ -435,6 +359,8 @@ class GuidedProjection:
             for c in self.constraints:
                 c.prepare(self.state)
             self._pattern = self._build_pattern()
+            self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free),
+                                           shared=self._pattern.shared)
         first = self.run_start = len(self.history)
         self.status = "iteration cap"
         self.best, self._damping_scale, self.monotone = None, 1.0, False
@@ -514,10 +440,8 @@ class GuidedProjection:
         """
         s = self.settings
         t0 = time.perf_counter()
-        residuals = [w * r for w, r in zip(weights, current.residuals, strict=True)]
-        jacobians = [w * J for w, J in zip(weights, current.jacobians, strict=True)]
         damping = base * self._damping_scale
-        upper, gradient = self._assemble(jacobians, residuals, damping)
+        upper, gradient = self._assemble(current.jacobians, current.residuals, weights, damping)
         t_assembly = time.perf_counter() - t0
         t_factor = t_solve = 0.0
         growth = 4.0            # each rejection raises the damping fourfold
@@ -541,7 +465,7 @@ class GuidedProjection:
                         trial, weights, merit, damping, length * h, gradient, hard_index,
                         ceiling if rejected == 0 else None, length=length):
                     return trial, IterationRecord(
-                        0, {}, 0.0, float(length * np.linalg.norm(h)), 0.0, t_assembly,
+                        0, {}, 0.0, float(length * np.sqrt(_dot(h, h))), 0.0, t_assembly,
                         t_factor, t_solve, merit=merit, rejected=rejected, damping=damping)
                 self._restore(before)
             raised = damping * growth
@@ -563,7 +487,7 @@ class GuidedProjection:
         # the decrease the linearization predicts for t h, h solving (J^T J + mu) h = -g:
         # -t g.h - t^2 h^T J^T J h / 2, with h^T J^T J h = -g.h - mu |h|^2 (here h is t h)
         full = h / length
-        gh, hh = float(gradient @ full), float(full @ full)
+        gh, hh = _dot(gradient, full), _dot(full, full)
         predicted = -length * gh + 0.5 * length * length * (gh + damping * hh)
         achieved = merit - trial.merit(weights)
         gain = achieved / predicted if predicted > 0 else (1.0 if achieved >= 0 else -1.0)
@@ -577,6 +501,28 @@ class GuidedProjection:
         return True
 
 
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a . b`` in this thread: BLAS would split a long vector over its threads, and on
+    a machine whose other core is busy every iteration waits for that thread (tens of ms
+    at 30k vertices)."""
+    return float(np.einsum("i,i->", a, b))
+
+
+@dataclass
+class _AssemblyBuffers:
+    """Arrays an assembly fills, allocated once per solver (not shared: a pattern may be)."""
+
+    products: np.ndarray       # (products,) every family's entry products
+    columns: list              # per family (k, m): the weighted Jacobian, entry-major
+    entries: list              # per family (m, k): weighted Jacobian times weighted residual
+
+    @classmethod
+    def for_pattern(cls, pattern: NormalPattern) -> _AssemblyBuffers:
+        shapes = [f.gradient_cols.shape for f in pattern.families]
+        return cls(np.empty(len(pattern.slots)), [np.empty((k, m)) for m, k in shapes],
+                   [np.empty((m, k)) for m, k in shapes])
+
+
 @dataclass
 class _Evaluation:
     """Unweighted residuals and Jacobians of every family at one point."""
@@ -588,11 +534,11 @@ class _Evaluation:
 
     def merit(self, weights: list[float]) -> float:
         """Half the weighted sum of squares of all residuals."""
-        return 0.5 * sum(w * w * float(r @ r) for w, r in zip(weights, self.residuals, strict=True))
+        return 0.5 * sum(w * w * _dot(r, r) for w, r in zip(weights, self.residuals, strict=True))
 
     def hard_merit(self, hard_index: list[int]) -> float:
         """Half the sum of squares of the hard residuals (comparable across iterations)."""
-        return 0.5 * sum(float(self.residuals[i] @ self.residuals[i]) for i in hard_index)
+        return 0.5 * sum(_dot(self.residuals[i], self.residuals[i]) for i in hard_index)
 
 
 @dataclass
