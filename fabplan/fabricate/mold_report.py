@@ -170,17 +170,15 @@ def step_figure(plan: MoldPlan) -> str:
     colors = cmap(np.clip(worst / limit, 0.0, 1.0))
     fig = figures.new_figure((9, 7))
     ax = fig.subplots()
-    figures.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals)
     over = plan.steps_over
-    if over.size:
-        from matplotlib.collections import LineCollection
-
-        segments = (mesh.vertices[mesh.interior_edges[over]] @ view.T)[..., :2]
-        ax.add_collection(LineCollection(segments, colors=[(0.85, 0.1, 0.1)], linewidths=1.5,
-                                         zorder=10))
+    # the edges over the limit in red, over a face they border and hidden by nearer ones
+    figures.draw_mesh(ax, mesh.vertices, mesh.faces, colors, view, normals=normals,
+                      lines=mesh.vertices[mesh.interior_edges[over]],
+                      line_faces=pairs[over, 0] if len(pairs) else np.zeros(0, np.int64),
+                      line_colors=(0.85, 0.1, 0.1, 1.0), line_width=1.5)
     sm = mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(0.0, limit), cmap=cmap)
     fig.colorbar(sm, ax=ax, shrink=0.7, label="largest step to a neighbour's mold [mm]")
-    ax.set_title(f"Steps between neighbouring panels' molds: largest {plan.max_step_mm:.2f} mm, "
+    ax.set_title(f"Steps between neighbouring panels' molds\nlargest {plan.max_step_mm:.2f} mm, "
                  f"{over.size} edges over {limit:g} mm")
     return figures.figure_to_data_uri(fig)
 
