@@ -120,6 +120,7 @@ def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> 
     rng = np.random.default_rng(seed)
     X, faces = mesh.vertices, mesh.faces
     held = _held_vertices(faces, len(X))
+    held |= not held.any()                      # a net without stars: every vertex counts
     at_vertex: dict = {}
     for f, face in enumerate(faces):
         for v in face:
@@ -518,3 +519,26 @@ def test_the_design_panel_surface_needs_an_exact_design():
     net = height_field_grid(5, 5, lambda x, y: 0.1 * x * y)
     with pytest.raises(InputError, match="built-in or NURBS"):
         plan_molds(net, tolerance_mm=1.0, panel_surface="design")
+
+
+def test_a_net_without_stars_fits_its_panels_to_their_neighbours():
+    # two rows of faces: no vertex is a star's, so none is left out of the fits
+    net = height_field_grid(6, 2, lambda x, y: 0.05 * (x * x + y * y))
+    local = plan_molds(net, tolerance_mm=1.0, units="m", panel_surface="local_fit")
+    corners = plan_molds(net, tolerance_mm=1.0, units="m", panel_surface="corners")
+    assert len(net.stars) == 0
+    assert np.abs(local.curvature).max() > 2 * np.abs(corners.curvature).max()
+
+
+def test_the_step_limit_is_a_setting_and_flat_panels_need_no_mold_by_the_bound():
+    net = height_field_grid(8, 8, lambda x, y: 0.002 * x * x * y + 0.01 * x * y, spacing=2.0)
+    strict = plan_molds(net, tolerance_mm=1.0, units="m")
+    loose = plan_molds(net, settings=MoldSettings(tolerance_mm=1.0, units="m",
+                                                  step_limit_mm=2 * strict.max_step_mm))
+    assert strict.steps_over.size and not strict.fits_all
+    assert loose.step_limit_mm == 2 * strict.max_step_mm and loose.fits_all
+    assert loose.record()["panel_steps"]["limit_mm"] == loose.step_limit_mm
+    with pytest.raises(InputError, match="step limit"):
+        plan_molds(net, tolerance_mm=1.0, step_limit_mm=-1.0)
+    flat = plan_molds(height_field_grid(4, 4, lambda x, y: 0 * x), tolerance_mm=1.0)
+    assert flat.mold_count_bound() == (0.0, 0)

@@ -76,11 +76,11 @@ __all__ = [
 ]
 
 UNITS = {"m": 1000.0, "mm": 1.0}
+"""Millimetres per model unit for each accepted ``units`` name (molds and strips)."""
 
 STEP_ROUNDS = 3
 """Rounds of casting the panels of over-limit steps on closer molds (tolerance halved in
 each round)."""
-"""Millimetres per model unit for each accepted ``units`` name (molds and strips)."""
 
 TOLERANCE_RANGE_MM = (0.01, 1000.0)
 """Mold tolerances that mean something: finer than 0.01 mm no mold is made, a gap of a
@@ -111,6 +111,8 @@ class MoldSettings:
     rounds : cap on the refit / reassign / remove rounds.
     step_fractions : where along every shared edge the step between the two panels' molds
         is measured (fractions of the edge from its first vertex).
+    step_limit_mm : largest step allowed between neighbouring panels' molds (mm); None:
+        twice the tolerance (two panels each within the tolerance of one surface).
     """
 
     tolerance_mm: float = 5.0
@@ -122,6 +124,7 @@ class MoldSettings:
     reserve: float = 0.01
     rounds: int = 8
     step_fractions: tuple[float, ...] = (0.25, 0.5, 0.75)
+    step_limit_mm: float | None = None
 
     def check(self) -> None:
         """Refuse impossible settings with a one-line `InputError`."""
@@ -142,6 +145,9 @@ class MoldSettings:
                              "local_fit, corners or design")
         if self.cover_level < 1 or self.verify_level < 1:
             raise InputError("the sample levels must be at least 1")
+        limit = self.step_limit_mm
+        if limit is not None and not (math.isfinite(limit) and limit > 0):
+            raise InputError(f"the step limit must be a positive number of millimetres, got {limit}")
 
     @property
     def mm_per_unit(self) -> float:
@@ -580,7 +586,8 @@ class MoldPlan:
     ----------
     mesh : the net (`fabplan.mesh.QuadMesh`).
     settings : the `MoldSettings` used.
-    panel_surface : the panel surface model used (``"local_fit"`` or ``"corners"``).
+    panel_surface : the panel surface model used (``"local_fit"``, ``"corners"`` or
+        ``"design"``).
     panel_type : (p,) int, index into `PANEL_TYPES`.
     curvature : (p, 2) float, signed principal curvatures ``k1 >= k2`` of every panel
         with respect to its face normal (1/mm).
@@ -647,8 +654,9 @@ class MoldPlan:
 
     @property
     def step_limit_mm(self) -> float:
-        """Largest step allowed between neighbouring panels: twice the tolerance."""
-        return 2.0 * self.settings.tolerance_mm
+        """Largest step allowed between neighbouring panels (`MoldSettings.step_limit_mm`)."""
+        s = self.settings
+        return 2.0 * s.tolerance_mm if s.step_limit_mm is None else float(s.step_limit_mm)
 
     @property
     def steps_over(self) -> np.ndarray:
@@ -666,8 +674,15 @@ class MoldPlan:
         return self.failures.size == 0 and self.steps_over.size == 0
 
     def mold_count_bound(self) -> tuple[float, int]:
-        """`mold_count_bound` of the panels' curvatures at the median panel's reach."""
-        return mold_count_bound(self.curvature, self.curvature_reach(0.5))
+        """`mold_count_bound` of the curved panels' curvatures, each in the form a mold takes
+        it (turned over when its mean curvature is negative: ``(-k2, -k1)``), at the median
+        panel's reach; ``(0.0, 0)`` when every panel is flat."""
+        curved = np.asarray(self.panel_type) > 0
+        if not curved.any():
+            return 0.0, 0
+        k = self.curvature[curved]
+        turned = np.where((k.sum(axis=1) < 0)[:, None], -k[:, ::-1], k)
+        return mold_count_bound(turned, self.curvature_reach(0.5))
 
     @property
     def panels_per_mold(self) -> np.ndarray:
@@ -818,7 +833,8 @@ class MoldPlan:
                f"{len(r['failures'])} panels do not fit (faces {r['failures'][:10]})"),
             f"largest step between neighbouring panels' molds {self.max_step_mm:.3f} mm "
             f"(limit {self.step_limit_mm:g} mm, {self.steps_over.size} shared edges over it); "
-            f"at least {r['mold_count_bound']['molds']} molds by the curvature set's length",
+            f"about {r['mold_count_bound']['molds']} molds at the least by the curvature set's "
+            "length",
         ]
         if w.get("thickness") is not None:
             lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
@@ -916,10 +932,11 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
     # patches of one design share their edges; the other panels' surfaces may differ there
     surface_step = (np.zeros(len(mesh.interior_edge_faces)) if model == "design"
                     else surface_steps(mesh, surfaces, fractions) * mm)
-    closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= 2.0 * tol
+    step_limit = 2.0 * tol if settings.step_limit_mm is None else float(settings.step_limit_mm)
+    closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= step_limit
     stepped = np.zeros(0, np.int64)
     for k in range(1, STEP_ROUNDS + 1):
-        faces = np.unique(mesh.interior_edge_faces[(step > 2.0 * tol) & closable])
+        faces = np.unique(mesh.interior_edge_faces[(step > step_limit) & closable])
         if faces.size == 0:
             break
         stepped = np.union1d(stepped, faces)

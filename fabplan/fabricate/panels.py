@@ -146,8 +146,9 @@ def panel_neighbourhoods(mesh, model: str = "local_fit") -> tuple[np.ndarray, np
     for ``local_fit`` also the vertices of the faces sharing a vertex with it, except vertices in
     no star (`fabplan.net.free_vertices`: nothing of the net holds them, so they say nothing of
     its surface), which count only as their own faces' corners."""
-    return face_neighbourhoods(mesh, ring=model == "local_fit",
-                               ignore=free_vertices(mesh) if model == "local_fit" else None)
+    # a net without a single star holds none of its vertices: all of them count then
+    ignore = free_vertices(mesh) if model == "local_fit" and len(mesh.stars) else None
+    return face_neighbourhoods(mesh, ring=model == "local_fit", ignore=ignore)
 
 
 @dataclass(frozen=True)
@@ -164,7 +165,7 @@ class PanelSurfaces:
         ``z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2) / 2`` in scaled coordinates.
     corners : (f, k_max, 2) float, the corners projected into the face plane (scaled), padded
         by repeating the last corner.
-    model : the surface model, ``"local_fit"`` or ``"corners"``.
+    model : the surface model, ``"local_fit"``, ``"corners"`` or ``"design"``.
     """
 
     origin: np.ndarray
@@ -342,7 +343,8 @@ def surface_steps(mesh, surfaces: PanelSurfaces, fractions: np.ndarray) -> np.nd
 
 def design_panel_samples(mesh, surfaces: PanelSurfaces, design, level: int) -> np.ndarray:
     """`panel_samples` moved onto the exact design: the points of the patch of `design` over
-    every face (model ``design``; `surfaces` are the ``local_fit`` ones the points start from).
+    every face (model ``design``; `surfaces` give the points they start from: the faces'
+    ``local_fit`` or their ``design`` quadrics).
 
     Returns
     -------
@@ -358,6 +360,10 @@ def fit_design_panels(mesh, design, level: int) -> PanelSurfaces:
     frame of its ``local_fit`` panel."""
     local = fit_panel_surfaces(mesh, "local_fit")
     points = design_panel_samples(mesh, local, design, level)
-    coefficients = fit_height_fields(points, np.ones(points.shape[:2]), local.origin,
-                                     local.frame, local.scale)
+    # samples beyond a face's own (padding, see `panel_samples`) get no weight
+    sizes = mesh.face_sizes
+    per_corner = points.shape[1] // int(sizes.max())
+    weight = np.repeat(np.arange(int(sizes.max()))[None, :] < sizes[:, None], per_corner,
+                       axis=1).astype(float)
+    coefficients = fit_height_fields(points, weight, local.origin, local.frame, local.scale)
     return replace(local, coefficients=coefficients, model="design")

@@ -64,8 +64,8 @@ def settle_free_vertices(mesh, keep: np.ndarray | None = None, step: float = 0.0
 
     Returns
     -------
-    mesh : `fabplan.net.mesh.QuadMesh`, the same object when nothing moves (no free vertex
-        next to a held one, or no star at all).
+    mesh : `fabplan.net.mesh.QuadMesh`, the same object when no free vertex can move (none
+        next to a held one, none stepping, or no star at all).
     moved : (n,) float, how far each vertex moved (model units).
     """
     n = mesh.vertex_count
@@ -83,9 +83,9 @@ def settle_free_vertices(mesh, keep: np.ndarray | None = None, step: float = 0.0
     a, b = np.concatenate([mesh.edges, mesh.edges[:, ::-1]]).T
     toward = movable[a] & ~free[b]
     neighbour = sp.csr_matrix((np.ones(int(toward.sum())), (a[toward], b[toward])), shape=(n, n))
-    keep = held_face[face]
-    at = sp.csr_matrix((np.ones(int(keep.sum())), (mesh.face_indices[keep], face[keep])),
-                       shape=(n, nf))
+    held_corner = held_face[face]
+    at = sp.csr_matrix((np.ones(int(held_corner.sum())),
+                        (mesh.face_indices[held_corner], face[held_corner])), shape=(n, nf))
     pairs = (neighbour @ at).tocoo()
     if pairs.nnz == 0:
         return mesh, np.zeros(n)

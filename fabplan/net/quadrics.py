@@ -94,7 +94,7 @@ def face_neighbourhoods(mesh, ring: bool = True,
     vertices[row, col] = reach.indices
     weight = np.zeros((nf, m))
     is_corner = np.asarray(incidence[row, reach.indices]).ravel() > 0
-    other = 0.0 if ignore is None else np.where(ignore[reach.indices], 0.0, 1.0)
+    other = 1.0 if ignore is None else np.where(ignore[reach.indices], 0.0, 1.0)
     weight[row, col] = np.where(is_corner, CORNER_WEIGHT, 1.0 * other)
     return vertices, weight
 

@@ -410,8 +410,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     free = free_vertices(result_mesh)
     moved = np.zeros(result_mesh.vertex_count)
     # planar faces hold every corner, tips included: nothing is free to settle
+    # (and a gliding net holds every vertex on the design)
     faces_held = any(c.name == "planar-faces" for c in solver.constraints)
-    if settle_free is not None and free.any() and not faces_held:
+    if settle_free is not None and free.any() and not faces_held and not glide:
         result_mesh, moved = settle_free_vertices(result_mesh, keep=held, step=settle_free)
         if moved.any():
             folds = measure_folds(mesh, result_mesh.vertices, reference=solver.reference)

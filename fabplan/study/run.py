@@ -489,7 +489,9 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
         molds = twin.molds
     else:
         # a net held on the design: its panels are patches of the design itself
-        molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=tolerance, units=units),
+        limit = study.limits_of(candidate).panel_step_limit_mm
+        molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=tolerance, units=units,
+                                                  step_limit_mm=limit),
                            design=design if candidate.glides else None)
     bounds = None
     if net.boundary_panels is not None:
@@ -683,7 +685,8 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
     checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any),
     ``max_panel_step_mm`` (largest step between neighbouring panels' molds at a shared
     edge), ``panel_steps_over`` (shared edges whose step exceeds twice the tolerance) and
-    ``bound`` (the fewest molds the panels' curvature set allows, `MoldPlan.mold_count_bound`).
+    ``bound`` (an estimate of the fewest molds the panels' curvature set allows,
+    `MoldPlan.mold_count_bound`).
     """
     curved = np.asarray(plan.mold_type) > 0
     per_mold = plan.panels_per_mold.copy()
