@@ -114,3 +114,16 @@ def edge_midpoint_steps(record: dict, mesh: QuadMesh) -> np.ndarray:
         qb = into(B, back)
         step = np.maximum(step, np.linalg.norm(qb - closest_on_mold(qb, K[B]), axis=1))
     return step
+
+
+def measured_saddle_candidate(tolerance_mm: float):
+    """A gliding S-net on an 8 x 8 m hyperbolic paraboloid as a study measures a candidate:
+    ``(result, plan, metrics)`` with its molds at `tolerance_mm`
+    (`fabplan.study.run.measure_candidate`), for tests of a study's limits."""
+    import fabplan
+    from fabplan.study.run import measure_candidate
+
+    design = fabplan.load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5", triangles=4000)
+    result = fabplan.glide(fabplan.layout_surface(design, 1.5), "snet")
+    plan = fabplan.plan_molds(result.mesh, tolerance_mm=tolerance_mm)
+    return result, plan, measure_candidate(result, design, plan, None, mm_per_unit=1000.0)

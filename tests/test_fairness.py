@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import measured_saddle_candidate
 
 from fabplan.net.fairness import fairness_record
 from fabplan.net.generate import height_field_grid
@@ -36,14 +37,10 @@ def test_a_vertex_moved_sideways_is_the_worst_place():
 
 
 def test_a_study_limits_how_far_the_lines_turn():
-    import fabplan
-    from fabplan.study.run import measure_candidate, verdict
+    from fabplan.study.run import verdict
     from fabplan.study.spec import Limits
 
-    design = fabplan.load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5", triangles=4000)
-    result = fabplan.glide(fabplan.layout_surface(design, 1.5), "snet")
-    plan = fabplan.plan_molds(result.mesh, tolerance_mm=5.0)
-    metrics = measure_candidate(result, design, plan, None, mm_per_unit=1000.0)
+    result, _, metrics = measured_saddle_candidate(5.0)
     turn = metrics["line_turn_deg"]["max"]
     assert turn == result.properties["fairness"]["line_turn_deg"]["max"] and turn > 0
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import edge_midpoint_steps
+from helpers import edge_midpoint_steps, measured_saddle_candidate
 
 import fabplan
 from fabplan.cli import main
@@ -463,13 +463,10 @@ def test_a_step_over_twice_the_tolerance_fails_the_plan():
 
 
 def test_a_study_limits_the_step_between_neighbouring_panels():
-    from fabplan.study.run import measure_candidate, verdict
+    from fabplan.study.run import verdict
     from fabplan.study.spec import Limits
 
-    design = fabplan.load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5", triangles=4000)
-    result = fabplan.glide(fabplan.layout_surface(design, 1.5), "snet")
-    plan = fabplan.plan_molds(result.mesh, tolerance_mm=1.0)
-    metrics = measure_candidate(result, design, plan, None, mm_per_unit=1000.0)
+    _, plan, metrics = measured_saddle_candidate(1.0)
     step = metrics["molds"]["max_panel_step_mm"]
     assert step == plan.max_step_mm > 0
     assert metrics["molds"]["panel_steps_over"] == plan.steps_over.size

@@ -63,7 +63,7 @@ def explain_mold_count(plan: MoldPlan) -> str:
 
 
 def _vertex_values(mesh, face_values: np.ndarray) -> np.ndarray:
-    face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+    face = mesh.corner_faces
     total = np.bincount(mesh.face_indices, face_values[face], minlength=mesh.vertex_count)
     count = np.bincount(mesh.face_indices, minlength=mesh.vertex_count)
     return total / np.maximum(count, 1)

@@ -78,10 +78,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
         return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _face_of_corner(mesh) -> np.ndarray:
-    return np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
-
-
 def check_panels(mesh) -> None:
     """Refuse a net with a degenerate face, naming it (`QuadMesh` already refuses a mesh
     without faces).
@@ -92,7 +88,7 @@ def check_panels(mesh) -> None:
         When a face has (almost) no area: its corners coincide or lie on one line.
     """
     X = mesh.vertices
-    face = _face_of_corner(mesh)
+    face = mesh.corner_faces
     ptr, sizes = mesh.face_indptr, mesh.face_sizes
     local = np.arange(len(face)) - ptr[face]
     nxt = mesh.face_indices[np.where(local == sizes[face] - 1, ptr[face], np.arange(len(face)) + 1)]

@@ -411,7 +411,7 @@ def _sphere_normals(mesh: QuadMesh) -> np.ndarray:
 
 def _face_mean_normals(mesh: QuadMesh) -> np.ndarray:
     F = face_normals(mesh.vertices, mesh)
-    face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+    face = mesh.corner_faces
     N = np.zeros_like(mesh.vertices)
     np.add.at(N, mesh.face_indices, F[face])
     return N / np.linalg.norm(N, axis=1, keepdims=True)
@@ -1121,7 +1121,7 @@ def _one_edge_run(mesh: QuadMesh, N: np.ndarray, v: np.ndarray, scale: float) ->
     kappa = float((N[v[0]] - N[v[1]]) @ e / (e @ e)) / scale
     if np.allclose(N[v[0]], N[v[1]], atol=1e-12) and len(mesh.stars):
         idx = mesh.face_indices
-        face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+        face = mesh.corner_faces
         both = np.intersect1d(face[idx == v[0]], face[idx == v[1]])
         corners = idx[np.isin(face, both)]
         near = np.isin(mesh.stars, corners).any(axis=1)  # stars reaching the edge's faces

@@ -259,7 +259,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     lone = np.flatnonzero(neighbour < 0)
     if lone.size:
         centre = np.array([vertices[polygons[k]].mean(axis=0) for k in lone])
-        face_centre = np.stack([np.bincount(np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes),
+        face_centre = np.stack([np.bincount(mesh.corner_faces,
                                             mesh.vertices[mesh.face_indices, k]) for k in range(3)],
                                axis=1) / mesh.face_sizes[:, None]
         neighbour[lone] = cKDTree(face_centre).query(centre)[1]

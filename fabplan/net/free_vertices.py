@@ -74,7 +74,7 @@ def settle_free_vertices(mesh, keep: np.ndarray | None = None, step: float = 0.0
         return mesh, np.zeros(n)
     X = mesh.vertices
     nf = len(mesh.face_sizes)
-    face = np.repeat(np.arange(nf), mesh.face_sizes)
+    face = mesh.corner_faces
     held_face = np.bincount(face, free[mesh.face_indices], minlength=nf) == 0
     # (free vertex, held face at one of its edge neighbours) pairs
     movable = free.copy()

@@ -292,7 +292,7 @@ def vertex_contact_normals(mesh, X: np.ndarray, stars: np.ndarray) -> np.ndarray
     """(n, 3) unit normals for contact elements: the discrete normal (Def. 2.13) at star
     centres, the mean of the adjacent face normals elsewhere (section 4.3)."""
     F = face_normals(X, mesh)
-    face = np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
+    face = mesh.corner_faces
     N = np.zeros_like(X)
     np.add.at(N, mesh.face_indices, F[face])
     N = _unit(N)

@@ -188,11 +188,16 @@ class QuadMesh:
 
     # ------------------------------------------------------------------ corners
     @cached_property
+    def corner_faces(self) -> np.ndarray:
+        """(c,) int, the face of every corner, aligned with `face_indices`."""
+        return np.repeat(np.arange(len(self.face_sizes)), self.face_sizes)
+
+    @cached_property
     def _corners(self) -> dict:
         """Per corner (face, local index): vertex, next vertex, previous vertex, twin corner."""
         sizes, ptr = self.face_sizes, self.face_indptr
         n = self.vertex_count
-        face = np.repeat(np.arange(len(sizes)), sizes)
+        face = self.corner_faces
         local = np.arange(len(face)) - ptr[face]
         vert = self.face_indices
         nxt_corner = np.where(local == sizes[face] - 1, ptr[face], np.arange(len(face)) + 1)

@@ -33,10 +33,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
         return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _face_of_corner(mesh) -> np.ndarray:
-    return np.repeat(np.arange(len(mesh.face_sizes)), mesh.face_sizes)
-
-
 def face_frames(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Frame of every face.
 
@@ -50,7 +46,7 @@ def face_frames(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     X = mesh.vertices
     sizes, ptr = mesh.face_sizes, mesh.face_indptr
     nf = len(sizes)
-    face = _face_of_corner(mesh)
+    face = mesh.corner_faces
     corners = X[mesh.face_indices]
     origin = np.stack([np.bincount(face, corners[:, d], minlength=nf) for d in range(3)], 1) \
         / sizes[:, None]
@@ -82,7 +78,7 @@ def face_neighbourhoods(mesh, ring: bool = True,
         0 for padding and ignored neighbours.
     """
     nf, n = len(mesh.face_sizes), mesh.vertex_count
-    face = _face_of_corner(mesh)
+    face = mesh.corner_faces
     incidence = sp.csr_matrix((np.ones(len(face)), (face, mesh.face_indices)), shape=(nf, n))
     reach = (incidence @ (incidence.T @ incidence)).tocsr() if ring else incidence.copy()
     reach.sort_indices()
