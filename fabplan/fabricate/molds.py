@@ -884,13 +884,14 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
         return panel_samples(mesh, surfaces, level)
 
     if model == "design":
-        surfaces = fit_design_panels(mesh, design, settings.cover_level)
+        # the design's points the quadrics are fitted to serve the assignment too
+        surfaces, points = fit_design_panels(mesh, design, settings.cover_level)
     else:
         surfaces = fit_panel_surfaces(mesh, model)
+        points = panel_samples(mesh, surfaces, settings.cover_level)
     shapes = panel_shapes(surfaces)
     frames, kk = placement_frames(shapes)
     kk = kk / mm
-    points = samples(settings.cover_level)
     data = _panel_data(points, shapes.point, frames, kk, mm, work)
     clock["panel model"] = time.perf_counter() - start
 

@@ -350,10 +350,16 @@ def design_panel_samples(mesh, surfaces: PanelSurfaces, design, level: int) -> n
     return design.closest_points(points.reshape(-1, 3)).reshape(points.shape)
 
 
-def fit_design_panels(mesh, design, level: int) -> PanelSurfaces:
+def fit_design_panels(mesh, design, level: int) -> tuple[PanelSurfaces, np.ndarray]:
     """The quadrics of the patches of `design` over the faces (model ``design``): each
     face's least-squares height field of its `design_panel_samples` at `level`, in the
-    frame of its ``local_fit`` panel."""
+    frame of its ``local_fit`` panel.
+
+    Returns
+    -------
+    surfaces : `PanelSurfaces` with model ``"design"``.
+    points : (f, s, 3) float, the samples they were fitted to (padded like `panel_samples`).
+    """
     local = fit_panel_surfaces(mesh, "local_fit")
     points = design_panel_samples(mesh, local, design, level)
     # samples beyond a face's own (padding, see `panel_samples`) get no weight
@@ -362,4 +368,4 @@ def fit_design_panels(mesh, design, level: int) -> PanelSurfaces:
     weight = np.repeat(np.arange(int(sizes.max()))[None, :] < sizes[:, None], per_corner,
                        axis=1).astype(float)
     coefficients = fit_height_fields(points, weight, local.origin, local.frame, local.scale)
-    return replace(local, coefficients=coefficients, model="design")
+    return replace(local, coefficients=coefficients, model="design"), points
