@@ -3,12 +3,13 @@
 Run from the repository root::
 
     python benchmarks/bench_molds.py --study /tmp/st        # stadium nets of a study run
-    python benchmarks/bench_molds.py --study /tmp/st --surface local_fit osculating
+    python benchmarks/bench_molds.py --study /tmp/st --surface shared local_fit \
+        --nets stadium-lw44 stadium-lw38 stadium-lw50 stadium-isogonal60 wein99
     python benchmarks/bench_molds.py --nets wein99
 
-``--study DIR`` reads ``DIR/candidates/linear-weingarten-44/net.obj`` and
-``DIR/candidates/baseline/net.obj`` of a ``fabplan study stadium -o DIR`` run (the study is
-run into a temporary folder when no folder is given). Each net is planned with
+``--study DIR`` reads the candidates' ``net.obj`` (``DIR/candidates/linear-weingarten-44/``,
+``baseline/`` and so on) of a ``fabplan study stadium -o DIR`` run (the study is run into a
+temporary folder when no folder is given). Each net is planned with
 `fabplan.plan_molds` (stadium nets at 1 mm, wein99 at 5 mm) for every panel surface asked
 for, and the plan's ``molds.json`` record is measured by `measure_record`, which reads
 only the net's vertices and faces and the record's molds and placements (no planner code):
@@ -44,7 +45,9 @@ from pathlib import Path
 import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results"
-STUDY_NETS = {"stadium-lw44": "linear-weingarten-44", "stadium-baseline": "baseline"}
+STUDY_NETS = {"stadium-lw44": "linear-weingarten-44", "stadium-baseline": "baseline",
+              "stadium-lw38": "linear-weingarten-38", "stadium-lw50": "linear-weingarten-50",
+              "stadium-isogonal60": "isogonal-60"}
 
 
 # ----------------------------------------------------------------------------- the recheck
@@ -196,6 +199,44 @@ def vertex_rings(X: np.ndarray, faces: list) -> np.ndarray:
     return ring
 
 
+# ----------------------------------------------------------------------------- the one surface
+def sphere_consistency(mesh) -> dict:
+    """How far the ``shared`` panel surface's curvature along each net edge at a star is
+    from the curvature of the star's Meusnier sphere (1/m, model units m).
+
+    For star centre v with discrete normal n (Def. 2.13) and edge neighbour w at distance
+    L: the one surface's edge midpoint p lies ``s = ((v + w) / 2 - p) . n`` off the chord
+    (away from n when the surface bends towards n), as on a circle of curvature
+    ``2 s / (s^2 + L^2 / 4)`` through v and w; the sphere through the star and tangent to
+    n at v has ``2 (w - v) . n / L^2`` (all four edges share it on an S-net). A tilt of n
+    changes the sagitta only to second order.
+    """
+    from fabplan.fabricate.panels import fit_panel_surfaces, shared_edge_points
+    from fabplan.net.geometry import star_normals
+
+    X, stars = mesh.vertices, mesh.stars
+    if not len(stars):
+        return {}
+    edge = shared_edge_points(mesh, fit_panel_surfaces(mesh, "local_fit"), np.array([0.5]))[:, :, 0]
+    midpoint = {}
+    for f, face in enumerate(mesh.faces):
+        for j, (a, b) in enumerate(zip(face, np.roll(face, -1), strict=True)):
+            midpoint[(int(a), int(b))] = midpoint[(int(b), int(a))] = edge[f, j]
+    n = star_normals(X, stars)
+    diff = []
+    for k in range(1, 5):
+        v, w = stars[:, 0], stars[:, k]
+        p = np.array([midpoint[(int(a), int(b))] for a, b in zip(v, w, strict=True)])
+        c = X[w] - X[v]
+        half = 0.25 * np.sum(c * c, 1)
+        rise = np.sum((0.5 * (X[v] + X[w]) - p) * n, 1)
+        diff.append(np.abs(2 * rise / (rise * rise + half) - 2 * np.sum(c * n, 1) / (4 * half)))
+    diff = np.concatenate(diff)
+    return {"edge_vs_sphere_curvature_median_per_m": float(np.median(diff)),
+            "edge_vs_sphere_curvature_p95_per_m": float(np.percentile(diff, 95)),
+            "edge_vs_sphere_curvature_max_per_m": float(diff.max())}
+
+
 # ----------------------------------------------------------------------------- the cases
 def _study_dir(given: str | None) -> Path:
     if given:
@@ -224,7 +265,8 @@ def main(argv: list[str] | None = None) -> int:
     import fabplan
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--nets", nargs="+", default=[*STUDY_NETS, "wein99"])
+    parser.add_argument("--nets", nargs="+", default=["stadium-lw44", "stadium-baseline", "wein99"],
+                        help=f"among {', '.join([*STUDY_NETS, 'wein99'])}")
     parser.add_argument("--study", help="folder of a `fabplan study stadium -o` run")
     parser.add_argument("--surface", nargs="+", default=["auto"], help="panel surface models")
     parser.add_argument("--label", default=datetime.date.today().isoformat())
@@ -233,8 +275,8 @@ def main(argv: list[str] | None = None) -> int:
     print("| net | surface | molds | largest step mm | edges over 2 x tol | "
           "largest corner miss mm | panels with a corner over tol | free vertices | "
           "edges over 2 x tol at their faces | largest step elsewhere mm | largest step, "
-          "rings >= 2 mm | molds only their faces use | s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "rings >= 2 mm | molds only their faces use | panels fitting no mold | s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, path, tol in cases(args.nets, args.study):
         mesh = fabplan.QuadMesh.from_obj(path)
         for surface in args.surface:
@@ -245,13 +287,27 @@ def main(argv: list[str] | None = None) -> int:
             row = {"net": name, "surface": surface, "model": record["panel_surface"],
                    "tolerance_mm": tol, "seconds": round(seconds, 1)}
             row.update(measure_record(mesh.vertices, mesh.faces, record))
+            row["panels_fitting_no_mold"] = len(record["failures"])
+            row["mold_reach_per_m"] = 1000.0 * record["curvature_reach_per_mm"]["median_panel"]
+            if record["panel_surface"] == "shared":
+                row.update(sphere_consistency(mesh))
             rows.append(row)
             print(f"| {name} | {row['model']} | {row['molds']} | {row['max_step_mm']:.2f} | "
                   f"{row['edges_over_2tol']} of {row['edges']} | {row['max_corner_miss_mm']:.2f} | "
                   f"{row['panels_corner_over_tol']} | {row['free_vertices']} | "
                   f"{row['edges_at_free_faces_over_2tol']} | {row['max_step_elsewhere_mm']:.2f} | "
                   f"{row['max_step_rings_2_and_in_mm']:.2f} | "
-                  f"{row['molds_only_for_faces_with_a_free_vertex']} | {seconds:.0f} |", flush=True)
+                  f"{row['molds_only_for_faces_with_a_free_vertex']} | "
+                  f"{row['panels_fitting_no_mold']} | {seconds:.0f} |", flush=True)
+    shared = [r for r in rows if "edge_vs_sphere_curvature_median_per_m" in r]
+    if shared:
+        print("\n| net | edge curvature - Meusnier sphere, median / p95 / max (1/m) "
+              "| one mold's reach (1/m) |")
+        print("|---|---|---|")
+        for r in shared:
+            print(f"| {r['net']} | {r['edge_vs_sphere_curvature_median_per_m']:.2g} / "
+                  f"{r['edge_vs_sphere_curvature_p95_per_m']:.2g} / "
+                  f"{r['edge_vs_sphere_curvature_max_per_m']:.2g} | {r['mold_reach_per_m']:.2g} |")
     RESULTS.mkdir(exist_ok=True)
     target = RESULTS / f"molds-{args.label}.json"
     target.write_text(json.dumps({"label": args.label, "rows": rows,

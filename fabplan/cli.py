@@ -852,11 +852,12 @@ def _add_molds(sub: Any) -> None:
     p.add_argument("--max-mold-size", type=float, metavar="MM",
                    help="largest mold side in mm (default: no limit)")
     p.add_argument("--panel-surface", default="auto",
-                   choices=["auto", "local_fit", "corners", "smooth"],
-                   help="panel shape: local_fit (a quadric per face, fitted to the corners "
-                        "around it: it follows the surface the net samples), corners "
-                        "(least curved through its corners), auto (corners for a net of flat "
-                        "faces, else local_fit); smooth is local_fit's earlier name")
+                   choices=["auto", "shared", "local_fit", "corners", "smooth"],
+                   help="panel shape: shared (pieces of one surface through the net: "
+                        "neighbouring panels share their edges), local_fit (a quadric per "
+                        "face, fitted to the corners around it; neighbours may step apart), "
+                        "corners (least curved through its corners), auto (corners for a net "
+                        "of flat faces, else shared); smooth is local_fit's earlier name")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     _add_3dm(p, units=False)
     p.add_argument("--no-3d", action="store_true",

@@ -88,9 +88,10 @@ def closest_on_mold(q: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.column_stack([x / (1 + k1 * t), y / (1 + k2 * t), z + t])
 
 
-def edge_midpoint_steps(record: dict, mesh: QuadMesh) -> np.ndarray:
+def edge_midpoint_steps(record: dict, mesh: QuadMesh, *, with_faces: bool = False):
     """Step at the midpoint of every shared edge from the exported placements (mm): the
-    point put on panel A's mold, measured against panel B's mold, both ways."""
+    point put on panel A's mold, measured against panel B's mold, both ways. With
+    `with_faces`, also the (e, 2) faces of every edge."""
     X = mesh.vertices
     shapes = {m["id"]: (m["k1"], m["k2"]) for m in record["molds"]}
     M = np.array([p["placement"] for p in record["panels"]])
@@ -113,7 +114,7 @@ def edge_midpoint_steps(record: dict, mesh: QuadMesh) -> np.ndarray:
         back = np.linalg.solve(M[A][:, :3, :3], (on_a - M[A][:, :3, 3])[..., None])[..., 0]
         qb = into(B, back)
         step = np.maximum(step, np.linalg.norm(qb - closest_on_mold(qb, K[B]), axis=1))
-    return step
+    return (step, np.column_stack([fa, fb])) if with_faces else step
 
 
 def measured_saddle_candidate(tolerance_mm: float):

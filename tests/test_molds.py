@@ -115,6 +115,55 @@ def _held_vertices(faces: list, n: int) -> np.ndarray:
     return held
 
 
+def _lift(surface, p: np.ndarray) -> np.ndarray:
+    """Points p (m, 3) moved along a face's normal onto its quadric (origin, frame, scale, coef)."""
+    origin, frame, scale, coef = surface
+    x, y, z = ((p - origin) @ frame.T / scale).T
+    h = coef[0] + coef[1] * x + coef[2] * y + 0.5 * (coef[3] * x * x + 2 * coef[4] * x * y
+                                                    + coef[5] * y * y)
+    return p + ((h - z) * scale)[:, None] * frame[2]
+
+
+def _fit_quadric(points: np.ndarray, frame_of) -> tuple:
+    """Least-squares quadric of points in the frame of a face (origin, frame, scale, _)."""
+    origin, frame, scale, _ = frame_of
+    x, y, z = ((points - origin) @ frame.T / scale).T
+    A = np.column_stack([np.ones_like(x), x, y, x * x / 2, x * y, y * y / 2])
+    return origin, frame, scale, np.linalg.lstsq(A, z, rcond=None)[0]
+
+
+def _shared_points(X, face, local, across, a, b, j) -> np.ndarray:
+    """Points of a ``shared`` panel (docs/molds-schema.md) at corner weights (a, b) of the
+    fan triangles (centre, corner j, corner j+1): its own quadric through its edges, bent
+    onto them; an edge is the mean of its two faces' local quadrics over the chord."""
+    k = len(face)
+    C = X[face]
+
+    def edge(jj, tau):
+        chord = C[jj] + tau[:, None] * (C[(jj + 1) % k] - C[jj])
+        out = np.empty_like(chord)
+        for e in range(k):
+            at = jj == e
+            out[at] = 0.5 * (_lift(local[0], chord[at]) + _lift(across[e], chord[at]))
+        return out
+
+    tau8 = np.arange(8) / 8
+    outline = np.vstack([edge(np.full(8, jj), tau8) for jj in range(k)])
+    base = _fit_quadric(outline, local[0])
+    origin, frame, scale, _ = base
+    P = ((C - origin) @ frame.T / scale)[:, :2]
+
+    def on_base(xy):
+        p = origin + scale * np.column_stack([xy, np.zeros(len(xy))]) @ frame
+        return _lift(base, p)
+
+    w = a + b
+    tau = np.where(w > 0, b / np.maximum(w, 1e-300), 0.0)
+    inner = on_base(a[:, None] * P[j] + b[:, None] * P[(j + 1) % k])
+    chord_on_base = on_base((1 - tau)[:, None] * P[j] + tau[:, None] * P[(j + 1) % k])
+    return inner + w[:, None] * (edge(j, tau) - chord_on_base)
+
+
 def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> np.ndarray:
     """Largest gap of every panel from its exported mold, computed from scratch (mm)."""
     rng = np.random.default_rng(seed)
@@ -122,31 +171,44 @@ def _recheck(record: dict, mesh: QuadMesh, samples: int = 40, seed: int = 7) -> 
     held = _held_vertices(faces, len(X))
     held |= not held.any()                      # a net without stars: every vertex counts
     at_vertex: dict = {}
+    at_edge: dict = {}
     for f, face in enumerate(faces):
         for v in face:
             at_vertex.setdefault(int(v), []).append(f)
+        for u, v in zip(face, np.roll(face, -1), strict=True):
+            at_edge.setdefault(frozenset((int(u), int(v))), []).append(f)
+    model = record["panel_surface"]
+    fitted = "local_fit" if model == "shared" else model
+
+    def surface_of(i):
+        # vertices in no star are no neighbours of a local fit (docs/molds-schema.md)
+        neighbours = {int(v) for c in faces[i] for f in at_vertex[int(c)] for v in faces[f]
+                      if held[v]} | {int(v) for v in faces[i]}
+        return _panel_surface(X, faces, i, neighbours, fitted)
+
+    local = [surface_of(i) for i in range(len(faces))]
     molds = {m["id"]: m for m in record["molds"]}
     mm = record["mm_per_unit"]
     gaps = np.zeros(len(faces))
     for panel in record["panels"]:
         i = panel["face"]
-        # vertices in no star are no neighbours of a local fit (docs/molds-schema.md)
-        neighbours = {int(v) for c in faces[i] for f in at_vertex[int(c)] for v in faces[f]
-                      if held[v]} | {int(v) for v in faces[i]}
-        origin, frame, scale, coef = _panel_surface(X, faces, i, neighbours,
-                                                    record["panel_surface"])
-        corners = ((X[faces[i]] - origin) @ frame.T / scale)[:, :2]
+        face = faces[i]
+        k = len(face)
         # random points in the fan triangles (centre, corner j, corner j+1), plus the corners
-        k = len(corners)
-        j = rng.integers(0, k, samples)
+        j = np.concatenate([rng.integers(0, k, samples), np.arange(k)])
         a, b = rng.random(samples), rng.random(samples)
         flip = a + b > 1
         a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
-        xy = np.vstack([a[:, None] * corners[j] + b[:, None] * corners[(j + 1) % k], corners])
-        x, y = xy.T
-        z = coef[0] + coef[1] * x + coef[2] * y + 0.5 * (coef[3] * x * x + 2 * coef[4] * x * y
-                                                        + coef[5] * y * y)
-        P = origin + scale * np.column_stack([x, y, z]) @ frame
+        a, b = np.concatenate([a, np.ones(k)]), np.concatenate([b, np.zeros(k)])
+        if model == "shared":
+            across = [local[next((f for f in at_edge[frozenset((int(face[jj]), int(face[(jj + 1) % k])))]
+                                  if f != i), i)] for jj in range(k)]
+            P = _shared_points(X, face, [local[i]], across, a, b, j)
+        else:
+            origin, frame, scale, coef = local[i]
+            corners = ((X[face] - origin) @ frame.T / scale)[:, :2]
+            xy = a[:, None] * corners[j] + b[:, None] * corners[(j + 1) % k]
+            P = _lift(local[i], origin + scale * np.column_stack([xy, np.zeros(len(xy))]) @ frame)
         M = np.array(panel["placement"])
         R = M[:3, :3] / mm
         assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.linalg.det(R) > 0
@@ -190,7 +252,7 @@ def test_wein99_needs_at_most_sqrt_n_molds_and_every_panel_fits(wein99_run, wein
     assert n == 1601 and record["units"] == "m" and record["tolerance_mm"] == 5.0
     assert record["mold_count"] <= math.sqrt(n)
     assert record["molds_per_sqrt_panels"] == pytest.approx(record["mold_count"] / math.sqrt(n))
-    assert record["panel_surface"] == "local_fit" and record["reassigned_by_verification"] == []
+    assert record["panel_surface"] == "shared" and record["reassigned_by_verification"] == []
     assert sum(record["panel_types"].values()) == n
     # the panels' curvatures lie on a line a k1 + b k2 = c: a thin band of their spread
     assert record["weingarten"]["thickness"] < 0.05
@@ -248,7 +310,7 @@ def test_a_cylinder_has_single_curved_panels_on_cylinder_molds_of_its_radius():
     net = cylinder_helical(radius=5.0)
     plan = plan_molds(net, tolerance_mm=1.0, units="m")
     record = plan.record()
-    assert record["panel_surface"] == "local_fit"
+    assert record["panel_surface"] == "shared"
     assert record["panel_types"]["single_curved"] == len(net.faces)
     assert record["mold_types"] == {"plane": 0, "cylinder": record["mold_count"], "paraboloid": 0}
     for mold in record["molds"]:
@@ -305,9 +367,9 @@ def test_panels_the_coarse_assignment_misjudged_are_caught_by_the_dense_verifica
     # those samples show; the verification must classify them again and give them molds
     net = height_field_grid(12, 12, lambda x, y: 0.05 * x * x + 0.3 * np.sin(y / 2) + 0.02 * x * y,
                             rotation_deg=25.0)
-    coarse = plan_molds(net, settings=MoldSettings(tolerance_mm=1.0, cover_level=1, reserve=0.0))
-    fine = plan_molds(net, tolerance_mm=1.0)
-    assert coarse.panel_surface == fine.panel_surface == "local_fit"
+    coarse = plan_molds(net, settings=MoldSettings(tolerance_mm=1.0, cover_level=1, reserve=0.0,
+                                                   panel_surface="local_fit"))
+    fine = plan_molds(net, tolerance_mm=1.0, panel_surface="local_fit")
     assert np.array_equal(coarse.panel_type, fine.panel_type)
     assert coarse.reassigned.size > 0 and fine.reassigned.size == 0
     assert coarse.mold_count >= fine.mold_count
@@ -449,9 +511,9 @@ def test_neighbouring_panels_meet_on_wein99_rechecked_from_the_export(wein99_run
 
 def test_a_step_over_twice_the_tolerance_fails_the_plan():
     # a twisted surface whose twist grows across it, at 1 mm on 2 m panels: every panel
-    # fits a mold, but neighbouring molds step apart by more than 2 mm
+    # quadric fits a mold, but neighbouring molds step apart by more than 2 mm
     net = height_field_grid(8, 8, lambda x, y: 0.002 * x * x * y + 0.01 * x * y, spacing=2.0)
-    plan = plan_molds(net, tolerance_mm=1.0, units="m")
+    plan = plan_molds(net, tolerance_mm=1.0, units="m", panel_surface="local_fit")
     record = plan.record()
     mine = edge_midpoint_steps(record, net)
     assert record["failures"] == []
@@ -460,6 +522,27 @@ def test_a_step_over_twice_the_tolerance_fails_the_plan():
     assert over and over[0]["step_mm"] == pytest.approx(record["panel_steps"]["max_mm"])
     assert {tuple(sorted(o["faces"])) for o in over} <= {
         tuple(sorted(p)) for p in net.interior_edge_faces.tolist()}
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_shared_panels_meet_wherever_they_fit_their_molds(seed):
+    # seeded cubic height fields, 1.5-2.5 m panels at 1 mm: with panels of one surface,
+    # neighbours share their edges, so two panels that fit their molds step apart by at
+    # most their two gaps; where no quadric mold takes a panel, it is reported as a failure
+    rng = np.random.default_rng(seed)
+    c = rng.normal(0, 1, 7) * np.array([0.03, 0.03, 0.03, 0.002, 0.002, 0.002, 0.002])
+    net = height_field_grid(8, 7, lambda x, y: c[0] * x * x + c[1] * x * y + c[2] * y * y + c[3] * x ** 3
+                            + c[4] * x * x * y + c[5] * x * y * y + c[6] * y ** 3,
+                            spacing=rng.uniform(1.5, 2.5))
+    record = plan_molds(net, tolerance_mm=1.0, units="m").record()
+    assert record["panel_surface"] == "shared"
+    gaps = _recheck(record, net)
+    fits = gaps <= 1.0 + 1e-6
+    assert set(np.flatnonzero(~fits)) <= set(record["failures"])
+    step, faces = edge_midpoint_steps(record, net, with_faces=True)
+    both = fits[faces].all(axis=1)
+    assert both.any() and step[both].max() <= 2.0 * 1.02
+    assert record["fits_all"] == (not record["failures"] and not record["panel_steps"]["over_limit"])
 
 
 def test_a_study_limits_the_step_between_neighbouring_panels():
@@ -485,7 +568,7 @@ def test_panels_of_a_net_on_an_exact_design_are_its_patches():
     net = fabplan.glide(fabplan.layout_surface(design, 1.0), "snet").mesh
     record = plan_molds(net, tolerance_mm=1.0, units="m", design=design).record()
     assert record["panel_surface"] == "design" and record["failures"] == []
-    assert plan_molds(net, tolerance_mm=1.0, units="m").record()["panel_surface"] == "local_fit"
+    assert plan_molds(net, tolerance_mm=1.0, units="m").record()["panel_surface"] == "shared"
     # rechecked apart from the planner: random points of every face, moved onto the exact
     # design (its own closest points), against the exported mold and placement
     rng = np.random.default_rng(3)
@@ -529,8 +612,8 @@ def test_a_net_without_stars_fits_its_panels_to_their_neighbours():
 
 def test_the_step_limit_is_a_setting_and_flat_panels_need_no_mold_by_the_bound():
     net = height_field_grid(8, 8, lambda x, y: 0.002 * x * x * y + 0.01 * x * y, spacing=2.0)
-    strict = plan_molds(net, tolerance_mm=1.0, units="m")
-    loose = plan_molds(net, settings=MoldSettings(tolerance_mm=1.0, units="m",
+    strict = plan_molds(net, tolerance_mm=1.0, units="m", panel_surface="local_fit")
+    loose = plan_molds(net, settings=MoldSettings(tolerance_mm=1.0, units="m", panel_surface="local_fit",
                                                   step_limit_mm=2 * strict.max_step_mm))
     assert strict.steps_over.size and not strict.fits_all
     assert loose.step_limit_mm == 2 * strict.max_step_mm and loose.fits_all
@@ -539,3 +622,38 @@ def test_the_step_limit_is_a_setting_and_flat_panels_need_no_mold_by_the_bound()
         plan_molds(net, tolerance_mm=1.0, step_limit_mm=-1.0)
     flat = plan_molds(height_field_grid(4, 4, lambda x, y: 0 * x), tolerance_mm=1.0)
     assert flat.mold_count_bound() == (0.0, 0)
+
+
+def test_shared_panels_are_pieces_of_one_surface():
+    # a mixed net (quads and triangles) on a wavy surface: both panels of every interior edge
+    # have the same points on it, the corners are the net's vertices, and the panels are
+    # not their quadrics (the edges bend them)
+    from fabplan.fabricate.panels import fit_panel_surfaces, shared_panel_samples
+
+    grid = height_field_grid(6, 5, lambda x, y: 0.2 * np.sin(x) + 0.05 * x * y)
+    faces = [f for f in grid.faces[:-4]]
+    for f in grid.faces[-4:]:                     # split the last quads into triangles
+        faces += [f[[0, 1, 2]], f[[0, 2, 3]]]
+    net = QuadMesh(grid.vertices, faces)
+    level = 4
+    points = shared_panel_samples(net, fit_panel_surfaces(net, "local_fit"), level)
+    per_side = level + 1
+    fan = [(i, j) for i in range(level + 1) for j in range(level + 1) if i + j <= level]
+    on_edge = [t for t, (i, j) in enumerate(fan) if i + j == level]     # from corner j to j+1
+    k_max = max(len(f) for f in faces)
+    edge_points = {}
+    for f, face in enumerate(faces):
+        P = points[f].reshape(k_max, len(fan), 3)
+        for j in range(len(face)):
+            a, b = int(face[j]), int(face[(j + 1) % len(face)])
+            line = P[j, on_edge]
+            line = line[np.argsort([fan[t][0] for t in on_edge])]   # from b to a
+            assert np.allclose(line[-1], grid.vertices[a], atol=1e-6)    # corner weight 1e6
+            assert np.allclose(line[0], grid.vertices[b], atol=1e-6)
+            edge_points.setdefault((min(a, b), max(a, b)), []).append(line if a < b else line[::-1])
+    shared = [v for v in edge_points.values() if len(v) == 2]
+    assert len(shared) == len(net.interior_edges) and len(shared[0][0]) == per_side
+    gap = max(np.abs(u - v).max() for u, v in shared)
+    assert gap < 1e-9
+    # the chord's points are not on the surface: the edges are curves
+    assert max(np.abs(u[len(u) // 2] - 0.5 * (u[0] + u[-1])).max() for u, _ in shared) > 1e-3

@@ -28,6 +28,15 @@ __all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "m
            "mold_report_files",
            "write_mold_report", "net_viewer_scene", "net_edges", "mold_pictures", "mold_report_pdf"]
 
+PANEL_SURFACE_TEXT = {
+    "shared": "pieces of one surface through the net's vertices; neighbours share their edges",
+    "local_fit": "one quadric per face, fitted to the corners around it; neighbours may "
+                 "differ along their shared edges",
+    "corners": "the least curved surface through each face's corners",
+    "design": "the patches of the exact design the net lies on",
+}
+"""What each panel surface model (`fabplan.fabricate.panels`) means, for the report."""
+
 _PER_M = 1000.0  # curvatures are stored per mm; the pictures and tables show them per m
 
 
@@ -302,7 +311,7 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
         ["net", r["net"]],
         ["model units", f"{r['units']} ({r['mm_per_unit']:g} mm per {r['units']})"],
         ["tolerance (largest gap between a panel and its mold)", f"{tol:g} mm"],
-        ["panel surface", r["panel_surface"]],
+        ["panel surface", f"{r['panel_surface']}: {PANEL_SURFACE_TEXT[r['panel_surface']]}"],
         ["panels N", counted(r["panel_count"], "panel")],
         ["molds M", counted(r["mold_count"], "mold")],
         ["M / sqrt(N)", f"{r['molds_per_sqrt_panels']:.3g} (ratio)"],

@@ -53,9 +53,11 @@ from .panels import (
     design_panel_samples,
     fit_design_panels,
     fit_panel_surfaces,
+    fit_shared_panels,
     panel_samples,
     panel_shapes,
     placement_frames,
+    shared_panel_samples,
     surface_model,
     surface_steps,
 )
@@ -101,8 +103,8 @@ class MoldSettings:
     units : unit of the net's coordinates, ``"m"`` or ``"mm"``.
     max_mold_size_mm : largest mold side (mm); a panel whose footprint on its mold is
         larger is a failure. None: no limit.
-    panel_surface : ``"auto"``, ``"local_fit"``, ``"corners"`` or ``"design"`` (see
-        `fabplan.fabricate.panels`; ``"design"`` needs the design the net lies on).
+    panel_surface : ``"auto"``, ``"shared"``, ``"local_fit"``, ``"corners"`` or ``"design"``
+        (see `fabplan.fabricate.panels`; ``"design"`` needs the design the net lies on).
     cover_level : sample grid steps per fan-triangle side while assigning (60 points on a
         quad at 4).
     verify_level : the same for the verification (364 points on a quad at 12).
@@ -142,7 +144,7 @@ class MoldSettings:
             raise InputError(f"the largest mold size must be a positive number of millimetres, got {s}")
         if self.panel_surface not in ("auto", "smooth") + SURFACE_MODELS:   # smooth: local_fit
             raise InputError(f"unknown panel surface {self.panel_surface!r}: use auto, "
-                             "local_fit, corners or design")
+                             + ", ".join(SURFACE_MODELS))
         if self.cover_level < 1 or self.verify_level < 1:
             raise InputError("the sample levels must be at least 1")
         limit = self.step_limit_mm
@@ -586,8 +588,8 @@ class MoldPlan:
     ----------
     mesh : the net (`fabplan.mesh.QuadMesh`).
     settings : the `MoldSettings` used.
-    panel_surface : the panel surface model used (``"local_fit"``, ``"corners"`` or
-        ``"design"``).
+    panel_surface : the panel surface model used (``"shared"``, ``"local_fit"``,
+        ``"corners"`` or ``"design"``).
     panel_type : (p,) int, index into `PANEL_TYPES`.
     curvature : (p, 2) float, signed principal curvatures ``k1 >= k2`` of every panel
         with respect to its face normal (1/mm).
@@ -881,11 +883,17 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
     def samples(level: int) -> np.ndarray:
         if model == "design":
             return design_panel_samples(mesh, surfaces, design, level)
+        if model == "shared":
+            return shared_panel_samples(mesh, local, level)
         return panel_samples(mesh, surfaces, level)
 
+    # the points the quadrics of the design and shared models are fitted to serve the
+    # assignment too
     if model == "design":
-        # the design's points the quadrics are fitted to serve the assignment too
         surfaces, points = fit_design_panels(mesh, design, settings.cover_level)
+    elif model == "shared":
+        local = fit_panel_surfaces(mesh, "local_fit")
+        surfaces, points = fit_shared_panels(mesh, local, settings.cover_level)
     else:
         surfaces = fit_panel_surfaces(mesh, model)
         points = panel_samples(mesh, surfaces, settings.cover_level)
@@ -930,8 +938,8 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
     # alone take up the limit, closer molds cannot help and would only add molds)
     fractions = np.asarray(settings.step_fractions, float)
     step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
-    # patches of one design share their edges; the other panels' surfaces may differ there
-    surface_step = (np.zeros(len(mesh.interior_edge_faces)) if model == "design"
+    # pieces of one surface share their edges; the other panels' surfaces may differ there
+    surface_step = (np.zeros(len(mesh.interior_edge_faces)) if model in ("design", "shared")
                     else surface_steps(mesh, surfaces, fractions) * mm)
     step_limit = 2.0 * tol if settings.step_limit_mm is None else float(settings.step_limit_mm)
     closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= step_limit

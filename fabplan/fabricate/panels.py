@@ -1,26 +1,36 @@
 """Panels of a net: the surface each face stands for, its principal frame and its samples.
 
-Every face of a net is a panel. Its shape is a quadratic height field in the face's own
+Every face of a net is a panel. What is cast is a quadratic height field in the face's own
 frame (origin at the mean of its corners, ``z`` along its Newell normal)::
 
     z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2) / 2
 
-fitted by weighted least squares, and its outline is the face's polygon projected into the
-face plane and lifted onto that surface. The surface models differ in the points the fit
-sees:
+fitted by weighted least squares, over the face's polygon projected into the face plane.
+The surface models differ in the surface a panel is a piece of, and so in the points the
+fit sees:
 
-``local_fit``
+``shared`` (one surface for the whole facade)
+    the panels are pieces of one continuous surface through the net's vertices. Every edge
+    is the mean of the two ``local_fit`` quadrics of its faces over the edge's chord (each
+    lifted along its face's normal), so the two panels of an edge share it exactly; a
+    panel is the quadric through its edges bent onto them (`shared_panel_samples`), and
+    its cast quadric the least-squares fit of that. Neighbours then step apart only by
+    their molds' gaps (at most twice the tolerance where every panel fits), and a panel
+    that is far from any quadric shows as a panel no mold fits, not as a hidden step.
+    The net's Meusnier spheres and principal curvatures enter through the ``local_fit``
+    quadrics (fitted to the star and its ring); `benchmarks/bench_molds.py` measures the
+    one surface's normal curvature along the net's edges against the spheres.
+``local_fit`` (one quadric per face)
     the panel's corners (weight `CORNER_WEIGHT`, so the panel passes through them) and the
     corners of every face that shares a vertex with it (weight 1), vertices in no star
     excepted: the panel follows the surface the net samples (its osculating paraboloid).
     Neighbouring panels meet at the net's vertices; along the edge between them their
-    quadrics, each fitted to its own neighbourhood, may differ (`surface_steps`). This is
-    the panel of a curved-panel net off any design (Weingarten S-nets).
+    quadrics, each fitted to its own neighbourhood, may differ (`surface_steps`), most
+    near the boundary, where the fit is one-sided.
 ``corners``
     the panel's corners only, with the least curvature that passes through them: a planar
     face gives a flat panel, a twisted quad its hyperbolic paraboloid. This is the panel of
     a planar-quad (or ruled) paneling.
-
 ``design`` (a net laid out on a design with an exact surface: a built-in or NURBS design)
     the panel is the patch of the design over the face: the ``local_fit`` panel's points
     moved to their closest points on the exact design (`design_panel_samples`), and its
@@ -29,7 +39,7 @@ sees:
 
 `surface_model` picks ``corners`` for a net whose faces are all flat within the tolerance
 (its panels are meant to be cut flat), else ``design`` when an exact design is given and
-``local_fit`` otherwise.
+``shared`` otherwise.
 
 Distances are in model units, curvatures in inverse model units; the principal curvatures
 are signed with respect to the face normal (positive when the panel bends towards it).
@@ -68,9 +78,12 @@ __all__ = [
     "surface_steps",
     "design_panel_samples",
     "fit_design_panels",
+    "shared_edge_points",
+    "shared_panel_samples",
+    "fit_shared_panels",
 ]
 
-SURFACE_MODELS = ("local_fit", "corners", "design")
+SURFACE_MODELS = ("shared", "local_fit", "corners", "design")
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -107,7 +120,7 @@ def check_panels(mesh) -> None:
 def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> str:
     """The panel surface model to use: ``model`` itself, or for ``"auto"`` ``"corners"`` when
     every face lies within `tolerance` (model units) of a plane, else ``"design"`` when
-    `design` (a `fabplan.design.DesignSurface`) has an exact surface, else ``"local_fit"``.
+    `design` (a `fabplan.design.DesignSurface`) has an exact surface, else ``"shared"``.
 
     Examples
     --------
@@ -119,7 +132,8 @@ def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> s
     """
     model = "local_fit" if model == "smooth" else model       # its earlier name
     if model not in ("auto",) + SURFACE_MODELS:
-        raise InputError(f"unknown panel surface model {model!r}: use auto, local_fit, corners or design")
+        raise InputError(f"unknown panel surface model {model!r}: use auto, "
+                         + ", ".join(SURFACE_MODELS))
     exact = design is not None and design.exact
     if model == "design" and not exact:
         raise InputError("the panel surface 'design' needs a net laid out on a built-in or NURBS "
@@ -134,7 +148,7 @@ def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> s
         starts = mesh.face_indptr[:-1][mesh.face_sizes == k]
         polys = mesh.face_indices[starts[:, None] + np.arange(k)]
         flat &= bool(np.all(face_planarity(X, polys) <= tolerance))
-    return "corners" if flat else ("design" if exact else "local_fit")
+    return "corners" if flat else ("design" if exact else "shared")
 
 
 def panel_neighbourhoods(mesh, model: str = "local_fit") -> tuple[np.ndarray, np.ndarray]:
@@ -263,6 +277,43 @@ def _fan_weights(level: int) -> np.ndarray:
     return np.stack([i[keep], j[keep]], axis=1) / level
 
 
+def _face_slots(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every face's corners padded to the largest face size.
+
+    Returns
+    -------
+    corner, following : (f, k_max) int, index into ``face_indices`` of corner j and of the
+        corner after it; padding slots repeat the last edge.
+    valid : (f, k_max) bool, the slots that are the face's own.
+    """
+    sizes, ptr = mesh.face_sizes, mesh.face_indptr
+    j = np.arange(int(sizes.max()))[None, :]
+    corner = ptr[:-1, None] + np.minimum(j, sizes[:, None] - 1)
+    following = ptr[:-1, None] + np.where(j + 1 >= sizes[:, None], 0, np.minimum(j + 1, sizes[:, None] - 1))
+    return corner, following, j < sizes[:, None]
+
+
+def _fan_points(mesh, surfaces: PanelSurfaces, weights: np.ndarray) -> np.ndarray:
+    """Points of every fan triangle (face centre, corner j, corner j+1) at barycentric
+    `weights` (t, 2) of its two corners, in the face plane and lifted onto `surfaces`.
+
+    Returns
+    -------
+    (f, k_max, t, 3) float model coordinates; padding slots repeat the face's first point.
+    """
+    corner, following, valid = _face_slots(mesh)
+    offset = mesh.face_indptr[:-1, None]
+    P = surfaces.corners
+    P_j = np.take_along_axis(P, (corner - offset)[..., None], axis=1)
+    P_next = np.take_along_axis(P, (following - offset)[..., None], axis=1)
+    xy = weights[None, None, :, :1] * P_j[:, :, None, :] + weights[None, None, :, 1:] * P_next[:, :, None, :]
+    xy = np.where(valid[:, :, None, None], xy, xy[:, :1, :1, :])
+    f, k, t = xy.shape[:3]
+    z = surfaces.height(xy.reshape(f, k * t, 2))
+    return surfaces.to_model(np.concatenate([xy.reshape(f, k * t, 2), z[..., None]], axis=2)
+                             ).reshape(f, k, t, 3)
+
+
 def panel_samples(mesh, surfaces: PanelSurfaces, level: int) -> np.ndarray:
     """Points spread over every panel: its outline and interior on its surface.
 
@@ -275,21 +326,8 @@ def panel_samples(mesh, surfaces: PanelSurfaces, level: int) -> np.ndarray:
     (f, s, 3) float model coordinates; faces with fewer samples than the largest repeat
     their first sample (so maxima and minima over a panel are unchanged).
     """
-    sizes = mesh.face_sizes
-    B = _fan_weights(level)
-    k_max = int(sizes.max())
-    s = k_max * len(B)
-    corners = surfaces.corners
-    nxt = np.minimum(np.arange(k_max) + 1, k_max - 1)
-    nxt = np.where(np.arange(k_max)[None, :] + 1 >= sizes[:, None], 0, nxt[None, :])
-    # (f, k_max, t, 2) points b * P_j + c * P_{j+1}
-    P_next = np.take_along_axis(corners, nxt[..., None], axis=1)
-    xy = B[None, None, :, :1] * corners[:, :, None, :] + B[None, None, :, 1:] * P_next[:, :, None, :]
-    valid = np.arange(k_max)[None, :] < sizes[:, None]
-    xy = np.where(valid[:, :, None, None], xy, xy[:, :1, :1, :])
-    xy = xy.reshape(len(sizes), s, 2)
-    z = surfaces.height(xy)
-    return surfaces.to_model(np.concatenate([xy, z[..., None]], axis=2))
+    points = _fan_points(mesh, surfaces, _fan_weights(level))
+    return points.reshape(len(points), -1, 3)
 
 
 def placement_frames(shapes: PanelShapes) -> tuple[np.ndarray, np.ndarray]:
@@ -350,6 +388,17 @@ def design_panel_samples(mesh, surfaces: PanelSurfaces, design, level: int) -> n
     return design.closest_points(points.reshape(-1, 3)).reshape(points.shape)
 
 
+def _fit_to_samples(mesh, local: PanelSurfaces, points: np.ndarray, model: str) -> PanelSurfaces:
+    """Each face's least-squares height field of its samples (f, s, 3) (padded like
+    `panel_samples`: padding gets no weight), in the frames of `local`."""
+    sizes = mesh.face_sizes
+    k_max = int(sizes.max())
+    weight = np.repeat(np.arange(k_max)[None, :] < sizes[:, None], points.shape[1] // k_max,
+                       axis=1).astype(float)
+    coefficients = fit_height_fields(points, weight, local.origin, local.frame, local.scale)
+    return replace(local, coefficients=coefficients, model=model)
+
+
 def fit_design_panels(mesh, design, level: int) -> tuple[PanelSurfaces, np.ndarray]:
     """The quadrics of the patches of `design` over the faces (model ``design``): each
     face's least-squares height field of its `design_panel_samples` at `level`, in the
@@ -362,10 +411,82 @@ def fit_design_panels(mesh, design, level: int) -> tuple[PanelSurfaces, np.ndarr
     """
     local = fit_panel_surfaces(mesh, "local_fit")
     points = design_panel_samples(mesh, local, design, level)
-    # samples beyond a face's own (padding, see `panel_samples`) get no weight
-    sizes = mesh.face_sizes
-    per_corner = points.shape[1] // int(sizes.max())
-    weight = np.repeat(np.arange(int(sizes.max()))[None, :] < sizes[:, None], per_corner,
-                       axis=1).astype(float)
-    coefficients = fit_height_fields(points, weight, local.origin, local.frame, local.scale)
-    return replace(local, coefficients=coefficients, model="design"), points
+    return _fit_to_samples(mesh, local, points, "design"), points
+
+
+# ----------------------------------------------------------------------------- shared
+def _lift(local: PanelSurfaces, face: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """`points` (f, k, t, 3) moved along the normal of `face` (f, k) onto its quadric."""
+    origin, frame, scale = local.origin[face], local.frame[face], local.scale[face]
+    q = np.einsum("fktj,fkij->fkti", points - origin[:, :, None, :], frame) / scale[..., None, None]
+    lift = height_field_values(local.coefficients[face][:, :, None, :], q[..., :2]) - q[..., 2]
+    return points + (lift * scale[..., None])[..., None] * frame[:, :, None, 2, :]
+
+
+def shared_edge_points(mesh, local: PanelSurfaces, tau: np.ndarray) -> np.ndarray:
+    """Points of every face's edges on the one surface of the net (model ``shared``).
+
+    The point at fraction `tau` of the edge from corner j to corner j+1 is the mean of the
+    chord's point lifted along the normals of the two faces of the edge onto their
+    ``local_fit`` quadrics (`local`); on the boundary the face's own. Both faces of an edge
+    get the same points.
+
+    Returns
+    -------
+    (f, k_max, t, 3) float model coordinates, padded like `_fan_points`.
+    """
+    X = mesh.vertices
+    corner, following, _ = _face_slots(mesh)
+    a, b = X[mesh.face_indices[corner]], X[mesh.face_indices[following]]
+    chord = a[:, :, None, :] + tau[None, None, :, None] * (b - a)[:, :, None, :]
+    own = np.broadcast_to(np.arange(len(corner))[:, None], corner.shape)
+    across = mesh.faces_across[corner]
+    across = np.where(across >= 0, across, own)
+    return 0.5 * (_lift(local, own, chord) + _lift(local, across, chord))
+
+
+SHARED_OUTLINE_STEPS = 8
+"""Points per edge (``tau = 0, 1/8, ..., 7/8``) the quadric of a ``shared`` panel is fitted to."""
+
+
+def shared_panel_samples(mesh, local: PanelSurfaces, level: int) -> np.ndarray:
+    """`panel_samples` of the one surface of the net (model ``shared``).
+
+    A panel is the least-squares quadric of its `shared_edge_points` (at
+    `SHARED_OUTLINE_STEPS` points per edge), bent onto them: the point of the fan triangle
+    (centre, corner j, corner j+1) with corner weights ``(s, t)`` is the quadric's point
+    plus ``s + t`` times the offset of edge j from the quadric at ``t / (s + t)``. On the
+    outline the panel is its edges exactly; at the centre and along the fan's spokes (the
+    offsets vanish at the corners) it is the quadric.
+
+    Returns
+    -------
+    (f, s, 3) float model coordinates, padded like `panel_samples`.
+    """
+    _, _, valid = _face_slots(mesh)
+    outline = shared_edge_points(mesh, local, np.arange(SHARED_OUTLINE_STEPS) / SHARED_OUTLINE_STEPS)
+    base = _fit_to_samples(mesh, local, outline.reshape(len(outline), -1, 3), "shared")
+    weights = _fan_weights(level)
+    on_edge = weights.sum(axis=1)              # s + t: 0 at the centre, 1 on the edge
+    tau = np.where(on_edge > 0, weights[:, 1] / np.maximum(on_edge, 1e-300), 0.0)
+    offset = shared_edge_points(mesh, local, tau) - _fan_points(mesh, base, np.column_stack([1 - tau, tau]))
+    offset = np.where(valid[:, :, None, None], offset, 0.0)       # padding: the face centre
+    points = _fan_points(mesh, base, weights) + on_edge[None, None, :, None] * offset
+    return points.reshape(len(points), -1, 3)
+
+
+def fit_shared_panels(mesh, local: PanelSurfaces, level: int) -> tuple[PanelSurfaces, np.ndarray]:
+    """The quadrics of the panels of the one surface of the net (model ``shared``): each
+    face's least-squares height field of its `shared_panel_samples` at `level`.
+
+    Parameters
+    ----------
+    local : the faces' ``local_fit`` surfaces (`fit_panel_surfaces`).
+
+    Returns
+    -------
+    surfaces : `PanelSurfaces` with model ``"shared"``.
+    points : (f, s, 3) float, the samples they were fitted to (padded like `panel_samples`).
+    """
+    points = shared_panel_samples(mesh, local, level)
+    return _fit_to_samples(mesh, local, points, "shared"), points

@@ -193,6 +193,13 @@ class QuadMesh:
         return np.repeat(np.arange(len(self.face_sizes)), self.face_sizes)
 
     @cached_property
+    def faces_across(self) -> np.ndarray:
+        """(c,) int, aligned with `face_indices`: the face across the edge from each corner to
+        the next corner of its face, or -1 where that edge is on the boundary."""
+        c = self._corners
+        return np.where(c["twin"] >= 0, c["face"][np.maximum(c["twin"], 0)], -1)
+
+    @cached_property
     def _corners(self) -> dict:
         """Per corner (face, local index): vertex, next vertex, previous vertex, twin corner."""
         sizes, ptr = self.face_sizes, self.face_indptr
