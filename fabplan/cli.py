@@ -601,12 +601,13 @@ def _cmd_strips(args) -> int:
         spacing_mm=args.spacing, margin_mm=args.margin, kerf_mm=args.kerf, end=args.end,
         end_extension_mm=args.extension, splice=args.splice, splice_length_mm=args.splice_length,
         labels=args.labels, label_height_mm=args.label_height, layers=_parse_layers(args.layer),
-        one_file=args.one_file)
+        one_file=args.one_file, boundary_member_mm=args.boundary_member)
     settings.check()
     out = Path(args.output)
     check_output_folder(out)
     started = time.perf_counter()
     mesh = load_net(args.net)
+    boundary = _strip_boundary(args, mesh)
     check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
                       what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
                       fix="plan the strips of a coarser net or of parts of it")
@@ -616,7 +617,7 @@ def _cmd_strips(args) -> int:
     progress = _progress(args)
     planning = time.perf_counter()
     with progress.stage("unrolling the strips"):
-        strips = build_strips(mesh, settings)
+        strips = build_strips(mesh, settings, boundary)
     with progress.stage(f"splitting {len(strips.strips)} strips into parts that fit the sheets"):
         parts = make_parts(strips, settings)
     with progress.stage(f"nesting {len(parts)} parts"):
@@ -648,11 +649,41 @@ def _cmd_strips(args) -> int:
           f"{settings.sheet_mm[1]:g} mm, material use {100 * s['material_use']:.1f} %")
     print(f"wrote {len(files)} files to {out} in {time.perf_counter() - started:.1f} s "
           f"(planning {s['seconds']:.1f} s, every sheet audited and checked before writing)")
+    if boundary is not None:
+        angle = s["member_angle_min_deg"]
+        print(f"{s['ends_at_boundary_member']} strip ends run through the boundary panels of "
+              f"{args.boundary} to the edge of the cladding and are cut square against a "
+              f"{settings.member_mm:g} mm boundary member"
+              + (f" (smallest angle to it {angle:.0f} deg)" if angle is not None else "")
+              + f"; {s['ends_free']} ends are free")
+        if s["ends_not_continued"]:
+            print(f"fabplan: note: {counted(s['ends_not_continued'], 'strip end')} on the net's "
+                  "boundary could not be continued to the edge (no boundary panel side goes on "
+                  "straight, or it runs along the edge): they end free, listed as 'free' in "
+                  f"{out / 'strips.csv'}", file=sys.stderr)
     if s["junctions"]:
         print(f"fabplan: note: {s['junctions']} vertices join more than one strip of a family "
               "(irregular vertices): no slits there, they need node connectors; listed in "
               f"{out / 'strips.json'}", file=sys.stderr)
     return 0
+
+
+def _strip_boundary(args, mesh):
+    """The boundary panels strips run through: ``--boundary FILE``, else ``NET.boundary.obj``
+    beside the net when a layout or study wrote one (``--no-boundary``: none)."""
+    from .fabricate.strip_boundary import StripBoundary
+
+    if args.no_boundary:
+        args.boundary = None
+        return None
+    if args.boundary is None:
+        beside = Path(args.net).with_suffix(".boundary.obj")
+        if not beside.is_file():
+            return None
+        args.boundary = str(beside)
+    elif not Path(args.boundary).is_file():
+        raise InputError(f"{args.boundary}: no such file (the boundary panels, NET.boundary.obj)")
+    return StripBoundary.from_obj(mesh, args.boundary)
 
 
 def _cmd_arcs(args) -> int:
@@ -968,7 +999,17 @@ def _add_strips(sub: Any) -> None:
     p.add_argument("--end", choices=["square", "round"], default="square",
                    help="strip ends (default square)")
     p.add_argument("--extension", type=float, metavar="MM",
-                   help="material beyond the end crossings (default height / 2)")
+                   help="material beyond the end crossings at free ends (default height / 2)")
+    p.add_argument("--boundary", metavar="FILE",
+                   help="the net's boundary panels (default: NET.boundary.obj beside the net, "
+                        "as layout and study write it): strips run through them to the edge of "
+                        "the cladding and are cut square against a boundary member there")
+    p.add_argument("--no-boundary", action="store_true",
+                   help="end the strips at the net's last vertices even when boundary panels "
+                        "are beside it")
+    p.add_argument("--boundary-member", type=float, metavar="MM",
+                   help="thickness of the boundary member strips end against (default "
+                        "--thickness)")
     p.add_argument("--splice", choices=["overlap", "lap"], default="overlap",
                    help="joint of a strip split to fit the sheets (default overlap)")
     p.add_argument("--splice-length", type=float, metavar="MM",

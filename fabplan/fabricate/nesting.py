@@ -221,16 +221,18 @@ def _split_strip(strip, node_s: np.ndarray, settings: "StripSettings") -> list:
     """
     curve = strip.curve
     h = settings.height_mm
-    e = settings.extension_mm
+    e0, e1 = strip.end_extensions_mm(settings)
     splice = settings.splice_mm
     kerf = settings.kerf_mm
     long_side, short_side = _usable_sheet(settings)
     half = h / 2 + settings.slit_overcut_mm + kerf / 2
-    cap = h / 2 if settings.end == "round" else 0.0
+    # round caps at free ends; a strip is cut square against a boundary member
+    cap0, cap1 = (h / 2 if settings.end == "round" and not strip.at_member(k) else 0.0
+                  for k in (0, 1))
     length = curve.length
     slack = 1.0  # mm kept free of the sheet's margin for rounding
 
-    band = _Band(curve, -e - splice, length + e + splice, half)
+    band = _Band(curve, -e0 - splice, length + e1 + splice, half)
 
     def fits(a: float, b: float, end_caps: float) -> bool:
         along, across = band.extent(a, b)
@@ -240,8 +242,8 @@ def _split_strip(strip, node_s: np.ndarray, settings: "StripSettings") -> list:
         raise InputError(f"the sheet {settings.sheet_mm[0]:g}x{settings.sheet_mm[1]:g} mm is too "
                          f"small: a strip {2 * half:.0f} mm high (height, slit overcut and kerf) "
                          f"does not fit inside its {settings.margin_mm:g} mm margin")
-    a = -e
-    if fits(a, length + e, 2 * cap):
+    a = -e0
+    if fits(a, length + e1, cap0 + cap1):
         return []
     # splice zones must keep clear of every slit and of the strip's end nodes
     clear = splice / 2 + settings.slit_width_mm / 2 + max(settings.text_height_mm, 2.0)
@@ -254,8 +256,8 @@ def _split_strip(strip, node_s: np.ndarray, settings: "StripSettings") -> list:
             f"crossings is long enough for a {splice:g} mm splice: use a larger --sheet or a "
             "shorter --splice-length")
     splits: list[float] = []
-    while not fits(a, length + e, cap + (0 if splits else cap)):
-        caps = cap if not splits else 0.0
+    while not fits(a, length + e1, cap1 + (0 if splits else cap0)):
+        caps = cap0 if not splits else 0.0
         # intervals beyond the part's start; the part grows with the split point, so the
         # last interval whose start still fits is found by bisection
         usable = [(max(lo, a + splice / 2 + 1.0), hi) for lo, hi in allowed]
@@ -346,8 +348,9 @@ def _part_geometry(strip, strip_crossings, settings, a: float, b: float,
                    start_kind: str, end_kind: str, splice_ids: tuple) -> dict:
     """Outline, slits, labels and marks of the part of `strip` between arc lengths a and b.
 
-    start_kind / end_kind : ``"end"`` (strip end), ``"overlap"``, ``"lap-top"`` (this part
-    keeps the top half over the splice zone at that end) or ``"lap-bottom"``.
+    start_kind / end_kind : ``"end"`` (free strip end), ``"member"`` (strip end cut square
+    against a boundary member), ``"overlap"``, ``"lap-top"`` (this part keeps the top half
+    over the splice zone at that end) or ``"lap-bottom"``.
     """
     curve = strip.curve
     h = settings.height_mm
@@ -361,7 +364,7 @@ def _part_geometry(strip, strip_crossings, settings, a: float, b: float,
     th = settings.text_height_mm
     # splice zones at the ends
     for where, kind, sid in (("start", start_kind, splice_ids[0]), ("end", end_kind, splice_ids[1])):
-        if kind == "end":
+        if kind in ("end", "member"):
             continue
         zone = (a, a + splice) if where == "start" else (b - splice, b)
         splices.append((sid, zone[0], zone[1]))
@@ -511,8 +514,9 @@ def make_parts(strips: "StripSet", settings: "StripSettings") -> list[Part]:
             raise InputError(f"strip {strip.id}: two crossings are {np.diff(cs).min():.1f} mm "
                              f"apart, too close for {w:g} mm slits")
         splits = _split_strip(strip, node_s, settings)
-        e = settings.extension_mm
-        bounds = [-e] + [c for c in splits] + [strip.curve.length + e]
+        e0, e1 = strip.end_extensions_mm(settings)
+        bounds = [-e0] + [c for c in splits] + [strip.curve.length + e1]
+        first_kind, last_kind = ("member" if strip.at_member(k) else "end" for k in (0, 1))
         count = len(splits) + 1
         first_splice = splice_counter + 1
         splice_counter += len(splits)
@@ -520,11 +524,11 @@ def make_parts(strips: "StripSet", settings: "StripSettings") -> list[Part]:
             a = bounds[j] if j == 0 else bounds[j] - settings.splice_mm / 2
             b = bounds[j + 1] if j == count - 1 else bounds[j + 1] + settings.splice_mm / 2
             if settings.splice == "overlap":
-                start_kind = "end" if j == 0 else "overlap"
-                end_kind = "end" if j == count - 1 else "overlap"
+                start_kind = first_kind if j == 0 else "overlap"
+                end_kind = last_kind if j == count - 1 else "overlap"
             else:
-                start_kind = "end" if j == 0 else "lap-bottom"
-                end_kind = "end" if j == count - 1 else "lap-top"
+                start_kind = first_kind if j == 0 else "lap-bottom"
+                end_kind = last_kind if j == count - 1 else "lap-top"
             ids = (first_splice + j - 1, first_splice + j)
             g = _part_geometry(strip, crossings, settings, a, b, start_kind, end_kind, ids)
             part_id = strip.id if count == 1 else f"{strip.id}-{j + 1}"

@@ -16,13 +16,15 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..io.output import output_folder
 from ..io.records import json_text
 from ..net.mesh import QuadMesh
 from .dxf import SheetGeometry, geometry_preview_png, sheet_geometry, write_sheet_file
 from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts
-from .strips import StripSet, StripSettings, build_strips
+from .strip_boundary import StripBoundary
+from .strips import Strip, StripSet, StripSettings, build_strips
 
 __all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan", "SHEETS_PER_PROCESS"]
 
@@ -68,13 +70,17 @@ class StripPlan:
         return write_plan(self, out_dir, name=name, previews=previews, workers=workers)
 
 
-def plan_strips(mesh: QuadMesh, settings: StripSettings) -> StripPlan:
+def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None) -> StripPlan:
     """Build the strips of a net, split them into parts that fit the sheets and nest them.
 
     Parameters
     ----------
     mesh : the net.
     settings : strip, sheet and file options.
+    boundary : the net's boundary panels (`fabplan.layout.trim.BoundaryPanels`, or a
+        `fabplan.fabricate.strip_boundary.StripBoundary`): the strips run through them to
+        the edge of the cladding and end at a boundary member there. None: they end at
+        the net's last vertices.
 
     Returns
     -------
@@ -87,7 +93,9 @@ def plan_strips(mesh: QuadMesh, settings: StripSettings) -> StripPlan:
         close for their slits or splices.
     """
     t0 = time.perf_counter()
-    strips = build_strips(mesh, settings)
+    if boundary is not None and not isinstance(boundary, StripBoundary):
+        boundary = StripBoundary.from_panels(mesh, boundary)
+    strips = build_strips(mesh, settings, boundary)
     parts = make_parts(strips, settings)
     nesting = nest_parts(parts, settings)
     return StripPlan(strips=strips, parts=parts, nesting=nesting,
@@ -120,8 +128,21 @@ def schedule_rows(plan: StripPlan) -> list:
             "twist_deg_per_m": round(strip.twist_deg_per_m, 3),
             "off_orthogonal_deg": round(strip.off_orthogonal_deg, 3),
             "boundary_lean_deg": round(strip.lean_deg, 3),
+            "start": _end_text(strip, 0),
+            "end": _end_text(strip, 1),
         })
     return rows
+
+
+def _end_text(strip: Strip, side: int) -> str:
+    """How a strip end is cut: ``free`` (beyond its last node), or ``member A deg -D mm``
+    (square against the boundary member, meeting it at A degrees, D mm short of its node on
+    the cladding's edge); ``closed`` for a loop."""
+    if strip.closed:
+        return "closed"
+    if not strip.at_member(side):
+        return "free"
+    return f"member {strip.end_angle_deg[side]:.1f} deg -{strip.end_setback_mm[side]:.1f} mm"
 
 
 def _schedule_csv(rows: list, header: str) -> str:
@@ -161,6 +182,9 @@ def _plan_record(plan: StripPlan, files: list, sheet_files: dict) -> dict:
         "summary": plan.summary(),
         "files": files,
         "strips": [dict(row, vertices=[int(v) for v in strip.vertices],
+                        boundary_nodes=list(strip.boundary_nodes),
+                        end_setback_mm=list(strip.end_setback_mm),
+                        end_angle_deg=[None if math.isnan(a) else a for a in strip.end_angle_deg],
                         runs=[{"start": r.start, "stop": r.stop, "radius_mm": r.radius_mm,
                                "deviation_mm": r.deviation_mm, "fitted": r.fitted}
                               for r in strip.runs])

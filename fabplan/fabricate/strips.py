@@ -43,7 +43,7 @@ the crossings and the slits. Units: model units in 3D, millimetres in the plane.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -52,6 +52,7 @@ from ..errors import InputError
 from ..net.geometry import circumcircle_tangent, face_normals, fit_star_spheres, star_normals
 from ..net.mesh import Polylines, QuadMesh
 from .molds import UNITS
+from .strip_boundary import StripBoundary, member_setback_mm
 
 __all__ = [
     "StripSettings",
@@ -108,6 +109,8 @@ class StripSettings:
     one_file : all sheets side by side in one DXF instead of one file per sheet.
     join_boundary : continue polylines of one family through boundary vertices where
         exactly two of them end (the corners of a staircase boundary).
+    boundary_member_mm : thickness of the boundary member a strip run to the edge of the
+        cladding ends against (default: `thickness_mm`).
     """
 
     height_mm: float
@@ -130,6 +133,7 @@ class StripSettings:
         "cut": ("CUT", 1), "slit": ("SLIT", 6), "engrave": ("ENGRAVE", 5)})
     one_file: bool = False
     join_boundary: bool = True
+    boundary_member_mm: float | None = None
 
     @property
     def scale(self) -> float:
@@ -144,6 +148,10 @@ class StripSettings:
     @property
     def extension_mm(self) -> float:
         return self.height_mm / 2 if self.end_extension_mm is None else self.end_extension_mm
+
+    @property
+    def member_mm(self) -> float:
+        return self.thickness_mm if self.boundary_member_mm is None else self.boundary_member_mm
 
     @property
     def splice_mm(self) -> float:
@@ -180,6 +188,7 @@ class StripSettings:
         non_negative("--kerf", self.kerf_mm)
         non_negative("--slit-overcut", self.slit_overcut_mm)
         non_negative("--extension", self.extension_mm)
+        non_negative("--boundary-member", self.member_mm)
         positive("--splice-length", self.splice_mm)
         positive("--label-height", self.text_height_mm)
         if self.units not in UNITS:
@@ -846,6 +855,14 @@ class Strip:
         edge and the edge's mean normal: how far a flat-panel lamella leans.
     lean_deg : largest lean at nodes without a star, where the strip continues its
         neighbours' normal curvature (see `unroll_polylines`).
+    end_setback_mm : (start, end): None at a free end (cut `StripSettings.end_extension_mm`
+        beyond its node), else how far short of its end node the strip ends at the boundary
+        member (`fabplan.fabricate.strip_boundary`), in mm: half the member over the sine
+        of their angle where the node is on the edge of the cladding; negative where the
+        node stops a hair short of the edge and the strip runs on straight to the member.
+    end_angle_deg : (start, end) angle between the strip and the cladding edge at a member
+        end (NaN at a free end).
+    boundary_nodes : (start, end) nodes beyond the net, in its boundary panels.
     """
 
     id: str
@@ -860,6 +877,19 @@ class Strip:
     max_twist_deg: float
     off_orthogonal_deg: float
     lean_deg: float
+    end_setback_mm: tuple[float | None, float | None] = (None, None)
+    end_angle_deg: tuple[float, float] = (math.nan, math.nan)
+    boundary_nodes: tuple[int, int] = (0, 0)
+
+    def at_member(self, side: int) -> bool:
+        """Whether the strip's start (`side` 0) or end (1) butts against a boundary member."""
+        return self.end_setback_mm[side] is not None
+
+    def end_extensions_mm(self, settings: "StripSettings") -> tuple[float, float]:
+        """Material beyond the first and the last node along the curve (mm): the settings'
+        extension at a free end, minus the set-back at a member end."""
+        return tuple(settings.extension_mm if e is None else -e    # type: ignore[return-value]
+                     for e in self.end_setback_mm)
 
     @property
     def length_mm(self) -> float:
@@ -935,12 +965,21 @@ class StripSet:
     junctions : (j,) int, vertices where more than one strip of a family meets (irregular
         vertices): no slit is cut there, they need a node connector.
     settings : the settings used.
+    positions : (m, 3) float, where the strips' vertices are (model units): the net's
+        vertices, then the corners of its boundary panels the strips run through.
+    ends_not_continued : strip ends on the net's boundary that no boundary panel side
+        continues to the edge (0 without boundary panels).
+    crossings_at_member : crossings left without slits because a strip ends there
+        against the boundary member (two strips meeting at a tip of the boundary).
     """
 
     strips: list
     crossings: list
     junctions: np.ndarray
     settings: StripSettings
+    positions: np.ndarray
+    ends_not_continued: int = 0
+    crossings_at_member: int = 0
 
     @cached_property
     def crossings_of_strip(self) -> list:
@@ -971,7 +1010,15 @@ class StripSet:
             "twist_deg_per_m": float(max(s.twist_deg_per_m for s in self.strips)),
             "off_orthogonal_deg": float(max(s.off_orthogonal_deg for s in self.strips)),
             "boundary_lean_deg": float(max(s.lean_deg for s in self.strips)),
+            "ends_at_boundary_member": int(sum(s.at_member(k) for s in self.strips for k in (0, 1))),
+            "ends_free": int(sum(not s.closed and not s.at_member(k)
+                                 for s in self.strips for k in (0, 1))),
+            "ends_not_continued": self.ends_not_continued,
+            "crossings_at_member": self.crossings_at_member,
+            "boundary_nodes": int(sum(sum(s.boundary_nodes) for s in self.strips)),
         }
+        angles = [a for s in self.strips for a in s.end_angle_deg if math.isfinite(a)]
+        rec["member_angle_min_deg"] = float(min(angles)) if angles else None
         if radii.size:
             med = float(np.median(radii))
             rec["radius_mm"] = {"median": med, "min": float(radii.min()), "max": float(radii.max()),
@@ -990,13 +1037,17 @@ def _order_across(mid: np.ndarray) -> np.ndarray:
     return np.argsort(C @ vt[0], kind="stable")
 
 
-def build_strips(mesh: QuadMesh, settings: StripSettings) -> StripSet:
+def build_strips(mesh: QuadMesh, settings: StripSettings,
+                 boundary: StripBoundary | None = None) -> StripSet:
     """Lamellas along every parameter polyline of both families, unrolled and fitted.
 
     Parameters
     ----------
     mesh : the net (model units, see `StripSettings.units`).
     settings : validated with `StripSettings.check`.
+    boundary : the net's boundary panels: strips ending on the net's boundary run on
+        through them to the edge of the cladding and end at a boundary member there
+        (`fabplan.fabricate.strip_boundary`). None: they end at the net's last vertex.
 
     Raises
     ------
@@ -1029,8 +1080,13 @@ def build_strips(mesh: QuadMesh, settings: StripSettings) -> StripSet:
     if bad[used].any():
         vertex = int(used[bad[used]][0])
         raise InputError(f"{mesh.name}: vertex {vertex} has no surface normal (degenerate faces)")
+    ends = None
+    if boundary is not None and boundary.polygons:
+        N = boundary.normals(N)
+        ends = boundary.extend(verts, closed, N)
+        verts, X = ends.vertices, boundary.vertices
     u = unroll_polylines(X, N, verts, scale=settings.scale,
-                         curvature=_continued_curvature(mesh, verts))
+                         curvature=_continued_curvature(mesh, verts, len(X)))
     zero = np.flatnonzero((u.edge_mm < 1e-9) & ~np.isin(np.arange(len(u.edge_mm)), u.ptr[1:] - 1))
     if zero.size:
         k = int(np.searchsorted(u.ptr, zero[0], side="right") - 1)
@@ -1054,6 +1110,16 @@ def build_strips(mesh: QuadMesh, settings: StripSettings) -> StripSet:
         twist = np.abs(u.twist[a:b - 1])
         f = int(family[k])
         counters[f] += 1
+        member: list = [None, None]
+        angle, added = (math.nan, math.nan), (0, 0)
+        if ends is not None:
+            angle = (float(ends.angle_deg[k, 0]), float(ends.angle_deg[k, 1]))
+            added = (int(ends.added[k, 0]), int(ends.added[k, 1]))
+            for side in (0, 1):
+                if ends.at_edge[k, side]:
+                    # negative where the end runs on straight to an edge a hair beyond it
+                    member[side] = (member_setback_mm(settings.member_mm, angle[side])
+                                    - ends.reach[k, side] * settings.scale)
         strips.append(Strip(
             id=f"{FAMILY_LETTERS[f]}{counters[f]:02d}", family=f, vertices=np.asarray(v),
             closed=bool(closed[k]), curve=ReferenceCurve(nodes, bulges), axis=u.axis[a:b],
@@ -1061,7 +1127,8 @@ def build_strips(mesh: QuadMesh, settings: StripSettings) -> StripSet:
             twist_deg_per_m=float(np.degrees(twist / (edge / 1000.0)).max()),
             max_twist_deg=float(np.degrees(twist).max()),
             off_orthogonal_deg=float(np.degrees(u.off_orthogonal[a:b]).max()),
-            lean_deg=float(np.degrees(u.lean[a:b]).max())))
+            lean_deg=float(np.degrees(u.lean[a:b]).max()),
+            end_setback_mm=(member[0], member[1]), end_angle_deg=angle, boundary_nodes=added))
     half = settings.height_mm / 2 + settings.kerf_mm / 2
     for s in strips:
         radii = np.abs(s.arc_radii_mm)
@@ -1070,31 +1137,51 @@ def build_strips(mesh: QuadMesh, settings: StripSettings) -> StripSet:
                              f"half the height ({half:g} mm): its inner edge would fold over; "
                              f"lower --height or check --units ({settings.units})")
     crossings, junctions = _find_crossings(X, strips)
-    return StripSet(strips=strips, crossings=crossings, junctions=junctions, settings=settings)
+    # where two strips end against the boundary member at one node (a zigzag boundary's
+    # tip), they meet at the member, not in slits; a slit cut off by a member end neither
+    slit = [c for c in crossings if all(_slit_inside(strips[c.strips[k]], c.nodes[k], settings)
+                                        for k in (0, 1))]
+    at_member = len(crossings) - len(slit)
+    slit = [replace(c, id=i + 1) for i, c in enumerate(slit)]
+    return StripSet(strips=strips, crossings=slit, junctions=junctions, settings=settings,
+                    positions=X, ends_not_continued=0 if ends is None else ends.not_continued,
+                    crossings_at_member=at_member)
 
 
-def _continued_curvature(mesh: QuadMesh, verts: list) -> np.ndarray:
+def _slit_inside(strip: Strip, node: int, settings: StripSettings) -> bool:
+    """Whether a slit at `node` lies within the strip as cut (its ends set back at a
+    boundary member)."""
+    e0, e1 = strip.end_extensions_mm(settings)
+    s = strip.s_mm[node]
+    half = settings.slit_width_mm / 2
+    return bool(s - half >= -e0 and s + half <= strip.curve.length + e1)
+
+
+def _continued_curvature(mesh: QuadMesh, verts: list, count: int | None = None) -> np.ndarray:
     """Normal curvature imposed at strip nodes that are no star centre (NaN elsewhere).
 
     The net does not constrain such a node (on the boundary, or next to an irregular
     vertex), so its strip continues the normal curvature of the star centres next to it
     along the strip (their mean), or else of the stars the node belongs to (at a star both
     families share the normal curvature): the net's defining property (a constant radius,
-    zero on an A-net) carries on to the strip's last nodes. Nodes no star reaches keep NaN.
+    zero on an A-net) carries on to the strip's last nodes. Nodes beyond the net (ids from
+    ``mesh.vertex_count`` up to `count`, in its boundary panels) carry on the curvature of
+    the nearest node along the strip that has one. Nodes no star reaches keep NaN.
     """
     X, stars = mesh.vertices, mesh.stars
-    kappa = np.full(len(X), np.nan)
-    nearby = np.full(len(X), np.nan)
+    count = len(X) if count is None else count
+    kappa = np.full(count, np.nan)
+    nearby = np.full(count, np.nan)
     if len(stars):
         k_star = fit_star_spheres(X, stars).curvature
         kappa[stars[:, 0]] = k_star
-        total = np.zeros(len(X))
-        count = np.zeros(len(X))
+        total = np.zeros(count)
+        hits = np.zeros(count)
         for j in range(1, 5):
             np.add.at(total, stars[:, j], k_star)
-            np.add.at(count, stars[:, j], 1)
+            np.add.at(hits, stars[:, j], 1)
         with np.errstate(invalid="ignore", divide="ignore"):
-            nearby = total / count
+            nearby = total / hits
     out = []
     for v in verts:
         k = kappa[v]
@@ -1103,7 +1190,20 @@ def _continued_curvature(mesh: QuadMesh, verts: list) -> np.ndarray:
         along = np.where(known.any(axis=0),
                          np.where(known, pair, 0).sum(axis=0) / np.maximum(known.sum(axis=0), 1),
                          nearby[v])
-        out.append(np.where(np.isfinite(k), np.nan, along))
+        imposed = np.where(np.isfinite(k), np.nan, along)
+        beyond = v >= len(X)
+        if beyond.any():
+            # the nearest node along the strip with a curvature (its star's or imposed)
+            value = np.where(np.isfinite(k), k, imposed)
+            have = np.flatnonzero(np.isfinite(value) & ~beyond)
+            if have.size:
+                pos = np.arange(len(v))
+                right = np.clip(np.searchsorted(have, pos), 0, have.size - 1)
+                left = np.clip(right - 1, 0, have.size - 1)
+                nearest = np.where(np.abs(have[left] - pos) <= np.abs(have[right] - pos),
+                                   have[left], have[right])
+                imposed = np.where(beyond, value[nearest], imposed)
+        out.append(imposed)
     return np.concatenate(out)
 
 

@@ -201,7 +201,8 @@ class NetDrawing:
     polylines : list of ((k,) int vertex ids, family 0/1) parameter polylines.
     face_mold : (f,) int mold of every face (`fabplan.fabricate.molds.MoldPlan.mold`), or
         None: no mold layers.
-    strips : list of (strip id, family, (k,) int vertex ids): strip reference curves.
+    strips : list of (strip id, family, (k, 3) float points): strip reference curves (they
+        may run beyond the net, through its boundary panels).
     units : a key of `RHINO_UNITS`.
     name : the net's name, stored as user text of the mesh.
     user_text : more user text of the mesh (net type, status).
@@ -245,9 +246,9 @@ def write_net_3dm(path: str | os.PathLike, drawing: NetDrawing) -> Path:
     for f, letter in enumerate(FAMILY_NAMES):
         if any(int(family) == f for _, family, _ in drawing.strips):
             doc.layer(f"strips {letter}", LINE_COLOURS[f])
-    for strip_id, family, ids in drawing.strips:
+    for strip_id, family, points in drawing.strips:
         letter = FAMILY_NAMES[int(family)]
-        doc.add_polyline(X[np.asarray(ids)], layer=f"strips {letter}", name=str(strip_id),
+        doc.add_polyline(np.asarray(points, np.float64), layer=f"strips {letter}", name=str(strip_id),
                          user_text={"strip": strip_id, "family": letter},
                          colour=LINE_COLOURS[int(family)])
     return doc.write(path)

@@ -247,15 +247,20 @@ def plan_molds(net: NetLike, settings: MoldSettings | None = None, *, design: An
     return MoldResult.of(_plan_molds_impl(as_mesh(net), settings, design=design, **options))
 
 
-def plan_strips(net: NetLike, settings: StripSettings | None = None, **options: Any) -> StripResult:
+def plan_strips(net: NetLike, settings: StripSettings | None = None, *, boundary: Any = "auto",
+                **options: Any) -> StripResult:
     """The lamella strips of a net, on sheets (``fabplan strips``): `StripSettings`, or its
-    fields as keyword options (``height_mm=120, thickness_mm=6``)."""
+    fields as keyword options (``height_mm=120, thickness_mm=6``). `boundary`: the net's
+    boundary panels, which the strips run through to the edge of the cladding (``"auto"``:
+    those of a layout or glide result given as `net`; None: the strips end at the net)."""
     if settings is None:
         settings = StripSettings(**options)
     elif options:
         raise InputError("give either settings or keyword options, not both")
     settings.check()
-    return StripResult.of(_plan_strips_impl(as_mesh(net), settings))
+    if isinstance(boundary, str) and boundary == "auto":
+        boundary = getattr(net, "boundary_panels", None)
+    return StripResult.of(_plan_strips_impl(as_mesh(net), settings, boundary=boundary))
 
 
 def mill(net: NetLike, tool: MillTool | str, settings: MillSettings | None = None, *,
@@ -317,7 +322,8 @@ def net_drawing(net: NetLike, *, molds: MoldPlan | None = None, strips: StripPla
         vertices=mesh.vertices, faces=mesh.faces,
         polylines=list(zip(lines.vertices, lines.family.tolist(), strict=True)),
         face_mold=None if molds is None else molds.mold,
-        strips=[] if strips is None else [(s.id, s.family, s.vertices) for s in strips.strips.strips],
+        strips=[] if strips is None else [(s.id, s.family, strips.strips.positions[s.vertices])
+                                          for s in strips.strips.strips],
         units=units, name=Path(str(mesh.name)).name, user_text=dict(user_text or {}))
 
 

@@ -510,7 +510,8 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
             clock = time.perf_counter()
             strips = plan_strips(net.mesh, StripSettings(
                 height_mm=options.height_mm, thickness_mm=options.thickness_mm, units=units,
-                sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm))
+                sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm),
+                boundary=net.boundary_panels)
             seconds["strips"] = time.perf_counter() - clock
             s = strips.summary()
             say(f"    {counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
@@ -649,6 +650,9 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
             "max_radius_mm": math.inf if s["straight"] or radius is None or
             any(math.isinf(st.radius_mm) for st in strips.strips.strips) else radius["max"],
             "unrolled_length_error_mm": s["unrolled_length_error_mm"],
+            "ends_at_boundary_member": s["ends_at_boundary_member"],
+            "ends_free": s["ends_free"],
+            "ends_not_continued": s["ends_not_continued"],
         }
     return metrics
 
