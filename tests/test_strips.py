@@ -20,6 +20,7 @@ import os
 import re
 import shutil
 import subprocess
+from dataclasses import replace
 
 import ezdxf
 import numpy as np
@@ -40,6 +41,7 @@ from fabplan.fabricate.dxf import (
     geometry_preview_png,
     preview_png,
     segment_problems,
+    sheet_dxf_text,
     sheet_geometry,
     write_sheet_file,
 )
@@ -558,6 +560,39 @@ def test_sheet_geometry_preview_equals_the_document_preview(text_run, stroke_run
         a, b = imread(tmp_path / "a.png"), imread(tmp_path / "b.png")
         assert a.shape == b.shape and np.array_equal(a, b)
         assert (a[..., :3] < 0.5).any()  # something is drawn
+
+
+@pytest.mark.parametrize("labels", ["stroke", "outline", "text"])
+def test_written_sheet_text_holds_what_the_ezdxf_document_holds(text_run, labels):
+    # the file text is written without ezdxf's entities: read back, it must hold ezdxf's own
+    # document of the same sheets entity by entity, to the bit, and pass ezdxf's audit
+    import io
+
+    plan = text_run[0]
+    settings = replace(plan.strips.settings, labels=labels)
+    for sheets in ([plan.nesting.sheets[0]], plan.nesting.sheets[:3]):      # one, side by side
+        geom = sheet_geometry(plan.nesting, sheets, settings)
+        mine = ezdxf.read(io.StringIO(sheet_dxf_text(geom, settings)))
+        theirs = geometry_document(geom, settings)
+        assert not mine.audit().errors and mine.dxfversion == "AC1024"
+        assert mine.header["$INSUNITS"] == 4
+        width = geom.size[0] * len(sheets) + 100.0 * (len(sheets) - 1)      # 100 mm between
+        assert mine.header["$EXTMAX"] == theirs.header["$EXTMAX"] == (width, geom.size[1], 0)
+        assert [(y.dxf.name, y.color) for y in mine.layers] == \
+            [(y.dxf.name, y.color) for y in theirs.layers]
+        ours, ref = list(mine.modelspace()), list(theirs.modelspace())
+        assert len(ours) == len(ref) > 0
+        for a, b in zip(ours, ref, strict=True):
+            assert (a.dxftype(), a.dxf.layer) == (b.dxftype(), b.dxf.layer)
+            if a.dxftype() == "LWPOLYLINE":
+                assert a.closed == b.closed
+                assert list(a.get_points("xyb")) == list(b.get_points("xyb"))
+            else:
+                assert (a.dxf.text, a.dxf.height, a.dxf.rotation, a.dxf.align_point) == \
+                    (b.dxf.text, b.dxf.height, b.dxf.rotation, b.dxf.align_point)
+        handles = [e.dxf.handle for e in mine.entitydb.values()]
+        assert len(handles) == len(set(handles))
+        assert int(mine.header["$HANDSEED"], 16) > max(int(h, 16) for h in handles)
 
 
 def test_write_sheet_file_refuses_overlapping_outlines_before_writing(tmp_path):

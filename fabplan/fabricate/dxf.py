@@ -6,11 +6,13 @@ slit rectangles on the slit layer (their mouths run `slit_overcut_mm` past the s
 so cutting the slits first and the outline after frees them cleanly), and engravings on
 the engrave layer: labels as single-stroke polylines, as glyph outlines, or as TEXT, plus
 the orientation arrows and splice marks. A sheet's entities are first gathered as plain
-arrays (`SheetGeometry`), from which its document and its preview are drawn. Each document
-is audited (``doc.audit()``) and checked in memory (closed outlines inside the sheet and
-apart, no zero-length or duplicate segments) before it is written; the bytes on disk are
-compared with those written by their SHA-256. `check_sheet` reads a written file back
-with ezdxf and runs the same checks.
+arrays (`SheetGeometry`). The file is the empty document ezdxf writes (header, tables,
+layers: audited by ezdxf) with the entities written straight into its ENTITIES section
+(`sheet_dxf_text`; ezdxf's own document of them, `geometry_document`, gives the same
+file's geometry to the last bit, and draws the previews in tests). The entities are checked
+before they are written (closed outlines inside the sheet and apart, no zero-length or
+duplicate segments), the bytes on disk are compared with those written by their SHA-256,
+and `check_sheet` reads a written file back with ezdxf, audits it and runs the same checks.
 """
 
 from __future__ import annotations
@@ -51,6 +53,8 @@ __all__ = [
     "geometry_document",
     "sheet_document",
     "dxf_bytes",
+    "sheet_dxf_text",
+    "geometry_drawing",
     "write_sheet_file",
     "SheetDrawing",
     "sheet_drawing",
@@ -59,6 +63,7 @@ __all__ = [
     "check_document",
     "check_sheet",
     "segment_problems",
+    "polyline_problems",
     "preview_png",
     "geometry_preview_png",
 ]
@@ -200,15 +205,36 @@ def _cap_height() -> float:
 
 # ---------------------------------------------------------------------- writing
 def _new_document(settings: "StripSettings", *, frames: bool = False):
+    return _empty_document(_layer_key(settings), frames)
+
+
+def _layer_key(settings: "StripSettings") -> tuple:
+    """The cut, slit and engrave layers' (name, colour), hashable."""
+    return tuple((str(settings.layers[k][0]), int(settings.layers[k][1]))
+                 for k in ("cut", "slit", "engrave"))
+
+
+def _empty_document(layers: tuple, frames: bool) -> Drawing:
     doc = ezdxf.new("R2010", units=ezdxf.units.MM, setup=False)
     doc.header["$MEASUREMENT"] = 1
-    for kind in ("cut", "slit", "engrave"):
-        name, colour = settings.layers[kind]
-        doc.layers.add(str(name), color=int(colour))
+    for name, colour in layers:
+        doc.layers.add(name, color=colour)
     if frames:
         layer = doc.layers.add(SHEET_LAYER[0], color=SHEET_LAYER[1])
         layer.dxf.plot = 0
     return doc
+
+
+def _set_extents(doc: Drawing, geom_size: tuple, sheet_count: int) -> None:
+    """The drawing's extents and limits: the sheets side by side (a CAD program zooms to
+    them). ezdxf writes the model space's own values into the header, so both are set."""
+    W, H = geom_size
+    width = sheet_count * W + (sheet_count - 1) * SHEET_GAP_MM
+    msp = doc.modelspace()
+    msp.dxf.extmin, msp.dxf.extmax = (0, 0, 0), (width, H, 0)
+    msp.dxf.limmin, msp.dxf.limmax = (0, 0), (width, H)
+    doc.header["$EXTMIN"], doc.header["$EXTMAX"] = (0, 0, 0), (width, H, 0)
+    doc.header["$LIMMIN"], doc.header["$LIMMAX"] = (0, 0), (width, H)
 
 
 @dataclass
@@ -323,13 +349,122 @@ def geometry_document(geom: SheetGeometry, settings: "StripSettings") -> Drawing
         else:
             msp.add_lwpolyline(shape.tolist(), format="xyb" if shape.shape[1] == 3 else "xy",
                                close=closed, dxfattribs=attribs)
-    W, H = geom.size
-    width = geom.sheet_count * W + (geom.sheet_count - 1) * SHEET_GAP_MM
-    doc.header["$EXTMIN"] = (0, 0, 0)
-    doc.header["$EXTMAX"] = (width, H, 0)
-    doc.header["$LIMMIN"] = (0, 0)
-    doc.header["$LIMMAX"] = (width, H)
+    _set_extents(doc, geom.size, geom.sheet_count)
     return doc
+
+
+@lru_cache(maxsize=8)
+def _template(layers: tuple, frames: bool, size: tuple, sheet_count: int) -> tuple[str, str, int, str]:
+    """An empty sheet file as ezdxf writes it, cut open at its ENTITIES section.
+
+    Returns
+    -------
+    head : the text up to the ENTITIES section's first entity.
+    tail : the text from the end of the ENTITIES section on.
+    seed : the first free handle.
+    owner : the handle of the model space's block record (every entity's owner).
+    """
+    doc = _empty_document(layers, frames)
+    _set_extents(doc, size, sheet_count)
+    if doc.audit().errors:                     # pragma: no cover - ezdxf's own document
+        raise FabplanError("the empty DXF sheet does not pass ezdxf's audit")
+    stream = io.StringIO()
+    doc.write(stream)
+    text = stream.getvalue()
+    start = text.index(_ENTITIES) + len(_ENTITIES)
+    end = text.index("  0\nENDSEC\n", start)
+    seed = int(str(doc.header["$HANDSEED"]), 16)
+    return text[:start], text[end:], seed, str(doc.modelspace().block_record_handle)
+
+
+_ENTITIES = "  0\nSECTION\n  2\nENTITIES\n"
+
+
+def _lwpolyline_tags(handle: int, owner: str, layer: str, rows: np.ndarray, closed: bool) -> str:
+    """The tags of an R2010 LWPOLYLINE (as ezdxf writes it): points (m, 2) or rows
+    (m, 3) ``x, y, bulge``, bulges only where they are not zero."""
+    head = (f"  0\nLWPOLYLINE\n  5\n{handle:X}\n330\n{owner}\n100\nAcDbEntity\n  8\n{layer}\n"
+            f"100\nAcDbPolyline\n 90\n{len(rows)}\n 70\n{1 if closed else 0}\n")
+    if rows.shape[1] == 3:
+        points = "".join(f" 10\n{x!r}\n 20\n{y!r}\n" + (f" 42\n{b!r}\n" if b else "")
+                         for x, y, b in rows.tolist())
+    else:
+        points = "".join(f" 10\n{x!r}\n 20\n{y!r}\n" for x, y in rows.tolist())
+    return head + points
+
+
+def _text_tags(handle: int, owner: str, layer: str, label: Label) -> str:
+    """The tags of an R2010 TEXT centred on the label's position (as ezdxf writes it)."""
+    x, y = (float(v) for v in label.position)
+    return (f"  0\nTEXT\n  5\n{handle:X}\n330\n{owner}\n100\nAcDbEntity\n  8\n{layer}\n"
+            f"100\nAcDbText\n 10\n{x!r}\n 20\n{y!r}\n 30\n0.0\n 40\n{float(label.height)!r}\n"
+            f"  1\n{label.text}\n 50\n{float(label.angle_deg)!r}\n 72\n1\n 11\n{x!r}\n"
+            f" 21\n{y!r}\n 31\n0.0\n100\nAcDbText\n 73\n2\n")
+
+
+def _entities(geom: SheetGeometry, settings: "StripSettings"
+              ) -> Iterator[tuple[str, np.ndarray | Label, bool]]:
+    """Every entity of a sheet file as written: (layer name, (m, 2|3) rows or a TEXT
+    `Label`, closed), labels broken into their polylines."""
+    names = {kind: str(settings.layers[kind][0]) for kind in ("cut", "slit", "engrave")}
+    names["sheet"] = SHEET_LAYER[0]
+    for kind, shape, closed in zip(geom.layers, geom.shapes, geom.closed, strict=True):
+        if isinstance(shape, Label):
+            if settings.labels == "text":
+                yield names[kind], shape, False
+                continue
+            lines, shut = label_polylines(shape, settings.labels)
+            for P in lines:
+                yield names[kind], np.asarray(P, dtype=np.float64), shut
+        else:
+            yield names[kind], np.asarray(shape, dtype=np.float64), closed
+
+
+def sheet_dxf_text(geom: SheetGeometry, settings: "StripSettings") -> str:
+    """The text of a sheet file: the same entities `geometry_document` builds, written
+    straight into the empty document ezdxf writes (`_template`), with handles from its
+    seed on. Coordinates are written as Python writes floats (exactly, as ezdxf does).
+    Used because building and exporting thousands of ezdxf entities took most of a
+    strip plan's time."""
+    head, tail, seed, owner = _template(_layer_key(settings), geom.sheet_count > 1,
+                                        tuple(geom.size), geom.sheet_count)
+    parts = []
+    handle = seed
+    for layer, shape, closed in _entities(geom, settings):
+        if isinstance(shape, Label):
+            parts.append(_text_tags(handle, owner, layer, shape))
+        else:
+            parts.append(_lwpolyline_tags(handle, owner, layer, shape, closed))
+        handle += 1
+    old = f"$HANDSEED\n  5\n{seed:X}\n"
+    if old not in head:                        # pragma: no cover - ezdxf's header layout
+        raise FabplanError("the empty DXF sheet has no $HANDSEED to continue")
+    return head.replace(old, f"$HANDSEED\n  5\n{handle:X}\n") + "".join(parts) + tail
+
+
+def geometry_drawing(geom: SheetGeometry, settings: "StripSettings") -> SheetDrawing:
+    """What a sheet file written by `sheet_dxf_text` holds, from its entities (for
+    `check_drawing` before it is written)."""
+    cut, slit = (str(settings.layers[k][0]) for k in ("cut", "slit"))
+    outlines, closed_o, slits, closed_s, polylines = [], [], [], [], []
+    engravings = 0
+    for layer, shape, closed in _entities(geom, settings):
+        if isinstance(shape, Label):
+            engravings += 1
+            continue
+        rows = shape if shape.shape[1] == 3 else np.column_stack([shape, np.zeros(len(shape))])
+        polylines.append((rows, closed, layer))
+        if layer == cut:
+            outlines.append(rows)
+            closed_o.append(closed)
+        elif layer == slit:
+            slits.append(shape[:, :2])
+            closed_s.append(closed)
+        elif layer != SHEET_LAYER[0]:
+            engravings += 1
+    return SheetDrawing(outlines=outlines, outline_closed=closed_o, slits=slits,
+                        slit_closed=closed_s, engravings=engravings, insunits=4,
+                        version="AC1024", audit_errors=0, recover_errors=0, polylines=polylines)
 
 
 def sheet_document(layout: "Nesting", sheets: list, settings: "StripSettings") -> Drawing:
@@ -355,9 +490,11 @@ def write_sheet_file(geom: SheetGeometry, settings: "StripSettings",
                      path: str | os.PathLike) -> str:
     """Build, check and write one sheet file; return the SHA-256 of its bytes.
 
-    The document is exported to bytes, then audited and checked in memory
-    (`check_document`); only then are the bytes written, and those on disk are hashed
-    again and compared with them, which stands in for reading the whole file back.
+    The entities are checked as written (`geometry_drawing`, `check_drawing`: closed
+    outlines inside the sheet and apart, no zero-length or duplicate segments), then the
+    text (`sheet_dxf_text`) is written, and the bytes on disk are hashed again and
+    compared with those written, which stands in for reading the whole file back
+    (`fabplan.fabricate.strip_plan.write_plan` reads one sheet back with ezdxf and audits it).
 
     Raises
     ------
@@ -365,11 +502,8 @@ def write_sheet_file(geom: SheetGeometry, settings: "StripSettings",
         When a check fails or the file on disk differs from the bytes written.
     """
     path = Path(path)
-    doc = geometry_document(geom, settings)
-    # export first: the audit may reorder the OBJECTS section (in an order that changes
-    # from run to run), and the file should be what the document exports as built
-    data = dxf_bytes(doc)
-    check_document(doc, settings, geom.sheet_count, name=path.name)
+    check_drawing(geometry_drawing(geom, settings), settings, geom.sheet_count, name=path.name)
+    data = sheet_dxf_text(geom, settings).encode("utf-8")
     digest = hashlib.sha256(data).hexdigest()
     path.write_bytes(data)
     if hashlib.sha256(path.read_bytes()).hexdigest() != digest:
@@ -395,6 +529,8 @@ class SheetDrawing:
     audit_errors : number of errors ``doc.audit()`` reports.
     recover_errors : number of errors left after ``ezdxf.recover.readfile``.
     doc : the document as read (not part of the comparison).
+    polylines : without a document, every polyline as (rows ``x, y, bulge``, closed,
+        layer) for the segment check.
     """
 
     outlines: list
@@ -407,6 +543,7 @@ class SheetDrawing:
     audit_errors: int
     recover_errors: int
     doc: Drawing | None = None
+    polylines: list | None = None
 
 
 def _lwpolylines(layout: BaseLayout) -> Iterator[LWPolyline]:
@@ -471,17 +608,23 @@ def segment_problems(doc_or_path: str | os.PathLike | Drawing) -> list:
     """
     doc = ezdxf.readfile(str(doc_or_path)) if isinstance(doc_or_path, (str, os.PathLike)) \
         else doc_or_path
+    return polyline_problems([(np.array(list(e.get_points("xyb")), dtype=np.float64),
+                               bool(e.closed), e.dxf.layer) for e in _lwpolylines(doc.modelspace())])
+
+
+def polyline_problems(polylines: list) -> list:
+    """`segment_problems` of polylines given as (rows (m, 3) ``x, y, bulge``, closed,
+    layer)."""
     starts, ends, bulges, layers = [], [], [], []
-    for e in _lwpolylines(doc.modelspace()):
-        pts = np.array(list(e.get_points("xyb")), dtype=np.float64)
+    for pts, closed, layer in polylines:
         if len(pts) < 2:
             continue
         nxt = np.roll(pts, -1, axis=0)
-        count = len(pts) if e.closed else len(pts) - 1
+        count = len(pts) if closed else len(pts) - 1
         starts.append(pts[:count, :2])
         ends.append(nxt[:count, :2])
         bulges.append(pts[:count, 2])
-        layers += [e.dxf.layer] * count
+        layers += [layer] * count
     if not starts:
         return []
     a, b, bulge = np.concatenate(starts), np.concatenate(ends), np.concatenate(bulges)
@@ -528,10 +671,10 @@ def check_drawing(d: SheetDrawing, settings: "StripSettings", sheet_count: int =
     pairs = tree.query(polys, predicate="dwithin", distance=max(settings.spacing_mm - 1e-3, 0))
     if any(a < b for a, b in pairs.T):
         raise FabplanError(f"{name}: two outlines are closer than the spacing")
-    if d.doc is not None:
-        problems = segment_problems(d.doc)
-        if problems:
-            raise FabplanError(f"{name}: {problems[0]}")
+    problems = (segment_problems(d.doc) if d.doc is not None else
+                polyline_problems(d.polylines) if d.polylines is not None else [])
+    if problems:
+        raise FabplanError(f"{name}: {problems[0]}")
     return d
 
 

@@ -21,7 +21,7 @@ from typing import Any
 from ..io.output import output_folder
 from ..io.records import json_text
 from ..net.mesh import QuadMesh
-from .dxf import SheetGeometry, geometry_preview_png, sheet_geometry, write_sheet_file
+from .dxf import SheetGeometry, check_sheet, geometry_preview_png, sheet_geometry, write_sheet_file
 from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts
 from .strip_boundary import StripBoundary
 from .strips import Strip, StripSet, StripSettings, build_strips
@@ -201,8 +201,9 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
                previews: bool = True, workers: int | None = 1) -> list[Path]:
     """Write the DXF sheets, schedule (CSV and JSON) and preview PNGs of a plan.
 
-    Every sheet's document is audited and checked in memory before it is written, and the
-    bytes on disk are compared with those written (`fabplan.fabricate.dxf.write_sheet_file`).
+    Every sheet's entities are checked before they are written, the bytes on disk are
+    compared with those written (`fabplan.fabricate.dxf.write_sheet_file`), and the first
+    sheet file is read back with ezdxf, audited and checked again.
     All files are built in a staging folder first, then moved into `out_dir`
     (`fabplan.io.output.output_folder`); on any failure nothing is left behind. Files of an
     earlier run with the same `name` (listed in its JSON) are removed.
@@ -249,6 +250,12 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
                              tmp / f"{name}-sheets.dxf")
             files.insert(0, f"{name}-sheets.dxf")
             sheet_files = {s.index: f"{name}-sheets.dxf" for s in layout.sheets}
+        # the files are written as text (`sheet_dxf_text`): one of them is read back with
+        # ezdxf and audited, so that a file no CAD program would open never leaves here
+        if sheet_files:
+            first = min(sheet_files)
+            check_sheet(tmp / sheet_files[first], settings,
+                        len(layout.sheets) if settings.one_file else 1)
         rows = schedule_rows(plan)
         summary = plan.summary()
         header = (f"# fabplan strip schedule: {summary['strips']} strips, {summary['sheets']} "
