@@ -607,7 +607,7 @@ def _cmd_strips(args) -> int:
     check_output_folder(out)
     started = time.perf_counter()
     mesh = load_net(args.net)
-    boundary = _strip_boundary(args, mesh)
+    boundary_file, boundary = _strip_boundary(args, mesh)
     check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
                       what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
                       fix="plan the strips of a coarser net or of parts of it")
@@ -651,11 +651,16 @@ def _cmd_strips(args) -> int:
           f"(planning {s['seconds']:.1f} s, every sheet audited and checked before writing)")
     if boundary is not None:
         angle = s["member_angle_min_deg"]
-        print(f"{s['ends_at_boundary_member']} strip ends run through the boundary panels of "
-              f"{args.boundary} to the edge of the cladding and are cut square against a "
-              f"{settings.member_mm:g} mm boundary member"
+        print(f"{counted(s['ends_at_boundary_member'], 'strip end')} reach the edge of the "
+              f"cladding ({counted(s['boundary_nodes'], 'node')} added in the boundary panels of "
+              f"{boundary_file}) and are cut square against a {settings.member_mm:g} mm "
+              "boundary member"
               + (f" (smallest angle to it {angle:.0f} deg)" if angle is not None else "")
               + f"; {s['ends_free']} ends are free")
+        if s["strips_along_edge"]:
+            print(f"fabplan: note: {counted(s['strips_along_edge'], 'polyline')} lie along the "
+                  "edge of the cladding, where the boundary member runs: no strips are cut "
+                  "for them", file=sys.stderr)
         if s["ends_not_continued"]:
             print(f"fabplan: note: {counted(s['ends_not_continued'], 'strip end')} on the net's "
                   "boundary could not be continued to the edge (no boundary panel side goes on "
@@ -669,21 +674,23 @@ def _cmd_strips(args) -> int:
 
 
 def _strip_boundary(args, mesh):
-    """The boundary panels strips run through: ``--boundary FILE``, else ``NET.boundary.obj``
-    beside the net when a layout or study wrote one (``--no-boundary``: none)."""
+    """``(file, StripBoundary)`` of the boundary panels strips run through: ``--boundary
+    FILE``, else ``NET.boundary.obj`` beside the net when a layout or study wrote one;
+    ``(None, None)`` for none (``--no-boundary``)."""
     from .fabricate.strip_boundary import StripBoundary
+    from .solve.optimize import boundary_path
 
     if args.no_boundary:
-        args.boundary = None
-        return None
+        return None, None
     if args.boundary is None:
-        beside = Path(args.net).with_suffix(".boundary.obj")
-        if not beside.is_file():
-            return None
-        args.boundary = str(beside)
-    elif not Path(args.boundary).is_file():
-        raise InputError(f"{args.boundary}: no such file (the boundary panels, NET.boundary.obj)")
-    return StripBoundary.from_obj(mesh, args.boundary)
+        path = boundary_path(args.net)
+        if not path.is_file():
+            return None, None
+    else:
+        path = Path(args.boundary)
+        if not path.is_file():
+            raise InputError(f"{path}: no such file (the boundary panels, NET.boundary.obj)")
+    return path, StripBoundary.from_obj(mesh, path)
 
 
 def _cmd_arcs(args) -> int:
@@ -1000,13 +1007,14 @@ def _add_strips(sub: Any) -> None:
                    help="strip ends (default square)")
     p.add_argument("--extension", type=float, metavar="MM",
                    help="material beyond the end crossings at free ends (default height / 2)")
-    p.add_argument("--boundary", metavar="FILE",
-                   help="the net's boundary panels (default: NET.boundary.obj beside the net, "
-                        "as layout and study write it): strips run through them to the edge of "
-                        "the cladding and are cut square against a boundary member there")
-    p.add_argument("--no-boundary", action="store_true",
-                   help="end the strips at the net's last vertices even when boundary panels "
-                        "are beside it")
+    ends = p.add_mutually_exclusive_group()
+    ends.add_argument("--boundary", metavar="FILE",
+                      help="the net's boundary panels (default: NET.boundary.obj beside the net, "
+                           "as layout and study write it): strips run through them to the edge "
+                           "of the cladding and are cut square against a boundary member there")
+    ends.add_argument("--no-boundary", action="store_true",
+                      help="end the strips at the net's last vertices even when boundary panels "
+                           "are beside it")
     p.add_argument("--boundary-member", type=float, metavar="MM",
                    help="thickness of the boundary member strips end against (default "
                         "--thickness)")

@@ -124,18 +124,21 @@ def _lift(surface, p: np.ndarray) -> np.ndarray:
     return p + ((h - z) * scale)[:, None] * frame[2]
 
 
-def _fit_quadric(points: np.ndarray, frame_of) -> tuple:
-    """Least-squares quadric of points in the frame of a face (origin, frame, scale, _)."""
+def _fit_quadric(points: np.ndarray, weight: np.ndarray, frame_of) -> tuple:
+    """Weighted least-squares quadric of points in the frame of a face (origin, frame,
+    scale, _)."""
     origin, frame, scale, _ = frame_of
     x, y, z = ((points - origin) @ frame.T / scale).T
     A = np.column_stack([np.ones_like(x), x, y, x * x / 2, x * y, y * y / 2])
-    return origin, frame, scale, np.linalg.lstsq(A, z, rcond=None)[0]
+    w = np.sqrt(weight)
+    return origin, frame, scale, np.linalg.lstsq(A * w[:, None], z * w, rcond=None)[0]
 
 
 def _shared_points(X, face, local, across, a, b, j) -> np.ndarray:
     """Points of a ``shared`` panel (docs/molds-schema.md) at corner weights (a, b) of the
-    fan triangles (centre, corner j, corner j+1): its own quadric through its edges, bent
-    onto them; an edge is the mean of its two faces' local quadrics over the chord."""
+    fan triangles (centre, corner j, corner j+1): its own quadric through its corners and
+    near its edges, bent onto them; an edge is the mean of its two faces' local quadrics
+    over the chord."""
     k = len(face)
     C = X[face]
 
@@ -149,7 +152,7 @@ def _shared_points(X, face, local, across, a, b, j) -> np.ndarray:
 
     tau8 = np.arange(8) / 8
     outline = np.vstack([edge(np.full(8, jj), tau8) for jj in range(k)])
-    base = _fit_quadric(outline, local[0])
+    base = _fit_quadric(outline, np.tile(np.r_[1e6, np.ones(7)], k), local[0])   # through the corners
     origin, frame, scale, _ = base
     P = ((C - origin) @ frame.T / scale)[:, :2]
 
@@ -626,8 +629,8 @@ def test_the_step_limit_is_a_setting_and_flat_panels_need_no_mold_by_the_bound()
 
 def test_shared_panels_are_pieces_of_one_surface():
     # a mixed net (quads and triangles) on a wavy surface: both panels of every interior edge
-    # have the same points on it, the corners are the net's vertices, and the panels are
-    # not their quadrics (the edges bend them)
+    # have the same points on it, the corners are the net's vertices, and the edges are
+    # curves, not the chords
     from fabplan.fabricate.panels import fit_panel_surfaces, shared_panel_samples
 
     grid = height_field_grid(6, 5, lambda x, y: 0.2 * np.sin(x) + 0.05 * x * y)

@@ -247,8 +247,10 @@ def _split_strip(strip, node_s: np.ndarray, settings: "StripSettings") -> list:
         return []
     # splice zones must keep clear of every slit and of the strip's end nodes
     clear = splice / 2 + settings.slit_width_mm / 2 + max(settings.text_height_mm, 2.0)
-    allowed = [(lo + clear, hi - clear) for lo, hi in zip(node_s[:-1], node_s[1:], strict=True)
-               if hi - lo > 2 * clear]
+    # ... and of the strip's cut ends (set back at a boundary member)
+    allowed = [(max(lo, -e0) + clear, min(hi, length + e1) - clear)
+               for lo, hi in zip(node_s[:-1], node_s[1:], strict=True)
+               if min(hi, length + e1) - max(lo, -e0) > 2 * clear]
     allowed = [(lo, hi) for lo, hi in allowed if hi >= lo]
     if not allowed:
         raise InputError(

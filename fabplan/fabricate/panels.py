@@ -175,7 +175,7 @@ class PanelSurfaces:
         ``z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2) / 2`` in scaled coordinates.
     corners : (f, k_max, 2) float, the corners projected into the face plane (scaled), padded
         by repeating the last corner.
-    model : the surface model, ``"local_fit"``, ``"corners"`` or ``"design"``.
+    model : the surface model, ``"shared"``, ``"local_fit"``, ``"corners"`` or ``"design"``.
     """
 
     origin: np.ndarray
@@ -200,7 +200,8 @@ def fit_panel_surfaces(mesh, model: str = "local_fit") -> PanelSurfaces:
     Parameters
     ----------
     mesh : `fabplan.mesh.QuadMesh`, faces of any size; check it with `check_panels` first.
-    model : ``"local_fit"`` or ``"corners"``.
+    model : ``"local_fit"`` or ``"corners"`` (the ``shared`` and ``design`` panels start from
+        ``local_fit``: `fit_shared_panels`, `fit_design_panels`).
 
     Returns
     -------
@@ -289,7 +290,7 @@ def _face_slots(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     sizes, ptr = mesh.face_sizes, mesh.face_indptr
     j = np.arange(int(sizes.max()))[None, :]
     corner = ptr[:-1, None] + np.minimum(j, sizes[:, None] - 1)
-    following = ptr[:-1, None] + np.where(j + 1 >= sizes[:, None], 0, np.minimum(j + 1, sizes[:, None] - 1))
+    following = ptr[:-1, None] + np.where(j + 1 >= sizes[:, None], 0, j + 1)
     return corner, following, j < sizes[:, None]
 
 
@@ -453,25 +454,33 @@ def shared_panel_samples(mesh, local: PanelSurfaces, level: int) -> np.ndarray:
     """`panel_samples` of the one surface of the net (model ``shared``).
 
     A panel is the least-squares quadric of its `shared_edge_points` (at
-    `SHARED_OUTLINE_STEPS` points per edge), bent onto them: the point of the fan triangle
-    (centre, corner j, corner j+1) with corner weights ``(s, t)`` is the quadric's point
-    plus ``s + t`` times the offset of edge j from the quadric at ``t / (s + t)``. On the
-    outline the panel is its edges exactly; at the centre and along the fan's spokes (the
-    offsets vanish at the corners) it is the quadric.
+    `SHARED_OUTLINE_STEPS` points per edge, its corners with weight `CORNER_WEIGHT`, so it
+    passes through them), bent onto them: the point of the fan triangle (centre, corner j,
+    corner j+1) with corner weights ``(s, t)`` is the quadric's point plus ``s + t`` times
+    the offset of edge j from the quadric at ``t / (s + t)``. On the outline the panel is
+    its edges exactly; at the centre and along the fan's spokes (the offsets vanish at the
+    corners) it is the quadric.
 
     Returns
     -------
     (f, s, 3) float model coordinates, padded like `panel_samples`.
     """
     _, _, valid = _face_slots(mesh)
-    outline = shared_edge_points(mesh, local, np.arange(SHARED_OUTLINE_STEPS) / SHARED_OUTLINE_STEPS)
-    base = _fit_to_samples(mesh, local, outline.reshape(len(outline), -1, 3), "shared")
+    f, k_max = valid.shape
+    steps = SHARED_OUTLINE_STEPS
+    outline = shared_edge_points(mesh, local, np.arange(steps) / steps).reshape(f, -1, 3)
+    weight = np.repeat(valid, steps, axis=1) * np.tile(np.r_[CORNER_WEIGHT, np.ones(steps - 1)], k_max)
+    coefficients = fit_height_fields(outline, weight, local.origin, local.frame, local.scale,
+                                     ridge_weight=steps * valid.sum(axis=1))
+    base = replace(local, coefficients=coefficients, model="shared")
     weights = _fan_weights(level)
     on_edge = weights.sum(axis=1)              # s + t: 0 at the centre, 1 on the edge
     tau = np.where(on_edge > 0, weights[:, 1] / np.maximum(on_edge, 1e-300), 0.0)
+    # a fan grid has `level` + 1 distinct fractions along the edge: lift each once
+    tau, which = np.unique(tau, return_inverse=True)
     offset = shared_edge_points(mesh, local, tau) - _fan_points(mesh, base, np.column_stack([1 - tau, tau]))
     offset = np.where(valid[:, :, None, None], offset, 0.0)       # padding: the face centre
-    points = _fan_points(mesh, base, weights) + on_edge[None, None, :, None] * offset
+    points = _fan_points(mesh, base, weights) + on_edge[None, None, :, None] * offset[:, :, which.ravel()]
     return points.reshape(len(points), -1, 3)
 
 

@@ -136,13 +136,15 @@ def schedule_rows(plan: StripPlan) -> list:
 
 def _end_text(strip: Strip, side: int) -> str:
     """How a strip end is cut: ``free`` (beyond its last node), or ``member A deg -D mm``
-    (square against the boundary member, meeting it at A degrees, D mm short of its node on
-    the cladding's edge); ``closed`` for a loop."""
+    (square against the boundary member, meeting it at A degrees, D mm short of its end
+    node; ``+D mm`` where it runs on past the node to an edge a hair beyond); ``closed``
+    for a loop."""
     if strip.closed:
         return "closed"
-    if not strip.at_member(side):
+    setback = strip.end_setback_mm[side]
+    if setback is None:
         return "free"
-    return f"member {strip.end_angle_deg[side]:.1f} deg -{strip.end_setback_mm[side]:.1f} mm"
+    return f"member {strip.end_angle_deg[side]:.1f} deg {-setback:+.1f} mm"
 
 
 def _schedule_csv(rows: list, header: str) -> str:
@@ -178,6 +180,8 @@ def _plan_record(plan: StripPlan, files: list, sheet_files: dict) -> dict:
     return {
         "units": "millimetres; arc lengths s along each strip's reference curve (its mid-line, "
                  "at the surface), from its first node",
+        "vertices": "strip and crossing vertex ids number the net's vertices and, beyond them, "
+                    "the corners of its boundary panels (NET.boundary.obj, net's vertices first)",
         "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(s).items()},
         "summary": plan.summary(),
         "files": files,

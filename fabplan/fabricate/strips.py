@@ -52,7 +52,7 @@ from ..errors import InputError
 from ..net.geometry import circumcircle_tangent, face_normals, fit_star_spheres, star_normals
 from ..net.mesh import Polylines, QuadMesh
 from .molds import UNITS
-from .strip_boundary import StripBoundary, member_setback_mm
+from .strip_boundary import StripBoundary, StripEnds, member_setback_mm, tip_setback_mm
 
 __all__ = [
     "StripSettings",
@@ -971,6 +971,8 @@ class StripSet:
         continues to the edge (0 without boundary panels).
     crossings_at_member : crossings left without slits because a strip ends there
         against the boundary member (two strips meeting at a tip of the boundary).
+    along_edge : polylines left out because they lie along the edge of the cladding, where
+        the boundary member runs.
     """
 
     strips: list
@@ -980,6 +982,7 @@ class StripSet:
     positions: np.ndarray
     ends_not_continued: int = 0
     crossings_at_member: int = 0
+    along_edge: int = 0
 
     @cached_property
     def crossings_of_strip(self) -> list:
@@ -1015,6 +1018,7 @@ class StripSet:
                                  for s in self.strips for k in (0, 1))),
             "ends_not_continued": self.ends_not_continued,
             "crossings_at_member": self.crossings_at_member,
+            "strips_along_edge": self.along_edge,
             "boundary_nodes": int(sum(sum(s.boundary_nodes) for s in self.strips)),
         }
         angles = [a for s in self.strips for a in s.end_angle_deg if math.isfinite(a)]
@@ -1081,10 +1085,20 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
         vertex = int(used[bad[used]][0])
         raise InputError(f"{mesh.name}: vertex {vertex} has no surface normal (degenerate faces)")
     ends = None
+    along_edge = 0
+    setback = np.full((len(verts), 2), np.nan)
     if boundary is not None and boundary.polygons:
         N = boundary.normals(N)
         ends = boundary.extend(verts, closed, N)
-        verts, X = ends.vertices, boundary.vertices
+        # a polyline lying along the cladding's edge is where the boundary member runs
+        kept = np.flatnonzero(~ends.along_edge)
+        along_edge = len(verts) - len(kept)
+        if kept.size == 0:
+            raise InputError(f"{mesh.name}: every parameter polyline runs along the edge of the "
+                             "cladding, where the boundary member is; use --no-boundary")
+        ends = ends.subset(kept)
+        verts, family, closed, X = ends.vertices, family[kept], closed[kept], boundary.vertices
+        setback = _member_setbacks(X, ends, settings)
     u = unroll_polylines(X, N, verts, scale=settings.scale,
                          curvature=_continued_curvature(mesh, verts, len(X)))
     zero = np.flatnonzero((u.edge_mm < 1e-9) & ~np.isin(np.arange(len(u.edge_mm)), u.ptr[1:] - 1))
@@ -1110,16 +1124,11 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
         twist = np.abs(u.twist[a:b - 1])
         f = int(family[k])
         counters[f] += 1
-        member: list = [None, None]
+        member = [None if math.isnan(x) else float(x) for x in setback[k]]
         angle, added = (math.nan, math.nan), (0, 0)
         if ends is not None:
             angle = (float(ends.angle_deg[k, 0]), float(ends.angle_deg[k, 1]))
             added = (int(ends.added[k, 0]), int(ends.added[k, 1]))
-            for side in (0, 1):
-                if ends.at_edge[k, side]:
-                    # negative where the end runs on straight to an edge a hair beyond it
-                    member[side] = (member_setback_mm(settings.member_mm, angle[side])
-                                    - ends.reach[k, side] * settings.scale)
         strips.append(Strip(
             id=f"{FAMILY_LETTERS[f]}{counters[f]:02d}", family=f, vertices=np.asarray(v),
             closed=bool(closed[k]), curve=ReferenceCurve(nodes, bulges), axis=u.axis[a:b],
@@ -1131,6 +1140,12 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
             end_setback_mm=(member[0], member[1]), end_angle_deg=angle, boundary_nodes=added))
     half = settings.height_mm / 2 + settings.kerf_mm / 2
     for s in strips:
+        e0, e1 = s.end_extensions_mm(settings)
+        if s.curve.length + e0 + e1 < settings.slit_width_mm + 2.0:
+            raise InputError(
+                f"strip {s.id} is {s.curve.length:.0f} mm long, but its ends against the "
+                f"{settings.member_mm:g} mm boundary member leave {s.curve.length + e0 + e1:.0f} "
+                "mm of it: use a thinner --boundary-member, or --no-boundary")
         radii = np.abs(s.arc_radii_mm)
         if radii.size and radii.min() <= half:
             raise InputError(f"strip {s.id} bends with a radius of {radii.min():.1f} mm, less than "
@@ -1145,7 +1160,36 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
     slit = [replace(c, id=i + 1) for i, c in enumerate(slit)]
     return StripSet(strips=strips, crossings=slit, junctions=junctions, settings=settings,
                     positions=X, ends_not_continued=0 if ends is None else ends.not_continued,
-                    crossings_at_member=at_member)
+                    crossings_at_member=at_member, along_edge=along_edge)
+
+
+def _member_setbacks(X: np.ndarray, ends: StripEnds, settings: StripSettings) -> np.ndarray:
+    """(p, 2) float, mm: how far short of its end node each strip end ends against the
+    boundary member (NaN at a free end).
+
+    Both faces of the lamella clear the member (`member_setback_mm`); an end that runs on
+    straight to the edge a hair beyond its node (`StripEnds.reach`) ends that much later
+    (a negative set-back); where two strips end at one node (a zigzag boundary's tip) each
+    also clears the other (`tip_setback_mm`)."""
+    out = np.full(ends.at_edge.shape, np.nan)
+    direction: dict = {}
+    for k, v in enumerate(ends.vertices):
+        for side in (0, 1):
+            if not ends.at_edge[k, side]:
+                continue
+            end, before = (v[0], v[1]) if side == 0 else (v[-1], v[-2])
+            out[k, side] = (member_setback_mm(settings.member_mm, settings.thickness_mm,
+                                              float(ends.angle_deg[k, side]))
+                            - ends.reach[k, side] * settings.scale)
+            d = X[end] - X[before]
+            direction.setdefault(int(end), []).append((k, side, d / np.linalg.norm(d)))
+    for meeting in direction.values():
+        for i, (k, side, d) in enumerate(meeting):
+            for j, (_, _, e) in enumerate(meeting):
+                if i != j:
+                    angle = math.degrees(math.acos(float(np.clip(d @ e, -1.0, 1.0))))
+                    out[k, side] = max(out[k, side], tip_setback_mm(settings.thickness_mm, angle))
+    return out
 
 
 def _slit_inside(strip: Strip, node: int, settings: StripSettings) -> bool:

@@ -96,13 +96,17 @@ def face_neighbourhoods(mesh, ring: bool = True,
 
 
 def fit_height_fields(points: np.ndarray, weight: np.ndarray, origin: np.ndarray,
-                      frame: np.ndarray, scale: np.ndarray) -> np.ndarray:
+                      frame: np.ndarray, scale: np.ndarray,
+                      ridge_weight: np.ndarray | None = None) -> np.ndarray:
     """Weighted least-squares height fields of points in the face frames.
 
     Parameters
     ----------
     points : (f, m, 3) float, model units; weight : (f, m) float.
     origin, frame, scale : the face frames (`face_frames`).
+    ridge_weight : (f,) float, the weight the ridge is a share of (default: the sum of
+        `weight`); points a fit must pass through (weight `CORNER_WEIGHT`) count as one
+        each where the others are to settle the curvature.
 
     Returns
     -------
@@ -115,7 +119,8 @@ def fit_height_fields(points: np.ndarray, weight: np.ndarray, origin: np.ndarray
     normal_matrix = AtW @ A
     # A tiny ridge on the curvature terms settles what the points leave free (a lone quad
     # fitted to its corners): the least-curved surface through them.
-    ridge = _RIDGE * weight.sum(axis=1)[:, None] * np.array([0, 0, 0, 1, 1, 1.0])
+    total = weight.sum(axis=1) if ridge_weight is None else ridge_weight
+    ridge = _RIDGE * total[:, None] * np.array([0, 0, 0, 1, 1, 1.0])
     normal_matrix[:, np.arange(6), np.arange(6)] += ridge
     return np.linalg.solve(normal_matrix, (AtW @ z[..., None]))[..., 0]
 

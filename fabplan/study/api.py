@@ -31,6 +31,7 @@ from ..fabricate.mill_report import MillResult, mill_net
 from ..fabricate.milling import MillSettings, MillTool, parse_tool
 from ..fabricate.molds import MoldPlan, MoldSettings
 from ..fabricate.molds import plan_molds as _plan_molds_impl
+from ..fabricate.strip_boundary import StripBoundary
 from ..fabricate.strip_plan import StripPlan, schedule_rows
 from ..fabricate.strip_plan import plan_strips as _plan_strips_impl
 from ..fabricate.strips import StripSettings
@@ -251,16 +252,22 @@ def plan_strips(net: NetLike, settings: StripSettings | None = None, *, boundary
                 **options: Any) -> StripResult:
     """The lamella strips of a net, on sheets (``fabplan strips``): `StripSettings`, or its
     fields as keyword options (``height_mm=120, thickness_mm=6``). `boundary`: the net's
-    boundary panels, which the strips run through to the edge of the cladding (``"auto"``:
-    those of a layout or glide result given as `net`; None: the strips end at the net)."""
+    boundary panels, which the strips run through to the edge of the cladding: a
+    `fabplan.layout.trim.BoundaryPanels`, or the path of a ``NET.boundary.obj``; ``"auto"``
+    those of a layout or glide result given as `net`; None: the strips end at the net."""
     if settings is None:
         settings = StripSettings(**options)
     elif options:
         raise InputError("give either settings or keyword options, not both")
     settings.check()
+    mesh = as_mesh(net)
     if isinstance(boundary, str) and boundary == "auto":
         boundary = getattr(net, "boundary_panels", None)
-    return StripResult.of(_plan_strips_impl(as_mesh(net), settings, boundary=boundary))
+    elif isinstance(boundary, (str, os.PathLike)):      # a NET.boundary.obj
+        if not Path(boundary).is_file():
+            raise InputError(f"{boundary}: no such file (the boundary panels, NET.boundary.obj)")
+        boundary = StripBoundary.from_obj(mesh, boundary)
+    return StripResult.of(_plan_strips_impl(mesh, settings, boundary=boundary))
 
 
 def mill(net: NetLike, tool: MillTool | str, settings: MillSettings | None = None, *,
