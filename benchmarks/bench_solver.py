@@ -239,6 +239,16 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
         "angle_spread_deg": props["intersection_angle_deg"]["max"] - props["intersection_angle_deg"]["min"],
         "mean_displacement_relative": float(
             np.linalg.norm(result.mesh.vertices - start.vertices, axis=1).mean() / L),
+        # how far the result lies from the net before the noise (the exact solution of the
+        # generated cases), in mean edges
+        "off_unperturbed_relative": {k: float(f(np.linalg.norm(result.mesh.vertices - net.vertices,
+                                                              axis=1)) / L)
+                                     for k, f in (("max", np.max), ("mean", np.mean))},
+        "angle_deg": result.parameters.get("angle_deg"),
+        "radius": result.parameters.get("radius"),
+        # the coarse nets solved first (`SolverSettings.multilevel`), coarsest first; None
+        # for a plain solve (and for code without the multilevel start)
+        "multilevel": result.parameters.get("multilevel"),
         "history": result.history,
     }
     if profiler:
@@ -303,6 +313,33 @@ def comparison_table(records: list[dict]) -> str:
             f"| {r['solver_seconds']:.2f} | {r['final_hard_residual']:.3e} "
             f"| {r['load_average_before']:.2f} / {r['load_average_after']:.2f} |")
     return "\n".join(lines)
+
+
+def accuracy_table(records: list[dict]) -> str:
+    """One line per run: iterations on the full net and on the coarse nets, whole solve,
+    and the accuracy of the result."""
+    head = ("| case | vertices | code | run | full-size iterations | coarse iterations (vertices) "
+            "| whole solve s | sphere residual / edge | angle deg | radius "
+            "| off the unperturbed net, max / mean (edges) | peak RSS GB |")
+    lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+    for r in records:
+        if "median_iteration_seconds" not in r:
+            continue
+        off = r["off_unperturbed_relative"]
+        lines.append(
+            f"| {r['case']} | {r['vertices']:,} | {r.get('code', 'new')} | {r.get('run', 1)} "
+            f"| {r['iterations']} | {_coarse(r)} | {r['solver_seconds']:.1f} "
+            f"| {r['sphere_residual_relative_max']:.1e} | {_fmt(r['angle_deg'], '.5f')} "
+            f"| {_fmt(r['radius'], '.5f')} | {off['max']:.2e} / {off['mean']:.2e} "
+            f"| {r['peak_rss_gb']:.2f} |")
+    return "\n".join(lines)
+
+
+def _coarse(record: dict) -> str:
+    """The coarse levels of a multilevel solve: ``5 (25,281) + 8 (6,400)``, finest first."""
+    levels = (record.get("multilevel") or {}).get("levels", [])
+    return " + ".join(f"{level['iterations']} ({level['vertices']:,})"
+                      for level in reversed(levels)) or "none"
 
 
 def _fmt(value, spec: str, missing: str = "n/a") -> str:
@@ -454,6 +491,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {r['status']}", flush=True)
 
     table = markdown_table([r for r in records if r["code"] == "new"] if args.compare else records)
+    table += "\n\n" + accuracy_table(records)
     if args.compare:
         table += "\n\n" + comparison_table(records)
         env["compare"] = {"old": str(args.compare.resolve()),

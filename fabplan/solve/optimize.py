@@ -51,6 +51,7 @@ from .multilevel import (
     start_from_coarse,
 )
 from .net_types import get_net, net_constraints
+from .pattern import pattern_cache
 from .reference import ReferenceSurface
 from .smoothing import smoothed_vertices
 from .solver import GuidedProjection, IterationRecord, SolverSettings
@@ -507,6 +508,7 @@ def _solve_coarse_levels(fine: GuidedProjection, mesh: QuadMesh, grid: np.ndarra
         levels = _solve_coarse_levels(coarse, coarse_mesh, coarse_grid, make, progress,
                                       (params[0][rows], params[1][cols]))
     _solve(coarse, np.zeros(0, dtype=np.int64), np.zeros((0, 3)), progress)
+    pattern_cache.discard(coarse.pattern.key)     # room for the full net's
     start_from_coarse(fine, coarse, prolong_vertices(coarse.vertices, grid, rows, cols, params))
     levels.append({"vertices": coarse_mesh.vertex_count, "iterations": coarse.accepted_steps,
                    "status": coarse.status, "seconds": time.perf_counter() - t0})
