@@ -3,13 +3,19 @@
 On a regular grid patch (every face a quad, every interior vertex of valence 4, four
 corners) the parameter lines give each vertex integer coordinates ``(i, j)``. The coarse
 net keeps every second line of both families and the boundary lines; it is solved with
-the same net type, settings and reference, and its solution is prolonged to the full net
-by tensor-product cubic interpolation along the lines (``(-1, 9, 9, -1) / 16`` between
-coarse lines, one-sided cubic stencils at the ends). The full solve then starts from the
-prolonged net with the coarse solve's common values (angle, radius), while its objective
-stays that of the plain solve: closeness to the user's reference, not to the prolonged
-net. The Gauss-Newton iterations on the full net start near the solution, so fewer of
-them are needed.
+the same net type, settings and reference (itself from its own coarse net while that is
+large), and its solution is prolonged to the full net by tensor-product cubic
+interpolation along the lines, in the parameters where the lines lie
+(``(-1, 9, 9, -1) / 16`` between evenly spaced coarse lines, one-sided cubics next to
+the boundary). The full solve then starts from the prolonged net with the coarse solve's
+common values (angle, radius), while its objective stays that of the plain solve:
+closeness to the user's reference, not to the prolonged net. Its Gauss-Newton
+iterations start near a solution, so fewer of them run on the full net (on the
+benchmark's 100k-vertex linear Weingarten net 6 instead of 17, `benchmarks/README.md`).
+
+The noise of a start leaves a family of nets near it; the multilevel and the plain solve
+pick nets of that family as close to the noise-free one (on the benchmark nets within
+2 % of an edge, both) but not the same to the last digit.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MULTILEVEL_MIN_VERTICES",
+    "MIN_COARSE_LINES",
     "grid_indices",
     "coarse_lines",
     "line_parameters",
@@ -36,7 +43,9 @@ __all__ = [
 
 # nets with at least this many vertices take the multilevel start when it is automatic
 MULTILEVEL_MIN_VERTICES = 20_000
-# a coarse net needs at least this many lines of each family to say anything about a star
+# a coarse net needs at least this many lines of each family: the coarser its lines, the
+# farther its solution from the full net's (coarsening a 100 x 100 net down to 5 x 5 left
+# the solution edges away from the plain solve's)
 MIN_COARSE_LINES = 16
 
 
