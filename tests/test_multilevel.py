@@ -156,19 +156,43 @@ def test_multilevel_solve_reaches_the_plain_solution_in_fewer_full_iterations(we
     assert near["mean"] <= 1.1 * near_plain["mean"] and near["max"] <= 0.03 * L
 
 
+def test_large_nets_take_nested_coarse_levels_automatically(monkeypatch):
+    # with the threshold at 1,000 vertices a 64 x 64 net is large, and so is its coarse
+    # net (33 x 33): it is solved from its own coarse net (17 x 17), whose lines are not
+    # evenly spaced (the regression: interpolated as if they were, the boundary rows of
+    # the middle net started a sixth of an edge off and the solve ended half an edge off)
+    monkeypatch.setattr("fabplan.solve.optimize.MULTILEVEL_MIN_VERTICES", 1000)
+    exact = rotational_weingarten_snet(64, 64, radius=RADIUS, angle_deg=ANGLE_DEG)
+    start = noisy(exact, 0.01, seed=5)
+    result = fabplan.optimize(start, "linear-weingarten")
+    plain = fabplan.optimize(start, "linear-weingarten", settings=SolverSettings(multilevel=False))
+    assert result.converged and plain.converged
+    levels = result.parameters["multilevel"]["levels"]
+    assert [level["vertices"] for level in levels] == [17 * 17, 33 * 33]
+    assert result.iterations < plain.iterations
+    L = exact.mean_edge_length
+    for r in (result, plain):
+        assert np.linalg.norm(r.mesh.vertices - exact.vertices, axis=1).max() <= 0.02 * L
+
+
 def test_multilevel_start_is_automatic_for_large_nets_only(weingarten_grid, plain_and_multilevel):
     start = plain_and_multilevel[0]
     auto = fabplan.optimize(start, "linear-weingarten", settings=SolverSettings(max_iterations=1))
     assert auto.parameters["multilevel"] is None      # below MULTILEVEL_MIN_VERTICES
 
 
-def test_held_vertices_and_irregular_nets_fall_back_to_the_plain_solve(wein99, plain_and_multilevel):
+def test_solves_the_multilevel_start_cannot_take_fall_back(wein99, plain_and_multilevel):
+    # held vertices, irregular nets, guards and S*-nets
     start = plain_and_multilevel[0]
     on = SolverSettings(multilevel=True, max_iterations=2)
     held = fabplan.optimize(start, "linear-weingarten", fixed=np.array([0]), settings=on)
     assert held.parameters["multilevel"] is None
     irregular = fabplan.optimize(wein99, "linear-weingarten", settings=on)
     assert irregular.parameters["multilevel"] is None
+    guarded = fabplan.optimize(start, "linear-weingarten", guards=True, settings=on)
+    assert guarded.parameters["multilevel"] is None and guarded.parameters["guards"]
+    dual = fabplan.optimize(start, "sstar", settings=on)          # normals are variables too
+    assert dual.parameters["multilevel"] is None
 
 
 def test_a_failed_multilevel_start_falls_back_to_the_plain_solve(plain_and_multilevel, monkeypatch):

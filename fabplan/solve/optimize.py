@@ -399,8 +399,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
                        stop)
 
     levels: list[dict] = []
-    grid = _multilevel_grid(mesh, settings, plain=not (held.size or glide or extra or guards
-                                                       or get_net(net).dual))
+    grid = _multilevel_grid(mesh, net, settings, plain=not (held.size or glide or extra or guards))
     attempts: list[Attempt] = []
     if grid is not None:
         if reference is None and (closeness or guards):
@@ -466,15 +465,17 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     )
 
 
-def _multilevel_grid(mesh: QuadMesh, settings: SolverSettings | None, *,
+def _multilevel_grid(mesh: QuadMesh, net: str, settings: SolverSettings | None, *,
                      plain: bool) -> np.ndarray | None:
-    """The grid coordinates (`fabplan.solve.multilevel.grid_indices`) of a net that takes
-    the multilevel start under `settings`, or None for a plain solve. `plain` says that
-    nothing else of the solve stands in the way (held vertices, handles, gliding,
-    guards, extra families or an S*-net's normals do)."""
+    """The grid coordinates (`fabplan.solve.multilevel.grid_indices`) of a net of type `net`
+    that takes the multilevel start under `settings`, or None for a plain solve. `plain`
+    says that nothing else of the solve stands in the way (held vertices, handles,
+    gliding, guards or extra families do; so do an S*-net's normals)."""
     wanted = (settings or SolverSettings()).multilevel
     if not plain or wanted is False or (wanted is None
                                         and mesh.vertex_count < MULTILEVEL_MIN_VERTICES):
+        return None
+    if get_net(net).dual:
         return None
     grid = grid_indices(mesh)
     if grid is None or min(len(coarse_lines(m)) for m in grid.shape) < MIN_COARSE_LINES:
