@@ -121,11 +121,13 @@ def _timing_hooks() -> dict:
     """Time the set-up and the numeric factorizations from outside the solver, the same way
     on this checkout and on older ones: the solver's pattern construction
     (`GuidedProjection._build_pattern`), each linear solver's first factorization (symbolic
-    analysis and its matrices) and CHOLMOD's numeric factorizations. Lists of seconds."""
+    analysis and its matrices) and CHOLMOD's numeric factorizations. Lists of seconds, and
+    the unknowns of every numeric factorization (``numeric_unknowns``: a multilevel solve
+    factors its coarse nets' systems too)."""
     from fabplan.solve import linalg
     from fabplan.solve import solver as solver_module
 
-    times: dict = {"pattern": [], "analysis": [], "numeric": []}
+    times: dict = {"pattern": [], "analysis": [], "numeric": [], "numeric_unknowns": []}
 
     def timed(function, into: str):
         def wrapper(*args, **kwargs):
@@ -143,7 +145,12 @@ def _timing_hooks() -> dict:
     except ImportError:
         cholmod = None
     else:
-        cholmod.numeric = timed(cholmod.numeric, "numeric")
+        numeric = timed(cholmod.numeric, "numeric")
+
+        def sized(matrix, *args):
+            times["numeric_unknowns"].append(matrix.size[0])
+            return numeric(matrix, *args)
+        cholmod.numeric = sized
     factor = linalg.SparseSPDSolver.factor
     analysed: set = set()
 
@@ -190,7 +197,10 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
     steps = [h for h in result.history if h["step"] > 0]
     props = result.properties
     L = result.mesh.mean_edge_length
-    numeric = hooks["numeric"]
+    # the full net's numeric factorizations (not those of a multilevel solve's coarse nets)
+    unknowns = hooks["numeric_unknowns"]
+    full = max(unknowns, default=0)
+    numeric = [t for t, n in zip(hooks["numeric"], unknowns, strict=True) if n == full]
     median_iteration = _median([h["seconds"] for h in steps])
     record = {
         "case": name,
@@ -239,6 +249,16 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
         "angle_spread_deg": props["intersection_angle_deg"]["max"] - props["intersection_angle_deg"]["min"],
         "mean_displacement_relative": float(
             np.linalg.norm(result.mesh.vertices - start.vertices, axis=1).mean() / L),
+        # how far the result lies from the net before the noise (the exact solution of the
+        # generated cases), in mean edges
+        "off_unperturbed_relative": {k: float(f(np.linalg.norm(result.mesh.vertices - net.vertices,
+                                                              axis=1)) / L)
+                                     for k, f in (("max", np.max), ("mean", np.mean))},
+        "angle_deg": result.parameters.get("angle_deg"),
+        "radius": result.parameters.get("radius"),
+        # the coarse nets solved first (`SolverSettings.multilevel`), coarsest first; None
+        # for a plain solve (and for code without the multilevel start)
+        "multilevel": result.parameters.get("multilevel"),
         "history": result.history,
     }
     if profiler:
@@ -303,6 +323,33 @@ def comparison_table(records: list[dict]) -> str:
             f"| {r['solver_seconds']:.2f} | {r['final_hard_residual']:.3e} "
             f"| {r['load_average_before']:.2f} / {r['load_average_after']:.2f} |")
     return "\n".join(lines)
+
+
+def accuracy_table(records: list[dict]) -> str:
+    """One line per run: iterations on the full net and on the coarse nets, whole solve,
+    and the accuracy of the result."""
+    head = ("| case | vertices | code | run | full-size iterations | coarse iterations (vertices) "
+            "| whole solve s | sphere residual / edge | angle deg | radius "
+            "| off the unperturbed net, max / mean (edges) | peak RSS GB |")
+    lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+    for r in records:
+        if "median_iteration_seconds" not in r:
+            continue
+        off = r["off_unperturbed_relative"]
+        lines.append(
+            f"| {r['case']} | {r['vertices']:,} | {r.get('code', 'new')} | {r.get('run', 1)} "
+            f"| {r['iterations']} | {_coarse(r)} | {r['solver_seconds']:.1f} "
+            f"| {r['sphere_residual_relative_max']:.1e} | {_fmt(r['angle_deg'], '.5f')} "
+            f"| {_fmt(r['radius'], '.5f')} | {off['max']:.2e} / {off['mean']:.2e} "
+            f"| {r['peak_rss_gb']:.2f} |")
+    return "\n".join(lines)
+
+
+def _coarse(record: dict) -> str:
+    """The coarse levels of a multilevel solve: ``5 (25,281) + 8 (6,400)``, finest first."""
+    levels = (record.get("multilevel") or {}).get("levels", [])
+    return " + ".join(f"{level['iterations']} ({level['vertices']:,})"
+                      for level in reversed(levels)) or "none"
 
 
 def _fmt(value, spec: str, missing: str = "n/a") -> str:
@@ -454,6 +501,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {r['status']}", flush=True)
 
     table = markdown_table([r for r in records if r["code"] == "new"] if args.compare else records)
+    table += "\n\n" + accuracy_table(records)
     if args.compare:
         table += "\n\n" + comparison_table(records)
         env["compare"] = {"old": str(args.compare.resolve()),

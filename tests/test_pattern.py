@@ -254,6 +254,9 @@ def test_pattern_cache_keeps_the_most_recent_within_its_limits():
     small.put(a)
     small.put(b)                  # too big together: the newest stays
     assert len(small) == 1 and b.key in small
+    cache.discard(b.key)
+    cache.discard(b.key)          # gone already: nothing to do
+    assert b.key not in cache and a.key in cache and len(cache) == 1
 
 
 def test_pattern_key_tells_columns_and_held_sets_apart():

@@ -4,6 +4,7 @@ Owns: the solver (`solver`), constraint families (`constraints`), the normal equ
 sparsity pattern and its cache (`pattern`), sparse linear algebra backends (`linalg`), the
 catalogue of net types (`net_types`), optimization presets
 (`optimize`), handles (`edit`), reference surfaces with exact closest points
-(`reference`) and the smoothed start of a retry (`smoothing`).
+(`reference`), the smoothed start of a retry (`smoothing`) and the multilevel start of
+large grid-patch nets (`multilevel`).
 May import: `fabplan.net`, `fabplan.report`, `fabplan.io`, `fabplan.errors`.
 """

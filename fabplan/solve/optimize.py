@@ -40,7 +40,18 @@ from .constraints import (
     RulingAngle,
     StarAngleRange,
 )
+from .multilevel import (
+    MIN_COARSE_LINES,
+    MULTILEVEL_MIN_VERTICES,
+    coarse_grid_net,
+    coarse_lines,
+    grid_indices,
+    line_parameters,
+    prolong_vertices,
+    start_from_coarse,
+)
 from .net_types import get_net, net_constraints
+from .pattern import pattern_cache
 from .reference import ReferenceSurface
 from .smoothing import smoothed_vertices
 from .solver import GuidedProjection, IterationRecord, SolverSettings
@@ -387,8 +398,19 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         return Attempt(name, solver, measure_folds(mesh, solver.vertices, reference=solver.reference),
                        stop)
 
-    first = attempt("guards" if guards else "plain", make(bool(guards)))
-    attempts = [first]
+    levels: list[dict] = []
+    grid = _multilevel_grid(mesh, net, settings, plain=not (held.size or glide or extra or guards))
+    attempts: list[Attempt] = []
+    if grid is not None:
+        if reference is None and (closeness or guards):
+            reference = ReferenceSurface.from_mesh(mesh)
+        fine = make(False, mesh, reference)
+        levels = _solve_coarse_levels(fine, mesh, grid, lambda m: make(False, m, reference),
+                                      progress)
+        attempts.append(attempt("multilevel", fine))
+    if not attempts or not attempts[0].succeeded:
+        attempts.append(attempt("guards" if guards else "plain", make(bool(guards))))
+    first = attempts[-1]
     unreachable = handle_ids.size and first.solver.status != "converged"
     if guards is None and (first.folds.folded or first.folds.degenerate) and not unreachable:
         # a start far from every net of the type: first the guards against folding, then
@@ -423,7 +445,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
                   "smoothed_start": chosen.name.startswith("smoothed"),
                   "free_vertices": {"count": int(free.sum()), "settled": bool(moved.any()),
                                     "largest_move": float(moved.max(initial=0.0))},
-                  "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)}}
+                  "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)},
+                  "multilevel": {"levels": levels, "full_iterations": solver.accepted_steps}
+                  if chosen.name == "multilevel" else None}
     status = solver.status
     if status == "converged" and (folds.folded or folds.degenerate):
         status = "folded" if folds.folded else "degenerate"
@@ -439,6 +463,57 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         properties=measure_net(result_mesh, reference=solver.reference),
         message=_explain(solver, status, folds, mesh, angle, attempts if len(attempts) > 1 else []),
     )
+
+
+def _multilevel_grid(mesh: QuadMesh, net: str, settings: SolverSettings | None, *,
+                     plain: bool) -> np.ndarray | None:
+    """The grid coordinates (`fabplan.solve.multilevel.grid_indices`) of a net of type `net`
+    that takes the multilevel start under `settings`, or None for a plain solve. `plain`
+    says that nothing else of the solve stands in the way (held vertices, handles,
+    gliding, guards or extra families do; so do an S*-net's normals)."""
+    wanted = (settings or SolverSettings()).multilevel
+    if not plain or wanted is False or (wanted is None
+                                        and mesh.vertex_count < MULTILEVEL_MIN_VERTICES):
+        return None
+    if get_net(net).dual:
+        return None
+    grid = grid_indices(mesh)
+    if grid is None or min(len(coarse_lines(m)) for m in grid.shape) < MIN_COARSE_LINES:
+        return None
+    return grid
+
+
+def _solve_coarse_levels(fine: GuidedProjection, mesh: QuadMesh, grid: np.ndarray,
+                         make: Callable[[QuadMesh], GuidedProjection],
+                         progress: Callable[[IterationRecord], None] | None,
+                         params: tuple[np.ndarray, np.ndarray] | None = None) -> list[dict]:
+    """Solve the coarse net of a grid patch (itself from its own coarse net while that has
+    at least `MULTILEVEL_MIN_VERTICES` vertices) and start `fine` from its prolonged
+    solution. `params` are the parameters of the lines of `grid` (default: where they
+    lie on `mesh`, `fabplan.solve.multilevel.line_parameters`).
+
+    Returns one record per coarse level solved, the coarsest first: vertices, accepted
+    iterations, status and seconds.
+    """
+    t0 = time.perf_counter()
+    if params is None:
+        params = line_parameters(mesh.vertices, grid)
+    coarse_mesh, rows, cols = coarse_grid_net(mesh, grid)
+    coarse = make(coarse_mesh)
+    levels: list[dict] = []
+    # a coarse net below that size is solved plainly: the coarser its lines, the farther
+    # its solution from the full net's
+    if coarse_mesh.vertex_count >= MULTILEVEL_MIN_VERTICES \
+            and min(len(coarse_lines(len(rows))), len(coarse_lines(len(cols)))) >= MIN_COARSE_LINES:
+        coarse_grid = np.arange(coarse_mesh.vertex_count).reshape(len(rows), len(cols))
+        levels = _solve_coarse_levels(coarse, coarse_mesh, coarse_grid, make, progress,
+                                      (params[0][rows], params[1][cols]))
+    _solve(coarse, np.zeros(0, dtype=np.int64), np.zeros((0, 3)), progress)
+    pattern_cache.discard(coarse.pattern.key)     # room for the full net's
+    start_from_coarse(fine, coarse, prolong_vertices(coarse.vertices, grid, rows, cols, params))
+    levels.append({"vertices": coarse_mesh.vertex_count, "iterations": coarse.accepted_steps,
+                   "status": coarse.status, "seconds": time.perf_counter() - t0})
+    return levels
 
 
 @dataclass

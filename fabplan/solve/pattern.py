@@ -490,6 +490,12 @@ class PatternCache:
                 self._patterns.popitem(last=False)
         return pattern
 
+    def discard(self, key: bytes) -> None:
+        """Forget the pattern of `key`, if kept (a solver that will not run again, such
+        as the coarse net of a multilevel solve, frees its memory for the next)."""
+        with self._lock:
+            self._patterns.pop(key, None)
+
     def clear(self) -> None:
         with self._lock:
             self._patterns.clear()

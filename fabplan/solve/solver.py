@@ -65,6 +65,12 @@ class SolverSettings:
         and continues with steps that must lower the merit function.
     climb : a free Gauss-Newton step is refused at once when it raises the hard residuals'
         sum of squares beyond this factor of the best.
+    multilevel : start a large grid-patch net from the solution of its coarse net (every
+        second line of both families; `fabplan.solve.multilevel`). None (default): when the
+        net has at least `fabplan.solve.multilevel.MULTILEVEL_MIN_VERTICES` vertices;
+        True: whenever the net allows it; False: never. Nets that are no regular grid
+        patch, and solves with held vertices, handles, gliding, guards or extra families,
+        are solved plainly.
     """
 
     max_iterations: int = 50
@@ -78,6 +84,7 @@ class SolverSettings:
     max_rejections: int = 12
     watchdog: int = 15
     climb: float = 1e8
+    multilevel: bool | None = None
 
 
 @dataclass
@@ -298,10 +305,16 @@ class GuidedProjection:
         soft = self.soft_weights(steps)
         return [soft.get(c.name, 1.0) if not c.hard else 1.0 for c in self.constraints]
 
-    def restart_soft_terms(self) -> None:
+    def restart_soft_terms(self, faded: int = 0) -> None:
         """Give the soft terms their initial weights again (a new stage of a continuation:
-        fairness and closeness guide it as they guided the first)."""
-        self._fade_start = self.accepted_steps
+        fairness and closeness guide it as they guided the first), or the weights they
+        have after `faded` accepted steps (a solve that continues one on a coarse net)."""
+        self._fade_start = self.accepted_steps - faded
+
+    @property
+    def soft_steps(self) -> int:
+        """Accepted steps the soft terms have faded over (since `restart_soft_terms`)."""
+        return self.accepted_steps - self._fade_start
 
     @property
     def accepted_steps(self) -> int:
