@@ -103,10 +103,13 @@ class _IterationReport:
         self.stage: Any = None
 
     def __call__(self, rec: Any) -> None:
+        # a multilevel start solves coarse nets first, each counting its own iterations
+        net = f"coarse net of {rec.coarse_vertices:,} vertices, " if rec.coarse_vertices else ""
         if self.stage is not None:
-            self.stage.note(f"iteration {rec.iteration}, residual {rec.hard_residual:.2e}")
-        self.progress.iteration(f"iteration {rec.iteration:3d}  residual {rec.hard_residual:.3e}  "
-                                f"step {rec.step:.2e}  {rec.seconds * 1000:.0f} ms")
+            self.stage.note(f"{net}iteration {rec.iteration}, residual {rec.hard_residual:.2e}")
+        self.progress.iteration(f"{net}iteration {rec.iteration:3d}  residual "
+                                f"{rec.hard_residual:.3e}  step {rec.step:.2e}  "
+                                f"{rec.seconds * 1000:.0f} ms")
 
 
 def _solver_options(args, progress: Progress) -> tuple[SolverSettings, _IterationReport]:
@@ -114,6 +117,8 @@ def _solver_options(args, progress: Progress) -> tuple[SolverSettings, _Iteratio
     settings = SolverSettings()
     if args.max_iter is not None:
         settings.max_iterations = args.max_iter
+    if getattr(args, "no_multilevel", False):
+        settings.multilevel = False
     return settings, _IterationReport(progress)
 
 
@@ -873,6 +878,9 @@ def _add_optimize(sub: Any) -> None:
                         "which no condition of the net holds, onto the surface the net "
                         "continues, so that the panels at them meet their neighbours' molds")
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
+    p.add_argument("--no-multilevel", action="store_true",
+                   help="solve a large grid net at full size from the start (by default, from "
+                        "20,000 vertices, its coarse net of every second line is solved first)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
     _add_html(p)
     _add_3dm(p, units=True)

@@ -206,3 +206,25 @@ def test_a_failed_multilevel_start_falls_back_to_the_plain_solve(plain_and_multi
     result = fabplan.optimize(start, "linear-weingarten", settings=SolverSettings(multilevel=True))
     assert result.converged and result.parameters["multilevel"] is None
     assert np.allclose(result.mesh.vertices, plain.mesh.vertices, rtol=0, atol=1e-9 * start.mean_edge_length)
+
+
+def test_the_command_reports_the_coarse_net_and_can_leave_it_out(plain_and_multilevel, tmp_path,
+                                                                 monkeypatch, capsys):
+    import json
+
+    from fabplan.cli import main
+
+    monkeypatch.setattr("fabplan.solve.optimize.MULTILEVEL_MIN_VERTICES", 1000)
+    start = tmp_path / "start.obj"
+    plain_and_multilevel[0].write_obj(start)
+    out = {}
+    for name, extra in (("multi", []), ("plain", ["--no-multilevel"])):
+        target = tmp_path / f"{name}.obj"
+        assert main(["optimize", str(start), "--net", "linear-weingarten", "-v", *extra,
+                     "-o", str(target)]) == 0
+        out[name] = capsys.readouterr().err
+        record = json.loads(target.with_suffix(".json").read_text())
+        levels = (record["parameters"]["multilevel"] or {}).get("levels")
+        assert (levels is not None) == (name == "multi")
+    assert "coarse net of 484 vertices, iteration" in out["multi"]
+    assert "coarse net" not in out["plain"]

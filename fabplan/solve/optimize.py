@@ -508,7 +508,12 @@ def _solve_coarse_levels(fine: GuidedProjection, mesh: QuadMesh, grid: np.ndarra
         coarse_grid = np.arange(coarse_mesh.vertex_count).reshape(len(rows), len(cols))
         levels = _solve_coarse_levels(coarse, coarse_mesh, coarse_grid, make, progress,
                                       (params[0][rows], params[1][cols]))
-    _solve(coarse, np.zeros(0, dtype=np.int64), np.zeros((0, 3)), progress)
+    def tell(record: IterationRecord) -> None:
+        record.coarse_vertices = coarse_mesh.vertex_count
+        if progress is not None:
+            progress(record)
+
+    _solve(coarse, np.zeros(0, dtype=np.int64), np.zeros((0, 3)), tell)
     pattern_cache.discard(coarse.pattern.key)     # room for the full net's
     start_from_coarse(fine, coarse, prolong_vertices(coarse.vertices, grid, rows, cols, params))
     levels.append({"vertices": coarse_mesh.vertex_count, "iterations": coarse.accepted_steps,

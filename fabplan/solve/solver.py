@@ -102,6 +102,7 @@ class IterationRecord:
     merit: float = 0.0         # weighted sum of squares before the step (hard and soft terms)
     rejected: int = 0          # trial steps rejected (damping raised) before this one
     damping: float = 0.0       # damping of the accepted step
+    coarse_vertices: int = 0   # the coarse net's vertices, in a multilevel start's coarse solve
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
