@@ -655,13 +655,15 @@ def _cmd_strips(args) -> int:
     print(f"wrote {len(files)} files to {out} in {time.perf_counter() - started:.1f} s "
           f"(planning {s['seconds']:.1f} s, every sheet audited and checked before writing)")
     if boundary is not None:
+        from .fabricate.strip_boundary import MAX_TURN_DEG
+
         angle = s["member_angle_min_deg"]
         print(f"{counted(s['ends_at_boundary_member'], 'strip end')} reach the edge of the "
               f"cladding ({counted(s['boundary_nodes'], 'node')} added in the boundary panels of "
               f"{boundary_file}) and are cut square against a {settings.member_mm:g} mm "
               "boundary member"
               + (f" (smallest angle to it {angle:.0f} deg)" if angle is not None else "")
-              + f"; {s['ends_free']} ends are free")
+              + f"; {_free_ends_text(s)}")
         if s["strips_along_edge"]:
             print(f"fabplan: note: {counted(s['strips_along_edge'], 'polyline')} lie along the "
                   "edge of the cladding, where the boundary member runs: no strips are cut "
@@ -669,13 +671,27 @@ def _cmd_strips(args) -> int:
         if s["ends_not_continued"]:
             print(f"fabplan: note: {counted(s['ends_not_continued'], 'strip end')} on the net's "
                   "boundary could not be continued to the edge (no boundary panel side goes on "
-                  "straight, or it runs along the edge): they end free, listed as 'free' in "
-                  f"{out / 'strips.csv'}", file=sys.stderr)
+                  f"straight from it, turning less than {MAX_TURN_DEG:g} deg): they end free, listed as "
+                  f"'free (not continued)' in {out / 'strips.csv'}", file=sys.stderr)
     if s["junctions"]:
         print(f"fabplan: note: {s['junctions']} vertices join more than one strip of a family "
               "(irregular vertices): no slits there, they need node connectors; listed in "
               f"{out / 'strips.json'}", file=sys.stderr)
     return 0
+
+
+def _free_ends_text(summary: dict) -> str:
+    """``N ends are free: a inside the net (...), b along the edge, c not continued``."""
+    from .fabricate.strip_boundary import MIN_MEMBER_ANGLE_DEG
+
+    kinds = summary["ends_free_by_kind"]
+    why = {"inside": "inside the net, where a line stops at an irregular vertex",
+           "along edge": f"along the edge (meeting it at less than {MIN_MEMBER_ANGLE_DEG:g} deg)",
+           "not continued": "not continued to the edge"}
+    parts = [f"{kinds[k]} {text}" for k, text in why.items() if kinds.get(k)]
+    free = summary["ends_free"]
+    return f"{counted(free, 'end')} {'is' if free == 1 else 'are'} free" + \
+        (": " + ", ".join(parts) if parts else "")
 
 
 def _strip_boundary(args, mesh):

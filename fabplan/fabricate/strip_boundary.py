@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 from ..errors import InputError
 from ..net.mesh import QuadMesh
 
-__all__ = ["MAX_TURN_DEG", "MIN_MEMBER_ANGLE_DEG", "StripBoundary", "StripEnds",
+__all__ = ["END_KINDS", "MAX_TURN_DEG", "MIN_MEMBER_ANGLE_DEG", "StripBoundary", "StripEnds",
            "member_setback_mm", "tip_setback_mm"]
 
 MAX_TURN_DEG = 35.0
@@ -62,6 +62,9 @@ that does not continue it ends at the edge: its straight continuation reaches it
 
 EDGE_REACH = 1.5
 """The edge's direction at a point is taken from edge points within this many strip edges."""
+
+END_KINDS = ("member", "along edge", "not continued", "inside", "closed")
+"""Why a strip end is where it is (`StripEnds.kind`); all but ``member`` are free ends."""
 
 MAX_STEPS = 64
 """Most panel corners a continued line passes (a few in practice: the boundary strip is a
@@ -92,9 +95,11 @@ class StripEnds:
         strip), how far the strip's straight continuation runs on to the edge; else 0.
     along_edge : (p,) bool, polylines whose nodes all lie on the edge: the boundary member
         takes their place.
-    not_continued : number of open strip ends on the net's boundary that no panel side
-        continues to the edge, or that would meet it at less than `MIN_MEMBER_ANGLE_DEG`
-        after running through the panels (they keep their free end).
+    kind : (p, 2) str, why each end is where it is (`END_KINDS`): ``member`` (at the edge,
+        against the boundary member), ``along edge`` (meets the edge at less than
+        `MIN_MEMBER_ANGLE_DEG`, or the polyline lies along it), ``not continued`` (on the
+        net's boundary, but no panel side goes on straight to the edge), ``inside`` (inside
+        the net: a line stopping at an irregular vertex), ``closed`` (a loop).
     """
 
     vertices: list
@@ -103,14 +108,19 @@ class StripEnds:
     added: np.ndarray
     reach: np.ndarray
     along_edge: np.ndarray
-    not_continued: int
+    kind: np.ndarray
+
+    @property
+    def not_continued(self) -> int:
+        """Open ends on the net's boundary that no panel side continues to the edge."""
+        return int((self.kind == "not continued").sum())
 
     def subset(self, keep: np.ndarray) -> "StripEnds":
         """The ends of the polylines `keep` (k,) int only."""
         return StripEnds(vertices=[self.vertices[k] for k in keep], at_edge=self.at_edge[keep],
                          angle_deg=self.angle_deg[keep], added=self.added[keep],
                          reach=self.reach[keep], along_edge=self.along_edge[keep],
-                         not_continued=self.not_continued)
+                         kind=self.kind[keep])
 
 
 @dataclass(frozen=True)
@@ -244,7 +254,26 @@ class StripBoundary:
         total = np.bincount(label[r.corner[c]], angle, minlength=places)
         np.add.at(total, label[self._t_junctions], math.pi)
         used = np.bincount(label[r.corner[c]], minlength=places) > 0
-        return (used & (total < math.radians(EDGE_ANGLE_SUM_DEG)))[label]
+        edge = used & (total < math.radians(EDGE_ANGLE_SUM_DEG))
+        # the edge is a chain of sides: a place with fewer than two edge places next to it
+        # along sides is a notch of one panel inside the cladding (two corners of one
+        # overlay a hair apart), not a point of the edge
+        sides = self._place_sides
+        p, q = sides.nonzero()
+        along = np.bincount(p[edge[p] & edge[q]], minlength=places)
+        return (edge & (along >= 2))[label]
+
+    @cached_property
+    def _place_sides(self) -> sp.csr_matrix:
+        """(places, places) adjacency of the places (`_welded`) joined by a polygon side."""
+        label, r = self._welded, self._all
+        places = int(label.max()) + 1
+        a, b = label[r.corner], label[r.corner[r.after]]
+        keep = a != b
+        A = sp.csr_matrix((np.ones(2 * keep.sum()), (np.r_[a[keep], b[keep]], np.r_[b[keep], a[keep]])),
+                          shape=(places, places))
+        A.sum_duplicates()
+        return A
 
     @cached_property
     def _t_junctions(self) -> np.ndarray:
@@ -368,13 +397,17 @@ class StripBoundary:
 
     def _edge_tangent(self, q: int, radius: float) -> np.ndarray | None:
         """(3,) the cladding edge's direction at its point `q`: from the nearest edge point
-        to the nearest one on the other side of `q` (or to `q`), within `radius`, points of
-        `q`'s own place left out (None when `q` has no edge point near)."""
+        to the nearest one on the other side of `q` (or to `q`), within `radius` or joined to
+        `q` by a polygon side, points of `q`'s own place left out (None when `q` has no edge
+        point near)."""
         X, label = self.vertices, self._welded
         edge = np.flatnonzero(self.on_edge & (label != label[q]))
         d = X[edge] - X[q]
         dist = np.linalg.norm(d, axis=1)
-        ok = dist <= radius
+        # edge points near, and the edge places a side joins to q's (a long panel side)
+        sides = self._place_sides
+        joined = sides.indices[sides.indptr[label[q]]:sides.indptr[label[q] + 1]]
+        ok = (dist <= radius) | np.isin(label[edge], joined)
         if not ok.any():
             return None
         edge, d, dist = edge[ok], d[ok], dist[ok]
@@ -425,8 +458,7 @@ class StripBoundary:
         """
         X = self.vertices
         boundary = self.mesh.is_boundary_vertex
-        out, at_edge, angle, added, reach, along = [], [], [], [], [], []
-        missed = 0
+        out, at_edge, angle, added, reach, along, kinds = [], [], [], [], [], [], []
         for v, loop in zip(polylines, closed, strict=True):
             v = np.asarray(v, np.int64)
             ends: list[list[int]] = [[], []]
@@ -434,6 +466,7 @@ class StripBoundary:
             angles = [math.nan, math.nan]
             beyond = [0.0, 0.0]
             flat_along = len(v) >= 2 and bool(self.on_edge[v].all())
+            kind = ["closed"] * 2 if loop else ["along edge"] * 2 if flat_along else ["inside"] * 2
             if not loop and len(v) >= 2 and not flat_along:
                 for side, (end, before) in enumerate(((int(v[0]), int(v[1])), (int(v[-1]), int(v[-2])))):
                     if not boundary[end]:
@@ -449,26 +482,28 @@ class StripBoundary:
                             beyond[side] = self._reach(end, before, q, normal)
                             reached[side] = beyond[side] > 0
                     if not reached[side]:
-                        missed += 1
+                        kind[side] = "not continued"
                         continue
                     angles[side] = self._edge_angle(q, X[chain[-1]] - X[chain[-2]], normal)
                     if angles[side] < MIN_MEMBER_ANGLE_DEG:       # along the edge: no member
                         reached[side], angles[side], beyond[side] = False, math.nan, 0.0
-                        if path:
-                            missed += 1
+                        kind[side] = "along edge"
                         continue
                     ends[side] = path
+                    kind[side] = "member"
             out.append(np.r_[np.array(ends[0][::-1], np.int64), v, np.array(ends[1], np.int64)])
             at_edge.append(reached)
             angle.append(angles)
             added.append([len(ends[0]), len(ends[1])])
             reach.append(beyond)
             along.append(flat_along)
+            kinds.append(kind)
         return StripEnds(vertices=out, at_edge=np.array(at_edge, bool).reshape(-1, 2),
                          angle_deg=np.array(angle, float).reshape(-1, 2),
                          added=np.array(added, np.int64).reshape(-1, 2),
                          reach=np.array(reach, float).reshape(-1, 2),
-                         along_edge=np.array(along, bool), not_continued=missed)
+                         along_edge=np.array(along, bool),
+                         kind=np.array(kinds, dtype=object).reshape(-1, 2))
 
 
 def member_setback_mm(member_mm: float, thickness_mm: float, angle_deg: float) -> float:

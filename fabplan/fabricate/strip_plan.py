@@ -135,15 +135,17 @@ def schedule_rows(plan: StripPlan) -> list:
 
 
 def _end_text(strip: Strip, side: int) -> str:
-    """How a strip end is cut: ``free`` (beyond its last node), or ``member A deg -D mm``
-    (square against the boundary member, meeting it at A degrees, D mm short of its end
-    node; ``+D mm`` where it runs on past the node to an edge a hair beyond); ``closed``
-    for a loop."""
+    """How a strip end is cut: ``free`` (beyond its last node, with why in brackets where
+    boundary panels were given: ``inside`` the net at an irregular vertex, ``along edge``,
+    ``not continued``), or ``member A deg -D mm`` (square against the boundary member,
+    meeting it at A degrees, D mm short of its end node; ``+D mm`` where it runs on past the
+    node to an edge a hair beyond); ``closed`` for a loop."""
     if strip.closed:
         return "closed"
     setback = strip.end_setback_mm[side]
     if setback is None:
-        return "free"
+        kind = strip.end_kind[side]
+        return "free" if kind == "free" else f"free ({kind})"
     return f"member {strip.end_angle_deg[side]:.1f} deg {-setback:+.1f} mm"
 
 

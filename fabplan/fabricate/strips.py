@@ -863,6 +863,9 @@ class Strip:
     end_angle_deg : (start, end) angle between the strip and the cladding edge at a member
         end (NaN at a free end).
     boundary_nodes : (start, end) nodes beyond the net, in its boundary panels.
+    end_kind : (start, end) why each end is where it is, one of
+        `fabplan.fabricate.strip_boundary.END_KINDS`; ``free`` when no boundary panels were
+        given.
     """
 
     id: str
@@ -880,6 +883,7 @@ class Strip:
     end_setback_mm: tuple[float | None, float | None] = (None, None)
     end_angle_deg: tuple[float, float] = (math.nan, math.nan)
     boundary_nodes: tuple[int, int] = (0, 0)
+    end_kind: tuple[str, str] = ("free", "free")
 
     def at_member(self, side: int) -> bool:
         """Whether the strip's start (`side` 0) or end (1) butts against a boundary member."""
@@ -1017,6 +1021,10 @@ class StripSet:
             "ends_free": int(sum(not s.closed and not s.at_member(k)
                                  for s in self.strips for k in (0, 1))),
             "ends_not_continued": self.ends_not_continued,
+            "ends_free_by_kind": {kind: int(sum(not s.closed and not s.at_member(k)
+                                                and s.end_kind[k] == kind
+                                                for s in self.strips for k in (0, 1)))
+                                  for kind in ("free", "inside", "along edge", "not continued")},
             "crossings_at_member": self.crossings_at_member,
             "strips_along_edge": self.along_edge,
             "boundary_nodes": int(sum(sum(s.boundary_nodes) for s in self.strips)),
@@ -1125,10 +1133,11 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
         f = int(family[k])
         counters[f] += 1
         member = [None if math.isnan(x) else float(x) for x in setback[k]]
-        angle, added = (math.nan, math.nan), (0, 0)
+        angle, added, kind = (math.nan, math.nan), (0, 0), ("free", "free")
         if ends is not None:
             angle = (float(ends.angle_deg[k, 0]), float(ends.angle_deg[k, 1]))
             added = (int(ends.added[k, 0]), int(ends.added[k, 1]))
+            kind = (str(ends.kind[k, 0]), str(ends.kind[k, 1]))
         strips.append(Strip(
             id=f"{FAMILY_LETTERS[f]}{counters[f]:02d}", family=f, vertices=np.asarray(v),
             closed=bool(closed[k]), curve=ReferenceCurve(nodes, bulges), axis=u.axis[a:b],
@@ -1137,7 +1146,8 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
             max_twist_deg=float(np.degrees(twist).max()),
             off_orthogonal_deg=float(np.degrees(u.off_orthogonal[a:b]).max()),
             lean_deg=float(np.degrees(u.lean[a:b]).max()),
-            end_setback_mm=(member[0], member[1]), end_angle_deg=angle, boundary_nodes=added))
+            end_setback_mm=(member[0], member[1]), end_angle_deg=angle, boundary_nodes=added,
+            end_kind=kind))
     half = settings.height_mm / 2 + settings.kerf_mm / 2
     for s in strips:
         e0, e1 = s.end_extensions_mm(settings)

@@ -683,7 +683,21 @@ def _candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list
         facts.append(["strips", f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} "
                       f"on {counted(s['sheets'], 'sheet')} ({100 * s['material_use']:.0f} % "
                       f"material use); {shape}"])
+        if s.get("ends_at_boundary_member"):
+            facts.append(["strip ends", _strip_ends_text(s)])
     return verdict, facts
+
+
+def _strip_ends_text(s: dict) -> str:
+    """Where the strips end: at the boundary member, and why the others are free."""
+    kinds = s.get("ends_free_by_kind") or {}
+    why = [f"{kinds[k]} {text}" for k, text in (
+        ("inside", "inside the net at irregular vertices (node connectors)"),
+        ("along edge", "along the edge"), ("not continued", "not continued to the edge"))
+        if kinds.get(k)]
+    return (f"{counted(s['ends_at_boundary_member'], 'end')} cut square against a "
+            f"{s['boundary_member_mm']:g} mm boundary member at the edge of the cladding; "
+            f"{s['ends_free']} free" + (f" ({', '.join(why)})" if why else ""))
 
 
 def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,

@@ -652,7 +652,9 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
             "unrolled_length_error_mm": s["unrolled_length_error_mm"],
             "ends_at_boundary_member": s["ends_at_boundary_member"],
             "ends_free": s["ends_free"],
+            "ends_free_by_kind": s["ends_free_by_kind"],
             "ends_not_continued": s["ends_not_continued"],
+            "boundary_member_mm": strips.strips.settings.member_mm,
         }
     return metrics
 
