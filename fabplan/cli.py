@@ -26,7 +26,7 @@ from .net.validate import check_panel_size, load_net
 from .report.html import counted
 from .report.progress import Progress
 from .solve.net_types import NETS, check_angle, check_radius
-from .solve.optimize import check_net_input, optimize, read_fixed, read_handles
+from .solve.optimize import boundary_path, check_net_input, optimize, read_fixed, read_handles
 from .solve.reference import load_reference
 from .solve.solver import SolverSettings
 
@@ -211,6 +211,7 @@ def _cmd_optimize(args) -> int:
                           reference=reference, fixed=fixed, handles=handles, settings=settings,
                           coherent=args.coherent, guards=args.guards,
                           settle_free=0.0 if args.settle_free else None, progress=report)
+    panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             _html_file(args, out) as page, \
             _viewer_files(args, out, result.mesh, units=args.units) as viewers:
@@ -234,12 +235,53 @@ def _cmd_optimize(args) -> int:
         print(format_summary(result.properties))
         print(f"{result.net}: {result.status} after {result.iterations} iterations in "
               f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
-    print(f"wrote {_listing([obj_path, json_path, *viewers])}" if not args.quiet else
+    written = [obj_path, json_path]
+    if result.boundary_panels is not None:
+        written.append(boundary_path(out))
+    print(f"wrote {_listing([*written, *viewers])}" if not args.quiet else
           f"{result.net}: {result.status} after {result.iterations} iterations; wrote {obj_path}")
+    if panels_note:
+        print(f"fabplan: note: {panels_note}", file=sys.stderr)
     if not result.converged:
         _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
     return 0
+
+
+def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
+    """Trim an optimized layout net to its design again, as its layout did: the layout
+    recorded in ``NET.json`` is made again (`layout_again`) and, when it gives the net's
+    faces, the optimized net's boundary panels are cut from it. Only for a net with a
+    ``NET.boundary.obj`` beside it. Returns a note when the panels could not be cut."""
+    import json
+
+    import numpy as np
+
+    from .layout.surface_layout import layout_again
+    from .layout.trim import add_boundary_panels
+
+    old = boundary_path(source)
+    if not old.is_file():
+        return None
+    lost = (f"the boundary panels of {old} belong to the net before it was optimized and "
+            "were not carried over")
+    try:
+        record = json.loads(source.with_suffix(".json").read_text(encoding="utf-8"))
+        layout_record = record["properties"]["layout"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return f"{lost}: {source.with_suffix('.json')} does not record the layout to cut them from"
+    with progress.stage("cutting the boundary panels again"):
+        try:
+            layout = layout_again(layout_record)
+        except (InputError, OSError) as exc:
+            return f"{lost}: its layout could not be made again ({exc})"
+        same = len(layout.mesh.faces) == len(mesh.faces) and all(
+            np.array_equal(a, b) for a, b in zip(layout.mesh.faces, mesh.faces, strict=True))
+        if not same:
+            return f"{lost}: the net's faces are not those of the layout in {source.with_suffix('.json')}"
+        if add_boundary_panels(result, layout) is None:
+            return f"{lost}: {result.properties['boundary_panels']['error']}"
+    return None
 
 
 def _cmd_molds(args) -> int:

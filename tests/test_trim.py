@@ -164,6 +164,41 @@ def test_layout_writes_the_boundary_panels_beside_the_net(tmp_path):
     assert all(len(f) >= 3 for f in faces)
 
 
+def test_a_net_optimized_after_its_layout_is_trimmed_again(tmp_path, capsys):
+    """`fabplan optimize` of a layout's net, off the design, cuts its boundary panels again
+    from the layout its JSON records; a net whose faces changed gets a note instead."""
+    out = tmp_path / "hp.obj"
+    assert main(["layout", "hyperbolic-paraboloid:width=6,depth=4,rise=2", "--net", "snet",
+                 "--panel-size", "1", "--triangles", "4000", "-o", str(out), "-q"]) == 0
+    lw = tmp_path / "opt" / "lw.obj"
+    code = main(["optimize", str(out), "--net", "linear-weingarten", "--reference",
+                 "hyperbolic-paraboloid:width=6,depth=4,rise=2", "-o", str(lw)])
+    assert code in (0, 3)
+    assert "were not carried over" not in capsys.readouterr().err
+    net_v, _ = read_obj(lw)
+    before, _ = read_obj(out)
+    assert np.abs(net_v - before).max() > 1e-3          # the net moved ...
+    V, faces = read_obj(tmp_path / "opt" / "lw.boundary.obj")
+    assert np.array_equal(V[:len(net_v)], net_v)         # ... and its panels with it
+    on = V[len(net_v):]
+    edge = np.minimum(np.abs(np.abs(on[:, 0]) - 6), np.abs(np.abs(on[:, 1]) - 4))
+    assert np.sort(edge)[len(edge) // 2] <= 1e-6          # new corners on the design's edge
+    props = json.loads(lw.with_suffix(".json").read_text())["properties"]
+    assert props["boundary_panels"]["count"] == len(faces) - len(props["boundary_panels"]["extensions"])
+    # a net whose faces are not the layout's keeps no panels, and says so
+    V0, F0 = read_obj(out)
+    from fabplan.io.obj import write_obj
+
+    edited = tmp_path / "edited" / "hp.obj"
+    edited.parent.mkdir()
+    write_obj(edited, V0, F0[:-1])
+    (edited.parent / "hp.json").write_text(out.with_suffix(".json").read_text())
+    (edited.parent / "hp.boundary.obj").write_text((tmp_path / "hp.boundary.obj").read_text())
+    main(["optimize", str(edited), "--net", "snet", "-o", str(tmp_path / "e" / "e.obj"), "-q"])
+    assert "were not carried over: the net's faces are not those of the layout" in capsys.readouterr().err
+    assert not (tmp_path / "e" / "e.boundary.obj").exists()
+
+
 def test_no_patch_clads_what_the_net_already_clads():
     """Regression: around the pole of a paraboloid dome the plane's sheets overlap, and
     four "holes" there lay under net faces (4-6 cm away): the design was clad twice."""

@@ -43,6 +43,7 @@ __all__ = [
     "surface_parameters",
     "surface_from_spec",
     "describe_surface_parameters",
+    "spec_of_surface",
     "hyperbolic_paraboloid",
     "paraboloid",
     "torus_patch",
@@ -529,6 +530,26 @@ def surface_from_spec(spec: str) -> ParametricSurface:
                 raise InputError(f"surface spec {spec!r}: {key} must be a number, got "
                                  f"{value!r}") from None
     return make_surface(name, **parameters)
+
+
+def spec_of_surface(surface: ParametricSurface) -> str | None:
+    """The ``"name:key=value,..."`` spec that `surface_from_spec` makes `surface` from again,
+    or None where a parameter came from a file (its values are not kept as text).
+
+    Examples
+    --------
+    >>> spec_of_surface(surface_from_spec("hyperbolic-paraboloid:width=5,rise=2"))
+    'hyperbolic-paraboloid:width=5.0,depth=10.0,rise=2.0'
+    """
+    items = []
+    for key, value in surface.parameters.items():
+        if key in FILE_PARAMETERS:
+            return None
+        if key in ("u_deg", "v_deg"):
+            items.append(f"{key}={float(value[0])!r}..{float(value[1])!r}")
+        else:
+            items.append(f"{key}={float(value)!r}")
+    return surface.name + (":" + ",".join(items) if items else "")
 
 
 def _read_grid_file(path: str, key: str) -> np.ndarray:

@@ -86,7 +86,7 @@ if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
     from ..solve.solver import IterationRecord, SolverSettings
 
-__all__ = ["SurfaceLayout", "layout_surface", "layout_angle", "glide"]
+__all__ = ["SurfaceLayout", "layout_surface", "layout_again", "layout_angle", "glide"]
 
 
 @dataclass
@@ -168,6 +168,8 @@ class SurfaceLayout:
         mesh = self.mesh
         return {
             "design": self.design.name,
+            "design_spec": _design_spec(self.design),
+            "design_resolution": _design_resolution(self.design),
             "design_triangles": int(len(self.design.triangles)),
             "design_repairs": dict(self.design.repairs),
             "design_units": self.design.units,
@@ -262,6 +264,57 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         raise refusal
     best.smoothing_tried = tried
     return best
+
+
+def layout_again(record: dict) -> SurfaceLayout:
+    """The layout a net's JSON record describes (`SurfaceLayout.record`, under
+    ``properties.layout``), made again.
+
+    A layout is deterministic: the same design (at the same triangle count), panel size,
+    angle, family and smoothing give the same net, so a net optimized after its layout can
+    be trimmed to the design again (`fabplan.layout.trim.add_boundary_panels`).
+
+    Raises
+    ------
+    InputError, OSError
+        When the design cannot be loaded again (a file moved), or the record is
+        incomplete.
+    """
+    from ..design.load import load_design
+
+    spec = record.get("design_spec", record.get("design"))
+    if spec is None:
+        raise InputError(f"the design {record.get('design')!r} was made from a file of values, "
+                         "which is not recorded")
+    try:
+        resolution = record.get("design_resolution")
+        design = load_design(spec, triangles=int(record["design_triangles"]),
+                             resolution=None if resolution is None else tuple(resolution))
+        settings = LayoutSettings(smoothing=float(record["smoothing_panels"]), smoothing_tries=())
+        return layout_surface(design, float(record["panel_size"]),
+                              angle=float(record["angle_deg"]),
+                              family=record.get("prescribed_family"), settings=settings)
+    except InputError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"the layout record is incomplete ({exc})") from None
+
+
+def _design_spec(design: DesignSurface) -> str | None:
+    """What `fabplan.design.load.load_design` loads `design` from again: a built-in
+    surface's spec with its parameters, else its file (None for a built-in surface made
+    from a file of values)."""
+    from ..design.parametric import spec_of_surface
+
+    return design.name if design.parametric is None else spec_of_surface(design.parametric)
+
+
+def _design_resolution(design: DesignSurface) -> list[int] | None:
+    """Grid cells (nu, nv) of a built-in surface's triangulation (None for a mesh)."""
+    if design.parametric is None or design.uv is None:
+        return None
+    nu = len(np.unique(design.uv[:, 0])) - (0 if design.parametric.periodic_u else 1)
+    return [int(nu), int(len(np.unique(design.uv[:, 1])) - 1)]
 
 
 def _layout_once(design: DesignSurface, h: float, angle: float, family: str | None,
