@@ -676,6 +676,11 @@ def _cmd_strips(args) -> int:
         files = plan.write(out, previews=not args.no_previews,
                            workers=worker_count(args.workers)) + viewers
     s = plan.summary()
+    if s["ends_set_back_past_half_an_edge"]:      # a warning, so also with --quiet
+        print(f"fabplan: warning: the {settings.member_mm:g} mm boundary member sets "
+              f"{counted(s['ends_set_back_past_half_an_edge'], 'strip end')} back by more "
+              f"than half their last edge (up to {s['member_setback_max_mm']:.0f} mm): is it "
+              "that thick? (--boundary-member is in mm)", file=sys.stderr)
     if args.quiet:
         print(f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
               f"{counted(s['sheets'], 'sheet')}; wrote {len(files)} files to {out}")

@@ -269,3 +269,17 @@ def test_a_line_along_the_edge_is_the_members_place_and_a_thick_member_is_refuse
 
     with pytest.raises(InputError, match="boundary-member"):
         _strips(net, V, panels, boundary_member_mm=6000.0)
+
+
+def test_a_member_that_eats_the_last_panel_is_questioned(laid_out, tmp_path, capsys):
+    """A boundary member given in the wrong units (1000 mm) sets the ends back by more than
+    half their last edge: the command warns, naming the option and its unit."""
+    common = ["--height", str(HEIGHT), "--thickness", str(THICKNESS), "--no-previews", "-q"]
+    assert main(["strips", str(laid_out / "saddle.obj"), *common, "--boundary-member", "1000",
+                 "-o", str(tmp_path / "thick")]) == 0
+    err = capsys.readouterr().err
+    assert "boundary member sets" in err and "--boundary-member is in mm" in err
+    summary = _record(tmp_path / "thick")["summary"]
+    assert summary["ends_set_back_past_half_an_edge"] > 0
+    assert summary["member_setback_max_mm"] >= 500.0
+    assert _record(laid_out / "to-edge")["summary"]["ends_set_back_past_half_an_edge"] == 0

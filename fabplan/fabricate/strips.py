@@ -1031,6 +1031,12 @@ class StripSet:
         }
         angles = [a for s in self.strips for a in s.end_angle_deg if math.isfinite(a)]
         rec["member_angle_min_deg"] = float(min(angles)) if angles else None
+        setbacks = [(e, last) for s in self.strips
+                    for e, last in zip(s.end_setback_mm, (s.edge_mm[0], s.edge_mm[-1]), strict=True)
+                    if e is not None]
+        rec["member_setback_max_mm"] = max((e for e, _ in setbacks), default=None)
+        # a member eating up more than half the last edge of a strip is no edge member
+        rec["ends_set_back_past_half_an_edge"] = sum(e > 0.5 * last for e, last in setbacks)
         if radii.size:
             med = float(np.median(radii))
             rec["radius_mm"] = {"median": med, "min": float(radii.min()), "max": float(radii.max()),
