@@ -228,3 +228,22 @@ def test_the_command_reports_the_coarse_net_and_can_leave_it_out(plain_and_multi
         assert (levels is not None) == (name == "multi")
     assert "coarse net of 484 vertices, iteration" in out["multi"]
     assert "coarse net" not in out["plain"]
+
+
+def test_a_rough_net_is_solved_plainly_unless_asked(weingarten_grid, monkeypatch):
+    """Regression: on a rough grid (a noisy height field) the automatic multilevel start
+    settled elsewhere than the plain solve (angles over 68-110 deg against 82-98). A net
+    whose coarse net does not stand for it is solved plainly; asked for, it still gets the
+    multilevel start."""
+    from fabplan.solve.multilevel import MAX_FINE_ROUGHNESS, fine_roughness
+
+    monkeypatch.setattr("fabplan.solve.optimize.MULTILEVEL_MIN_VERTICES", 1000)
+    G = grid_indices(weingarten_grid)
+    smooth, rough = noisy(weingarten_grid, 0.01, seed=3), noisy(weingarten_grid, 0.04, seed=3)
+    assert fine_roughness(weingarten_grid, G) < 1e-3
+    assert fine_roughness(smooth, G) < MAX_FINE_ROUGHNESS < fine_roughness(rough, G)
+    once = SolverSettings(max_iterations=1)
+    assert fabplan.optimize(smooth, "linear-weingarten", settings=once).parameters["multilevel"]
+    assert fabplan.optimize(rough, "linear-weingarten", settings=once).parameters["multilevel"] is None
+    asked = SolverSettings(max_iterations=1, multilevel=True)
+    assert fabplan.optimize(rough, "linear-weingarten", settings=asked).parameters["multilevel"]

@@ -41,10 +41,12 @@ from .constraints import (
     StarAngleRange,
 )
 from .multilevel import (
+    MAX_FINE_ROUGHNESS,
     MIN_COARSE_LINES,
     MULTILEVEL_MIN_VERTICES,
     coarse_grid_net,
     coarse_lines,
+    fine_roughness,
     grid_indices,
     line_parameters,
     prolong_vertices,
@@ -479,6 +481,8 @@ def _multilevel_grid(mesh: QuadMesh, net: str, settings: SolverSettings | None, 
         return None
     grid = grid_indices(mesh)
     if grid is None or min(len(coarse_lines(m)) for m in grid.shape) < MIN_COARSE_LINES:
+        return None
+    if wanted is None and fine_roughness(mesh, grid) > MAX_FINE_ROUGHNESS:
         return None
     return grid
 

@@ -67,7 +67,8 @@ class SolverSettings:
         sum of squares beyond this factor of the best.
     multilevel : start a large grid-patch net from the solution of its coarse net (every
         second line of both families; `fabplan.solve.multilevel`). None (default): when the
-        net has at least `fabplan.solve.multilevel.MULTILEVEL_MIN_VERTICES` vertices;
+        net has at least `fabplan.solve.multilevel.MULTILEVEL_MIN_VERTICES` vertices and
+        its coarse net stands for it (`fabplan.solve.multilevel.MAX_FINE_ROUGHNESS`);
         True: whenever the net allows it; False: never. Nets that are no regular grid
         patch, and solves with held vertices, handles, gliding, guards or extra families,
         are solved plainly.
