@@ -285,9 +285,11 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
 
 
 def _cmd_molds(args) -> int:
+    from .fabricate.boundary_molds import boundary_molds, boundary_molds_text
     from .fabricate.mold_report import write_mold_report
     from .fabricate.molds import MoldSettings, plan_molds
     from .fabricate.panels import check_panels
+    from .layout.trim import read_boundary_panels
 
     settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=args.units,
                             max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface)
@@ -298,17 +300,26 @@ def _cmd_molds(args) -> int:
     check_panels(mesh)
     _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit),
           args.quiet)
+    boundary_file = _boundary_file(args)
+    panels = None if boundary_file is None else read_boundary_panels(
+        mesh, boundary_file, _boundary_record(args.net))
     progress = _progress(args)
     with progress.stage(f"fitting molds to {len(mesh.face_sizes)} panels"):
         plan = plan_molds(mesh, settings)
+        # a boundary panel is cut from the mold of the full panel it continues when it
+        # stays within the tolerance of it, as a full panel must
+        boundary = None if panels is None else (
+            panels, boundary_molds(plan, panels, limit_mm=settings.tolerance_mm))
     with progress.stage("writing the report"), \
             _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
-        files = write_mold_report(plan, out, view_3d=not args.no_3d) + viewers
+        files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary) + viewers
     if args.quiet:
         print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')} at "
               f"{settings.tolerance_mm:g} mm; wrote {files[0]}")
     else:
         print(plan.summary())
+        if boundary is not None:
+            print(boundary_molds_text(boundary[1], plan.mold_count, boundary_file))
         print(f"wrote {', '.join(str(f) for f in files)}")
     if plan.failures.size:
         print(f"fabplan: warning: {plan.failures.size} panels do not fit a mold within "
@@ -741,24 +752,40 @@ def _free_ends_text(summary: dict) -> str:
         (": " + ", ".join(parts) if parts else "")
 
 
-def _strip_boundary(args, mesh):
-    """``(file, StripBoundary)`` of the boundary panels strips run through: ``--boundary
-    FILE``, else ``NET.boundary.obj`` beside the net when a layout or study wrote one;
-    ``(None, None)`` for none (``--no-boundary``)."""
-    from .fabricate.strip_boundary import StripBoundary
+def _boundary_file(args) -> Path | None:
+    """The net's boundary panels: ``--boundary FILE``, else ``NET.boundary.obj`` beside the
+    net when a layout, optimize or study wrote one; None for none (``--no-boundary``)."""
     from .solve.optimize import boundary_path
 
     if args.no_boundary:
-        return None, None
+        return None
     if args.boundary is None:
         path = boundary_path(args.net)
-        if not path.is_file():
-            return None, None
-    else:
-        path = Path(args.boundary)
-        if not path.is_file():
-            raise InputError(f"{path}: no such file (the boundary panels, NET.boundary.obj)")
-    return path, StripBoundary.from_obj(mesh, path)
+        return path if path.is_file() else None
+    path = Path(args.boundary)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file (the boundary panels, NET.boundary.obj)")
+    return path
+
+
+def _strip_boundary(args, mesh):
+    """``(file, StripBoundary)`` of the boundary panels strips run through, or
+    ``(None, None)`` (`_boundary_file`)."""
+    from .fabricate.strip_boundary import StripBoundary
+
+    path = _boundary_file(args)
+    return (None, None) if path is None else (path, StripBoundary.from_obj(mesh, path))
+
+
+def _boundary_record(net: str | Path) -> dict | None:
+    """``properties.boundary_panels`` of ``NET.json`` beside the net, if there is one."""
+    import json
+
+    try:
+        record = json.loads(Path(net).with_suffix(".json").read_text(encoding="utf-8"))
+        return record["properties"]["boundary_panels"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _cmd_arcs(args) -> int:
@@ -967,6 +994,14 @@ def _add_molds(sub: Any) -> None:
                         "face, fitted to the corners around it; neighbours may step apart), "
                         "corners (least curved through its corners), auto (corners for a net "
                         "of flat faces, else shared); smooth is local_fit's earlier name")
+    ends = p.add_mutually_exclusive_group()
+    ends.add_argument("--boundary", metavar="FILE",
+                      help="the net's boundary panels (default: NET.boundary.obj beside the net, "
+                           "as layout, optimize and study write it): each is cut from the mold "
+                           "of the full panel it continues, or gets a mold of its own")
+    ends.add_argument("--no-boundary", action="store_true",
+                      help="plan the net's own panels only, even when boundary panels are "
+                           "beside it")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     _add_3dm(p, units=False)
     p.add_argument("--no-3d", action="store_true",

@@ -226,3 +226,39 @@ def test_no_patch_clads_what_the_net_already_clads():
     share = (np.bincount(owner, area * near, minlength=panels.count)
              / np.bincount(owner, area, minlength=panels.count))
     assert share[panels.patch].max(initial=0.0) <= 0.5
+
+
+def test_molds_plan_the_boundary_panels_beside_the_net(tmp_path, capsys):
+    """`fabplan molds NET.obj` reads ``NET.boundary.obj``: each boundary panel is cut from
+    the mold of the full panel it continues, which shares a side with it, or gets its own."""
+    import csv
+
+    out = tmp_path / "hp.obj"
+    assert main(["layout", "hyperbolic-paraboloid:width=6,depth=4,rise=2", "--net", "snet",
+                 "--panel-size", "1", "--triangles", "4000", "-o", str(out), "-q"]) == 0
+    assert main(["molds", str(out), "--tolerance-mm", "2", "--no-3d", "-o",
+                 str(tmp_path / "molds")]) in (0, 3)
+    assert "boundary panels" in capsys.readouterr().out
+    V, panels = read_obj(tmp_path / "hp.boundary.obj")
+    net_v, faces = read_obj(out)
+    record = json.loads((tmp_path / "molds" / "molds.json").read_text())
+    bp = record["boundary_panels"]
+    with open(tmp_path / "molds" / "boundary-panels.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(panels) == len(bp["mold"])
+    assert bp["molds_in_all"] == record["mold_count"] + bp["own_molds"]
+    assert sum(r["mold"] == "own" for r in rows) == bp["own_molds"]
+    assert all(float(r["deviation_mm"]) <= 2.0 for r in rows if r["mold"] != "own")
+    # the full panel a boundary panel continues shares a side with it, where one does
+    sides = {frozenset((int(a), int(b))) for f in faces for a, b in zip(f, np.roll(f, -1), strict=True)}
+    for k, p in enumerate(panels):
+        own = [frozenset((int(a), int(b))) for a, b in zip(p, np.roll(p, -1), strict=True)]
+        shared = [s for s in own if s in sides]
+        f = faces[bp["neighbour_face"][k]]
+        if shared:
+            assert any(s <= set(f.tolist()) for s in shared)
+    # --no-boundary plans the net alone
+    assert main(["molds", str(out), "--tolerance-mm", "2", "--no-3d", "--no-boundary", "-o",
+                 str(tmp_path / "alone")]) in (0, 3)
+    assert not (tmp_path / "alone" / "boundary-panels.csv").exists()
+    assert "boundary_panels" not in json.loads((tmp_path / "alone" / "molds.json").read_text())

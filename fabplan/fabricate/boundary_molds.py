@@ -24,7 +24,8 @@ from ..layout.trim import BoundaryPanels
 from ..report.viewer import PanelInfo
 from .molds import MOLD_TYPES, MoldPlan, placement_deviations
 
-__all__ = ["BoundaryMolds", "boundary_molds", "boundary_panels_csv", "boundary_mold_info"]
+__all__ = ["BoundaryMolds", "boundary_molds", "boundary_molds_text", "boundary_panels_csv",
+           "boundary_mold_info"]
 
 
 @dataclass
@@ -71,6 +72,17 @@ class BoundaryMolds:
             "mold": self.mold.tolist(),
             "neighbour_face": self.neighbour_face.tolist(),
         }
+
+
+def boundary_molds_text(molds: BoundaryMolds, net_molds: int, source: object = None) -> str:
+    """One sentence: how the boundary panels are made, and the molds in all with theirs."""
+    fits = int(np.sum(molds.mold[~molds.extension] >= 0))
+    return (f"{molds.count} boundary panels" + (f" ({source})" if source is not None else "")
+            + f": {fits} cut from the mold of the full panel they continue (within "
+            f"{molds.limit_mm:g} mm), {molds.own_molds} need a mold of their own"
+            + (f", {int(molds.extension.sum())} slivers cut with their full panel"
+               if molds.extension.any() else "")
+            + f"; {net_molds + molds.own_molds} molds in all")
 
 
 def boundary_panels_csv(panels: BoundaryPanels, molds: BoundaryMolds) -> str:

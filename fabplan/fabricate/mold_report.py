@@ -17,11 +17,13 @@ from scipy.spatial.transform import Rotation
 
 from ..io.output import output_folder, write_texts
 from ..io.records import json_text
+from ..layout.trim import BoundaryPanels
 from ..net.geometry import face_normals
 from ..net.view import net_edges, net_scene
 from ..report import figures, html, viewer
 from ..report.html import counted
 from ..report.pdf import PdfDocument
+from .boundary_molds import BoundaryMolds, boundary_molds_text, boundary_panels_csv
 from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
 
 __all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "mold_report_html",
@@ -300,9 +302,11 @@ def mold_pictures(plan: MoldPlan) -> dict[str, str]:
 
 
 def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
-                     pictures: dict[str, str] | None = None) -> str:
+                     pictures: dict[str, str] | None = None,
+                     boundary: BoundaryMolds | None = None) -> str:
     """The self-contained HTML report of a mold plan (`view_3d`: with the interactive 3D
-    view, about 0.6 MB more; `pictures`: `mold_pictures` when already drawn)."""
+    view, about 0.6 MB more; `pictures`: `mold_pictures` when already drawn; `boundary`:
+    the molds of the net's boundary panels, listed in ``boundary-panels.csv``)."""
     r = plan.record()
     tol = r["tolerance_mm"]
     w = plan.weingarten
@@ -341,6 +345,9 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
          "no limit" if r["max_mold_size_mm"] is None else f"{r['max_mold_size_mm']:g} mm"],
         ["run time", f"{r['seconds']:.1f} s"],
     ]
+    if boundary is not None:
+        summary_rows.insert(6, ["boundary panels (boundary-panels.csv)",
+                                boundary_molds_text(boundary, plan.mold_count)])
     steps = r["panel_steps"]
     if plan.fits_all:
         verdict = html.html_paragraph(
@@ -498,10 +505,12 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None) -> P
     return doc
 
 
-def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *,
-                      view_3d: bool = True) -> list[Path]:
+def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: bool = True,
+                      boundary: tuple[BoundaryPanels, BoundaryMolds] | None = None) -> list[Path]:
     """Write ``report.html``, ``report.pdf``, ``molds.json`` and ``panels.csv`` into
-    `folder`, all or none (`view_3d`: the HTML report with its interactive 3D view).
+    `folder`, all or none (`view_3d`: the HTML report with its interactive 3D view). With
+    `boundary` (the net's boundary panels and their molds, `boundary_molds`) also
+    ``boundary-panels.csv``, and ``boundary_panels`` in ``molds.json``.
 
     Returns
     -------
@@ -509,10 +518,17 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *,
     """
     folder = Path(folder)
     pictures = mold_pictures(plan)
+    record = plan.record()
+    texts = {"panels.csv": plan.panels_csv()}
+    if boundary is not None:
+        panels, molds = boundary
+        record["boundary_panels"] = {**molds.record(), "molds_in_all": plan.mold_count + molds.own_molds}
+        texts["boundary-panels.csv"] = boundary_panels_csv(panels, molds)
     with output_folder(folder) as staging:
-        write_texts({staging / "report.html": mold_report_html(plan, view_3d=view_3d,
-                                                               pictures=pictures),
-                     staging / "molds.json": json_text(plan.record()),
-                     staging / "panels.csv": plan.panels_csv()})
+        write_texts({staging / "report.html": mold_report_html(
+                         plan, view_3d=view_3d, pictures=pictures,
+                         boundary=None if boundary is None else boundary[1]),
+                     staging / "molds.json": json_text(record),
+                     **{staging / name: text for name, text in texts.items()}})
         mold_report_pdf(plan, pictures).write(staging / "report.pdf")
-    return [folder / name for name in ("report.html", "report.pdf", "molds.json", "panels.csv")]
+    return [folder / name for name in ("report.html", "report.pdf", "molds.json", *texts)]

@@ -32,7 +32,6 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..errors import InputError
 from ..net.mesh import QuadMesh
 
 __all__ = ["END_KINDS", "MAX_TURN_DEG", "MIN_MEMBER_ANGLE_DEG", "StripBoundary", "StripEnds",
@@ -175,20 +174,11 @@ class StripBoundary:
         Raises
         ------
         InputError
-            When the file does not continue `mesh`: fewer vertices than the net, or the
-            net's vertices moved (the net was changed after its boundary panels were cut).
+            When the file does not continue `mesh` (`fabplan.layout.trim.read_boundary_panels`).
         """
-        from ..io.obj import read_obj
+        from ..layout.trim import read_boundary_panels
 
-        vertices, polygons = read_obj(path)
-        n = mesh.vertex_count
-        scale = max(float(np.ptp(mesh.vertices, axis=0).max()), 1e-300)
-        if len(vertices) < n or not np.allclose(vertices[:n], mesh.vertices, atol=1e-6 * scale):
-            raise InputError(f"{path}: its first {n} vertices are not the net's {mesh.name} "
-                             "(boundary panels of another net, or of the net before it was "
-                             "changed?); cut them again or use --no-boundary")
-        return cls(mesh=mesh, vertices=np.asarray(vertices, float),
-                   polygons=[np.asarray(p, np.int64) for p in polygons])
+        return cls.from_panels(mesh, read_boundary_panels(mesh, path))
 
     # ------------------------------------------------------------------ topology
     @cached_property

@@ -28,6 +28,8 @@ below them (`_under`).
 
 from __future__ import annotations
 
+import math
+import os
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -39,6 +41,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
+from ..errors import InputError
 from ..net.mesh import QuadMesh
 
 if TYPE_CHECKING:
@@ -46,7 +49,7 @@ if TYPE_CHECKING:
     from .surface_layout import SurfaceLayout
 
 __all__ = ["BoundaryPanels", "ParameterChart", "trim_to_design", "add_boundary_panels",
-           "net_coverage"]
+           "read_boundary_panels", "net_coverage"]
 
 
 @dataclass
@@ -252,17 +255,8 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     area = np.bincount(owner, tri_area, minlength=len(polygons))
-    neighbour = _neighbour_faces(polygons, mesh)
+    neighbour = _neighbour_faces(polygons, mesh, vertices)
     extension = area < min_panel * h * h
-    # a piece touching no full panel along a side (a corner cell, a sliver) continues the
-    # nearest one
-    lone = np.flatnonzero(neighbour < 0)
-    if lone.size:
-        centre = np.array([vertices[polygons[k]].mean(axis=0) for k in lone])
-        face_centre = np.stack([np.bincount(mesh.corner_faces,
-                                            mesh.vertices[mesh.face_indices, k]) for k in range(3)],
-                               axis=1) / mesh.face_sizes[:, None]
-        neighbour[lone] = cKDTree(face_centre).query(centre)[1]
     flipped = _flipped(vertices, polygons, design, 1e-3 * h * h)
     return BoundaryPanels(
         vertices=vertices, polygons=polygons, net_vertex_count=mesh.vertex_count,
@@ -273,6 +267,56 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         flipped=flipped[~extension[flipped]], patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner)
+
+
+def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
+                         record: dict | None = None) -> BoundaryPanels:
+    """The boundary panels of `mesh` from the ``NET.boundary.obj`` a layout, an optimize or
+    a study writes beside ``NET.obj``.
+
+    The file holds the panels' outlines; what it does not hold is rebuilt: the face each
+    panel continues (`BoundaryPanels.neighbour_face`, as `trim_to_design` chooses it), the
+    panels' areas (of their outlines' fans), and their corners (net vertices, and points
+    two polygons share: the ends of the extended lines; the points between are the trim
+    outline's). `record` (``properties.boundary_panels`` of ``NET.json``) gives the
+    extensions, the patches, the coverage and the panel size, where known.
+
+    Raises
+    ------
+    InputError
+        When the file does not continue `mesh`: fewer vertices than the net, or the net's
+        vertices moved (the net was changed after its boundary panels were cut).
+    """
+    from ..io.obj import read_obj
+
+    vertices, polygons = read_obj(path)
+    n = mesh.vertex_count
+    scale = max(float(np.ptp(mesh.vertices, axis=0).max()), 1e-300)
+    if len(vertices) < n or not np.allclose(vertices[:n], mesh.vertices, atol=1e-6 * scale):
+        raise InputError(f"{path}: its first {n} vertices are not the net's {mesh.name} "
+                         "(boundary panels of another net, or of the net before it was "
+                         "changed?); cut them again or use --no-boundary")
+    polygons = [np.asarray(q, np.int64) for q in polygons]
+    vertices = np.asarray(vertices, float)
+    record = record or {}
+    p = len(polygons)
+    flags = {key: np.isin(np.arange(p), np.asarray(record.get(key, []), np.int64))
+             for key in ("extensions", "patches")}
+    ids = np.concatenate(polygons) if p else np.zeros(0, np.int64)
+    owner = np.repeat(np.arange(p), [len(q) for q in polygons])
+    nxt = np.concatenate([np.roll(q, -1) for q in polygons]) if p else ids
+    newell = np.zeros((p, 3))
+    np.add.at(newell, owner, 0.5 * np.cross(vertices[ids], vertices[nxt]))
+    shared = np.bincount(np.r_[ids, mesh.face_indices], minlength=len(vertices))
+    corner = (np.arange(len(vertices)) < n) | (shared >= 2)
+    coverage = record.get("coverage", math.nan)
+    return BoundaryPanels(
+        vertices=vertices, polygons=polygons, net_vertex_count=n,
+        on_boundary=np.zeros(len(vertices), bool), corner=corner,
+        neighbour_face=_neighbour_faces(polygons, mesh, vertices),
+        area=np.linalg.norm(newell, axis=1), panel_size=mesh.mean_edge_length,
+        coverage_net=record.get("coverage_net", math.nan), coverage=coverage,
+        patch=flags["patches"], extension=flags["extensions"])
 
 
 def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout
@@ -742,7 +786,22 @@ def _sane_on_surface(pieces: np.ndarray, vertices: np.ndarray, polygons: list, h
     return ok
 
 
-def _neighbour_faces(polygons: list, mesh: QuadMesh) -> np.ndarray:
+def _neighbour_faces(polygons: list, mesh: QuadMesh, vertices: np.ndarray) -> np.ndarray:
+    """(p,) int, the net face sharing a side (two consecutive net vertices) with each
+    panel, the longest such side deciding; a piece touching no full panel along a side (a
+    corner cell, a sliver) continues the face whose centre is nearest its own."""
+    out = _side_faces(polygons, mesh)
+    lone = np.flatnonzero(out < 0)
+    if lone.size:
+        centre = np.array([vertices[polygons[k]].mean(axis=0) for k in lone])
+        face_centre = np.stack([np.bincount(mesh.corner_faces,
+                                            mesh.vertices[mesh.face_indices, k]) for k in range(3)],
+                               axis=1) / mesh.face_sizes[:, None]
+        out[lone] = cKDTree(face_centre).query(centre)[1]
+    return out
+
+
+def _side_faces(polygons: list, mesh: QuadMesh) -> np.ndarray:
     """(p,) int, the net face sharing a side (two consecutive net vertices) with each
     panel, the longest such side deciding; -1 where none."""
     out = np.full(len(polygons), -1)
