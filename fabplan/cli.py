@@ -182,10 +182,10 @@ def _reference(spec: str | None):
 
     if spec is None:
         return None
-    if not is_3dm_source(spec) and (Path(spec).exists()
-                                    or Path(spec).suffix.lower() in (".obj", ".stl", ".ply", ".off")):
+    from .design.load import load_design, names_a_file
+
+    if not is_3dm_source(spec) and names_a_file(spec):
         return load_reference(spec)
-    from .design.load import load_design
 
     return load_design(spec).reference
 
@@ -322,9 +322,16 @@ def _cmd_molds(args) -> int:
             print(boundary_molds_text(boundary[1], plan.mold_count, boundary_file))
         print(f"wrote {', '.join(str(f) for f in files)}")
     if plan.failures.size:
-        print(f"fabplan: warning: {plan.failures.size} panels do not fit a mold within "
-              f"{settings.tolerance_mm:g} mm; they are listed in {out / 'report.html'}",
-              file=sys.stderr)
+        too_large = sum("needs a mold of" in (plan.problem[i] or "") for i in plan.failures)
+        why = []
+        if too_large:
+            why.append(f"{too_large} need a mold larger than --max-mold-size "
+                       f"{settings.max_mold_size_mm:g} mm")
+        if plan.failures.size - too_large:
+            why.append(f"{plan.failures.size - too_large} deviate from every mold by more than "
+                       f"{settings.tolerance_mm:g} mm")
+        print(f"fabplan: warning: {counted(plan.failures.size, 'panel')} fit no mold "
+              f"({'; '.join(why)}); they are listed in {out / 'report.html'}", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     if not plan.fits_all:
         print(f"fabplan: warning: the molds of neighbouring panels step up to "
@@ -573,6 +580,11 @@ def boundary_text(properties: dict) -> str:
     if patches:
         text += (f" (of them {len(patches)} patch{'' if len(patches) == 1 else 'es'} closing holes "
                  "inside the net, ids under properties.boundary_panels.patches)")
+    slivers = len(panels.get("extensions") or [])
+    if slivers:
+        # the boundary OBJ has a face for each: say why it has more faces than panels
+        text += (f", and {counted(slivers, 'sliver')} cut as part of the full panel beside "
+                 f"{'it' if slivers == 1 else 'them'} ({count + slivers} faces in the boundary OBJ)")
     return text
 
 
@@ -699,7 +711,8 @@ def _cmd_strips(args) -> int:
     radius = s["radius_mm"]
     print(f"{s['strips']} strips ({s['strips_per_family'][0]} A, {s['strips_per_family'][1]} B), "
           f"{s['crossings']} crossings, {s['total_length_mm'] / 1000:.2f} m of strip, "
-          f"unrolled length error {s['unrolled_length_error_mm']:.1e} mm")
+          f"unrolled length error {s['unrolled_length_error_mm']:.1e} mm (the net read in "
+          f"{settings.units}: --units)")
     if radius:
         print(f"arc radius {radius['median']:.1f} mm (spread {radius['spread_relative']:.2e}); "
               f"parts {'congruent' if s['congruent'] else 'not congruent'} within "
@@ -1010,6 +1023,12 @@ def _add_molds(sub: Any) -> None:
     p.set_defaults(func=_cmd_molds)
 
 
+def _first_sentence(doc: str | None) -> str:
+    """The first paragraph of a docstring on one line, without reST literals: what a
+    built-in surface is (``width`` and ``depth`` are half-sizes: ``[-width, width]``)."""
+    return " ".join((doc or "").strip().split("\n\n")[0].split()).replace("``", "")
+
+
 def _add_mill(sub: Any) -> None:
     p = sub.add_parser("mill", help="curvature-adaptive milling paths, checked by simulation "
                                     "(CL + CSV + mill.json + report.html): face milling from the "
@@ -1055,7 +1074,8 @@ def _add_layout(sub: Any) -> None:
                                       "gliding on the surface (OBJ + JSON + PNG)",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="built-in surfaces and their parameters (defaults):\n" + "\n".join(
-                           f"  {name}: {describe_surface_parameters(name)}" for name in SURFACES))
+                           f"  {name}: {describe_surface_parameters(name)}\n"
+                           f"      {_first_sentence(SURFACES[name].__doc__)}" for name in SURFACES))
     p.add_argument("surface", help="design surface: a triangle mesh (OBJ/STL/PLY/OFF), a Rhino "
                                    "file 'FILE.3dm[#layer=L,object=NAME,face=K,units=U]' (a NURBS "
                                    "surface, polysurface face or mesh), or a built-in surface "

@@ -357,3 +357,13 @@ def test_console_script_refuses_bad_input(tmp_path):
     assert proc.stdout == ""
     assert proc.stderr == f"fabplan: error: {source}:2: vertex 1 has a non-finite coordinate\n"
     assert _snapshot(tmp_path) == before
+
+
+def test_a_folder_named_like_a_built_in_surface_does_not_shadow_it(tmp_path, monkeypatch):
+    """Regression: with a folder ``paraboloid`` (a project's output, say) in the working
+    folder, ``fabplan layout paraboloid`` read the folder as a mesh file and failed."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paraboloid").mkdir()
+    assert main(["layout", "paraboloid", "--net", "snet", "--panel-size", "1.5",
+                 "--triangles", "2000", "-o", "net.obj", "-q"]) == 0
+    assert (tmp_path / "net.obj").is_file()

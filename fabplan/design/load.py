@@ -9,9 +9,18 @@ from ..io.rhino_read import RhinoDesign, is_3dm_source, read_3dm, split_source
 from ..io.triangles import read_triangles
 from .mesh_surface import DesignSurface
 from .nurbs import NurbsSurface, trims_to_parameters
-from .parametric import surface_from_spec
+from .parametric import SURFACES, surface_from_spec
 
-__all__ = ["load_design", "load_3dm_design", "nurbs_from_rhino"]
+__all__ = ["load_design", "load_3dm_design", "names_a_file", "nurbs_from_rhino"]
+
+
+def names_a_file(source: str | os.PathLike) -> bool:
+    """Whether `source` names a mesh file rather than a built-in surface spec: a mesh
+    suffix, an existing file, or another existing path (a folder, refused as such later)
+    unless it is named like a built-in surface, which it does not shadow."""
+    path = Path(source)
+    return (path.suffix.lower() in (".obj", ".stl", ".ply", ".off") or path.is_file()
+            or (path.exists() and str(source).partition(":")[0] not in SURFACES))
 
 
 def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = None,
@@ -30,8 +39,7 @@ def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = N
     if is_3dm_source(source):
         return load_3dm_design(source, resolution=resolution, triangles=triangles)
     path = Path(source)
-    looks_like_file = path.suffix.lower() in (".obj", ".stl", ".ply", ".off") or path.exists()
-    if not looks_like_file:
+    if not names_a_file(source):
         surface = surface_from_spec(str(source))
         return surface.triangulate(resolution or surface.resolution_for(triangles))
     vertices, faces = read_triangles(path)

@@ -251,7 +251,7 @@ def hyperbolic_paraboloid(width: float = 10.0, depth: float = 10.0,
 
 def paraboloid(radius_x: float = 10.0, radius_y: float = 10.0, width: float = 6.0,
                depth: float = 6.0) -> ParametricSurface:
-    """The dome ``z = x^2 / (2 radius_x) + y^2 / (2 radius_y)`` over a rectangle.
+    """The dome ``z = x^2 / (2 radius_x) + y^2 / (2 radius_y)`` over ``[-width, width] x [-depth, depth]``.
 
     ``radius_x, radius_y`` are the principal radii at the apex (signed); equal radii make
     the apex an umbilic (the principal directions turn once around it).
