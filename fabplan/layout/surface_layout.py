@@ -334,10 +334,20 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
     k1, k2, e1 = face_principal_frames(design, radius=s.curvature_radius)
     if s.bisector == "min":
         e1 = np.cross(normal, e1)
+    e1_raw = e1
     lap("principal_directions")
     e1, symmetry, smoothing = _smoothed_directions(
-        design, e1, np.abs(k1 - k2) * design.face_areas, h, s,
-        cross=family is None and angle == 90.0)
+        design, e1, np.abs(k1 - k2) * design.face_areas, h, s, cross=family is None)
+    if symmetry == 4 and angle != 90.0:
+        # the combed cross field is a principal direction everywhere, continuous across
+        # the lines where the larger principal curvature swaps direction (a wave's
+        # inflections): the bisector of the families, turned to the `bisector` setting
+        # where most of the design's anisotropy is
+        e_max = e1_raw if s.bisector == "max" else np.cross(normal, e1_raw)
+        agree = np.abs(np.sum(e1 * e_max, axis=1)) >= math.sqrt(0.5)
+        weight = np.abs(k1 - k2) * design.face_areas
+        if weight[agree].sum() < weight[~agree].sum():
+            e1 = np.cross(normal, e1)
     lap("smoothing")
     e1, seam = comb_line_field(design, e1)
     index = line_field_index(design, e1)
@@ -540,7 +550,9 @@ def _smoothed_directions(design: DesignSurface, e1: np.ndarray, weight: np.ndarr
 
     An orthogonal S-net is the same net with its two families swapped, so its directions
     are a cross field: across a near-umbilic the principal directions may turn by a
-    quarter turn without the net's lines turning at all. The cross field is smoothed over
+    quarter turn without the net's lines turning at all. An S-net at another angle is
+    symmetric about either principal direction, so the combed cross field serves as its
+    bisector as well (`_layout_once` turns it to the `bisector` setting). The cross field is smoothed over
     `LayoutSettings.smoothing` panels, doubled up to `max_smoothing`, until it has no
     quarter-turn singularity (which the lattice cannot follow; four of them surround a
     dome's apex); failing that, and for other nets, the line field is smoothed.

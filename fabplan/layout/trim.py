@@ -401,7 +401,8 @@ class ParameterChart:
 
         The plane of a parametrization with seams can hold several sheets of the design
         over one point; of the triangles holding a point, the one whose surface point is
-        nearest to `near` (m, 3) is taken (the first without). A point in no triangle
+        nearest to `near` (m, 3) is taken (the first without, or where its row is NaN). A
+        point in no triangle
         (outside by rounding) takes the triangle it is least outside of among the twelve
         nearest.
         """
@@ -420,7 +421,8 @@ class ParameterChart:
             score = np.zeros(len(which))
             if near is not None:
                 X = np.einsum("mk,mkj->mj", b, self.design.vertices[self.design.triangles[hold]])
-                score = np.linalg.norm(X - near[which], axis=1)
+                # a point without a preference (NaN) takes the first sheet
+                score = np.nan_to_num(np.linalg.norm(X - near[which], axis=1), nan=0.0)
             order = np.lexsort((score, which))
             first = order[np.r_[True, which[order][1:] != which[order][:-1]]]
             tri[which[first]], bary[which[first]] = hold[first], b[first]
@@ -439,7 +441,8 @@ class ParameterChart:
 
     def to_surface(self, points: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
         """(m, 3) float, the points of the design at parameters `points` (m, 2), on the
-        sheet nearest to `near` (m, 3) where the plane holds several (`locate`)."""
+        sheet nearest to `near` (m, 3, NaN rows for no preference) where the plane holds
+        several (`locate`)."""
         tri, bary = self.locate(points, near)
         design = self.design
         if design.parametric is not None and design.uv is not None:
@@ -686,9 +689,9 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     count = np.bincount(piece, weight, minlength=len(rings))
     anchor = np.stack([np.bincount(piece, weight * mesh.vertices[nearest, k], minlength=len(rings))
                        for k in range(3)], axis=1) / np.maximum(count, 1)[:, None]
-    near: np.ndarray | None = anchor[piece[other[first]]] if other.size else np.zeros((0, 3))
-    if other.size and (count[piece[other[first]]] == 0).any():
-        near = None   # a panel without a net vertex: no sheet to prefer
+    # a panel without a net vertex has no sheet to prefer (NaN); the others keep theirs
+    anchor[count == 0] = np.nan
+    near = anchor[piece[other[first]]] if other.size else np.zeros((0, 3))
     vertices = np.vstack([mesh.vertices, chart.to_surface(exact, near)])
     on_ray = np.zeros(len(vertices), bool)
     if len(rays) and len(new_p):
