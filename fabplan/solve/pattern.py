@@ -344,7 +344,7 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
         if nodes else np.zeros(0, dtype=np.int64)
     nnz = int(row_lengths.sum())
     dtype = index_dtype(nnz)
-    indptr = np.zeros(nfree + 1, dtype=dtype)
+    indptr: np.ndarray = np.zeros(nfree + 1, dtype=dtype)
     np.cumsum(row_lengths, out=indptr[1:])
     # the start of the row of each (pair, a), shifted, with the row's byte: one word each
     packed = np.cumsum(counts, axis=0, dtype=np.int64)
@@ -355,7 +355,7 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     packed <<= 8
     packed |= row_bytes
     packed = packed.ravel()
-    indices = np.empty(nnz, dtype=dtype)
+    indices: np.ndarray = np.empty(nnz, dtype=dtype)
     step = _CHUNK // 64
     for t in range(0, len(pairs), step):       # chunks of node pairs: small temporaries
         present = np.flatnonzero(np.unpackbits(row_bytes[t:t + step, :, None], axis=2,
@@ -366,7 +366,7 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
             first[pairs[present >> 6] % max(nodes, 1)] + b
 
     # 4. every product's slot: the start of its row in its node pair, plus the bits before it
-    slots = np.empty(sum(layout.within.size for layout in layouts), dtype=dtype)
+    slots: np.ndarray = np.empty(sum(layout.within.size for layout in layouts), dtype=dtype)
     at = 0
     if not nnz:                         # every variable held: every product too
         slots.fill(nnz)
