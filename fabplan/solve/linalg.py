@@ -191,29 +191,32 @@ class SparseSPDSolver:
         elif self.backend == "cholmod":
             from cvxopt import cholmod, matrix, spmatrix
 
+            # the values pass through one buffer (`values`), not a new matrix
+            values = self.values(upper.nnz)
+            if upper.data is not values:
+                values[:] = upper.data
             if self._matrix is None:
                 pattern = None if self._shared is None else self._shared.get("cholmod")
                 if pattern is None:
                     n = upper.shape[0]
-                    rows = matrix(np.asarray(upper.indices, dtype=np.int64))
-                    # the column of every entry, counted up in place (fresh memory is slow)
+                    # the triplets filled in place (fresh memory is slow): the row of every
+                    # entry, and its column counted up
+                    rows = matrix(0, (upper.nnz, 1), "i")
+                    np.asarray(rows)[:, 0] = upper.indices
                     cols = matrix(0, (upper.nnz, 1), "i")
                     column = np.asarray(cols)[:, 0]
                     starts = upper.indptr[1:-1]
                     np.add.at(column, starts[starts < upper.nnz], 1)
                     np.cumsum(column, out=column)
-                    # built with ones so that no structural entry is dropped, then refilled
-                    self._matrix = spmatrix(1.0, rows, cols, (n, n))
+                    # cvxopt keeps every triplet, zeros included: the structure is the pattern's
+                    self._matrix = spmatrix(self._values, rows, cols, (n, n))
+                    del rows, cols, column        # not held through the factorization
                     if self._shared is not None:
                         # the next solver copies its structure (its values it overwrites)
                         self._shared["cholmod"] = self._matrix
                 else:
                     self._matrix = 1.0 * pattern     # a copy, explicit zeros kept (unlike `sparse`)
                 self._factor = cholmod.symbolic(self._matrix)
-            # the values pass through one buffer (`values`), not a new matrix
-            values = self.values(upper.nnz)
-            if upper.data is not values:
-                values[:] = upper.data
             self._matrix.V = self._values
             try:
                 cholmod.numeric(self._matrix, self._factor)
