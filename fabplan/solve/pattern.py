@@ -86,12 +86,12 @@ class NormalPattern:
     diagonal : (nfree,) int, positions of the diagonal entries in ``indices``.
     slots : (products,) int, every family's products' positions in ``indices``,
         concatenated; ``nnz`` for a product on a held variable.
-
-    The index arrays are int32 when ``nnz`` allows it (`index_dtype`): the slots are the
-    pattern's largest array, 12 million at 30k vertices.
     key : the `pattern_key` it was built for.
     shared : what linear solver backends build from the pattern alone, kept for the
         next solver of the pattern (see `fabplan.solve.linalg.SparseSPDSolver`).
+
+    The index arrays are int32 when ``nnz`` allows it (`index_dtype`): the slots are the
+    pattern's largest array, 12 million at 30k vertices.
     """
 
     families: tuple
