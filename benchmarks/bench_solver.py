@@ -170,8 +170,9 @@ def _timing_hooks() -> dict:
 
 
 def run_case(name: str, profile: bool = False, max_iterations: int | None = None,
-             backend: str = "auto") -> dict:
-    """Generate, perturb and optimize one case in this process; the record of the run."""
+             backend: str = "auto", multilevel: bool | None = None) -> dict:
+    """Generate, perturb and optimize one case in this process; the record of the run.
+    `multilevel`: `SolverSettings.multilevel` (None: the solver's default)."""
     import numpy as np
 
     import fabplan
@@ -183,6 +184,8 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
     setup_seconds = time.perf_counter() - t0
     before_gb = _peak_gb()
     settings = SolverSettings(backend=backend)
+    if multilevel is not None:
+        settings.multilevel = multilevel
     hooks = _timing_hooks()
     if max_iterations is not None:
         settings.max_iterations = max_iterations
@@ -259,6 +262,7 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
         # the coarse nets solved first (`SolverSettings.multilevel`), coarsest first; None
         # for a plain solve (and for code without the multilevel start)
         "multilevel": result.parameters.get("multilevel"),
+        "multilevel_setting": multilevel,
         "history": result.history,
     }
     if profiler:
@@ -274,10 +278,11 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
 # ---------------------------------------------------------------------------- driver side
 def run_in_subprocess(name: str, profile: bool, max_iterations: int | None,
                       timeout: float | None, backend: str = "auto",
-                      package: Path | None = None) -> dict:
+                      package: Path | None = None, multilevel: str = "auto") -> dict:
     """Run one case in a new Python process; `package`: the checkout whose fabplan it
-    imports (default: this one)."""
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--backend", backend]
+    imports (default: this one); `multilevel`: "auto", "on" or "off"."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", name, "--backend", backend,
+           "--multilevel", multilevel]
     root = str(package or Path(__file__).resolve().parent.parent)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [root] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
@@ -454,12 +459,18 @@ def main(argv: list[str] | None = None) -> int:
                         help="rounds of --compare (each round runs both codes once per case)")
     parser.add_argument("--first", choices=["new", "old"], default="new",
                         help="the code that runs first in odd rounds of --compare")
+    parser.add_argument("--multilevel", choices=["auto", "on", "off"], default="auto",
+                        help="SolverSettings.multilevel: auto (the solver's default, from 20k "
+                             "vertices), on, or off (the plain solve on the full net, to "
+                             "measure its set-up and iterations)")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--worker-profile", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
 
     if args.worker:
-        record = run_case(args.worker, args.worker_profile, args.max_iterations, args.backend)
+        multilevel = {"auto": None, "on": True, "off": False}[args.multilevel]
+        record = run_case(args.worker, args.worker_profile, args.max_iterations, args.backend,
+                          multilevel)
         print(json.dumps(record))
         return 0
 
@@ -481,7 +492,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"running {name}{f' ({code}, round {round_})' if args.compare else ''} ...",
                       flush=True)
                 records.append(run_in_subprocess(name, False, args.max_iterations, args.timeout,
-                                                 args.backend, package))
+                                                 args.backend, package, args.multilevel))
                 r = records[-1]
                 r["code"], r["run"] = code, round_
                 print(f"  {r['status']}, {r.get('iterations')} iterations, "
@@ -491,7 +502,8 @@ def main(argv: list[str] | None = None) -> int:
     profiles = {}
     for name in args.profile:
         print(f"profiling {name} ...", flush=True)
-        r = run_in_subprocess(name, True, args.max_iterations, args.timeout, args.backend)
+        r = run_in_subprocess(name, True, args.max_iterations, args.timeout, args.backend,
+                              multilevel=args.multilevel)
         if "profile" in r:
             profiles[name] = r["profile"]
             stamp = datetime.date.today().isoformat()

@@ -193,6 +193,11 @@ class QuadMesh:
         return np.repeat(np.arange(len(self.face_sizes)), self.face_sizes)
 
     @cached_property
+    def corner_next_vertices(self) -> np.ndarray:
+        """(c,) int, aligned with `face_indices`: the vertex after each corner in its face."""
+        return self._corners["nxt"]
+
+    @cached_property
     def faces_across(self) -> np.ndarray:
         """(c,) int, aligned with `face_indices`: the face across the edge from each corner to
         the next corner of its face, or -1 where that edge is on the boundary."""

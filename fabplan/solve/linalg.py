@@ -168,6 +168,20 @@ class SparseSPDSolver:
         self._values_view = np.zeros(0)
         self._factor: _Pardiso | Any = None
 
+    def values(self, nnz: int) -> np.ndarray:
+        """(nnz,) float, a buffer for the matrices' values that `factor` takes without a
+        copy when they are passed in it (as ``upper.data``): with CHOLMOD a view of the
+        cvxopt matrix that feeds its matrix."""
+        if len(self._values_view) != nnz:
+            if self.backend == "cholmod":
+                from cvxopt import matrix
+
+                self._values = matrix(0.0, (nnz, 1))
+                self._values_view = np.asarray(self._values)[:, 0]
+            else:
+                self._values_view = np.zeros(nnz)
+        return self._values_view
+
     def factor(self, upper: sp.csr_matrix) -> None:
         """Numeric factorization; the symbolic analysis runs on the first call only."""
         if self.backend == "pardiso":
@@ -177,29 +191,32 @@ class SparseSPDSolver:
         elif self.backend == "cholmod":
             from cvxopt import cholmod, matrix, spmatrix
 
+            # the values pass through one buffer (`values`), not a new matrix
+            values = self.values(upper.nnz)
+            if upper.data is not values:
+                values[:] = upper.data
             if self._matrix is None:
-                # the values pass through one buffer (a numpy view of it), not a new matrix
-                self._values = matrix(1.0, (upper.nnz, 1))
-                self._values_view = np.asarray(self._values)[:, 0]
                 pattern = None if self._shared is None else self._shared.get("cholmod")
                 if pattern is None:
                     n = upper.shape[0]
-                    rows = matrix(np.asarray(upper.indices, dtype=np.int64))
-                    # the column of every entry, counted up in place (fresh memory is slow)
+                    # the triplets filled in place (fresh memory is slow): the row of every
+                    # entry, and its column counted up
+                    rows = matrix(0, (upper.nnz, 1), "i")
+                    np.asarray(rows)[:, 0] = upper.indices
                     cols = matrix(0, (upper.nnz, 1), "i")
                     column = np.asarray(cols)[:, 0]
                     starts = upper.indptr[1:-1]
                     np.add.at(column, starts[starts < upper.nnz], 1)
                     np.cumsum(column, out=column)
-                    # built with ones so that no structural entry is dropped, then refilled
+                    # cvxopt keeps every triplet, zeros included: the structure is the pattern's
                     self._matrix = spmatrix(self._values, rows, cols, (n, n))
+                    del rows, cols, column        # not held through the factorization
                     if self._shared is not None:
                         # the next solver copies its structure (its values it overwrites)
                         self._shared["cholmod"] = self._matrix
                 else:
                     self._matrix = 1.0 * pattern     # a copy, explicit zeros kept (unlike `sparse`)
                 self._factor = cholmod.symbolic(self._matrix)
-            self._values_view[:] = upper.data
             self._matrix.V = self._values
             try:
                 cholmod.numeric(self._matrix, self._factor)

@@ -34,6 +34,7 @@ __all__ = [
     "FamilyPattern",
     "NormalPattern",
     "PatternCache",
+    "index_dtype",
     "normal_pattern",
     "pattern_cache",
     "pattern_key",
@@ -47,7 +48,7 @@ _CHUNK = 1 << 20            # elements of the temporaries: fresh memory is slow 
 # popcount of every byte, and of its bits below bit b (at byte * 8 + b)
 _POPCOUNT = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).sum(axis=1).astype(np.uint8)
 _RANK_BELOW = np.array([bin(v & ((1 << b) - 1)).count("1") for v in range(256) for b in range(8)],
-                       dtype=np.int64)
+                       dtype=np.uint8)
 # the diagonal of a node w wide: bits 9 a for a < w
 _DIAGONAL_BITS = np.array([sum(1 << (9 * a) for a in range(w)) for w in range(MAX_NODE_WIDTH + 1)],
                           dtype=np.uint64)
@@ -88,6 +89,9 @@ class NormalPattern:
     key : the `pattern_key` it was built for.
     shared : what linear solver backends build from the pattern alone, kept for the
         next solver of the pattern (see `fabplan.solve.linalg.SparseSPDSolver`).
+
+    The index arrays are int32 when ``nnz`` allows it (`index_dtype`): the slots are the
+    pattern's largest array, 12 million at 30k vertices.
     """
 
     families: tuple
@@ -110,6 +114,18 @@ class NormalPattern:
         arrays += [a for f in self.families for a in (f.gradient_cols, f.multiplicity)
                    if a is not None]
         return sum(a.nbytes for a in arrays) + 16 * self.nnz * len(self.shared)
+
+
+def index_dtype(nnz: int) -> type:
+    """The integer type of a pattern's index arrays: int32 while the ``nnz + 1`` slots
+    (the last for products on held variables) fit in it, int64 beyond.
+
+    Examples
+    --------
+    >>> index_dtype(1000).__name__, index_dtype(2**31).__name__
+    ('int32', 'int64')
+    """
+    return np.int32 if nnz < np.iinfo(np.int32).max else np.int64
 
 
 def rank_keys(keys: np.ndarray, bound: int) -> tuple[np.ndarray, np.ndarray]:
@@ -326,18 +342,20 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     segment = np.searchsorted(pair_row, np.arange(nodes))      # (P, P) starts node P's pairs
     row_lengths = np.add.reduceat(counts, segment, axis=0, dtype=np.int64)[node, offset] \
         if nodes else np.zeros(0, dtype=np.int64)
-    indptr = np.zeros(nfree + 1, dtype=np.int64)
+    nnz = int(row_lengths.sum())
+    dtype = index_dtype(nnz)
+    indptr: np.ndarray = np.zeros(nfree + 1, dtype=dtype)
     np.cumsum(row_lengths, out=indptr[1:])
     # the start of the row of each (pair, a), shifted, with the row's byte: one word each
     packed = np.cumsum(counts, axis=0, dtype=np.int64)
     packed -= counts
     packed -= packed[segment][pair_row]
     packed += indptr[np.minimum(first[pair_row][:, None] + np.arange(8), nfree)]
-    diagonal = packed[segment[node], offset]
+    diagonal = packed[segment[node], offset].astype(dtype)
     packed <<= 8
     packed |= row_bytes
     packed = packed.ravel()
-    indices = np.empty(int(indptr[-1]), dtype=np.int64)
+    indices: np.ndarray = np.empty(nnz, dtype=dtype)
     step = _CHUNK // 64
     for t in range(0, len(pairs), step):       # chunks of node pairs: small temporaries
         present = np.flatnonzero(np.unpackbits(row_bytes[t:t + step, :, None], axis=2,
@@ -348,8 +366,7 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
             first[pairs[present >> 6] % max(nodes, 1)] + b
 
     # 4. every product's slot: the start of its row in its node pair, plus the bits before it
-    nnz = len(indices)
-    slots = np.empty(sum(layout.within.size for layout in layouts), dtype=np.int64)
+    slots: np.ndarray = np.empty(sum(layout.within.size for layout in layouts), dtype=dtype)
     at = 0
     if not nnz:                         # every variable held: every product too
         slots.fill(nnz)

@@ -100,10 +100,18 @@ class ReferenceSurface:
             key = np.sort(sides, axis=2).reshape(-1, 2)
             _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
             self._boundary_sides = (count[inverse.ravel()] == 1).reshape(-1, 3)
-        T = self.vertices[self.triangles[triangle]]
-        bary = igl.barycentric_coordinates(np.ascontiguousarray(foot, dtype=np.float64),
-                                           T[:, 0].copy(), T[:, 1].copy(), T[:, 2].copy())
-        return np.any((bary <= tolerance) & self._boundary_sides[triangle], axis=1)
+        sides = self._boundary_sides[triangle]
+        # only footpoints on a triangle with a boundary side can be on the boundary: the
+        # others (most of them, every iteration of a solve) need no coordinates
+        near = np.flatnonzero(sides.any(axis=1))
+        result = np.zeros(len(triangle), dtype=bool)
+        if len(near):
+            T = self.vertices[self.triangles[triangle[near]]]
+            foot = np.ascontiguousarray(np.asarray(foot, dtype=np.float64)[near])
+            bary = igl.barycentric_coordinates(foot, T[:, 0].copy(), T[:, 1].copy(),
+                                               T[:, 2].copy())
+            result[near] = np.any((bary <= tolerance) & sides[near], axis=1)
+        return result
 
     def boundary_curves(self) -> list:
         """The boundary loops of the surface as closed polylines, list of (k, 3) float."""

@@ -13,7 +13,7 @@ residual) and returns to it when it stops short of the tolerance.
 The sparsity pattern of the normal equations is fixed for the whole run: it is built once
 from the structure of the variables (`fabplan.solve.pattern`; solvers of the same topology
 and held set share it), analysed once, and each iteration only refills values (one
-`np.bincount` into the same matrix) and refactors numerically.
+`np.add.at` into the linear solver's own buffer) and refactors numerically.
 Coordinates are normalized (centroid at the origin, mean edge length 1) so that weights,
 tolerances and the regularization mean the same on every net.
 """
@@ -197,7 +197,7 @@ class GuidedProjection:
 
         Row ``i`` of ``J`` contributes ``J[i, p] J[i, q]`` to entry ``(p, q)`` of ``J^T J``;
         every product has its slot in the upper triangle (`fabplan.solve.pattern`), so each
-        iteration assembles ``J^T J`` with a single `np.bincount` over all families, keeping
+        iteration assembles ``J^T J`` with a single `np.add.at` over all families, keeping
         exact zeros as entries (the factorization's symbolic analysis stays valid). A
         pattern built for the same columns and free variables before (another candidate
         on this topology, a solve with the same handles) is taken from `pattern_cache`.
@@ -222,13 +222,14 @@ class GuidedProjection:
         """Upper triangle of ``J^T J + damping I`` (CSR) and the gradient ``J^T r`` of the
         weighted system (`jacobians` and `residuals` unweighted, one row weight per family).
 
-        The matrix is one object for the whole run (its index arrays are the pattern's) and
-        the per-family buffers are reused: an iteration only computes values.
+        The matrix is one object for the whole run (its index arrays are the pattern's, its
+        values the linear solver's buffer) and the per-family buffers are reused: an
+        iteration only computes values.
         """
         pat = self.pattern
         nnz, nfree = pat.nnz, len(self.free)
         if self._buffers is None:
-            self._buffers = _AssemblyBuffers.for_pattern(pat)
+            self._buffers = _AssemblyBuffers.for_pattern(pat, self._linear.values(nnz))
         buffers = self._buffers
         gradient = np.zeros(nfree + 1)
         start = 0
@@ -249,12 +250,17 @@ class GuidedProjection:
             entries *= (w * r)[:, None]
             gradient += np.bincount(f.gradient_cols.ravel(), weights=entries.ravel(),
                                     minlength=nfree + 1)
-        data = np.bincount(pat.slots, weights=buffers.products, minlength=nnz + 1)[:nnz]
-        data[pat.diagonal] += damping
+        # summed in place, in the order of the products (as np.bincount would, without a
+        # fresh array every iteration); products on held variables go to a last slot
+        buffers.summed.fill(0.0)
+        np.add.at(buffers.summed, pat.slots, buffers.products)
+        if buffers.summed is not buffers.data:
+            buffers.data[:] = buffers.summed[:nnz]
+        buffers.data[pat.diagonal] += damping
         if self._upper is None:
-            self._upper = sp.csr_matrix((data, pat.indices, pat.indptr), shape=(nfree, nfree))
-        else:
-            self._upper.data = data
+            self._upper = sp.csr_matrix((buffers.data, pat.indices, pat.indptr),
+                                        shape=(nfree, nfree))
+            self._upper.data = buffers.data     # the buffer itself, not a view: no copy
         return self._upper, gradient[:nfree]
 
     def _factor(self, upper: sp.csr_matrix, damping: float) -> None:
@@ -530,12 +536,18 @@ class _AssemblyBuffers:
     products: np.ndarray       # (products,) every family's entry products
     columns: list              # per family (k, m): the weighted Jacobian, entry-major
     entries: list              # per family (m, k): weighted Jacobian times weighted residual
+    data: np.ndarray           # (nnz,) the matrix's values: the linear solver's buffer
+    summed: np.ndarray         # what the products are summed into: `data`, or (nnz + 1,)
+                               # when some products fall on held variables (the last slot)
 
     @classmethod
-    def for_pattern(cls, pattern: NormalPattern) -> _AssemblyBuffers:
+    def for_pattern(cls, pattern: NormalPattern, data: np.ndarray) -> _AssemblyBuffers:
+        """Buffers for `pattern`; `data`: the (nnz,) array the matrix's values go to."""
         shapes = [f.gradient_cols.shape for f in pattern.families]
+        held = len(pattern.slots) > 0 and int(pattern.slots.max()) >= pattern.nnz
         return cls(np.empty(len(pattern.slots)), [np.empty((k, m)) for m, k in shapes],
-                   [np.empty((m, k)) for m, k in shapes])
+                   [np.empty((m, k)) for m, k in shapes], data,
+                   np.empty(pattern.nnz + 1) if held else data)
 
 
 @dataclass
