@@ -262,3 +262,33 @@ def test_molds_plan_the_boundary_panels_beside_the_net(tmp_path, capsys):
                  str(tmp_path / "alone")]) in (0, 3)
     assert not (tmp_path / "alone" / "boundary-panels.csv").exists()
     assert "boundary_panels" not in json.loads((tmp_path / "alone" / "molds.json").read_text())
+
+
+def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
+    """A net solved away from the design stands off it and tilts against it: a design
+    point under it sees its closest net point off its own normal. It is clad; a point
+    under a missing face is not (the rim of the gap is the net's free edge)."""
+    from fabplan.layout.trim import net_coverage
+    from fabplan.net.mesh import QuadMesh
+
+    # the design: the flat square [0, 1.5]^2, finely triangulated
+    n = 30
+    x, y = np.meshgrid(np.linspace(0, 1.5, n + 1), np.linspace(0, 1.5, n + 1), indexing="ij")
+    V = np.stack([x, y, 0 * x], axis=-1).reshape(-1, 3)
+    idx = np.arange(len(V)).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    design = DesignSurface(V, T, name="flat")
+    # the net: a 6 x 6 grid over [-0.5, 2]^2 tilted by 30 deg about the y axis
+    u, v = np.meshgrid(np.linspace(-0.5, 2.0, 7), np.linspace(-0.5, 2.0, 7), indexing="ij")
+    grid = np.stack([u, v, np.tan(np.radians(30)) * u], axis=-1)
+    whole = QuadMesh.grid(grid)
+    assert net_coverage(whole, design, panel_size=4.0) == pytest.approx(1.0)
+    # a face missing over the middle of the design: its area is unclad
+    centre = np.array([whole.vertices[f][:, :2].mean(axis=0) for f in whole.faces])
+    gone = int(np.argmin(np.linalg.norm(centre - 0.6, axis=1)))     # u, v in [1/3, 3/4]
+    holed = QuadMesh(whole.vertices, [f for k, f in enumerate(whole.faces) if k != gone])
+    covered = net_coverage(holed, design, panel_size=4.0)
+    # a design point (x, y, 0) has its closest point at u = 0.75 x on the tilted net: the
+    # missing face stands over x in [4/9, 1], y in [1/3, 3/4], 10.3 % of the design
+    assert covered == pytest.approx(1 - (1 - 4 / 9) * (3 / 4 - 1 / 3) / 1.5 ** 2, abs=0.015)

@@ -250,8 +250,9 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
     # coverage is measured on the surface, independently of the plane (`_under`)
     samples, normals, weight = _design_samples(design)
-    on_net = _under(samples, normals, mesh.vertices, mesh.triangles(), h)
-    on_any = on_net | _under(samples, normals, vertices, triangles, h)
+    on_net = _clad(samples, normals, mesh.vertices, mesh.triangles(), h)
+    on_any = on_net | _clad(samples, normals, vertices,
+                            np.vstack([mesh.triangles(), triangles]), h)
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     area = np.bincount(owner, tri_area, minlength=len(polygons))
@@ -344,9 +345,9 @@ def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout
 
 
 def net_coverage(mesh: QuadMesh, design: DesignSurface, panel_size: float) -> float:
-    """The share of the design's area under the faces of `mesh` (`_under`)."""
+    """The share of the design's area under the faces of `mesh` (`_clad`)."""
     samples, normals, weight = _design_samples(design)
-    on = _under(samples, normals, mesh.vertices, mesh.triangles(), panel_size)
+    on = _clad(samples, normals, mesh.vertices, mesh.triangles(), panel_size)
     return float(weight[on].sum() / weight.sum())
 
 
@@ -755,6 +756,43 @@ def _share_under(vertices: np.ndarray, triangles: np.ndarray, owner: np.ndarray,
     under = _under(T.mean(axis=1), normal, mesh.vertices, mesh.triangles(), h)
     total = np.bincount(owner, area, minlength=count)
     return np.bincount(owner, area * under, minlength=count) / np.maximum(total, 1e-300)
+
+
+def _clad(points: np.ndarray, normals: np.ndarray, V: np.ndarray, F: np.ndarray, h: float
+          ) -> np.ndarray:
+    """(m,) bool, design points the cladding (V, F) covers: `_under` it, or within a
+    quarter panel of it with their closest cladding point off its free edges (the sides
+    of one triangle only: the cladding's outline and the rims of its gaps).
+
+    A net solved away from the design stands off it and tilts against it, so a point under
+    it may see its closest point well off its normal; a point in a gap always has it on
+    the gap's rim."""
+    under = _under(points, normals, V, F, h)
+    if len(F) == 0:
+        return under
+    F = np.asarray(F, dtype=np.int64)
+    d2, tri, closest = igl.point_mesh_squared_distance(points, V, F)
+    T = V[F[tri]]
+    bary = igl.barycentric_coordinates(closest, T[:, 0].copy(), T[:, 1].copy(), T[:, 2].copy())
+    # free edges: sides of one triangle only
+    n = len(V)
+    sides = np.sort(np.concatenate([F[:, [1, 2]], F[:, [2, 0]], F[:, [0, 1]]]), axis=1)
+    key, count = np.unique(sides[:, 0] * n + sides[:, 1], return_counts=True)
+    free_key = key[count == 1]
+    free_vertex = np.zeros(n, bool)
+    free_vertex[free_key // n] = free_vertex[free_key % n] = True
+    on_rim = np.zeros(len(points), bool)
+    small = bary < 1e-6
+    for k in range(3):        # on the side opposite corner k (of the three sides)
+        a, b = F[tri, (k + 1) % 3], F[tri, (k + 2) % 3]
+        side = np.minimum(a, b) * n + np.maximum(a, b)
+        at = np.clip(np.searchsorted(free_key, side), 0, max(len(free_key) - 1, 0))
+        on_rim |= small[:, k] & (len(free_key) > 0) & (free_key[at] == side) if len(free_key) \
+            else np.zeros(len(points), bool)
+    # at a corner (two coordinates near zero): on the rim when the corner is on it
+    corner = small.sum(axis=1) >= 2
+    on_rim |= corner & free_vertex[F[tri, np.argmax(bary, axis=1)]]
+    return under | (~on_rim & (np.sqrt(d2) <= 0.25 * h))
 
 
 def _under(points: np.ndarray, normals: np.ndarray, V: np.ndarray, F: np.ndarray, h: float
