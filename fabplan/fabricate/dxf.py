@@ -36,7 +36,6 @@ from ezdxf.enums import TextEntityAlignment
 from ezdxf.layouts import BaseLayout
 
 from ..errors import FabplanError, InputError
-from ..report.figures import new_figure
 from .nesting import Label, bulge_points, bulge_polygon
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -705,7 +704,7 @@ def check_sheet(path: str | os.PathLike, settings: "StripSettings", sheet_count:
 
 
 def preview_png(doc, path, size: tuple, *, title: str = "") -> None:
-    """Draw a sheet document's entities as they are in the file (matplotlib PNG).
+    """Draw a sheet document's entities as they are in the file (PNG, `_draw_preview`).
 
     Polylines are flattened from their bulges and drawn in their layer's colour, TEXT at
     its insertion point; the sheet's outline is drawn in grey.
@@ -760,26 +759,52 @@ def _preview_line(rows: np.ndarray, closed: bool) -> np.ndarray:
     return np.vstack([P, P[:1]]) if closed else P
 
 
+#: the preview's long side (pixels), and the supersampling its lines are drawn with
+PREVIEW_PIXELS, PREVIEW_SUPERSAMPLE = 1540, 2
+
+
 def _draw_preview(lines: list, colours: list, texts: list, size: tuple, path, title: str) -> None:
-    """One figure: the polylines as one LineCollection, the texts, the sheet in grey."""
-    from matplotlib.collections import LineCollection
+    """Rasterize a sheet: the polylines in their colours, the texts, the sheet in grey
+    (PNG, `PREVIEW_PIXELS` on the long side, lines drawn at `PREVIEW_SUPERSAMPLE` times
+    the size and reduced, so they are smooth).
+
+    Pillow draws the polylines straight into the image: a sheet of 500 strips takes a
+    few milliseconds, where matplotlib's artists took 60-120."""
+    from PIL import Image, ImageDraw, ImageFont
 
     W, H = size
-    scale = 14.0 / max(W, H)
-    fig = new_figure((max(W * scale, 2), max(H * scale, 2) + (0.3 if title else 0)), dpi=100)
-    ax = fig.add_axes((0, 0, 1, 1 if not title else H * scale / (H * scale + 0.3)))
-    for x, y, text, rotation, height, colour in texts:
-        ax.text(x, y, text, rotation=rotation, ha="center", va="center",
-                fontsize=max(2.0, height * scale * 72 / 1.4), color=colour, rotation_mode="anchor")
-    # one (n, 3) array: matplotlib converts a list of colours one by one
-    ax.add_collection(LineCollection(lines, colors=np.asarray(colours, dtype=np.float64).reshape(-1, 3),
-                                     linewidths=0.6))
-    ax.plot([0, W, W, 0, 0], [0, 0, H, H, 0], color="0.6", lw=0.8)
-    ax.set_xlim(-0.01 * W, 1.01 * W)
-    ax.set_ylim(-0.01 * H, 1.01 * H)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.axis("off")
+    k = PREVIEW_SUPERSAMPLE
+    scale = PREVIEW_PIXELS / max(W, H)
+    margin = 0.01 * max(W, H) * scale
+    head = 24 if title else 0
+    width = int(round(W * scale + 2 * margin))
+    height = int(round(H * scale + 2 * margin)) + head
+    image = Image.new("RGB", (width * k, height * k), "white")
+    draw = ImageDraw.Draw(image)
+
+    def pixels(P: np.ndarray) -> list:
+        x = (margin + np.asarray(P)[:, 0] * scale) * k
+        y = (height - margin - np.asarray(P)[:, 1] * scale) * k      # y up on the sheet
+        return np.column_stack([x, y]).ravel().tolist()
+
+    draw.line(pixels(np.array([[0, 0], [W, 0], [W, H], [0, H], [0, 0]])), fill=(153, 153, 153),
+              width=k)
+    for P, colour in zip(lines, colours, strict=True):
+        if len(P) >= 2:
+            draw.line(pixels(P), fill=tuple(int(round(255 * c)) for c in colour), width=k)
+    for x, y, text, rotation, text_height, colour in texts:
+        font = ImageFont.load_default(size=max(6.0, text_height * scale * k))
+        box = draw.textbbox((0, 0), text, font=font)
+        label = Image.new("RGBA", (box[2] - box[0] + 2, box[3] - box[1] + 2), (0, 0, 0, 0))
+        ImageDraw.Draw(label).text((-box[0] + 1, -box[1] + 1), text, font=font,
+                                   fill=tuple(int(round(255 * c)) for c in colour))
+        label = label.rotate(rotation, expand=True, resample=Image.Resampling.BICUBIC)
+        cx, cy = pixels(np.array([[x, y]]))
+        image.paste(label, (int(cx - label.width / 2), int(cy - label.height / 2)), label)
+    image = image.reduce(k)
     if title:
-        fig.suptitle(title, fontsize=9, y=0.995)
-    # zlib level 3 instead of 6: the same pixels, a third more bytes, encoded in half the time
-    fig.savefig(path, dpi=110, facecolor="white", pil_kwargs={"compress_level": 3})
+        ImageDraw.Draw(image).text((width / 2, 4), title, fill="black", anchor="ma",
+                                   font=ImageFont.load_default(size=14))
+    # a palette of the few colours and their blends encodes in a fifth of the time
+    image = image.quantize(colors=64, method=Image.Quantize.FASTOCTREE)
+    image.save(path, format="PNG", compress_level=3)
