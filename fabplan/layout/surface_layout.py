@@ -306,7 +306,11 @@ def _design_spec(design: DesignSurface) -> str | None:
     from a file of values)."""
     from ..design.parametric import spec_of_surface
 
-    return design.name if design.parametric is None else spec_of_surface(design.parametric)
+    if design.parametric is not None:
+        return spec_of_surface(design.parametric)
+    # a file, found again from another working folder
+    path = Path(design.name.split("#")[0])
+    return str(path.resolve()) + design.name[len(str(path)):] if path.is_file() else design.name
 
 
 def _design_resolution(design: DesignSurface) -> list[int] | None:
