@@ -56,8 +56,9 @@ class BoundaryMolds:
 
     @property
     def own_molds(self) -> int:
-        """Boundary panels that need a mold of their own."""
-        return int(np.sum(self.mold < 0))
+        """Boundary panels that need a mold of their own (slivers are cut with their full
+        panel: they need none)."""
+        return int(np.sum((self.mold < 0) & ~self.extension))
 
     def record(self) -> dict:
         """JSON-ready summary."""
