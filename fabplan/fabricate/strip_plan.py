@@ -158,7 +158,7 @@ def _schedule_csv(rows: list, header: str) -> str:
     return buf.getvalue()
 
 
-def _plan_record(plan: StripPlan, files: list, sheet_files: dict) -> dict:
+def _plan_record(plan: StripPlan, files: list, sheet_files: dict, summary: dict) -> dict:
     s = plan.strips.settings
     sheet_of_part: dict[int, tuple[int, Placement]] = {}
     for sheet in plan.nesting.sheets:
@@ -185,7 +185,7 @@ def _plan_record(plan: StripPlan, files: list, sheet_files: dict) -> dict:
         "vertices": "strip and crossing vertex ids number the net's vertices and, beyond them, "
                     "the corners of its boundary panels (NET.boundary.obj, net's vertices first)",
         "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(s).items()},
-        "summary": plan.summary(),
+        "summary": summary,
         "files": files,
         "strips": [dict(row, vertices=[int(v) for v in strip.vertices],
                         boundary_nodes=list(strip.boundary_nodes),
@@ -268,7 +268,7 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
                   f"sheets of {W:g}x{H:g} mm; lengths and radii in millimetres\n")
         (tmp / f"{name}.csv").write_text(_schedule_csv(rows, header), encoding="utf-8")
         files += [f"{name}.csv", f"{name}.json"]
-        record = _plan_record(plan, files, sheet_files)
+        record = _plan_record(plan, files, sheet_files, summary)
         (tmp / f"{name}.json").write_text(json_text(record), encoding="utf-8")
         stale = _stale_files(out_dir, name, files)
     for target in stale:
