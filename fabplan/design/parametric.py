@@ -170,12 +170,14 @@ class ParametricSurface:
             return np.stack([u, np.clip(w[:, 1], v0, v1)], axis=1)
 
         uv = inside(uv)
-        best = np.sum((self.points(uv[:, 0], uv[:, 1]) - P) ** 2, axis=1)
+        # the surface's points at uv, kept as uv moves (not evaluated again)
+        at = self.points(uv[:, 0], uv[:, 1])
+        best = np.sum((at - P) ** 2, axis=1)
         for _ in range(iterations):
             u, v = uv[:, 0], uv[:, 1]
             fu = (self.points(u + du, v) - self.points(u - du, v)) / (2 * du)
             fv = (self.points(u, v + dv) - self.points(u, v - dv)) / (2 * dv)
-            r = self.points(u, v) - P
+            r = at - P
             a, b, c = (np.sum(x * y, axis=1) for x, y in ((fu, fu), (fu, fv), (fv, fv)))
             gu, gv = np.sum(fu * r, axis=1), np.sum(fv * r, axis=1)
             det = np.maximum(a * c - b * b, 1e-300)
@@ -183,9 +185,10 @@ class ParametricSurface:
             # a step that does not bring the point closer is halved, up to three times
             for _ in range(4):
                 trial = inside(uv - step)
-                distance = np.sum((self.points(trial[:, 0], trial[:, 1]) - P) ** 2, axis=1)
+                moved = self.points(trial[:, 0], trial[:, 1])
+                distance = np.sum((moved - P) ** 2, axis=1)
                 better = distance < best
-                uv[better], best[better] = trial[better], distance[better]
+                uv[better], best[better], at[better] = trial[better], distance[better], moved[better]
                 if better.all():
                     break
                 step[~better] *= 0.5
@@ -329,9 +332,13 @@ def revolution(profile=None, *, height: float = 40.0, radius: float = 8.0, waist
     def f(u, v):
         r = r_of_z(v)
         x, y = r * np.cos(u), aspect * r * np.sin(u)
-        turn = twist * (v - z0)
-        c, s = np.cos(turn), np.sin(turn)
-        return np.stack([c * x - s * y, s * x + c * y, v + 0 * u], axis=-1)
+        if twist:
+            turn = twist * (v - z0)
+            c, s = np.cos(turn), np.sin(turn)
+            x, y = c * x - s * y, s * x + c * y
+        # untwisted, the turn is by cos 0 = 1 and sin 0 = 0: the same points, without the
+        # two sines and cosines that are most of the cost of the closest points
+        return np.stack([x, y, v + 0 * u], axis=-1)
 
     periodic = sweep_deg == 360
     half = math.radians(sweep_deg) / 2

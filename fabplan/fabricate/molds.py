@@ -453,13 +453,7 @@ def _refit(U: np.ndarray, Z: np.ndarray, K: np.ndarray, free: int, reach: float)
     for _ in range(20):
         p, s = np.nonzero(active)
         u, z = U[p, s, :free] / scale, Z[p, s]
-        m = len(p)
-        ones = np.ones(m)
-        Ku = sp.csr_matrix(0.5 * u)
-        C = sp.csr_matrix((ones, (np.arange(m), p)), shape=(m, q))
-        T = sp.csr_matrix(ones[:, None])
-        # z - u.k/2 - c_p <= t and -(z - u.k/2 - c_p) <= t; variables [k (free), c (q), t]
-        A = sp.vstack([sp.hstack([-Ku, -C, -T]), sp.hstack([Ku, C, -T])]).tocsr()
+        A = _refit_constraints(u, p, q)
         cost = np.zeros(free + q + 1)
         cost[-1] = 1.0
         bounds = [(None, None)] * (free + q) + [(0, None)]
@@ -473,6 +467,27 @@ def _refit(U: np.ndarray, Z: np.ndarray, K: np.ndarray, free: int, reach: float)
         if active.sum() == before:
             break
     return best
+
+
+def _refit_constraints(u: np.ndarray, panel: np.ndarray, q: int) -> sp.csr_matrix:
+    """The constraint matrix of `_refit`'s linear program, (2 m, free + q + 1) CSR.
+
+    Variables ``[k (free), c (q), t]``; for every active sample (m, with its scaled
+    squared coordinates `u` (m, free) and its panel index `panel` (m,)) the rows of
+    ``z - u.k/2 - c_p <= t`` and ``-(z - u.k/2 - c_p) <= t``. Built entry by entry in the
+    order of the row-wise stacked blocks ``[-u/2, -C, -1; u/2, C, -1]`` (zeros of ``u/2``
+    left out), which it equals.
+    """
+    m, free = u.shape
+    half = 0.5 * u
+    row, col = np.nonzero(half)
+    rows = np.arange(m)
+    minus = -np.ones(m)
+    row_all = np.concatenate([row, rows, rows, row + m, rows + m, rows + m])
+    col_all = np.concatenate([col, free + panel, np.full(m, free + q),
+                              col, free + panel, np.full(m, free + q)])
+    data = np.concatenate([-half[row, col], minus, minus, half[row, col], -minus, minus])
+    return sp.csr_matrix((data, (row_all, col_all)), shape=(2 * m, free + q + 1))
 
 
 def _mark_extremes(active: np.ndarray, U: np.ndarray, Z: np.ndarray, K: np.ndarray) -> None:
