@@ -419,14 +419,19 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
 
 def _greedy_cover(fits: np.ndarray) -> np.ndarray:
     """Columns of `fits` (p, c) bool chosen greedily, the one covering most uncovered rows
-    first (lowest index on ties), until every coverable row is covered."""
-    A = fits.T.astype(np.float32)
-    uncovered = np.any(fits, axis=1).astype(np.float32)
+    first (lowest index on ties), until every coverable row is covered.
+
+    The uncovered rows of every column are counted once and then less the rows each
+    choice covers (integers: no product of the whole matrix per choice)."""
+    uncovered = np.any(fits, axis=1)
+    count = fits.sum(axis=0, dtype=np.int64)
     chosen: list[int] = []
     while uncovered.any():
-        best = int(np.argmax(A @ uncovered))
+        best = int(np.argmax(count))
         chosen.append(best)
-        uncovered[fits[:, best]] = 0.0
+        covered = uncovered & fits[:, best]
+        count -= fits[covered].sum(axis=0, dtype=np.int64)
+        uncovered &= ~covered
     return np.array(chosen, dtype=np.int64)
 
 
