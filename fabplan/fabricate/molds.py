@@ -380,6 +380,10 @@ def _cylinder_fits(U: np.ndarray, Z: np.ndarray, k1: np.ndarray,
 
 
 # ----------------------------------------------------------------------------- gaps and cover
+#: Panels per block of `_gap_matrix`'s arithmetic.
+_GAP_ROWS = 32
+
+
 def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """Exact gaps of every panel on every mold, in the best of the four placements.
 
@@ -407,9 +411,12 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
             rows = np.flatnonzero(gap <= data.reach)
             if rows.size == 0:
                 continue
-            U, Z = data.U[rows, v], data.Z[rows, v]
-            r = Z[..., None] - 0.5 * (U[..., 0, None] * K[:, 0] + U[..., 1, None] * K[:, 1])
-            dev = 0.5 * (r.max(axis=1) - r.min(axis=1))              # (rows, chunk)
+            dev = np.empty((rows.size, len(cols)))                  # (rows, chunk)
+            # rows in blocks: the (rows, samples, chunk) temporaries stay in the cache
+            for b in range(0, rows.size, _GAP_ROWS):
+                U, Z = data.U[rows[b:b + _GAP_ROWS], v], data.Z[rows[b:b + _GAP_ROWS], v]
+                r = Z[..., None] - 0.5 * (U[..., 0, None] * K[:, 0] + U[..., 1, None] * K[:, 1])
+                dev[b:b + _GAP_ROWS] = 0.5 * (r.max(axis=1) - r.min(axis=1))
             block = deviation[np.ix_(rows, cols)]
             better = dev < block
             deviation[np.ix_(rows, cols)] = np.where(better, dev, block)
