@@ -53,6 +53,20 @@ __all__ = [
 ]
 
 
+def _row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(m,) float, the dot products of the rows of (m, 3) arrays: ``np.sum(a * b, axis=1)``,
+    whose terms numpy adds in this order (the same numbers), without its reduction over
+    rows of three, which takes five times as long.
+
+    Examples
+    --------
+    >>> a = np.array([[1e16, 1.0, -1e16], [0.1, 0.2, 0.3]])
+    >>> bool(np.array_equal(_row_dot(a, np.ones((2, 3))), np.sum(a, axis=1)))
+    True
+    """
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
 @dataclass(frozen=True)
 class ParametricSurface:
     """A surface ``(u, v) -> xyz`` on a rectangular domain.
@@ -172,21 +186,21 @@ class ParametricSurface:
         uv = inside(uv)
         # the surface's points at uv, kept as uv moves (not evaluated again)
         at = self.points(uv[:, 0], uv[:, 1])
-        best = np.sum((at - P) ** 2, axis=1)
+        best = _row_dot(at - P, at - P)
         for _ in range(iterations):
             u, v = uv[:, 0], uv[:, 1]
             fu = (self.points(u + du, v) - self.points(u - du, v)) / (2 * du)
             fv = (self.points(u, v + dv) - self.points(u, v - dv)) / (2 * dv)
             r = at - P
-            a, b, c = (np.sum(x * y, axis=1) for x, y in ((fu, fu), (fu, fv), (fv, fv)))
-            gu, gv = np.sum(fu * r, axis=1), np.sum(fv * r, axis=1)
+            a, b, c = _row_dot(fu, fu), _row_dot(fu, fv), _row_dot(fv, fv)
+            gu, gv = _row_dot(fu, r), _row_dot(fv, r)
             det = np.maximum(a * c - b * b, 1e-300)
             step = np.stack([(c * gu - b * gv) / det, (a * gv - b * gu) / det], axis=1)
             # a step that does not bring the point closer is halved, up to three times
             for _ in range(4):
                 trial = inside(uv - step)
                 moved = self.points(trial[:, 0], trial[:, 1])
-                distance = np.sum((moved - P) ** 2, axis=1)
+                distance = _row_dot(moved - P, moved - P)
                 better = distance < best
                 uv[better], best[better], at[better] = trial[better], distance[better], moved[better]
                 if better.all():
