@@ -202,10 +202,13 @@ class ParametricSurface:
                 moved = self.points(trial[:, 0], trial[:, 1])
                 distance = _row_dot(moved - P, moved - P)
                 better = distance < best
-                uv[better], best[better], at[better] = trial[better], distance[better], moved[better]
+                column = better[:, None]
+                uv = np.where(column, trial, uv)
+                best = np.where(better, distance, best)
+                at = np.where(column, moved, at)
                 if better.all():
                     break
-                step[~better] *= 0.5
+                step = np.where(column, step, 0.5 * step)
         return uv
 
     def triangulate(self, resolution: int | tuple[int, int] = 100) -> "DesignSurface":
