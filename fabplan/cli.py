@@ -858,7 +858,10 @@ def _cmd_study(args) -> int:
         else:
             with progress.stage(f"running {len(study.candidates)} candidates"):
                 result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
-                                   resume=args.resume)
+                                   resume=args.resume, files=True, rhino=args.rhino,
+                                   # a --resume run keeps each candidate as it finishes,
+                                   # in the order of the study
+                                   background=cache is None)
         writing = time.perf_counter()
         # with workers, they make the candidates' files too
         with progress.stage("writing the report and the candidates' files"):

@@ -54,6 +54,20 @@ __all__ = [
 ]
 
 
+def _row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(m,) float, the dot products of the rows of (m, 3) arrays: ``np.sum(a * b, axis=1)``,
+    whose terms numpy adds in this order (the same numbers), without its reduction over
+    rows of three, which takes five times as long.
+
+    Examples
+    --------
+    >>> a = np.array([[1e16, 1.0, -1e16], [0.1, 0.2, 0.3]])
+    >>> bool(np.array_equal(_row_dot(a, np.ones((2, 3))), np.sum(a, axis=1)))
+    True
+    """
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
 @dataclass(frozen=True)
 class ParametricSurface:
     """A surface ``(u, v) -> xyz`` on a rectangular domain.
@@ -171,25 +185,31 @@ class ParametricSurface:
             return np.stack([u, np.clip(w[:, 1], v0, v1)], axis=1)
 
         uv = inside(uv)
-        best = np.sum((self.points(uv[:, 0], uv[:, 1]) - P) ** 2, axis=1)
+        # the surface's points at uv, kept as uv moves (not evaluated again)
+        at = self.points(uv[:, 0], uv[:, 1])
+        best = _row_dot(at - P, at - P)
         for _ in range(iterations):
             u, v = uv[:, 0], uv[:, 1]
             fu = (self.points(u + du, v) - self.points(u - du, v)) / (2 * du)
             fv = (self.points(u, v + dv) - self.points(u, v - dv)) / (2 * dv)
-            r = self.points(u, v) - P
-            a, b, c = (np.sum(x * y, axis=1) for x, y in ((fu, fu), (fu, fv), (fv, fv)))
-            gu, gv = np.sum(fu * r, axis=1), np.sum(fv * r, axis=1)
+            r = at - P
+            a, b, c = _row_dot(fu, fu), _row_dot(fu, fv), _row_dot(fv, fv)
+            gu, gv = _row_dot(fu, r), _row_dot(fv, r)
             det = np.maximum(a * c - b * b, 1e-300)
             step = np.stack([(c * gu - b * gv) / det, (a * gv - b * gu) / det], axis=1)
             # a step that does not bring the point closer is halved, up to three times
             for _ in range(4):
                 trial = inside(uv - step)
-                distance = np.sum((self.points(trial[:, 0], trial[:, 1]) - P) ** 2, axis=1)
+                moved = self.points(trial[:, 0], trial[:, 1])
+                distance = _row_dot(moved - P, moved - P)
                 better = distance < best
-                uv[better], best[better] = trial[better], distance[better]
+                column = better[:, None]
+                uv = np.where(column, trial, uv)
+                best = np.where(better, distance, best)
+                at = np.where(column, moved, at)
                 if better.all():
                     break
-                step[~better] *= 0.5
+                step = np.where(column, step, 0.5 * step)
         return uv
 
     def triangulate(self, resolution: int | tuple[int, int] = 100) -> "DesignSurface":
@@ -330,9 +350,13 @@ def revolution(profile=None, *, height: float = 40.0, radius: float = 8.0, waist
     def f(u, v):
         r = r_of_z(v)
         x, y = r * np.cos(u), aspect * r * np.sin(u)
-        turn = twist * (v - z0)
-        c, s = np.cos(turn), np.sin(turn)
-        return np.stack([c * x - s * y, s * x + c * y, v + 0 * u], axis=-1)
+        if twist:
+            turn = twist * (v - z0)
+            c, s = np.cos(turn), np.sin(turn)
+            x, y = c * x - s * y, s * x + c * y
+        # untwisted, the turn is by cos 0 = 1 and sin 0 = 0: the same points, without the
+        # two sines and cosines that are most of the cost of the closest points
+        return np.stack([x, y, v + 0 * u], axis=-1)
 
     periodic = sweep_deg == 360
     half = math.radians(sweep_deg) / 2

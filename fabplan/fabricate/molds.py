@@ -380,6 +380,10 @@ def _cylinder_fits(U: np.ndarray, Z: np.ndarray, k1: np.ndarray,
 
 
 # ----------------------------------------------------------------------------- gaps and cover
+#: Panels per block of `_gap_matrix`'s arithmetic.
+_GAP_ROWS = 32
+
+
 def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """Exact gaps of every panel on every mold, in the best of the four placements.
 
@@ -407,9 +411,12 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
             rows = np.flatnonzero(gap <= data.reach)
             if rows.size == 0:
                 continue
-            U, Z = data.U[rows, v], data.Z[rows, v]
-            r = Z[..., None] - 0.5 * (U[..., 0, None] * K[:, 0] + U[..., 1, None] * K[:, 1])
-            dev = 0.5 * (r.max(axis=1) - r.min(axis=1))              # (rows, chunk)
+            dev = np.empty((rows.size, len(cols)))                  # (rows, chunk)
+            # rows in blocks: the (rows, samples, chunk) temporaries stay in the cache
+            for b in range(0, rows.size, _GAP_ROWS):
+                U, Z = data.U[rows[b:b + _GAP_ROWS], v], data.Z[rows[b:b + _GAP_ROWS], v]
+                r = Z[..., None] - 0.5 * (U[..., 0, None] * K[:, 0] + U[..., 1, None] * K[:, 1])
+                dev[b:b + _GAP_ROWS] = 0.5 * (r.max(axis=1) - r.min(axis=1))
             block = deviation[np.ix_(rows, cols)]
             better = dev < block
             deviation[np.ix_(rows, cols)] = np.where(better, dev, block)
@@ -419,14 +426,19 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
 
 def _greedy_cover(fits: np.ndarray) -> np.ndarray:
     """Columns of `fits` (p, c) bool chosen greedily, the one covering most uncovered rows
-    first (lowest index on ties), until every coverable row is covered."""
-    A = fits.T.astype(np.float32)
-    uncovered = np.any(fits, axis=1).astype(np.float32)
+    first (lowest index on ties), until every coverable row is covered.
+
+    The uncovered rows of every column are counted once and then less the rows each
+    choice covers (integers: no product of the whole matrix per choice)."""
+    uncovered = np.any(fits, axis=1)
+    count = fits.sum(axis=0, dtype=np.int64)
     chosen: list[int] = []
     while uncovered.any():
-        best = int(np.argmax(A @ uncovered))
+        best = int(np.argmax(count))
         chosen.append(best)
-        uncovered[fits[:, best]] = 0.0
+        covered = uncovered & fits[:, best]
+        count -= fits[covered].sum(axis=0, dtype=np.int64)
+        uncovered &= ~covered
     return np.array(chosen, dtype=np.int64)
 
 
@@ -453,13 +465,7 @@ def _refit(U: np.ndarray, Z: np.ndarray, K: np.ndarray, free: int, reach: float)
     for _ in range(20):
         p, s = np.nonzero(active)
         u, z = U[p, s, :free] / scale, Z[p, s]
-        m = len(p)
-        ones = np.ones(m)
-        Ku = sp.csr_matrix(0.5 * u)
-        C = sp.csr_matrix((ones, (np.arange(m), p)), shape=(m, q))
-        T = sp.csr_matrix(ones[:, None])
-        # z - u.k/2 - c_p <= t and -(z - u.k/2 - c_p) <= t; variables [k (free), c (q), t]
-        A = sp.vstack([sp.hstack([-Ku, -C, -T]), sp.hstack([Ku, C, -T])]).tocsr()
+        A = _refit_constraints(u, p, q)
         cost = np.zeros(free + q + 1)
         cost[-1] = 1.0
         bounds = [(None, None)] * (free + q) + [(0, None)]
@@ -473,6 +479,27 @@ def _refit(U: np.ndarray, Z: np.ndarray, K: np.ndarray, free: int, reach: float)
         if active.sum() == before:
             break
     return best
+
+
+def _refit_constraints(u: np.ndarray, panel: np.ndarray, q: int) -> sp.csr_matrix:
+    """The constraint matrix of `_refit`'s linear program, (2 m, free + q + 1) CSR.
+
+    Variables ``[k (free), c (q), t]``; for every active sample (m, with its scaled
+    squared coordinates `u` (m, free) and its panel index `panel` (m,)) the rows of
+    ``z - u.k/2 - c_p <= t`` and ``-(z - u.k/2 - c_p) <= t``. Built entry by entry in the
+    order of the row-wise stacked blocks ``[-u/2, -C, -1; u/2, C, -1]`` (zeros of ``u/2``
+    left out), which it equals.
+    """
+    m, free = u.shape
+    half = 0.5 * u
+    row, col = np.nonzero(half)
+    rows = np.arange(m)
+    minus = -np.ones(m)
+    row_all = np.concatenate([row, rows, rows, row + m, rows + m, rows + m])
+    col_all = np.concatenate([col, free + panel, np.full(m, free + q),
+                              col, free + panel, np.full(m, free + q)])
+    data = np.concatenate([-half[row, col], minus, minus, half[row, col], -minus, minus])
+    return sp.csr_matrix((data, (row_all, col_all)), shape=(2 * m, free + q + 1))
 
 
 def _mark_extremes(active: np.ndarray, U: np.ndarray, Z: np.ndarray, K: np.ndarray) -> None:

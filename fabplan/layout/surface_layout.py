@@ -707,7 +707,8 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
 def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,
           radius: float | None = None, settings: SolverSettings | None = None,
           fixed: np.ndarray | None = None, surface_tolerance: float = SURFACE_TOLERANCE,
-          progress: Callable[[IterationRecord], None] | None = None) -> OptimizationResult:
+          progress: Callable[[IterationRecord], None] | None = None,
+          boundary_panels: bool = True) -> OptimizationResult:
     """Optimize a layout into a net of type `net` while it glides on the design surface.
 
     The vertices are held within `surface_tolerance` panel sizes of the design surface
@@ -716,6 +717,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     curves; everything else is `fabplan.optimize`. The tolerance is what lets an exact
     S-net form on a curved design: held at zero distance the vertices could only slide.
     Nets with a prescribed family are held on the surface (its levels are read there).
+    A net that only starts another solve needs no boundary panels (``boundary_panels=False``:
+    its trim to the design is left out).
 
     Returns
     -------
@@ -724,7 +727,7 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     ``distance_to_design`` (model units), ``distance_to_design_relative_to_panel``,
     ``edge_length_relative_to_panel``, ``coverage`` (share of the design's area the
     full and boundary panels cover), ``coverage_net`` (the full panels alone) and
-    ``boundary_panels``.
+    ``boundary_panels`` (none of these three without `boundary_panels`).
     """
     from ..solve.net_types import get_net
     from ..solve.optimize import optimize
@@ -764,7 +767,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     # a closest-point search per triangle, so it is measured only when that matters
     off = d.max() > 0.01 * layout.panel_size and design.parametric is not None
     result.properties["design_chord_error"] = design.chord_error if off else None
-    add_boundary_panels(result, layout)
+    if boundary_panels:
+        add_boundary_panels(result, layout)
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size
     return result

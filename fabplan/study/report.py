@@ -1086,10 +1086,11 @@ def _write_files(folder: Path, files: dict[str, bytes]) -> None:
 
 
 def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) -> tuple:
-    """Every measured candidate's folder in `tmp`: from the files a parallel run's workers
-    made already (`StudyResult.made_files`), else made on the workers of `client` (each
-    in memory, see `candidate_file_bytes`; this process writes them), else here. Returns
-    the outputs and pictures by candidate name."""
+    """Every measured candidate's folder in `tmp`: from the files made already beside the
+    run (`StudyResult.made_files`: a parallel run's workers, a serial run's forked
+    processes), else made on the workers of `client` (each in memory, see
+    `candidate_file_bytes`; this process writes them), else here. Returns the outputs and
+    pictures by candidate name."""
     outputs, pictures = {}, {}
     by_name = {c.name: c for c in result.candidates}
     done = [c for c in result.candidates if not c.failed]
@@ -1101,6 +1102,11 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
         return outputs, pictures
     if client is None:
         for c in done:
+            if c.name in result.made_files:   # made beside a serial run
+                files, outputs[c.name], pictures[c.name] = result.made_files[c.name]
+                _write_files(output.path_inside(tmp, "candidates", c.name), files)
+                say(f"    wrote {c.name}")
+                continue
             # names are checked when the study is read; this guards the API too
             folder = output.path_inside(tmp, "candidates", c.name)
             twin = _strip_twin(c, by_name)

@@ -69,6 +69,7 @@ __all__ = [
     "cost_drivers",
     "pareto_optimal",
     "shared_solve",
+    "failure_reason",
     "Layouts",
     "Starts",
 ]
@@ -143,9 +144,10 @@ class StudyResult:
     recommendation : the recommendation in plain words.
     sheets_charged : whether strip sheets enter the cost (only when every measured
         candidate has strips, see `judge_study`).
-    made_files : the candidates' files a parallel run's workers made beside the
-        computation (name -> what `fabplan.study.report.candidate_file_bytes` returns),
-        for `write_study` to write; empty otherwise.
+    made_files : the candidates' files made beside the computation, by a parallel run's
+        workers or a serial run's forked processes (name -> what
+        `fabplan.study.report.candidate_file_bytes` returns), for `write_study` to write;
+        empty otherwise.
     seconds_run : wall time from loading the design to the last verdict (writing the
         files is not included: `fabplan.study_report.write_study` adds it).
     """
@@ -176,7 +178,8 @@ class StudyResult:
 # ---------------------------------------------------------------------------- running
 def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
               max_panels: int | None = None, cache: CandidateCache | None = None,
-              resume: bool = False) -> StudyResult:
+              resume: bool = False, background: bool = False, files: bool = False,
+              rhino: bool = False) -> StudyResult:
     """Run every candidate of `study` and judge it.
 
     A candidate that fails (a layout or a solve that breaks) is recorded with its reason
@@ -190,6 +193,11 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         memory holds, `fabplan.io.resources.default_max_panels`).
     cache : where finished candidates are kept (`fabplan.study.cache.CandidateCache`).
     resume : take the candidates the cache already holds instead of computing them.
+    background : measure every solved candidate (molds, strips, measurements) in a forked
+        process beside the next candidates' solves, one process per core
+        (`fabplan.study.background`; on Linux, else here); with `files` (and `rhino` as
+        in `write_study`) its files too, which come back in `StudyResult.made_files` for
+        `write_study` to write. The results are those of the serial run.
 
     Raises
     ------
@@ -201,6 +209,13 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     say = progress or (lambda message: None)
     start = time.perf_counter()
     design, baseline = prepare_design(study, say, max_panels)
+    helper = None
+    if background:
+        from .background import BackgroundCandidates
+
+        helper = BackgroundCandidates(study, design, say, files=files, rhino=rhino,
+                                      done=None if cache is None else cache.store)
+        helper = helper if helper.active else None
     layouts: Layouts = {(90.0, study.panel_size): baseline}
     starts: Starts = {}
     solves: dict[tuple, CandidateResult] = {}
@@ -216,18 +231,41 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         say(f"[{i}/{count}] {candidate.name}: {candidate.describe()}")
         clock = time.perf_counter()
         try:
-            result = _run_candidate(study, design, candidate, layouts, starts, solves, results,
-                                    say)
+            solved, twin = _solve_with_twin(study, design, candidate, layouts, starts, solves,
+                                            results, say)
+            if helper is not None:
+                twin = None if twin is None else helper.complete(twin.name) or twin
+                helper.submit(solved, twin, time.perf_counter() - clock)
+                # stands in for the candidate until it is measured: its net and twin are
+                # what the later candidates' twins are found by
+                results.append(CandidateResult(candidate, metrics=solved.metrics,
+                                               net=solved.net, layout=solved.layout,
+                                               twin=None if twin is None else twin.name))
+                continue
+            result = fabricate_candidate(study, design, solved, twin, say)
         except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-            reason = str(exc) if isinstance(exc, FabplanError) else \
-                f"{type(exc).__name__}: {exc} ({_where(exc)})"
+            reason = failure_reason(exc)
             result = CandidateResult(candidate, error=reason, reasons=[reason])
             say(f"    failed: {reason}")
         result.metrics.setdefault("seconds", {})["total"] = time.perf_counter() - clock
         if cache is not None:
             cache.store(result)
         results.append(result)
-    return judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+    made: dict[str, tuple] = {}
+    if helper is not None:
+        measured = helper.collect()
+        results = [measured.get(r.name, r) for r in results]
+        made = helper.made_files
+    judged = judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+    judged.made_files = made
+    return judged
+
+
+def failure_reason(exc: BaseException) -> str:
+    """Why a candidate failed, for the report: a fabplan error's message, else the type
+    and message of the error and where it arose (not a traceback)."""
+    return str(exc) if isinstance(exc, FabplanError) else \
+        f"{type(exc).__name__}: {exc} ({_where(exc)})"
 
 
 def prepare_design(study: Study, say: Callable[[str], None],
@@ -376,11 +414,13 @@ Layouts = dict[tuple[float, float], "SurfaceLayout"]
 Starts = dict[tuple[float, float], "OptimizationResult"]
 
 
-def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
-                   layouts: Layouts, starts: Starts, solves: dict[tuple, CandidateResult],
-                   earlier: list[CandidateResult], say: Callable[[str], None]) -> CandidateResult:
-    """Solve one candidate and plan its molds and strips (the serial path). Candidates
-    that differ only in their mold tolerance share the solve kept in `solves`."""
+def _solve_with_twin(study: Study, design: DesignSurface, candidate: Candidate,
+                     layouts: Layouts, starts: Starts, solves: dict[tuple, CandidateResult],
+                     earlier: list[CandidateResult], say: Callable[[str], None]
+                     ) -> tuple[CandidateResult, CandidateResult | None]:
+    """Solve one candidate (the serial path) and find the earlier candidate it ended at
+    the same net as (`twin_of`), if any. Candidates that differ only in their mold
+    tolerance share the solve kept in `solves`."""
     if candidate.solve_key in solves:
         say("    its net is that of an earlier candidate of the sweep")
         solved = shared_solve(solves[candidate.solve_key], candidate)
@@ -392,7 +432,7 @@ def _run_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     j = twin_of(len(earlier), [*(r.candidate for r in earlier), candidate],
                 [r.net.mesh if r.net is not None else None for r in [*earlier, solved]], twins,
                 study)
-    return fabricate_candidate(study, design, solved, None if j is None else earlier[j], say)
+    return solved, None if j is None else earlier[j]
 
 
 def shared_solve(solved: CandidateResult, candidate: Candidate) -> CandidateResult:
@@ -444,7 +484,8 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
             starts[key] = net
     else:
         if key not in starts:
-            starts[key] = glide(layout, "snet", settings=settings)
+            # only its mesh is used: the solved net gets boundary panels of its own
+            starts[key] = glide(layout, "snet", settings=settings, boundary_panels=False)
         # a net that leaves the design: a zigzag tip (a vertex in no star) whose face would
         # step against its neighbours by more than the step limit follows the surface the
         # net continues instead of the design, so that the panels meet

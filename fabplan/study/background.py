@@ -1,0 +1,199 @@
+"""A serial study's candidates measured in forked processes beside the next solves.
+
+A serial run (`fabplan.study.run.run_study`) keeps one core busy. Once a candidate's net
+is solved, what remains of it (molds, strips, measurements: `fabricate_candidate`; and
+its files, `fabplan.study.report.candidate_file_bytes`) needs nothing the next candidates
+change, so a forked copy of the process does it on another core while the run solves the
+next candidates, as the workers of a parallel run do (`fabplan.study.parallel`). The fork
+inherits the candidate as it is: nothing is pickled on the way in; what comes back is the
+measured candidate without its net and layout (the run holds those), the progress lines,
+and the files.
+
+The child is a bare `os.fork` that leaves by `os._exit`: it runs none of the parent's
+exit handlers and writes nothing to the parent's streams (a progress thread of the parent
+may hold their locks at the fork). Elsewhere than on Linux, or on one core, nothing is
+forked and the run measures every candidate itself; so it does for a candidate whose
+process died.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+from ..errors import FabplanError
+
+if TYPE_CHECKING:
+    from ..design.mesh_surface import DesignSurface
+    from .run import CandidateResult
+    from .spec import Study
+
+__all__ = ["BackgroundCandidates", "background_processes"]
+
+
+def background_processes(processes: int | None = None) -> int:
+    """How many candidates are measured at once beside a serial run: one per core
+    (`processes` when given), none but on Linux or on one core."""
+    if not sys.platform.startswith("linux"):
+        return 0
+    count = (os.cpu_count() or 1) if processes is None else processes
+    return count if count > 1 else 0
+
+
+def _warm_up(files: bool) -> None:
+    """Import here what every forked process needs, and draw a text (loading the font),
+    so that the processes inherit them instead of loading them each."""
+    from ..fabricate import boundary_molds, molds, strip_plan  # noqa: F401
+
+    if files:
+        from ..fabricate import dxf, mold_report  # noqa: F401
+        from ..report import figures
+        from . import report  # noqa: F401
+
+        fig = figures.new_figure((1, 1))
+        fig.text(0.5, 0.5, "0")
+        figures.png_bytes(fig)
+
+
+@dataclass
+class _Job:
+    solved: CandidateResult
+    twin: CandidateResult | None
+    pid: int
+    path: Path
+    seconds: float          # the candidate's solve
+
+
+def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
+             twin: CandidateResult | None, files: bool, rhino: bool) -> tuple:
+    """What the forked process sends back: (measured candidate without net and layout or
+    None, why it failed or None, progress lines, files or None, seconds)."""
+    from .report import candidate_file_bytes
+    from .run import fabricate_candidate, failure_reason
+
+    clock = time.perf_counter()
+    lines: list[str] = []
+    try:
+        result = fabricate_candidate(study, design, solved, twin, lines.append)
+    except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        return None, failure_reason(exc), lines, None, time.perf_counter() - clock
+    made = None
+    # strips shared with a twin are copied from its folder by `write_study`
+    if files and not (result.twin is not None and result.strips is not None):
+        made = candidate_file_bytes(result, study, design, None, rhino=rhino)
+    return (replace(result, net=None, layout=None), None, lines, made,
+            time.perf_counter() - clock)
+
+
+class BackgroundCandidates:
+    """Solved candidates measured in forked processes, at most `processes` at once.
+
+    `submit` a solved candidate (with its twin, complete: `complete`); `collect` waits for
+    the last ones. The files of the candidates (with `files`) come back in `made_files`;
+    `done` is called with every candidate as it is measured.
+    """
+
+    def __init__(self, study: Study, design: DesignSurface, say: Callable[[str], None], *,
+                 processes: int | None = None, files: bool = False, rhino: bool = False,
+                 done: Callable[[CandidateResult], None] | None = None):
+        self.study, self.design, self.say, self.done = study, design, say, done
+        self.files, self.rhino = files, rhino
+        self.processes = background_processes(processes)
+        self.made_files: dict[str, tuple] = {}
+        self._running: list[_Job] = []
+        self._done: dict[str, CandidateResult] = {}
+        self._folder: tempfile.TemporaryDirectory | None = None
+        self._count = 0
+        if self.active:
+            _warm_up(files)
+
+    @property
+    def active(self) -> bool:
+        """Whether candidates are measured here (else the run measures them itself)."""
+        return self.processes > 0
+
+    def submit(self, solved: CandidateResult, twin: CandidateResult | None,
+               seconds: float = 0.0) -> None:
+        """Measure `solved` (whose solve took `seconds`) in a forked process once one is
+        free; `twin` is the earlier candidate it ended at the same net as, measured."""
+        while len(self._running) >= self.processes:
+            self._reap(wait=True)
+        if self._folder is None:
+            self._folder = tempfile.TemporaryDirectory(prefix="fabplan-candidates-")
+        self._count += 1
+        path = Path(self._folder.name) / f"{self._count}.pickle"
+        pid = os.fork()
+        if pid == 0:
+            code = 1
+            try:
+                sys.stdout = sys.stderr = open(os.devnull, "w")
+                made = _measure(self.study, self.design, solved, twin, self.files, self.rhino)
+                part = path.with_suffix(".part")
+                part.write_bytes(pickle.dumps(made, protocol=pickle.HIGHEST_PROTOCOL))
+                os.replace(part, path)
+                code = 0
+            finally:
+                os._exit(code)
+        self._running.append(_Job(solved, twin, pid, path, seconds))
+        self._reap(wait=False)
+
+    def complete(self, name: str) -> CandidateResult | None:
+        """The measured candidate `name`, waiting for its process; None when it was not
+        submitted here."""
+        while name not in self._done and any(j.solved.name == name for j in self._running):
+            self._reap(wait=True)
+        return self._done.get(name)
+
+    def collect(self) -> dict[str, CandidateResult]:
+        """Wait for every process; the measured candidates by name."""
+        while self._running:
+            self._reap(wait=True)
+        if self._folder is not None:
+            self._folder.cleanup()
+            self._folder = None
+        return self._done
+
+    def _reap(self, *, wait: bool) -> None:
+        """Take in the finished processes (with `wait`, at least the oldest)."""
+        from .run import CandidateResult, fabricate_candidate, failure_reason
+
+        for k, job in enumerate(list(self._running)):
+            pid, status = os.waitpid(job.pid, 0 if wait and k == 0 else os.WNOHANG)
+            if pid == 0:
+                continue
+            self._running.remove(job)
+            solved, name = job.solved, job.solved.name
+            if os.waitstatus_to_exitcode(status) == 0 and job.path.is_file():
+                result, failure, lines, made, spent = pickle.loads(job.path.read_bytes())
+                job.path.unlink()
+                for line in lines:
+                    self.say(f"    {name}: {line.strip()}")
+            else:   # the process died: measured here, as the serial run does
+                clock = time.perf_counter()
+                failure, made = None, None
+                try:
+                    result = fabricate_candidate(self.study, self.design, solved, job.twin,
+                                                 self.say)
+                except (FabplanError, ArithmeticError, ValueError,
+                        np.linalg.LinAlgError) as exc:
+                    failure = failure_reason(exc)
+                spent = time.perf_counter() - clock
+            if failure is not None:
+                self.say(f"    {name}: failed: {failure}")
+                result = CandidateResult(solved.candidate, error=failure, reasons=[failure])
+            else:
+                result = replace(result, net=solved.net, layout=solved.layout)
+            result.metrics.setdefault("seconds", {})["total"] = job.seconds + spent
+            if made is not None:
+                self.made_files[name] = made
+            self._done[name] = result
+            if self.done is not None:
+                self.done(result)
