@@ -302,7 +302,7 @@ def _cmd_molds(args) -> int:
           args.quiet)
     boundary_file = _boundary_file(args)
     panels = None if boundary_file is None else read_boundary_panels(
-        mesh, boundary_file, _boundary_record(args.net))
+        mesh, boundary_file, _boundary_record(args.net) if args.boundary is None else None)
     progress = _progress(args)
     with progress.stage(f"fitting molds to {len(mesh.face_sizes)} panels"):
         plan = plan_molds(mesh, settings)
@@ -787,7 +787,11 @@ def _strip_boundary(args, mesh):
     from .fabricate.strip_boundary import StripBoundary
 
     path = _boundary_file(args)
-    return (None, None) if path is None else (path, StripBoundary.from_obj(mesh, path))
+    if path is None:
+        return None, None
+    # NET.json records which points the trimming put on the design boundary
+    record = _boundary_record(args.net) if args.boundary is None else None
+    return path, StripBoundary.from_obj(mesh, path, record)
 
 
 def _boundary_record(net: str | Path) -> dict | None:

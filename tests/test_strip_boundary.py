@@ -283,3 +283,22 @@ def test_a_member_that_eats_the_last_panel_is_questioned(laid_out, tmp_path, cap
     assert summary["ends_set_back_past_half_an_edge"] > 0
     assert summary["member_setback_max_mm"] >= 500.0
     assert _record(laid_out / "to-edge")["summary"]["ends_set_back_past_half_an_edge"] == 0
+
+
+def test_member_ends_lie_on_the_edge_also_without_the_layouts_record(laid_out, tmp_path):
+    """Given as --boundary FILE, the panels come without NET.json's record of the points on
+    the design boundary; the edge is then found from the polygons alone (a notch of one
+    panel is no point of it), and every member end still lies on the design's edge."""
+    common = ["--height", str(HEIGHT), "--thickness", str(THICKNESS), "--no-previews", "-q"]
+    assert main(["strips", str(laid_out / "saddle.obj"), *common, "--boundary",
+                 str(laid_out / "saddle.boundary.obj"), "-o", str(tmp_path / "file")]) == 0
+    X, _ = read_obj(laid_out / "saddle.boundary.obj")
+    edge = _design_edge(6000)
+    rec = _record(tmp_path / "file")
+    assert rec["summary"]["ends_at_boundary_member"] > 0
+    for strip in rec["strips"]:
+        v = strip["vertices"]
+        for side, end in ((0, v[0]), (1, v[-1])):
+            setback = strip["end_setback_mm"][side]
+            if setback is not None and setback > 0:      # not a hair end running on
+                assert _to_edge(X[end], edge)[0] < 0.016, (strip["strip"], side)

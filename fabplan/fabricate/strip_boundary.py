@@ -155,21 +155,27 @@ class StripBoundary:
     vertices : (m, 3) float, the net's vertices (first ``mesh.vertex_count`` rows) and the
         panels' new corners and outline points.
     polygons : list of (k,) int arrays into `vertices`, one per boundary panel.
+    on_design_boundary : (m,) bool, the points the trimming put on the design's boundary
+        curve, or None where unknown (`on_edge`).
     """
 
     mesh: QuadMesh
     vertices: np.ndarray
     polygons: list
+    on_design_boundary: np.ndarray | None = None
 
     @classmethod
     def from_panels(cls, mesh: QuadMesh, panels) -> "StripBoundary":
         """From a `fabplan.layout.trim.BoundaryPanels` of `mesh`."""
+        on = np.asarray(panels.on_design_boundary, bool)
         return cls(mesh=mesh, vertices=np.asarray(panels.vertices, float),
-                   polygons=[np.asarray(p, np.int64) for p in panels.polygons])
+                   polygons=[np.asarray(p, np.int64) for p in panels.polygons],
+                   on_design_boundary=on if on.any() else None)
 
     @classmethod
-    def from_obj(cls, mesh: QuadMesh, path) -> "StripBoundary":
-        """From the ``NET.boundary.obj`` a layout or study writes beside ``NET.obj``.
+    def from_obj(cls, mesh: QuadMesh, path, record: dict | None = None) -> "StripBoundary":
+        """From the ``NET.boundary.obj`` a layout or study writes beside ``NET.obj``, with
+        the ``properties.boundary_panels`` `record` of its ``NET.json`` where known.
 
         Raises
         ------
@@ -178,7 +184,7 @@ class StripBoundary:
         """
         from ..layout.trim import read_boundary_panels
 
-        return cls.from_panels(mesh, read_boundary_panels(mesh, path))
+        return cls.from_panels(mesh, read_boundary_panels(mesh, path, record))
 
     # ------------------------------------------------------------------ topology
     @cached_property
@@ -217,7 +223,9 @@ class StripBoundary:
         """(m,) bool, points on the edge of the cladding (see the module's text): the corner
         angles of the polygons at a place, each signed about its polygon's normal (a reflex
         corner counts more than 180 degrees), and a straight angle for every other
-        polygon's side through it (`_t_junctions`), sum to less than `EDGE_ANGLE_SUM_DEG`."""
+        polygon's side through it (`_t_junctions`), sum to less than `EDGE_ANGLE_SUM_DEG`;
+        and the point is one the trimming put on the design boundary (`on_design_boundary`)
+        or, where that is unknown, has two such places next to it along sides."""
         X, label, r = self.vertices, self._welded, self._all
         # corners whose side to the previous corner has no length (two points of one
         # place) are left out; the polygon's angle at that place is the kept corner's
@@ -245,9 +253,15 @@ class StripBoundary:
         np.add.at(total, label[self._t_junctions], math.pi)
         used = np.bincount(label[r.corner[c]], minlength=places) > 0
         edge = used & (total < math.radians(EDGE_ANGLE_SUM_DEG))
-        # the edge is a chain of sides: a place with fewer than two edge places next to it
-        # along sides is a notch of one panel inside the cladding (two corners of one
+        # else the edge is a chain of sides: a place with fewer than two edge places next to
+        # it along sides is a notch of one panel inside the cladding (two corners of one
         # overlay a hair apart), not a point of the edge
+        if self.on_design_boundary is not None:
+            # where the trimming says which points it put on the design's boundary curve,
+            # the edge is those (a gap the trimming left inside is no edge for a member)
+            on = np.zeros(places, bool)
+            on[label[self.on_design_boundary]] = True
+            return (edge & on)[label]
         sides = self._place_sides
         p, q = sides.nonzero()
         along = np.bincount(p[edge[p] & edge[q]], minlength=places)

@@ -84,6 +84,8 @@ class BoundaryPanels:
     triangles : (t, 3) int into `vertices`, the panels cut into triangles in the plane of
         the parametrization (concave outlines stay whole), or None; triangle_panel :
         (t,) int, the panel of each (see `panel_triangles`).
+    net_on_boundary : (n,) bool, the net's vertices on the design boundary (to a
+        thousandth of a panel); empty where unknown.
     """
 
     vertices: np.ndarray
@@ -103,6 +105,7 @@ class BoundaryPanels:
     seconds: float = 0.0
     triangles: np.ndarray | None = None
     triangle_panel: np.ndarray | None = None
+    net_on_boundary: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def count(self) -> int:
@@ -141,6 +144,16 @@ class BoundaryPanels:
         first = start[panel]
         return np.stack([ids[first], ids[first + j], ids[first + j + 1]], axis=1), panel
 
+    @property
+    def on_design_boundary(self) -> np.ndarray:
+        """(m,) bool, the points on the design's boundary curve: the new corners and
+        outline points there (`on_boundary`) and the net's vertices there
+        (`net_on_boundary`)."""
+        out = np.asarray(self.on_boundary, bool).copy()
+        on_net = np.asarray(self.net_on_boundary, bool)
+        out[:len(on_net)] |= on_net
+        return out
+
     def corner_counts(self) -> np.ndarray:
         """(p,) int, corners of each panel: net vertices and ends of the extended lines
         (points of the trim outline between them are not corners)."""
@@ -164,6 +177,8 @@ class BoundaryPanels:
             "flipped": self.flipped.tolist(),
             "boundary_distance_max_relative_to_panel": self.boundary_distance_max,
             "patches": np.flatnonzero(self.patch).tolist(),
+            # the points on the design's boundary curve: the new ones and the net's vertices
+            "on_design_boundary": np.flatnonzero(self.on_design_boundary).tolist(),
             "uncovered": 1.0 - self.coverage,
             "seconds": round(self.seconds, 4),
         }
@@ -267,7 +282,8 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         coverage=float(weight[on_any].sum() / weight.sum()),
         flipped=flipped[~extension[flipped]], patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
-        seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner)
+        seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
+        net_on_boundary=touching)
 
 
 def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
@@ -303,6 +319,10 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
     p = len(polygons)
     flags = {key: np.isin(np.arange(p), np.asarray(record.get(key, []), np.int64))
              for key in ("extensions", "patches")}
+    on = np.zeros(len(vertices), bool)
+    on[[i for i in record.get("on_design_boundary", []) if 0 <= i < len(vertices)]] = True
+    on_boundary, net_on_boundary = on.copy(), on[:n].copy()
+    on_boundary[:n] = False
     ids = np.concatenate(polygons) if p else np.zeros(0, np.int64)
     owner = np.repeat(np.arange(p), [len(q) for q in polygons])
     nxt = np.concatenate([np.roll(q, -1) for q in polygons]) if p else ids
@@ -313,11 +333,11 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
     coverage = record.get("coverage", math.nan)
     return BoundaryPanels(
         vertices=vertices, polygons=polygons, net_vertex_count=n,
-        on_boundary=np.zeros(len(vertices), bool), corner=corner,
+        on_boundary=on_boundary, corner=corner,
         neighbour_face=_neighbour_faces(polygons, mesh, vertices),
         area=np.linalg.norm(newell, axis=1), panel_size=mesh.mean_edge_length,
         coverage_net=record.get("coverage_net", math.nan), coverage=coverage,
-        patch=flags["patches"], extension=flags["extensions"])
+        patch=flags["patches"], extension=flags["extensions"], net_on_boundary=net_on_boundary)
 
 
 def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout
