@@ -126,7 +126,14 @@ def _warn_not_converged(result, json_path: Path) -> None:
     what = {"iteration cap": "stopped at the iteration cap", "folded": "ended folded",
             "degenerate": "ended degenerate"}.get(
         result.status, f"stopped ({result.status})")
-    print(f"fabplan: warning: the optimization {what}: {result.message} (details in {json_path})",
+    message = result.message
+    said = f"stopped ({result.status}) "
+    if message.startswith(said):      # the status is said once
+        message = message[len(said):]
+        print(f"fabplan: warning: the optimization {what} {message} (details in {json_path})",
+              file=sys.stderr)
+        return
+    print(f"fabplan: warning: the optimization {what}: {message} (details in {json_path})",
           file=sys.stderr)
 
 
@@ -285,11 +292,12 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
 
 
 def _cmd_molds(args) -> int:
-    from .fabricate.boundary_molds import boundary_molds, boundary_molds_text
+    from .fabricate.boundary_molds import boundary_molds_text, planned_boundary_molds
     from .fabricate.mold_report import write_mold_report
     from .fabricate.molds import MoldSettings, plan_molds
     from .fabricate.panels import check_panels
     from .layout.trim import read_boundary_panels
+    from .net.mesh import QuadMesh
 
     settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=args.units,
                             max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface)
@@ -304,14 +312,18 @@ def _cmd_molds(args) -> int:
     panels = None if boundary_file is None else read_boundary_panels(
         mesh, boundary_file, _boundary_record(args.net) if args.boundary is None else None)
     progress = _progress(args)
-    with progress.stage(f"fitting molds to {len(mesh.face_sizes)} panels"):
-        plan = plan_molds(mesh, settings)
-        # a boundary panel is cut from the mold of the full panel it continues when it
-        # stays within the tolerance of it, as a full panel must
-        boundary = None if panels is None else (
-            panels, boundary_molds(plan, panels, limit_mm=settings.tolerance_mm))
+    planned = mesh
+    if panels is not None:
+        # the boundary panels are panels: planned with the net's, each on the mold that
+        # fits it (slivers are cut with their full panel)
+        planned = QuadMesh(panels.vertices, list(mesh.faces) + [
+            q for q, sliver in zip(panels.polygons, panels.extension, strict=True) if not sliver],
+            name=mesh.name)
+    with progress.stage(f"fitting molds to {len(planned.face_sizes)} panels"):
+        plan = plan_molds(planned, settings)
+        boundary = None if panels is None else (panels, planned_boundary_molds(plan, panels))
     with progress.stage("writing the report"), \
-            _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
+            _viewer_files(args, out / "net", planned, units=settings.units, molds=plan) as viewers:
         files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary) + viewers
     if args.quiet:
         print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')} at "
@@ -588,6 +600,10 @@ def boundary_text(properties: dict) -> str:
     return text
 
 
+#: a layout whose net's lines turn more than this at a vertex (degrees) is warned about
+LINE_TURN_WARNING_DEG = 45.0
+
+
 def layout_warnings(properties: dict) -> list:
     """What a user should know about a layout's measured result, in plain words."""
     out = []
@@ -612,6 +628,13 @@ def layout_warnings(properties: dict) -> list:
     if angle.get("min") is not None and (angle["min"] < 20 or angle["max"] > 160):
         out.append(f"the families meet at {angle['min']:.1f} .. {angle['max']:.1f} deg: some "
                    "panels are nearly degenerate")
+    turn = ((properties.get("fairness") or {}).get("line_turn_deg")) or {}
+    if turn.get("max") is not None and turn["max"] > LINE_TURN_WARNING_DEG:
+        out.append(f"the net's lines turn within the surface by up to {turn['max']:.0f} deg at "
+                   f"vertex {turn['vertex']} (median {turn['median']:.1f} deg, 95 % below "
+                   f"{turn['p95']:.0f}): the solve bent the layout's lines to make a net of its "
+                   "type; a smaller --panel-size or another net type may be fairer (a study "
+                   "judges it with max_line_turn_deg)")
     folds = properties.get("folds") or {}
     if folds.get("folded"):
         out.append(f"the net folds: {folds['flipped_faces']['count']} flipped faces (ids in the "

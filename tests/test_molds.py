@@ -388,7 +388,7 @@ def test_panels_larger_than_the_largest_mold_are_reported_not_hidden(tmp_path, c
     code = main(["molds", str(net_path), "--tolerance-mm", "1", "--max-mold-size", "600",
                  "-o", str(out)])
     _, err = capsys.readouterr()
-    assert code == 3 and "do not fit" in err
+    assert code == 3 and "fit no mold" in err and "--max-mold-size" in err
     record = json.loads((out / "molds.json").read_text())
     assert not record["fits_all"] and len(record["failures"]) == record["panel_count"]
     assert all("larger than the largest mold" in p["problem"] for p in record["panels"])

@@ -229,8 +229,8 @@ def test_no_patch_clads_what_the_net_already_clads():
 
 
 def test_molds_plan_the_boundary_panels_beside_the_net(tmp_path, capsys):
-    """`fabplan molds NET.obj` reads ``NET.boundary.obj``: each boundary panel is cut from
-    the mold of the full panel it continues, which shares a side with it, or gets its own."""
+    """`fabplan molds NET.obj` reads ``NET.boundary.obj`` and plans the boundary panels as
+    panels with the net's; the full panel each continues shares a side with it."""
     import csv
 
     out = tmp_path / "hp.obj"
@@ -246,9 +246,16 @@ def test_molds_plan_the_boundary_panels_beside_the_net(tmp_path, capsys):
     with open(tmp_path / "molds" / "boundary-panels.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == len(panels) == len(bp["mold"])
-    assert bp["molds_in_all"] == record["mold_count"] + bp["own_molds"]
-    assert sum(r["mold"] == "own" for r in rows) == bp["own_molds"]
-    assert all(float(r["deviation_mm"]) <= 2.0 for r in rows if r["mold"] != "own")
+    # planned as panels with the net's: the plan's panels are the net's faces, then the
+    # boundary panels that are no slivers, each on the mold the plan gives it
+    assert bp["planned_with_net"] and bp["molds_in_all"] == record["mold_count"]
+    own = [r for r in rows if r["kind"] != "extension"]
+    assert len(record["panels"]) == len(faces) + len(own)
+    for r, placed in zip(own, record["panels"][len(faces):], strict=True):
+        assert int(r["mold"]) == placed["mold"]
+        assert float(r["deviation_mm"]) == pytest.approx(placed["deviation_mm"], rel=1e-6, abs=1e-6)
+    used_by_net = {p["mold"] for p in record["panels"][:len(faces)]}
+    assert bp["molds_only_boundary_panels_use"] == len({int(r["mold"]) for r in own} - used_by_net)
     # the full panel a boundary panel continues shares a side with it, where one does
     sides = {frozenset((int(a), int(b))) for f in faces for a, b in zip(f, np.roll(f, -1), strict=True)}
     for k, p in enumerate(panels):

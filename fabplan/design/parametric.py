@@ -385,12 +385,14 @@ def tower_facade(width: float = 12.0, height: float = 24.0, twist: float = 4.0,
 
 
 def height_field(heights, *, width: float = 20.0, depth: float = 20.0) -> ParametricSurface:
-    """A freeform height field ``z = f(x, y)``.
+    """A freeform height field ``z = f(x, y)`` over ``[-width/2, width/2] x
+    [-depth/2, depth/2]`` (full sizes; the rows of a grid run along x).
 
     Parameters
     ----------
     heights : (m, k) float grid of heights over ``[-width/2, width/2] x [-depth/2, depth/2]``
-        (interpolated by a bicubic spline, m, k >= 4), or a vectorized callable ``f(x, y)``.
+        (interpolated by a bicubic spline, m, k >= 4; row i at x, column j at y), or a
+        vectorized callable ``f(x, y)``.
     """
     _positive(width=width, depth=depth)
     if callable(heights):

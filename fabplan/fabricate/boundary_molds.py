@@ -24,8 +24,8 @@ from ..layout.trim import BoundaryPanels
 from ..report.viewer import PanelInfo
 from .molds import MOLD_TYPES, MoldPlan, placement_deviations
 
-__all__ = ["BoundaryMolds", "boundary_molds", "boundary_molds_text", "boundary_panels_csv",
-           "boundary_mold_info"]
+__all__ = ["BoundaryMolds", "boundary_molds", "planned_boundary_molds", "boundary_molds_text",
+           "boundary_panels_csv", "boundary_mold_info"]
 
 
 @dataclass
@@ -40,6 +40,9 @@ class BoundaryMolds:
         and its neighbour's mold surface (mm; inf without a neighbour).
     limit_mm : the gap allowed on a neighbour's mold.
     extension : (p,) bool, slivers made as part of their neighbour (not panels).
+    planned_with_net : the molds the net's own panels use, when the boundary panels were
+        planned as panels with them (`planned_boundary_molds`); None when each is cut
+        from its neighbour's mold or a mold of its own (`boundary_molds`).
     """
 
     neighbour_face: np.ndarray
@@ -47,6 +50,15 @@ class BoundaryMolds:
     deviation_mm: np.ndarray
     limit_mm: float
     extension: np.ndarray
+    planned_with_net: np.ndarray | None = None
+
+    @property
+    def molds_of_their_own(self) -> int:
+        """Molds only boundary panels use, when planned with the net's panels."""
+        if self.planned_with_net is None:
+            return int(np.sum((self.mold < 0) & ~self.extension))
+        used = np.unique(self.mold[(self.mold >= 0) & ~self.extension])
+        return int(np.sum(~np.isin(used, self.planned_with_net)))
 
     @property
     def count(self) -> int:
@@ -57,33 +69,73 @@ class BoundaryMolds:
     @property
     def own_molds(self) -> int:
         """Boundary panels that need a mold of their own (slivers are cut with their full
-        panel: they need none)."""
+        panel: they need none); none when planned with the net's panels, whose plan
+        counts their molds."""
+        if self.planned_with_net is not None:
+            return 0
         return int(np.sum((self.mold < 0) & ~self.extension))
 
     def record(self) -> dict:
         """JSON-ready summary."""
-        fits = np.isfinite(self.deviation_mm) & (self.mold >= 0)
-        return {
+        fits = np.isfinite(self.deviation_mm) & (self.mold >= 0) & ~self.extension
+        rec = {
             "panels": self.count,
             "extensions_of_full_panels": int(self.extension.sum()),
-            "cut_from_neighbour_mold": int(fits.sum()),
-            "own_molds": self.own_molds,
+            "planned_with_net": self.planned_with_net is not None,
             "deviation_limit_mm": self.limit_mm,
             "deviation_max_mm": float(self.deviation_mm[fits].max()) if fits.any() else None,
             "mold": self.mold.tolist(),
             "neighbour_face": self.neighbour_face.tolist(),
         }
+        if self.planned_with_net is None:
+            rec.update(cut_from_neighbour_mold=int(fits.sum()), own_molds=self.own_molds)
+        else:
+            # their molds are among the plan's: none to add to its count
+            shared = int(np.sum(np.isin(self.mold[~self.extension], self.planned_with_net)))
+            rec.update(on_molds_full_panels_use=shared,
+                       molds_only_boundary_panels_use=self.molds_of_their_own, own_molds=0)
+        return rec
 
 
 def boundary_molds_text(molds: BoundaryMolds, net_molds: int, source: object = None) -> str:
     """One sentence: how the boundary panels are made, and the molds in all with theirs."""
-    fits = int(np.sum(molds.mold[~molds.extension] >= 0))
-    return (f"{molds.count} boundary panels" + (f" ({source})" if source is not None else "")
-            + f": {fits} cut from the mold of the full panel they continue (within "
-            f"{molds.limit_mm:g} mm), {molds.own_molds} need a mold of their own"
-            + (f", {int(molds.extension.sum())} slivers cut with their full panel"
+    slivers = (f", {int(molds.extension.sum())} slivers cut with their full panel"
                if molds.extension.any() else "")
-            + f"; {net_molds + molds.own_molds} molds in all")
+    head = f"{molds.count} boundary panels" + (f" ({source})" if source is not None else "")
+    if molds.planned_with_net is not None:
+        shared = int(np.sum(np.isin(molds.mold[~molds.extension], molds.planned_with_net)))
+        return (f"{head}: planned with the net's panels, {shared} on molds full panels use, "
+                f"{molds.count - shared} on the {molds.molds_of_their_own} molds only boundary "
+                f"panels use{slivers}; {net_molds} molds in all")
+    fits = int(np.sum(molds.mold[~molds.extension] >= 0))
+    return (f"{head}: {fits} cut from the mold of the full panel they continue (within "
+            f"{molds.limit_mm:g} mm), {molds.own_molds} need a mold of their own{slivers}; "
+            f"{net_molds + molds.own_molds} molds in all")
+
+
+def planned_boundary_molds(plan: MoldPlan, panels: BoundaryPanels) -> BoundaryMolds:
+    """The molds of boundary panels planned as panels with the net's: `plan` is of the
+    net's faces followed by the boundary panels that are no slivers, in order. A sliver is
+    cut with the full panel it continues, from that panel's mold.
+
+    Returns
+    -------
+    BoundaryMolds whose `mold` and `deviation_mm` are the plan's (a sliver's, its
+    neighbour's mold and its gap to it), with `planned_with_net` the molds the net's own
+    panels use.
+    """
+    n_faces = len(plan.mold) - int(np.sum(~np.asarray(panels.extension, bool)))
+    neighbour = boundary_molds(plan, panels, limit_mm=np.inf)
+    own = np.flatnonzero(~np.asarray(panels.extension, bool))
+    mold, deviation = neighbour.mold.copy(), neighbour.deviation_mm.copy()
+    mold[own] = plan.mold[n_faces:]
+    deviation[own] = plan.deviation_mm[n_faces:]
+    return BoundaryMolds(neighbour.neighbour_face, mold, deviation,
+                         float(plan.settings.tolerance_mm), neighbour.extension,
+                         planned_with_net=np.unique(plan.mold[:n_faces]))
+
+
+
 
 
 def boundary_panels_csv(panels: BoundaryPanels, molds: BoundaryMolds) -> str:
@@ -149,7 +201,9 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, limit_mm: float) -> B
     if flat.any():
         deviation[flat] = [_plane_gap(panels.vertices[panels.polygons[k]]) * plan.settings.mm_per_unit
                            for k in np.flatnonzero(flat)]
-    mold = np.where(flat | (curved & (deviation <= limit_mm)), neighbour_mold, -1)
+    # a sliver is cut with its full panel, from that panel's mold, whatever its gap
+    extension = np.asarray(panels.extension, bool)
+    mold = np.where(flat | (curved & ((deviation <= limit_mm) | extension)), neighbour_mold, -1)
     return BoundaryMolds(face, mold, deviation, float(limit_mm), np.asarray(panels.extension, bool))
 
 

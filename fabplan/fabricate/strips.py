@@ -849,7 +849,8 @@ class Strip:
     axis : (k, 2) float, slit direction at each node (the node normal unrolled, upwards).
     edge_mm : (k - 1,) float, 3D edge lengths (mm).
     runs : arc runs of the reference curve.
-    twist_deg_per_m : largest rotation of the normals about an edge per metre of edge.
+    twist_deg_per_m : largest rotation of the normals about an edge per metre of edge (edges
+        shorter than a quarter of the strip's median edge taken at that length).
     max_twist_deg : largest rotation of the normals about one edge.
     off_orthogonal_deg : largest angle between a node normal and a flat panel through its
         edge and the edge's mean normal: how far a flat-panel lamella leans.
@@ -1148,7 +1149,10 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
             id=f"{FAMILY_LETTERS[f]}{counters[f]:02d}", family=f, vertices=np.asarray(v),
             closed=bool(closed[k]), curve=ReferenceCurve(nodes, bulges), axis=u.axis[a:b],
             edge_mm=edge, runs=runs,
-            twist_deg_per_m=float(np.degrees(twist / (edge / 1000.0)).max()),
+            # per metre over at least a quarter of the strip's median edge: a sliver's
+            # millimetre edge at a boundary panel corner would make any turn a huge rate
+            twist_deg_per_m=float(np.degrees(
+                twist / (np.maximum(edge, 0.25 * np.median(edge)) / 1000.0)).max()),
             max_twist_deg=float(np.degrees(twist).max()),
             off_orthogonal_deg=float(np.degrees(u.off_orthogonal[a:b]).max()),
             lean_deg=float(np.degrees(u.lean[a:b]).max()),

@@ -314,6 +314,13 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
                          "(boundary panels of another net, or of the net before it was "
                          "changed?); cut them again or use --no-boundary")
     polygons = [np.asarray(q, np.int64) for q in polygons]
+    # the net's own faces are no boundary panels (the net given as its own boundary file)
+    faces = {tuple(sorted(f.tolist())) for f in mesh.faces}
+    own = [k for k, q in enumerate(polygons) if tuple(sorted(q.tolist())) in faces]
+    if own:
+        raise InputError(f"{path}: face {own[0] + 1} is a face of the net {mesh.name}, not a "
+                         "boundary panel (the net itself given as its boundary file?); give "
+                         "NET.boundary.obj or use --no-boundary")
     vertices = np.asarray(vertices, float)
     record = record or {}
     p = len(polygons)

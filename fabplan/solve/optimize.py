@@ -698,7 +698,7 @@ def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: Qu
         parts.append(f"stopped ({status}) with {unmet or 'residuals above the tolerance'}")
         best = solver.best
         if best is not None and best.admissible:
-            parts.append("the net written is the best iterate, fold-free and near the reference")
+            parts.append("the net written is the best iterate, fold-free")
         if best is not None and best.iteration <= solver.run_start:
             parts.append("no step improved on the start: it may be far from any net of this "
                          "type, or the type may not exist on this surface")

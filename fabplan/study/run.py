@@ -818,9 +818,12 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     checks.append(_check(
         "max_deviation_mm", limits.max_deviation_mm, both, both <= limits.max_deviation_mm,
         f"the net deviates up to {dev:.1f} mm from the design"
-        + (f", its boundary panels on their neighbours' molds up to {edge:.1f} mm" if edge is not None
-           else "")
-        + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
+        # the boundary panels' gap is within the limit by construction: the others are
+        # on molds of their own
+        + (f", the boundary panels cut from their neighbours' molds up to {edge:.2f} mm"
+           if edge is not None else "")
+        + (f" (and {counted(own, 'boundary panel')} further off on molds of their own)"
+           if own else "")
         + f" (limit {limits.max_deviation_mm:g} mm)"))
     molds = metrics["molds"]
     panels_fit = molds["failures"] == 0
