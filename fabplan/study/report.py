@@ -975,8 +975,13 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
         raise ValueError(f"candidate {c.name!r} has no net to write (it failed)")
     folder.mkdir(parents=True)
     net_obj, net_json = net.write(folder / "net.obj")
+    record = molds_plan.record()
+    if c.boundary_molds is not None:
+        # the same count as the report's: the net's molds and the boundary panels' own
+        record["boundary_panels"] = {**c.boundary_molds.record(),
+                                     "molds_in_all": molds_plan.mold_count + c.boundary_molds.own_molds}
     output.write_texts({folder / "molds.csv": molds_plan.panels_csv(),
-                 folder / "molds.json": json_text(molds_plan.record())})
+                        folder / "molds.json": json_text(record)})
     outputs: dict[str, str | list[str]] = {
         "net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
         "molds_json": "molds.json", "picture": "net.png"}
