@@ -798,7 +798,8 @@ def _draw_preview(lines: list, colours: list, texts: list, size: tuple, path, ti
     for (x, y, text, rotation, text_height, _), colour in zip(texts, text_rgb, strict=True):
         font = ImageFont.load_default(size=max(8.0, text_height * scale))
         box = draw.textbbox((0, 0), text, font=font)
-        label = Image.new("L", (box[2] - box[0] + 2, box[3] - box[1] + 2), 0)
+        label = Image.new("L", (int(math.ceil(box[2] - box[0])) + 2,
+                                int(math.ceil(box[3] - box[1])) + 2), 0)
         ImageDraw.Draw(label).text((-box[0] + 1, -box[1] + 1), text, font=font, fill=255)
         label = label.rotate(rotation, expand=True).point(lambda v: 255 if v >= 48 else 0)
         cx, cy = pixels(np.array([[x, y]]))
