@@ -299,3 +299,42 @@ def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
     # a design point (x, y, 0) has its closest point at u = 0.75 x on the tilted net: the
     # missing face stands over x in [4/9, 1], y in [1/3, 3/4], 10.3 % of the design
     assert covered == pytest.approx(1 - (1 - 4 / 9) * (3 / 4 - 1 / 3) / 1.5 ** 2, abs=0.015)
+
+
+def _monkey_saddle(cells: int = 48) -> DesignSurface:
+    """The monkey saddle z = (x^3 - 3 x y^2) / 120 on 12 x 12 m: an umbilic of index -1/2
+    at the centre, which the layout's line field meets with a seam."""
+    x, y = np.meshgrid(np.linspace(-6, 6, cells + 1), np.linspace(-6, 6, cells + 1), indexing="ij")
+    V = np.stack([x, y, (x**3 - 3 * x * y * y) / 120], axis=-1).reshape(-1, 3)
+    idx = np.arange(V.shape[0]).reshape(x.shape)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return DesignSurface(V, T, name="monkey-saddle")
+
+
+def test_boundary_panels_reach_the_edges_where_the_sheets_of_a_seam_overlap():
+    """Regression: around the monkey saddle's seam the parameter plane holds two sheets of
+    the design, and the net faces of one were cut from the unclad strip of the other: a
+    sawtooth of unclad triangles stayed along two edges (coverage 0.969 here, 0.984 at
+    500 panels)."""
+    design = _monkey_saddle()
+    layout = layout_surface(design, float(np.sqrt(design.area / 150)))
+    net = glide(layout, "snet")
+    panels = net.boundary_panels
+    assert layout.cuts and layout.chart.overlapping
+    assert panels.coverage >= 0.995
+    # the panels and the net clad the design once: in the xy-plane (a height field) they
+    # overlap by a sliver at most (a fifth of a percent, where the seam meets the edge)
+    # and cover it
+    X = net.mesh.vertices
+    polygons = [shapely.Polygon(X[f][:, :2]) for f in net.mesh.faces]
+    polygons += [shapely.Polygon(panels.vertices[p][:, :2]) for p in panels.polygons]
+    polygons = [shapely.make_valid(p) for p in polygons]
+    total = sum(p.area for p in polygons)
+    union = shapely.union_all(polygons)
+    assert total - union.area <= 2e-3 * design.area
+    assert shapely.intersection(union, shapely.box(-6, -6, 6, 6)).area >= 0.995 * 144.0
+    # on the surface: the net's and the panels' areas add up to the design's, clad once
+    T = X[net.mesh.triangles()]
+    net_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum()
+    assert abs((net_area + panels.area.sum()) / design.area - panels.coverage) <= 0.01

@@ -7,7 +7,10 @@ its edges, so the strip between the net and the boundary is cut into *boundary p
 1. The layout's parametrization ``(phi, psi)`` (integer values are the net's lines) maps
    the design to the plane. There the design is the union of its parameter triangles
    ``D``, the net is the union of its faces ``N`` (every vertex at the parameters of its
-   closest design point), and the unclad strip is ``R = D - N``.
+   closest design point), and the unclad strip is ``R = D - N``. Where a seam makes the
+   parameter triangles overlap (the plane holds several sheets of the design), each
+   triangle loses only the net faces on its own sheet, and the parts of ``R`` on
+   different sheets are cut apart (`_unclad_by_sheet`).
 2. Every line of the net that ends on the net's boundary is extended straight in the
    parameter plane (the lattice lines are straight there) until it leaves ``R``. The rays
    cut ``R`` into pieces: quads, pentagons and triangles with one side on the design
@@ -38,6 +41,8 @@ from typing import TYPE_CHECKING
 import igl
 import numpy as np
 import shapely
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
@@ -218,32 +223,36 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     grid = 1e-7 * cell ** 0.5
     p_net = np.round(p_net / grid) * grid
     faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
-    net = shapely.union_all(_polygonal(shapely.make_valid(faces)), grid_size=grid)
-    domain = shapely.union_all(_polygonal([shapely.set_precision(chart.domain, grid)]), grid_size=grid)
-    unclad = shapely.union_all(_polygonal([shapely.difference(domain, net, grid_size=grid)]),
-                               grid_size=grid)
+    by_sheet = bool(layout.cuts) and chart.overlapping
+    if by_sheet:
+        # across a seam the plane holds several sheets of the design: each triangle loses
+        # only the net faces on its own sheet
+        rest, rest_triangle, rest_region, regions = _unclad_by_sheet(
+            chart, faces, mesh, h, grid, 1e-6 * cell)
+    else:
+        net = shapely.union_all(_polygonal(shapely.make_valid(faces)), grid_size=grid)
+        domain = shapely.union_all(_polygonal([shapely.set_precision(chart.domain, grid)]),
+                                   grid_size=grid)
+        regions = [shapely.union_all(_polygonal([shapely.difference(domain, net, grid_size=grid)]),
+                                     grid_size=grid)]
     boundary = chart.boundary_lines
     tol = 4 * grid
     # a vertex on the boundary (to a thousandth of a panel: gliding, or added on it)
     # ends its lines there; a line continued from it would run along the boundary. It is
     # joined to the boundary by the shortest way instead, which parts the slivers beside it
     touching = shapely.distance(shapely.points(p_net), boundary) <= 1e-3 * cell ** 0.5
-    rays = np.concatenate([
-        _clipped_rays(mesh, p_net, unclad, ~touching, grid),
-        _connectors(p_net[touching & mesh.is_boundary_vertex], boundary, unclad, grid)])
-    pieces = _split_large(_split(unclad, rays, grid), 1.5 * cell, grid)
-    # specks of rounding size are no panels (their area stays in the uncovered share)
-    pieces = shapely.orient_polygons(
-        _merge_small(pieces[shapely.area(pieces) > 1e-6 * cell], min_panel * cell))
-    # unclad regions that do not reach the design boundary are holes inside the net
-    regions = shapely.get_parts(unclad)
-    inner = regions[shapely.distance(regions, boundary) > tol]
-    patch = np.zeros(len(pieces), bool)
-    if len(pieces) and len(inner):
-        hit, _ = shapely.STRtree(inner).query(shapely.point_on_surface(pieces), predicate="within")
-        patch[hit] = True
+    # regions of different sheets may overlap in the plane: each is cut on its own
+    cut = [_cut_region(unclad, mesh, p_net, boundary, touching, cell, grid, min_panel)
+           for unclad in regions]
+    pieces = np.concatenate([c[0] for c in cut] + [np.zeros(0, dtype=object)])
+    rays = np.concatenate([c[1] for c in cut] + [np.zeros(0, dtype=object)])
+    patch = np.concatenate([c[2] for c in cut] + [np.zeros(0, bool)])
+    sheets = None
+    if by_sheet:
+        piece_region = np.repeat(np.arange(len(cut)), [len(c[0]) for c in cut])
+        sheets = (rest, rest_triangle, rest_region, piece_region)
     vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
-        pieces, mesh, p_net, chart, boundary, rays, tol, touching)
+        pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
     # a piece over a seam of the parametrization, where the plane holds several sheets
     # of the design, may map to points of different sheets: its sides then stretch far
     # beyond their length in the plane (about a panel per unit). Such pieces are left
@@ -251,17 +260,28 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     sane = _sane_on_surface(pieces, vertices, polygons, h)
     if not sane.all():
         pieces = pieces[sane]
+        if sheets is not None:
+            sheets = (*sheets[:3], sheets[3][sane])
         vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
-            pieces, mesh, p_net, chart, boundary, rays, tol, touching)
+            pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
     patch = patch[sane]
     triangles, owner = _triangles_on_surface(pieces, ring_ids)
     # near a singular point the plane's sheets overlap, and a "hole" there may lie under
-    # net faces on the surface: such a patch would clad the design twice
-    double = patch & (_share_under(vertices, triangles, owner, len(pieces), mesh, h) > 0.5)
+    # net faces on the surface: such a patch would clad the design twice. Cut by sheet,
+    # any piece may: along a seam a face whose corners lie on both sides is folded in the
+    # plane and leaves part of the triangles under it unclad there
+    double = (patch | by_sheet) & \
+        (_share_under(vertices, triangles, owner, len(pieces), mesh, h) > 0.5)
+    if by_sheet:
+        # a piece of a hole at a singular point, where the sheets meet, may map across
+        # the fold there: it faces against the design and overlaps its neighbours
+        double[_flipped(vertices, polygons, design, 1e-3 * h * h)] = True
     if double.any():
         pieces, patch = pieces[~double], patch[~double]
+        if sheets is not None:
+            sheets = (*sheets[:3], sheets[3][~double])
         vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
-            pieces, mesh, p_net, chart, boundary, rays, tol, touching)
+            pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
     # coverage is measured on the surface, independently of the plane (`_under`)
     samples, normals, weight = _design_samples(design)
@@ -410,6 +430,14 @@ class ParameterChart:
         return shapely.make_valid(shapely.union_all(self.triangles[self.usable]))
 
     @cached_property
+    def overlapping(self) -> bool:
+        """Whether the parameter triangles overlap (the plane holds several sheets of the
+        design somewhere: around a seam's end): their areas add up to more than their
+        union's (to a millionth)."""
+        total = float(np.abs(self.param_area[self.usable]).sum())
+        return total > (1.0 + 1e-6) * self.domain.area
+
+    @cached_property
     def boundary_lines(self):
         """The design's boundary edges in the parameter plane (not the cuts)."""
         T = self.design.triangles
@@ -422,15 +450,15 @@ class ParameterChart:
         segments = np.stack([self.P[tri, k], self.P[tri, (k + 1) % 3]], axis=1)
         return shapely.multilinestrings(shapely.linestrings(segments))
 
-    def locate(self, points: np.ndarray, near: np.ndarray | None = None
+    def locate(self, points: np.ndarray, near: np.ndarray | None = None, *, reach: float = 0.0
                ) -> tuple[np.ndarray, np.ndarray]:
         """The parameter triangle holding each point and the point's barycentric
         coordinates in it (clipped into the triangle).
 
         The plane of a parametrization with seams can hold several sheets of the design
         over one point; of the triangles holding a point, the one whose surface point is
-        nearest to `near` (m, 3) is taken (the first without, or where its row is NaN). A
-        point in no triangle
+        nearest to `near` (m, 3) is taken (the first without, or where its row is NaN);
+        triangles within `reach` of a point count as holding it. A point in no triangle
         (outside by rounding) takes the triangle it is least outside of among the twelve
         nearest.
         """
@@ -440,7 +468,11 @@ class ParameterChart:
         bary = np.zeros((m, 3))
         if m == 0:
             return tri, bary
-        which, hold = self.tree.query(shapely.points(points), predicate="intersects")
+        if reach > 0:
+            which, hold = self.tree.query(shapely.points(points), predicate="dwithin",
+                                          distance=reach)
+        else:
+            which, hold = self.tree.query(shapely.points(points), predicate="intersects")
         ok = self.usable[hold]
         which, hold = which[ok], hold[ok]
         if len(which):
@@ -467,11 +499,12 @@ class ParameterChart:
             tri[lost], bary[lost] = cand[rows, best], chosen / chosen.sum(axis=1, keepdims=True)
         return tri, bary
 
-    def to_surface(self, points: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+    def to_surface(self, points: np.ndarray, near: np.ndarray | None = None, *,
+                   reach: float = 0.0) -> np.ndarray:
         """(m, 3) float, the points of the design at parameters `points` (m, 2), on the
         sheet nearest to `near` (m, 3, NaN rows for no preference) where the plane holds
-        several (`locate`)."""
-        tri, bary = self.locate(points, near)
+        several, of the triangles within `reach` (`locate`)."""
+        tri, bary = self.locate(points, near, reach=reach)
         design = self.design
         if design.parametric is not None and design.uv is not None:
             uv = np.einsum("mk,mkj->mj", bary, design.triangle_uv(tri))
@@ -537,6 +570,120 @@ def _face_polygons(mesh: QuadMesh, p: np.ndarray, maps: list) -> np.ndarray:
     out += [shapely.polygons(shapely.linearrings(sign * closing + shift, indices=ring_of))
             for sign, shift in maps[1:]]
     return np.concatenate(out)
+
+
+def _unclad_by_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh, h: float,
+                     grid: float, min_area: float) -> tuple:
+    """The unclad region ``D - N`` of a chart whose parameter triangles overlap (a seam):
+    every design triangle minus the net faces on its own sheet, united.
+
+    A face lies on the sheet of the triangles it overlaps in the plane that lie under it
+    on the surface: their centroid within the face's radius (its corners' largest
+    distance from its centroid) and half a panel `h` of its centroid. On another sheet
+    the triangle lies a few panels away, but where the sheets meet (at a singular point)
+    the face lies on all of them.
+
+    Parameters
+    ----------
+    chart : the layout's `ParameterChart`.
+    faces : (f * k,) Polygons, the net's f faces in the plane and their images under the
+        cuts' maps (`_face_polygons`): row i is face ``i % f``.
+    mesh : the net.
+    h : panel size (model units).
+    grid : the overlays' snap-rounding grid.
+    min_area : regions of no more area (in the plane) are left out.
+
+    Returns
+    -------
+    rest : (u,) Polygons, what is left of the design triangles.
+    rest_triangle : (u,) int, the design triangle of each.
+    rest_region : (u,) int, the region of each (-1: one left out).
+    regions : list of polygonal geometries, the unclad region in parts that hang
+        together on the surface (each on one sheet; two may overlap in the plane).
+    """
+    f = len(mesh.face_sizes)
+    valid = shapely.make_valid(faces)
+    parts, row = shapely.get_parts(valid, return_index=True)
+    polygon = shapely.get_type_id(parts) == 3
+    parts, face = parts[polygon], row[polygon] % f
+    sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
+    centre3 = np.stack([np.add.reduceat(mesh.vertices[idx, k], ptr[:-1]) for k in range(3)],
+                       axis=1) / sizes[:, None]
+    corner_face = np.repeat(np.arange(f), sizes)
+    radius = np.zeros(f)
+    np.maximum.at(radius, corner_face, np.linalg.norm(mesh.vertices[idx] - centre3[corner_face], axis=1))
+    part, tri = chart.tree.query(parts, predicate="intersects")
+    keep = chart.usable[tri]
+    part, tri = part[keep], tri[keep]
+    design = chart.design
+    gap = np.linalg.norm(design.vertices[design.triangles[tri]].mean(axis=1) - centre3[face[part]],
+                         axis=1)
+    own = gap <= radius[face[part]] + 0.5 * h
+    part, tri = part[own], tri[own]
+    # most triangles lie inside one face of their sheet: nothing of them is left
+    covered = np.zeros(len(chart.P), bool)
+    covered[tri[shapely.covers(parts[part], chart.triangles[tri])]] = True
+    part, tri = part[~covered[tri]], tri[~covered[tri]]
+    # each triangle loses its faces one rank at a time: a loop over the few faces a
+    # triangle meets, not over the triangles
+    order = np.lexsort((part, tri))
+    part, tri = part[order], tri[order]
+    first = np.r_[True, tri[1:] != tri[:-1]]
+    rank = np.arange(len(tri)) - np.maximum.accumulate(np.where(first, np.arange(len(tri)), 0))
+    usable = np.flatnonzero(chart.usable & ~covered)
+    rest = np.full(len(chart.P), None, dtype=object)
+    rest[usable] = chart.triangles[usable]
+    for k in range(int(rank.max(initial=-1)) + 1):
+        at = rank == k
+        rest[tri[at]] = shapely.difference(rest[tri[at]], parts[part[at]], grid_size=grid)
+    left = usable[~shapely.is_empty(rest[usable])]
+    rest, at = shapely.get_parts(rest[left], return_index=True)
+    polygon = shapely.get_type_id(rest) == 3
+    rest, left = rest[polygon], left[at[polygon]]
+    # parts hang together where their triangles share a corner on the design and they
+    # meet in the plane; parts of other sheets over them in the plane share no corner
+    a, b = shapely.STRtree(rest).query(rest, predicate="intersects")
+    T = chart.design.triangles
+    linked = (T[left[a]][:, :, None] == T[left[b]][:, None, :]).any(axis=(1, 2))
+    graph = coo_matrix((np.ones(int(linked.sum())), (a[linked], b[linked])),
+                       shape=(len(rest), len(rest)))
+    count, region = connected_components(graph, directed=False)
+    # regions of rounding size are no panels (as the specks among the pieces)
+    large = np.flatnonzero(np.bincount(region, shapely.area(rest), minlength=count) > min_area)
+    regions = [shapely.union_all(_polygonal([shapely.union_all(rest[region == k], grid_size=grid)]),
+                                 grid_size=grid) for k in large]
+    number = np.full(count, -1)
+    number[large] = np.arange(len(large))
+    return rest, left, number[region], regions
+
+
+def _cut_region(unclad, mesh: QuadMesh, p_net: np.ndarray, boundary, touching: np.ndarray,
+                cell: float, grid: float, min_panel: float) -> tuple:
+    """One unclad region cut into pieces by the net's lines extended into it.
+
+    Returns
+    -------
+    pieces : (p,) Polygons, counter-clockwise.
+    rays : (r,) LineStrings, the lines that cut it (`_clipped_rays`, `_connectors`).
+    patch : (p,) bool, pieces of parts of the region that do not reach the design
+        boundary (holes inside the net).
+    """
+    tol = 4 * grid
+    rays = np.concatenate([
+        _clipped_rays(mesh, p_net, unclad, ~touching, grid),
+        _connectors(p_net[touching & mesh.is_boundary_vertex], boundary, unclad, grid)])
+    pieces = _split_large(_split(unclad, rays, grid), 1.5 * cell, grid)
+    # specks of rounding size are no panels (their area stays in the uncovered share)
+    pieces = shapely.orient_polygons(
+        _merge_small(pieces[shapely.area(pieces) > 1e-6 * cell], min_panel * cell))
+    # unclad regions that do not reach the design boundary are holes inside the net
+    regions = shapely.get_parts(unclad)
+    inner = regions[shapely.distance(regions, boundary) > tol]
+    patch = np.zeros(len(pieces), bool)
+    if len(pieces) and len(inner):
+        hit, _ = shapely.STRtree(inner).query(shapely.point_on_surface(pieces), predicate="within")
+        patch[hit] = True
+    return pieces, rays, patch
 
 
 def _clipped_rays(mesh: QuadMesh, p: np.ndarray, unclad, free: np.ndarray, grid: float
@@ -673,7 +820,8 @@ def _merge_small(pieces: np.ndarray, min_area: float) -> np.ndarray:
 
 
 def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: ParameterChart,
-                boundary, rays: np.ndarray, tol: float, touching: np.ndarray) -> tuple:
+                boundary, rays: np.ndarray, tol: float, touching: np.ndarray,
+                sheets: tuple | None = None) -> tuple:
     """The pieces as polygons on the surface: corners at net vertices are those vertices,
     the others are mapped through the chart (shared points once; points within `tol` of
     the design boundary are first put on it, so that they land on its curve). Net
@@ -719,8 +867,15 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
                        for k in range(3)], axis=1) / np.maximum(count, 1)[:, None]
     # a panel without a net vertex has no sheet to prefer (NaN); the others keep theirs
     anchor[count == 0] = np.nan
+    if sheets is not None:
+        # where the plane holds several sheets, the piece is on that of the design
+        # triangles it was cut from (the net vertices in its ring may be another's)
+        anchor = _piece_anchors(pieces, *sheets, chart, anchor)
     near = anchor[piece[other[first]]] if other.size else np.zeros((0, 3))
-    vertices = np.vstack([mesh.vertices, chart.to_surface(exact, near)])
+    # over a seam a point on one sheet's boundary may be inside another sheet's triangle
+    # only, to rounding: the triangles within `tol` are candidates too
+    reach = tol if sheets is not None else 0.0
+    vertices = np.vstack([mesh.vertices, chart.to_surface(exact, near, reach=reach)])
     on_ray = np.zeros(len(vertices), bool)
     if len(rays) and len(new_p):
         on_ray[n:] = shapely.distance(new_points, shapely.union_all(rays)) <= tol
@@ -739,6 +894,30 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     corner = np.zeros(len(vertices), bool)
     corner[ring[(ring < n) | ~ob[ring] | ~ob[before] | ~ob[after] | on_ray[ring]]] = True
     return vertices, polygons, on_boundary, corner, ring_ids
+
+
+def _piece_anchors(pieces: np.ndarray, rest: np.ndarray, rest_triangle: np.ndarray,
+                   rest_region: np.ndarray, piece_region: np.ndarray, chart: ParameterChart,
+                   default: np.ndarray) -> np.ndarray:
+    """(p, 3) float, a point of the surface on each piece's sheet: the centroid on the
+    surface of the design triangle with the largest unclad part (`rest` (u,) Polygons of
+    the triangles `rest_triangle` (u,) int in regions `rest_region` (u,) int,
+    `_unclad_by_sheet`) in the piece and its region (`piece_region` (p,) int); the row
+    of `default` (p, 3) for a piece that holds none."""
+    anchor = default.copy()
+    if len(rest) == 0 or len(pieces) == 0:
+        return anchor
+    piece, part = shapely.STRtree(shapely.point_on_surface(rest)).query(pieces, predicate="covers")
+    same = rest_region[part] == piece_region[piece]
+    piece, part = piece[same], part[same]
+    if len(piece) == 0:
+        return anchor
+    share = shapely.area(rest[part])
+    best = np.lexsort((-share, piece))
+    best = best[np.r_[True, piece[best][1:] != piece[best][:-1]]]
+    design = chart.design
+    anchor[piece[best]] = design.vertices[design.triangles[rest_triangle[part[best]]]].mean(axis=1)
+    return anchor
 
 
 def _triangles_on_surface(pieces: np.ndarray, ring_ids: list) -> tuple[np.ndarray, np.ndarray]:
