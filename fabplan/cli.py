@@ -883,12 +883,14 @@ def _cmd_study(args) -> int:
                                         max_panels=args.max_panels, cache=cache,
                                         resume=args.resume, files=True, rhino=args.rhino)
         else:
+            from .study.background import BackgroundCandidates
+
             with progress.stage(f"running {len(study.candidates)} candidates"):
                 result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
                                    resume=args.resume, files=True, rhino=args.rhino,
                                    # a --resume run keeps each candidate as it finishes,
                                    # in the order of the study
-                                   background=cache is None)
+                                   background=BackgroundCandidates if cache is None else None)
         writing = time.perf_counter()
         # with workers, they make the candidates' files too
         with progress.stage("writing the report and the candidates' files"):

@@ -567,6 +567,8 @@ def spec_of_surface(surface: ParametricSurface) -> str | None:
     >>> spec_of_surface(surface_from_spec("hyperbolic-paraboloid:width=5,rise=2"))
     'hyperbolic-paraboloid:width=5.0,depth=10.0,rise=2.0'
     """
+    if surface.name not in SURFACES:      # a NURBS surface, say: made from its file
+        return None
     items = []
     for key, value in surface.parameters.items():
         if key in FILE_PARAMETERS:

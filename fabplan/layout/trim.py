@@ -821,7 +821,8 @@ def _merge_small(pieces: np.ndarray, min_area: float) -> np.ndarray:
 
 def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: ParameterChart,
                 boundary, rays: np.ndarray, tol: float, touching: np.ndarray,
-                sheets: tuple | None = None) -> tuple:
+                sheets: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+                ) -> tuple:
     """The pieces as polygons on the surface: corners at net vertices are those vertices,
     the others are mapped through the chart (shared points once; points within `tol` of
     the design boundary are first put on it, so that they land on its curve). Net

@@ -22,7 +22,7 @@ import math
 import time
 import traceback
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -178,8 +178,8 @@ class StudyResult:
 # ---------------------------------------------------------------------------- running
 def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
               max_panels: int | None = None, cache: CandidateCache | None = None,
-              resume: bool = False, background: bool = False, files: bool = False,
-              rhino: bool = False) -> StudyResult:
+              resume: bool = False, background: Callable[..., Any] | None = None,
+              files: bool = False, rhino: bool = False) -> StudyResult:
     """Run every candidate of `study` and judge it.
 
     A candidate that fails (a layout or a solve that breaks) is recorded with its reason
@@ -193,11 +193,12 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         memory holds, `fabplan.io.resources.default_max_panels`).
     cache : where finished candidates are kept (`fabplan.study.cache.CandidateCache`).
     resume : take the candidates the cache already holds instead of computing them.
-    background : measure every solved candidate (molds, strips, measurements) in a forked
-        process beside the next candidates' solves, one process per core
-        (`fabplan.study.background`; on Linux, else here); with `files` (and `rhino` as
-        in `write_study`) its files too, which come back in `StudyResult.made_files` for
-        `write_study` to write. The results are those of the serial run.
+    background : `fabplan.study.background.BackgroundCandidates` (or another class like
+        it), to measure every solved candidate (molds, strips, measurements) in a forked
+        process beside the next candidates' solves, one process per core (on Linux, else
+        here); with `files` (and `rhino` as in `write_study`) its files too, which come
+        back in `StudyResult.made_files` for `write_study` to write. The results are those
+        of the serial run. None: every candidate is measured here, in turn.
 
     Raises
     ------
@@ -210,11 +211,9 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     start = time.perf_counter()
     design, baseline = prepare_design(study, say, max_panels)
     helper = None
-    if background:
-        from .background import BackgroundCandidates
-
-        helper = BackgroundCandidates(study, design, say, files=files, rhino=rhino,
-                                      done=None if cache is None else cache.store)
+    if background is not None:
+        helper = background(study, design, say, files=files, rhino=rhino,
+                            done=None if cache is None else cache.store)
         helper = helper if helper.active else None
     layouts: Layouts = {(90.0, study.panel_size): baseline}
     starts: Starts = {}
