@@ -714,7 +714,7 @@ def _cmd_strips(args) -> int:
     with progress.stage(f"splitting {len(strips.strips)} strips into parts that fit the sheets"):
         parts = make_parts(strips, settings)
     with progress.stage(f"nesting {len(parts)} parts"):
-        nesting = nest_parts(parts, settings)
+        nesting = nest_parts(parts, settings, workers=worker_count(args.workers))
     plan = StripPlan(strips=strips, parts=parts, nesting=nesting,
                      seconds=time.perf_counter() - planning)
     with progress.stage(f"writing {len(nesting.sheets)} sheets and checking them"), \

@@ -723,13 +723,40 @@ def _lowest_fit(S: np.ndarray, c: _Candidate, short_side: float) -> tuple[int, f
     return int(todo[k]), float(y[k])
 
 
-def nest_parts(parts: list[Part], settings: "StripSettings") -> Nesting:
+#: fewest parts whose orientations are worth computing in several processes
+PARTS_PER_PROCESS = 200
+
+
+def _orientations_of(parts: list, spacing: float, res: float) -> list:
+    return [_orientations(p, spacing, res) for p in parts]
+
+
+def _all_orientations(parts: list[Part], spacing: float, res: float, workers: int) -> list:
+    """`_orientations` of every part, spread over `workers` processes when there are many
+    parts (each part's are independent of the nesting)."""
+    count = min(workers, len(parts) // PARTS_PER_PROCESS)
+    if count <= 1:
+        return _orientations_of(parts, spacing, res)
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=count) as pool:
+        batches = list(pool.map(_orientations_of, [parts[k::count] for k in range(count)],
+                                [spacing] * count, [res] * count))
+    out: list = [None] * len(parts)
+    for k, batch in enumerate(batches):
+        out[k::count] = batch
+    return out
+
+
+def nest_parts(parts: list[Part], settings: "StripSettings", *, workers: int = 1) -> Nesting:
     """Place parts on as few sheets as the skyline heuristic finds, then check exactly.
 
     Parameters
     ----------
     parts : list of Part.
     settings : sheet size, spacing, margin.
+    workers : processes that compute the parts' orientations (the placements are the
+        same whatever their number).
 
     Returns
     -------
@@ -750,8 +777,9 @@ def nest_parts(parts: list[Part], settings: "StripSettings") -> Nesting:
     skylines: list[np.ndarray] = []
     placed: list[list] = []
     refused: list[list] = []  # per sheet: (cells, height) of parts that did not fit
+    oriented = _all_orientations(parts, settings.spacing_mm, res, workers)
     for i in order:
-        candidates = _orientations(parts[i], settings.spacing_mm, res)
+        candidates = oriented[i]
         size = (min(len(c.lower) for c in candidates), min(c.height for c in candidates))
         best = None
         for sheet, S in enumerate(skylines):

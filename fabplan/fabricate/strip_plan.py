@@ -14,7 +14,7 @@ import math
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -48,14 +48,17 @@ class StripPlan:
     parts: list[Part]
     nesting: Nesting
     seconds: float = 0.0
+    _measured: dict | None = field(default=None, init=False, repr=False, compare=False)
 
     def summary(self) -> dict:
-        """Everything measured, for the JSON schedule and the facade study."""
-        rec = self.strips.summary()
-        rec.update(congruence(self.parts, self.strips))
-        rec.update(self.nesting.summary())
-        rec["seconds"] = self.seconds
-        return rec
+        """Everything measured, for the JSON schedule and the facade study (measured once:
+        a plan is not changed after it is made; a copy each call)."""
+        if self._measured is None:
+            rec = self.strips.summary()
+            rec.update(congruence(self.parts, self.strips))
+            rec.update(self.nesting.summary())
+            self._measured = rec
+        return {**self._measured, "seconds": self.seconds}
 
     def write(self, out_dir: str | os.PathLike, *, name: str = "strips",
               previews: bool = True, workers: int | None = 1) -> list[Path]:
