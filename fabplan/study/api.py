@@ -183,7 +183,7 @@ class StripResult(StripPlan):
 
     @classmethod
     def of(cls, plan: StripPlan) -> "StripResult":
-        return cls(**{f.name: getattr(plan, f.name) for f in fields(StripPlan)})
+        return cls(**{f.name: getattr(plan, f.name) for f in fields(StripPlan) if f.init})
 
     def to_json(self) -> dict:
         return {"summary": self.summary(), "strips": schedule_rows(self)}
