@@ -1039,14 +1039,8 @@ def _add_molds(sub: Any) -> None:
                         "face, fitted to the corners around it; neighbours may step apart), "
                         "corners (least curved through its corners), auto (corners for a net "
                         "of flat faces, else shared); smooth is local_fit's earlier name")
-    ends = p.add_mutually_exclusive_group()
-    ends.add_argument("--boundary", metavar="FILE",
-                      help="the net's boundary panels (default: NET.boundary.obj beside the net, "
-                           "as layout, optimize and study write it): each is cut from the mold "
-                           "of the full panel it continues, or gets a mold of its own")
-    ends.add_argument("--no-boundary", action="store_true",
-                      help="plan the net's own panels only, even when boundary panels are "
-                           "beside it")
+    _add_boundary_options(p, "they are planned as panels with the net's (slivers cut with "
+                             "their full panel)", "plan the net's own panels only")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     _add_3dm(p, units=False)
     p.add_argument("--no-3d", action="store_true",
@@ -1059,6 +1053,17 @@ def _first_sentence(doc: str | None) -> str:
     """The first paragraph of a docstring on one line, without reST literals: what a
     built-in surface is (``width`` and ``depth`` are half-sizes: ``[-width, width]``)."""
     return " ".join((doc or "").strip().split("\n\n")[0].split()).replace("``", "")
+
+
+def _add_boundary_options(p: argparse.ArgumentParser, use: str, without: str) -> None:
+    """``--boundary FILE`` and ``--no-boundary``: what the command does with a net's boundary
+    panels (`use`), and without them (`without`)."""
+    ends = p.add_mutually_exclusive_group()
+    ends.add_argument("--boundary", metavar="FILE",
+                      help="the net's boundary panels (default: NET.boundary.obj beside the net, "
+                           f"as layout, optimize and study write it): {use}")
+    ends.add_argument("--no-boundary", action="store_true",
+                      help=f"{without}, even when boundary panels are beside it")
 
 
 def _add_mill(sub: Any) -> None:
@@ -1165,14 +1170,9 @@ def _add_strips(sub: Any) -> None:
                    help="strip ends (default square)")
     p.add_argument("--extension", type=float, metavar="MM",
                    help="material beyond the end crossings at free ends (default height / 2)")
-    ends = p.add_mutually_exclusive_group()
-    ends.add_argument("--boundary", metavar="FILE",
-                      help="the net's boundary panels (default: NET.boundary.obj beside the net, "
-                           "as layout and study write it): strips run through them to the edge "
-                           "of the cladding and are cut square against a boundary member there")
-    ends.add_argument("--no-boundary", action="store_true",
-                      help="end the strips at the net's last vertices even when boundary panels "
-                           "are beside it")
+    _add_boundary_options(p, "strips run through them to the edge of the cladding and are "
+                             "cut square against a boundary member there",
+                          "end the strips at the net's last vertices")
     p.add_argument("--boundary-member", type=float, metavar="MM",
                    help="thickness of the boundary member strips end against (default "
                         "--thickness)")
