@@ -69,19 +69,25 @@ def test_door_facade_is_clad_to_its_edges_and_the_door(door):
     assert (_distance_to_polylines(on, [door_loop]) <= 1e-6 * h).sum() >= 4
 
 
+def _xy_cladding(net) -> tuple:
+    """The net's faces and its boundary panels in the xy-plane (the designs here are
+    height fields): how much of their area lies twice or more (their areas' sum less
+    their union's), and their union."""
+    X, panels = net.mesh.vertices, net.boundary_panels
+    polygons = [shapely.Polygon(X[f][:, :2]) for f in net.mesh.faces]
+    polygons += [shapely.Polygon(panels.vertices[p][:, :2]) for p in panels.polygons]
+    polygons = [shapely.make_valid(p) for p in polygons]
+    union = shapely.union_all(polygons)
+    return sum(p.area for p in polygons) - union.area, union
+
+
 def test_door_facade_panels_tile_without_overlap(door):
     """In the xy-plane (the facade's own parametrization): net faces and boundary panels
     overlap by nothing and together cover the design."""
     design, layout, net = door
-    panels = net.boundary_panels
-    X = net.mesh.vertices
-    polygons = [shapely.Polygon(X[f][:, :2]) for f in net.mesh.faces]
-    polygons += [shapely.Polygon(panels.vertices[p][:, :2]) for p in panels.polygons]
-    polygons = [shapely.make_valid(p) for p in polygons]
-    total = sum(p.area for p in polygons)
-    union = shapely.union_all(polygons)
+    overlap, union = _xy_cladding(net)
     domain = shapely.union_all([shapely.Polygon(t) for t in design.vertices[design.triangles][:, :, :2]])
-    assert total - union.area <= 1e-3 * domain.area              # no overlap
+    assert overlap <= 1e-3 * domain.area              # no overlap
     assert shapely.intersection(union, domain).area >= 0.999 * domain.area
     assert shapely.difference(union, domain).area <= 2e-3 * domain.area   # nothing outside
 
@@ -327,12 +333,8 @@ def test_boundary_panels_reach_the_edges_where_the_sheets_of_a_seam_overlap():
     # overlap by a sliver at most (a fifth of a percent, where the seam meets the edge)
     # and cover it
     X = net.mesh.vertices
-    polygons = [shapely.Polygon(X[f][:, :2]) for f in net.mesh.faces]
-    polygons += [shapely.Polygon(panels.vertices[p][:, :2]) for p in panels.polygons]
-    polygons = [shapely.make_valid(p) for p in polygons]
-    total = sum(p.area for p in polygons)
-    union = shapely.union_all(polygons)
-    assert total - union.area <= 2e-3 * design.area
+    overlap, union = _xy_cladding(net)
+    assert overlap <= 2e-3 * design.area
     assert shapely.intersection(union, shapely.box(-6, -6, 6, 6)).area >= 0.995 * 144.0
     # on the surface: the net's and the panels' areas add up to the design's, clad once
     T = X[net.mesh.triangles()]
