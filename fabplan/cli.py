@@ -126,14 +126,11 @@ def _warn_not_converged(result, json_path: Path) -> None:
     what = {"iteration cap": "stopped at the iteration cap", "folded": "ended folded",
             "degenerate": "ended degenerate"}.get(
         result.status, f"stopped ({result.status})")
-    message = result.message
     said = f"stopped ({result.status}) "
-    if message.startswith(said):      # the status is said once
-        message = message[len(said):]
-        print(f"fabplan: warning: the optimization {what} {message} (details in {json_path})",
-              file=sys.stderr)
-        return
-    print(f"fabplan: warning: the optimization {what}: {message} (details in {json_path})",
+    # the status is said once: "stopped (stagnated) with ..." continues the sentence
+    message = (" " + result.message[len(said):] if result.message.startswith(said)
+               else ": " + result.message)
+    print(f"fabplan: warning: the optimization {what}{message} (details in {json_path})",
           file=sys.stderr)
 
 
@@ -260,8 +257,6 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
     recorded in ``NET.json`` is made again (`layout_again`) and, when it gives the net's
     faces, the optimized net's boundary panels are cut from it. Only for a net with a
     ``NET.boundary.obj`` beside it. Returns a note when the panels could not be cut."""
-    import json
-
     import numpy as np
 
     from .layout.surface_layout import layout_again
@@ -272,10 +267,8 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
         return None
     lost = (f"the boundary panels of {old} belong to the net before it was optimized and "
             "were not carried over")
-    try:
-        record = json.loads(source.with_suffix(".json").read_text(encoding="utf-8"))
-        layout_record = record["properties"]["layout"]
-    except (OSError, ValueError, KeyError, TypeError):
+    layout_record = _net_properties(source).get("layout")
+    if not isinstance(layout_record, dict):
         return f"{lost}: {source.with_suffix('.json')} does not record the layout to cut them from"
     with progress.stage("cutting the boundary panels again"):
         try:
@@ -310,7 +303,7 @@ def _cmd_molds(args) -> int:
           args.quiet)
     boundary_file = _boundary_file(args)
     panels = None if boundary_file is None else read_boundary_panels(
-        mesh, boundary_file, _boundary_record(args.net) if args.boundary is None else None)
+        mesh, boundary_file, _boundary_record(args))
     progress = _progress(args)
     planned = mesh
     if panels is not None:
@@ -812,20 +805,25 @@ def _strip_boundary(args, mesh):
     path = _boundary_file(args)
     if path is None:
         return None, None
-    # NET.json records which points the trimming put on the design boundary
-    record = _boundary_record(args.net) if args.boundary is None else None
-    return path, StripBoundary.from_obj(mesh, path, record)
+    return path, StripBoundary.from_obj(mesh, path, _boundary_record(args))
 
 
-def _boundary_record(net: str | Path) -> dict | None:
-    """``properties.boundary_panels`` of ``NET.json`` beside the net, if there is one."""
+def _net_properties(net: str | Path) -> dict:
+    """``properties`` of the ``NET.json`` beside a net a layout, optimize or study wrote
+    ({} where there is none, or it holds none)."""
     import json
 
     try:
-        record = json.loads(Path(net).with_suffix(".json").read_text(encoding="utf-8"))
-        return record["properties"]["boundary_panels"]
+        properties = json.loads(Path(net).with_suffix(".json").read_text(encoding="utf-8"))["properties"]
     except (OSError, ValueError, KeyError, TypeError):
-        return None
+        return {}
+    return properties if isinstance(properties, dict) else {}
+
+
+def _boundary_record(args) -> dict | None:
+    """What NET.json records of the boundary panels beside the net (which are slivers,
+    patches, points on the design boundary); None for panels given by ``--boundary``."""
+    return None if args.boundary is not None else _net_properties(args.net).get("boundary_panels")
 
 
 def _cmd_arcs(args) -> int:
