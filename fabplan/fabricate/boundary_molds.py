@@ -75,8 +75,17 @@ class BoundaryMolds:
             return 0
         return int(np.sum((self.mold < 0) & ~self.extension))
 
-    def record(self) -> dict:
-        """JSON-ready summary."""
+    @property
+    def on_net_molds(self) -> int:
+        """Boundary panels (slivers aside) on molds the net's own panels use, when planned
+        with them."""
+        if self.planned_with_net is None:
+            return 0
+        return int(np.sum(np.isin(self.mold[~self.extension], self.planned_with_net)))
+
+    def record(self, net_molds: int | None = None) -> dict:
+        """JSON-ready summary; with the net's own mold count `net_molds`, also
+        ``molds_in_all``."""
         fits = np.isfinite(self.deviation_mm) & (self.mold >= 0) & ~self.extension
         rec = {
             "panels": self.count,
@@ -91,9 +100,10 @@ class BoundaryMolds:
             rec.update(cut_from_neighbour_mold=int(fits.sum()), own_molds=self.own_molds)
         else:
             # their molds are among the plan's: none to add to its count
-            shared = int(np.sum(np.isin(self.mold[~self.extension], self.planned_with_net)))
-            rec.update(on_molds_full_panels_use=shared,
+            rec.update(on_molds_full_panels_use=self.on_net_molds,
                        molds_only_boundary_panels_use=self.molds_of_their_own, own_molds=0)
+        if net_molds is not None:
+            rec["molds_in_all"] = net_molds + self.own_molds
         return rec
 
 
@@ -103,7 +113,7 @@ def boundary_molds_text(molds: BoundaryMolds, net_molds: int, source: object = N
                if molds.extension.any() else "")
     head = f"{molds.count} boundary panels" + (f" ({source})" if source is not None else "")
     if molds.planned_with_net is not None:
-        shared = int(np.sum(np.isin(molds.mold[~molds.extension], molds.planned_with_net)))
+        shared = molds.on_net_molds
         return (f"{head}: planned with the net's panels, {shared} on molds full panels use, "
                 f"{molds.count - shared} on the {molds.molds_of_their_own} molds only boundary "
                 f"panels use{slivers}; {net_molds} molds in all")

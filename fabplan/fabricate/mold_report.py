@@ -522,7 +522,7 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
     texts = {"panels.csv": plan.panels_csv()}
     if boundary is not None:
         panels, molds = boundary
-        record["boundary_panels"] = {**molds.record(), "molds_in_all": plan.mold_count + molds.own_molds}
+        record["boundary_panels"] = molds.record(net_molds=plan.mold_count)
         texts["boundary-panels.csv"] = boundary_panels_csv(panels, molds)
     with output_folder(folder) as staging:
         write_texts({staging / "report.html": mold_report_html(

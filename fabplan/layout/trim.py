@@ -316,7 +316,8 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
     panels' areas (of their outlines' fans), and their corners (net vertices, and points
     two polygons share: the ends of the extended lines; the points between are the trim
     outline's). `record` (``properties.boundary_panels`` of ``NET.json``) gives the
-    extensions, the patches, the coverage and the panel size, where known.
+    slivers, the patches, the points on the design boundary and the coverage, where known;
+    the panel size is taken as the net's mean edge.
 
     Raises
     ------

@@ -978,8 +978,7 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
     record = molds_plan.record()
     if c.boundary_molds is not None:
         # the same count as the report's: the net's molds and the boundary panels' own
-        record["boundary_panels"] = {**c.boundary_molds.record(),
-                                     "molds_in_all": molds_plan.mold_count + c.boundary_molds.own_molds}
+        record["boundary_panels"] = c.boundary_molds.record(net_molds=molds_plan.mold_count)
     output.write_texts({folder / "molds.csv": molds_plan.panels_csv(),
                         folder / "molds.json": json_text(record)})
     outputs: dict[str, str | list[str]] = {
