@@ -543,6 +543,25 @@ def test_fast_turning_principal_directions_are_found_and_reported():
     assert len(layout_surface(calm, 1.0, angle=70.0).turning_points) == 0
 
 
+def test_the_bisector_setting_turns_the_isogonal_layout():
+    """Regression: the combed cross field was turned to the larger principal curvature's
+    direction whatever `LayoutSettings.bisector` said. On the saddle z = x y the principal
+    directions run along the diagonals, so the families of a 70 deg net lie 35 deg from
+    the one diagonal ("max") or the other ("min"): 20 deg apart."""
+    saddle = surface_from_spec("hyperbolic-paraboloid:width=5,depth=5,rise=3").triangulate((60, 60))
+
+    def family_angles(bisector: str) -> np.ndarray:
+        layout = layout_surface(saddle, 0.8, angle=70.0, settings=LayoutSettings(bisector=bisector))
+        X = layout.mesh.vertices
+        f = min(layout.mesh.faces, key=lambda q: np.linalg.norm(X[q][:, :2].mean(axis=0)))
+        d = X[f[1:3]][:, :2] - X[f[:2]][:, :2]
+        return np.sort(np.degrees(np.arctan2(d[:, 1], d[:, 0])) % 180.0)
+
+    a, b = family_angles("max"), family_angles("min")
+    gap = np.abs((a[:, None] - b[None, :] + 90.0) % 180.0 - 90.0).min(axis=1)
+    assert np.all(gap > 10.0), (a, b)
+
+
 def test_an_isogonal_net_takes_its_bisector_from_the_cross_field():
     """Regression: an isogonal layout smoothed the larger principal direction as a line
     field, which swaps by a quarter turn where a wave's curvature changes sign; the

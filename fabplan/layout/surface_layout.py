@@ -282,11 +282,9 @@ def layout_again(record: dict) -> SurfaceLayout:
     """
     from ..design.load import load_design
 
-    spec = record.get("design_spec", record.get("design"))
-    if spec is None:
-        raise InputError(f"the design {record.get('design')!r} was made from a file of values, "
-                         "which is not recorded")
     try:
+        # records written before the spec was kept name the design only
+        spec = record.get("design_spec") or record["design"]
         resolution = record.get("design_resolution")
         design = load_design(spec, triangles=int(record["design_triangles"]),
                              resolution=None if resolution is None else tuple(resolution))
@@ -300,7 +298,7 @@ def layout_again(record: dict) -> SurfaceLayout:
         raise InputError(f"the layout record is incomplete ({exc})") from None
 
 
-def _design_spec(design: DesignSurface) -> str | None:
+def _design_spec(design: DesignSurface) -> str:
     """What `fabplan.design.load.load_design` loads `design` from again: a built-in
     surface's spec with its parameters, else its file or Rhino source (a built-in surface
     made from a file of values gives its name, which does not load it again)."""
@@ -338,7 +336,7 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
     k1, k2, e1 = face_principal_frames(design, radius=s.curvature_radius)
     if s.bisector == "min":
         e1 = np.cross(normal, e1)
-    e1_raw = e1
+    e1_raw = e1       # the bisector's principal direction (`LayoutSettings.bisector`)
     lap("principal_directions")
     e1, symmetry, smoothing = _smoothed_directions(
         design, e1, np.abs(k1 - k2) * design.face_areas, h, s, cross=family is None)
@@ -347,8 +345,7 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
         # the lines where the larger principal curvature swaps direction (a wave's
         # inflections): the bisector of the families, turned to the `bisector` setting
         # where most of the design's anisotropy is
-        e_max = e1_raw if s.bisector == "max" else np.cross(normal, e1_raw)
-        agree = np.abs(np.sum(e1 * e_max, axis=1)) >= math.sqrt(0.5)
+        agree = np.abs(np.sum(e1 * e1_raw, axis=1)) >= math.sqrt(0.5)
         weight = np.abs(k1 - k2) * design.face_areas
         if weight[agree].sum() < weight[~agree].sum():
             e1 = np.cross(normal, e1)
@@ -556,10 +553,11 @@ def _smoothed_directions(design: DesignSurface, e1: np.ndarray, weight: np.ndarr
     are a cross field: across a near-umbilic the principal directions may turn by a
     quarter turn without the net's lines turning at all. An S-net at another angle is
     symmetric about either principal direction, so the combed cross field serves as its
-    bisector as well (`_layout_once` turns it to the `bisector` setting). The cross field is smoothed over
-    `LayoutSettings.smoothing` panels, doubled up to `max_smoothing`, until it has no
-    quarter-turn singularity (which the lattice cannot follow; four of them surround a
-    dome's apex); failing that, and for other nets, the line field is smoothed.
+    bisector as well (`_layout_once` turns it to the `bisector` setting). The cross field
+    is smoothed over `LayoutSettings.smoothing` panels, doubled up to `max_smoothing`,
+    until it has no quarter-turn singularity (which the lattice cannot follow; four of them
+    surround a dome's apex); failing that, and for a prescribed family, the line field is
+    smoothed.
 
     Returns
     -------
