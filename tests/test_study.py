@@ -774,3 +774,72 @@ def test_the_report_says_how_much_of_the_design_is_clad_and_whether_nets_fold(st
         assert f"{100 * m['coverage']:.2f} % of the design's area" in page
         if m["coverage"] < 0.999:
             assert f"{100 * (1 - m['coverage']):.1f} % is left unclad" in page
+
+
+TWIN_STUDY = """\
+[study]
+name = "Twins"
+max_iterations = 80
+
+[design]
+surface = "hyperbolic-paraboloid"
+parameters = { width = 3, depth = 3, rise = 0.9 }
+triangles = 3000
+
+[panels]
+size = 0.7
+
+[limits]
+max_deviation_mm = 200
+mold_tolerance_mm = 1.5
+max_kink_deg = 20
+
+[strips]
+height_mm = 60
+thickness_mm = 3
+sheet_mm = [1200, 600]
+nets = "all"
+
+[[candidates]]
+net = "minimal"
+
+[[candidates]]
+net = "cmc"
+"""
+
+
+def test_forked_candidates_write_the_same_files_as_the_serial_run(tmp_path):
+    """Candidates measured in forked processes (their files made there too, a twin's
+    copying its twin's strips) and the PDF drawn in one: the same files as the serial run
+    writes, byte for byte where no time or id is in them."""
+    from fabplan.study.background import BackgroundCandidates, background_processes
+    from fabplan.study.report import write_study
+
+    if background_processes() == 0:
+        pytest.skip("nothing is forked on this machine")
+    path = tmp_path / "twins.toml"
+    path.write_text(TWIN_STUDY, encoding="utf-8")
+    serial = run_study(read_study(path))
+    forked = run_study(read_study(path), background=BackgroundCandidates, files=True)
+    assert {c.name: c.twin for c in forked.candidates}["cmc"] == "minimal"   # the same net
+    assert {"minimal", "cmc"} <= set(forked.made_files)       # the twin's made beside, too
+    write_study(serial, tmp_path / "serial")
+    write_study(forked, tmp_path / "forked")
+
+    def files(folder: Path) -> dict:
+        return {p.relative_to(folder).as_posix(): p for p in sorted(folder.rglob("*"))
+                if p.is_file()}
+
+    a, b = files(tmp_path / "serial"), files(tmp_path / "forked")
+    assert a.keys() == b.keys()
+    assert any(k.startswith("candidates/cmc/strips/") and k.endswith(".dxf") for k in a)
+    for name in a:
+        if name.startswith("candidates/") and name.endswith((".obj", ".csv")):
+            assert a[name].read_bytes() == b[name].read_bytes(), name
+        elif name.endswith(".dxf"):
+            lines = [[(e.dxf.layer, e.get_points("xyb")) for e in
+                      ezdxf.readfile(p).modelspace().query("LWPOLYLINE")] for p in (a[name], b[name])]
+            assert lines[0] == lines[1] and lines[0], name
+    pdf = b["report.pdf"].read_bytes()
+    assert pdf.startswith(b"%PDF") and pdf.rstrip().endswith(b"%%EOF")
+    assert not list((tmp_path / "forked").glob("*.part"))

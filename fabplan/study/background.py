@@ -13,7 +13,8 @@ The child is a bare `os.fork` that leaves by `os._exit`: it runs none of the par
 exit handlers and writes nothing to the parent's streams (a progress thread of the parent
 may hold their locks at the fork). Elsewhere than on Linux, or on one core, nothing is
 forked and the run measures every candidate itself; so it does for a candidate whose
-process died.
+process died. `ForkedFile` draws one file the same way (the study's PDF report, while the
+HTML report is written).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ if TYPE_CHECKING:
     from .run import CandidateResult
     from .spec import Study
 
-__all__ = ["BackgroundCandidates", "background_processes"]
+__all__ = ["BackgroundCandidates", "ForkedFile", "background_processes"]
 
 
 def background_processes(processes: int | None = None) -> int:
@@ -46,6 +47,40 @@ def background_processes(processes: int | None = None) -> int:
         return 0
     count = (os.cpu_count() or 1) if processes is None else processes
     return count if count > 1 else 0
+
+
+class ForkedFile:
+    """One file written by `write(path)` in a forked process while the caller goes on
+    (the study's PDF report beside its HTML report); `finish` waits for it.
+
+    The child writes beside `path` and renames, so `path` is whole or absent; where
+    nothing is forked (see `background_processes`), or the child failed, `finish` writes
+    the file in this process.
+    """
+
+    def __init__(self, write: Callable[[Path], None], path: Path) -> None:
+        self.write, self.path = write, Path(path)
+        self._pid = os.fork() if background_processes() else None
+        if self._pid == 0:
+            code = 1
+            try:
+                sys.stdout = sys.stderr = open(os.devnull, "w")
+                part = self.path.with_name(self.path.name + ".part")
+                write(part)
+                os.replace(part, self.path)
+                code = 0
+            finally:
+                os._exit(code)
+
+    def finish(self) -> None:
+        """Wait for the child; write the file here when it did not."""
+        if self._pid is not None:
+            _, status = os.waitpid(self._pid, 0)
+            self._pid = None
+            if os.waitstatus_to_exitcode(status) == 0 and self.path.is_file():
+                return
+            self.path.with_name(self.path.name + ".part").unlink(missing_ok=True)
+        self.write(self.path)
 
 
 def _warm_up(files: bool) -> None:
@@ -73,9 +108,11 @@ class _Job:
 
 
 def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
-             twin: CandidateResult | None, files: bool, rhino: bool) -> tuple:
+             twin: CandidateResult | None, files: bool, rhino: bool,
+             twin_files: dict[str, bytes] | None = None) -> tuple:
     """What the forked process sends back: (measured candidate without net and layout or
-    None, why it failed or None, progress lines, files or None, seconds)."""
+    None, why it failed or None, progress lines, files or None, seconds). `twin_files`:
+    the files made for `twin`, whose strip files a candidate sharing its strips copies."""
     from .report import candidate_file_bytes
     from .run import fabricate_candidate, failure_reason
 
@@ -86,9 +123,11 @@ def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
     except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
         return None, failure_reason(exc), lines, None, time.perf_counter() - clock
     made = None
-    # strips shared with a twin are copied from its folder by `write_study`
-    if files and not (result.twin is not None and result.strips is not None):
-        made = candidate_file_bytes(result, study, design, None, rhino=rhino)
+    shares_strips = result.twin is not None and result.strips is not None
+    # without the twin's files, `write_study` copies the shared strips from its folder
+    if files and (twin_files is not None or not shares_strips):
+        made = candidate_file_bytes(result, study, design,
+                                    twin_files if shares_strips else None, rhino=rhino)
     return (replace(result, net=None, layout=None), None, lines, made,
             time.perf_counter() - clock)
 
@@ -130,12 +169,14 @@ class BackgroundCandidates:
             self._folder = tempfile.TemporaryDirectory(prefix="fabplan-candidates-")
         self._count += 1
         path = Path(self._folder.name) / f"{self._count}.pickle"
+        twin_made = None if twin is None else self.made_files.get(twin.name)
         pid = os.fork()
         if pid == 0:
             code = 1
             try:
                 sys.stdout = sys.stderr = open(os.devnull, "w")
-                made = _measure(self.study, self.design, solved, twin, self.files, self.rhino)
+                made = _measure(self.study, self.design, solved, twin, self.files, self.rhino,
+                                None if twin_made is None else twin_made[0])
                 part = path.with_suffix(".part")
                 part.write_bytes(pickle.dumps(made, protocol=pickle.HIGHEST_PROTOCOL))
                 os.replace(part, path)

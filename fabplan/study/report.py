@@ -33,6 +33,7 @@ from ..report import figures, html, viewer
 from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
+from .background import ForkedFile
 from .cache import CACHE_FOLDER
 from .run import CandidateResult, StudyResult, cost_drivers, molds_text, vertex_deviation_mm
 
@@ -1182,13 +1183,18 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
                 title="The design's curvature: where its principal directions are weak")
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
-        if pdf:
-            study_pdf(result, pictures, seconds_total=total).write(tmp / "report.pdf")
-        output.write_texts({tmp / "study.json": json_text(record),
-                            tmp / "candidates.csv": candidates_csv(result),
-                            tmp / "report.html": study_html(result, pictures, outputs,
-                                                            seconds_total=total,
-                                                            view_3d=view_3d)})
+        # the PDF is drawn on the other core while this one writes the rest
+        printed = ForkedFile(lambda path: study_pdf(result, pictures, seconds_total=total)
+                             .write(path), tmp / "report.pdf") if pdf else None
+        try:
+            output.write_texts({tmp / "study.json": json_text(record),
+                                tmp / "candidates.csv": candidates_csv(result),
+                                tmp / "report.html": study_html(result, pictures, outputs,
+                                                                seconds_total=total,
+                                                                view_3d=view_3d)})
+        finally:
+            if printed is not None:
+                printed.finish()
         kept = out_dir / CACHE_FOLDER
         if kept.is_dir():     # the finished candidates stay with the study, for --resume
             os.replace(kept, tmp / CACHE_FOLDER)
