@@ -602,8 +602,14 @@ def layout_warnings(properties: dict) -> list:
     out = []
     coverage = properties["coverage"]
     if coverage < 0.999:
+        gaps = (properties.get("boundary_panels") or {}).get("gaps") or []
+        where = "" if not gaps else (
+            f"; the largest gap, {gaps[0]['area_relative_to_panel']:.2g} panels of area, is "
+            f"{'at the design boundary' if gaps[0]['at_design_boundary'] else 'inside'} around "
+            f"({', '.join(f'{v:.4g}' for v in gaps[0]['point'])})")
         out.append(f"the panels cover only {100 * coverage:.1f} % of the design surface "
-                   "(measured by area on the design; see properties.boundary_panels in the JSON)")
+                   f"(measured by area on the design{where}; every gap under "
+                   "properties.boundary_panels.gaps in the JSON)")
     net = properties.get("coverage_net", coverage)
     if coverage - net > 0.1:
         out.append(f"the full panels cover only {100 * net:.0f} % of the design: the layout stops far "

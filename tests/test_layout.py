@@ -470,6 +470,10 @@ def test_low_coverage_is_measured_and_warned_about(tmp_path, capsys):
     assert props["coverage"] >= props["coverage_net"]
     if props["coverage"] < 0.999:
         assert f"cover only {100 * props['coverage']:.1f} % of the design" in err
+        gap = props["boundary_panels"]["gaps"][0]       # the largest, said where it is
+        assert "around (" + ", ".join(f"{v:.4g}" for v in gap["point"]) + ")" in err
+        assert sum(g["area"] for g in props["boundary_panels"]["gaps"]) <= \
+            (1 - props["coverage"]) * design.area * (1 + 1e-9)
     else:
         assert "cover only" not in err
 

@@ -305,6 +305,27 @@ def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
     # a design point (x, y, 0) has its closest point at u = 0.75 x on the tilted net: the
     # missing face stands over x in [4/9, 1], y in [1/3, 3/4], 10.3 % of the design
     assert covered == pytest.approx(1 - (1 - 4 / 9) * (3 / 4 - 1 / 3) / 1.5 ** 2, abs=0.015)
+    # ... and it is found where it is, as one gap inside the design, of that area
+    gaps = _gaps(holed, design, 4.0)
+    assert len(gaps) == 1 and not gaps[0]["at_design_boundary"]
+    assert gaps[0]["area"] == pytest.approx((1 - 4 / 9) * (3 / 4 - 1 / 3), abs=0.015 * 1.5 ** 2)
+    assert 4 / 9 < gaps[0]["point"][0] < 1 and 1 / 3 < gaps[0]["point"][1] < 3 / 4
+    # a second face missing at the design's corner (over x in [1, 1.5], y in [7/6, 1.5]):
+    # a smaller gap, listed second, there
+    corner = int(np.argmin(np.linalg.norm(centre - [0.96, 1.38], axis=1)))
+    two = QuadMesh(whole.vertices, [f for k, f in enumerate(whole.faces) if k not in (gone, corner)])
+    gaps = _gaps(two, design, 4.0)
+    assert [g["at_design_boundary"] for g in gaps] == [False, True]
+    assert gaps[1]["area"] < gaps[0]["area"] and min(gaps[1]["point"][:2]) > 1.0
+    assert _gaps(whole, design, 4.0) == []
+
+
+def _gaps(net, design: DesignSurface, h: float) -> list:
+    from fabplan.layout.trim import _clad, _design_samples, coverage_gaps
+
+    samples, normals, weight = _design_samples(design)
+    clad = _clad(samples, normals, net.vertices, net.triangles(), h)
+    return coverage_gaps(design, samples, weight, clad, h)
 
 
 def _monkey_saddle(cells: int = 48) -> DesignSurface:

@@ -24,9 +24,14 @@ NEAR_UMBILIC = 0.25
 
 def fairness_marks(properties: dict) -> dict[str, list]:
     """Where a measured net is least fair (`fabplan.net.fairness`), as labelled points for
-    `write_layout_picture`: the vertex its lines turn most, and the smallest angle."""
+    `write_layout_picture`: the vertex its lines turn most, the smallest angle, and the
+    largest part of the design left unclad (`fabplan.layout.trim.coverage_gaps`) when the
+    panels cover less than 99.9 % of it."""
     fairness = properties.get("fairness") or {}
     marks = {}
+    gaps = (properties.get("boundary_panels") or {}).get("gaps") or []
+    if gaps and properties.get("coverage", 1.0) < 0.999:
+        marks[f"largest gap ({gaps[0]['area_relative_to_panel']:.2g} panels)"] = gaps[0]["point"]
     turn = fairness.get("line_turn_deg") or {}
     if turn.get("point") is not None:
         marks[f"lines turn most ({turn['max']:.1f} deg)"] = turn["point"]

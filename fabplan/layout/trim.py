@@ -46,6 +46,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
+from ..design.topology import triangle_pairs
 from ..errors import InputError
 from ..net.mesh import QuadMesh
 
@@ -91,6 +92,8 @@ class BoundaryPanels:
         (t,) int, the panel of each (see `panel_triangles`).
     net_on_boundary : (n,) bool, the net's vertices on the design boundary (to a
         thousandth of a panel); empty where unknown.
+    gaps : the largest parts of the design no panel covers (`coverage_gaps`), largest
+        first.
     """
 
     vertices: np.ndarray
@@ -111,6 +114,7 @@ class BoundaryPanels:
     triangles: np.ndarray | None = None
     triangle_panel: np.ndarray | None = None
     net_on_boundary: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    gaps: list = field(default_factory=list)
 
     @property
     def count(self) -> int:
@@ -185,6 +189,7 @@ class BoundaryPanels:
             # the points on the design's boundary curve: the new ones and the net's vertices
             "on_design_boundary": np.flatnonzero(self.on_design_boundary).tolist(),
             "uncovered": 1.0 - self.coverage,
+            "gaps": self.gaps,
             "seconds": round(self.seconds, 4),
         }
 
@@ -303,7 +308,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         flipped=flipped[~extension[flipped]], patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
-        net_on_boundary=touching)
+        net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h))
 
 
 def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
@@ -397,6 +402,59 @@ def net_coverage(mesh: QuadMesh, design: DesignSurface, panel_size: float) -> fl
     samples, normals, weight = _design_samples(design)
     on = _clad(samples, normals, mesh.vertices, mesh.triangles(), panel_size)
     return float(weight[on].sum() / weight.sum())
+
+
+#: gaps smaller than this share of a full panel are not listed (measuring noise)
+MIN_GAP = 0.01
+
+
+def coverage_gaps(design: DesignSurface, samples: np.ndarray, weight: np.ndarray,
+                  clad: np.ndarray, h: float, count: int = 5) -> list[dict]:
+    """The largest parts of the design left unclad, for a user to find them.
+
+    Parameters
+    ----------
+    design : the design; `samples` (4 t, 3), `weight` (4 t,) its points and their areas
+        (`_design_samples`, four per triangle in the triangle order), `clad` (4 t,) bool
+        which are covered; `h` the panel size.
+    count : at most this many gaps, largest first.
+
+    Returns
+    -------
+    list of dict: ``area`` (model units squared) and ``area_relative_to_panel`` of each
+    gap (unclad triangles that share edges), ``point`` (3,) its unclad sample nearest to
+    its centroid (a point on the design), and ``at_design_boundary`` whether it reaches
+    the design's boundary.
+    """
+    open_ = ~clad.reshape(-1, 4)
+    unclad = np.flatnonzero(open_.any(axis=1))
+    if len(unclad) == 0:
+        return []
+    f, g, _ = triangle_pairs(design.triangles, len(design.vertices))
+    both = open_.any(axis=1)[f] & open_.any(axis=1)[g]
+    local = np.full(len(design.triangles), -1)
+    local[unclad] = np.arange(len(unclad))
+    graph = coo_matrix((np.ones(int(both.sum())), (local[f[both]], local[g[both]])),
+                       shape=(len(unclad), len(unclad)))
+    _, label = connected_components(graph, directed=False)
+    w = (weight.reshape(-1, 4) * open_)[unclad]             # the unclad samples' areas
+    area = np.bincount(label, w.sum(axis=1))
+    edge = np.zeros(len(design.vertices), bool)
+    edge[np.concatenate(design.boundary_loops or [np.zeros(0, np.int64)])] = True
+    reaches = np.bincount(label, edge[design.triangles[unclad]].any(axis=1)) > 0
+    P = samples.reshape(-1, 4, 3)[unclad]
+    centroid = np.stack([np.bincount(label, (w * P[..., k]).sum(axis=1)) for k in range(3)],
+                        axis=1) / np.maximum(area, 1e-300)[:, None]
+    out = []
+    for gap in np.argsort(-area, kind="stable")[:count]:
+        if area[gap] < MIN_GAP * h * h:
+            break
+        mine = (label == gap)[:, None] & open_[unclad]
+        points = P[mine]
+        nearest = points[np.argmin(np.linalg.norm(points - centroid[gap], axis=1))]
+        out.append({"area": float(area[gap]), "area_relative_to_panel": float(area[gap] / (h * h)),
+                    "point": [float(v) for v in nearest], "at_design_boundary": bool(reaches[gap])})
+    return out
 
 
 # ---------------------------------------------------------------------------- the chart
