@@ -246,6 +246,9 @@ def _cmd_optimize(args) -> int:
           f"{result.net}: {result.status} after {result.iterations} iterations; wrote {obj_path}")
     if panels_note:
         print(f"fabplan: note: {panels_note}", file=sys.stderr)
+    elif result.boundary_panels is not None:
+        for warning in boundary_warnings(result.properties):
+            _warn(warning)
     if not result.converged:
         _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
@@ -597,12 +600,14 @@ def boundary_text(properties: dict) -> str:
 LINE_TURN_WARNING_DEG = 45.0
 
 
-def layout_warnings(properties: dict) -> list:
-    """What a user should know about a layout's measured result, in plain words."""
+def boundary_warnings(properties: dict) -> list:
+    """What falls short in a net's cladding of its design (coverage, boundary panels
+    facing against it or crossing themselves), in plain words."""
     out = []
     coverage = properties["coverage"]
+    panels = properties.get("boundary_panels") or {}
     if coverage < 0.999:
-        gaps = (properties.get("boundary_panels") or {}).get("gaps") or []
+        gaps = panels.get("gaps") or []
         where = "" if not gaps else (
             f"; the largest gap, {gaps[0]['area_relative_to_panel']:.2g} panels of area, is "
             f"{'at the design boundary' if gaps[0]['at_design_boundary'] else 'inside'} around "
@@ -610,15 +615,29 @@ def layout_warnings(properties: dict) -> list:
         out.append(f"the panels cover only {100 * coverage:.1f} % of the design surface "
                    f"(measured by area on the design{where}; every gap under "
                    "properties.boundary_panels.gaps in the JSON)")
+    flipped = panels.get("flipped") or []
+    if flipped:
+        out.append(f"{counted(len(flipped), 'boundary panel')} face{'s' if len(flipped) == 1 else ''} "
+                   "against the design (ids under properties.boundary_panels.flipped)")
+    crossed = panels.get("crossed") or []
+    if crossed:
+        one = len(crossed) == 1
+        out.append(f"{counted(len(crossed), 'boundary panel')} "
+                   f"{'crosses itself' if one else 'cross themselves'} (ids under "
+                   "properties.boundary_panels.crossed): the outline turns back at a net vertex "
+                   "off the design boundary; trim the net there by hand")
+    return out
+
+
+def layout_warnings(properties: dict) -> list:
+    """What a user should know about a layout's measured result, in plain words."""
+    out = boundary_warnings(properties)
+    coverage = properties["coverage"]
     net = properties.get("coverage_net", coverage)
     if coverage - net > 0.1:
         out.append(f"the full panels cover only {100 * net:.0f} % of the design: the layout stops far "
                    "short of the boundary or leaves holes, and boundary panels and patches cover "
                    f"{100 * (coverage - net):.0f} % (try a smaller --panel-size)")
-    flipped = (properties.get("boundary_panels") or {}).get("flipped") or []
-    if flipped:
-        out.append(f"{len(flipped)} boundary panels face against the design (ids under "
-                   "properties.boundary_panels.flipped)")
     edge = properties["edge_length_relative_to_panel"]
     if edge["min"] < 0.5 or edge["max"] > 2.0:
         out.append(f"edges range over {edge['min']:.2f} .. {edge['max']:.2f} of the panel size "

@@ -79,6 +79,8 @@ class BoundaryPanels:
     coverage_net : share of the design's area the net's full panels cover.
     coverage : share covered by the full and the boundary panels together.
     flipped : (k,) int, panels that face against the design (none in a sound result).
+    crossed : (k,) int, panels whose outline crosses itself (none in a sound result; see
+        `_untangled`; slivers along the boundary curve, `extension`, are not listed).
     patch : (p,) bool, the panels that close a hole inside the net (not reaching the
         design boundary).
     extension : (p,) bool, slivers under `min_panel` of a full panel along the side of a
@@ -107,6 +109,7 @@ class BoundaryPanels:
     coverage_net: float
     coverage: float
     flipped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    crossed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     patch: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     extension: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     boundary_distance_max: float = 0.0
@@ -184,6 +187,7 @@ class BoundaryPanels:
                         enumerate(np.bincount(self.corner_counts()[~self.extension])) if c},
             "outline_points_max": max((len(p) for p in self.polygons), default=0),
             "flipped": self.flipped.tolist(),
+            "crossed": np.asarray(self.crossed, np.int64).tolist(),
             "boundary_distance_max_relative_to_panel": self.boundary_distance_max,
             "patches": np.flatnonzero(self.patch).tolist(),
             # the points on the design's boundary curve: the new ones and the net's vertices
@@ -288,6 +292,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    polygons, crossed = _untangled(vertices, polygons, corner)
     # coverage is measured on the surface, independently of the plane (`_under`)
     samples, normals, weight = _design_samples(design)
     on_net = _clad(samples, normals, mesh.vertices, mesh.triangles(), h)
@@ -305,7 +310,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         area=area, panel_size=h, extension=extension,
         coverage_net=float(weight[on_net].sum() / weight.sum()),
         coverage=float(weight[on_any].sum() / weight.sum()),
-        flipped=flipped[~extension[flipped]], patch=patch,
+        flipped=flipped[~extension[flipped]], crossed=crossed[~extension[crossed]], patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
         net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h))
@@ -1167,6 +1172,69 @@ def _flipped(vertices: np.ndarray, polygons: list, design: DesignSurface, min_ar
     size = np.linalg.norm(vector, axis=1)
     return np.flatnonzero((np.sum(vector * design.face_normals[tri], axis=1) <= 0)
                           & (size > 2 * min_area))
+
+
+def _untangled(vertices: np.ndarray, polygons: list, corner: np.ndarray
+               ) -> tuple[list, np.ndarray]:
+    """The outlines without the zigzags where they cross themselves, and the panels whose
+    outline still does.
+
+    A net vertex that lies past the design boundary (a net optimized off the design
+    keeps its boundary vertices where the solve left them, centimetres outside) is
+    followed by the boundary curve's points behind it: the outline runs out to the vertex
+    and back. Where two sides of an outline cross (in the plane of the panel's vector
+    area), the points of the shorter loop between them that are not corners (points
+    that only follow the boundary curve) are dropped, until no sides cross; a crossing
+    whose loop holds only corners is left and reported.
+
+    Returns
+    -------
+    polygons : list of (k,) int arrays, the outlines.
+    crossed : (c,) int, the panels whose outline still crosses itself.
+    """
+    out, crossed = [], []
+    for k, ring in enumerate(polygons):
+        ids = list(ring)
+        while len(ids) > 3:
+            pair = _first_crossing(vertices[ids])
+            if pair is None:
+                break
+            i, j = pair                  # sides i and j cross: points i + 1 .. j between
+            inner = list(range(i + 1, j + 1))
+            outer = list(range(j + 1, len(ids))) + list(range(i + 1))
+            loop = inner if len(inner) <= len(outer) else outer
+            drop = {m for m in loop if not corner[ids[m]]}
+            if not drop or len(ids) - len(drop) < 3:
+                crossed.append(k)
+                break
+            ids = [v for m, v in enumerate(ids) if m not in drop]
+        out.append(np.asarray(ids, dtype=np.asarray(ring).dtype))
+    return out, np.asarray(crossed, np.int64)
+
+
+def _first_crossing(P: np.ndarray) -> tuple[int, int] | None:
+    """The first two sides of the closed outline `P` (k, 3) that cross, in the plane of
+    its vector area: (i, j), i < j, side i from point i to i + 1; None when none do."""
+    n = len(P)
+    centred = P - P.mean(axis=0)
+    normal = np.sum(np.cross(P, np.roll(P, -1, axis=0)), axis=0)
+    if np.linalg.norm(normal) <= 1e-9 * np.sum(centred ** 2):
+        normal = np.linalg.svd(centred)[2][2]      # a bow tie's lobes cancel: its plane
+    axis = np.linalg.svd(normal[None, :])[2][1:]           # two directions across it
+    q = centred @ axis.T
+    a, b = q, np.roll(q, -1, axis=0)
+    i, j = np.triu_indices(n, 2)
+    keep = ~((i == 0) & (j == n - 1))                         # the last side meets the first
+    i, j = i[keep], j[keep]
+
+    def side(p, r, s):          # which side of p -> r the point s lies on (sign of cross)
+        d = r - p
+        return np.sign(d[..., 0] * (s[..., 1] - p[..., 1]) - d[..., 1] * (s[..., 0] - p[..., 0]))
+
+    hit = (side(a[i], b[i], a[j]) * side(a[i], b[i], b[j]) < 0) & \
+          (side(a[j], b[j], a[i]) * side(a[j], b[j], b[i]) < 0)
+    first = np.flatnonzero(hit)
+    return None if len(first) == 0 else (int(i[first[0]]), int(j[first[0]]))
 
 
 def _boundary_distance(design: DesignSurface, points: np.ndarray) -> float:
