@@ -710,3 +710,41 @@ def test_a_pickled_layout_leaves_its_chart_behind_and_makes_it_again():
     assert "chart" not in vars(received)
     np.testing.assert_array_equal(received.chart.P, chart.P)
     np.testing.assert_array_equal(received.vertex_keys, layout.vertex_keys)
+
+
+def _bumps(seed: int):
+    """Six seeded Gaussian bumps and dents on 16 x 16 m: domes, saddles and umbilics
+    between them."""
+    rng = np.random.default_rng(seed)
+    centres, heights = rng.uniform(-6, 6, size=(6, 2)), rng.uniform(-1.2, 1.2, size=6)
+    widths = rng.uniform(2.0, 4.0, size=6)
+
+    def z(x, y):
+        return sum(h * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / w**2)
+                   for (cx, cy), h, w in zip(centres, heights, widths, strict=True)) + 0 * x
+
+    surface = height_field(z, width=16.0, depth=16.0)
+    return surface.triangulate(surface.resolution_for(12000))
+
+
+@pytest.mark.parametrize("seed", [3, 8])
+def test_a_lattice_broken_by_umbilics_is_refused_with_the_reason(seed, tmp_path, capsys):
+    """Regression: on six bumps and dents the layout's quads covered 3 % of the design
+    and boundary panels the size of the gaps the rest; the net was written as converged.
+    A layout either holds together (its quads cover at least half the design) or is
+    refused, naming the singular points, with nothing written."""
+    path = tmp_path / "bumps.obj"
+    _bumps(seed).write(path)
+    out = tmp_path / "out" / "net.obj"
+    code = main(["layout", str(path), "--net", "snet", "--panel-size", "0.72", "-o", str(out), "-q"])
+    err = capsys.readouterr().err
+    if code == 0:
+        props = json.loads(out.with_suffix(".json").read_text())["properties"]
+        assert props["coverage_net"] >= 0.5
+    else:
+        lines = [line for line in err.splitlines() if line.startswith("fabplan: error:")]
+        assert len(lines) == 1 and "does not hold together" in lines[0], err
+        assert "singular points of the principal directions" in lines[0]
+        assert not (tmp_path / "out").exists()
+    if seed == 3:
+        assert code != 0

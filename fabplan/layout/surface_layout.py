@@ -245,25 +245,57 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
             continue
         if best is None and k == len(lengths) - 1:
             # the only layout there is: nothing to compare its coverage with
-            best = layout
+            best, best_net = layout, None
             tried.append({"smoothing_panels": length, "coverage": None})
             break
         # judged with the boundary panels the net will get: the staircase along the
         # boundary is theirs to clad; what they cannot reach are the lattice's own holes
         try:
-            coverage = trim_to_design(layout.mesh, layout).coverage
+            panels = trim_to_design(layout.mesh, layout)
+            coverage, on_net = panels.coverage, panels.coverage_net
         except shapely.errors.GEOSException:
-            coverage = net_coverage(layout.mesh, design, h)
+            coverage = on_net = net_coverage(layout.mesh, design, h)
         tried.append({"smoothing_panels": length, "coverage": coverage})
         if coverage > best_coverage:
-            best, best_coverage = layout, coverage
+            best, best_coverage, best_net = layout, coverage, on_net
         if coverage >= s.good_coverage:
             break
     if best is None:
         assert refusal is not None
         raise refusal
+    if best_net is None:
+        best_net = net_coverage(best.mesh, design, h)
+    if best_net < MIN_LATTICE_SHARE:
+        raise InputError(_broken_lattice(best, best_net, [t["smoothing_panels"] for t in tried]))
     best.smoothing_tried = tried
     return best
+
+
+#: a layout whose full quads cover less of the design than this is refused: the rest
+#: would be boundary panels and patches, pieces as large as the gaps they fill
+MIN_LATTICE_SHARE = 0.5
+
+
+def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list | None) -> str:
+    """Why a layout's lattice of quads does not hold together, in one line: the quads'
+    share of the design (`share`, None: no interior vertex), the singular points and the
+    places the directions turn, the smoothing lengths tried (panels) and what to try."""
+    design, h = layout.design, layout.panel_size
+    held = ("the quads laid out form no interior vertex with four quads" if share is None else
+            f"its quads cover only {100 * share:.0f} % of the design")
+    why = []
+    if len(layout.singular_points):
+        why.append(f"{len(layout.singular_points)} singular points of the principal directions "
+                   "(umbilics, where the lattice must break)")
+    if len(layout.turning_points):
+        why.append(f"{len(layout.turning_points)} places where they turn by up to "
+                   f"{float(np.max(layout.turning_deg)):.0f} deg within a panel")
+    tried = "" if not smoothing else \
+        f" (direction fields smoothed over {', '.join(f'{x:g}' for x in smoothing)} panels tried)"
+    return (f"{design.name}: the layout at panel size {h:g} does not hold together: {held}"
+            + (f"; the design has {' and '.join(why)}" if why else "") + tried
+            + ". Smooth the design's curvature near those points, lay it out in parts, or "
+            "try another --panel-size")
 
 
 def layout_again(record: dict) -> SurfaceLayout:
@@ -375,14 +407,11 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
     vertex_keys = np.full((len(verts), 2), np.nan)
     vertex_keys[:len(keys)] = keys
     mesh = QuadMesh(verts, faces, name=f"layout-{Path(design.name).stem}")
-    if len(mesh.stars) == 0:
-        raise InputError(f"{design.name}: panel size {h:g} is too large for the surface (the "
-                         "layout has no interior vertex with four quads)")
     lap("holes")
     gliding = _near_design_boundary(mesh, design, s.boundary_snap * h, fields.prescribed,
                                     vertex_keys[:, 0])
     lap("boundary")
-    return SurfaceLayout(
+    layout = SurfaceLayout(
         mesh=mesh, design=design, panel_size=h,
         angle_deg=None if family is not None else float(angle),
         parameters=P2 + np.asarray(off), singular_points=V[singular],
@@ -393,6 +422,12 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
         prescribed=fields.prescribed, family=fields.description, level_step=fields.level_step,
         turning_points=turning[0], turning_deg=turning[1], direction_symmetry=symmetry,
         smoothing=smoothing, seconds=seconds)
+    if len(mesh.stars) == 0:
+        if design.area / (h * h) < 36:      # under about 6 x 6 panels: the size is why
+            raise InputError(f"{design.name}: panel size {h:g} is too large for the surface "
+                             "(the layout has no interior vertex with four quads)")
+        raise InputError(_broken_lattice(layout, None, None))
+    return layout
 
 
 def _check_layout_request(design: DesignSurface, h: float, angle: float,
