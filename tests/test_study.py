@@ -776,30 +776,7 @@ def test_the_report_says_how_much_of_the_design_is_clad_and_whether_nets_fold(st
             assert f"{100 * (1 - m['coverage']):.1f} % is left unclad" in page
 
 
-TWIN_STUDY = """\
-[study]
-name = "Twins"
-max_iterations = 80
-
-[design]
-surface = "hyperbolic-paraboloid"
-parameters = { width = 3, depth = 3, rise = 0.9 }
-triangles = 3000
-
-[panels]
-size = 0.7
-
-[limits]
-max_deviation_mm = 200
-mold_tolerance_mm = 1.5
-max_kink_deg = 20
-
-[strips]
-height_mm = 60
-thickness_mm = 3
-sheet_mm = [1200, 600]
-nets = "all"
-
+TWIN_STUDY = STUDY.split("[[candidates]]")[0].format(deviation=200) + """\
 [[candidates]]
 net = "minimal"
 
