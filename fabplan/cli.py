@@ -263,7 +263,7 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
     import numpy as np
 
     from .layout.surface_layout import layout_again
-    from .layout.trim import add_boundary_panels
+    from .layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
 
     old = boundary_path(source)
     if not old.is_file():
@@ -282,7 +282,7 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
             np.array_equal(a, b) for a, b in zip(layout.mesh.faces, mesh.faces, strict=True))
         if not same:
             return f"{lost}: the net's faces are not those of the layout in {source.with_suffix('.json')}"
-        if add_boundary_panels(result, layout) is None:
+        if add_boundary_panels(result, layout, touch=OFF_DESIGN_TOUCH) is None:
             return f"{lost}: {result.properties['boundary_panels']['error']}"
     return None
 
@@ -600,6 +600,18 @@ def boundary_text(properties: dict) -> str:
 LINE_TURN_WARNING_DEG = 45.0
 
 
+def panel_areas(count: float) -> str:
+    """An area in full panels, in words.
+
+    Examples
+    --------
+    >>> panel_areas(0.0412), panel_areas(2.46), panel_areas(54.2)
+    ('0.04 panel', '2.5 panels', '54 panels')
+    """
+    text = f"{count:.2f}" if count < 1 else f"{count:.1f}" if count < 10 else f"{count:.0f}"
+    return f"{text} panel{'' if count < 1 else 's'}"
+
+
 def boundary_warnings(properties: dict) -> list:
     """What falls short in a net's cladding of its design (coverage, boundary panels
     facing against it or crossing themselves), in plain words."""
@@ -609,12 +621,12 @@ def boundary_warnings(properties: dict) -> list:
     if coverage < 0.999:
         gaps = panels.get("gaps") or []
         where = "" if not gaps else (
-            f"; the largest gap, {gaps[0]['area_relative_to_panel']:.2g} panels of area, is "
-            f"{'at the design boundary' if gaps[0]['at_design_boundary'] else 'inside'} around "
-            f"({', '.join(f'{v:.4g}' for v in gaps[0]['point'])})")
+            f"; the largest gap, of {panel_areas(gaps[0]['area_relative_to_panel'])}, lies "
+            f"{'at the design boundary' if gaps[0]['at_design_boundary'] else 'inside the design'} "
+            f"around ({', '.join(f'{v:.4g}' for v in gaps[0]['point'])})")
         out.append(f"the panels cover only {100 * coverage:.1f} % of the design surface "
-                   f"(measured by area on the design{where}; every gap under "
-                   "properties.boundary_panels.gaps in the JSON)")
+                   f"(measured by area on the design{where}; the largest gaps are listed "
+                   "under properties.boundary_panels.gaps in the JSON)")
     flipped = panels.get("flipped") or []
     if flipped:
         out.append(f"{counted(len(flipped), 'boundary panel')} face{'s' if len(flipped) == 1 else ''} "
@@ -918,7 +930,7 @@ def _cmd_study(args) -> int:
         # with workers, they make the candidates' files too
         with progress.stage("writing the report and the candidates' files"):
             files = write_study(result, out, progress=say, rhino=args.rhino,
-                                view_3d=not args.no_3d, client=client)
+                                view_3d=not args.no_3d, client=client, fork=client is None)
     done = time.perf_counter()
     if args.quiet:
         verdict = (f"recommended: {result.recommended}" if result.recommended else

@@ -801,7 +801,7 @@ def test_forked_candidates_write_the_same_files_as_the_serial_run(tmp_path):
     assert {c.name: c.twin for c in forked.candidates}["cmc"] == "minimal"   # the same net
     assert {"minimal", "cmc"} <= set(forked.made_files)       # the twin's made beside, too
     write_study(serial, tmp_path / "serial")
-    write_study(forked, tmp_path / "forked")
+    write_study(forked, tmp_path / "forked", fork=True)
 
     def files(folder: Path) -> dict:
         return {p.relative_to(folder).as_posix(): p for p in sorted(folder.rglob("*"))
@@ -820,3 +820,38 @@ def test_forked_candidates_write_the_same_files_as_the_serial_run(tmp_path):
     pdf = b["report.pdf"].read_bytes()
     assert pdf.startswith(b"%PDF") and pdf.rstrip().endswith(b"%%EOF")
     assert not list((tmp_path / "forked").glob("*.part"))
+
+
+def test_a_forked_file_is_written_whole_here_when_its_process_fails_and_gone_when_cancelled(tmp_path):
+    import os
+    import time
+
+    from fabplan.study.background import ForkedFile
+
+    def write(path: Path) -> None:
+        path.write_text("drawn", encoding="utf-8")
+
+    done = ForkedFile(write, tmp_path / "a.txt")
+    done.finish()
+    assert (tmp_path / "a.txt").read_text(encoding="utf-8") == "drawn"
+
+    parent = os.getpid()
+
+    def fails_elsewhere(path: Path) -> None:
+        if os.getpid() != parent:
+            raise RuntimeError("the forked process fails")
+        path.write_text("here", encoding="utf-8")
+
+    here = ForkedFile(fails_elsewhere, tmp_path / "b.txt")
+    here.finish()
+    assert (tmp_path / "b.txt").read_text(encoding="utf-8") == "here"
+
+    def slow(path: Path) -> None:
+        path.write_text("half", encoding="utf-8")
+        time.sleep(30)
+
+    stopped = ForkedFile(slow, tmp_path / "c.txt")
+    clock = time.perf_counter()
+    stopped.cancel()
+    assert time.perf_counter() - clock < 10
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]

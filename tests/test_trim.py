@@ -227,18 +227,22 @@ def test_outlines_that_turn_back_at_a_vertex_off_the_boundary_are_untangled():
     from fabplan.layout.trim import _untangled
 
     # a panel: net vertices 0, 1 (1 is 4 cm past the edge x = 1), then edge points 2..4
-    V = np.array([[0.0, 0.0, 0], [1.04, 0.0, 0], [1.0, 0.05, 0], [1.0, 0.5, 0], [1.0, 1.0, 0],
-                  [0.0, 1.0, 0]])
+    V = np.array([[0.0, 0.0, 0], [1.04, 0.0, 0], [1.0, -0.03, 0], [1.0, 0.5, 0], [1.0, 1.0, 0],
+                  [0.0, 1.0, 0]])          # point 2 lies behind vertex 1 along the edge
     corner = np.array([True, True, False, False, True, True])
     ring = np.array([0, 1, 2, 3, 4, 5])
-    V[2] = [1.0, -0.03, 0]                 # behind vertex 1 along the edge: the zigzag
     assert _crossing_outlines(V, [ring]) == [0]
-    polygons, crossed = _untangled(V, [ring], corner)
-    assert polygons[0].tolist() == [0, 1, 3, 4, 5] and len(crossed) == 0
+    polygons, changed, crossed = _untangled(V, [ring], corner)
+    assert polygons[0].tolist() == [0, 1, 3, 4, 5] and changed.tolist() == [0] and len(crossed) == 0
     assert _crossing_outlines(V, polygons) == []
+    # an outline that runs along the edge past a point and back over itself (a spike)
+    spike = np.array([[0.0, 0, 0], [1, 0, 0], [1.5, 0, 0], [1.2, 0, 0], [1.2, 1, 0], [0, 1, 0]])
+    polygons, changed, crossed = _untangled(spike, [np.arange(6)],
+                                            np.array([True, False, False, False, True, True]))
+    assert polygons[0].tolist() == [0, 1, 3, 4, 5] and len(crossed) == 0
     # a bow tie of corners only cannot be untangled: reported
     bow = np.array([[0.0, 0, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0]])
-    polygons, crossed = _untangled(bow, [np.arange(4)], np.ones(4, bool))
+    polygons, _, crossed = _untangled(bow, [np.arange(4)], np.ones(4, bool))
     assert crossed.tolist() == [0] and polygons[0].tolist() == [0, 1, 2, 3]
 
 
@@ -375,6 +379,12 @@ def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
     assert [g["at_design_boundary"] for g in gaps] == [False, True]
     assert gaps[1]["area"] < gaps[0]["area"] and min(gaps[1]["point"][:2]) > 1.0
     assert _gaps(whole, design, 4.0) == []
+    # the warning names the largest gap and where it lies
+    from fabplan.cli import boundary_warnings
+
+    text = boundary_warnings({"coverage": 0.9, "boundary_panels": {"gaps": gaps}})[0]
+    where = ", ".join(f"{v:.4g}" for v in gaps[0]["point"])
+    assert "cover only 90.0 %" in text and f"lies inside the design around ({where})" in text
 
 
 def _gaps(net, design: DesignSurface, h: float) -> list:
@@ -418,3 +428,43 @@ def test_boundary_panels_reach_the_edges_where_the_sheets_of_a_seam_overlap():
     T = X[net.mesh.triangles()]
     net_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum()
     assert abs((net_area + panels.area.sum()) / design.area - panels.coverage) <= 0.01
+
+
+def test_small_gaps_are_patched_in_their_tangent_plane():
+    """A gap of a panel inside the cladding is closed by a patch whose corners are the
+    cladding's own; one at the design's edge by a patch whose new corners lie on the
+    design boundary; the design is then clad whole (measured by the samples)."""
+    from fabplan.layout.gap_patches import gap_patches
+    from fabplan.layout.trim import _clad, _design_samples
+    from fabplan.net.mesh import QuadMesh
+
+    n = 30
+    x, y = np.meshgrid(np.linspace(0, 1.5, n + 1), np.linspace(0, 1.5, n + 1), indexing="ij")
+    V = np.stack([x, y, 0.05 * np.sin(x) * np.cos(y)], axis=-1).reshape(-1, 3)
+    idx = np.arange(len(V)).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    design = DesignSurface(V, T, name="gently curved")
+    # the cladding: a 6 x 6 grid over [-0.25, 1.75]^2 on the surface, less two faces
+    u, v = np.meshgrid(np.linspace(-0.25, 1.75, 7), np.linspace(-0.25, 1.75, 7), indexing="ij")
+    whole = QuadMesh.grid(np.stack([u, v, 0.05 * np.sin(u) * np.cos(v)], axis=-1))
+    centre = np.array([whole.vertices[f][:, :2].mean(axis=0) for f in whole.faces])
+    inside = int(np.argmin(np.linalg.norm(centre - [0.75, 0.75], axis=1)))
+    edge = int(np.argmin(np.linalg.norm(centre - [1.58, 0.75], axis=1)))     # over x = 1.5
+    net = QuadMesh(whole.vertices, [f for k, f in enumerate(whole.faces) if k not in (inside, edge)])
+    h = 2.0 / 6
+    samples, normals, weight = _design_samples(design)
+    clad = _clad(samples, normals, net.vertices, net.triangles(), h)
+    assert weight[~clad].sum() > 0.9 * h * h                  # a panel and more are unclad
+    patches = gap_patches(design, net.vertices, net.triangles(), clad, h)
+    assert patches.count == 2
+    by_size = sorted(patches.polygons, key=len)
+    assert sorted(by_size[0].tolist()) == sorted(whole.faces[inside].tolist())   # its corners
+    at_edge = by_size[1]
+    new = at_edge[at_edge >= len(net.vertices)]
+    assert len(new) >= 2 and patches.on_boundary.all()
+    assert np.abs(patches.points[:, 0] - 1.5).max() < 1e-9   # new corners on the edge x = 1.5
+    points = np.vstack([net.vertices, patches.points])
+    everything = np.vstack([net.triangles(), patches.triangles])
+    assert weight[_clad(samples, normals, points, everything, h)].sum() == pytest.approx(
+        weight.sum(), rel=1e-6)

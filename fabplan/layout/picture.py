@@ -31,7 +31,9 @@ def fairness_marks(properties: dict) -> dict[str, list]:
     marks = {}
     gaps = (properties.get("boundary_panels") or {}).get("gaps") or []
     if gaps and properties.get("coverage", 1.0) < 0.999:
-        marks[f"largest gap ({gaps[0]['area_relative_to_panel']:.2g} panels)"] = gaps[0]["point"]
+        area = gaps[0]["area_relative_to_panel"]
+        marks[f"largest gap ({area:.2f} of a panel)" if area < 1 else
+              f"largest gap ({area:.1f} panels)"] = gaps[0]["point"]
     turn = fairness.get("line_turn_deg") or {}
     if turn.get("point") is not None:
         marks[f"lines turn most ({turn['max']:.1f} deg)"] = turn["point"]

@@ -203,8 +203,8 @@ class SurfaceLayout:
 
 
 def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 90.0,
-                   family: str | None = None,
-                   settings: LayoutSettings | None = None) -> SurfaceLayout:
+                   family: str | None = None, settings: LayoutSettings | None = None,
+                   refuse_broken: bool = True) -> SurfaceLayout:
     """Lay out an initial S-net on a design surface.
 
     Parameters
@@ -215,6 +215,9 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     family : a prescribed first family (see `prescribed_family`); the second family is
         the complementary one that makes an S-net.
     settings : `LayoutSettings`.
+    refuse_broken : refuse a layout whose lattice does not hold together (its quads cover
+        less than `MIN_LATTICE_SHARE` of a design of `MIN_PANELS_JUDGED` panels or more);
+        False makes such a layout anyway (`layout_again` of a net made before).
 
     Returns
     -------
@@ -224,7 +227,8 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     ------
     InputError
         For a panel size that is not positive or too large for the surface, an angle
-        outside (0, 180), or a layout without a single regular vertex.
+        outside (0, 180), a layout without a single regular vertex, or (with
+        `refuse_broken`) one whose lattice does not hold together, naming why.
     """
     from dataclasses import replace
 
@@ -263,10 +267,14 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     if best is None:
         assert refusal is not None
         raise refusal
-    if best_net is None:
-        best_net = net_coverage(best.mesh, design, h)
-    if best_net < MIN_LATTICE_SHARE:
-        raise InputError(_broken_lattice(best, best_net, [t["smoothing_panels"] for t in tried]))
+    if refuse_broken and design.area / (h * h) >= MIN_PANELS_JUDGED:
+        # a few panels' raw lattice stops a panel short of the boundary all round: only
+        # larger designs are judged by the share their quads cover
+        if best_net is None:
+            best_net = net_coverage(best.mesh, design, h)
+        if best_net < MIN_LATTICE_SHARE:
+            raise InputError(_broken_lattice(best, best_net,
+                                             [t["smoothing_panels"] for t in tried]))
     best.smoothing_tried = tried
     return best
 
@@ -274,6 +282,10 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
 #: a layout whose full quads cover less of the design than this is refused: the rest
 #: would be boundary panels and patches, pieces as large as the gaps they fill
 MIN_LATTICE_SHARE = 0.5
+
+#: designs of fewer panels (area over the panel size squared) are not judged by their
+#: quads' share, and a layout of them without an interior vertex is "too large a panel"
+MIN_PANELS_JUDGED = 36
 
 
 def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list | None) -> str:
@@ -292,10 +304,11 @@ def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list 
                    f"{float(np.max(layout.turning_deg)):.0f} deg within a panel")
     tried = "" if not smoothing else \
         f" (direction fields smoothed over {', '.join(f'{x:g}' for x in smoothing)} panels tried)"
+    advice = ("smooth the design's curvature near those points, lay it out in parts, or try "
+              "another panel size" if why else "lay the design out in parts, or try another "
+              "panel size")
     return (f"{design.name}: the layout at panel size {h:g} does not hold together: {held}"
-            + (f"; the design has {' and '.join(why)}" if why else "") + tried
-            + ". Smooth the design's curvature near those points, lay it out in parts, or "
-            "try another --panel-size")
+            + (f"; the design has {' and '.join(why)}" if why else "") + tried + f"; {advice}")
 
 
 def layout_again(record: dict) -> SurfaceLayout:
@@ -323,7 +336,8 @@ def layout_again(record: dict) -> SurfaceLayout:
         settings = LayoutSettings(smoothing=float(record["smoothing_panels"]), smoothing_tries=())
         return layout_surface(design, float(record["panel_size"]),
                               angle=float(record["angle_deg"]),
-                              family=record.get("prescribed_family"), settings=settings)
+                              family=record.get("prescribed_family"), settings=settings,
+                              refuse_broken=False)
     except InputError:
         raise
     except (KeyError, TypeError, ValueError) as exc:
@@ -423,7 +437,7 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
         turning_points=turning[0], turning_deg=turning[1], direction_symmetry=symmetry,
         smoothing=smoothing, seconds=seconds)
     if len(mesh.stars) == 0:
-        if design.area / (h * h) < 36:      # under about 6 x 6 panels: the size is why
+        if design.area / (h * h) < MIN_PANELS_JUDGED:     # the panel size is why
             raise InputError(f"{design.name}: panel size {h:g} is too large for the surface "
                              "(the layout has no interior vertex with four quads)")
         raise InputError(_broken_lattice(layout, None, None))

@@ -46,9 +46,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
-from ..design.topology import triangle_pairs
 from ..errors import InputError
 from ..net.mesh import QuadMesh
+from .gap_patches import gap_patches, unclad_components
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
@@ -93,7 +93,7 @@ class BoundaryPanels:
         the parametrization (concave outlines stay whole), or None; triangle_panel :
         (t,) int, the panel of each (see `panel_triangles`).
     net_on_boundary : (n,) bool, the net's vertices on the design boundary (to a
-        thousandth of a panel); empty where unknown.
+        `touch` of a panel); empty where unknown.
     gaps : the largest parts of the design no panel covers (`coverage_gaps`), largest
         first.
     """
@@ -205,8 +205,15 @@ class BoundaryPanels:
         return format_obj(self.vertices, self.polygons, header)
 
 
-def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05
-                   ) -> BoundaryPanels:
+#: a net vertex this close to the design boundary (in panel sizes) is on it: a net held on
+#: the design glides there; a net that leaves the design (OFF_DESIGN_TOUCH) ends a few
+#: millimetres inside, and the strip between is no panel (a boundary member covers it)
+TOUCH = 1e-3
+OFF_DESIGN_TOUCH = 1e-2
+
+
+def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05,
+                   touch: float = TOUCH) -> BoundaryPanels:
     """The boundary panels of a net laid out on a design (see the module's text).
 
     Parameters
@@ -215,6 +222,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         within a small distance of the design).
     layout : the `SurfaceLayout` the net comes from (design, parametrization, cuts).
     min_panel : pieces smaller than this share of a full panel's area join a neighbour.
+    touch : net vertices this close to the design boundary (panel sizes) are on it.
 
     Returns
     -------
@@ -231,6 +239,15 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     # vertex on a boundary segment to rounding is noded there
     grid = 1e-7 * cell ** 0.5
     p_net = np.round(p_net / grid) * grid
+    if touch > TOUCH:
+        # a net that left the design: its vertices within `touch` of the boundary stand
+        # on it in the plane, so that no strip a few millimetres wide is cut beside them
+        points = shapely.points(p_net)
+        near = shapely.distance(points, chart.boundary_lines) <= touch * cell ** 0.5
+        if near.any():
+            foot = shapely.get_coordinates(
+                shapely.shortest_line(points[near], chart.boundary_lines)).reshape(-1, 2, 2)[:, 1]
+            p_net[near] = np.round(foot / grid) * grid
     faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
     by_sheet = bool(layout.cuts) and chart.overlapping
     if by_sheet:
@@ -246,10 +263,10 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
                                      grid_size=grid)]
     boundary = chart.boundary_lines
     tol = 4 * grid
-    # a vertex on the boundary (to a thousandth of a panel: gliding, or added on it)
+    # a vertex on the boundary (to `touch` of a panel: gliding, or added on it)
     # ends its lines there; a line continued from it would run along the boundary. It is
     # joined to the boundary by the shortest way instead, which parts the slivers beside it
-    touching = shapely.distance(shapely.points(p_net), boundary) <= 1e-3 * cell ** 0.5
+    touching = shapely.distance(shapely.points(p_net), boundary) <= touch * cell ** 0.5
     # regions of different sheets may overlap in the plane: each is cut on its own
     cut = [_cut_region(unclad, mesh, p_net, boundary, touching, cell, grid, min_panel)
            for unclad in regions]
@@ -292,12 +309,24 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
-    polygons, crossed = _untangled(vertices, polygons, corner)
+    polygons, changed, crossed = _untangled(vertices, polygons, corner)
+    triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
     # coverage is measured on the surface, independently of the plane (`_under`)
     samples, normals, weight = _design_samples(design)
     on_net = _clad(samples, normals, mesh.vertices, mesh.triangles(), h)
     on_any = on_net | _clad(samples, normals, vertices,
                             np.vstack([mesh.triangles(), triangles]), h)
+    # the small gaps left (pieces around singular points the plane could not cut) are
+    # cut in their own tangent planes
+    extra = gap_patches(design, vertices, np.vstack([mesh.triangles(), triangles]), on_any, h)
+    if extra.count:
+        owner = np.r_[owner, len(polygons) + extra.owner]
+        vertices, polygons = np.vstack([vertices, extra.points]), polygons + extra.polygons
+        triangles = np.vstack([triangles, extra.triangles])
+        patch = np.r_[patch, np.ones(extra.count, bool)]
+        on_boundary = np.r_[on_boundary, extra.on_boundary]
+        corner = np.r_[corner, ~extra.on_boundary]
+        on_any |= _clad(samples, normals, vertices, np.vstack([mesh.triangles(), triangles]), h)
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     area = np.bincount(owner, tri_area, minlength=len(polygons))
@@ -375,18 +404,27 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
         neighbour_face=_neighbour_faces(polygons, mesh, vertices),
         area=np.linalg.norm(newell, axis=1), panel_size=mesh.mean_edge_length,
         coverage_net=record.get("coverage_net", math.nan), coverage=coverage,
-        patch=flags["patches"], extension=flags["extensions"], net_on_boundary=net_on_boundary)
+        patch=flags["patches"], extension=flags["extensions"], net_on_boundary=net_on_boundary,
+        flipped=_ids(record.get("flipped"), p), crossed=_ids(record.get("crossed"), p),
+        gaps=list(record.get("gaps") or []))
 
 
-def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout
-                        ) -> BoundaryPanels | None:
+def _ids(values, count: int) -> np.ndarray:
+    """The panel ids of a record's list that exist among `count` panels (int array)."""
+    ids = np.asarray(values or [], np.int64)
+    return ids[(ids >= 0) & (ids < count)]
+
+
+def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout, *,
+                        touch: float = TOUCH) -> BoundaryPanels | None:
     """Trim a net solved from `layout` to the design (`trim_to_design`), attach the panels
     to `result` (written beside its OBJ) and record what they give in its properties:
     ``coverage`` (full and boundary panels), ``coverage_net`` (full panels only) and
     ``boundary_panels`` (`BoundaryPanels.record`). A net the overlays fail on gets none,
-    and the reason under ``boundary_panels.error``."""
+    and the reason under ``boundary_panels.error``. `touch`: as in `trim_to_design`
+    (`OFF_DESIGN_TOUCH` for a net that left the design)."""
     try:
-        panels = trim_to_design(result.mesh, layout)
+        panels = trim_to_design(result.mesh, layout, touch=touch)
     except shapely.errors.GEOSException as exc:
         # the overlays failed on a degenerate net: it is reported without boundary panels
         coverage = net_coverage(result.mesh, layout.design, layout.panel_size)
@@ -431,19 +469,10 @@ def coverage_gaps(design: DesignSurface, samples: np.ndarray, weight: np.ndarray
     its centroid (a point on the design), and ``at_design_boundary`` whether it reaches
     the design's boundary.
     """
-    open_ = ~clad.reshape(-1, 4)
-    unclad = np.flatnonzero(open_.any(axis=1))
+    unclad, label, open_, area = unclad_components(design, clad)
     if len(unclad) == 0:
         return []
-    f, g, _ = triangle_pairs(design.triangles, len(design.vertices))
-    both = open_.any(axis=1)[f] & open_.any(axis=1)[g]
-    local = np.full(len(design.triangles), -1)
-    local[unclad] = np.arange(len(unclad))
-    graph = coo_matrix((np.ones(int(both.sum())), (local[f[both]], local[g[both]])),
-                       shape=(len(unclad), len(unclad)))
-    _, label = connected_components(graph, directed=False)
-    w = (weight.reshape(-1, 4) * open_)[unclad]             # the unclad samples' areas
-    area = np.bincount(label, w.sum(axis=1))
+    w = weight.reshape(-1, 4)[unclad] * open_               # the unclad samples' areas
     edge = np.zeros(len(design.vertices), bool)
     edge[np.concatenate(design.boundary_loops or [np.zeros(0, np.int64)])] = True
     reaches = np.bincount(label, edge[design.triangles[unclad]].any(axis=1)) > 0
@@ -454,7 +483,7 @@ def coverage_gaps(design: DesignSurface, samples: np.ndarray, weight: np.ndarray
     for gap in np.argsort(-area, kind="stable")[:count]:
         if area[gap] < MIN_GAP * h * h:
             break
-        mine = (label == gap)[:, None] & open_[unclad]
+        mine = (label == gap)[:, None] & open_
         points = P[mine]
         nearest = points[np.argmin(np.linalg.norm(points - centroid[gap], axis=1))]
         out.append({"area": float(area[gap]), "area_relative_to_panel": float(area[gap] / (h * h)),
@@ -1175,47 +1204,116 @@ def _flipped(vertices: np.ndarray, polygons: list, design: DesignSurface, min_ar
 
 
 def _untangled(vertices: np.ndarray, polygons: list, corner: np.ndarray
-               ) -> tuple[list, np.ndarray]:
-    """The outlines without the zigzags where they cross themselves, and the panels whose
-    outline still does.
+               ) -> tuple[list, np.ndarray, np.ndarray]:
+    """The outlines without the zigzags where they turn back or cross themselves, and
+    the panels whose outline still does.
 
     A net vertex that lies past the design boundary (a net optimized off the design
     keeps its boundary vertices where the solve left them, centimetres outside) is
     followed by the boundary curve's points behind it: the outline runs out to the vertex
-    and back. Where two sides of an outline cross (in the plane of the panel's vector
-    area), the points of the shorter loop between them that are not corners (points
-    that only follow the boundary curve) are dropped, until no sides cross; a crossing
-    whose loop holds only corners is left and reported.
+    and back, across itself or along itself. Where an outline turns back on itself at a
+    point (a spike: its two sides run opposite ways) or two of its sides cross (in the
+    plane of the panel's vector area), points that are not corners (points that only
+    follow the boundary curve) are dropped: the spike's tip, or its nearer foot when the
+    tip is a corner; the points of the shorter loop between crossing sides. This repeats
+    until the outline is simple; a zigzag of corners only is left and reported.
 
     Returns
     -------
     polygons : list of (k,) int arrays, the outlines.
-    crossed : (c,) int, the panels whose outline still crosses itself.
+    changed : (g,) int, the panels that lost points.
+    crossed : (c,) int, the panels whose outline still turns back or crosses itself.
     """
-    out, crossed = [], []
+    out, changed, crossed = [], [], []
     for k, ring in enumerate(polygons):
         ids = list(ring)
         while len(ids) > 3:
-            pair = _first_crossing(vertices[ids])
-            if pair is None:
-                break
-            i, j = pair                  # sides i and j cross: points i + 1 .. j between
-            inner = list(range(i + 1, j + 1))
-            outer = list(range(j + 1, len(ids))) + list(range(i + 1))
-            loop = inner if len(inner) <= len(outer) else outer
-            drop = {m for m in loop if not corner[ids[m]]}
+            drop = _spike(vertices[ids], corner[ids])
+            if drop is None:
+                pair = _first_crossing(vertices[ids])
+                if pair is None:
+                    break
+                i, j = pair              # sides i and j cross: points i + 1 .. j between
+                inner = list(range(i + 1, j + 1))
+                outer = list(range(j + 1, len(ids))) + list(range(i + 1))
+                loop = inner if len(inner) <= len(outer) else outer
+                drop = {m for m in loop if not corner[ids[m]]}
             if not drop or len(ids) - len(drop) < 3:
                 crossed.append(k)
                 break
             ids = [v for m, v in enumerate(ids) if m not in drop]
+        if len(ids) < len(ring):
+            changed.append(k)
         out.append(np.asarray(ids, dtype=np.asarray(ring).dtype))
-    return out, np.asarray(crossed, np.int64)
+    return out, np.asarray(changed, np.int64), np.asarray(crossed, np.int64)
+
+
+#: an outline turning by more than this at a point turns back on itself (degrees)
+SPIKE_DEG = 175.0
+
+
+def _spike(P: np.ndarray, corner: np.ndarray) -> set | None:
+    """The points to drop at the first place the closed outline `P` (k, 3) turns back on
+    itself or repeats a point: the tip when it is no corner, else its nearer neighbour
+    that is none (an empty set when both are corners); None where it does neither."""
+    before = P - np.roll(P, 1, axis=0)
+    after = np.roll(P, -1, axis=0) - P
+    lb, la = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
+    scale = 1e-9 * max(float(np.max(lb)), 1e-300)
+    repeated = la <= scale
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.sum(before * after, axis=1) / (lb * la)
+    back = (cos < np.cos(np.radians(SPIKE_DEG))) & (lb > scale) & (la > scale)
+    at = np.flatnonzero(repeated | back)
+    if len(at) == 0:
+        return None
+    i, k = int(at[0]), len(P)
+    if repeated[i]:                     # point i + 1 repeats point i: drop one not a corner
+        pair = [m for m in (i, (i + 1) % k) if not corner[m]]
+        return set(pair[:1])
+    if not corner[i]:
+        return {i}
+    feet = [m for _, m in sorted(((lb[i], (i - 1) % k), (la[i], (i + 1) % k))) if not corner[m]]
+    return set(feet[:1])
+
+
+def _retriangulated(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
+                    owner: np.ndarray, changed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of the `changed` panels made again from their outlines (constrained
+    Delaunay in the plane of each outline's vector area); a panel whose outline is not
+    simple in that plane keeps its triangles less those on dropped points."""
+    if len(changed) == 0:
+        return triangles, owner
+    keep = ~np.isin(owner, changed)
+    new_t, new_o = [triangles[keep]], [owner[keep]]
+    for k in changed:
+        ring = np.asarray(polygons[k])
+        P = vertices[ring]
+        centred = P - P.mean(axis=0)
+        normal = np.sum(np.cross(P, np.roll(P, -1, axis=0)), axis=0)
+        axis = np.linalg.svd(normal[None, :])[2][1:]
+        q = centred @ axis.T
+        outline = shapely.Polygon(q)
+        if outline.is_valid and outline.area > 0:
+            parts = shapely.get_parts(shapely.constrained_delaunay_triangles(outline))
+            corners = shapely.get_coordinates(shapely.get_exterior_ring(parts)).reshape(-1, 4, 2)[:, :3]
+            _, at = cKDTree(q).query(corners.reshape(-1, 2))
+            t = ring[at].reshape(-1, 3)
+        else:
+            old = triangles[owner == k]
+            t = old[np.isin(old, ring).all(axis=1)]
+        t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]
+        new_t.append(t)
+        new_o.append(np.full(len(t), k))
+    return np.concatenate(new_t).astype(np.int64), np.concatenate(new_o).astype(np.int64)
 
 
 def _first_crossing(P: np.ndarray) -> tuple[int, int] | None:
     """The first two sides of the closed outline `P` (k, 3) that cross, in the plane of
     its vector area: (i, j), i < j, side i from point i to i + 1; None when none do."""
     n = len(P)
+    if not np.isfinite(P).all():
+        return None
     centred = P - P.mean(axis=0)
     normal = np.sum(np.cross(P, np.roll(P, -1, axis=0)), axis=0)
     if np.linalg.norm(normal) <= 1e-9 * np.sum(centred ** 2):

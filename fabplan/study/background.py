@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import sys
 import tempfile
 import time
@@ -51,36 +52,56 @@ def background_processes(processes: int | None = None) -> int:
 
 class ForkedFile:
     """One file written by `write(path)` in a forked process while the caller goes on
-    (the study's PDF report beside its HTML report); `finish` waits for it.
+    (the study's PDF report beside its HTML report): `finish` waits for it, `cancel`
+    stops it when the caller failed.
 
-    The child writes beside `path` and renames, so `path` is whole or absent; where
-    nothing is forked (see `background_processes`), or the child failed, `finish` writes
-    the file in this process.
+    The file is written beside `path` and renamed, so `path` is whole or absent; where
+    nothing is forked (see `background_processes`, or the fork fails), or the child
+    failed, `finish` writes the file in this process.
     """
 
     def __init__(self, write: Callable[[Path], None], path: Path) -> None:
         self.write, self.path = write, Path(path)
-        self._pid = os.fork() if background_processes() else None
+        self._part = self.path.with_name(self.path.name + ".part")
+        self._pid: int | None = None
+        if background_processes():
+            try:
+                self._pid = os.fork()
+            except OSError:          # no process to spare: written by `finish`
+                self._pid = None
         if self._pid == 0:
             code = 1
             try:
                 sys.stdout = sys.stderr = open(os.devnull, "w")
-                part = self.path.with_name(self.path.name + ".part")
-                write(part)
-                os.replace(part, self.path)
+                self._write_whole()
                 code = 0
             finally:
                 os._exit(code)
 
+    def _write_whole(self) -> None:
+        self.write(self._part)
+        os.replace(self._part, self.path)
+
     def finish(self) -> None:
         """Wait for the child; write the file here when it did not."""
         if self._pid is not None:
-            _, status = os.waitpid(self._pid, 0)
-            self._pid = None
+            pid, self._pid = self._pid, None
+            _, status = os.waitpid(pid, 0)
             if os.waitstatus_to_exitcode(status) == 0 and self.path.is_file():
                 return
-            self.path.with_name(self.path.name + ".part").unlink(missing_ok=True)
-        self.write(self.path)
+        self._part.unlink(missing_ok=True)
+        self._write_whole()
+
+    def cancel(self) -> None:
+        """Stop the child and remove what it wrote (the caller failed)."""
+        if self._pid is not None:
+            pid, self._pid = self._pid, None
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            os.waitpid(pid, 0)
+        self._part.unlink(missing_ok=True)
 
 
 def _warm_up(files: bool) -> None:

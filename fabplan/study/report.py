@@ -1142,11 +1142,14 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
 
 
 def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False,
-                view_3d: bool = True, pdf: bool = True, client: Any = None) -> list[Path]:
+                view_3d: bool = True, pdf: bool = True, client: Any = None,
+                fork: bool = False) -> list[Path]:
     """Write every file of a study into `out_dir`, replacing the folder as a whole.
 
     `progress` is called with a line per written candidate; `view_3d` puts the
-    interactive 3D view into ``report.html``; `pdf` writes ``report.pdf`` beside it. With
+    interactive 3D view into ``report.html``; `pdf` writes ``report.pdf`` beside it (with
+    `fork`, in a forked process meanwhile, `fabplan.study.background.ForkedFile`: the
+    command does; a notebook or a Dask client's process had better not fork). With
     `rhino`, every candidate's folder also gets ``net.3dm`` (the net, its polylines, its
     panels by mold and its strip curves) and ``net.glb``.
 
@@ -1183,18 +1186,26 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
                 title="The design's curvature: where its principal directions are weak")
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
-        # the PDF is drawn on the other core while this one writes the rest
-        printed = ForkedFile(lambda path: study_pdf(result, pictures, seconds_total=total)
-                             .write(path), tmp / "report.pdf") if pdf else None
+        def print_pdf(path: Path) -> None:
+            study_pdf(result, pictures, seconds_total=total).write(path)
+
+        printed = None
+        if pdf and fork:     # the PDF is drawn on the other core while this one writes the rest
+            printed = ForkedFile(print_pdf, tmp / "report.pdf")
+        elif pdf:
+            print_pdf(tmp / "report.pdf")
         try:
             output.write_texts({tmp / "study.json": json_text(record),
                                 tmp / "candidates.csv": candidates_csv(result),
                                 tmp / "report.html": study_html(result, pictures, outputs,
                                                                 seconds_total=total,
                                                                 view_3d=view_3d)})
-        finally:
+        except BaseException:
             if printed is not None:
-                printed.finish()
+                printed.cancel()
+            raise
+        if printed is not None:
+            printed.finish()
         kept = out_dir / CACHE_FOLDER
         if kept.is_dir():     # the finished candidates stay with the study, for --resume
             os.replace(kept, tmp / CACHE_FOLDER)
