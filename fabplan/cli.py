@@ -288,6 +288,8 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
 
 
 def _cmd_molds(args) -> int:
+    import numpy as np
+
     from .fabricate.boundary_molds import boundary_molds_text, planned_boundary_molds
     from .fabricate.mold_report import write_mold_report
     from .fabricate.molds import MoldSettings, plan_molds
@@ -329,8 +331,25 @@ def _cmd_molds(args) -> int:
         if boundary is not None:
             print(boundary_molds_text(boundary[1], plan.mold_count, boundary_file))
         print(f"wrote {', '.join(str(f) for f in files)}")
+    over = np.zeros(0, np.int64) if boundary is None else boundary[1].slivers_over_limit
+    if over.size:
+        molds = boundary[1]
+        print(f"fabplan: warning: {counted(over.size, 'sliver')} cut with {'its' if over.size == 1 else 'their'} "
+              f"full panel stand{'s' if over.size == 1 else ''} up to {molds.sliver_deviation_max_mm:.2f} mm "
+              f"off the design on its mold (tolerance {settings.tolerance_mm:g} mm; ids in "
+              f"{boundary_file}: {over.tolist()[:10]}): cut them as panels of their own or trim them by hand",
+              file=sys.stderr)
     if plan.failures.size:
         too_large = sum("needs a mold of" in (plan.problem[i] or "") for i in plan.failures)
+        if panels is not None:
+            # faces past the net's are boundary panels: named as in their own file
+            own = np.flatnonzero(~np.asarray(panels.extension, bool))
+            failed = plan.failures[plan.failures >= len(mesh.faces)] - len(mesh.faces)
+            if failed.size:
+                print(f"fabplan: note: of the panels that fit no mold, faces "
+                      f"{(plan.failures[plan.failures >= len(mesh.faces)]).tolist()[:10]} are the "
+                      f"boundary panels {own[failed].tolist()[:10]} of {boundary_file}",
+                      file=sys.stderr)
         why = []
         if too_large:
             why.append(f"{too_large} need a mold larger than --max-mold-size "
@@ -347,7 +366,7 @@ def _cmd_molds(args) -> int:
               f"(limit {plan.step_limit_mm:g} mm); see the step map in {out / 'report.html'}",
               file=sys.stderr)
         return EXIT_NOT_CONVERGED
-    return 0
+    return EXIT_NOT_CONVERGED if over.size else 0
 
 
 def _cmd_mill(args) -> int:

@@ -468,3 +468,17 @@ def test_small_gaps_are_patched_in_their_tangent_plane():
     everything = np.vstack([net.triangles(), patches.triangles])
     assert weight[_clad(samples, normals, points, everything, h)].sum() == pytest.approx(
         weight.sum(), rel=1e-6)
+
+
+def test_slivers_off_their_full_panels_mold_are_counted_not_hidden():
+    """A sliver is cut with its full panel from that panel's mold: its gap to the design
+    there is reported (largest, and which exceed the limit), apart from the panels'."""
+    from fabplan.fabricate.boundary_molds import BoundaryMolds
+
+    molds = BoundaryMolds(neighbour_face=np.array([0, 1, 2, 3]), mold=np.array([0, 0, 1, 1]),
+                          deviation_mm=np.array([0.8, 15.2, 1.9, 3.1]), limit_mm=2.0,
+                          extension=np.array([False, True, False, True]))
+    record = molds.record()
+    assert record["deviation_max_mm"] == pytest.approx(1.9)          # the panels'
+    assert record["extensions_deviation_max_mm"] == pytest.approx(15.2)
+    assert record["extensions_over_limit"] == [1, 3]

@@ -83,6 +83,17 @@ class BoundaryMolds:
             return 0
         return int(np.sum(np.isin(self.mold[~self.extension], self.planned_with_net)))
 
+    @property
+    def sliver_deviation_max_mm(self) -> float | None:
+        """The largest gap of a sliver, cut with its full panel, to the design (mm)."""
+        sliver = self.extension & np.isfinite(self.deviation_mm)
+        return float(self.deviation_mm[sliver].max()) if sliver.any() else None
+
+    @property
+    def slivers_over_limit(self) -> np.ndarray:
+        """(s,) int, the slivers whose gap on their full panel's mold exceeds `limit_mm`."""
+        return np.flatnonzero(self.extension & (self.deviation_mm > self.limit_mm))
+
     def record(self, net_molds: int | None = None) -> dict:
         """JSON-ready summary; with the net's own mold count `net_molds`, also
         ``molds_in_all``."""
@@ -93,6 +104,9 @@ class BoundaryMolds:
             "planned_with_net": self.planned_with_net is not None,
             "deviation_limit_mm": self.limit_mm,
             "deviation_max_mm": float(self.deviation_mm[fits].max()) if fits.any() else None,
+            # slivers are cut with their full panel, from its mold: how far that is off
+            "extensions_deviation_max_mm": self.sliver_deviation_max_mm,
+            "extensions_over_limit": self.slivers_over_limit.tolist(),
             "mold": self.mold.tolist(),
             "neighbour_face": self.neighbour_face.tolist(),
         }

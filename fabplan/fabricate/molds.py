@@ -862,8 +862,8 @@ class MoldPlan:
                f"{len(r['failures'])} panels do not fit (faces {r['failures'][:10]})"),
             f"largest step between neighbouring panels' molds {self.max_step_mm:.3f} mm "
             f"(limit {self.step_limit_mm:g} mm, {self.steps_over.size} shared edges over it); "
-            f"about {r['mold_count_bound']['molds']} molds at the least by the curvature set's "
-            "length",
+            f"the curvature set's length over one mold's reach suggests about "
+            f"{r['mold_count_bound']['molds']} molds (an estimate, not a bound)",
         ]
         if w.get("thickness") is not None:
             lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
