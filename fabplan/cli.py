@@ -444,6 +444,12 @@ def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
           f"{record['irregular_vertices'][:12]}{' ...' if len(record['irregular_vertices']) > 12 else ''}; "
           f"{record['gliding_boundary_vertices']} of {record['boundary_vertices']} boundary vertices "
           "glide on the surface boundary")
+    changed = {k: v for k, v in (record.get("design_repairs") or {}).items()
+               if v and k != "welded_vertices"}        # welding is how STL files are read
+    if changed:
+        print(f"fabplan: note: the design was repaired as it was read: "
+              f"{', '.join(f'{v} {k.replace(chr(95), chr(32))}' for k, v in changed.items())} "
+              "(properties.layout.design_repairs)", file=sys.stderr)
     if len(layout.turning_points):
         where = ", ".join(f"({', '.join(f'{c:.4g}' for c in p)})" for p in layout.turning_points[:3])
         print(f"fabplan: warning: the principal directions turn by up to "
@@ -550,7 +556,10 @@ def _cmd_layout(args) -> int:
     else:
         _print_layout_report(props, layout, json_path)
         print(f"{result.net}: {result.status} after {result.iterations} iterations in "
-              f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s)"
+              f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s"
+              + (f", boundary panels {props['boundary_panels']['seconds']:.2f} s"
+                 if (props.get("boundary_panels") or {}).get("seconds") is not None else "")
+              + ")"
               + (f" ({params})" if params else ""))
         print(f"wrote {_listing([obj_path, json_path, boundary_path(obj_path), picture, *viewers])}")
         for warning in layout_warnings(props):

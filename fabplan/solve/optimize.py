@@ -463,7 +463,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         linear_solver=solver.linear_solver,
         history=[h.as_dict() for h in solver.history],
         properties=measure_net(result_mesh, reference=solver.reference),
-        message=_explain(solver, status, folds, mesh, angle, attempts if len(attempts) > 1 else []),
+        message=_explain(solver, status, folds, mesh, angle, attempts if len(attempts) > 1 else [],
+                         glide=glide),
     )
 
 
@@ -685,9 +686,10 @@ def _stopped_at(stage: Stage | None) -> str:
 
 
 def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: QuadMesh,
-             angle: float | None, attempts: list[Attempt]) -> str:
+             angle: float | None, attempts: list[Attempt], *, glide: bool = False) -> str:
     """One line: what stood in the way of a converged net, and what to try; `attempts`
-    are the solves tried when there were more than one."""
+    are the solves tried when there were more than one; with `glide` the start is a
+    layout's lattice on its design, not the user's net."""
     if status == "converged":
         return ""
     parts = []
@@ -709,7 +711,13 @@ def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: Qu
         written = next(a.name for a in attempts if a.solver is solver)
         parts.append(f"tried {len(attempts)} solves ({tried}); the net written is the {written} one")
         start_folds = measure_folds(start, reference=solver.reference)
-        if start_folds.folded:
+        if start_folds.folded and glide:
+            parts.append(f"the layout's lattice folds there ({start_folds.describe()}): "
+                         "another panel size or net type may avoid it")
+        elif glide:
+            parts.append("the layout is too far from any net of this type on this design for "
+                         "a fold-free one near it: try another panel size or net type")
+        elif start_folds.folded:
             parts.append(f"the input itself folds ({start_folds.describe()}): repair or smooth it")
         else:
             parts.append("the input is too far from any net of this type for a fold-free one "
