@@ -333,9 +333,9 @@ def _cmd_molds(args) -> int:
         print(f"wrote {', '.join(str(f) for f in files)}")
     over = np.zeros(0, np.int64) if boundary is None else boundary[1].slivers_over_limit
     if over.size:
-        molds = boundary[1]
-        print(f"fabplan: warning: {counted(over.size, 'sliver')} cut with {'its' if over.size == 1 else 'their'} "
-              f"full panel stand{'s' if over.size == 1 else ''} up to {molds.sliver_deviation_max_mm:.2f} mm "
+        molds, one = boundary[1], over.size == 1
+        print(f"fabplan: warning: {counted(over.size, 'sliver')} cut with {'its' if one else 'their'} "
+              f"full panel stand{'s' if one else ''} up to {molds.sliver_deviation_max_mm:.2f} mm "
               f"off the design on its mold (tolerance {settings.tolerance_mm:g} mm; ids in "
               f"{boundary_file}: {over.tolist()[:10]}): cut them as panels of their own or trim them by hand",
               file=sys.stderr)
