@@ -482,3 +482,25 @@ def test_slivers_off_their_full_panels_mold_are_counted_not_hidden():
     assert record["deviation_max_mm"] == pytest.approx(1.9)          # the panels'
     assert record["extensions_deviation_max_mm"] == pytest.approx(15.2)
     assert record["extensions_over_limit"] == [1, 3]
+
+
+@pytest.mark.slow
+def test_a_net_left_the_design_is_trimmed_without_strips_along_its_edge(tmp_path):
+    """Regression: an isogonal layout net optimized as linear Weingarten keeps its
+    boundary vertices 1-12 mm inside the design's edge; its 22 boundary panels were cut
+    with a strip that wide along the edge, 16 of them zigzags of up to 49 points."""
+    out = tmp_path / "hp.obj"
+    assert main(["layout", "hyperbolic-paraboloid", "--net", "isogonal", "--angle", "60",
+                 "--panel-size", "1", "-o", str(out), "-q"]) == 0
+    lw = tmp_path / "lw" / "lw.obj"
+    assert main(["optimize", str(out), "--net", "linear-weingarten", "--reference",
+                 "hyperbolic-paraboloid", "-o", str(lw), "-q"]) in (0, 3)
+    _, before = read_obj(tmp_path / "hp.boundary.obj")
+    V, after = read_obj(tmp_path / "lw" / "lw.boundary.obj")
+    record = json.loads(lw.with_suffix(".json").read_text())["properties"]["boundary_panels"]
+    assert record["crossed"] == [] and record["flipped"] == []
+    assert sorted(set(_crossing_outlines(V, after)) - set(record["extensions"])) == []
+    # the panels keep the layout's shapes: as many, with as many outline points or few more
+    assert abs(len(after) - len(before)) <= 2
+    assert max(len(f) for f in after) <= max(len(f) for f in before) + 2
+    assert record["coverage"] >= 0.999
