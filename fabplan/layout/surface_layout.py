@@ -250,19 +250,21 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
             continue
         if best is None and k == len(lengths) - 1:
             # the only layout there is: nothing to compare its coverage with
-            best, best_net = layout, None
+            best, best_net, best_hole = layout, None, None
             tried.append({"smoothing_panels": length, "coverage": None})
             break
         # judged with the boundary panels the net will get: the staircase along the
         # boundary is theirs to clad; what they cannot reach are the lattice's own holes
+        hole = None
         try:
             panels = trim_to_design(layout.mesh, layout)
             coverage, on_net = panels.coverage, panels.coverage_net
+            hole = panels.gaps[0] if panels.gaps else None
         except shapely.errors.GEOSException:
             coverage = on_net = net_coverage(layout.mesh, design, h)
         tried.append({"smoothing_panels": length, "coverage": coverage})
         if coverage > best_coverage:
-            best, best_coverage, best_net = layout, coverage, on_net
+            best, best_coverage, best_net, best_hole = layout, coverage, on_net, hole
         if coverage >= s.good_coverage:
             break
     if best is None:
@@ -273,9 +275,10 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         # larger designs are judged by the share their quads cover
         if best_net is None:
             best_net = net_coverage(best.mesh, design, h)
-        if best_net < MIN_LATTICE_SHARE:
+        if best_net < MIN_LATTICE_SHARE or (
+                best_hole is not None and best_hole["area_relative_to_panel"] > MAX_HOLE_PANELS):
             raise InputError(_broken_lattice(best, best_net,
-                                             [t["smoothing_panels"] for t in tried]))
+                                             [t["smoothing_panels"] for t in tried], best_hole))
     best.smoothing_tried = tried
     # the other smoothing lengths tried, and judging them, took time too
     best.seconds["other_tries"] = max(time.perf_counter() - clock - sum(best.seconds.values()), 0.0)
@@ -286,18 +289,30 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
 #: would be boundary panels and patches, pieces as large as the gaps they fill
 MIN_LATTICE_SHARE = 0.5
 
+#: a layout that leaves a gap larger than this many full panels of area (after its
+#: boundary panels and patches) is refused: its lattice broke there
+MAX_HOLE_PANELS = 10.0
+
 #: designs of fewer panels (area over the panel size squared) are not judged by their
 #: quads' share, and a layout of them without an interior vertex is "too large a panel"
 MIN_PANELS_JUDGED = 36
 
 
-def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list | None) -> str:
+def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list | None,
+                    hole: dict | None = None) -> str:
     """Why a layout's lattice of quads does not hold together, in one line: the quads'
-    share of the design (`share`, None: no interior vertex), the singular points and the
-    places the directions turn, the smoothing lengths tried (panels) and what to try."""
+    share of the design (`share`, None: no interior vertex) or the `hole` it leaves
+    (`fabplan.layout.trim.coverage_gaps`), the singular points and the places the
+    directions turn, the smoothing lengths tried (panels) and what to try."""
     design, h = layout.design, layout.panel_size
-    held = ("the quads laid out form no interior vertex with four quads" if share is None else
-            f"its quads cover only {100 * share:.0f} % of the design")
+    if share is None:
+        held = "the quads laid out form no interior vertex with four quads"
+    elif share < MIN_LATTICE_SHARE or hole is None:
+        held = f"its quads cover only {100 * share:.0f} % of the design"
+    else:
+        where = "at the design boundary" if hole["at_design_boundary"] else "inside the design"
+        held = (f"it leaves a gap of {hole['area_relative_to_panel']:.0f} panels' area {where} "
+                f"around ({', '.join(f'{v:.4g}' for v in hole['point'])})")
     why = []
     if len(layout.singular_points):
         why.append(f"{len(layout.singular_points)} singular points of the principal directions "
