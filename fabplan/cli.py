@@ -331,9 +331,10 @@ def _cmd_molds(args) -> int:
         if boundary is not None:
             print(boundary_molds_text(boundary[1], plan.mold_count, boundary_file))
         print(f"wrote {', '.join(str(f) for f in files)}")
-    over = np.zeros(0, np.int64) if boundary is None else boundary[1].slivers_over_limit
-    if over.size:
-        molds, one = boundary[1], over.size == 1
+    molds = None if boundary is None else boundary[1]
+    over = np.zeros(0, np.int64) if molds is None else molds.slivers_over_limit
+    if molds is not None and over.size:
+        one = over.size == 1
         print(f"fabplan: warning: {counted(over.size, 'sliver')} cut with {'its' if one else 'their'} "
               f"full panel stand{'s' if one else ''} up to {molds.sliver_deviation_max_mm:.2f} mm "
               f"off the design on its mold (tolerance {settings.tolerance_mm:g} mm; ids in "

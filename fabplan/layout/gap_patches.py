@@ -86,7 +86,7 @@ def unclad_components(design: DesignSurface, clad: np.ndarray
     if len(unclad) == 0:
         return unclad, np.zeros(0, np.int64), np.zeros((0, 4), bool), np.zeros(0)
     f, g, _ = triangle_pairs(design.triangles, len(design.vertices))
-    hit = open_.any(axis=1)
+    hit: np.ndarray = np.asarray(open_.any(axis=1))
     both = hit[f] & hit[g]
     local = np.full(len(design.triangles), -1)
     local[unclad] = np.arange(len(unclad))

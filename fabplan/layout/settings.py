@@ -45,6 +45,13 @@ class LayoutSettings:
         extraction with the most quads is kept.
     max_turning_deg : the direction field turning faster than this per panel is reported
         (`SurfaceLayout.turning_points`).
+    min_lattice_share : a layout whose full quads cover less of the design than this is
+        refused (`layout_surface`): the rest would be boundary pieces as large as the gaps.
+    max_gap_panels : a layout that leaves a gap of more full panels of area than this,
+        after its boundary panels and patches, is refused: its lattice broke there.
+    min_panels_judged : designs of fewer panels (area over the panel size squared) are
+        not judged by the two limits above (a few panels' raw lattice stops a panel short
+        of the boundary all round).
     """
 
     bisector: str = "max"
@@ -61,3 +68,6 @@ class LayoutSettings:
     boundary_snap: float = 0.75
     offsets: int = 2
     max_turning_deg: float = 30.0
+    min_lattice_share: float = 0.5
+    max_gap_panels: float = 10.0
+    min_panels_judged: float = 36.0

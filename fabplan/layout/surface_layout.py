@@ -215,9 +215,9 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     family : a prescribed first family (see `prescribed_family`); the second family is
         the complementary one that makes an S-net.
     settings : `LayoutSettings`.
-    refuse_broken : refuse a layout whose lattice does not hold together (its quads cover
-        less than `MIN_LATTICE_SHARE` of a design of `MIN_PANELS_JUDGED` panels or more);
-        False makes such a layout anyway (`layout_again` of a net made before).
+    refuse_broken : refuse a layout whose lattice does not hold together (see
+        `LayoutSettings.min_lattice_share` and `max_gap_panels`); False makes such a layout
+        anyway (`layout_again` of a net made before).
 
     Returns
     -------
@@ -270,32 +270,21 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     if best is None:
         assert refusal is not None
         raise refusal
-    if refuse_broken and design.area / (h * h) >= MIN_PANELS_JUDGED:
+    if refuse_broken and design.area / (h * h) >= s.min_panels_judged:
         # a few panels' raw lattice stops a panel short of the boundary all round: only
         # larger designs are judged by the share their quads cover
         if best_net is None:
             best_net = net_coverage(best.mesh, design, h)
-        if best_net < MIN_LATTICE_SHARE or (
-                best_hole is not None and best_hole["area_relative_to_panel"] > MAX_HOLE_PANELS):
-            raise InputError(_broken_lattice(best, best_net,
-                                             [t["smoothing_panels"] for t in tried], best_hole))
+        if best_net < s.min_lattice_share or (
+                best_hole is not None and best_hole["area_relative_to_panel"] > s.max_gap_panels):
+            raise InputError(_broken_lattice(best, best_net, [t["smoothing_panels"] for t in tried],
+                                             best_hole if best_net >= s.min_lattice_share else None))
     best.smoothing_tried = tried
     # the other smoothing lengths tried, and judging them, took time too
     best.seconds["other_tries"] = max(time.perf_counter() - clock - sum(best.seconds.values()), 0.0)
     return best
 
 
-#: a layout whose full quads cover less of the design than this is refused: the rest
-#: would be boundary panels and patches, pieces as large as the gaps they fill
-MIN_LATTICE_SHARE = 0.5
-
-#: a layout that leaves a gap larger than this many full panels of area (after its
-#: boundary panels and patches) is refused: its lattice broke there
-MAX_HOLE_PANELS = 10.0
-
-#: designs of fewer panels (area over the panel size squared) are not judged by their
-#: quads' share, and a layout of them without an interior vertex is "too large a panel"
-MIN_PANELS_JUDGED = 36
 
 
 def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list | None,
@@ -307,7 +296,7 @@ def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list 
     design, h = layout.design, layout.panel_size
     if share is None:
         held = "the quads laid out form no interior vertex with four quads"
-    elif share < MIN_LATTICE_SHARE or hole is None:
+    elif hole is None:
         held = f"its quads cover only {100 * share:.0f} % of the design"
     else:
         where = "at the design boundary" if hole["at_design_boundary"] else "inside the design"
@@ -455,7 +444,7 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
         turning_points=turning[0], turning_deg=turning[1], direction_symmetry=symmetry,
         smoothing=smoothing, seconds=seconds)
     if len(mesh.stars) == 0:
-        if design.area / (h * h) < MIN_PANELS_JUDGED:     # the panel size is why
+        if design.area / (h * h) < s.min_panels_judged:     # the panel size is why
             raise InputError(f"{design.name}: panel size {h:g} is too large for the surface "
                              "(the layout has no interior vertex with four quads)")
         raise InputError(_broken_lattice(layout, None, None))

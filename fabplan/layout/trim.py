@@ -452,7 +452,7 @@ MIN_GAP = 0.01
 
 
 def coverage_gaps(design: DesignSurface, samples: np.ndarray, weight: np.ndarray,
-                  clad: np.ndarray, h: float, count: int = 5) -> list[dict]:
+                  clad: np.ndarray, h: float, *, count: int = 5) -> list[dict]:
     """The largest parts of the design left unclad, for a user to find them.
 
     Parameters
