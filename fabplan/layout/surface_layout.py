@@ -257,7 +257,8 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         # boundary is theirs to clad; what they cannot reach are the lattice's own holes
         hole = None
         try:
-            panels = trim_to_design(layout.mesh, layout)
+            # the lattice as it is: patches would hide the holes a smoother field avoids
+            panels = trim_to_design(layout.mesh, layout, patch_gaps=False)
             coverage, on_net = panels.coverage, panels.coverage_net
             hole = panels.gaps[0] if panels.gaps else None
         except shapely.errors.GEOSException:

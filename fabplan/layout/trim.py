@@ -213,7 +213,7 @@ OFF_DESIGN_TOUCH = 1e-2
 
 
 def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05,
-                   touch: float = TOUCH) -> BoundaryPanels:
+                   touch: float = TOUCH, patch_gaps: bool = True) -> BoundaryPanels:
     """The boundary panels of a net laid out on a design (see the module's text).
 
     Parameters
@@ -223,6 +223,8 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     layout : the `SurfaceLayout` the net comes from (design, parametrization, cuts).
     min_panel : pieces smaller than this share of a full panel's area join a neighbour.
     touch : net vertices this close to the design boundary (panel sizes) are on it.
+    patch_gaps : close the small gaps left with patches cut in their tangent planes
+        (`fabplan.layout.gap_patches`); off, the lattice is judged as it is.
 
     Returns
     -------
@@ -318,8 +320,9 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
                             np.vstack([mesh.triangles(), triangles]), h)
     # the small gaps left (pieces around singular points the plane could not cut) are
     # cut in their own tangent planes
-    extra = gap_patches(design, vertices, np.vstack([mesh.triangles(), triangles]), on_any, h)
-    if extra.count:
+    extra = gap_patches(design, vertices, np.vstack([mesh.triangles(), triangles]), on_any, h) \
+        if patch_gaps else None
+    if extra is not None and extra.count:
         owner = np.r_[owner, len(polygons) + extra.owner]
         vertices, polygons = np.vstack([vertices, extra.points]), polygons + extra.polygons
         triangles = np.vstack([triangles, extra.triangles])
