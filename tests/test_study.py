@@ -826,7 +826,7 @@ def test_a_forked_file_is_written_whole_here_when_its_process_fails_and_gone_whe
     import os
     import time
 
-    from fabplan.study.background import ForkedFile
+    from fabplan.io.forked import ForkedFile
 
     def write(path: Path) -> None:
         path.write_text("drawn", encoding="utf-8")

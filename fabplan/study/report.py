@@ -22,6 +22,7 @@ import numpy as np
 
 from ..fabricate.mold_report import net_viewer_scene
 from ..io import output
+from ..io.forked import ForkedFile
 from ..io.records import json_text
 from ..layout.picture import (
     curvature_difference_figure,
@@ -33,7 +34,6 @@ from ..report import figures, html, viewer
 from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
-from .background import ForkedFile
 from .cache import CACHE_FOLDER
 from .run import CandidateResult, StudyResult, cost_drivers, molds_text, vertex_deviation_mm
 

@@ -455,7 +455,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     CandidateResult with `net` and `layout`, its seconds so far in ``metrics["seconds"]``.
     """
     from ..layout.surface_layout import glide, layout_surface
-    from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
+    from ..layout.trim import add_boundary_panels
     from ..solve.optimize import optimize
     from ..solve.solver import SolverSettings
 
@@ -492,7 +492,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         net = optimize(starts[key].mesh, candidate.net, angle=candidate.angle,
                        radius=candidate.radius, reference=design.reference, settings=settings,
                        settle_free=step, progress=report)
-        add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH)
+        add_boundary_panels(net, layout)
     seconds["optimize"] = time.perf_counter() - clock
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
     return CandidateResult(candidate, metrics={"seconds": seconds}, net=net, layout=layout)

@@ -1,0 +1,79 @@
+"""Work done in a forked copy of the process, on another core, while the caller goes on.
+
+May import: nothing of fabplan. A bare `os.fork` that leaves by `os._exit`: the child runs
+none of the parent's exit handlers and writes nothing to the parent's streams. Elsewhere
+than on Linux, or on one core, nothing is forked.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+__all__ = ["ForkedFile", "forked_processes"]
+
+
+def forked_processes(processes: int | None = None) -> int:
+    """How many forked processes may work at once: one per core (`processes` when
+    given), none but on Linux or on one core."""
+    if not sys.platform.startswith("linux"):
+        return 0
+    count = (os.cpu_count() or 1) if processes is None else processes
+    return count if count > 1 else 0
+
+
+class ForkedFile:
+    """One file written by `write(path)` in a forked process while the caller goes on
+    (the study's PDF report beside its HTML report): `finish` waits for it, `cancel`
+    stops it when the caller failed.
+
+    The file is written beside `path` and renamed, so `path` is whole or absent; where
+    nothing is forked (see `forked_processes`, or the fork fails), or the child
+    failed, `finish` writes the file in this process.
+    """
+
+    def __init__(self, write: Callable[[Path], None], path: Path) -> None:
+        self.write, self.path = write, Path(path)
+        self._part = self.path.with_name(self.path.name + ".part")
+        self._pid: int | None = None
+        if forked_processes():
+            try:
+                self._pid = os.fork()
+            except OSError:          # no process to spare: written by `finish`
+                self._pid = None
+        if self._pid == 0:
+            code = 1
+            try:
+                sys.stdout = sys.stderr = open(os.devnull, "w")
+                self._write_whole()
+                code = 0
+            finally:
+                os._exit(code)
+
+    def _write_whole(self) -> None:
+        self.write(self._part)
+        os.replace(self._part, self.path)
+
+    def finish(self) -> None:
+        """Wait for the child; write the file here when it did not."""
+        if self._pid is not None:
+            pid, self._pid = self._pid, None
+            _, status = os.waitpid(pid, 0)
+            if os.waitstatus_to_exitcode(status) == 0 and self.path.is_file():
+                return
+        self._part.unlink(missing_ok=True)
+        self._write_whole()
+
+    def cancel(self) -> None:
+        """Stop the child and remove what it wrote (the caller failed)."""
+        if self._pid is not None:
+            pid, self._pid = self._pid, None
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            os.waitpid(pid, 0)
+        self._part.unlink(missing_ok=True)
