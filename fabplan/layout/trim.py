@@ -1291,11 +1291,7 @@ def _retriangulated(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
     new_t, new_o = [triangles[keep]], [owner[keep]]
     for k in changed:
         ring = np.asarray(polygons[k])
-        P = vertices[ring]
-        centred = P - P.mean(axis=0)
-        normal = np.sum(np.cross(P, np.roll(P, -1, axis=0)), axis=0)
-        axis = np.linalg.svd(normal[None, :])[2][1:]
-        q = centred @ axis.T
+        q = _in_own_plane(vertices[ring])
         outline = shapely.Polygon(q)
         if outline.is_valid and outline.area > 0:
             parts = shapely.get_parts(shapely.constrained_delaunay_triangles(outline))
@@ -1311,18 +1307,24 @@ def _retriangulated(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
     return np.concatenate(new_t).astype(np.int64), np.concatenate(new_o).astype(np.int64)
 
 
+def _in_own_plane(P: np.ndarray) -> np.ndarray:
+    """(k, 2) the closed outline `P` (k, 3) in the plane of its vector area (of its best
+    fitting plane where the lobes of a bow tie cancel), about its centroid."""
+    centred = P - P.mean(axis=0)
+    normal = np.sum(np.cross(P, np.roll(P, -1, axis=0)), axis=0)
+    if np.linalg.norm(normal) <= 1e-9 * np.sum(centred ** 2):
+        normal = np.linalg.svd(centred)[2][2]
+    axis = np.linalg.svd(normal[None, :])[2][1:]           # two directions across it
+    return centred @ axis.T
+
+
 def _first_crossing(P: np.ndarray) -> tuple[int, int] | None:
     """The first two sides of the closed outline `P` (k, 3) that cross, in the plane of
     its vector area: (i, j), i < j, side i from point i to i + 1; None when none do."""
     n = len(P)
     if not np.isfinite(P).all():
         return None
-    centred = P - P.mean(axis=0)
-    normal = np.sum(np.cross(P, np.roll(P, -1, axis=0)), axis=0)
-    if np.linalg.norm(normal) <= 1e-9 * np.sum(centred ** 2):
-        normal = np.linalg.svd(centred)[2][2]      # a bow tie's lobes cancel: its plane
-    axis = np.linalg.svd(normal[None, :])[2][1:]           # two directions across it
-    q = centred @ axis.T
+    q = _in_own_plane(P)
     a, b = q, np.roll(q, -1, axis=0)
     i, j = np.triu_indices(n, 2)
     keep = ~((i == 0) & (j == n - 1))                         # the last side meets the first
