@@ -796,7 +796,8 @@ def _cmd_strips(args) -> int:
           f"unrolled length error {s['unrolled_length_error_mm']:.1e} mm (the net read in "
           f"{settings.units}: --units)")
     if radius:
-        print(f"arc radius {radius['median']:.1f} mm (spread {radius['spread_relative']:.2e}); "
+        print(f"arc radius {radius['median']:.1f} mm, the median (relative spread "
+              f"{radius['spread_relative']:.2e}); "
               f"parts {'congruent' if s['congruent'] else 'not congruent'} within "
               f"{settings.tolerance_mm:g} mm (deviation {s['congruence_deviation_mm']:.3f} mm)")
     else:
