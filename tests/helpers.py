@@ -128,3 +128,11 @@ def measured_saddle_candidate(tolerance_mm: float):
     result = fabplan.glide(fabplan.layout_surface(design, 1.5), "snet")
     plan = fabplan.plan_molds(result.mesh, tolerance_mm=tolerance_mm)
     return result, plan, measure_candidate(result, design, plan, None, mm_per_unit=1000.0)
+
+
+def interruptible() -> None:
+    """`preexec_fn` for a process a test interrupts with SIGINT: Ctrl-C acts in it even
+    when the tests run as a background job (whose children start with SIGINT ignored)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

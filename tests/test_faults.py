@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import interruptible
 
 from fabplan.cli import main
 from fabplan.net.mesh import QuadMesh
@@ -188,7 +189,7 @@ def test_strips_killed_while_writing_leave_the_earlier_ones(net, tmp_path, sig):
     subprocess.run([*argv, "--height", "40"], check=True, capture_output=True)
     before = listing(out)
     process = subprocess.Popen([*argv, "--height", "50"], stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
+                               stderr=subprocess.PIPE, preexec_fn=interruptible)
     staged = _wait_for(lambda: any(p.name.startswith(".") for p in out.iterdir()), 60)
     process.send_signal(sig)
     _, err = process.communicate(timeout=60)

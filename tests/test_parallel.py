@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import without_timings
+from helpers import interruptible, without_timings
 
 from fabplan.cli import main
 from fabplan.errors import InputError
@@ -172,7 +172,7 @@ def test_an_interrupted_study_resumes_with_only_the_missing_candidates(serial, t
     (out / "study.json").write_text('{"earlier": true}', encoding="utf-8")
     run = subprocess.Popen([sys.executable, "-m", "fabplan.cli", "study",
                             str(folder / "small.toml"), "-o", str(out), "--resume"],
-                           stderr=subprocess.PIPE, text=True)
+                           stderr=subprocess.PIPE, text=True, preexec_fn=interruptible)
     for line in run.stderr:
         if line.startswith("[3/5]"):
             run.send_signal(signal.SIGINT)
