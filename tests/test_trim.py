@@ -504,3 +504,39 @@ def test_a_net_left_the_design_is_trimmed_without_strips_along_its_edge(tmp_path
     assert abs(len(after) - len(before)) <= 2
     assert max(len(f) for f in after) <= max(len(f) for f in before) + 2
     assert record["coverage"] >= 0.999
+
+
+def test_a_gap_of_several_panels_is_patched_in_pieces_of_about_one():
+    """A hole of three panels is cut into pieces of about a panel that share their new
+    corners (no point twice) and clad it whole."""
+    from fabplan.layout.gap_patches import gap_patches
+    from fabplan.layout.trim import _clad, _design_samples
+    from fabplan.net.mesh import QuadMesh
+
+    n = 40
+    x, y = np.meshgrid(np.linspace(0, 3, n + 1), np.linspace(0, 3, n + 1), indexing="ij")
+    V = np.stack([x, y, 0.04 * np.sin(x) * np.cos(y)], axis=-1).reshape(-1, 3)
+    idx = np.arange(len(V)).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    design = DesignSurface(V, T, name="gently curved")
+    u, v = np.meshgrid(np.linspace(-0.5, 3.5, 9), np.linspace(-0.5, 3.5, 9), indexing="ij")
+    whole = QuadMesh.grid(np.stack([u, v, 0.04 * np.sin(u) * np.cos(v)], axis=-1))
+    centre = np.array([whole.vertices[f][:, :2].mean(axis=0) for f in whole.faces])
+    # a bent hole of three faces in the middle
+    gone = {int(np.argmin(np.linalg.norm(centre - p, axis=1))) for p in ([1.25, 1.25], [1.75, 1.25],
+                                                                        [1.75, 1.75])}
+    net = QuadMesh(whole.vertices, [f for k, f in enumerate(whole.faces) if k not in gone])
+    h = 0.5
+    samples, normals, weight = _design_samples(design)
+    clad = _clad(samples, normals, net.vertices, net.triangles(), h)
+    patches = gap_patches(design, net.vertices, net.triangles(), clad, h)
+    assert 2 <= patches.count <= 8
+    P = np.vstack([net.vertices, patches.points])
+    assert len(np.unique(np.round(P, 9), axis=0)) == len(P)            # no point twice
+    area = [0.5 * np.linalg.norm(np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]]))
+            for t in patches.triangles]
+    assert sum(area) == pytest.approx(3 * h * h, rel=0.02)
+    assert max(np.bincount(patches.owner, area)) <= 1.5 * h * h
+    everything = np.vstack([net.triangles(), patches.triangles])
+    assert weight[_clad(samples, normals, P, everything, h)].sum() == pytest.approx(weight.sum(), rel=1e-6)

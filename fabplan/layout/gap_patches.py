@@ -23,9 +23,9 @@ from ..design.mesh_surface import DesignSurface
 
 __all__ = ["GapPatches", "gap_patches", "unclad_components", "MAX_GAP_PANELS"]
 
-#: gaps up to this many full panels of area are patched; a larger one is where the
-#: layout failed, and is reported rather than filled with a piece of that size
-MAX_GAP_PANELS = 3.0
+#: gaps up to this many full panels of area are patched (in pieces of about a panel); a
+#: larger one is where the layout failed, and is reported rather than filled
+MAX_GAP_PANELS = 6.0
 
 #: smaller gaps are the measure's noise between panels that meet (full panels of area)
 MIN_GAP_PANELS = 0.01
@@ -132,14 +132,16 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
                               design_boundary)
             if made is not None:
                 break
-        for piece, ids, lifted, on_edge in made or []:
-            fresh = ids < 0
-            ids[fresh] = count + np.arange(int(fresh.sum()))
-            count += int(fresh.sum())
-            new_points.append(lifted[fresh])
-            new_boundary.append(on_edge[fresh])
-            polygons.append(ids)
+        if not made:
+            continue
+        cut, lifted, on_edge = made
+        for piece, ids in cut:
+            # new points are numbered -1, -2, ... within the gap (shared by its pieces)
+            polygons.append(np.where(ids < 0, count - ids - 1, ids))
             pieces.append(piece)
+        count += len(lifted)
+        new_points.append(lifted)
+        new_boundary.append(on_edge)
     if not polygons:
         return GapPatches(np.zeros((0, 3)), np.zeros(0, bool), [], np.zeros((0, 3), np.int64),
                           np.zeros(0, np.int64))
@@ -150,11 +152,14 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
 
 def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
                gap: np.ndarray, h: float, rings: int, grid: float, design_boundary: set
-               ) -> list | None:
-    """The patches of one gap (its design triangles `gap`, grown by `rings` rings): a
-    list of (piece in the plane, (k,) int ids of its ring points into `points` or -1 for
-    new ones, (k, 3) their points on the design, (k,) bool on the design boundary); empty
-    where the gap is not cut here, None where it reaches beyond the grown region."""
+               ) -> tuple | None:
+    """The patches of one gap (its design triangles `gap`, grown by `rings` rings):
+    (pieces, lifted, on_edge) with pieces a list of (piece in the plane, (k,) int ids of
+    its ring points: into `points`, or -1 - j for the gap's new point j), lifted (m, 3)
+    the new points on the design and on_edge (m,) bool those on the design boundary; an
+    empty tuple where the gap is not cut here, None where it reaches beyond the grown
+    region. A patch larger than `SPLIT_ABOVE` panels is cut into pieces of about a panel
+    (`_split_piece`)."""
     T, V = design.triangles, design.vertices
     region = np.zeros(len(T), bool)
     region[gap] = True
@@ -164,7 +169,7 @@ def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
     normal = np.sum(design.face_normals[region] * design.face_areas[region, None], axis=0)
     normal /= np.linalg.norm(normal)
     if np.min(design.face_normals[region] @ normal) < np.cos(np.radians(MAX_TILT_DEG)):
-        return []
+        return ()
     e1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     e1 /= np.linalg.norm(e1)
     axes = np.stack([e1, np.cross(normal, e1)])
@@ -187,24 +192,59 @@ def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
     gap_2d = shapely.union_all(shapely.polygons(flat(V[T[gap]])), grid_size=grid)
     tree = cKDTree(flat(points[np.unique(triangles[near])]))
     ids_near = np.unique(triangles[near])
-    made = []
-    for piece in shapely.get_parts(rest):
-        if not isinstance(piece, shapely.Polygon) or piece.interiors or \
-                piece.area < 0.01 * h * h or shapely.intersection(piece, gap_2d).area < 1e-3 * h * h:
+    cut: list = []
+    fresh: dict = {}                # a new point's plane coordinates (on the grid) -> j
+    for whole in shapely.get_parts(rest):
+        if not isinstance(whole, shapely.Polygon) or whole.interiors or \
+                whole.area < 0.01 * h * h or shapely.intersection(whole, gap_2d).area < 1e-3 * h * h:
             continue
-        if shapely.distance(piece.exterior, inner) <= 4 * grid:
+        if shapely.distance(whole.exterior, inner) <= 4 * grid:
             return None                               # the gap goes on beyond the region
-        piece = shapely.orient_polygons(piece) if hasattr(shapely, "orient_polygons") else \
-            shapely.geometry.polygon.orient(piece)
-        ring = np.asarray(piece.exterior.coords)[:-1]
-        distance, at = tree.query(ring)
-        ids = np.where(distance <= 8 * grid, ids_near[at], -1)
-        lifted = _lift(design, region, flat(V[T[region]]), ring)
-        lifted[ids >= 0] = points[ids[ids >= 0]]
-        on_edge = np.zeros(len(ring), bool) if outer is None else \
-            (shapely.distance(shapely.points(ring), outer) <= 4 * grid) & (ids < 0)
-        made.append((piece, ids, lifted, on_edge))
-    return made
+        for piece in _split_piece(whole, h, grid):
+            ring = np.asarray(piece.exterior.coords)[:-1]
+            distance, at = tree.query(ring)
+            ids = np.where(distance <= 8 * grid, ids_near[at], -1)
+            for m in np.flatnonzero(ids < 0):
+                key = tuple(np.round(ring[m] / grid).astype(np.int64).tolist())
+                ids[m] = -1 - fresh.setdefault(key, len(fresh))
+            cut.append((piece, ids))
+    if not cut:
+        return ()
+    plane = np.array(list(fresh), dtype=float).reshape(-1, 2) * grid
+    lifted = _lift(design, region, flat(V[T[region]]), plane) if len(plane) else np.zeros((0, 3))
+    on_edge = np.zeros(len(plane), bool) if outer is None or not len(plane) else \
+        shapely.distance(shapely.points(plane), outer) <= 4 * grid
+    return cut, lifted, on_edge
+
+
+#: patches larger than this many full panels of area are cut into pieces of about one
+SPLIT_ABOVE = 1.5
+
+
+def _split_piece(piece, h: float, grid: float) -> list:
+    """`piece` (a polygon in the plane) oriented counter-clockwise, cut by lines along
+    its principal axes into pieces of about a panel when it is larger than
+    `SPLIT_ABOVE` panels."""
+    orient = getattr(shapely, "orient_polygons", None) or shapely.geometry.polygon.orient
+    if piece.area <= SPLIT_ABOVE * h * h:
+        return [orient(piece)]
+    ring = np.asarray(piece.exterior.coords)[:-1]
+    centre = ring.mean(axis=0)
+    axes = np.linalg.svd(ring - centre)[2]
+    lines = []
+    for axis, other in (axes, axes[::-1]):
+        along = (ring - centre) @ axis
+        reach = float(np.abs((ring - centre) @ other).max()) + h
+        cuts = max(int(round((along.max() - along.min()) / h)), 1)
+        for t in along.min() + (along.max() - along.min()) * np.arange(1, cuts) / cuts:
+            a, b = centre + t * axis - reach * other, centre + t * axis + reach * other
+            lines.append(shapely.linestrings([a, b]))
+    if not lines:
+        return [orient(piece)]
+    noded = shapely.union_all([piece.exterior, *lines], grid_size=grid)
+    parts = [p for p in shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
+             if shapely.contains(piece, shapely.point_on_surface(p)) and p.area > 1e-6 * h * h]
+    return [orient(p) for p in parts] or [orient(piece)]
 
 
 def _boundary_edges(T: np.ndarray, n: int) -> set:

@@ -1256,9 +1256,10 @@ SPIKE_DEG = 175.0
 
 
 def _spike(P: np.ndarray, corner: np.ndarray) -> set | None:
-    """The points to drop at the first place the closed outline `P` (k, 3) turns back on
+    """The point to drop at the first place the closed outline `P` (k, 3) turns back on
     itself or repeats a point: the tip when it is no corner, else its nearer neighbour
-    that is none (an empty set when both are corners); None where it does neither."""
+    that is none; None where it does neither but at corners only (a needle corner
+    between two corners is a shape, not a zigzag)."""
     before = P - np.roll(P, 1, axis=0)
     after = np.roll(P, -1, axis=0) - P
     lb, la = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
@@ -1267,17 +1268,18 @@ def _spike(P: np.ndarray, corner: np.ndarray) -> set | None:
     with np.errstate(invalid="ignore", divide="ignore"):
         cos = np.sum(before * after, axis=1) / (lb * la)
     back = (cos < np.cos(np.radians(SPIKE_DEG))) & (lb > scale) & (la > scale)
-    at = np.flatnonzero(repeated | back)
-    if len(at) == 0:
-        return None
-    i, k = int(at[0]), len(P)
-    if repeated[i]:                     # point i + 1 repeats point i: drop one not a corner
-        pair = [m for m in (i, (i + 1) % k) if not corner[m]]
-        return set(pair[:1])
-    if not corner[i]:
-        return {i}
-    feet = [m for _, m in sorted(((lb[i], (i - 1) % k), (la[i], (i + 1) % k))) if not corner[m]]
-    return set(feet[:1])
+    k = len(P)
+    for i in np.flatnonzero(repeated | back).tolist():
+        if repeated[i]:                 # point i + 1 repeats point i: drop one not a corner
+            drop = [m for m in (i, (i + 1) % k) if not corner[m]]
+        elif not corner[i]:
+            drop = [i]
+        else:
+            drop = [m for _, m in sorted(((lb[i], (i - 1) % k), (la[i], (i + 1) % k)))
+                    if not corner[m]]
+        if drop:
+            return {drop[0]}
+    return None                         # none, or needle corners between corners only
 
 
 def _retriangulated(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
