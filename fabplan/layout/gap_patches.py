@@ -126,7 +126,7 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
     grid = 1e-7 * h
     count = len(points)
     for gap in np.flatnonzero((area >= MIN_GAP_PANELS * h * h) & (area <= max_panels * h * h)):
-        made: list | None = None
+        made: tuple | None = None
         for grown in (rings, 2 * rings, 4 * rings):   # until the region holds the gap
             made = _patch_gap(design, points, triangles, unclad[label == gap], h, grown, grid,
                               design_boundary)
