@@ -125,6 +125,8 @@ class SurfaceLayout:
         `fabplan.directions.direction_turning`), and how fast: the net's lines cannot
         follow it there.
     seconds : time per stage.
+    max_gap_panels : a net glided from this layout whose trimming leaves a larger gap (in
+        full panels of area) is refused (`glide`); None: not judged.
     """
 
     mesh: QuadMesh
@@ -147,6 +149,7 @@ class SurfaceLayout:
     turning_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     direction_symmetry: int = 2
     smoothing: float = 0.5
+    max_gap_panels: float | None = None
     smoothing_tried: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
 
@@ -260,7 +263,10 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
             # the lattice as it is: patches would hide the holes a smoother field avoids
             panels = trim_to_design(layout.mesh, layout, patch_gaps=False)
             coverage, on_net = panels.coverage, panels.coverage_net
-            hole = panels.gaps[0] if panels.gaps else None
+            # a gap inside the design; one at its boundary the glide partly closes (the
+            # boundary vertices move onto the boundary): judged after it
+            inside = [g for g in panels.gaps if not g["at_design_boundary"]]
+            hole = inside[0] if inside else None
         except shapely.errors.GEOSException:
             coverage = on_net = net_coverage(layout.mesh, design, h)
         tried.append({"smoothing_panels": length, "coverage": coverage})
@@ -281,6 +287,8 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
             raise InputError(_broken_lattice(best, best_net, [t["smoothing_panels"] for t in tried],
                                              best_hole if best_net >= s.min_lattice_share else None))
     best.smoothing_tried = tried
+    judged = refuse_broken and design.area / (h * h) >= s.min_panels_judged
+    best.max_gap_panels = s.max_gap_panels if judged else None
     # the other smoothing lengths tried, and judging them, took time too
     best.seconds["other_tries"] = max(time.perf_counter() - clock - sum(best.seconds.values()), 0.0)
     return best
@@ -783,6 +791,12 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     ``edge_length_relative_to_panel``, ``coverage`` (share of the design's area the
     full and boundary panels cover), ``coverage_net`` (the full panels alone) and
     ``boundary_panels`` (none of these three without `boundary_panels`).
+
+    Raises
+    ------
+    InputError
+        For an S*-net type, or when the trimmed net leaves a gap larger than the layout's
+        `max_gap_panels` (its lattice broke there).
     """
     from ..solve.net_types import get_net
     from ..solve.optimize import optimize
@@ -823,7 +837,10 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     off = d.max() > 0.01 * layout.panel_size and design.parametric is not None
     result.properties["design_chord_error"] = design.chord_error if off else None
     if boundary_panels:
-        add_boundary_panels(result, layout)
+        panels = add_boundary_panels(result, layout)
+        if panels is not None and panels.gaps and layout.max_gap_panels is not None and \
+                panels.gaps[0]["area_relative_to_panel"] > layout.max_gap_panels:
+            raise InputError(_broken_lattice(layout, panels.coverage_net, None, panels.gaps[0]))
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size
     return result
