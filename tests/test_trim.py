@@ -19,6 +19,34 @@ from fabplan.io.obj import read_obj
 from fabplan.layout.surface_layout import glide, layout_surface
 
 
+def _grid_triangles(shape: tuple) -> np.ndarray:
+    """(t, 3) int, two triangles per cell of a grid of points of `shape` (rows along x)."""
+    idx = np.arange(shape[0] * shape[1]).reshape(shape)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    return np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+
+
+def _net_without(whole, centres: list):
+    """The quad net `whole` less the faces whose xy-centres are nearest `centres`."""
+    from fabplan.net.mesh import QuadMesh
+
+    centre = np.array([whole.vertices[f][:, :2].mean(axis=0) for f in whole.faces])
+    gone = {int(np.argmin(np.linalg.norm(centre - np.asarray(p), axis=1))) for p in centres}
+    return QuadMesh(whole.vertices, [f for k, f in enumerate(whole.faces) if k not in gone]), gone
+
+
+def _gently_curved(size: float, cells: int, panels: int, margin: float, rise: float) -> tuple:
+    """The surface z = rise sin x cos y over [0, size]^2 as a design of 2 cells^2
+    triangles, and a quad net of panels^2 faces on it over [-margin, size + margin]^2."""
+    from fabplan.net.mesh import QuadMesh
+
+    x, y = np.meshgrid(np.linspace(0, size, cells + 1), np.linspace(0, size, cells + 1), indexing="ij")
+    V = np.stack([x, y, rise * np.sin(x) * np.cos(y)], axis=-1).reshape(-1, 3)
+    design = DesignSurface(V, _grid_triangles(x.shape), name="gently curved")
+    u, v = np.meshgrid(*[np.linspace(-margin, size + margin, panels + 1)] * 2, indexing="ij")
+    return design, QuadMesh.grid(np.stack([u, v, rise * np.sin(u) * np.cos(v)], axis=-1))
+
+
 def _wavy_door_facade(width: float = 12.0, height: float = 6.0, cells: int = 96) -> DesignSurface:
     """A wavy facade z = f(x, y) on a grid, without the triangles of a door (2 x 2.4 m)."""
     nx, ny = cells, cells * height // width
@@ -26,9 +54,7 @@ def _wavy_door_facade(width: float = 12.0, height: float = 6.0, cells: int = 96)
                        indexing="ij")
     z = 0.35 * np.sin(x / 2.1) * np.cos(y / 1.7) + 0.02 * x * y / 6
     V = np.stack([x, y, z], axis=-1).reshape(-1, 3)
-    idx = np.arange(V.shape[0]).reshape(x.shape)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    T = _grid_triangles(x.shape)
     centre = V[T].mean(axis=1)
     door = (np.abs(centre[:, 0] - 5.0) < 1.0) & (centre[:, 1] < 2.4)
     return DesignSurface(V, T[~door], name="door-facade")
@@ -349,9 +375,7 @@ def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
     n = 30
     x, y = np.meshgrid(np.linspace(0, 1.5, n + 1), np.linspace(0, 1.5, n + 1), indexing="ij")
     V = np.stack([x, y, 0 * x], axis=-1).reshape(-1, 3)
-    idx = np.arange(len(V)).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    T = _grid_triangles(x.shape)
     design = DesignSurface(V, T, name="flat")
     # the net: a 6 x 6 grid over [-0.5, 2]^2 tilted by 30 deg about the y axis
     u, v = np.meshgrid(np.linspace(-0.5, 2.0, 7), np.linspace(-0.5, 2.0, 7), indexing="ij")
@@ -400,9 +424,7 @@ def _monkey_saddle(cells: int = 48) -> DesignSurface:
     at the centre, which the layout's line field meets with a seam."""
     x, y = np.meshgrid(np.linspace(-6, 6, cells + 1), np.linspace(-6, 6, cells + 1), indexing="ij")
     V = np.stack([x, y, (x**3 - 3 * x * y * y) / 120], axis=-1).reshape(-1, 3)
-    idx = np.arange(V.shape[0]).reshape(x.shape)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    T = _grid_triangles(x.shape)
     return DesignSurface(V, T, name="monkey-saddle")
 
 
@@ -436,22 +458,11 @@ def test_small_gaps_are_patched_in_their_tangent_plane():
     design boundary; the design is then clad whole (measured by the samples)."""
     from fabplan.layout.gap_patches import gap_patches
     from fabplan.layout.trim import _clad, _design_samples
-    from fabplan.net.mesh import QuadMesh
 
-    n = 30
-    x, y = np.meshgrid(np.linspace(0, 1.5, n + 1), np.linspace(0, 1.5, n + 1), indexing="ij")
-    V = np.stack([x, y, 0.05 * np.sin(x) * np.cos(y)], axis=-1).reshape(-1, 3)
-    idx = np.arange(len(V)).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
-    design = DesignSurface(V, T, name="gently curved")
     # the cladding: a 6 x 6 grid over [-0.25, 1.75]^2 on the surface, less two faces
-    u, v = np.meshgrid(np.linspace(-0.25, 1.75, 7), np.linspace(-0.25, 1.75, 7), indexing="ij")
-    whole = QuadMesh.grid(np.stack([u, v, 0.05 * np.sin(u) * np.cos(v)], axis=-1))
-    centre = np.array([whole.vertices[f][:, :2].mean(axis=0) for f in whole.faces])
-    inside = int(np.argmin(np.linalg.norm(centre - [0.75, 0.75], axis=1)))
-    edge = int(np.argmin(np.linalg.norm(centre - [1.58, 0.75], axis=1)))     # over x = 1.5
-    net = QuadMesh(whole.vertices, [f for k, f in enumerate(whole.faces) if k not in (inside, edge)])
+    design, whole = _gently_curved(1.5, 30, 6, 0.25, 0.05)
+    net, _ = _net_without(whole, [[0.75, 0.75], [1.58, 0.75]])      # the second over x = 1.5
+    inside = _net_without(whole, [[0.75, 0.75]])[1].pop()
     h = 2.0 / 6
     samples, normals, weight = _design_samples(design)
     clad = _clad(samples, normals, net.vertices, net.triangles(), h)
@@ -511,22 +522,10 @@ def test_a_gap_of_several_panels_is_patched_in_pieces_of_about_one():
     corners (no point twice) and clad it whole."""
     from fabplan.layout.gap_patches import gap_patches
     from fabplan.layout.trim import _clad, _design_samples
-    from fabplan.net.mesh import QuadMesh
 
-    n = 40
-    x, y = np.meshgrid(np.linspace(0, 3, n + 1), np.linspace(0, 3, n + 1), indexing="ij")
-    V = np.stack([x, y, 0.04 * np.sin(x) * np.cos(y)], axis=-1).reshape(-1, 3)
-    idx = np.arange(len(V)).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
-    design = DesignSurface(V, T, name="gently curved")
-    u, v = np.meshgrid(np.linspace(-0.5, 3.5, 9), np.linspace(-0.5, 3.5, 9), indexing="ij")
-    whole = QuadMesh.grid(np.stack([u, v, 0.04 * np.sin(u) * np.cos(v)], axis=-1))
-    centre = np.array([whole.vertices[f][:, :2].mean(axis=0) for f in whole.faces])
+    design, whole = _gently_curved(3.0, 40, 8, 0.5, 0.04)
     # a bent hole of three faces in the middle
-    gone = {int(np.argmin(np.linalg.norm(centre - p, axis=1))) for p in ([1.25, 1.25], [1.75, 1.25],
-                                                                        [1.75, 1.75])}
-    net = QuadMesh(whole.vertices, [f for k, f in enumerate(whole.faces) if k not in gone])
+    net, _ = _net_without(whole, [[1.25, 1.25], [1.75, 1.25], [1.75, 1.75]])
     h = 0.5
     samples, normals, weight = _design_samples(design)
     clad = _clad(samples, normals, net.vertices, net.triangles(), h)
