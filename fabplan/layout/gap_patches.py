@@ -21,7 +21,8 @@ from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
 
-__all__ = ["GapPatches", "gap_patches", "unclad_components", "MAX_GAP_PANELS"]
+__all__ = ["GapPatches", "gap_patches", "outline_triangles", "unclad_components",
+           "MAX_GAP_PANELS"]
 
 #: gaps up to this many full panels of area are patched (in pieces of about a panel); a
 #: larger one is where the layout failed, and is reported rather than filled
@@ -118,7 +119,7 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
     on beyond).
     """
     unclad, label, _, area = unclad_components(design, clad)
-    design_boundary = _boundary_edges(design.triangles, len(design.vertices))
+    design_boundary = _boundary_edge_keys(design.triangles, len(design.vertices))
     new_points: list = []
     new_boundary: list = []
     polygons: list = []
@@ -151,8 +152,8 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
 
 
 def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
-               gap: np.ndarray, h: float, rings: int, grid: float, design_boundary: set
-               ) -> tuple | None:
+               gap: np.ndarray, h: float, rings: int, grid: float,
+               design_boundary: np.ndarray) -> tuple | None:
     """The patches of one gap (its design triangles `gap`, grown by `rings` rings):
     (pieces, lifted, on_edge) with pieces a list of (piece in the plane, (k,) int ids of
     its ring points: into `points`, or -1 - j for the gap's new point j), lifted (m, 3)
@@ -186,7 +187,7 @@ def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
     clad_2d = shapely.union_all(shapely.polygons(flat(C[near])), grid_size=grid)
     rest = shapely.difference(design_2d, clad_2d, grid_size=grid)
     # where the region's edge is not the design's, the gap must not reach it
-    edge = _region_edges(T, region, design_boundary)
+    edge = _region_edges(T, region, design_boundary, len(V))
     inner = shapely.union_all(shapely.linestrings(flat(V[edge[0]])))
     outer = shapely.union_all(shapely.linestrings(flat(V[edge[1]]))) if len(edge[1]) else None
     gap_2d = shapely.union_all(shapely.polygons(flat(V[T[gap]])), grid_size=grid)
@@ -247,22 +248,23 @@ def _split_piece(piece, h: float, grid: float) -> list:
     return [orient(p) for p in parts] or [orient(piece)]
 
 
-def _boundary_edges(T: np.ndarray, n: int) -> set:
-    """The design's boundary edges (used by one triangle), as sorted vertex pairs."""
+def _boundary_edge_keys(T: np.ndarray, n: int) -> np.ndarray:
+    """The design's boundary edges (used by one triangle), as sorted keys ``a n + b``,
+    a < b, of `n` vertices."""
     e = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
     keys, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
-    return set(keys[counts == 1].tolist())
+    return keys[counts == 1]
 
 
-def _region_edges(T: np.ndarray, region: np.ndarray, design_boundary: set) -> tuple:
-    """The edges around the region: (i, 2) int that lie inside the design, (j, 2) int
-    on its boundary."""
-    n = int(T.max()) + 1
+def _region_edges(T: np.ndarray, region: np.ndarray, boundary_keys: np.ndarray, n: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The edges around the region (triangles `region` of `T`, `n` vertices): (i, 2) int
+    that lie inside the design, (j, 2) int on its boundary (`boundary_keys`)."""
     e = np.sort(np.concatenate([T[region][:, [0, 1]], T[region][:, [1, 2]],
                                 T[region][:, [2, 0]]]), axis=1)
     keys, first, counts = np.unique(e[:, 0] * n + e[:, 1], return_index=True, return_counts=True)
     rim = e[first[counts == 1]]
-    on = np.array([k in design_boundary for k in keys[counts == 1].tolist()], bool)
+    on = np.isin(keys[counts == 1], boundary_keys)
     return rim[~on], rim[on]
 
 
@@ -290,16 +292,20 @@ def _lift(design: DesignSurface, region: np.ndarray, flat_triangles: np.ndarray,
 
 
 def _triangulated(pieces: list, polygons: list) -> tuple[np.ndarray, np.ndarray]:
-    """The pieces cut into triangles in their plane (constrained Delaunay), corners
-    numbered as their ring points."""
-    tris, owner = [], []
-    for k, (piece, ids) in enumerate(zip(pieces, polygons, strict=True)):
-        ring = np.asarray(piece.exterior.coords)[:-1]
-        parts = shapely.get_parts(shapely.constrained_delaunay_triangles(piece))
-        corners = shapely.get_coordinates(shapely.get_exterior_ring(parts)).reshape(-1, 4, 2)[:, :3]
-        _, at = cKDTree(ring).query(corners.reshape(-1, 2))
-        t = ids[at].reshape(-1, 3)
-        t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]
-        tris.append(t)
-        owner.append(np.full(len(t), k))
-    return np.concatenate(tris).astype(np.int64), np.concatenate(owner).astype(np.int64)
+    """The pieces cut into triangles in their plane (`outline_triangles`) and the piece
+    of each."""
+    tris = [outline_triangles(piece, ids) for piece, ids in zip(pieces, polygons, strict=True)]
+    owner = np.repeat(np.arange(len(tris)), [len(t) for t in tris])
+    return np.concatenate(tris).astype(np.int64), owner.astype(np.int64)
+
+
+def outline_triangles(outline, ids: np.ndarray) -> np.ndarray:
+    """(t, 3) int, the simple polygon `outline` (in a plane) cut into triangles by
+    constrained Delaunay (a concave outline stays whole), corners numbered as its ring's
+    points are by `ids` (k,) (the ring without its closing point)."""
+    ring = np.asarray(outline.exterior.coords)[:-1]
+    parts = shapely.get_parts(shapely.constrained_delaunay_triangles(outline))
+    corners = shapely.get_coordinates(shapely.get_exterior_ring(parts)).reshape(-1, 4, 2)[:, :3]
+    _, at = cKDTree(ring).query(corners.reshape(-1, 2))
+    t = np.asarray(ids)[at].reshape(-1, 3)
+    return t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]

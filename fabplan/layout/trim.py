@@ -48,7 +48,7 @@ from scipy.spatial import cKDTree
 from ..design.mesh_surface import DesignSurface
 from ..errors import InputError
 from ..net.mesh import QuadMesh
-from .gap_patches import gap_patches, unclad_components
+from .gap_patches import gap_patches, outline_triangles, unclad_components
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
@@ -241,15 +241,18 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     # vertex on a boundary segment to rounding is noded there
     grid = 1e-7 * cell ** 0.5
     p_net = np.round(p_net / grid) * grid
-    if touch > TOUCH:
-        # a net that left the design: its vertices within `touch` of the boundary stand
-        # on it in the plane, so that no strip a few millimetres wide is cut beside them
-        points = shapely.points(p_net)
-        near = shapely.distance(points, chart.boundary_lines) <= touch * cell ** 0.5
-        if near.any():
-            foot = shapely.get_coordinates(
-                shapely.shortest_line(points[near], chart.boundary_lines)).reshape(-1, 2, 2)[:, 1]
-            p_net[near] = np.round(foot / grid) * grid
+    boundary = chart.boundary_lines
+    # a vertex on the boundary (to `touch` of a panel: gliding, or added on it)
+    # ends its lines there; a line continued from it would run along the boundary. It is
+    # joined to the boundary by the shortest way instead, which parts the slivers beside it
+    points = shapely.points(p_net)
+    touching = shapely.distance(points, boundary) <= touch * cell ** 0.5
+    if touch > TOUCH and touching.any():
+        # a net that left the design: its vertices that near the boundary stand on it in
+        # the plane, so that no strip a few millimetres wide is cut beside them
+        foot = shapely.get_coordinates(
+            shapely.shortest_line(points[touching], boundary)).reshape(-1, 2, 2)[:, 1]
+        p_net[touching] = np.round(foot / grid) * grid
     faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
     by_sheet = bool(layout.cuts) and chart.overlapping
     if by_sheet:
@@ -263,12 +266,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
                                    grid_size=grid)
         regions = [shapely.union_all(_polygonal([shapely.difference(domain, net, grid_size=grid)]),
                                      grid_size=grid)]
-    boundary = chart.boundary_lines
     tol = 4 * grid
-    # a vertex on the boundary (to `touch` of a panel: gliding, or added on it)
-    # ends its lines there; a line continued from it would run along the boundary. It is
-    # joined to the boundary by the shortest way instead, which parts the slivers beside it
-    touching = shapely.distance(shapely.points(p_net), boundary) <= touch * cell ** 0.5
     # regions of different sheets may overlap in the plane: each is cut on its own
     cut = [_cut_region(unclad, mesh, p_net, boundary, touching, cell, grid, min_panel)
            for unclad in regions]
@@ -1293,17 +1291,12 @@ def _retriangulated(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
     new_t, new_o = [triangles[keep]], [owner[keep]]
     for k in changed:
         ring = np.asarray(polygons[k])
-        q = _in_own_plane(vertices[ring])
-        outline = shapely.Polygon(q)
+        outline = shapely.Polygon(_in_own_plane(vertices[ring]))
         if outline.is_valid and outline.area > 0:
-            parts = shapely.get_parts(shapely.constrained_delaunay_triangles(outline))
-            corners = shapely.get_coordinates(shapely.get_exterior_ring(parts)).reshape(-1, 4, 2)[:, :3]
-            _, at = cKDTree(q).query(corners.reshape(-1, 2))
-            t = ring[at].reshape(-1, 3)
+            t = outline_triangles(outline, ring)
         else:
             old = triangles[owner == k]
             t = old[np.isin(old, ring).all(axis=1)]
-        t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]
         new_t.append(t)
         new_o.append(np.full(len(t), k))
     return np.concatenate(new_t).astype(np.int64), np.concatenate(new_o).astype(np.int64)
