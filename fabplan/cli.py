@@ -23,7 +23,7 @@ from .io.output import atomic_path, check_output_file, check_output_folder
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
 from .net.validate import check_panel_size, load_net
-from .report.html import counted
+from .report.html import counted, panel_areas
 from .report.progress import Progress
 from .solve.net_types import NETS, check_angle, check_radius
 from .solve.optimize import boundary_path, check_net_input, optimize, read_fixed, read_handles
@@ -345,11 +345,11 @@ def _cmd_molds(args) -> int:
         if panels is not None:
             # faces past the net's are boundary panels: named as in their own file
             own = np.flatnonzero(~np.asarray(panels.extension, bool))
-            failed = plan.failures[plan.failures >= len(mesh.faces)] - len(mesh.faces)
+            failed = plan.failures[plan.failures >= len(mesh.faces)]
             if failed.size:
                 print(f"fabplan: note: of the panels that fit no mold, faces "
-                      f"{(plan.failures[plan.failures >= len(mesh.faces)]).tolist()[:10]} are the "
-                      f"boundary panels {own[failed].tolist()[:10]} of {boundary_file}",
+                      f"{failed.tolist()[:10]} are the boundary panels "
+                      f"{own[failed - len(mesh.faces)].tolist()[:10]} of {boundary_file}",
                       file=sys.stderr)
         why = []
         if too_large:
@@ -445,11 +445,11 @@ def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
           f"{record['irregular_vertices'][:12]}{' ...' if len(record['irregular_vertices']) > 12 else ''}; "
           f"{record['gliding_boundary_vertices']} of {record['boundary_vertices']} boundary vertices "
           "glide on the surface boundary")
-    changed = {k: v for k, v in (record.get("design_repairs") or {}).items()
-               if v and k != "welded_vertices"}        # welding is how STL files are read
+    # welding is how STL files are read: the other repairs change the design
+    changed = [f"{v} {k.replace('_', ' ')}" for k, v in (record.get("design_repairs") or {}).items()
+               if v and k != "welded_vertices"]
     if changed:
-        print(f"fabplan: note: the design was repaired as it was read: "
-              f"{', '.join(f'{v} {k.replace(chr(95), chr(32))}' for k, v in changed.items())} "
+        print(f"fabplan: note: the design was repaired as it was read: {', '.join(changed)} "
               "(properties.layout.design_repairs)", file=sys.stderr)
     if len(layout.turning_points):
         where = ", ".join(f"({', '.join(f'{c:.4g}' for c in p)})" for p in layout.turning_points[:3])
@@ -627,18 +627,6 @@ def boundary_text(properties: dict) -> str:
 
 #: a layout whose net's lines turn more than this at a vertex (degrees) is warned about
 LINE_TURN_WARNING_DEG = 45.0
-
-
-def panel_areas(count: float) -> str:
-    """An area in full panels, in words.
-
-    Examples
-    --------
-    >>> panel_areas(0.0412), panel_areas(2.46), panel_areas(54.2)
-    ('0.04 panel', '2.5 panels', '54 panels')
-    """
-    text = f"{count:.2f}" if count < 1 else f"{count:.1f}" if count < 10 else f"{count:.0f}"
-    return f"{text} panel{'' if count < 1 else 's'}"
 
 
 def boundary_warnings(properties: dict) -> list:

@@ -12,6 +12,7 @@ from ..design.mesh_surface import DesignSurface
 from ..io.output import atomic_path
 from ..net.mesh import QuadMesh
 from ..report.figures import net_view_angles, new_figure
+from ..report.html import panel_areas
 from .trim import BoundaryPanels
 
 __all__ = ["write_layout_picture", "fairness_marks", "curvature_difference_figure",
@@ -31,9 +32,7 @@ def fairness_marks(properties: dict) -> dict[str, list]:
     marks = {}
     gaps = (properties.get("boundary_panels") or {}).get("gaps") or []
     if gaps and properties.get("coverage", 1.0) < 0.999:
-        area = gaps[0]["area_relative_to_panel"]
-        marks[f"largest gap ({area:.2f} of a panel)" if area < 1 else
-              f"largest gap ({area:.1f} panels)"] = gaps[0]["point"]
+        marks[f"largest gap ({panel_areas(gaps[0]['area_relative_to_panel'])})"] = gaps[0]["point"]
     turn = fairness.get("line_turn_deg") or {}
     if turn.get("point") is not None:
         marks[f"lines turn most ({turn['max']:.1f} deg)"] = turn["point"]

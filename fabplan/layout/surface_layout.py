@@ -277,17 +277,18 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     if best is None:
         assert refusal is not None
         raise refusal
-    if refuse_broken and design.area / (h * h) >= s.min_panels_judged:
-        # a few panels' raw lattice stops a panel short of the boundary all round: only
-        # larger designs are judged by the share their quads cover
+    # a few panels' raw lattice stops a panel short of the boundary all round: only
+    # larger designs are judged by the share their quads cover and the gaps they leave
+    judged = refuse_broken and design.area / (h * h) >= s.min_panels_judged
+    lengths = [float(t["smoothing_panels"] or 0.0) for t in tried]
+    if judged:
         if best_net is None:
             best_net = net_coverage(best.mesh, design, h)
-        if best_net < s.min_lattice_share or (
-                best_hole is not None and best_hole["area_relative_to_panel"] > s.max_gap_panels):
-            raise InputError(_broken_lattice(best, best_net, [t["smoothing_panels"] for t in tried],
-                                             best_hole if best_net >= s.min_lattice_share else None))
+        if best_net < s.min_lattice_share:
+            raise InputError(_broken_lattice(best, best_net, lengths))
+        if best_hole is not None and best_hole["area_relative_to_panel"] > s.max_gap_panels:
+            raise InputError(_broken_lattice(best, best_net, lengths, best_hole))
     best.smoothing_tried = tried
-    judged = refuse_broken and design.area / (h * h) >= s.min_panels_judged
     best.max_gap_panels = s.max_gap_panels if judged else None
     # the other smoothing lengths tried, and judging them, took time too
     best.seconds["other_tries"] = max(time.perf_counter() - clock - sum(best.seconds.values()), 0.0)

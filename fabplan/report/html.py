@@ -29,6 +29,7 @@ __all__ = [
     "html_details",
     "format_value",
     "counted",
+    "panel_areas",
     "html_links",
     "format_range",
     "section_id",
@@ -131,6 +132,18 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
     ('1 mold', '0 molds', '3 sheets', '2 boxes')
     """
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+def panel_areas(count: float) -> str:
+    """An area in full panels, in words.
+
+    Examples
+    --------
+    >>> panel_areas(0.0412), panel_areas(2.46), panel_areas(54.2)
+    ('0.04 panel', '2.5 panels', '54 panels')
+    """
+    text = f"{count:.2f}" if count < 1 else f"{count:.1f}" if count < 10 else f"{count:.0f}"
+    return f"{text} panel{'' if count < 1 else 's'}"
 
 
 def format_range(low, high, unit: str = "", digits: int = 4) -> str:
