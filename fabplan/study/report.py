@@ -1148,7 +1148,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
 
     `progress` is called with a line per written candidate; `view_3d` puts the
     interactive 3D view into ``report.html``; `pdf` writes ``report.pdf`` beside it (with
-    `fork`, in a forked process meanwhile, `fabplan.study.background.ForkedFile`: the
+    `fork`, in a forked process meanwhile, `fabplan.io.forked.ForkedFile`: the
     command does; a notebook or a Dask client's process had better not fork). With
     `rhino`, every candidate's folder also gets ``net.3dm`` (the net, its polylines, its
     panels by mold and its strip curves) and ``net.glb``.
