@@ -59,14 +59,21 @@ def line_turns_deg(X: np.ndarray, stars: np.ndarray) -> np.ndarray:
     return np.concatenate(out)
 
 
-def run_case(design, net: str, angle: float | None, panels: int) -> dict:
+def run_case(design, net: str, angle: float | None, panels: int, starts: int = 1) -> dict:
     h = math.sqrt(design.area / panels)
     record: dict = {"design": design.name, "net": net if angle is None else f"{net}-{angle:g}",
                     "panel_size": round(h, 4)}
     t0 = time.perf_counter()
     try:
-        layout = fabplan.layout_surface(design, h, angle=angle or 90.0)
-        result = fabplan.glide(layout, net, angle=angle)
+        if starts > 1:      # several starts, the fairest kept (`fabplan.layout.starts`)
+            from fabplan.layout.starts import glide_fairest
+
+            _, result = glide_fairest(design, h, net, angle=angle or 90.0, net_angle=angle,
+                                      starts=starts)
+            record["starts"] = result.properties["layout_starts"]
+        else:
+            layout = fabplan.layout_surface(design, h, angle=angle or 90.0)
+            result = fabplan.glide(layout, net, angle=angle)
     except fabplan.FabplanError as exc:
         record.update(status="refused", message=str(exc), seconds=time.perf_counter() - t0)
         return record
@@ -86,6 +93,7 @@ def run_case(design, net: str, angle: float | None, panels: int) -> dict:
         boundary_patches=len((props.get("boundary_panels") or {}).get("patches") or []),
         line_turn_max=float(turns.max()) if turns.size else None,
         line_turn_median=float(np.median(turns)) if turns.size else None,
+        line_turn_p95=float(np.percentile(turns, 95)) if turns.size else None,
         angle_min=angle_stats.get("min"), angle_max=angle_stats.get("max"),
         folded=folds.get("folded"),
         quads=int(np.sum(result.mesh.face_sizes == 4)),
@@ -116,7 +124,8 @@ def table(records: list) -> str:
 def summarize(paths: list[Path]) -> str:
     runs = [json.loads(p.read_text()) for p in paths]
     head = "| net | " + " | ".join(
-        f"{r['label']}: converged, coverage median / min %, line turn median / worst deg"
+        f"{r['label']}: converged, coverage median / min %, line turn at the 95th "
+        "percentile median / worst, line turn median / worst of the cases' sharpest, deg"
         for r in runs) + " |"
     rows = [head, "|---|" + "---|" * len(runs)]
     for net in sorted({c["net"] for r in runs for c in r["cases"]}):
@@ -126,9 +135,12 @@ def summarize(paths: list[Path]) -> str:
             done = [c for c in cases if c.get("line_turn_max") is not None]
             cov = [100 * c["coverage"] for c in done if c.get("coverage") is not None]
             turn = [c["line_turn_max"] for c in done]
+            p95 = [c["line_turn_p95"] for c in done if c.get("line_turn_p95") is not None]
             ok = sum(1 for c in cases if c.get("converged"))
             cells.append(f"{ok} of {len(cases)}, {_fmt(np.median(cov) if cov else None)} / "
                          f"{_fmt(min(cov) if cov else None)}, "
+                         f"{_fmt(np.median(p95) if p95 else None)} / "
+                         f"{_fmt(max(p95) if p95 else None)}, "
                          f"{_fmt(np.median(turn) if turn else None)} / "
                          f"{_fmt(max(turn) if turn else None)}")
         rows.append(f"| {net} | " + " | ".join(cells) + " |")
@@ -141,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--nets", nargs="*", default=[n for n, _ in NETS])
     parser.add_argument("--label", default=datetime.date.today().isoformat())
     parser.add_argument("--summarize", nargs="*", type=Path)
+    parser.add_argument("--starts", type=int, default=1,
+                        help="lay out and solve every case from this many starts and keep the "
+                             "fairest (fabplan.layout.starts; 1: one layout, one solve)")
     args = parser.parse_args(argv)
     if args.summarize:
         print(summarize(args.summarize))
@@ -152,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             if net not in args.nets:
                 continue
             for panels in PANELS:
-                records.append(run_case(design, net, angle, panels))
+                records.append(run_case(design, net, angle, panels, args.starts))
                 r = records[-1]
                 print(f"{r['design']:<14} {r['net']:<13} {r['panel_size']:6.2f} {r['status']:<14} "
                       f"coverage {_fmt(None if r.get('coverage') is None else 100 * r['coverage'], '.2f')} "

@@ -101,10 +101,12 @@ class _IterationReport:
     def __init__(self, progress: Progress):
         self.progress = progress
         self.stage: Any = None
+        self.prefix = ""         # which of several solves (`fabplan layout`'s starts)
 
     def __call__(self, rec: Any) -> None:
         # a multilevel start solves coarse nets first, each counting its own iterations
-        net = f"coarse net of {rec.coarse_vertices:,} vertices, " if rec.coarse_vertices else ""
+        net = self.prefix + (f"coarse net of {rec.coarse_vertices:,} vertices, "
+                             if rec.coarse_vertices else "")
         if self.stage is not None:
             self.stage.note(f"{net}iteration {rec.iteration}, residual {rec.hard_residual:.2e}")
         self.progress.iteration(f"{net}iteration {rec.iteration:3d}  residual "
@@ -427,6 +429,21 @@ def _check_layout_options(args: argparse.Namespace, preset: Any) -> None:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
     if args.smoothing is not None and not 0 < args.smoothing <= 20:
         raise InputError(f"--smoothing must lie in (0, 20] panels, got {args.smoothing}")
+    from .layout.settings import MAX_STARTS
+
+    if not 1 <= args.starts <= MAX_STARTS:
+        raise InputError(f"--starts must lie between 1 and {MAX_STARTS}, got {args.starts}")
+
+
+def _start_text(start: dict) -> str:
+    """One start of `fabplan layout` (`fabplan.layout.starts`) in a few words."""
+    text = f"{start['start']}{' (kept)' if start['chosen'] else ''}: {start['status']}"
+    if start["status"] == "refused":
+        return text
+    turn = start.get("line_turn_p95_deg")
+    return (text + f", coverage {100 * (start.get('coverage') or 0):.2f} %"
+            + ("" if turn is None else f", lines turn {turn:.1f} deg at the 95th percentile")
+            + f", {start['seconds']:.1f} s")
 
 
 def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
@@ -451,6 +468,9 @@ def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
     if changed:
         print(f"fabplan: note: the design was repaired as it was read: {', '.join(changed)} "
               "(properties.layout.design_repairs)", file=sys.stderr)
+    starts = props.get("layout_starts") or []
+    if len(starts) > 1:
+        print(f"starts: {'; '.join(_start_text(t) for t in starts)}")
     if len(layout.turning_points):
         where = ", ".join(f"({', '.join(f'{c:.4g}' for c in p)})" for p in layout.turning_points[:3])
         print(f"fabplan: warning: the principal directions turn by up to "
@@ -472,7 +492,8 @@ def _cmd_layout(args) -> int:
     from .design.load import load_design
     from .layout.picture import fairness_marks, write_layout_picture
     from .layout.settings import LayoutSettings
-    from .layout.surface_layout import glide, layout_angle, layout_surface
+    from .layout.starts import glide_fairest
+    from .layout.surface_layout import layout_angle
     from .solve.net_types import get_net
     from .solve.optimize import boundary_path
 
@@ -494,17 +515,23 @@ def _cmd_layout(args) -> int:
                                                 if design.source["scale"] != 1 else ""))
     _check_layout_size(design, args.panel_size, args.max_panels)
     progress = _progress(args)    # after the checks: a refusal is one line on its own
-    with progress.stage("laying out the net"):
-        start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
-        settings_layout = (LayoutSettings() if args.smoothing is None else
-                           LayoutSettings(smoothing=args.smoothing, smoothing_tries=()))
-        layout = layout_surface(design, args.panel_size, angle=start, family=args.family,
-                                settings=settings_layout)
+    start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
+    settings_layout = (LayoutSettings() if args.smoothing is None else
+                       LayoutSettings(smoothing=args.smoothing, smoothing_tries=()))
     settings, report = _solver_options(args, progress)
-    with progress.stage("solving on the design") as stage:
+    with progress.stage("laying out the net and solving it on the design") as stage:
         report.stage = stage
-        result = glide(layout, preset.name, angle=args.angle if preset.angle == "param" else None,
-                       settings=settings, progress=report)
+
+        def starting(k: int, n: int, name: str) -> None:
+            if n > 1:
+                report.prefix = f"start {k + 1} of {n} ({name}), "
+                stage.note(report.prefix.rstrip(", "))
+
+        layout, result = glide_fairest(
+            design, args.panel_size, preset.name, angle=start,
+            net_angle=args.angle if preset.angle == "param" else None, family=args.family,
+            settings=settings_layout, solver=settings, starts=args.starts,
+            vary_smoothing=args.smoothing is None, progress=report, on_start=starting)
     angle = result.parameters.get("angle_deg")
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
              + (f", {layout.family}" if layout.family else
@@ -550,6 +577,7 @@ def _cmd_layout(args) -> int:
     if page is not None:
         viewers = [out.with_suffix(".html"), *viewers]
     props = result.properties
+    starts = props.get("layout_starts") or []
     params = ", ".join(f"{k} {v:.6g}" for k, v in result.parameters.items() if isinstance(v, float))
     if args.quiet:
         print(f"{result.net}: {result.status} after {result.iterations} iterations; wrote "
@@ -558,6 +586,8 @@ def _cmd_layout(args) -> int:
         _print_layout_report(props, layout, json_path)
         print(f"{result.net}: {result.status} after {result.iterations} iterations in "
               f"{result.seconds:.2f} s (layout {sum(layout.seconds.values()):.2f} s"
+              + (f"; {len(starts)} starts laid out and solved in "
+                 f"{sum(t['seconds'] for t in starts):.1f} s" if len(starts) > 1 else "")
               + (f", boundary panels {props['boundary_panels']['seconds']:.2f} s"
                  if (props.get("boundary_panels") or {}).get("seconds") is not None else "")
               + ")"
@@ -1189,6 +1219,12 @@ def _add_layout(sub: Any) -> None:
                         "(default: from half a panel, longer while the lattice leaves the design "
                         "unclad; longer smoothing holds the lattice together near umbilics, "
                         "shorter keeps the lines fairer after the solve)")
+    p.add_argument("--starts", type=int, default=4, metavar="N",
+                   help="lay the net out and solve it from up to N starts and keep the one "
+                        "that converges, covers the design and whose lines turn least: as "
+                        "set; the fairness term held longer in the solve; the other principal "
+                        "direction as the bisector (at angles other than 90 deg); the "
+                        "directions smoothed twice as long (default 4; 1 is the fastest)")
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["LayoutSettings", "SURFACE_TOLERANCE"]
+__all__ = ["LayoutSettings", "SURFACE_TOLERANCE", "MAX_STARTS"]
 
 
 # how far a gliding net may leave the design, in panel sizes: half of the 1 % a layout is
 # judged by (measured: up to 0.45 % used on a facade with near-umbilics)
 SURFACE_TOLERANCE = 0.005
+
+#: the starts a net may be laid out and solved from (`fabplan.layout.starts`)
+MAX_STARTS = 4
 
 
 @dataclass

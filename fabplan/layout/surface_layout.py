@@ -118,8 +118,10 @@ class SurfaceLayout:
     level_step : level k of the prescribed family is where its function equals
         ``k * level_step`` (see `prescribed_family`), or None.
     direction_symmetry : 4 when the directions were smoothed as a cross field, 2 as a
-        line field; `smoothing` the smoothing length (panel sizes); `smoothing_tried` the
-        lengths tried and the share of the design each layout's quads covered.
+        line field; `smoothing` the smoothing length used (panel sizes); `smoothing_tried`
+        the lengths asked for, the length each used and the share of the design each
+        layout's quads covered.
+    bisector : the principal direction bisecting the families (`LayoutSettings.bisector`).
     turning_points, turning_deg : (k, 3), (k,) float, where the direction field turns
         faster than `LayoutSettings.max_turning_deg` per panel (umbilics and near-umbilics,
         `fabplan.directions.direction_turning`), and how fast: the net's lines cannot
@@ -149,6 +151,7 @@ class SurfaceLayout:
     turning_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     direction_symmetry: int = 2
     smoothing: float = 0.5
+    bisector: str = "max"
     max_gap_panels: float | None = None
     smoothing_tried: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
@@ -189,9 +192,10 @@ class SurfaceLayout:
             "singular_index": self.singular_index.tolist(),
             "fast_turning_points": self.turning_points.tolist(),
             "fast_turning_deg_per_panel": self.turning_deg.tolist(),
-            "direction_field": "cross" if self.direction_symmetry == 4 else "line",
+            "direction_field": _field_name(self),
             "smoothing_panels": self.smoothing,
             "smoothing_tried": self.smoothing_tried,
+            "bisector": self.bisector,
             "seam_edges": int(self.seam_edges),
             "cuts": [list(map(int, c)) for c in self.cuts],
             "filled_holes": int(self.filled_holes),
@@ -242,19 +246,22 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     best: SurfaceLayout | None = None
     best_coverage = -1.0
     refusal: InputError | None = None
-    tried: list[dict[str, float | None]] = []
+    tried: list[dict[str, float | str | None]] = []
     lengths = [s.smoothing, *(x for x in s.smoothing_tries if x > s.smoothing)]
     for k, length in enumerate(lengths):
+        if any(_doubled_past(t, length) for t in tried):
+            continue        # the same cross field as a try before, and the same layout
         try:
             layout = _layout_once(design, h, angle, family, replace(s, smoothing=length))
         except InputError as exc:      # this smoothing leaves no usable lattice
             refusal = refusal or exc
-            tried.append({"smoothing_panels": length, "coverage": 0.0})
+            tried.append({"smoothing_panels": length, "used": None, "coverage": 0.0})
             continue
         if best is None and k == len(lengths) - 1:
             # the only layout there is: nothing to compare its coverage with
             best, best_net, best_hole = layout, None, None
-            tried.append({"smoothing_panels": length, "coverage": None})
+            tried.append({"smoothing_panels": length, "used": layout.smoothing,
+                          "field": _field_name(layout), "coverage": None})
             break
         # judged with the boundary panels the net will get: the staircase along the
         # boundary is theirs to clad; what they cannot reach are the lattice's own holes
@@ -269,7 +276,8 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
             hole = inside[0] if inside else None
         except shapely.errors.GEOSException:
             coverage = on_net = net_coverage(layout.mesh, design, h)
-        tried.append({"smoothing_panels": length, "coverage": coverage})
+        tried.append({"smoothing_panels": length, "used": layout.smoothing,
+                      "field": _field_name(layout), "coverage": coverage})
         if coverage > best_coverage:
             best, best_coverage, best_net, best_hole = layout, coverage, on_net, hole
         if coverage >= s.good_coverage:
@@ -295,6 +303,20 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     return best
 
 
+
+
+def _field_name(layout: SurfaceLayout) -> str:
+    return "cross" if layout.direction_symmetry == 4 else "line"
+
+
+def _doubled_past(tried: dict, length: float) -> bool:
+    """Whether a smoothing try's cross field was doubled (`_smoothed_directions`) from its
+    length through `length` up to the one it used: starting at `length` ends there too."""
+    asked, used = tried["smoothing_panels"], tried["used"]
+    if used is None or tried.get("field") != "cross" or not asked <= length <= used:
+        return False
+    steps = math.log2(length / asked)
+    return math.isclose(steps, round(steps), abs_tol=1e-9)
 
 
 def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list | None,
@@ -350,7 +372,10 @@ def layout_again(record: dict) -> SurfaceLayout:
         resolution = record.get("design_resolution")
         design = load_design(spec, triangles=int(record["design_triangles"]),
                              resolution=None if resolution is None else tuple(resolution))
-        settings = LayoutSettings(smoothing=float(record["smoothing_panels"]), smoothing_tries=())
+        smoothing = float(record["smoothing_panels"])
+        settings = LayoutSettings(smoothing=smoothing, smoothing_tries=(),
+                                  max_smoothing=max(LayoutSettings.max_smoothing, smoothing),
+                                  bisector=record.get("bisector", "max"))
         return layout_surface(design, float(record["panel_size"]),
                               angle=float(record["angle_deg"]),
                               family=record.get("prescribed_family"), settings=settings,
@@ -452,7 +477,7 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
         gliding_boundary=gliding, vertex_keys=vertex_keys,
         prescribed=fields.prescribed, family=fields.description, level_step=fields.level_step,
         turning_points=turning[0], turning_deg=turning[1], direction_symmetry=symmetry,
-        smoothing=smoothing, seconds=seconds)
+        smoothing=smoothing, bisector=s.bisector, seconds=seconds)
     if len(mesh.stars) == 0:
         if design.area / (h * h) < s.min_panels_judged:     # the panel size is why
             raise InputError(f"{design.name}: panel size {h:g} is too large for the surface "

@@ -192,7 +192,7 @@ class StripResult(StripPlan):
 # ----------------------------------------------------------------------------- stages
 def layout_net(design: DesignSurface | str | os.PathLike, panel_size: float, net: str = "snet", *,
            angle: float | None = None, family: str | None = None, settings: Any = None,
-           progress: Callable[..., None] | None = None) -> NetResult:
+           starts: int = 4, progress: Callable[..., None] | None = None) -> NetResult:
     """Lay out a net of type `net` on a design and solve it gliding on the surface
     (``fabplan layout``).
 
@@ -204,18 +204,23 @@ def layout_net(design: DesignSurface | str | os.PathLike, panel_size: float, net
     angle : intersection angle in degrees for isogonal nets (default: the design's).
     family : prescribed first family (``"z"``, ``"z:3.5"`` or a file), see the CLI.
     settings : `fabplan.SolverSettings`.
+    starts : how many starts to solve and choose the fairest from
+        (`fabplan.layout.starts.glide_fairest`; 1: one layout, one solve).
     """
     from ..design.load import load_design
     from ..design.mesh_surface import DesignSurface
-    from ..layout.surface_layout import glide, layout_angle, layout_surface
+    from ..layout.starts import glide_fairest
+    from ..layout.surface_layout import layout_angle
     from ..solve.net_types import get_net
 
     surface = design if isinstance(design, DesignSurface) else load_design(design)
     preset = get_net(net)
     start = layout_angle(preset.name, surface, angle) if family is None else 90.0
-    laid: SurfaceLayout = layout_surface(surface, panel_size, angle=start, family=family)
-    result = glide(laid, preset.name, angle=angle if preset.angle == "param" else None,
-                   settings=settings, progress=progress)
+    laid: SurfaceLayout
+    laid, result = glide_fairest(surface, panel_size, preset.name, angle=start,
+                                 net_angle=angle if preset.angle == "param" else None,
+                                 family=family, solver=settings, starts=starts,
+                                 progress=progress)
     return NetResult.of(result, layout=laid)
 
 

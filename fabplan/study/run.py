@@ -454,6 +454,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     -------
     CandidateResult with `net` and `layout`, its seconds so far in ``metrics["seconds"]``.
     """
+    from ..layout.starts import glide_fairest
     from ..layout.surface_layout import glide, layout_surface
     from ..layout.trim import add_boundary_panels
     from ..solve.optimize import optimize
@@ -464,10 +465,11 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     angle = start_angle(candidate, design)
     size = study.panel_size_of(candidate)
     key = (angle, size)
-    if key not in layouts:
+    several = candidate.glides and study.layout_starts > 1
+    if key not in layouts and not several:
         say(f"    layout at {angle:g} deg, panel size {size:g}")
         layouts[key] = layout_surface(design, size, angle=angle)
-    layout = layouts[key]
+    layout = layouts.get(key)
     seconds["layout"] = time.perf_counter() - clock
     settings = SolverSettings(max_iterations=study.max_iterations)
 
@@ -476,12 +478,23 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
             say(f"    iteration {rec.iteration:3d}  residual {rec.hard_residual:.2e}")
 
     clock = time.perf_counter()
-    if candidate.glides:
+    if several:
+        # its own layout among the starts (`fabplan.layout.starts`): the S-net start of the
+        # nets that leave the design stays the shared layout's
+        layout, net = glide_fairest(design, size, candidate.net, angle=angle,
+                                    net_angle=candidate.angle, solver=settings,
+                                    starts=study.layout_starts, progress=report)
+        say(f"    {len(net.properties['layout_starts'])} starts: "
+            + ", ".join(f"{t['start']} {t['status']}" + (" (kept)" if t["chosen"] else "")
+                        for t in net.properties["layout_starts"]))
+    elif candidate.glides:
+        assert layout is not None
         net = glide(layout, candidate.net, angle=candidate.angle, settings=settings,
                     progress=report)
         if candidate.net == "snet":
             starts[key] = net
     else:
+        assert layout is not None
         if key not in starts:
             # only its mesh is used: the solved net gets boundary panels of its own
             starts[key] = glide(layout, "snet", settings=settings, boundary_panels=False)

@@ -35,6 +35,7 @@ from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
 from ..io.inputs import check_input_file, check_text
+from ..layout.settings import MAX_STARTS
 from ..solve.net_types import NETS, get_net
 
 if sys.version_info >= (3, 11):
@@ -278,6 +279,7 @@ class Study:
     cost: CostWeights
     candidates: tuple[Candidate, ...]
     max_iterations: int = 100
+    layout_starts: int = 1
     extra: dict = field(default_factory=dict)
 
     def panel_size_of(self, candidate: Candidate) -> float:
@@ -324,6 +326,7 @@ class Study:
              else list(self.strips.nets)},
             "cost": asdict(self.cost),
             "max_iterations": self.max_iterations,
+            "layout_starts": self.layout_starts,
         }
 
 
@@ -502,6 +505,9 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     name = meta.text("name", path.stem if path else "study")
     description = meta.text("description", "")
     max_iterations = meta.number("max_iterations", 100, integer=True)
+    layout_starts = meta.number("layout_starts", 1, integer=True)
+    if layout_starts > MAX_STARTS:
+        meta.fail("layout_starts", f"must lie between 1 and {MAX_STARTS}, got {layout_starts}")
     meta.done()
 
     panels = _Table(top.get("panels", {}), "panels", file)
@@ -523,7 +529,8 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     top.done()
     return Study(name=name, path=path, description=description, design=design,
                  panel_size=sizes[0], limits=limits, strips=strips, cost=cost,
-                 candidates=candidates, max_iterations=max_iterations)
+                 candidates=candidates, max_iterations=max_iterations,
+                 layout_starts=int(layout_starts))
 
 
 def _design(t: _Table, folder: Path) -> DesignSpec:
