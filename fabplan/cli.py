@@ -249,6 +249,13 @@ def _cmd_optimize(args) -> int:
     if panels_note:
         print(f"fabplan: note: {panels_note}", file=sys.stderr)
     elif result.boundary_panels is not None:
+        panels = result.properties.get("boundary_panels") or {}
+        if panels.get("follow_net") and panels.get("offset_from_design_max", 0.0) > 0.0:
+            print(f"fabplan: note: the boundary panels continue the net where it stands off the "
+                  f"design: their points between the net and the design boundary stand off the "
+                  f"design as the net does beside them, by up to "
+                  f"{panels['offset_from_design_max']:.4g} model units "
+                  "(properties.boundary_panels.offset_from_design_max)", file=sys.stderr)
         for warning in boundary_warnings(result.properties):
             _warn(warning)
     if not result.converged:
@@ -284,7 +291,7 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
             np.array_equal(a, b) for a, b in zip(layout.mesh.faces, mesh.faces, strict=True))
         if not same:
             return f"{lost}: the net's faces are not those of the layout in {source.with_suffix('.json')}"
-        if add_boundary_panels(result, layout, touch=OFF_DESIGN_TOUCH) is None:
+        if add_boundary_panels(result, layout, touch=OFF_DESIGN_TOUCH, follow_net=True) is None:
             return f"{lost}: {result.properties['boundary_panels']['error']}"
     return None
 
@@ -439,10 +446,14 @@ def _start_text(start: dict) -> str:
     """One start of `fabplan layout` (`fabplan.layout.starts`) in a few words."""
     text = f"{start['start']}{' (kept)' if start['chosen'] else ''}: {start['status']}"
     if start["status"] == "refused":
-        return text
+        return f"{text}: {start['message']}"
     turn = start.get("line_turn_p95_deg")
+    edges = start.get("edge_length_relative_to_panel") or {}
     return (text + f", coverage {100 * (start.get('coverage') or 0):.2f} %"
             + ("" if turn is None else f", lines turn {turn:.1f} deg at the 95th percentile")
+            + (f", edges {edges['min']:.2f} .. {edges['max']:.2f} panels" if edges else "")
+            + (f" ({start['less_even_than_first']} than the first start)"
+               if start.get("less_even_than_first") else "")
             + f", {start['seconds']:.1f} s")
 
 
@@ -470,7 +481,11 @@ def _print_layout_report(props: dict, layout: Any, json_path: Path) -> None:
               "(properties.layout.design_repairs)", file=sys.stderr)
     starts = props.get("layout_starts") or []
     if len(starts) > 1:
-        print(f"starts: {'; '.join(_start_text(t) for t in starts)}")
+        print("starts (the fairest kept):")
+        for start in starts:
+            print(f"  {_start_text(start)}")
+        for start in props.get("layout_starts_left_out") or []:
+            print(f"  {start['start']}: left out ({start['why']})")
     if len(layout.turning_points):
         where = ", ".join(f"({', '.join(f'{c:.4g}' for c in p)})" for p in layout.turning_points[:3])
         print(f"fabplan: warning: the principal directions turn by up to "
@@ -1219,12 +1234,13 @@ def _add_layout(sub: Any) -> None:
                         "(default: from half a panel, longer while the lattice leaves the design "
                         "unclad; longer smoothing holds the lattice together near umbilics, "
                         "shorter keeps the lines fairer after the solve)")
-    p.add_argument("--starts", type=int, default=4, metavar="N",
+    p.add_argument("--starts", type=int, default=5, metavar="N",
                    help="lay the net out and solve it from up to N starts and keep the one "
                         "that converges, covers the design and whose lines turn least: as "
                         "set; the fairness term held longer in the solve; the other principal "
                         "direction as the bisector (at angles other than 90 deg); the "
-                        "directions smoothed twice as long (default 4; 1 is the fastest)")
+                        "directions smoothed twice as long; smoothed as a line field "
+                        "(default 5; 1 is the fastest)")
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")

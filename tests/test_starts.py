@@ -46,26 +46,58 @@ def tower():
     return design, math.sqrt(design.area / 120)
 
 
-def test_the_kept_start_is_the_fairest_that_converges_and_clads(tower):
+def edge_spread(mesh) -> float:
+    """Longest edge over the shortest, measured here."""
+    length = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
+    return float(length.max() / length.min())
+
+
+def test_the_kept_start_is_the_fairest_whose_panels_are_as_even(tower):
     design, h = tower
     layout, result = glide_fairest(design, h, "snet", angle=90.0)
     starts = result.properties["layout_starts"]
-    # at 90 deg the bisector is no choice
-    assert [t["start"] for t in starts] == ["as set", "fairness held longer", "smoothing doubled"]
+    # at 90 deg the bisector is no choice, and the output says so
+    assert [t["start"] for t in starts] == ["as set", "fairness held longer", "smoothing doubled",
+                                            "line field"]
+    assert [t["start"] for t in result.properties["layout_starts_left_out"]] == ["bisector"]
     assert sum(t["chosen"] for t in starts) == 1
     kept = next(t for t in starts if t["chosen"])
     assert result.converged and result.properties["coverage"] >= 0.999
     measured = line_turns_p95(result.mesh.vertices, result.mesh.stars)
     assert measured == pytest.approx(kept["line_turn_p95_deg"], abs=0.5)
+    first = starts[0]
+    assert not kept["less_even_than_first"]
+    # no start that ended as well, with panels as even as the first's, has lines clearly
+    # straighter than the kept one's
+    p95 = kept["line_turn_p95_deg"]
     for t in starts:
-        if t["status"] == "converged" and t["coverage"] >= 0.999:
-            assert kept["line_turn_p95_deg"] <= t["line_turn_p95_deg"] + 0.05
-    # one layout solved once: its lines turn more (12 against 6 deg when measured)
-    single = glide(layout_surface(design, h), "snet")
-    assert single.converged
-    assert measured <= 0.8 * line_turns_p95(single.mesh.vertices, single.mesh.stars)
+        if t["status"] == "converged" and t["coverage"] >= 0.999 and not t["less_even_than_first"]:
+            assert t["line_turn_p95_deg"] >= min(p95 - 1.0, 0.9 * p95) - 0.05
+    # the starts left for uneven panels are so: their edges spread more than the first's
+    spread = first["edge_length_relative_to_panel"]
+    for t in starts:
+        if t["less_even_than_first"] == "its edges are less even":
+            edges = t["edge_length_relative_to_panel"]
+            assert edges["max"] / edges["min"] > 1.15 * spread["max"] / spread["min"]
     # the kept layout is the one the net was solved from
     assert layout.smoothing == kept["smoothing_panels"]
+
+
+def test_an_isogonal_net_on_a_torus_is_fairer_from_the_other_bisector():
+    """The torus's isogonal 60 deg net from the given bisector turns its lines by 28 deg at
+    the 95th percentile (measured when this was written); bisected by the other principal
+    direction, by 14 deg, with edges no less even."""
+    surface = surface_from_spec("torus")
+    design = surface.triangulate(surface.resolution_for(8000))
+    h = math.sqrt(design.area / 120)
+    _, result = glide_fairest(design, h, "isogonal", angle=60.0, net_angle=60.0)
+    kept = next(t for t in result.properties["layout_starts"] if t["chosen"])
+    assert kept["start"] == "bisector min" and result.converged
+    single = glide(layout_surface(design, h, angle=60.0), "isogonal", angle=60.0)
+    assert single.converged
+    assert line_turns_p95(result.mesh.vertices, result.mesh.stars) <= \
+        0.6 * line_turns_p95(single.mesh.vertices, single.mesh.stars)
+    assert edge_spread(result.mesh) <= 1.15 * edge_spread(single.mesh)
 
 
 def test_one_start_is_one_layout_and_one_solve(tower):
@@ -80,13 +112,22 @@ def test_an_isogonal_net_tries_the_other_bisector_and_its_layout_is_made_again()
     surface = surface_from_spec("hyperbolic-paraboloid:width=5,depth=5,rise=3")
     design = surface.triangulate((60, 60))
     names = [s.name for s in layout_starts(LayoutSettings(), 70.0)]
-    assert names == ["as set", "fairness held longer", "bisector min", "smoothing doubled"]
+    assert names == ["as set", "fairness held longer", "bisector min", "smoothing doubled",
+                     "line field"]
     # the bisector start alone, then made again from the net's record
     layout, result = glide_fairest(design, 0.8, "isogonal", angle=70.0, net_angle=70.0,
                                    settings=LayoutSettings(bisector="min"), starts=1)
     record = result.properties["layout"]
     assert record["bisector"] == "min"
     again = layout_again(json.loads(json.dumps(record)))
+    np.testing.assert_array_equal(again.mesh.vertices, layout.mesh.vertices)
+    # a line field asked for (no cross field tried) is asked for again
+    layout, result = glide_fairest(design, 0.8, "isogonal", angle=70.0, net_angle=70.0,
+                                   settings=LayoutSettings(max_smoothing=0.0), starts=1)
+    record = result.properties["layout"]
+    assert record["direction_field"] == "line"
+    again = layout_again(json.loads(json.dumps(record)))
+    assert again.direction_symmetry == 2
     np.testing.assert_array_equal(again.mesh.vertices, layout.mesh.vertices)
     assert layout_starts(LayoutSettings(), 70.0, family="z")[2].name == "smoothing doubled"
 
@@ -110,12 +151,12 @@ def test_the_cli_lists_its_starts_and_refuses_a_bad_count(tmp_path, capsys):
     props = json.loads(out.with_suffix(".json").read_text())["properties"]
     assert code in (0, 3)
     assert [t["start"] for t in props["layout_starts"]] == ["as set", "fairness held longer"]
-    assert "starts: as set" in stdout
+    assert "starts (the fairest kept):\n  as set" in stdout
     code = main(["layout", "tower-facade", "--net", "snet", "--panel-size", "2",
-                 "--starts", "5", "-o", str(tmp_path / "five.obj")])
+                 "--starts", "6", "-o", str(tmp_path / "six.obj")])
     _, err = capsys.readouterr()
-    assert code == 2 and err == "fabplan: error: --starts must lie between 1 and 4, got 5\n"
-    assert not list(tmp_path.glob("five*"))
+    assert code == 2 and err == "fabplan: error: --starts must lie between 1 and 5, got 6\n"
+    assert not list(tmp_path.glob("six*"))
 
 
 def test_a_study_asks_for_starts_in_its_study_table():
@@ -127,5 +168,65 @@ def test_a_study_asks_for_starts_in_its_study_table():
 
     assert parse_study(asking(3)).layout_starts == 3
     assert parse_study(text).layout_starts == 1
-    with pytest.raises(InputError, match="layout_starts must lie between 1 and 4, got 6"):
+    with pytest.raises(InputError, match="layout_starts must lie between 1 and 5, got 6"):
         parse_study(asking(6))
+
+
+def test_a_start_that_leaves_the_design_unclad_is_kept_last():
+    """Regression: a start that converged with 94 % of the design clad was kept over one
+    at the iteration cap cladding 99.99 % (bspline-a's orthogonal net in the corpus)."""
+    from types import SimpleNamespace
+
+    from fabplan.layout.starts import LayoutStart, _fairest, _Tried
+
+    def tried(name: str, converged: bool, coverage: float, turn: float) -> _Tried:
+        result = SimpleNamespace(converged=converged, properties={
+            "coverage": coverage, "fairness": {"line_turn_deg": {"p95": turn}},
+            "edge_length_relative_to_panel": {"min": 0.8, "max": 1.2}})
+        return _Tried(LayoutStart(name, LayoutSettings()), None, result, None, 0.0)  # type: ignore[arg-type]
+
+    capped = tried("as set", False, 0.9999, 30.0)
+    unclad = tried("line field", True, 0.94, 10.0)
+    clad = tried("smoothing doubled", True, 0.998, 20.0)
+    assert _fairest([capped, unclad]) is capped
+    # converged and clad comes first; fairness decides only among equals
+    assert _fairest([capped, unclad, clad]) is clad
+    fairer = tried("fairness held longer", True, 0.998, 12.0)
+    assert _fairest([capped, clad, fairer]) is fairer
+
+
+SADDLE_STUDY = """
+[study]
+name = "saddle"
+layout_starts = 2
+
+[design]
+surface = "hyperbolic-paraboloid"
+parameters = { width = 4, depth = 4, rise = 1.2 }
+triangles = 4000
+
+[panels]
+size = 0.7
+
+[limits]
+max_deviation_mm = 200
+mold_tolerance_mm = 1.5
+
+[[candidates]]
+net = "const-radius"
+"""
+
+
+def test_a_study_with_starts_solves_its_gliding_nets_and_their_start_from_them():
+    from fabplan.study.run import run_study
+
+    result = run_study(parse_study(SADDLE_STUDY), progress=lambda line: None)
+    baseline = next(c for c in result.candidates if c.candidate.baseline)
+    other = next(c for c in result.candidates if not c.candidate.baseline)
+    assert baseline.candidate.glides and not other.candidate.glides
+    assert baseline.net is not None and other.net is not None
+    # the baseline S-net from two starts; the constant-radius net starts from it and is
+    # trimmed on its layout
+    assert len(baseline.net.properties["layout_starts"]) == 2
+    assert other.layout is baseline.layout
+    assert other.net.properties["coverage"] >= 0.999

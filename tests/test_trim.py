@@ -214,9 +214,12 @@ def test_a_net_optimized_after_its_layout_is_trimmed_again(tmp_path, capsys):
     assert np.abs(net_v - before).max() > 1e-3          # the net moved ...
     V, faces = read_obj(tmp_path / "opt" / "lw.boundary.obj")
     assert np.array_equal(V[:len(net_v)], net_v)         # ... and its panels with it
-    on = V[len(net_v):]
+    # new corners on the design's edge, lifted off the design with the net beside them:
+    # their closest points on the design are on its edge
+    design = load_design("hyperbolic-paraboloid:width=6,depth=4,rise=2", triangles=4000)
+    on = design.closest_points(V[len(net_v):])
     edge = np.minimum(np.abs(np.abs(on[:, 0]) - 6), np.abs(np.abs(on[:, 1]) - 4))
-    assert np.sort(edge)[len(edge) // 2] <= 1e-6          # new corners on the design's edge
+    assert np.sort(edge)[len(edge) // 2] <= 1e-6
     props = json.loads(lw.with_suffix(".json").read_text())["properties"]
     assert props["boundary_panels"]["count"] == len(faces) - len(props["boundary_panels"]["extensions"])
     # a net whose faces are not the layout's keeps no panels, and says so
@@ -541,3 +544,40 @@ def test_a_gap_of_several_panels_is_patched_in_pieces_of_about_one():
     assert max(np.bincount(patches.owner, area)) <= 1.5 * h * h
     everything = np.vstack([net.triangles(), patches.triangles])
     assert weight[_clad(samples, normals, P, everything, h)].sum() == pytest.approx(weight.sum(), rel=1e-6)
+
+
+def test_the_boundary_panels_of_a_net_off_its_design_continue_the_net():
+    """A net optimized off its design (here: lifted along the design's normals by an offset
+    growing across it) is trimmed with its boundary panels standing off the design as the
+    net does beside them, instead of stepping down to the design; measured by the points'
+    signed distances to the design."""
+    from fabplan.layout.trim import OFF_DESIGN_TOUCH, trim_to_design
+    from fabplan.net.mesh import QuadMesh
+
+    design = load_design("hyperbolic-paraboloid:width=6,depth=4,rise=2", triangles=4000)
+    h = 0.8
+    layout = layout_surface(design, h)
+
+    def lift(points: np.ndarray) -> np.ndarray:      # 3 % of a panel at x = -3 to 9 % at 3
+        return h * (0.06 + 0.01 * points[:, 0])
+
+    def signed_distance(points: np.ndarray) -> np.ndarray:
+        foot, _, tri = design.reference.closest_points(points)
+        return np.sum((points - foot) * design.face_normals[tri], axis=1)
+
+    X = layout.mesh.vertices
+    _, _, tri = design.reference.closest_points(X)
+    lifted = QuadMesh(X + lift(X)[:, None] * design.face_normals[tri], layout.mesh.faces)
+    n = lifted.vertex_count
+    # the same pieces with and without (patches of small gaps are cut after the lift)
+    follows = trim_to_design(lifted, layout, touch=OFF_DESIGN_TOUCH, follow_net=True,
+                             patch_gaps=False)
+    stays = trim_to_design(lifted, layout, touch=OFF_DESIGN_TOUCH, patch_gaps=False)
+    assert follows.count == stays.count > 0 and follows.coverage >= 0.999
+    points = follows.vertices[n:]
+    # where the design's point is, the net beside it stands off by about the lift there
+    under = stays.vertices[n:]
+    assert np.abs(signed_distance(points) - lift(under)).max() <= 0.01 * h
+    assert np.abs(signed_distance(under)).max() <= 1e-3 * h       # before: on the design
+    assert follows.record()["follow_net"] and \
+        follows.record()["offset_from_design_max"] == pytest.approx(lift(under).max(), rel=0.1)

@@ -12,7 +12,7 @@ __all__ = ["LayoutSettings", "SURFACE_TOLERANCE", "MAX_STARTS"]
 SURFACE_TOLERANCE = 0.005
 
 #: the starts a net may be laid out and solved from (`fabplan.layout.starts`)
-MAX_STARTS = 4
+MAX_STARTS = 5
 
 
 @dataclass

@@ -26,11 +26,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from ..errors import InputError
 from ..solve.solver import SolverSettings
-from .settings import MAX_STARTS, LayoutSettings
+from .settings import MAX_STARTS, SURFACE_TOLERANCE, LayoutSettings
 from .surface_layout import SurfaceLayout, glide, layout_surface
 
 if TYPE_CHECKING:
@@ -45,8 +45,19 @@ __all__ = ["LayoutStart", "layout_starts", "glide_fairest", "MAX_STARTS"]
 #: 50 iterations; measured on the corpus, 0.7 gave no fairer nets and hit the cap more)
 HELD_FAIRNESS, HELD_FADE = 1.0, 0.6
 
-#: coverage at which a start counts as cladding the whole design (judged by fairness then)
-CLAD = 0.999
+#: coverage at which a start counts as cladding the whole design (judged by fairness then),
+#: and below which it leaves part of it unclad (judged after every start that clads it)
+CLAD, UNCLAD = 0.999, 0.995
+
+#: a start's panels are as even as the first start's when its longest over shortest edge
+#: is at most this factor of the first's, its intersection angles stay within this many
+#: degrees of the first's range, and it stands off the design by at most this factor of
+#: the first's distance (or the gliding tolerance)
+EVEN_EDGES, EVEN_ANGLES_DEG, EVEN_OFFSET = 1.15, 5.0, 1.25
+
+#: another start replaces the first only when its lines turn less by this many degrees
+#: and this share at the 95th percentile (a few tenths of a degree is no fairer net)
+CLEARER_DEG, CLEARER_SHARE = 1.0, 0.1
 
 
 @dataclass(frozen=True)
@@ -58,14 +69,15 @@ class LayoutStart:
     name : what it varies, for reports.
     layout : its `LayoutSettings`; None: the first start's layout, solved otherwise.
     solver : `SolverSettings` fields it sets.
-    double_smoothing : its layout smooths the directions twice as long as the first
-        start's layout did (known only once that layout is made).
+    smoothing : its layout smooths the directions over this factor of the length the
+        first start's layout used (known only once that layout is made), and tries no
+        other; None: as its settings say.
     """
 
     name: str
     layout: LayoutSettings | None
     solver: dict = field(default_factory=dict)
-    double_smoothing: bool = False
+    smoothing: float | None = None
 
 
 def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None = None,
@@ -91,13 +103,20 @@ def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None 
         other = "min" if settings.bisector == "max" else "max"
         starts.append(LayoutStart(f"bisector {other}", replace(settings, bisector=other)))
     if vary_smoothing:
-        starts.append(LayoutStart("smoothing doubled", settings, double_smoothing=True))
+        starts.append(LayoutStart("smoothing doubled", settings, smoothing=2.0))
+    if family is None:
+        # the principal directions smoothed as a line field (no cross field tried) over the
+        # first layout's length, solved as the fairness start: a lattice that follows one
+        # principal direction through its turns
+        starts.append(LayoutStart("line field", replace(settings, max_smoothing=0.0),
+                                  {"fairness_weight": HELD_FAIRNESS, "fade": HELD_FADE},
+                                  smoothing=1.0))
     return starts[:max(int(count), 1)]
 
 
 @dataclass
 class _Tried:
-    """A start solved, with what judges it."""
+    """A start solved (or refused), with what judges it."""
 
     start: LayoutStart
     layout: SurfaceLayout | None
@@ -105,18 +124,59 @@ class _Tried:
     refusal: InputError | None
     seconds: float
 
-    def rank(self) -> tuple:
-        r = self.result
-        if r is None:
-            return (3, 0.0, math.inf)
-        coverage = float(r.properties.get("coverage") or 0.0)
-        turn = (r.properties.get("fairness") or {}).get("line_turn_deg", {}).get("p95")
-        # a design clad to 99.9 % is clad (what a template study asks); below that the
-        # start that clads more comes first, whatever its lines
-        return (0 if r.converged else 1, -round(min(coverage, CLAD), 4),
-                math.inf if turn is None else round(turn, 1))
+    def _get(self, *keys: str) -> float | None:
+        """A number of the result's properties, by its keys (None when absent)."""
+        value: Any = None if self.result is None else self.result.properties
+        for key in keys:
+            value = value.get(key) if isinstance(value, dict) else None
+        return None if value is None else float(value)
 
-    def record(self, chosen: bool) -> dict:
+    @property
+    def turn(self) -> float:
+        """95th percentile of the lines' turns (degrees)."""
+        value = self._get("fairness", "line_turn_deg", "p95")
+        return math.inf if value is None else value
+
+    @property
+    def edge_spread(self) -> float:
+        """Longest edge over the shortest."""
+        lo = self._get("edge_length_relative_to_panel", "min")
+        hi = self._get("edge_length_relative_to_panel", "max")
+        return math.inf if not lo or hi is None else hi / lo
+
+    def tier(self) -> tuple:
+        """What comes before fairness: whether it clads the design (`UNCLAD`), how it
+        ended, then how much of the design it clads."""
+        if self.result is None:
+            return (1, 2, 0.0)
+        coverage = self._get("coverage") or 0.0
+        # a net that leaves a visible part of the design unclad is no start to keep, even
+        # converged; a design clad to 99.9 % is clad (what a template study asks), and
+        # below that the start that clads more comes first, whatever its lines
+        return (int(coverage < UNCLAD), 0 if self.result.converged else 1,
+                -round(min(coverage, CLAD), 4))
+
+    def uneven_against(self, other: _Tried) -> str | None:
+        """Why its panels are less even than `other`'s, or None when they are about as
+        even: straighter lines bought with uneven panels (edges stretched to the solve's
+        limits, angles opened) or a net further off the design are no fairer net."""
+        if other.result is None or self is other:
+            return None
+        if self.edge_spread > EVEN_EDGES * other.edge_spread:
+            return "its edges are less even"
+        angle = ("fairness", "intersection_angle_deg")
+        lo, other_lo = self._get(*angle, "min"), other._get(*angle, "min")
+        hi, other_hi = self._get(*angle, "max"), other._get(*angle, "max")
+        if (lo is not None and other_lo is not None and lo < other_lo - EVEN_ANGLES_DEG) or \
+                (hi is not None and other_hi is not None and hi > other_hi + EVEN_ANGLES_DEG):
+            return "its lines meet at a wider range of angles"
+        off = self._get("distance_to_design_relative_to_panel", "max") or 0.0
+        other_off = other._get("distance_to_design_relative_to_panel", "max") or 0.0
+        if off > max(EVEN_OFFSET * other_off, SURFACE_TOLERANCE):
+            return "it stands further off the design"
+        return None
+
+    def record(self, chosen: bool, uneven: str | None) -> dict:
         out: dict = {"start": self.start.name, "chosen": chosen,
                      "seconds": round(self.seconds, 3)}
         if self.layout is not None:
@@ -126,10 +186,48 @@ class _Tried:
         if self.result is None:
             out.update(status="refused", message=str(self.refusal))
             return out
-        turn = (self.result.properties.get("fairness") or {}).get("line_turn_deg", {})
-        out.update(status=self.result.status, coverage=self.result.properties.get("coverage"),
-                   line_turn_p95_deg=turn.get("p95"), line_turn_max_deg=turn.get("max"))
+        props = self.result.properties
+        angles = (props.get("fairness") or {}).get("intersection_angle_deg") or {}
+        out.update(status=self.result.status, coverage=props.get("coverage"),
+                   line_turn_p95_deg=self._get("fairness", "line_turn_deg", "p95"),
+                   line_turn_max_deg=self._get("fairness", "line_turn_deg", "max"),
+                   edge_length_relative_to_panel=props.get("edge_length_relative_to_panel"),
+                   intersection_angle_deg={"min": angles.get("min"), "max": angles.get("max")},
+                   distance_to_design_relative_to_panel_max=self._get(
+                       "distance_to_design_relative_to_panel", "max"),
+                   edge_ratio_along_lines_p95=self._get("fairness", "edge_ratio_along_lines", "p95"),
+                   less_even_than_first=uneven)
         return out
+
+
+def _left_out(plan: list[LayoutStart], angle: float, family: str | None,
+              vary_smoothing: bool) -> list[dict]:
+    """The starts not in `plan`, each with why."""
+    names = {s.name for s in plan}
+    why = {"fairness held longer": "not asked for", "smoothing doubled":
+           "not asked for" if vary_smoothing else "the smoothing length is set",
+           "line field": "not asked for" if family is None else
+           "a prescribed family's lattice follows it"}
+    if family is not None or math.isclose(angle, 90.0):
+        why["bisector"] = ("at 90 deg either principal direction bisects the families"
+                           if family is None else "a prescribed family's lattice follows it")
+    elif not any(n.startswith("bisector") for n in names):
+        why["bisector"] = "not asked for"
+    return [{"start": name, "why": text} for name, text in why.items() if name not in names]
+
+
+def _fairest(tried: list[_Tried]) -> _Tried:
+    """The start kept: the best `tier`, then among those whose panels are as even as the
+    first solved start's, the lowest 95th percentile of line turns; another start replaces
+    the first only where its lines turn clearly less (`CLEARER_DEG`, `CLEARER_SHARE`)."""
+    solved = [t for t in tried if t.result is not None]
+    first = solved[0]
+    best = min(solved, key=lambda t: (t.tier(), t.uneven_against(first) is not None,
+                                      round(t.turn, 1)))
+    if best is not first and first.tier() == best.tier() and \
+            best.turn > min(first.turn - CLEARER_DEG, (1 - CLEARER_SHARE) * first.turn):
+        return first
+    return best
 
 
 def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: float,
@@ -168,11 +266,16 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
     solver = solver or SolverSettings()
     plan = layout_starts(base, angle, family=family, count=starts,
                          vary_smoothing=vary_smoothing)
+    left_out = _left_out(plan, angle, family, vary_smoothing)
     tried: list[_Tried] = []
     first: SurfaceLayout | None = None
     for k, start in enumerate(plan):
-        if (start.layout is None or start.double_smoothing) and first is None:
-            continue          # the first start made no layout to solve otherwise or double
+        if (start.layout is None or start.smoothing is not None) and first is None:
+            left_out.append({"start": start.name, "why": "the first start made no layout"})
+            continue
+        if start.name == "line field" and first is not None and first.direction_symmetry == 2:
+            left_out.append({"start": start.name, "why": "the first layout is a line field"})
+            continue
         if on_start is not None:
             on_start(k, len(plan), start.name)
         clock = time.perf_counter()
@@ -181,11 +284,12 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
             if layout is None:
                 assert start.layout is not None
                 layout_settings = start.layout
-                if start.double_smoothing:
+                if start.smoothing is not None:
                     assert first is not None
-                    length = 2 * first.smoothing
+                    length, cap = start.smoothing * first.smoothing, start.layout.max_smoothing
+                    # a cross field is tried from that length on (a line field's cap is 0)
                     layout_settings = replace(start.layout, smoothing=length, smoothing_tries=(),
-                                              max_smoothing=max(start.layout.max_smoothing, length))
+                                              max_smoothing=max(cap, length) if cap > 0 else 0.0)
                 layout = layout_surface(design, panel_size, angle=angle, family=family,
                                         settings=layout_settings)
                 if k == 0:
@@ -200,7 +304,9 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
         refusal = tried[0].refusal
         assert refusal is not None
         raise refusal
-    best = min(solved, key=_Tried.rank)      # the first of equals: the given settings
+    best = _fairest(tried)
     assert best.layout is not None and best.result is not None
-    best.result.properties["layout_starts"] = [t.record(t is best) for t in tried]
+    best.result.properties["layout_starts"] = [t.record(t is best, t.uneven_against(solved[0]))
+                                               for t in tried]
+    best.result.properties["layout_starts_left_out"] = left_out
     return best.layout, best.result

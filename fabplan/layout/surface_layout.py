@@ -373,8 +373,12 @@ def layout_again(record: dict) -> SurfaceLayout:
         design = load_design(spec, triangles=int(record["design_triangles"]),
                              resolution=None if resolution is None else tuple(resolution))
         smoothing = float(record["smoothing_panels"])
+        # a line field was either asked for (`fabplan.layout.starts`) or what the cross
+        # field fell back to at this length: asked for again either way
+        line = record.get("direction_field") == "line"
         settings = LayoutSettings(smoothing=smoothing, smoothing_tries=(),
-                                  max_smoothing=max(LayoutSettings.max_smoothing, smoothing),
+                                  max_smoothing=0.0 if line else
+                                  max(LayoutSettings.max_smoothing, smoothing),
                                   bisector=record.get("bisector", "max"))
         return layout_surface(design, float(record["panel_size"]),
                               angle=float(record["angle_deg"]),

@@ -118,6 +118,8 @@ class BoundaryPanels:
     triangle_panel: np.ndarray | None = None
     net_on_boundary: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     gaps: list = field(default_factory=list)
+    follows_net: bool = False
+    offset_max: float = 0.0
 
     @property
     def count(self) -> int:
@@ -194,6 +196,9 @@ class BoundaryPanels:
             "on_design_boundary": np.flatnonzero(self.on_design_boundary).tolist(),
             "uncovered": 1.0 - self.coverage,
             "gaps": self.gaps,
+            # a net optimized off its design: its boundary panels stand off it with it
+            "follow_net": self.follows_net,
+            "offset_from_design_max": self.offset_max,
             "seconds": round(self.seconds, 4),
         }
 
@@ -213,7 +218,8 @@ OFF_DESIGN_TOUCH = 1e-2
 
 
 def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05,
-                   touch: float = TOUCH, patch_gaps: bool = True) -> BoundaryPanels:
+                   touch: float = TOUCH, patch_gaps: bool = True,
+                   follow_net: bool = False) -> BoundaryPanels:
     """The boundary panels of a net laid out on a design (see the module's text).
 
     Parameters
@@ -225,6 +231,9 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     touch : net vertices this close to the design boundary (panel sizes) are on it.
     patch_gaps : close the small gaps left with patches cut in their tangent planes
         (`fabplan.layout.gap_patches`); off, the lattice is judged as it is.
+    follow_net : the net left the design (optimized off it): the panels' points off the
+        net stand off the design as the net does near them (`_follow_net`), so that a
+        boundary panel continues its net instead of stepping down to the design.
 
     Returns
     -------
@@ -309,6 +318,12 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    offset = np.zeros((0, 3))
+    if follow_net and len(vertices) > mesh.vertex_count:
+        # lifted before the outlines are checked: what crosses is judged where it is cut
+        offset = _follow_net(vertices[mesh.vertex_count:], mesh.vertices, design)
+        vertices = vertices.copy()
+        vertices[mesh.vertex_count:] += offset
     polygons, changed, crossed = _untangled(vertices, polygons, corner)
     triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
     # coverage is measured on the surface, independently of the plane (`_under`)
@@ -343,7 +358,28 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         flipped=flipped[~extension[flipped]], crossed=crossed[~extension[crossed]], patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
-        net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h))
+        net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h),
+        follows_net=follow_net,
+        offset_max=float(np.linalg.norm(offset, axis=1).max()) if len(offset) else 0.0)
+
+
+def _follow_net(points: np.ndarray, net: np.ndarray, design: DesignSurface,
+                neighbours: int = 4) -> np.ndarray:
+    """(m, 3) float, how far the net stands off the design near each point of the design
+    (`points` (m, 3)), along the design's normal there: the signed normal distances of the
+    `neighbours` nearest net vertices (`net` (n, 3)) from the design, weighted by the
+    inverse square of their footpoints' distances to the point (a point at a footpoint
+    takes that vertex's distance)."""
+    foot, _, tri = design.reference.closest_points(net)
+    # measured to the exact surface where there is one (a built-in or NURBS design)
+    along = np.sum((net - design.closest_points(net)) * design.face_normals[tri], axis=1)
+    k = min(neighbours, len(net))
+    d, near = cKDTree(foot).query(points, k=k)
+    d, near = d.reshape(len(points), k), near.reshape(len(points), k)
+    weight = 1.0 / np.maximum(d, 1e-12) ** 2
+    carried = np.sum(weight * along[near], axis=1) / np.sum(weight, axis=1)
+    _, _, at = design.reference.closest_points(points)
+    return carried[:, None] * design.face_normals[at]
 
 
 def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
@@ -417,15 +453,15 @@ def _ids(values, count: int) -> np.ndarray:
 
 
 def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout, *,
-                        touch: float = TOUCH) -> BoundaryPanels | None:
+                        touch: float = TOUCH, follow_net: bool = False) -> BoundaryPanels | None:
     """Trim a net solved from `layout` to the design (`trim_to_design`), attach the panels
     to `result` (written beside its OBJ) and record what they give in its properties:
     ``coverage`` (full and boundary panels), ``coverage_net`` (full panels only) and
     ``boundary_panels`` (`BoundaryPanels.record`). A net the overlays fail on gets none,
     and the reason under ``boundary_panels.error``. `touch`: as in `trim_to_design`
-    (`OFF_DESIGN_TOUCH` for a net that left the design)."""
+    (`OFF_DESIGN_TOUCH` for a net that left the design), `follow_net` too."""
     try:
-        panels = trim_to_design(result.mesh, layout, touch=touch)
+        panels = trim_to_design(result.mesh, layout, touch=touch, follow_net=follow_net)
     except shapely.errors.GEOSException as exc:
         # the overlays failed on a degenerate net: it is reported without boundary panels
         coverage = net_coverage(result.mesh, layout.design, layout.panel_size)

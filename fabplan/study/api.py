@@ -192,7 +192,7 @@ class StripResult(StripPlan):
 # ----------------------------------------------------------------------------- stages
 def layout_net(design: DesignSurface | str | os.PathLike, panel_size: float, net: str = "snet", *,
            angle: float | None = None, family: str | None = None, settings: Any = None,
-           starts: int = 4, progress: Callable[..., None] | None = None) -> NetResult:
+           starts: int = 5, progress: Callable[..., None] | None = None) -> NetResult:
     """Lay out a net of type `net` on a design and solve it gliding on the surface
     (``fabplan layout``).
 

@@ -448,7 +448,9 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                     say: Callable[[str], None]) -> CandidateResult:
     """The first half of a candidate: its layout (cached in `layouts` by start angle and
     panel size) and its solved net (an S-net start for the nets that leave the design,
-    cached in `starts`).
+    cached in `starts`). With `Study.layout_starts` above 1 a net that glides on the design
+    is the fairest of its starts, on its own layout, and so is the S-net start (its layout
+    then replaces the cached one).
 
     Returns
     -------
@@ -465,7 +467,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     angle = start_angle(candidate, design)
     size = study.panel_size_of(candidate)
     key = (angle, size)
-    several = candidate.glides and study.layout_starts > 1
+    several = study.layout_starts > 1
     if key not in layouts and not several:
         say(f"    layout at {angle:g} deg, panel size {size:g}")
         layouts[key] = layout_surface(design, size, angle=angle)
@@ -477,16 +479,21 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         if rec.iteration % 10 == 0:
             say(f"    iteration {rec.iteration:3d}  residual {rec.hard_residual:.2e}")
 
-    clock = time.perf_counter()
-    if several:
-        # its own layout among the starts (`fabplan.layout.starts`): the S-net start of the
-        # nets that leave the design stays the shared layout's
-        layout, net = glide_fairest(design, size, candidate.net, angle=angle,
-                                    net_angle=candidate.angle, solver=settings,
-                                    starts=study.layout_starts, progress=report)
-        say(f"    {len(net.properties['layout_starts'])} starts: "
+    def fairest(net_type: str, net_angle: float | None) -> tuple[SurfaceLayout, OptimizationResult]:
+        # several starts, the fairest kept (`fabplan.layout.starts`)
+        laid, solved = glide_fairest(design, size, net_type, angle=angle, net_angle=net_angle,
+                                     solver=settings, starts=study.layout_starts,
+                                     progress=report)
+        say(f"    {net_type} from {len(solved.properties['layout_starts'])} starts: "
             + ", ".join(f"{t['start']} {t['status']}" + (" (kept)" if t["chosen"] else "")
-                        for t in net.properties["layout_starts"]))
+                        for t in solved.properties["layout_starts"]))
+        return laid, solved
+
+    clock = time.perf_counter()
+    if candidate.glides and several:
+        layout, net = fairest(candidate.net, candidate.angle)
+        if candidate.net == "snet":     # it starts the nets that leave the design too
+            layouts[key], starts[key] = layout, net
     elif candidate.glides:
         assert layout is not None
         net = glide(layout, candidate.net, angle=candidate.angle, settings=settings,
@@ -494,10 +501,14 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         if candidate.net == "snet":
             starts[key] = net
     else:
-        assert layout is not None
-        if key not in starts:
+        if key not in starts and several:
+            # the fairest S-net starts the nets that leave the design, on its own layout
+            layouts[key], starts[key] = fairest("snet", None)
+        elif key not in starts:
+            assert layout is not None
             # only its mesh is used: the solved net gets boundary panels of its own
             starts[key] = glide(layout, "snet", settings=settings, boundary_panels=False)
+        layout = layouts[key]
         # a net that leaves the design: a zigzag tip (a vertex in no star) whose face would
         # step against its neighbours by more than the step limit follows the surface the
         # net continues instead of the design, so that the panels meet

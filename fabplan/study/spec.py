@@ -393,7 +393,9 @@ class _Table:
         if not ok or (positive and value <= 0):
             kind = "a positive " if positive else "a "
             kind += "whole number" if integer else "number"
-            self.fail(key, f"must be {kind}{f' ({unit})' if unit else ''}, got {value!r}")
+            # as the file says it (TOML's true, not Python's True)
+            shown = str(value).lower() if isinstance(value, bool) else repr(value)
+            self.fail(key, f"must be {kind}{f' ({unit})' if unit else ''}, got {shown}")
         return int(value) if integer else float(value)
 
     @overload
@@ -505,8 +507,8 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     name = meta.text("name", path.stem if path else "study")
     description = meta.text("description", "")
     max_iterations = meta.number("max_iterations", 100, integer=True)
-    layout_starts = meta.number("layout_starts", 1, integer=True)
-    if layout_starts > MAX_STARTS:
+    layout_starts = meta.number("layout_starts", 1, integer=True, positive=False)
+    if not 1 <= layout_starts <= MAX_STARTS:
         meta.fail("layout_starts", f"must lie between 1 and {MAX_STARTS}, got {layout_starts}")
     meta.done()
 
