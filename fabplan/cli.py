@@ -250,12 +250,13 @@ def _cmd_optimize(args) -> int:
         print(f"fabplan: note: {panels_note}", file=sys.stderr)
     elif result.boundary_panels is not None:
         panels = result.properties.get("boundary_panels") or {}
-        if panels.get("follow_net") and panels.get("offset_from_design_max", 0.0) > 0.0:
+        lift = panels.get("offset_from_design_max_relative_to_panel") or 0.0
+        if panels.get("follow_net") and lift > 1e-3:
             print(f"fabplan: note: the boundary panels continue the net where it stands off the "
                   f"design: their points between the net and the design boundary stand off the "
-                  f"design as the net does beside them, by up to "
-                  f"{panels['offset_from_design_max']:.4g} model units "
-                  "(properties.boundary_panels.offset_from_design_max)", file=sys.stderr)
+                  f"design as the net does beside them, by up to {lift:.3g} of the panel size "
+                  "(properties.boundary_panels.offset_from_design_max_relative_to_panel)",
+                  file=sys.stderr)
         for warning in boundary_warnings(result.properties):
             _warn(warning)
     if not result.converged:
@@ -452,7 +453,7 @@ def _start_text(start: dict) -> str:
     return (text + f", coverage {100 * (start.get('coverage') or 0):.2f} %"
             + ("" if turn is None else f", lines turn {turn:.1f} deg at the 95th percentile")
             + (f", edges {edges['min']:.2f} .. {edges['max']:.2f} panels" if edges else "")
-            + (f" ({start['less_even_than_first']} than the first start)"
+            + (f" ({start['less_even_than_first']} than {start['compared_with']}'s)"
                if start.get("less_even_than_first") else "")
             + f", {start['seconds']:.1f} s")
 
@@ -1235,12 +1236,13 @@ def _add_layout(sub: Any) -> None:
                         "unclad; longer smoothing holds the lattice together near umbilics, "
                         "shorter keeps the lines fairer after the solve)")
     p.add_argument("--starts", type=int, default=5, metavar="N",
-                   help="lay the net out and solve it from up to N starts and keep the one "
-                        "that converges, covers the design and whose lines turn least: as "
-                        "set; the fairness term held longer in the solve; the other principal "
-                        "direction as the bisector (at angles other than 90 deg); the "
-                        "directions smoothed twice as long; smoothed as a line field "
-                        "(default 5; 1 is the fastest)")
+                   help="lay the net out and solve it from up to N starts (as set; the "
+                        "fairness term held longer in the solve; the other principal direction "
+                        "as the bisector, at angles other than 90 deg; the directions smoothed "
+                        "twice as long; smoothed as a line field) and keep the one that clads "
+                        "the design, converges and, among those whose panels are as even as "
+                        "the first start's, whose lines turn least (default 5; 1 is the "
+                        "fastest)")
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")

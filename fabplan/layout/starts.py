@@ -3,7 +3,7 @@
 Where a glided net's lines kink is decided by the lattice it starts from and by the solve
 as much as by the design: the solve moves the lattice's vertices until every star is a
 star of the net type, and a lattice whose lines lean away from the principal directions'
-symmetry must bend there. A start varies one of three choices:
+symmetry must bend there. Each start after the first varies one choice (`layout_starts`):
 
 - how long the fairness term guides the solve (`SolverSettings.fairness_weight` and
   `fade`): held for a few dozen steps instead of fading after three, the solve keeps the
@@ -11,14 +11,19 @@ symmetry must bend there. A start varies one of three choices:
 - which principal direction bisects the two families (an S-net at an angle other than
   90 deg is symmetric about either; `LayoutSettings.bisector`);
 - how far the principal directions are smoothed before the lattice follows them (a longer
-  smoothing gives straighter lattice lines that the solve may bend more).
+  smoothing gives straighter lattice lines that the solve may bend more);
+- whether they are smoothed as a cross field or as a line field (one principal direction
+  followed through its turns).
 
 Which one gives the fairest net depends on the design (measured on the corpus of
 `benchmarks/designs.py`: each is the best on some designs and the worst on others), so
-each is solved and measured. A start is judged by how it ended (converged, which means
-fold-free, first), then by its coverage of the design, then by the 95th percentile of its
-lines' turns (`fabplan.net.fairness`): the sharpest places are mostly where the design
-forces them (near-umbilics), the 95th percentile is the net's fairness as a whole.
+each is solved and measured (`_fairest`): first by what a net must do (clad the design to
+`UNCLAD`, converge, which means fold-free, clad it to `CLAD`), then among the starts whose
+panels are as even as the first start's (`_Tried.uneven_against`: straighter lines bought
+with stretched edges are no fairer net) by the 95th percentile of the lines' turns
+(`fabplan.net.fairness`; the sharpest places are mostly where the design forces them,
+near-umbilics, the 95th percentile is the net's fairness as a whole), by a clear margin
+over the first start.
 """
 
 from __future__ import annotations
@@ -28,7 +33,9 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable
 
-from ..errors import InputError
+import numpy as np
+
+from ..errors import FabplanError, InputError, SolverError
 from ..solve.solver import SolverSettings
 from .settings import MAX_STARTS, SURFACE_TOLERANCE, LayoutSettings
 from .surface_layout import SurfaceLayout, glide, layout_surface
@@ -94,7 +101,7 @@ def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None 
 
     Returns
     -------
-    list of `LayoutStart`, the cheapest first (the fairness start reuses the first layout).
+    list of `LayoutStart` (the fairness start reuses the first layout).
     """
     starts = [LayoutStart("as set", settings),
               LayoutStart("fairness held longer", None,
@@ -121,7 +128,7 @@ class _Tried:
     start: LayoutStart
     layout: SurfaceLayout | None
     result: OptimizationResult | None
-    refusal: InputError | None
+    refusal: Exception | None
     seconds: float
 
     def _get(self, *keys: str) -> float | None:
@@ -176,7 +183,7 @@ class _Tried:
             return "it stands further off the design"
         return None
 
-    def record(self, chosen: bool, uneven: str | None) -> dict:
+    def record(self, chosen: bool, uneven: str | None, first: str) -> dict:
         out: dict = {"start": self.start.name, "chosen": chosen,
                      "seconds": round(self.seconds, 3)}
         if self.layout is not None:
@@ -196,7 +203,8 @@ class _Tried:
                    distance_to_design_relative_to_panel_max=self._get(
                        "distance_to_design_relative_to_panel", "max"),
                    edge_ratio_along_lines_p95=self._get("fairness", "edge_ratio_along_lines", "p95"),
-                   less_even_than_first=uneven)
+                   less_even_than_first=uneven,
+                   compared_with=None if self.start.name == first else first)
         return out
 
 
@@ -262,6 +270,8 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
     InputError
         When every start was refused: the first start's reason.
     """
+    if not 1 <= starts <= MAX_STARTS:
+        raise InputError(f"starts must lie between 1 and {MAX_STARTS}, got {starts}")
     base = settings or LayoutSettings()
     solver = solver or SolverSettings()
     plan = layout_starts(base, angle, family=family, count=starts,
@@ -297,16 +307,16 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
             result = glide(layout, net, angle=net_angle, settings=replace(solver, **start.solver),
                            progress=progress)
             tried.append(_Tried(start, layout, result, None, time.perf_counter() - clock))
-        except InputError as exc:      # this start's lattice does not hold together
+        except (FabplanError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            # this start's lattice does not hold together, or its solve broke down: the
+            # others may still make a net
             tried.append(_Tried(start, layout, None, exc, time.perf_counter() - clock))
     solved = [t for t in tried if t.result is not None]
     if not solved:
-        refusal = tried[0].refusal
-        assert refusal is not None
-        raise refusal
+        raise tried[0].refusal or SolverError("no start made a net")
     best = _fairest(tried)
     assert best.layout is not None and best.result is not None
-    best.result.properties["layout_starts"] = [t.record(t is best, t.uneven_against(solved[0]))
-                                               for t in tried]
+    best.result.properties["layout_starts"] = [
+        t.record(t is best, t.uneven_against(solved[0]), solved[0].start.name) for t in tried]
     best.result.properties["layout_starts_left_out"] = left_out
     return best.layout, best.result

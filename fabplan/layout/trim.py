@@ -65,7 +65,8 @@ class BoundaryPanels:
     Attributes
     ----------
     vertices : (m, 3) float, the net's vertices (first `net_vertex_count` rows, unchanged)
-        followed by the new corners and trim-outline points (on the design surface).
+        followed by the new corners and trim-outline points (on the design surface, or
+        off it with the net for `follows_net`).
     polygons : list of (k,) int arrays, each boundary panel's outline into `vertices`,
         counter-clockwise about the surface normal, following the design boundary.
     net_vertex_count : number of the net's vertices at the head of `vertices`.
@@ -87,7 +88,11 @@ class BoundaryPanels:
         full panel: made as part of that panel (cut larger from its mold), not as panels
         of their own.
     boundary_distance_max : largest distance of a point flagged `on_boundary` from the
-        design's boundary curve (the exact one for a built-in design), in panel sizes.
+        design's boundary curve (the exact one for a built-in design), in panel sizes
+        (with `follows_net`, lifted points: about the lift there).
+    follows_net : the points off the net stand off the design as the net does beside
+        them (`trim_to_design(..., follow_net=True)`); offset_max : the largest such lift
+        (model units).
     seconds : time taken.
     triangles : (t, 3) int into `vertices`, the panels cut into triangles in the plane of
         the parametrization (concave outlines stay whole), or None; triangle_panel :
@@ -198,7 +203,7 @@ class BoundaryPanels:
             "gaps": self.gaps,
             # a net optimized off its design: its boundary panels stand off it with it
             "follow_net": self.follows_net,
-            "offset_from_design_max": self.offset_max,
+            "offset_from_design_max_relative_to_panel": self.offset_max / self.panel_size,
             "seconds": round(self.seconds, 4),
         }
 
@@ -337,7 +342,13 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         if patch_gaps else None
     if extra is not None and extra.count:
         owner = np.r_[owner, len(polygons) + extra.owner]
-        vertices, polygons = np.vstack([vertices, extra.points]), polygons + extra.polygons
+        lifted = np.zeros((len(extra.points), 3))
+        if follow_net and len(extra.points):
+            # the patches' new points are on the design: they stand off it with the net too
+            lifted = _follow_net(extra.points, mesh.vertices, design)
+            offset = np.vstack([offset, lifted])
+        vertices = np.vstack([vertices, extra.points + lifted])
+        polygons = polygons + extra.polygons
         triangles = np.vstack([triangles, extra.triangles])
         patch = np.r_[patch, np.ones(extra.count, bool)]
         on_boundary = np.r_[on_boundary, extra.on_boundary]

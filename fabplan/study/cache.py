@@ -7,7 +7,7 @@ interrupted (Ctrl-C, a lost machine) or a sweep that grows computes only what is
 Without ``--resume`` nothing is kept: a failed run leaves nothing behind. The key hashes
 everything a candidate's result depends on: the fabplan version, the design (and the
 bytes of every file it reads), the panel size, the limits, the strip options, the
-iteration cap and the candidate itself. The cost weights are not in it: ranking is
+iteration cap, the layout starts and the candidate itself. The cost weights are not in it: ranking is
 recomputed from the measured candidates. A cache entry that does not load is ignored and
 computed again.
 """
@@ -66,6 +66,7 @@ class CandidateCache:
         self._common = json.dumps({
             "fabplan": __version__, "design": record["design"], "files": _file_digests(study),
             "strips": record["strips"], "max_iterations": record["max_iterations"],
+            "layout_starts": record["layout_starts"],
         }, sort_keys=True, default=str)
 
     def key(self, candidate: Candidate) -> str:
