@@ -188,7 +188,10 @@ class _Tried:
                      "seconds": round(self.seconds, 3)}
         if self.layout is not None:
             out.update(bisector=self.layout.bisector, smoothing_panels=self.layout.smoothing,
-                       direction_field="cross" if self.layout.direction_symmetry == 4 else "line")
+                       direction_field="cross" if self.layout.direction_symmetry == 4 else "line",
+                       # its own layout's time (none for a start solving the first layout)
+                       layout_seconds=0.0 if self.start.layout is None else
+                       round(sum(self.layout.seconds.values()), 3))
         out.update(self.start.solver)
         if self.result is None:
             out.update(status="refused", message=str(self.refusal))

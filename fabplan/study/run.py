@@ -518,6 +518,11 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                        settle_free=step, progress=report)
         add_boundary_panels(net, layout)
     seconds["optimize"] = time.perf_counter() - clock
+    if several and "layout_starts" in net.properties:
+        # the starts' layouts were made in the solve: counted as layout time
+        laid_out = sum(t.get("layout_seconds", 0.0) for t in net.properties["layout_starts"])
+        seconds["layout"] += laid_out
+        seconds["optimize"] = max(seconds["optimize"] - laid_out, 0.0)
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
     return CandidateResult(candidate, metrics={"seconds": seconds}, net=net, layout=layout)
 
