@@ -83,16 +83,17 @@ def test_the_kept_start_is_the_fairest_whose_panels_are_as_even(tower):
     assert layout.smoothing == kept["smoothing_panels"]
 
 
-def test_an_isogonal_net_on_a_torus_is_fairer_from_the_other_bisector():
-    """The torus's isogonal 60 deg net from the given bisector turns its lines by 28 deg at
-    the 95th percentile (measured when this was written); bisected by the other principal
-    direction, by 14 deg, with edges no less even."""
+def test_an_isogonal_net_on_a_torus_is_fairer_from_another_start():
+    """The torus's isogonal 60 deg net from one start turns its lines by 28 deg at the 95th
+    percentile (measured when this was written); bisected by the other principal direction
+    14 deg, solved with the fairness term held longer and its edges held to the first
+    start's range 9 deg: with edges no less even."""
     surface = surface_from_spec("torus")
     design = surface.triangulate(surface.resolution_for(8000))
     h = math.sqrt(design.area / 120)
     _, result = glide_fairest(design, h, "isogonal", angle=60.0, net_angle=60.0)
     kept = next(t for t in result.properties["layout_starts"] if t["chosen"])
-    assert kept["start"] == "bisector min" and result.converged
+    assert kept["start"] != "as set" and result.converged
     single = glide(layout_surface(design, h, angle=60.0), "isogonal", angle=60.0)
     assert single.converged
     assert line_turns_p95(result.mesh.vertices, result.mesh.stars) <= \

@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import FabplanError, InputError, SolverError
 from ..solve.solver import SolverSettings
 from .settings import MAX_STARTS, SURFACE_TOLERANCE, LayoutSettings
-from .surface_layout import SurfaceLayout, glide, layout_surface
+from .surface_layout import EDGE_RANGE, SurfaceLayout, glide, layout_surface
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
@@ -59,8 +59,12 @@ CLAD, UNCLAD = 0.999, 0.995
 #: a start's panels are as even as the first start's when its longest over shortest edge
 #: is at most this factor of the first's, its intersection angles stay within this many
 #: degrees of the first's range, and it stands off the design by at most this factor of
-#: the first's distance (or the gliding tolerance)
+#: the first's distance (or 1 % of a panel)
 EVEN_EDGES, EVEN_ANGLES_DEG, EVEN_OFFSET = 1.15, 5.0, 1.25
+
+#: the starts that straighten the lines keep their edges within the first start's range
+#: widened by this factor at both ends (so their edge spread stays within `EVEN_EDGES`)
+EVEN_EDGE_MARGIN = 1.05
 
 #: another start replaces the first only when its lines turn less by this many degrees
 #: and this share at the 95th percentile (a few tenths of a degree is no fairer net)
@@ -79,12 +83,16 @@ class LayoutStart:
     smoothing : its layout smooths the directions over this factor of the length the
         first start's layout used (known only once that layout is made), and tries no
         other; None: as its settings say.
+    even : its edges are held within the first start's range of edge lengths (widened by
+        `EVEN_EDGE_MARGIN`): a solve that straightens the lines would otherwise slide the
+        boundary vertices along the boundary and stretch the edge rows there.
     """
 
     name: str
     layout: LayoutSettings | None
     solver: dict = field(default_factory=dict)
     smoothing: float | None = None
+    even: bool = False
 
 
 def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None = None,
@@ -105,7 +113,7 @@ def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None 
     """
     starts = [LayoutStart("as set", settings),
               LayoutStart("fairness held longer", None,
-                          {"fairness_weight": HELD_FAIRNESS, "fade": HELD_FADE})]
+                          {"fairness_weight": HELD_FAIRNESS, "fade": HELD_FADE}, even=True)]
     if family is None and not math.isclose(angle, 90.0):
         other = "min" if settings.bisector == "max" else "max"
         starts.append(LayoutStart(f"bisector {other}", replace(settings, bisector=other)))
@@ -117,7 +125,7 @@ def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None 
         # principal direction through its turns
         starts.append(LayoutStart("line field", replace(settings, max_smoothing=0.0),
                                   {"fairness_weight": HELD_FAIRNESS, "fade": HELD_FADE},
-                                  smoothing=1.0))
+                                  smoothing=1.0, even=True))
     return starts[:max(int(count), 1)]
 
 
@@ -179,7 +187,8 @@ class _Tried:
             return "its lines meet at a wider range of angles"
         off = self._get("distance_to_design_relative_to_panel", "max") or 0.0
         other_off = other._get("distance_to_design_relative_to_panel", "max") or 0.0
-        if off > max(EVEN_OFFSET * other_off, SURFACE_TOLERANCE):
+        # within the 1 % of a panel a layout is judged by, any gliding net is on the design
+        if off > max(EVEN_OFFSET * other_off, 2 * SURFACE_TOLERANCE):
             return "it stands further off the design"
         return None
 
@@ -193,6 +202,8 @@ class _Tried:
                        layout_seconds=0.0 if self.start.layout is None else
                        round(sum(self.layout.seconds.values()), 3))
         out.update(self.start.solver)
+        if self.start.even:
+            out["edges_held_to_first"] = True
         if self.result is None:
             out.update(status="refused", message=str(self.refusal))
             return out
@@ -209,6 +220,17 @@ class _Tried:
                    less_even_than_first=uneven,
                    compared_with=None if self.start.name == first else first)
         return out
+
+
+def _edges_of(first: _Tried) -> tuple[float, float]:
+    """The edge lengths (panel sizes) a start held as even as `first` keeps: the first's
+    range widened by `EVEN_EDGE_MARGIN`, within `EDGE_RANGE` (all of it when the first
+    start made no net)."""
+    lo = first._get("edge_length_relative_to_panel", "min")
+    hi = first._get("edge_length_relative_to_panel", "max")
+    if lo is None or hi is None:
+        return EDGE_RANGE
+    return (max(lo / EVEN_EDGE_MARGIN, EDGE_RANGE[0]), min(hi * EVEN_EDGE_MARGIN, EDGE_RANGE[1]))
 
 
 def _left_out(plan: list[LayoutStart], angle: float, family: str | None,
@@ -307,8 +329,9 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
                                         settings=layout_settings)
                 if k == 0:
                     first = layout
+            edges = _edges_of(tried[0]) if start.even and tried else EDGE_RANGE
             result = glide(layout, net, angle=net_angle, settings=replace(solver, **start.solver),
-                           progress=progress)
+                           progress=progress, edge_range=edges)
             tried.append(_Tried(start, layout, result, None, time.perf_counter() - clock))
         except (FabplanError, ArithmeticError, np.linalg.LinAlgError) as exc:
             # this start's lattice does not hold together, or its solve broke down: the

@@ -797,11 +797,16 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
     return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
 
 
+#: the edge lengths a gliding net keeps, in panel sizes: 0.5 - 2, with a margin
+EDGE_RANGE = (0.51, 1.99)
+
+
 def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = None,
           radius: float | None = None, settings: SolverSettings | None = None,
           fixed: np.ndarray | None = None, surface_tolerance: float = SURFACE_TOLERANCE,
           progress: Callable[[IterationRecord], None] | None = None,
-          boundary_panels: bool = True) -> OptimizationResult:
+          boundary_panels: bool = True,
+          edge_range: tuple[float, float] = EDGE_RANGE) -> OptimizationResult:
     """Optimize a layout into a net of type `net` while it glides on the design surface.
 
     The vertices are held within `surface_tolerance` panel sizes of the design surface
@@ -811,7 +816,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     S-net form on a curved design: held at zero distance the vertices could only slide.
     Nets with a prescribed family are held on the surface (its levels are read there).
     A net that only starts another solve needs no boundary panels (``boundary_panels=False``:
-    its trim to the design is left out).
+    its trim to the design is left out). `edge_range`: the edges' lengths allowed, in
+    panel sizes (`EDGE_RANGE` by default).
 
     Returns
     -------
@@ -842,8 +848,9 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
         extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
                               layout.vertex_keys[on_level, 0]),)
-    # edges within 0.5 - 2 panel sizes (the shorter ones at their start length), with a margin
-    extra += (EdgeLengthRange(0.51 * layout.panel_size, 1.99 * layout.panel_size),)
+    # edges within their range (the shorter ones at their start length)
+    extra += (EdgeLengthRange(edge_range[0] * layout.panel_size,
+                              edge_range[1] * layout.panel_size),)
     result = optimize(mesh, net, angle=angle, radius=radius, reference=design.reference,
                       fixed=fixed, settings=settings, glide=True,
                       glide_boundary=layout.gliding_boundary,
