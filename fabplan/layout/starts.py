@@ -51,6 +51,7 @@ __all__ = ["LayoutStart", "layout_starts", "glide_fairest", "MAX_STARTS"]
 #: factor after every step (it falls below 1e-10 after about 45 steps, within the default
 #: 50 iterations; measured on the corpus, 0.7 gave no fairer nets and hit the cap more)
 HELD_FAIRNESS, HELD_FADE = 1.0, 0.6
+HELD_SOLVER = {"fairness_weight": HELD_FAIRNESS, "fade": HELD_FADE}
 
 #: coverage at which a start counts as cladding the whole design (judged by fairness then),
 #: and below which it leaves part of it unclad (judged after every start that clads it)
@@ -112,8 +113,7 @@ def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None 
     list of `LayoutStart` (the fairness start reuses the first layout).
     """
     starts = [LayoutStart("as set", settings),
-              LayoutStart("fairness held longer", None,
-                          {"fairness_weight": HELD_FAIRNESS, "fade": HELD_FADE}, even=True)]
+              LayoutStart("fairness held longer", None, HELD_SOLVER, even=True)]
     if family is None and not math.isclose(angle, 90.0):
         other = "min" if settings.bisector == "max" else "max"
         starts.append(LayoutStart(f"bisector {other}", replace(settings, bisector=other)))
@@ -124,8 +124,7 @@ def layout_starts(settings: LayoutSettings, angle: float, *, family: str | None 
         # first layout's length, solved as the fairness start: a lattice that follows one
         # principal direction through its turns
         starts.append(LayoutStart("line field", replace(settings, max_smoothing=0.0),
-                                  {"fairness_weight": HELD_FAIRNESS, "fade": HELD_FADE},
-                                  smoothing=1.0, even=True))
+                                  HELD_SOLVER, smoothing=1.0, even=True))
     return starts[:max(int(count), 1)]
 
 
@@ -197,7 +196,7 @@ class _Tried:
                      "seconds": round(self.seconds, 3)}
         if self.layout is not None:
             out.update(bisector=self.layout.bisector, smoothing_panels=self.layout.smoothing,
-                       direction_field="cross" if self.layout.direction_symmetry == 4 else "line",
+                       direction_field=self.layout.direction_field,
                        # its own layout's time (none for a start solving the first layout)
                        layout_seconds=0.0 if self.start.layout is None else
                        round(sum(self.layout.seconds.values()), 3))
@@ -293,7 +292,9 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
     Raises
     ------
     InputError
-        When every start was refused: the first start's reason.
+        For `starts` outside 1 .. `MAX_STARTS`.
+    FabplanError, ArithmeticError, numpy.linalg.LinAlgError
+        When no start made a net: the first start's error.
     """
     if not 1 <= starts <= MAX_STARTS:
         raise InputError(f"starts must lie between 1 and {MAX_STARTS}, got {starts}")
@@ -308,7 +309,8 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
         if (start.layout is None or start.smoothing is not None) and first is None:
             left_out.append({"start": start.name, "why": "the first start made no layout"})
             continue
-        if start.name == "line field" and first is not None and first.direction_symmetry == 2:
+        line_field = start.layout is not None and start.layout.max_smoothing == 0.0
+        if line_field and first is not None and first.direction_field == "line":
             left_out.append({"start": start.name, "why": "the first layout is a line field"})
             continue
         if on_start is not None:

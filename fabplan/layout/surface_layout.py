@@ -156,6 +156,11 @@ class SurfaceLayout:
     smoothing_tried: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
 
+    @property
+    def direction_field(self) -> str:
+        """"cross" or "line": how the directions were smoothed (`direction_symmetry`)."""
+        return "cross" if self.direction_symmetry == 4 else "line"
+
     @cached_property
     def chart(self) -> ParameterChart:
         """The design in the plane of the parameters ``(phi, psi)`` (`fabplan.layout.trim`),
@@ -192,7 +197,7 @@ class SurfaceLayout:
             "singular_index": self.singular_index.tolist(),
             "fast_turning_points": self.turning_points.tolist(),
             "fast_turning_deg_per_panel": self.turning_deg.tolist(),
-            "direction_field": _field_name(self),
+            "direction_field": self.direction_field,
             "smoothing_panels": self.smoothing,
             "smoothing_tried": self.smoothing_tried,
             "bisector": self.bisector,
@@ -261,7 +266,7 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
             # the only layout there is: nothing to compare its coverage with
             best, best_net, best_hole = layout, None, None
             tried.append({"smoothing_panels": length, "used": layout.smoothing,
-                          "field": _field_name(layout), "coverage": None})
+                          "field": layout.direction_field, "coverage": None})
             break
         # judged with the boundary panels the net will get: the staircase along the
         # boundary is theirs to clad; what they cannot reach are the lattice's own holes
@@ -277,7 +282,7 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         except shapely.errors.GEOSException:
             coverage = on_net = net_coverage(layout.mesh, design, h)
         tried.append({"smoothing_panels": length, "used": layout.smoothing,
-                      "field": _field_name(layout), "coverage": coverage})
+                      "field": layout.direction_field, "coverage": coverage})
         if coverage > best_coverage:
             best, best_coverage, best_net, best_hole = layout, coverage, on_net, hole
         if coverage >= s.good_coverage:
@@ -303,10 +308,6 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     return best
 
 
-
-
-def _field_name(layout: SurfaceLayout) -> str:
-    return "cross" if layout.direction_symmetry == 4 else "line"
 
 
 def _doubled_past(tried: dict, length: float) -> bool:
