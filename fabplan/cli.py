@@ -19,7 +19,13 @@ from typing import Any, Iterator
 from . import __version__
 from .errors import FabplanError, InputError
 from .io.inputs import check_input_file
-from .io.output import atomic_path, check_output_file, check_output_folder
+from .io.output import (
+    atomic_path,
+    check_apart,
+    check_output_file,
+    check_output_folder,
+    output_argument,
+)
 from .io.records import write_json
 from .net.measure import format_summary, measure_net
 from .net.validate import check_panel_size, load_net
@@ -44,8 +50,9 @@ def _cmd_nets(args) -> int:
 
 
 def _cmd_measure(args) -> int:
-    out = Path(args.output) if args.output else Path(args.net).with_suffix(".measure.json")
-    _check_outputs([out], [args.net, args.reference])
+    out = (output_argument(args.output) if args.output is not None
+           else Path(args.net).with_suffix(".measure.json"))
+    _check_outputs([out], {**_net_inputs(args.net), **_file_inputs((args.reference, "the reference"))})
     mesh = load_net(args.net)
     reference = _reference(args.reference)
     record = measure_net(mesh, reference=reference)
@@ -68,13 +75,44 @@ def _progress(args) -> Progress:
                     verbose=getattr(args, "verbose", False))
 
 
-def _check_outputs(outputs: list[Path], inputs: list[str | None]) -> None:
+def _check_outputs(outputs: list[Path], inputs: dict[Path, str]) -> None:
     """Refuse outputs that would overwrite an input or cannot be written, before working."""
-    protected = {Path(p).resolve() for p in inputs if p}
+    check_apart(outputs, inputs)
     for out in outputs:
-        if out.resolve() in protected:
-            raise InputError(f"{out}: refusing to overwrite the input file")
         check_output_file(out)
+
+
+def _net_inputs(net: str | os.PathLike | None, what: str = "the input net") -> dict[Path, str]:
+    """A net file and the files beside it that fabplan reads back with it (its record
+    ``NET.json`` and its boundary panels ``NET.boundary.obj``, where they exist): no
+    output may replace them."""
+    if not net:
+        return {}
+    path = Path(net)
+    beside = {path.with_suffix(".json"): f"the record of {path.name}",
+              boundary_path(path): f"the boundary panels of {path.name}"}
+    return {path: what, **{p: w for p, w in beside.items() if os.path.lexists(p)}}
+
+
+def _file_inputs(*options: tuple[str | None, str]) -> dict[Path, str]:
+    """The files named by options that take a file or a spec (`--reference`, `--fix`,
+    a Rhino file with its selector after ``#``), with what each is."""
+    files = {}
+    for value, what in options:
+        if value:
+            files[Path(value.split("#", 1)[0])] = what
+    return files
+
+
+def _folder_apart(folder: Path, names: list[str], inputs: dict[Path, str]) -> None:
+    """Refuse a run whose output folder holds an input under a name it writes (`names`:
+    file names or patterns such as ``strips-sheet-*.dxf``), before the work."""
+    import fnmatch
+
+    for path, what in inputs.items():
+        inside = os.path.dirname(os.path.realpath(path)) == os.path.realpath(folder)
+        if inside and any(fnmatch.fnmatch(path.name, n) for n in names):
+            check_apart([folder / path.name], {path: what})
 
 
 def _check_option_files(*options: tuple[str | None, str]) -> None:
@@ -86,12 +124,28 @@ def _check_option_files(*options: tuple[str | None, str]) -> None:
 
 
 def _output_path(args) -> Path:
-    out = Path(args.output)
+    out = output_argument(args.output)
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")
-    _check_outputs([out, out.with_suffix(".json"), *_viewer_paths(args, out)],
-                   [args.input, args.reference, args.fix])
+    inputs = {**_net_inputs(args.input), **_layout_design_inputs(args.input),
+              **_file_inputs((args.reference, "the reference"),
+                             (None if args.fix == "boundary" else args.fix, "the file of fixed vertices")),
+              **{Path(h): "a handle file" for h in args.handle or [] if ":" not in h}}
+    _check_outputs([out, out.with_suffix(".json"), boundary_path(out), *_viewer_paths(args, out)],
+                   inputs)
     return out
+
+
+def _layout_design_inputs(net: str) -> dict[Path, str]:
+    """The design file a layout net's record names (``NET.json``), which `optimize`
+    reads to cut the net's boundary panels again."""
+    layout = _net_properties(net).get("layout")
+    source = layout.get("design_source") if isinstance(layout, dict) else None
+    names = [source.get("file")] if isinstance(source, dict) else []
+    if isinstance(layout, dict):
+        names.append(layout.get("design"))
+    return {Path(n): f"the design of {Path(net).name}" for n in names
+            if isinstance(n, str) and n and os.path.isfile(n)}
 
 
 class _IterationReport:
@@ -301,7 +355,7 @@ def _cmd_molds(args) -> int:
     import numpy as np
 
     from .fabricate.boundary_molds import boundary_molds_text, planned_boundary_molds
-    from .fabricate.mold_report import write_mold_report
+    from .fabricate.mold_report import MOLD_FILES, write_mold_report
     from .fabricate.molds import MoldSettings, plan_molds
     from .fabricate.panels import check_panels
     from .layout.trim import read_boundary_panels
@@ -310,8 +364,10 @@ def _cmd_molds(args) -> int:
     settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=args.units,
                             max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface)
     settings.check()
-    out = Path(args.output)
+    out = output_argument(args.output, folder=True)
     check_output_folder(out)
+    inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"))}
+    _folder_apart(out, [*MOLD_FILES, "net.3dm", "net.glb"], inputs)
     mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
     _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit),
@@ -332,7 +388,8 @@ def _cmd_molds(args) -> int:
         boundary = None if panels is None else (panels, planned_boundary_molds(plan, panels))
     with progress.stage("writing the report"), \
             _viewer_files(args, out / "net", planned, units=settings.units, molds=plan) as viewers:
-        files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary) + viewers
+        files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary,
+                                  protect=inputs) + viewers
     if args.quiet:
         print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')} at "
               f"{settings.tolerance_mm:g} mm; wrote {files[0]}")
@@ -391,16 +448,17 @@ def _cmd_mill(args) -> int:
     settings.check()
     if not 0.01 <= args.sim_step <= 10:
         raise InputError(f"--sim-step must lie in 0.01 .. 10 mm, got {args.sim_step}")
-    out = Path(args.output)
+    out = output_argument(args.output, folder=True)
     check_output_folder(out)
-    _check_outputs([out / name for name in MILL_FILES], [args.net])
+    inputs = _net_inputs(args.net)
+    _folder_apart(out, [*MILL_FILES, "paths.3dm"], inputs)
     mesh = load_net(args.net)
     progress = _progress(args)
     with progress.stage("planning the passes and simulating the cut"):
         result = mill_net(mesh, tool, settings, simulate=not args.no_simulation,
                           simulation=SimulationSettings(step_mm=args.sim_step))
     with progress.stage("writing the tool paths and the report"):
-        files = write_mill_report(result, out, rhino=args.rhino)
+        files = write_mill_report(result, out, rhino=args.rhino, protect=inputs)
     if args.quiet:
         print(f"{counted(result.plan.path.pass_count, 'pass', 'passes')}; wrote {files[0]}")
     else:
@@ -515,7 +573,7 @@ def _cmd_layout(args) -> int:
 
     preset = get_net(args.net)
     _check_layout_options(args, preset)
-    out = Path(args.output)
+    out = output_argument(args.output)
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")
     picture = out.with_suffix(".png")
@@ -523,7 +581,7 @@ def _cmd_layout(args) -> int:
     family_file = args.family if args.family and Path(args.family).is_file() else None
     _check_outputs([out, out.with_suffix(".json"), boundary_path(out), picture,
                     *_viewer_paths(args, out)],
-                   [args.surface, family_file])
+                   _file_inputs((args.surface, "the design"), (family_file, "the family file")))
     design = load_design(args.surface, triangles=args.triangles)
     if design.source is not None and not args.quiet:
         print(f"design: {design.source['object']} of {design.source['file']}, in "
@@ -774,7 +832,7 @@ def _parse_layers(specs: list | None) -> dict:
 def _cmd_strips(args) -> int:
     from .fabricate.molds import UNITS
     from .fabricate.nesting import make_parts, nest_parts
-    from .fabricate.strip_plan import StripPlan
+    from .fabricate.strip_plan import STRIP_FILES, StripPlan
     from .fabricate.strips import StripSettings, build_strips
     from .io.resources import check_panel_count, worker_count
 
@@ -789,8 +847,10 @@ def _cmd_strips(args) -> int:
         labels=args.labels, label_height_mm=args.label_height, layers=_parse_layers(args.layer),
         one_file=args.one_file, boundary_member_mm=args.boundary_member)
     settings.check()
-    out = Path(args.output)
+    out = output_argument(args.output, folder=True)
     check_output_folder(out)
+    inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"))}
+    _folder_apart(out, [*STRIP_FILES, "strips.3dm", "strips.glb"], inputs)
     started = time.perf_counter()
     mesh = load_net(args.net)
     boundary_file, boundary = _strip_boundary(args, mesh)
@@ -813,7 +873,7 @@ def _cmd_strips(args) -> int:
     with progress.stage(f"writing {len(nesting.sheets)} sheets and checking them"), \
             _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
         files = plan.write(out, previews=not args.no_previews,
-                           workers=worker_count(args.workers)) + viewers
+                           workers=worker_count(args.workers), protect=inputs) + viewers
     s = plan.summary()
     if s["ends_set_back_past_half_an_edge"]:      # a warning, so also with --quiet
         print(f"fabplan: warning: the {settings.member_mm:g} mm boundary member sets "
@@ -930,10 +990,10 @@ def _boundary_record(args) -> dict | None:
 def _cmd_arcs(args) -> int:
     from .fabricate.arcs import arc_structure, write_arcs
 
-    out = Path(args.output)
+    out = output_argument(args.output)
     if out.suffix.lower() not in (".3dm", ".dxf"):
         raise InputError(f"{out}: the output must be a .3dm or a .dxf file")
-    _check_outputs([out, out.with_suffix(".json")], [args.net])
+    _check_outputs([out, out.with_suffix(".json")], _net_inputs(args.net))
     mesh = load_net(args.net, quads=False)
     progress = _progress(args)
     with progress.stage("the arcs"):
@@ -967,10 +1027,14 @@ def _cmd_study(args) -> int:
     progress = _progress(args)
     say = progress.say()
     started = time.perf_counter()
-    out = Path(args.output)
+    out = output_argument(args.output, folder=True)
     study = read_study(resolve_study(args.study))
-    check_output_folder(out)
-    cache = _study_cache(out, study) if args.resume else None
+    check_output_folder(out, study)
+    cache = None
+    if args.resume:
+        from .study.cache import CandidateCache
+
+        cache = CandidateCache(out, study, note=say)
     with ExitStack() as stack:
         client = None
         if args.workers is not None or args.scheduler is not None:
@@ -1017,16 +1081,6 @@ def _cmd_study(args) -> int:
     return 0
 
 
-def _study_cache(out: Path, study: Any) -> Any:
-    """The study's cache of finished candidates (`fabplan.study.cache`)."""
-    try:
-        from .study.cache import CandidateCache
-    except ImportError:
-        raise InputError("--resume needs the study cache, which comes with "
-                         "pip install \"fabplan[parallel]\"") from None
-    return CandidateCache(out, study)
-
-
 def _cmd_templates(args) -> int:
     from .study.spec import copy_template, template_names, template_summary
 
@@ -1043,6 +1097,7 @@ def _cmd_templates(args) -> int:
 
         print(template_path(args.name).read_text(encoding="utf-8"), end="")
         return 0
+    output_argument(args.output, folder=True)       # named, and short enough
     for path in copy_template(args.name, args.output):
         print(f"wrote {path}")
     return 0
@@ -1342,14 +1397,15 @@ def _add_study(sub: Any) -> None:
     p = sub.add_parser("study", help="facade feasibility study: run the candidate nets of a "
                        "design, judge them against the fabrication limits, recommend one",
                        description="Run a facade feasibility study and write its report. "
-                       "The output folder is replaced as a whole when it is empty or holds an "
-                       "earlier study (a study.json), so a study can be re-run into its "
-                       "folder; a folder of other files, or a file, is refused.")
+                       "A study replaces what an earlier study wrote in the output folder (listed "
+                       "in DIR/.fabplan-files) and keeps every other file, so a study can be "
+                       "re-run into its folder; a folder of other files only, a file, or the "
+                       "folder of the study file is refused.")
     p.add_argument("study", help="study file (TOML, see docs/study-file.md) or a template "
                    "name (see `fabplan templates`)")
     p.add_argument("-o", "--output", required=True, metavar="DIR",
-                   help="folder for report.html, study.json, candidates.csv and candidates/; "
-                        "an empty folder or one holding an earlier study is replaced")
+                   help="folder for report.html, study.json, candidates.csv and candidates/: "
+                        "new, empty, or holding an earlier study (whose files are replaced)")
     p.add_argument("--workers", metavar="N|auto",
                    help="run the candidates in N local processes (auto: one per core) with Dask")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
@@ -1393,15 +1449,52 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP: the run stops as at Ctrl-C, cleaning up what it staged."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+@contextmanager
+def _stopped_by_signals() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise `_Stopped` in the main thread while the command runs, so
+    that they leave nothing behind, as Ctrl-C does; the handlers before are restored."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise _Stopped(signum)
+
+    wanted = [s for s in ("SIGTERM", "SIGHUP") if hasattr(signal, s)]
+    before = {name: signal.signal(getattr(signal, name), stop) for name in wanted}
+    try:
+        yield
+    finally:
+        for name, handler in before.items():
+            signal.signal(getattr(signal, name), handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        with _stopped_by_signals():
+            return args.func(args)
     except FabplanError as exc:
         print(f"fabplan: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except _Stopped as exc:
+        import signal
+
+        print(f"fabplan: stopped by {signal.Signals(exc.signum).name}", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print("fabplan: interrupted", file=sys.stderr)
         return 130

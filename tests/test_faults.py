@@ -180,9 +180,10 @@ def _wait_for(predicate, seconds: float) -> bool:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT])
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_strips_killed_while_writing_leave_the_earlier_ones(net, tmp_path, sig):
-    """A killed `strips` left a 12 MB staging folder that later runs never removed."""
+    """A killed `strips` left a 12 MB staging folder that later runs never removed;
+    SIGTERM and SIGHUP left it like SIGKILL."""
     out = tmp_path / "out"
     argv = [sys.executable, "-c", "import sys; from fabplan.cli import main; sys.exit(main())",
             "strips", str(net), "--thickness", "4", "-o", str(out)]
@@ -198,6 +199,10 @@ def test_strips_killed_while_writing_leave_the_earlier_ones(net, tmp_path, sig):
     assert left == before                     # earlier output intact
     if sig == signal.SIGINT:
         assert process.returncode == 130 and err == b"fabplan: interrupted\n"
+    elif sig != signal.SIGKILL:
+        assert process.returncode == 128 + sig
+        assert err == f"fabplan: stopped by {signal.Signals(sig).name}\n".encode()
+    if sig != signal.SIGKILL:
         assert listing(out) == before         # and nothing left behind
     subprocess.run([*argv, "--height", "50"], check=True, capture_output=True)
     assert not [p for p in out.rglob(".*")], "the stale staging folder was not removed"

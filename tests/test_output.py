@@ -103,26 +103,30 @@ def test_measure_refuses_a_fifo_and_a_socket_and_leaves_them_alone(fifo, unix_so
     assert fifo.is_fifo() and unix_socket.is_socket()
 
 
+def _earlier_study(folder):
+    return {"study.json"} if (folder / "study.json").is_file() else None
+
+
 def test_a_replaced_folder_survives_a_failed_run(tmp_path):
     out = tmp_path / "study"
     out.mkdir()
     (out / "study.json").write_text("earlier")
     with pytest.raises(RuntimeError):
-        with output_folder(out, replace=True, accept=lambda f: (f / "study.json").is_file()) as stage:
+        with output_folder(out, replace=True, owned=_earlier_study) as stage:
             (stage / "study.json").write_text("new")
             raise RuntimeError("candidate failed")
     assert _tree(tmp_path) == ["study", "study/study.json"]
     assert (out / "study.json").read_text() == "earlier"
-    with output_folder(out, replace=True, accept=lambda f: (f / "study.json").is_file()) as stage:
+    with output_folder(out, replace=True, owned=_earlier_study) as stage:
         (stage / "study.json").write_text("new")
-    assert _tree(tmp_path) == ["study", "study/study.json"]
+    assert _tree(tmp_path) == ["study", "study/.fabplan-files", "study/study.json"]
     assert (out / "study.json").read_text() == "new"
 
 
 def test_a_folder_of_other_files_is_not_replaced(tmp_path):
     (tmp_path / "mine.txt").write_text("keep")
     with pytest.raises(InputError, match="not empty"):
-        with output_folder(tmp_path, replace=True, accept=lambda f: False):
+        with output_folder(tmp_path, replace=True, owned=lambda f: None):
             pass
     assert (tmp_path / "mine.txt").read_text() == "keep"
 

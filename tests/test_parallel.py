@@ -181,7 +181,7 @@ def test_an_interrupted_study_resumes_with_only_the_missing_candidates(serial, t
     assert run.returncode != 0
     assert json.loads((out / "study.json").read_text()) == {"earlier": True}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]      # nothing beside it
-    assert len(list((out / ".fabplan-cache").glob("*.pkl"))) == 2
+    assert len(list((out / ".fabplan-cache").glob("*.json"))) == 2
     resumed = subprocess.run([sys.executable, "-m", "fabplan.cli", "study",
                               str(folder / "small.toml"), "-o", str(out), "--resume"],
                              capture_output=True, text=True, timeout=600)

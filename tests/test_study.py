@@ -78,8 +78,9 @@ def study_result(tmp_path_factory):
     """The saddle study run and written as `fabplan study` does: (study file, output
     folder, study.json, StudyResult, progress lines).
 
-    The output folder holds an earlier study (a study.json and a file of that run) before:
-    the new study must replace it as a whole."""
+    The output folder holds an earlier study written without a list of its files (a
+    study.json and a candidate's file) and a file of the user's before: the new study
+    must replace the earlier study's files and keep the user's."""
     from fabplan.study.report import write_study
 
     folder = tmp_path_factory.mktemp("study")
@@ -87,7 +88,9 @@ def study_result(tmp_path_factory):
     out = folder / "out"
     out.mkdir()
     (out / "study.json").write_text("{}", encoding="utf-8")
-    (out / "left-over.csv").write_text("of the earlier run", encoding="utf-8")
+    (out / "candidates" / "gone").mkdir(parents=True)
+    (out / "candidates" / "gone" / "net.obj").write_text("of the earlier run", encoding="utf-8")
+    (out / "notes.txt").write_text("the user's", encoding="utf-8")
     lines: list = []
     result = run_study(read_study(path), progress=lines.append)
     write_study(result, out, progress=lines.append)
@@ -451,10 +454,12 @@ def test_an_existing_folder_of_other_files_is_not_replaced(tmp_path, capsys):
 
 
 def test_an_empty_folder_or_an_earlier_study_is_replaced(study_run, tmp_path, capsys):
-    """Re-running a study into its folder replaces it (documented, also in --help)."""
+    """Re-running a study into its folder replaces the earlier study's files and keeps the
+    others (documented, also in --help)."""
     _, out, record = study_run
-    assert not (out / "left-over.csv").exists()           # the earlier study's file is gone
+    assert not (out / "candidates" / "gone").exists()      # the earlier study's files are gone
     assert record["schema"] == "fabplan-study/1"           # and its study.json replaced
+    assert (out / "notes.txt").read_text(encoding="utf-8") == "the user's"
     (tmp_path / "empty").mkdir()
     check_output_folder(tmp_path / "empty")
     check_output_folder(out)
@@ -462,8 +467,9 @@ def test_an_empty_folder_or_an_earlier_study_is_replaced(study_run, tmp_path, ca
     with pytest.raises(SystemExit):
         main(["study", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "replaced as a whole when it is empty or holds an earlier study" in help_text
-    assert "a folder of other files, or a file, is refused" in help_text
+    assert "replaces what an earlier study wrote in the output folder" in help_text
+    assert "keeps every other file" in help_text
+    assert "the folder of the study file is refused" in help_text
 
 
 def test_kinks_and_coverage_are_measured_on_the_net(study_run):

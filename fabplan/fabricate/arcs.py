@@ -43,7 +43,7 @@ import numpy as np
 
 from ..errors import FabplanError, InputError
 from ..io.output import atomic_path
-from ..io.records import write_json
+from ..io.records import json_text
 from ..io.rhino_write import FAMILY_NAMES, MM_PER_UNIT, RHINO_UNITS, Rhino3dmWriter
 from ..net.geometry import StarSpheres, circumcircle_tangent, fit_star_spheres
 from ..net.mesh import QuadMesh
@@ -545,7 +545,8 @@ def write_arcs_dxf(arcs: ArcStructure, path: str | os.PathLike, *, units: str = 
 
 
 def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m") -> list[Path]:
-    """Write the arcs to ``OUT.3dm`` or ``OUT.dxf`` and their report to ``OUT.json``.
+    """Write the arcs to ``OUT.3dm`` or ``OUT.dxf`` and their report to ``OUT.json``: both,
+    or neither.
 
     Returns
     -------
@@ -561,7 +562,8 @@ def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m")
     record = arcs.to_json()
     record["units"] = units if suffix == ".3dm" else "mm"
     record["file"] = path.name
-    written = write_arcs_3dm(arcs, path, units=units) if suffix == ".3dm" else \
-        write_arcs_dxf(arcs, path, units=units)
-    write_json(report, record)
-    return [written, report]
+    with atomic_path(path) as staged, atomic_path(report) as staged_report:
+        write = write_arcs_3dm if suffix == ".3dm" else write_arcs_dxf
+        write(arcs, staged, units=units)
+        staged_report.write_text(json_text(record), encoding="utf-8")
+    return [path, report]

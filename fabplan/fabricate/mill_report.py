@@ -12,6 +12,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
@@ -328,12 +329,14 @@ def mill_drawing(result: MillResult) -> Rhino3dmWriter:
 
 
 def write_mill_report(result: MillResult, folder: str | os.PathLike, *,
-                      rhino: bool = False) -> list[Path]:
+                      rhino: bool = False,
+                      protect: Mapping[Path, str] | None = None) -> list[Path]:
     """Write the four files into `folder`, all or none, and with `rhino` also
-    ``paths.3dm`` (`mill_drawing`); returns their paths."""
+    ``paths.3dm`` (`mill_drawing`); none replaces one of `protect` (the run's inputs);
+    returns their paths."""
     folder = Path(folder)
     names = MILL_FILES + (("paths.3dm",) if rhino else ())
-    with output_folder(folder) as staging:
+    with output_folder(folder, protect=protect) as staging:
         write_texts(mill_report_files(result, staging))
         if rhino:
             mill_drawing(result).write(staging / "paths.3dm")

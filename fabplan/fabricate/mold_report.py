@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -28,7 +29,8 @@ from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
 
 __all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "mold_report_html",
            "mold_report_files",
-           "write_mold_report", "net_viewer_scene", "net_edges", "mold_pictures", "mold_report_pdf"]
+           "write_mold_report", "net_viewer_scene", "net_edges", "mold_pictures", "mold_report_pdf",
+           "MOLD_FILES"]
 
 PANEL_SURFACE_TEXT = {
     "shared": "pieces of one surface through the net's vertices; neighbours share their edges",
@@ -506,11 +508,13 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None) -> P
 
 
 def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: bool = True,
-                      boundary: tuple[BoundaryPanels, BoundaryMolds] | None = None) -> list[Path]:
+                      boundary: tuple[BoundaryPanels, BoundaryMolds] | None = None,
+                      protect: Mapping[Path, str] | None = None) -> list[Path]:
     """Write ``report.html``, ``report.pdf``, ``molds.json`` and ``panels.csv`` into
     `folder`, all or none (`view_3d`: the HTML report with its interactive 3D view). With
     `boundary` (the net's boundary panels and their molds, `boundary_molds`) also
-    ``boundary-panels.csv``, and ``boundary_panels`` in ``molds.json``.
+    ``boundary-panels.csv``, and ``boundary_panels`` in ``molds.json``. No file replaces
+    one of `protect` (the run's inputs, path -> what it is).
 
     Returns
     -------
@@ -524,7 +528,7 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
         panels, molds = boundary
         record["boundary_panels"] = molds.record(net_molds=plan.mold_count)
         texts["boundary-panels.csv"] = boundary_panels_csv(panels, molds)
-    with output_folder(folder) as staging:
+    with output_folder(folder, protect=protect) as staging:
         write_texts({staging / "report.html": mold_report_html(
                          plan, view_3d=view_3d, pictures=pictures,
                          boundary=None if boundary is None else boundary[1]),
@@ -532,3 +536,7 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
                      **{staging / name: text for name, text in texts.items()}})
         mold_report_pdf(plan, pictures).write(staging / "report.pdf")
     return [folder / name for name in ("report.html", "report.pdf", "molds.json", *texts)]
+
+
+#: the files `write_mold_report` may write into its folder
+MOLD_FILES = ("report.html", "report.pdf", "molds.json", "panels.csv", "boundary-panels.csv")

@@ -19,6 +19,7 @@ margin, no two closer than the spacing.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -739,7 +740,11 @@ def _all_orientations(parts: list[Part], spacing: float, res: float, workers: in
         return _orientations_of(parts, spacing, res)
     from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(max_workers=count) as pool:
+    from ..io.forked import die_with_parent
+
+    # workers end with this process, even when it is killed (SIGKILL) mid-run
+    with ProcessPoolExecutor(max_workers=count, initializer=die_with_parent,
+                             initargs=(os.getpid(),)) as pool:
         batches = list(pool.map(_orientations_of, [parts[k::count] for k in range(count)],
                                 [spacing] * count, [res] * count))
     out: list = [None] * len(parts)

@@ -8,6 +8,7 @@ runs the three and writes every file of a plan as one output transaction.
 from __future__ import annotations
 
 import csv
+import fnmatch
 import io
 import json
 import math
@@ -16,9 +17,10 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
-from ..io.output import output_folder
+from ..io.forked import die_with_parent
+from ..io.output import check_apart, output_folder
 from ..io.records import json_text
 from ..net.mesh import QuadMesh
 from .dxf import SheetGeometry, check_sheet, geometry_preview_png, sheet_geometry, write_sheet_file
@@ -26,7 +28,7 @@ from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_part
 from .strip_boundary import StripBoundary
 from .strips import Strip, StripSet, StripSettings, build_strips
 
-__all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan", "SHEETS_PER_PROCESS"]
+__all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan", "SHEETS_PER_PROCESS", "STRIP_FILES"]
 
 SHEETS_PER_PROCESS = 8
 """Fewest sheets per process when sheets are written in several processes."""
@@ -61,16 +63,19 @@ class StripPlan:
         return {**self._measured, "seconds": self.seconds}
 
     def write(self, out_dir: str | os.PathLike, *, name: str = "strips",
-              previews: bool = True, workers: int | None = 1) -> list[Path]:
+              previews: bool = True, workers: int | None = 1,
+              protect: Mapping[Path, str] | None = None) -> list[Path]:
         """Write DXF sheets, the schedule (CSV, JSON) and preview PNGs into `out_dir`.
 
         Everything is built in a temporary folder beside `out_dir`, every DXF is audited
         and checked before it is written there, and only then are the files moved into
         place: a failed run leaves no partial output. Files of an earlier run listed in
         ``NAME.json`` are replaced. `workers` processes write the sheets (None: one per
-        CPU). Returns the written paths.
+        CPU). No file replaces one of `protect` (the run's inputs, path -> what it is).
+        Returns the written paths.
         """
-        return write_plan(self, out_dir, name=name, previews=previews, workers=workers)
+        return write_plan(self, out_dir, name=name, previews=previews, workers=workers,
+                          protect=protect)
 
 
 def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None) -> StripPlan:
@@ -207,7 +212,8 @@ def _plan_record(plan: StripPlan, files: list, sheet_files: dict, summary: dict)
 
 
 def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "strips",
-               previews: bool = True, workers: int | None = 1) -> list[Path]:
+               previews: bool = True, workers: int | None = 1,
+               protect: Mapping[Path, str] | None = None) -> list[Path]:
     """Write the DXF sheets, schedule (CSV and JSON) and preview PNGs of a plan.
 
     Every sheet's entities are checked before they are written, the bytes on disk are
@@ -225,6 +231,7 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
     previews : also draw one PNG per sheet.
     workers : processes that write the sheets; None for one per CPU. One writes them in
         this process, as do several for fewer than `SHEETS_PER_PROCESS` sheets each.
+    protect : the run's inputs (path -> what it is): no file written or removed is one.
 
     Returns
     -------
@@ -234,7 +241,7 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
     settings = plan.strips.settings
     layout = plan.nesting
     W, H = settings.sheet_mm
-    with output_folder(out_dir) as tmp:
+    with output_folder(out_dir, protect=protect) as tmp:
         files: list[str] = []
         sheet_files: dict = {}
         digits = max(3, len(str(len(layout.sheets))))
@@ -274,6 +281,7 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
         record = _plan_record(plan, files, sheet_files, summary)
         (tmp / f"{name}.json").write_text(json_text(record), encoding="utf-8")
         stale = _stale_files(out_dir, name, files)
+        check_apart(stale, protect or {})
     for target in stale:
         target.unlink(missing_ok=True)
     return [out_dir / f for f in files]
@@ -313,7 +321,9 @@ def _run_sheet_jobs(jobs: list[_SheetJob], settings: StripSettings, folder: Path
         return
     # interleaved batches: the first sheets hold the longest parts and take the longest
     batches = [jobs[k::4 * count] for k in range(4 * count)]
-    with ProcessPoolExecutor(max_workers=count) as pool:
+    # workers end with this process, even when it is killed (SIGKILL) mid-run
+    with ProcessPoolExecutor(max_workers=count, initializer=die_with_parent,
+                             initargs=(os.getpid(),)) as pool:
         for future in [pool.submit(_write_sheet_jobs, b, settings, folder) for b in batches if b]:
             future.result()
 
@@ -327,5 +337,13 @@ def _stale_files(out_dir: Path, name: str, files: list[str]) -> list[Path]:
         listed = json.loads(old.read_text(encoding="utf-8")).get("files", [])
     except (ValueError, OSError, AttributeError):
         listed = []
+    # only names such a run writes: the list is data from the folder, and must not make a
+    # run remove anything else
     targets = [out_dir / Path(str(f)).name for f in listed]
-    return [t for t in targets if t.is_file() and t.name not in files]
+    return [t for t in targets if t.is_file() and not t.is_symlink() and t.name not in files
+            and any(fnmatch.fnmatchcase(t.name, p.replace("strips", name, 1)) for p in STRIP_FILES)]
+
+
+#: the files `write_plan` writes into its folder (of the default name ``strips``)
+STRIP_FILES = ("strips-sheet-*.dxf", "strips-sheet-*.png", "strips-sheets.dxf", "strips.csv",
+               "strips.json")

@@ -757,6 +757,14 @@ class ReferenceCurve:
             self.edge_length = np.where(self.straight, self.chord, self.radius * np.abs(self.theta))
         self.s = np.concatenate([[0.0], np.cumsum(self.edge_length)])
 
+    def to_data(self) -> dict:
+        """The curve as plain data (`fabplan.io.typed_data`)."""
+        return {"nodes": self.nodes, "bulges": self.bulges}
+
+    @classmethod
+    def from_data(cls, data: dict) -> "ReferenceCurve":
+        return cls(data["nodes"], data["bulges"])
+
     @property
     def length(self) -> float:
         return float(self.s[-1])

@@ -13,7 +13,38 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["ForkedFile", "forked_processes"]
+__all__ = ["ForkedFile", "forked_processes", "die_with_parent"]
+
+_PR_SET_PDEATHSIG = 1     # prctl(2): the signal a process gets when its parent ends
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this process (a worker or forked child of `parent`) end when its parent
+    does, so that a parent killed with SIGKILL leaves no worker running.
+
+    On Linux the kernel sends SIGKILL (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon
+    thread checks every second whether the parent is still there. A parent that is
+    already gone ends this process at once.
+    """
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    else:
+        import threading
+        import time
+
+        def watch() -> None:
+            while os.getppid() == parent:
+                time.sleep(1.0)
+            os._exit(1)
+
+        threading.Thread(target=watch, daemon=True, name="fabplan-parent-watch").start()
+    if os.getppid() != parent:
+        os._exit(1)
 
 
 def forked_processes(processes: int | None = None) -> int:
@@ -39,6 +70,7 @@ class ForkedFile:
         self.write, self.path = write, Path(path)
         self._part = self.path.with_name(self.path.name + ".part")
         self._pid: int | None = None
+        parent = os.getpid()
         if forked_processes():
             try:
                 self._pid = os.fork()
@@ -47,6 +79,7 @@ class ForkedFile:
         if self._pid == 0:
             code = 1
             try:
+                die_with_parent(parent)
                 sys.stdout = sys.stderr = open(os.devnull, "w")
                 self._write_whole()
                 code = 0

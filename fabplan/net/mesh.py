@@ -119,6 +119,18 @@ class QuadMesh:
         ).reshape(-1, 4)
         return cls(points.reshape(-1, 3), quads, name=name)
 
+    def to_data(self) -> dict:
+        """The mesh as plain data (`fabplan.io.typed_data`): arrays, its name."""
+        return {"vertices": self.vertices, "face_sizes": self.face_sizes,
+                "face_indices": self.face_indices, "name": self.name, "normals": self.normals}
+
+    @classmethod
+    def from_data(cls, data: dict) -> "QuadMesh":
+        """The mesh `to_data` gave (checked as any new mesh is)."""
+        sizes = np.asarray(data["face_sizes"], dtype=np.int64)
+        faces = np.split(np.asarray(data["face_indices"], dtype=np.int64), np.cumsum(sizes)[:-1])
+        return cls(data["vertices"], faces, name=str(data["name"]), normals=data["normals"])
+
     def with_vertices(self, vertices: np.ndarray, normals: np.ndarray | None = None) -> "QuadMesh":
         """The same combinatorics with new vertex positions (and normals, dropped unless
         given); the cached topology is shared."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import sys
 import tempfile
 import time
@@ -31,7 +32,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..errors import FabplanError
-from ..io.forked import forked_processes
+from ..io.forked import die_with_parent, forked_processes
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
@@ -92,7 +93,7 @@ def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
     if files and (twin_files is not None or not shares_strips):
         made = candidate_file_bytes(result, study, design,
                                     twin_files if shares_strips else None, rhino=rhino)
-    return (replace(result, net=None, layout=None), None, lines, made,
+    return (replace(result, net=None), None, lines, made,
             time.perf_counter() - clock)
 
 
@@ -134,10 +135,12 @@ class BackgroundCandidates:
         self._count += 1
         path = Path(self._folder.name) / f"{self._count}.pickle"
         twin_made = None if twin is None else self.made_files.get(twin.name)
+        parent = os.getpid()
         pid = os.fork()
         if pid == 0:
             code = 1
             try:
+                die_with_parent(parent)
                 sys.stdout = sys.stderr = open(os.devnull, "w")
                 made = _measure(self.study, self.design, solved, twin, self.files, self.rhino,
                                 None if twin_made is None else twin_made[0])
@@ -156,6 +159,19 @@ class BackgroundCandidates:
         while name not in self._done and any(j.solved.name == name for j in self._running):
             self._reap(wait=True)
         return self._done.get(name)
+
+    def cancel(self) -> None:
+        """Stop every process still measuring (the run was interrupted or failed)."""
+        for job in self._running:
+            try:
+                os.kill(job.pid, signal.SIGKILL)
+                os.waitpid(job.pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+        self._running = []
+        if self._folder is not None:
+            self._folder.cleanup()
+            self._folder = None
 
     def collect(self) -> dict[str, CandidateResult]:
         """Wait for every process; the measured candidates by name."""
@@ -195,7 +211,7 @@ class BackgroundCandidates:
                 self.say(f"    {name}: failed: {failure}")
                 result = CandidateResult(solved.candidate, error=failure, reasons=[failure])
             else:
-                result = replace(result, net=solved.net, layout=solved.layout)
+                result = replace(result, net=solved.net)
             result.metrics.setdefault("seconds", {})["total"] = job.seconds + spent
             if made is not None:
                 self.made_files[name] = made

@@ -1,50 +1,100 @@
 """The candidates a study has computed, kept in its output folder for `--resume`.
 
-With ``fabplan study STUDY -o DIR --resume`` a study writes every finished candidate (its
-net, molds, strips and measurements) to ``DIR/.fabplan-cache/KEY.pkl`` as soon as it is
-done, and takes the candidates already there instead of computing them: a run that was
-interrupted (Ctrl-C, a lost machine) or a sweep that grows computes only what is missing.
-Without ``--resume`` nothing is kept: a failed run leaves nothing behind. The key hashes
-everything a candidate's result depends on: the fabplan version, the design (and the
-bytes of every file it reads), the panel size, the limits, the strip options, the
-iteration cap, the layout starts and the candidate itself. The cost weights are not in it: ranking is
-recomputed from the measured candidates. A cache entry that does not load is ignored and
+With ``fabplan study STUDY -o DIR --resume`` a study keeps every finished candidate (its
+net, molds, strips and measurements) in ``DIR/.fabplan-cache`` as soon as it is done, and
+takes the candidates already there instead of computing them: a run that was interrupted
+(Ctrl-C, a lost machine) or a sweep that grows computes only what is missing. Without
+``--resume`` nothing is kept: a failed run leaves nothing behind.
+
+A kept candidate is data, never code: ``KEY.json`` (the candidate's objects as a typed
+JSON tree, `fabplan.io.typed_data`) and ``KEY.npz`` (its arrays, read with
+``allow_pickle=False``). Only the result types listed in `CACHED_TYPES` can be read back,
+so a crafted file in a shared study folder can at worst be ignored. The JSON holds the
+format version, the key and the SHA-256 of its ``.npz``. The key hashes everything a
+candidate's result depends on: the fabplan version, the design (and the bytes of every
+file it reads), the panel size, the limits, the strip options, the iteration cap, the
+layout starts and the candidate itself. The cost weights are not in it: ranking is
+recomputed from the measured candidates. An entry that does not match (another version,
+a damaged or foreign file, a link or a FIFO in its place) is ignored with a note and
 computed again.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
+import stat
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
 
 from .. import __version__
+from ..errors import InputError
+from ..io.output import remove_stale_staging, temporary_path
+from ..io.typed_data import decode, encode
 
 if TYPE_CHECKING:
     from .run import CandidateResult
     from .spec import Candidate, Study
 
-__all__ = ["CACHE_FOLDER", "CandidateCache"]
+__all__ = ["CACHE_FOLDER", "CACHE_FORMAT", "CandidateCache", "cached_types"]
 
 CACHE_FOLDER = ".fabplan-cache"
+#: what a kept candidate's JSON says it is, and the version of its layout
+CACHE_FORMAT = {"format": "fabplan-candidate", "version": 1}
+#: largest kept file read back (a crafted huge file is ignored, not read)
+MAX_ENTRY_BYTES = 2**31
+
+
+def cached_types() -> dict[str, type]:
+    """The only classes a kept candidate may hold: a study candidate's results."""
+    from ..fabricate.boundary_molds import BoundaryMolds
+    from ..fabricate.molds import MoldPlan, MoldSettings
+    from ..fabricate.nesting import Label, Nesting, Part, Placement, Sheet
+    from ..fabricate.strip_plan import StripPlan
+    from ..fabricate.strips import ArcRun, Crossing, ReferenceCurve, Strip, StripSet, StripSettings
+    from ..layout.trim import BoundaryPanels
+    from ..net.mesh import QuadMesh
+    from ..solve.optimize import OptimizationResult
+    from .run import CandidateResult
+    from .spec import Candidate
+
+    classes: list[type] = [
+        CandidateResult, Candidate, OptimizationResult, QuadMesh, BoundaryPanels, MoldPlan,
+        MoldSettings, BoundaryMolds, StripPlan, StripSet, Strip, StripSettings, ReferenceCurve,
+        ArcRun, Crossing, Part, Label, Placement, Sheet, Nesting]
+    return {cls.__name__: cls for cls in classes}
 
 
 def _file_digests(study: Study) -> dict[str, str]:
-    """sha256 of every existing file the design names (its mesh, a profile, a grid)."""
-    names = [study.design.source, *(str(v) for v in study.design.parameters.values())]
-    names += [part.split("=", 1)[-1] for part in study.design.source.replace(":", ",").split(",")]
+    """sha256 of every file the design reads (its mesh, a profile, a grid)."""
     digests = {}
-    for name in names:
-        path = Path(name)
+    for path in study.design.files():
         try:
-            if path.is_file():
-                digests[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
+            digests[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
         except OSError:
             continue
     return digests
+
+
+def _read_regular(path: Path) -> bytes:
+    """The bytes of `path`, which must be a regular file and not a link (a FIFO would
+    block a plain read forever)."""
+    fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError("not a regular file")
+        if info.st_size > MAX_ENTRY_BYTES:
+            raise ValueError(f"larger than {MAX_ENTRY_BYTES} bytes")
+        with os.fdopen(fd, "rb", closefd=False) as handle:
+            return handle.read()
+    finally:
+        os.close(fd)
 
 
 class CandidateCache:
@@ -54,14 +104,26 @@ class CandidateCache:
     ----------
     out_dir : the study's output folder.
     study : the study; its candidates are looked up by `key`.
+    note : called with a line for every kept entry that is ignored, and every candidate
+        that cannot be kept.
+
+    Raises
+    ------
+    InputError
+        When ``.fabplan-cache`` exists and is not a folder of its own (a link, a file):
+        a study writes nothing through it.
     """
 
-    def __init__(self, out_dir: str | os.PathLike, study: Study) -> None:
-        import cloudpickle  # what Dask sends tasks with: it also pickles parametric designs
-
-        self._pickle = cloudpickle
+    def __init__(self, out_dir: str | os.PathLike, study: Study, *,
+                 note: Callable[[str], None] | None = None) -> None:
         self.folder = Path(out_dir) / CACHE_FOLDER
+        if os.path.lexists(self.folder) and (self.folder.is_symlink() or not self.folder.is_dir()):
+            raise InputError(f"{self.folder}: is not a folder of its own (a link or a file); "
+                             "remove it to resume")
+        remove_stale_staging(self.folder)      # what a killed run was writing
         self._study = study
+        self._note = note or (lambda message: None)
+        self._types = cached_types()
         record = study.record()
         self._common = json.dumps({
             "fabplan": __version__, "design": record["design"], "files": _file_digests(study),
@@ -78,24 +140,59 @@ class CandidateCache:
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def load(self, candidate: Candidate) -> CandidateResult | None:
-        """The cached result of `candidate`, or None."""
-        path = self.folder / f"{self.key(candidate)}.pkl"
-        try:
-            with path.open("rb") as handle:
-                result: Any = self._pickle.load(handle)
-        except (OSError, EOFError, ValueError, TypeError, AttributeError, ImportError,
-                ModuleNotFoundError, self._pickle.pickle.UnpicklingError):
+        """The kept result of `candidate`, or None (nothing kept, or an entry that does
+        not match, which is ignored with a note)."""
+        key = self.key(candidate)
+        path = self.folder / f"{key}.json"
+        if not os.path.lexists(path):
             return None
-        return result if getattr(result, "candidate", None) == candidate else None
+        try:
+            header = json.loads(_read_regular(path))
+            if not isinstance(header, dict) or {k: header.get(k) for k in CACHE_FORMAT} != CACHE_FORMAT:
+                raise ValueError("not a kept candidate of this fabplan version")
+            if header.get("key") != key or header.get("fabplan") != __version__:
+                raise ValueError("kept for other inputs or another fabplan version")
+            data = _read_regular(path.with_suffix(".npz"))
+            if hashlib.sha256(data).hexdigest() != header.get("arrays_sha256"):
+                raise ValueError("its arrays do not match it")
+            with np.load(io.BytesIO(data), allow_pickle=False) as stored:
+                arrays = [stored[f"arr_{k}"] for k in range(len(stored.files))]
+            result = decode(header["data"], arrays, self._types)
+        except (OSError, ValueError, TypeError, KeyError, RecursionError) as exc:
+            self._note(f"    {CACHE_FOLDER}/{path.name} ignored ({exc}): {candidate.name} is "
+                       "computed again")
+            return None
+        if type(result).__name__ != "CandidateResult" or result.candidate != candidate:
+            self._note(f"    {CACHE_FOLDER}/{path.name} ignored (another candidate): "
+                       f"{candidate.name} is computed again")
+            return None
+        return result
 
     def store(self, result: CandidateResult) -> None:
-        """Keep a finished candidate (written atomically; failed candidates are not kept:
-        a resumed run tries them again)."""
+        """Keep a finished candidate (written atomically, its arrays first; failed
+        candidates are not kept: a resumed run tries them again)."""
         if result.failed:
             return
-        self.folder.mkdir(parents=True, exist_ok=True)
-        path = self.folder / f"{self.key(result.candidate)}.pkl"
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        with tmp.open("wb") as handle:
-            self._pickle.dump(result, handle)
-        os.replace(tmp, path)
+        try:
+            tree, arrays = encode(result, self._types)
+        except TypeError as exc:
+            self._note(f"    {result.name} is not kept for --resume ({exc})")
+            return
+        buffer = io.BytesIO()
+        np.savez(buffer, *arrays)
+        data = buffer.getvalue()
+        header = {**CACHE_FORMAT, "fabplan": __version__, "key": self.key(result.candidate),
+                  "candidate": result.name, "arrays_sha256": hashlib.sha256(data).hexdigest(),
+                  "data": tree}
+        text = json.dumps(header, separators=(",", ":"))
+        os.makedirs(self.folder, exist_ok=True)
+        stem = self.folder / self.key(result.candidate)
+        for path, content in ((stem.with_suffix(".npz"), data), (stem.with_suffix(".json"),
+                                                                 text.encode())):
+            tmp = temporary_path(self.folder)
+            try:
+                with open(tmp, "xb") as handle:
+                    handle.write(content)
+                os.replace(tmp, path)
+            finally:
+                tmp.unlink(missing_ok=True)

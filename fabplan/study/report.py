@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..fabricate.mold_report import net_viewer_scene
 from ..io import output
 from ..io.forked import ForkedFile
@@ -944,22 +945,42 @@ def _limit_items(result: StudyResult) -> list[tuple[str, object]]:
 
 
 # ---------------------------------------------------------------------------- writing
-def holds_study(folder: Path) -> bool:
-    """True when `folder` holds an earlier study (a ``study.json``, or the candidates an
-    interrupted one kept: `fabplan.study.cache`): a study may replace it."""
+#: what a study writes at the top of its folder (besides ``candidates/``)
+STUDY_FILES = ("report.html", "report.pdf", "study.json", "candidates.csv")
+
+
+def study_files(folder: Path) -> set[str] | None:
+    """The files an earlier study wrote in `folder`, which a new study replaces: those
+    its manifest lists (`fabplan.io.output.MANIFEST`); for a study written without one,
+    its report files and ``candidates/``; an empty set for a folder that holds only the
+    candidates an interrupted study kept (`fabplan.study.cache`); None for a folder that
+    holds no study."""
     folder = Path(folder)
-    return (folder / "study.json").is_file() or (folder / CACHE_FOLDER).is_dir()
+    listed = output.read_manifest(folder)
+    if listed is not None:
+        return listed
+    if (folder / "study.json").is_file():
+        candidates = folder / "candidates"
+        inside = [] if candidates.is_symlink() else [
+            p.relative_to(folder).as_posix() for p in candidates.rglob("*")
+            if p.is_file() or p.is_symlink()]
+        return {name for name in STUDY_FILES if (folder / name).is_file()} | set(inside)
+    return set() if (folder / CACHE_FOLDER).is_dir() else None
 
 
-def check_output_folder(folder: str | os.PathLike) -> None:
+def check_output_folder(folder: str | os.PathLike, study: Study | None = None) -> None:
     """Refuse a folder that cannot hold a study, without creating anything.
 
-    A study replaces its whole output folder. A folder that does not exist yet, an empty
-    one, or one that holds an earlier study (`holds_study`) is therefore accepted and
-    replaced as a whole, so that a study can be re-run into its folder; a file, an
-    unwritable place, or a folder of other files is refused.
+    A study replaces what an earlier study wrote in its folder and leaves every other
+    file there as it is. A folder that does not exist yet, an empty one, or one that
+    holds an earlier study (`study_files`) is accepted; a file, an unwritable place, a
+    folder of other files, or the folder that holds the `study` file itself is refused.
     """
-    output.check_output_folder(folder, accept=holds_study)
+    output.check_output_folder(folder, owned=study_files)
+    path = None if study is None else study.path
+    if path is not None and Path(os.path.realpath(path)).is_relative_to(os.path.realpath(folder)):
+        raise InputError(f"{folder}: holds the study file {path}; a study's files go to a "
+                         "folder of their own: choose another -o (a new folder beside it)")
 
 
 def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: DesignSurface,
@@ -992,7 +1013,7 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
         outputs["boundary_panels_csv"] = "boundary-panels.csv"
     title = f"{c.name}: {c.candidate.describe()}"
     write_layout_picture(folder / "net.png", design, net.mesh, title=title,
-                         singular_points=c.layout.singular_points if c.layout else None,
+                         singular_points=c.singular_points,
                          marks=fairness_marks(net.properties),
                          boundary_panels=net.boundary_panels)
     pictures = {"net": _png_uri(folder / "net.png"),
@@ -1170,7 +1191,9 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
     say = progress or (lambda message: None)
     clock = time.perf_counter()
     out_dir = Path(out_dir)
-    with output.output_folder(out_dir, replace=True, accept=holds_study) as tmp:
+    check_output_folder(out_dir, result.study)
+    with output.output_folder(out_dir, replace=True, owned=study_files,
+                              protect=result.study.input_files()) as tmp:
         outputs, pictures = _write_candidates(result, tmp, say, rhino, client)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
@@ -1182,7 +1205,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
             pictures["curvature"] = curvature_difference_figure(
                 result.design, result.study.panel_size_of(c.candidate),
                 marks={f"{c.name}: lines turn most ({turn['max']:.0f} deg)": turn["point"]},
-                singular_points=c.layout.singular_points if c.layout is not None else None,
+                singular_points=c.singular_points,
                 title="The design's curvature: where its principal directions are weak")
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
@@ -1206,7 +1229,4 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
             raise
         if printed is not None:
             printed.finish()
-        kept = out_dir / CACHE_FOLDER
-        if kept.is_dir():     # the finished candidates stay with the study, for --resume
-            os.replace(kept, tmp / CACHE_FOLDER)
     return [out_dir / "report.html", out_dir / "study.json", out_dir / "candidates.csv"]

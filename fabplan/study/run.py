@@ -96,7 +96,9 @@ class CandidateResult:
     twin : name of an earlier candidate that ended at the same net, at any mold
         tolerance (its strips are this one's), or None.
     notes : remarks beside the verdict (that it is the same net as another candidate).
-    net, molds, strips, layout : the objects behind the metrics (for the files).
+    net, molds, strips : the objects behind the metrics (for the files).
+    singular_points : (k, 3) float, the singular points of the direction field of the
+        layout the net was made from (marked on its pictures), or None.
     boundary_molds : the molds of the net's boundary panels (`BoundaryMolds`), or None.
     deviation_mm : (n,) float, distance of every net vertex from the design (mm), which
         the deviation metrics and the heat map are made of.
@@ -119,7 +121,7 @@ class CandidateResult:
     net: OptimizationResult | None = None
     molds: MoldPlan | None = None
     strips: StripPlan | None = None
-    layout: SurfaceLayout | None = None
+    singular_points: np.ndarray | None = None
     boundary_molds: BoundaryMolds | None = None
 
     @property
@@ -218,6 +220,28 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     layouts: Layouts = {(90.0, study.panel_size): baseline}
     starts: Starts = {}
     solves: dict[tuple, CandidateResult] = {}
+    try:
+        results = _run_candidates(study, design, helper, cache, resume, layouts, starts, solves, say)
+    except BaseException:
+        if helper is not None:
+            helper.cancel()
+        raise
+    made: dict[str, tuple] = {}
+    if helper is not None:
+        measured = helper.collect()
+        results = [measured.get(r.name, r) for r in results]
+        made = helper.made_files
+    judged = judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+    judged.made_files = made
+    return judged
+
+
+def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: CandidateCache | None,
+                    resume: bool, layouts: Layouts, starts: Starts,
+                    solves: dict[tuple, CandidateResult], say: Callable[[str], None]
+                    ) -> list[CandidateResult]:
+    """Every candidate of `study` in turn (see `run_study`): solved here, measured here or
+    by `helper` (`fabplan.study.background.BackgroundCandidates`)."""
     results: list[CandidateResult] = []
     count = len(study.candidates)
     for i, candidate in enumerate(study.candidates, 1):
@@ -238,7 +262,8 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
                 # stands in for the candidate until it is measured: its net and twin are
                 # what the later candidates' twins are found by
                 results.append(CandidateResult(candidate, metrics=solved.metrics,
-                                               net=solved.net, layout=solved.layout,
+                                               net=solved.net,
+                                               singular_points=solved.singular_points,
                                                twin=None if twin is None else twin.name))
                 continue
             result = fabricate_candidate(study, design, solved, twin, say)
@@ -250,14 +275,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         if cache is not None:
             cache.store(result)
         results.append(result)
-    made: dict[str, tuple] = {}
-    if helper is not None:
-        measured = helper.collect()
-        results = [measured.get(r.name, r) for r in results]
-        made = helper.made_files
-    judged = judge_study(study, design, results, seconds_run=time.perf_counter() - start)
-    judged.made_files = made
-    return judged
+    return results
 
 
 def failure_reason(exc: BaseException) -> str:
@@ -440,7 +458,7 @@ def shared_solve(solved: CandidateResult, candidate: Candidate) -> CandidateResu
     if solved.failed:
         return CandidateResult(candidate, error=solved.error, reasons=list(solved.reasons))
     return CandidateResult(candidate, metrics={"seconds": {"layout": 0.0, "optimize": 0.0}},
-                           net=solved.net, layout=solved.layout)
+                           net=solved.net, singular_points=solved.singular_points)
 
 
 def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
@@ -524,7 +542,8 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         seconds["layout"] += laid_out
         seconds["optimize"] = max(seconds["optimize"] - laid_out, 0.0)
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
-    return CandidateResult(candidate, metrics={"seconds": seconds}, net=net, layout=layout)
+    return CandidateResult(candidate, metrics={"seconds": seconds}, net=net,
+                           singular_points=None if layout is None else layout.singular_points)
 
 
 def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateResult,
@@ -590,7 +609,7 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
                                 deviation_mm=deviation, boundary=bounds)
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
-                           layout=solved.layout, boundary_molds=bounds,
+                           singular_points=solved.singular_points, boundary_molds=bounds,
                            same_net_as=twin.name if same_molds and twin is not None else None,
                            twin=twin.name if twin is not None else None,
                            deviation_mm=deviation)

@@ -98,6 +98,21 @@ class DesignSpec:
     def mm_per_unit(self) -> float:
         return 1000.0 if self.units == "m" else 1.0
 
+    def files(self) -> list[Path]:
+        """The existing files the design reads: its mesh or Rhino file, and the files a
+        built-in surface's parameters name (a profile, a grid of heights)."""
+        names = [self.source.split("#", 1)[0], *(str(v) for v in self.parameters.values())]
+        names += [part.split("=", 1)[-1] for part in self.source.replace(":", ",").split(",")]
+        found: list[Path] = []
+        for name in names:
+            try:
+                path = Path(name)
+                if path.is_file() and path not in found:
+                    found.append(path)
+            except (OSError, ValueError):
+                continue
+        return found
+
 
 @dataclass(frozen=True)
 class Limits:
@@ -308,6 +323,14 @@ class Study:
             if len(values) > 1 and None not in values:
                 out[key] = sorted(set(values), key=values.index)
         return out
+
+    def input_files(self) -> dict[Path, str]:
+        """Every file the study reads, with what it is: the study file and the design's
+        files (`DesignSpec.files`). No output of the study may replace one."""
+        files = {path: f"a file of the design {self.design.label}" for path in self.design.files()}
+        if self.path is not None:
+            files[self.path] = "the study file"
+        return files
 
     def record(self) -> dict:
         """The study as JSON (what `study.json` says was asked)."""
