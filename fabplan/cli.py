@@ -27,8 +27,9 @@ from .io.output import (
     output_argument,
 )
 from .io.records import write_json
+from .io.units import DEFAULT_UNITS, MM_PER_UNIT, UNIT_WORDS, units_warning
 from .net.measure import format_summary, measure_net
-from .net.validate import check_panel_size, load_net
+from .net.validate import load_net, net_units_warning
 from .report.html import counted, panel_areas
 from .report.progress import Progress
 from .solve.net_types import NETS, check_angle, check_radius
@@ -54,9 +55,12 @@ def _cmd_measure(args) -> int:
            else Path(args.net).with_suffix(".measure.json"))
     _check_outputs([out], {**_net_inputs(args.net), **_file_inputs((args.reference, "the reference"))})
     mesh = load_net(args.net)
+    units = _net_units(args, args.net)
+    _check_units(args, mesh, units)
     reference = _reference(args.reference)
     record = measure_net(mesh, reference=reference)
     record["file"] = str(args.net)
+    record["units"] = units
     write_json(out, record)           # the file first: the terminal may go away
     print(format_summary(record))
     print(f"wrote {out}")
@@ -66,6 +70,33 @@ def _cmd_measure(args) -> int:
 def _warn(message: str | None, quiet: bool = False) -> None:
     if message and not quiet:
         print(f"fabplan: warning: {message}", file=sys.stderr)
+
+
+def _net_units(args: argparse.Namespace, net: str | os.PathLike | None, *,
+               default: str = DEFAULT_UNITS) -> str:
+    """The model units of a command's net: ``--units``, else those its record NET.json
+    states (a layout's or optimize's ``properties.units``, a layout's design units), else
+    `default`."""
+    if args.units is not None:
+        return args.units
+    properties = _net_properties(Path(net)) if net else {}
+    layout = properties.get("layout")
+    recorded = properties.get("units") or (layout.get("design_units") if isinstance(layout, dict)
+                                           else None)
+    return recorded if recorded in MM_PER_UNIT else default
+
+
+def _check_units(args: argparse.Namespace, mesh: Any, units: str) -> None:
+    """Warn (or with ``--strict-units`` refuse now) when the net's size does not fit
+    `units`; the warning comes after the run (`_warn_after`)."""
+    _warn_after(args, net_units_warning(mesh, units, strict=args.strict_units))
+
+
+def _warn_after(args: argparse.Namespace, message: str | None) -> None:
+    """A warning printed when the command has run (`main`): a refusal on the way comes
+    alone, without a warning before it."""
+    if message:
+        args.warnings_after = [*getattr(args, "warnings_after", []), message]
 
 
 def _progress(args) -> Progress:
@@ -260,6 +291,8 @@ def _cmd_optimize(args) -> int:
     out = _output_path(args)
     mesh = load_net(args.input)
     check_net_input(mesh)
+    units = _net_units(args, args.input)
+    _check_units(args, mesh, units)
     reference = _reference(args.reference)
     fixed = read_fixed(args.fix, mesh)
     handles = read_handles(args.handle)
@@ -271,10 +304,11 @@ def _cmd_optimize(args) -> int:
                           reference=reference, fixed=fixed, handles=handles, settings=settings,
                           coherent=args.coherent, guards=args.guards,
                           settle_free=0.0 if args.settle_free else None, progress=report)
+    result.properties["units"] = units
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             _html_file(args, out) as page, \
-            _viewer_files(args, out, result.mesh, units=args.units) as viewers:
+            _viewer_files(args, out, result.mesh, units=units) as viewers:
         if page is not None:
             from .layout.view import net_view_html
             from .solve.reference import ReferenceSurface
@@ -282,9 +316,9 @@ def _cmd_optimize(args) -> int:
             page.write_text(net_view_html(
                 result, title=f"{result.net} net: {out.name}",
                 subtitle=f"fabplan optimize {Path(args.input).name}: {result.status} after "
-                         f"{counted(result.iterations, 'iteration')}; model units {args.units}",
+                         f"{counted(result.iterations, 'iteration')}; model units {units}",
                 surface=reference if reference is not None else ReferenceSurface.from_mesh(mesh),
-                deviation_from="the reference", units=args.units,
+                deviation_from="the reference", units=units,
                 picture_caption=f"{result.net} net {out.name}"), encoding="utf-8")
         obj_path, json_path = result.write(out)
     if page is not None:
@@ -361,17 +395,27 @@ def _cmd_molds(args) -> int:
     from .layout.trim import read_boundary_panels
     from .net.mesh import QuadMesh
 
-    settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=args.units,
-                            max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface)
+    settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=_net_units(args, args.net),
+                            max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface,
+                            step_limit_mm=args.step_limit)
     settings.check()
+    if args.design is None and args.panel_surface == "design":
+        raise InputError("--panel-surface design needs --design SURFACE, the design the net lies on")
+    if not 100 <= args.triangles <= 5_000_000:
+        raise InputError(f"--triangles must lie between 100 and 5000000, got {args.triangles}")
     out = output_argument(args.output, folder=True)
     check_output_folder(out)
-    inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"))}
+    inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"),
+                                                      (args.design, "the design"))}
     _folder_apart(out, [*MOLD_FILES, "net.3dm", "net.glb"], inputs)
     mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
-    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=settings.mm_per_unit),
-          args.quiet)
+    _check_units(args, mesh, settings.units)
+    design = None
+    if args.design is not None:
+        from .design.load import load_design
+
+        design = load_design(args.design, triangles=args.triangles)
     boundary_file = _boundary_file(args)
     panels = None if boundary_file is None else read_boundary_panels(
         mesh, boundary_file, _boundary_record(args))
@@ -384,7 +428,7 @@ def _cmd_molds(args) -> int:
             q for q, sliver in zip(panels.polygons, panels.extension, strict=True) if not sliver],
             name=mesh.name)
     with progress.stage(f"fitting molds to {len(planned.face_sizes)} panels"):
-        plan = plan_molds(planned, settings)
+        plan = plan_molds(planned, settings, design=design)
         boundary = None if panels is None else (panels, planned_boundary_molds(plan, panels))
     with progress.stage("writing the report"), \
             _viewer_files(args, out / "net", planned, units=settings.units, molds=plan) as viewers:
@@ -443,7 +487,8 @@ def _cmd_mill(args) -> int:
     from .fabricate.milling import MillSettings, parse_tool
 
     tool = parse_tool(args.tool)
-    settings = MillSettings(along=args.along, units=args.units, margin_mm=args.margin,
+    settings = MillSettings(along=args.along, units=_net_units(args, args.net, default="mm"),
+                            margin_mm=args.margin,
                             scallop_mm=args.scallop, side=args.side)
     settings.check()
     if not 0.01 <= args.sim_step <= 10:
@@ -587,7 +632,10 @@ def _cmd_layout(args) -> int:
         print(f"design: {design.source['object']} of {design.source['file']}, in "
               f"{_units_said(design.units)}" + (f" (converted from {design.source['file_units']})"
                                                 if design.source["scale"] != 1 else ""))
+    units = _design_units(args, design)
     _check_layout_size(design, args.panel_size, args.max_panels)
+    _warn_after(args, units_warning(Path(design.name).name, units, panel=args.panel_size,
+                                    extent=design.extent, strict=args.strict_units))
     progress = _progress(args)    # after the checks: a refusal is one line on its own
     start = layout_angle(preset.name, design, args.angle) if args.family is None else 90.0
     settings_layout = (LayoutSettings() if args.smoothing is None else
@@ -606,6 +654,7 @@ def _cmd_layout(args) -> int:
             net_angle=args.angle if preset.angle == "param" else None, family=args.family,
             settings=settings_layout, solver=settings, starts=args.starts,
             vary_smoothing=args.smoothing is None, progress=report, on_start=starting)
+    result.properties["units"] = units
     angle = result.parameters.get("angle_deg")
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
              + (f", {layout.family}" if layout.family else
@@ -613,7 +662,7 @@ def _cmd_layout(args) -> int:
     # the picture and the Rhino files land only with the net they show
     with progress.stage("writing the net and its picture" + (" and page" if args.html else "")), \
             atomic_path(picture) as staged, _html_file(args, out) as page, \
-            _viewer_files(args, out, result.mesh, units=args.units) as viewers:
+            _viewer_files(args, out, result.mesh, units=units) as viewers:
         write_layout_picture(staged, design, result.mesh, title=title,
                              singular_points=layout.singular_points,
                              marks=fairness_marks(result.properties),
@@ -635,8 +684,8 @@ def _cmd_layout(args) -> int:
             page.write_text(net_view_html(
                 result, title=f"Layout: {title}",
                 subtitle=f"fabplan layout {args.surface}: {result.status} after "
-                         f"{counted(result.iterations, 'iteration')}; model units {args.units}",
-                surface=design, units=args.units, picture_png=staged.read_bytes(),
+                         f"{counted(result.iterations, 'iteration')}; model units {units}",
+                surface=design, units=units, picture_png=staged.read_bytes(),
                 picture_caption=f"{picture.name}: the net (blue) on the design (grey), boundary "
                                 "panels green, the places its lines turn most marked",
                 figures_after=((kinks, "Where the design makes lines kink: the design coloured "
@@ -680,6 +729,18 @@ def _cmd_layout(args) -> int:
                   "(`fabplan study` measures how far)", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
+
+
+def _design_units(args: argparse.Namespace, design: Any) -> str:
+    """The model units of a layout: those of its design's file (a .3dm file's unit system,
+    converted with ``#units=U``), else ``--units``, else metres; a --units that
+    contradicts the file is refused."""
+    if design.units is None:
+        return args.units or DEFAULT_UNITS
+    if args.units is not None and args.units != design.units:
+        raise InputError(f"--units {args.units}: the design is in {UNIT_WORDS[design.units]} "
+                         f"(its file says so); to convert it, choose it as FILE.3dm#units={args.units}")
+    return str(design.units)
 
 
 def _units_said(units: str | None) -> str:
@@ -830,7 +891,6 @@ def _parse_layers(specs: list | None) -> dict:
 
 
 def _cmd_strips(args) -> int:
-    from .fabricate.molds import UNITS
     from .fabricate.nesting import make_parts, nest_parts
     from .fabricate.strip_plan import STRIP_FILES, StripPlan
     from .fabricate.strips import StripSettings, build_strips
@@ -841,7 +901,8 @@ def _cmd_strips(args) -> int:
 
     settings = StripSettings(
         height_mm=args.height, thickness_mm=args.thickness, clearance_mm=args.clearance,
-        units=args.units, tolerance_mm=args.tolerance, sheet_mm=_parse_sheet(args.sheet),
+        units=_net_units(args, args.net), tolerance_mm=args.tolerance,
+        sheet_mm=_parse_sheet(args.sheet),
         spacing_mm=args.spacing, margin_mm=args.margin, kerf_mm=args.kerf, end=args.end,
         end_extension_mm=args.extension, splice=args.splice, splice_length_mm=args.splice_length,
         labels=args.labels, label_height_mm=args.label_height, layers=_parse_layers(args.layer),
@@ -857,8 +918,7 @@ def _cmd_strips(args) -> int:
     check_panel_count(len(mesh.face_sizes), max_panels=args.max_panels,
                       what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
                       fix="plan the strips of a coarser net or of parts of it")
-    _warn(check_panel_size(mesh, units=settings.units, mm_per_unit=UNITS[settings.units]),
-          args.quiet)
+    _check_units(args, mesh, settings.units)
     # the stages of `plan_strips`, one by one so that each shows its progress
     progress = _progress(args)
     planning = time.perf_counter()
@@ -995,11 +1055,13 @@ def _cmd_arcs(args) -> int:
         raise InputError(f"{out}: the output must be a .3dm or a .dxf file")
     _check_outputs([out, out.with_suffix(".json")], _net_inputs(args.net))
     mesh = load_net(args.net, quads=False)
+    units = _net_units(args, args.net)
+    _check_units(args, mesh, units)
     progress = _progress(args)
     with progress.stage("the arcs"):
         arcs = arc_structure(mesh)
     with progress.stage("writing the arcs"):
-        files = write_arcs(arcs, out, units=args.units)
+        files = write_arcs(arcs, out, units=units)
     s = arcs.summary()
     if args.quiet:
         print(f"{counted(s['arcs'], 'arc')}; wrote {files[0]}")
@@ -1136,6 +1198,7 @@ def _add_measure(sub: Any) -> None:
     p.add_argument("-o", "--output", help="JSON file to write (default: NET.measure.json)")
     p.add_argument("--reference", help="surface to measure the distance to (OBJ/STL/PLY/OFF, "
                                        "FILE.3dm[#...] or a built-in surface)")
+    _add_units(p)
     p.set_defaults(func=_cmd_measure)
 
 
@@ -1172,7 +1235,8 @@ def _add_optimize(sub: Any) -> None:
                         "20,000 vertices, its coarse net of every second line is solved first)")
     p.add_argument("-o", "--output", required=True, help="output OBJ; its .json sits beside it")
     _add_html(p)
-    _add_3dm(p, units=True)
+    _add_3dm(p)
+    _add_units(p)
     _add_verbosity(p)
     p.set_defaults(func=_cmd_optimize)
 
@@ -1183,20 +1247,31 @@ def _add_molds(sub: Any) -> None:
     p.add_argument("net", help="quad mesh (OBJ); every face is a panel")
     p.add_argument("--tolerance-mm", type=float, required=True, metavar="T",
                    help="largest allowed gap between a panel and its mold, in mm")
-    p.add_argument("--units", default="m", help="unit of the net's coordinates: m (default) or mm")
+    _add_units(p)
     p.add_argument("--max-mold-size", type=float, metavar="MM",
                    help="largest mold side in mm (default: no limit)")
     p.add_argument("--panel-surface", default="auto",
-                   choices=["auto", "shared", "local_fit", "corners", "smooth"],
+                   choices=["auto", "shared", "local_fit", "corners", "design", "smooth"],
                    help="panel shape: shared (pieces of one surface through the net: "
                         "neighbouring panels share their edges), local_fit (a quadric per "
                         "face, fitted to the corners around it; neighbours may step apart), "
-                        "corners (least curved through its corners), auto (corners for a net "
-                        "of flat faces, else shared); smooth is local_fit's earlier name")
+                        "corners (least curved through its corners), design (patches of the "
+                        "exact design the net lies on, --design: what a study plans for a "
+                        "net on its design), auto (corners for a net of flat faces, else "
+                        "design with --design, else shared); smooth is local_fit's earlier name")
+    p.add_argument("--design", metavar="SURFACE",
+                   help="the design the net lies on, for --panel-surface design: a built-in "
+                        "surface spec or a .3dm NURBS surface as for `fabplan layout`")
+    p.add_argument("--triangles", type=int, default=20000, metavar="N",
+                   help="triangles of the --design's triangulation, where the exact surface is "
+                        "searched from (default 20000, a study's)")
+    p.add_argument("--step-limit", type=float, metavar="MM",
+                   help="largest step between neighbouring panels' molds in mm (default twice "
+                        "the tolerance)")
     _add_boundary_options(p, "they are planned as panels with the net's (slivers cut with "
                              "their full panel)", "plan the net's own panels only")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
-    _add_3dm(p, units=False)
+    _add_3dm(p)
     p.add_argument("--no-3d", action="store_true",
                    help="leave the interactive 3D view out of report.html (0.6 MB smaller)")
     _add_verbosity(p)
@@ -1234,8 +1309,7 @@ def _add_mill(sub: Any) -> None:
                         "along the axis, tip diameter (default 0)")
     p.add_argument("--along", choices=["A", "B"], default="A",
                    help="family whose lines the passes follow (A: the first, default)")
-    p.add_argument("--units", choices=["mm", "m"], default="mm",
-                   help="unit of the net's coordinates (default mm)")
+    _add_units(p, default="mm")
     p.add_argument("--margin", type=float, metavar="MM",
                    help="Meusnier radius minus safety sphere radius (cone: Mannheim radius "
                         "minus at least this) (default: the rule of docs/milling.md, which keeps "
@@ -1302,7 +1376,8 @@ def _add_layout(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
     _add_html(p)
-    _add_3dm(p, units=True)
+    _add_3dm(p)
+    _add_units(p)
     _add_verbosity(p)
     p.set_defaults(func=_cmd_layout)
 
@@ -1315,7 +1390,7 @@ def _add_strips(sub: Any) -> None:
                    help="lamella height; the surface runs along its middle")
     p.add_argument("--thickness", type=float, required=True, metavar="MM",
                    help="material thickness (the slits are this plus --clearance wide)")
-    p.add_argument("--units", choices=["m", "mm"], default="m", help="model units (default m)")
+    _add_units(p)
     p.add_argument("--sheet", default="2500x1250", metavar="WxH",
                    help="sheet size in mm (default 2500x1250)")
     p.add_argument("--spacing", type=float, default=10.0, metavar="MM",
@@ -1357,7 +1432,7 @@ def _add_strips(sub: Any) -> None:
                    help="write the sheets in N processes (default auto: one per core)")
     _add_max_panels(p)
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
-    _add_3dm(p, units=False)
+    _add_3dm(p)
     _add_verbosity(p)
     p.set_defaults(func=_cmd_strips)
 
@@ -1370,22 +1445,29 @@ def _add_html(p: argparse.ArgumentParser) -> None:
                         "picture (about 0.7 MB, most of it the viewer)")
 
 
-def _add_3dm(p: argparse.ArgumentParser, *, units: bool) -> None:
+def _add_units(p: argparse.ArgumentParser, default: str = DEFAULT_UNITS) -> None:
+    """--units (the same five on every command) and --strict-units."""
+    p.add_argument("--units", choices=list(MM_PER_UNIT), metavar="U",
+                   help="unit of the model's coordinates: mm, cm, m, in or ft (default: the "
+                        f"units the net's record NET.json states, else {default})")
+    p.add_argument("--strict-units", action="store_true",
+                   help="refuse, instead of warning, a net or design whose size does not fit "
+                        "its units (panels under 10 mm or over 20 m, a design under 1 m in "
+                        "metres or feet)")
+
+
+def _add_3dm(p: argparse.ArgumentParser) -> None:
     p.add_argument("--3dm", dest="rhino", action="store_true",
                    help="also write the net as a Rhino .3dm file (mesh, polylines per family, "
                         "panels per mold, strip curves; ids as in the CSV/JSON) and a .glb "
                         "for web viewers, coloured by mold")
-    if units:
-        p.add_argument("--units", default="m", choices=["mm", "cm", "m", "in", "ft"],
-                       help="model units of the net, for the .3dm file (default m)")
 
 
 def _add_arcs(sub: Any) -> None:
     p = sub.add_parser("arcs", help="circular arc structure: every edge replaced by the arc in "
                                     "which its end vertices' spheres meet (3dm or DXF + JSON)")
     p.add_argument("net", help="the net (OBJ)")
-    p.add_argument("--units", default="m", choices=["mm", "cm", "m", "in", "ft"],
-                   help="model units of the net (default m); the DXF is written in mm")
+    _add_units(p)
     p.add_argument("-o", "--output", required=True, metavar="OUT.3dm|OUT.dxf",
                    help="the arcs as Rhino ArcCurves or DXF ARC entities; the report goes to "
                         "OUT.json")
@@ -1486,7 +1568,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         with _stopped_by_signals():
-            return args.func(args)
+            code = args.func(args)
+        for message in getattr(args, "warnings_after", []):
+            _warn(message, getattr(args, "quiet", False))
+        return code
     except FabplanError as exc:
         print(f"fabplan: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -84,6 +84,7 @@ def test_measure_writes_the_api_record(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["wein99.measure.json", "wein99.obj"]
     record = json.loads(written.read_text())
     assert record.pop("file") == str(net)
+    assert record.pop("units") == "m"       # none given, none recorded: metres
     # JSON keeps every digit of a float: the record is the API's, number for number
     expected = json.loads(json.dumps(fabplan.measure_net(QuadMesh.from_obj(net))))
     assert record == expected

@@ -20,6 +20,7 @@ import pytest
 
 import fabplan
 from fabplan.cli import main
+from fabplan.errors import InputError
 from fabplan.io.obj import write_obj
 from fabplan.net.mesh import QuadMesh
 
@@ -400,16 +401,19 @@ def test_a_mold_tolerance_outside_its_range_is_refused(work, capsys, value):
 
 
 def test_a_plausible_but_odd_panel_size_warns_and_names_the_other_unit():
-    from fabplan.net.validate import check_panel_size
+    from fabplan.net.validate import net_units_warning
 
     net = QuadMesh.grid(grid_points() * 5.0, name="small.obj")   # 5 mm panels
-    assert check_panel_size(net, units="mm", mm_per_unit=1.0) == (
-        "small.obj: panels of 5.02 mm (median edge 5.025 mm) are implausible for a building; "
-        "if the model is in metres, give --units m")
-    assert check_panel_size(net, units="m", mm_per_unit=1000.0) is None
+    assert net_units_warning(net, "mm") == (
+        "small.obj: panels of 5.02 mm (median edge 5.025 mm) read in millimetres: implausible "
+        "for a building; if the file is in metres, give --units m")
+    assert net_units_warning(net, "m") is None
     big = QuadMesh.grid(grid_points() * 30.0, name="big.obj")   # 30 m panels
-    assert "if the model is in millimetres, give --units mm" in check_panel_size(
-        big, units="m", mm_per_unit=1000.0)
+    assert "if the file is in centimetres, give --units cm" in net_units_warning(big, "m")
+    with pytest.raises(InputError, match=r"implausible for a building; .* \(--strict-units\)"):
+        net_units_warning(big, "m", strict=True)
+    tiny = QuadMesh.grid(grid_points() * 0.002, name="tiny.obj")   # a 10 x 8 mm model in metres
+    assert "a design 10 mm across read in metres" in net_units_warning(tiny, "m")
 
 
 @pytest.mark.slow

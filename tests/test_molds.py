@@ -407,7 +407,8 @@ def _degenerate_obj(path: Path) -> None:
     ("zero-tolerance", "tolerance must be a positive"),
     ("negative-tolerance", "tolerance must be a positive"),
     ("nan-tolerance", "tolerance must be a positive"),
-    ("units", "unknown units 'ft'"),
+    ("units", "read in centimetres: implausible for a building; if the file is in metres, give "
+              "--units m (--strict-units)"),
     ("mold-size", "largest mold size must be a positive"),
     ("missing", "no such file"),
 ])
@@ -423,7 +424,7 @@ def test_bad_input_is_refused_in_one_line_and_writes_nothing(tmp_path, capsys, c
         args = ["--tolerance-mm", {"zero-tolerance": "0", "negative-tolerance": "-1",
                                    "nan-tolerance": "nan"}[case]]
     elif case == "units":
-        args += ["--units", "ft"]
+        args += ["--units", "cm", "--strict-units"]
     elif case == "mold-size":
         args += ["--max-mold-size", "0"]
     elif case == "missing":

@@ -132,10 +132,11 @@ def test_glb_is_the_net_coloured_by_mold(mold_run, patch_file):
 def test_optimize_3dm_matches_its_obj(tmp_path, patch_file):
     out = tmp_path / "net.obj"
     code = main(["optimize", str(patch_file), "--net", "snet", "--max-iter", "5", "--3dm",
-                 "--units", "mm", "-o", str(out), "-q"])
+                 "--units", "cm", "-o", str(out), "-q"])
     assert code in (0, 3)
     objects, units = _objects(out.with_suffix(".3dm"))
-    assert units == rhino3dm.UnitSystem.Millimeters
+    assert units == rhino3dm.UnitSystem.Centimeters
+    assert json.loads(out.with_suffix(".json").read_text())["properties"]["units"] == "cm"
     (net,) = [o for layer, o in objects if layer == "net"]
     vertices, faces = _mesh_arrays(net.Geometry)
     obj_vertices, obj_faces = read_obj(out)
@@ -146,8 +147,8 @@ def test_optimize_3dm_matches_its_obj(tmp_path, patch_file):
 
     (glb,) = trimesh.load(out.with_suffix(".glb"), force="scene").geometry.values()
     net = fabplan.read_obj(out)
-    # glTF is in metres: the net in millimetres comes out a thousandth of its size
-    assert np.allclose(glb.vertices[glb.faces], net.vertices[net.triangles()] / 1000, atol=1e-9)
+    # glTF is in metres: the net in centimetres comes out a hundredth of its size
+    assert np.allclose(glb.vertices[glb.faces], net.vertices[net.triangles()] / 100, atol=1e-9)
 
 
 def test_without_3dm_no_rhino_files(tmp_path, patch_file):

@@ -561,6 +561,7 @@ def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m")
     report = path.with_suffix(".json")
     record = arcs.to_json()
     record["units"] = units if suffix == ".3dm" else "mm"
+    record["model_units"] = units
     record["file"] = path.name
     with atomic_path(path) as staged, atomic_path(report) as staged_report:
         write = write_arcs_3dm if suffix == ".3dm" else write_arcs_dxf

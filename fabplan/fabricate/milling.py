@@ -33,6 +33,7 @@ from scipy.interpolate import CubicSpline
 from scipy.sparse import csgraph
 
 from ..errors import InputError
+from ..io.units import MM_PER_UNIT, check_units
 from ..net.geometry import (
     fit_star_spheres,
     osculating_tangents,
@@ -63,7 +64,6 @@ __all__ = [
     "trace_passes",
 ]
 
-_MM_PER_UNIT = {"mm": 1.0, "m": 1000.0}
 
 
 @dataclass(frozen=True)
@@ -194,7 +194,7 @@ class MillSettings:
     Attributes
     ----------
     along : ``"A"`` passes along the lines of family 0, ``"B"`` along family 1.
-    units : model units of the net, ``"mm"`` or ``"m"``.
+    units : model units of the net (a key of `fabplan.io.units.MM_PER_UNIT`).
     margin_mm : the Meusnier sphere radius minus the safety sphere radius; None chooses
         it by `default_margin_mm`.
     scallop_mm : largest predicted scallop height the pass selection allows.
@@ -225,14 +225,13 @@ class MillSettings:
 
     @property
     def mm_per_unit(self) -> float:
-        return _MM_PER_UNIT[self.units]
+        return MM_PER_UNIT[self.units]
 
     def check(self) -> None:
         """Refuse impossible options (`InputError`, one line)."""
         if self.along not in ("A", "B"):
             raise InputError(f"--along must be A or B, got {self.along!r}")
-        if self.units not in _MM_PER_UNIT:
-            raise InputError(f"--units must be mm or m, got {self.units!r}")
+        check_units(self.units)
         if self.side not in ("auto", "+", "-"):
             raise InputError(f"--side must be auto, + or -, got {self.side!r}")
         if self.margin_mm is not None and not (np.isfinite(self.margin_mm) and self.margin_mm >= 0):

@@ -45,6 +45,7 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from ..errors import InputError
+from ..io.units import MM_PER_UNIT, check_units
 from ..net.mesh import QuadMesh
 from ..net.weingarten import weingarten_fit
 from .panels import (
@@ -77,7 +78,7 @@ __all__ = [
     "mold_count_bound",
 ]
 
-UNITS = {"m": 1000.0, "mm": 1.0}
+UNITS = MM_PER_UNIT    # the model units a plan takes (`fabplan.io.units`)
 """Millimetres per model unit for each accepted ``units`` name (molds and strips)."""
 
 STEP_ROUNDS = 3
@@ -100,7 +101,7 @@ class MoldSettings:
     Attributes
     ----------
     tolerance_mm : largest allowed gap between a panel and its mold (mm), > 0.
-    units : unit of the net's coordinates, ``"m"`` or ``"mm"``.
+    units : unit of the net's coordinates (a key of `fabplan.io.units.MM_PER_UNIT`).
     max_mold_size_mm : largest mold side (mm); a panel whose footprint on its mold is
         larger is a failure. None: no limit.
     panel_surface : ``"auto"``, ``"shared"``, ``"local_fit"``, ``"corners"`` or ``"design"``
@@ -137,8 +138,7 @@ class MoldSettings:
         if not low <= t <= high:
             raise InputError(f"the tolerance {t:g} mm lies outside {low:g} .. {high:g} mm, the "
                              "range a mold can be made to (is it in the wrong unit?)")
-        if self.units not in UNITS:
-            raise InputError(f"unknown units {self.units!r}: use " + " or ".join(UNITS))
+        check_units(self.units)
         s = self.max_mold_size_mm
         if s is not None and not (math.isfinite(s) and s > 0):
             raise InputError(f"the largest mold size must be a positive number of millimetres, got {s}")

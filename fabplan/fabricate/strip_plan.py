@@ -190,6 +190,7 @@ def _plan_record(plan: StripPlan, files: list, sheet_files: dict, summary: dict)
     return {
         "units": "millimetres; arc lengths s along each strip's reference curve (its mid-line, "
                  "at the surface), from its first node",
+        "model_units": s.units,
         "vertices": "strip and crossing vertex ids number the net's vertices and, beyond them, "
                     "the corners of its boundary panels (NET.boundary.obj, net's vertices first)",
         "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(s).items()},

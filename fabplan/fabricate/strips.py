@@ -49,6 +49,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import InputError
+from ..io.units import check_units
 from ..net.geometry import circumcircle_tangent, face_normals, fit_star_spheres, star_normals
 from ..net.mesh import Polylines, QuadMesh
 from .molds import UNITS
@@ -191,8 +192,7 @@ class StripSettings:
         non_negative("--boundary-member", self.member_mm)
         positive("--splice-length", self.splice_mm)
         positive("--label-height", self.text_height_mm)
-        if self.units not in UNITS:
-            raise InputError(f"--units must be one of {', '.join(UNITS)}, got {self.units!r}")
+        check_units(self.units)
         if len(self.sheet_mm) != 2:
             raise InputError(f"--sheet must be WIDTHxHEIGHT, got {self.sheet_mm}")
         for value in self.sheet_mm:

@@ -24,12 +24,12 @@ import numpy as np
 
 from ..errors import InputError
 from .inputs import check_coordinates, check_input_file
+from .units import MM_PER_UNIT
 
 __all__ = ["MM_PER_UNIT", "SOURCE_KEYS", "RhinoSurface", "RhinoDesign", "read_3dm",
            "split_source", "is_3dm_source", "describe_3dm"]
 
 #: Millimetres per model unit of the unit systems a design file may be in.
-MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "ft": 304.8}
 
 #: The choices a ``FILE.3dm#key=value,...`` source may make.
 SOURCE_KEYS = ("layer", "object", "face", "units")

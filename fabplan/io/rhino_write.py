@@ -33,6 +33,7 @@ import numpy as np
 from ..errors import InputError
 from .inputs import check_input_file
 from .output import atomic_path
+from .units import MM_PER_UNIT
 
 __all__ = [
     "RHINO_UNITS",
@@ -49,8 +50,6 @@ RHINO_UNITS = {"mm": "Millimeters", "cm": "Centimeters", "m": "Meters", "in": "I
                "ft": "Feet"}
 """fabplan unit name -> the `rhino3dm.UnitSystem` member a file is written in."""
 
-MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "ft": 304.8}
-"""Millimetres per model unit of every name in `RHINO_UNITS`."""
 
 FAMILY_NAMES = ("A", "B")
 """Letters of the two families of parameter lines, as in strip ids (``A07``)."""

@@ -8,13 +8,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.inputs import check_coordinates, check_input_file
+from ..io.units import units_warning
 from .mesh import QuadMesh, load_mesh
 
-__all__ = ["check_net", "load_net", "check_panel_size", "PLAUSIBLE_PANEL_MM"]
-
-PLAUSIBLE_PANEL_MM = (10.0, 20_000.0)
-"""Panel sizes (median edge length, mm) a fabrication plan can mean. Outside them a run
-warns; a factor 10 further out (under 1 mm, over 200 m) it refuses: the units are wrong."""
+__all__ = ["check_net", "load_net", "net_units_warning"]
 
 
 def check_net(mesh: QuadMesh, *, quads: bool = True, manifold: bool = True) -> QuadMesh:
@@ -79,42 +76,35 @@ def load_net(path: str | os.PathLike, *, quads: bool = True, manifold: bool = Tr
     return check_net(load_mesh(path), quads=quads, manifold=manifold)
 
 
-def check_panel_size(mesh: QuadMesh, *, units: str, mm_per_unit: float) -> str | None:
-    """Check the net's panel size is plausible in the stated `units`.
+def net_units_warning(mesh: QuadMesh, units: str, *, strict: bool = False) -> str | None:
+    """Whether the net's size fits the `units` it is read in (`fabplan.io.units.units_warning`
+    on its median edge and its largest extent).
 
     Returns
     -------
-    A warning for a size outside `PLAUSIBLE_PANEL_MM`, else None.
+    A warning for a size a building does not have, else None.
 
     Raises
     ------
     InputError
-        For a size a factor 10 beyond those bounds, suggesting the other unit.
+        With `strict` instead of the warning, and always for panels a factor 10 beyond
+        `fabplan.io.units.PLAUSIBLE_PANEL_MM`, naming the likely unit.
 
     Examples
     --------
     >>> import numpy as np
     >>> u, v = np.meshgrid(np.arange(4.0) / 2, np.arange(3.0) / 2, indexing="ij")
     >>> net = QuadMesh.grid(np.stack([u, v, 0 * u], axis=-1), name="roof.obj")
-    >>> check_panel_size(net, units="mm", mm_per_unit=1.0)
+    >>> net_units_warning(net, "mm")
     Traceback (most recent call last):
     ...
     fabplan.errors.InputError: roof.obj: panels of 0.5 mm (median edge 0.5 mm) cannot be \
 meant for fabrication: is the model in metres? Give --units m
-    >>> check_panel_size(net, units="m", mm_per_unit=1000.0) is None
+    >>> net_units_warning(net, "m") is None
     True
     """
     edges = mesh.edges
     lengths = np.linalg.norm(mesh.vertices[edges[:, 0]] - mesh.vertices[edges[:, 1]], axis=1)
-    edge_mm = float(np.median(lengths)) * mm_per_unit
-    low, high = PLAUSIBLE_PANEL_MM
-    other = "metres" if units == "mm" else "millimetres"
-    other_units = "m" if units == "mm" else "mm"
-    said = f"{mesh.name}: panels of {edge_mm:.3g} mm (median edge {edge_mm / mm_per_unit:.4g} {units})"
-    if edge_mm < 0.1 * low or edge_mm > 10 * high:
-        raise InputError(f"{said} cannot be meant for fabrication: is the model in {other}? "
-                         f"Give --units {other_units}")
-    if edge_mm < low or edge_mm > high:
-        return (f"{said} are implausible for a building; if the model is in {other}, give "
-                f"--units {other_units}")
-    return None
+    extent = float(np.ptp(mesh.vertices, axis=0).max())
+    return units_warning(mesh.name, units, panel=float(np.median(lengths)), extent=extent,
+                         strict=strict)

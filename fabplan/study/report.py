@@ -983,6 +983,42 @@ def check_output_folder(folder: str | os.PathLike, study: Study | None = None) -
                          "folder of their own: choose another -o (a new folder beside it)")
 
 
+def reproduce_commands(c: CandidateResult, study: Study) -> list[list[str]]:
+    """The commands that give a candidate's molds (and strips) from the files in its
+    folder, as the study planned them: `fabplan molds` on ``net.obj`` at the candidate's
+    mold tolerance and step limit, on the design's patches for a net that glides on it;
+    `fabplan strips` with the study's strip options. Run in the candidate's folder."""
+    units = study.design.units
+    limits = study.limits_of(c.candidate)
+    molds = ["fabplan", "molds", "net.obj", "--tolerance-mm", f"{limits.mold_tolerance_mm!r}",
+             "--step-limit", f"{limits.panel_step_limit_mm!r}", "--units", units]
+    if c.molds is not None and c.molds.panel_surface == "design":
+        molds += ["--panel-surface", "design", "--design", study.design.source]
+        if study.design.triangles is not None:
+            molds += ["--triangles", str(study.design.triangles)]
+    molds += ["--no-boundary", "-o", "reproduced/molds"]
+    commands = [molds]
+    options = study.strips
+    if c.strips is not None and options is not None:
+        commands.append(["fabplan", "strips", "net.obj", "--height", f"{options.height_mm!r}",
+                         "--thickness", f"{options.thickness_mm!r}", "--units", units,
+                         "--sheet", f"{options.sheet_mm[0]!r}x{options.sheet_mm[1]!r}",
+                         "--tolerance", f"{options.congruence_tolerance_mm!r}", "-o",
+                         "reproduced/strips"])
+    return commands
+
+
+def reproduce_script(c: CandidateResult, study: Study) -> str:
+    """``reproduce.sh``: `reproduce_commands` as a shell script that runs in its folder."""
+    import shlex
+
+    lines = ["#!/bin/sh",
+             f"# {c.name}: the commands that give this candidate's net molds and strips from",
+             "# net.obj, as the study planned them, in reproduced/molds and reproduced/strips",
+             "set -e", 'cd "$(dirname "$0")"']
+    return "\n".join([*lines, *(shlex.join(cmd) for cmd in reproduce_commands(c, study))]) + "\n"
+
+
 def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: DesignSurface,
                      say, twin_strips: dict[str, bytes] | None = None,
                      rhino: bool = False) -> tuple:
@@ -1002,10 +1038,11 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
         # the same count as the report's: the net's molds and the boundary panels' own
         record["boundary_panels"] = c.boundary_molds.record(net_molds=molds_plan.mold_count)
     output.write_texts({folder / "molds.csv": molds_plan.panels_csv(),
-                        folder / "molds.json": json_text(record)})
+                        folder / "molds.json": json_text(record),
+                        folder / "reproduce.sh": reproduce_script(c, study)})
     outputs: dict[str, str | list[str]] = {
         "net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
-        "molds_json": "molds.json", "picture": "net.png"}
+        "molds_json": "molds.json", "picture": "net.png", "reproduce": "reproduce.sh"}
     if net.boundary_panels is not None and c.boundary_molds is not None:
         output.write_texts({folder / "boundary-panels.csv": boundary_panels_csv(
             net.boundary_panels, c.boundary_molds)})

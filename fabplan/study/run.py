@@ -542,6 +542,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         seconds["layout"] += laid_out
         seconds["optimize"] = max(seconds["optimize"] - laid_out, 0.0)
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
+    net.properties["units"] = study.design.units     # read back by the commands on net.obj
     return CandidateResult(candidate, metrics={"seconds": seconds}, net=net,
                            singular_points=None if layout is None else layout.singular_points)
 

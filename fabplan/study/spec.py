@@ -35,6 +35,7 @@ from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
 from ..io.inputs import check_input_file, check_text
+from ..io.units import MM_PER_UNIT
 from ..layout.settings import MAX_STARTS
 from ..solve.net_types import NETS, get_net
 
@@ -85,7 +86,7 @@ class DesignSpec:
     parameters : parameters of a built-in surface (for the record).
     triangles : triangles of the design mesh a built-in or NURBS surface is sampled with
         (about); None for a mesh file, which keeps its own triangles.
-    units : model units, ``"m"`` or ``"mm"``.
+    units : model units (a key of `fabplan.io.units.MM_PER_UNIT`).
     """
 
     source: str
@@ -96,7 +97,7 @@ class DesignSpec:
 
     @property
     def mm_per_unit(self) -> float:
-        return 1000.0 if self.units == "m" else 1.0
+        return MM_PER_UNIT[self.units]
 
     def files(self) -> list[Path]:
         """The existing files the design reads: its mesh or Rhino file, and the files a
@@ -576,7 +577,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     if rhino_keys:
         t.fail(rhino_keys[0], "picks an object of a Rhino file: it belongs with a design.file "
                "ending in .3dm")
-    units = t.text("units", "m", choices=("m", "mm"))
+    units = t.text("units", "m", choices=tuple(MM_PER_UNIT))
     if file is not None:
         if parameters:
             t.fail("parameters", "belongs to a built-in surface, not to a design file")
@@ -616,7 +617,7 @@ def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     """A design in a .3dm file: the object that `layer`, `object` and `face` pick, read
     now so that a bad choice is named before the study starts. The model units are
     `units` when given (the file's coordinates converted to them), else the file's own
-    unit system when it is metres or millimetres, else metres (converted)."""
+    unit system, else (a file without one) metres."""
     from ..io.rhino_read import read_3dm
 
     source = (folder / file).resolve()
@@ -626,14 +627,14 @@ def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     face = t.number("face", None, positive=False, integer=True)
     if face is not None and face < 0:
         t.fail("face", f"must be a face number (0, 1, ...), got {face}")
-    asked = t.text("units", None, choices=("m", "mm"))
+    asked = t.text("units", None, choices=tuple(MM_PER_UNIT))
     triangles = t.number("triangles", 20000, integer=True)
     t.done()
     read = read_3dm(source, layer=layer, object_name=name, face=face)
     if asked is not None and read.file_units is None:
         units = asked          # a unitless file is taken to be in the units the study says
     else:
-        units = asked or (read.file_units if read.file_units in ("m", "mm") else "m")
+        units = asked or read.file_units or "m"
     choice = {"layer": layer, "object": name, "face": None if face is None else str(face),
               "units": units if read.file_units is not None else None}
     fragment = ",".join(f"{k}={v}" for k, v in choice.items() if v is not None)
@@ -645,12 +646,12 @@ def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
 def _check_panel_units(panel_size: float, design: DesignSpec, file: str) -> None:
     """Refuse a panel size no building has in the design's units (a factor 10 beyond
     `PLAUSIBLE_PANEL_MM`): the units are wrong."""
-    from ..net.validate import PLAUSIBLE_PANEL_MM
+    from ..io.units import PLAUSIBLE_PANEL_MM
 
     size_mm = panel_size * design.mm_per_unit
     low, high = PLAUSIBLE_PANEL_MM
     if not 0.1 * low <= size_mm <= 10 * high:
-        other = "m" if design.units == "mm" else "mm"
+        other = "mm" if design.units == "m" else "m"
         raise InputError(f"{file}: panels.size {panel_size:g} {design.units} is {size_mm:g} mm, "
                          f"not a panel of a building: is the design in {other}? Set "
                          f'design.units = "{other}"')

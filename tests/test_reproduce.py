@@ -1,0 +1,101 @@
+"""A study's figures come back from the command line: every candidate folder's
+``reproduce.sh`` runs `fabplan molds` (and `strips`) on its ``net.obj`` and gives the
+study's molds and strips.
+
+Regression: a study planned a gliding candidate on the design's patches (3 molds, all
+fit) while `fabplan molds` on its net.obj gave 9 molds and 10 failures, and offered no
+way to plan on the design.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shlex
+from pathlib import Path
+
+import pytest
+
+from fabplan.cli import main
+
+STUDY = """
+[design]
+surface = "hyperbolic-paraboloid"
+[panels]
+size = 2.0
+[limits]
+max_deviation_mm = 30
+mold_tolerance_mm = 2
+[[candidates]]
+net = "isogonal"
+angle = 80
+"""
+
+
+def _run_script(folder: Path, monkeypatch) -> list[list[str]]:
+    """Run a candidate's reproduce.sh line by line through `main`, in its folder."""
+    lines = (folder / "reproduce.sh").read_text(encoding="utf-8").splitlines()
+    assert lines[0] == "#!/bin/sh" and 'cd "$(dirname "$0")"' in lines
+    commands = [shlex.split(line) for line in lines if line.startswith("fabplan ")]
+    monkeypatch.chdir(folder)
+    for command in commands:
+        assert main([*command[1:], "-q"]) in (0, 3), command
+    return commands
+
+
+def _mold_rows(path: Path) -> list[dict]:
+    rows = [r for r in csv.DictReader(line for line in path.read_text().splitlines()
+                                      if not line.startswith("#"))]
+    assert rows
+    return rows
+
+
+def _same_molds(study_folder: Path, made: Path) -> None:
+    """The molds the command gave are the study's: count, every panel's mold and gap."""
+    ours = json.loads((made / "molds.json").read_text())
+    theirs = json.loads((study_folder / "molds.json").read_text())
+    for key in ("mold_count", "panel_count", "panel_surface", "tolerance_mm", "units"):
+        assert ours[key] == theirs[key], key
+    assert _mold_rows(made / "panels.csv") == _mold_rows(study_folder / "molds.csv")
+
+
+def test_a_gliding_candidate_is_planned_on_the_design_by_its_reproduce_commands(
+        tmp_path, monkeypatch):
+    (tmp_path / "s.toml").write_text(STUDY, encoding="utf-8")
+    assert main(["study", str(tmp_path / "s.toml"), "-o", str(tmp_path / "out"), "-q"]) == 0
+    record = json.loads((tmp_path / "out" / "study.json").read_text())
+    for candidate in record["candidates"]:
+        folder = tmp_path / "out" / "candidates" / candidate["name"]
+        assert candidate["outputs"]["reproduce"].endswith("reproduce.sh")
+        commands = _run_script(folder, monkeypatch)
+        assert "--design" in commands[0]          # the candidates glide on the design
+        _same_molds(folder, folder / "reproduced" / "molds")
+        molds = candidate["metrics"]["molds"]
+        assert json.loads((folder / "reproduced" / "molds" / "molds.json").read_text())[
+            "mold_count"] == molds["count"] - (molds["boundary_own_molds"] or 0)
+
+
+def test_molds_on_the_design_needs_the_design(tmp_path, capsys):
+    net = tmp_path / "net.obj"
+    net.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+    code = main(["molds", str(net), "--tolerance-mm", "1", "--panel-surface", "design",
+                 "-o", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert code == 2 and "--panel-surface design needs --design SURFACE" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["net.obj"]
+
+
+@pytest.mark.slow
+def test_every_canopy_candidate_is_reproduced_by_its_commands(tmp_path, monkeypatch):
+    assert main(["study", "canopy", "-o", str(tmp_path / "out"), "-q"]) == 0
+    record = json.loads((tmp_path / "out" / "study.json").read_text())
+    for candidate in record["candidates"]:
+        if candidate.get("error"):
+            continue
+        folder = tmp_path / "out" / "candidates" / candidate["name"]
+        commands = _run_script(folder, monkeypatch)
+        _same_molds(folder, folder / "reproduced" / "molds")
+        if any(c[1] == "strips" for c in commands):
+            ours = json.loads((folder / "reproduced" / "strips" / "strips.json").read_text())["summary"]
+            study = candidate["metrics"]["strips"]
+            assert ours["strips"] == study["strips"] and ours["sheets"] == study["sheets"]
