@@ -1110,7 +1110,9 @@ def _cmd_study(args) -> int:
         else:
             from .study.background import BackgroundCandidates
 
-            with progress.stage(f"running {len(study.candidates)} candidates"):
+            searching = (f" and {counted(len(study.searches), 'search', 'searches')}"
+                         if study.searches else "")
+            with progress.stage(f"running {counted(len(study.candidates), 'candidate')}{searching}"):
                 result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
                                    resume=args.resume, files=True, rhino=args.rhino,
                                    # a --resume run keeps each candidate as it finishes,

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
@@ -40,11 +41,14 @@ from .run import (
     fabricate_candidate,
     judge_study,
     load_study_design,
+    searched_study,
     shared_solve,
     solve_candidate,
     start_angle,
     twin_of,
+    with_first_points,
 )
+from .search import next_points
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
@@ -171,18 +175,31 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
         if client is None:
             client = stack.enter_context(dask_client(workers, scheduler))
         design = load_study_design(study, say, max_panels)
-        results, made = _run_on(client, study, design, say, cache, resume,
-                                files=files, rhino=rhino)
-    result = judge_study(study, design, results, seconds_run=time.perf_counter() - start)
+        first = with_first_points(study)
+        results, made = _run_on(client, replace(study, candidates=tuple(first)), design, say,
+                                cache, resume, files=files, rhino=rhino)
+        # a search's further rounds, each on the workers at once (`fabplan.study.search`)
+        for k in range(2, 2 + max((s.budget for s in study.searches), default=0)):
+            judged = judge_study(searched_study(study, results), design, results)
+            more = [c for s in study.searches for c in next_points(s, judged.candidates)]
+            if not more:
+                break
+            say(f"  search round {k}: {', '.join(c.name for c in more)}")
+            found, made_now = _run_on(client, replace(study, candidates=tuple(more)), design,
+                                      say, cache, resume, files=files, rhino=rhino, tag=f"-r{k}")
+            results += found
+            made.update(made_now)
+    result = judge_study(searched_study(study, results), design, results,
+                         seconds_run=time.perf_counter() - start)
     result.made_files = made
     return result
 
 
 def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str], None],
             cache: CandidateCache | None, resume: bool, *, files: bool = False,
-            rhino: bool = False) -> tuple[list[CandidateResult], dict[str, tuple]]:
+            rhino: bool = False, tag: str = "") -> tuple[list[CandidateResult], dict[str, tuple]]:
     """The candidates' results in the order of the study, and the files the workers made
-    of them (with `files`) by name."""
+    of them (with `files`) by name; `tag` ends the task keys (a search's later rounds)."""
     from distributed import as_completed
 
     from .report import candidate_files_task
@@ -194,7 +211,7 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
             "the cache")
     todo = [i for i, k in enumerate(kept) if k is None]
     shared = shared_inputs(client, study, design)
-    baseline = client.submit(_baseline_task, *shared, key="baseline-layout", pure=False,
+    baseline = client.submit(_baseline_task, *shared, key=f"baseline-layout{tag}", pure=False,
                              retries=RETRIES)
     layouts = {(90.0, study.panel_size): baseline}
     # one solve per solve key (a sweep of mold tolerances shares its nets); a kept
@@ -214,9 +231,9 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
                         and study.panel_size_of(candidates[i]) == study.panel_size)
         solves[keys[i]] = client.submit(_solve_task_with, *shared,
                                         layouts if starts_there else {}, candidates[i],
-                                        key=f"solve-{i}-{candidates[i].name}", pure=False,
+                                        key=f"solve-{i}-{candidates[i].name}{tag}", pure=False,
                                         retries=RETRIES)
-        waiting[client.submit(_solved_mesh, solves[keys[i]], key=f"net-{i}", pure=False)] = \
+        waiting[client.submit(_solved_mesh, solves[keys[i]], key=f"net-{i}{tag}", pure=False)] = \
             keys[i]
     refused = baseline.result()
     if isinstance(refused, FabplanError):     # no baseline layout: nothing can be compared
@@ -236,7 +253,7 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
                 made[i] = client.submit(
                     _fabricate_task, *shared, solves[keys[i]], candidates[i],
                     None if original is None else made[original],
-                    key=f"fabricate-{i}-{candidates[i].name}", pure=False, retries=RETRIES)
+                    key=f"fabricate-{i}-{candidates[i].name}{tag}", pure=False, retries=RETRIES)
             if files:
                 # made beside the others' solves: a worker that waits for the order of
                 # the study has something to do
@@ -244,7 +261,7 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
                 making[i] = client.submit(
                     candidate_files_task, made[i], *shared,
                     None if twin is None else making[twin], rhino,
-                    key=f"files-{i}-{candidates[i].name}", pure=False, retries=RETRIES)
+                    key=f"files-{i}-{candidates[i].name}{tag}", pure=False, retries=RETRIES)
 
     submit_ready()
     failed = 0

@@ -36,7 +36,9 @@ from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
+from .checks import binding_check, relaxation_text
 from .run import CandidateResult, StudyResult, cost_drivers, molds_text, vertex_deviation_mm
+from .search import search_record
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
@@ -67,6 +69,8 @@ def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None
         "notes": c.notes,
         "error": c.error,
         "checks": c.checks,
+        "binding_limit": None if (b := binding_check(c.checks)) is None else b["limit"],
+        "relaxation": relaxation_text(c.checks) or None,
         "metrics": c.metrics,
         "cost": c.cost,
         "cost_terms": c.cost_terms,
@@ -101,6 +105,7 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
         "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended,
                                          result.study)
                        for c in result.candidates],
+        "searches": [search_record(s, result.candidates) for s in result.study.searches],
         "seconds_run": result.seconds_run,
         "seconds_total": result.seconds_run if seconds_total is None else seconds_total,
         # fabplan-study/1 readers knew the run time as `seconds`: the same as seconds_total
@@ -293,6 +298,54 @@ def comparison_figure(result: StudyResult) -> str:
     fig.suptitle("Candidates in rank order (green: feasible, red: not)")
     fig.tight_layout()
     return figures.figure_to_data_uri(fig)
+
+
+def search_figure(result: StudyResult, record: dict) -> str:
+    """Data URI: a search's cost, molds and largest deviation against its parameter, the
+    feasible points green, the others red, the feasible range shaded, the best ringed."""
+    points = [p for p in record["points"] if not p["failed"]]
+    unit = "deg" if record["parameter"] == "angle" else result.study.design.units
+    limits = result.study.limits
+    fig = figures.new_figure((9, 7))
+    axes = fig.subplots(3, 1, sharex=True)
+    x = np.array([p["value"] for p in points])
+    ok = np.array([p["feasible"] for p in points], bool)
+    series = (("cost", "cost [units]", None), ("molds", "molds", limits.max_molds),
+              ("deviation_mm", "largest deviation [mm]", limits.max_deviation_mm))
+    for ax, (key, label, limit) in zip(axes, series, strict=True):
+        y = np.array([p[key] for p in points], float)
+        ax.plot(x, y, color="0.6", lw=1, zorder=1)
+        ax.scatter(x[ok], y[ok], color="#2e8b57", zorder=2, label="meets every limit")
+        ax.scatter(x[~ok], y[~ok], color="#c0392b", marker="x", zorder=2, label="does not")
+        if limit is not None:
+            ax.axhline(limit, color="black", ls="--", lw=1, label="limit")
+        if record["feasible_range"] is not None:
+            ax.axvspan(*record["feasible_range"], color="#2e8b57", alpha=0.12, lw=0)
+        best = next((p for p in points if p["candidate"] == record["best"]), None)
+        if best is not None:
+            ax.scatter([best["value"]], [best[key]], s=160, facecolors="none",
+                       edgecolors="black", zorder=3, label="best")
+        ax.set_ylabel(label)
+    axes[0].legend(loc="best", fontsize=8)
+    axes[-1].set_xlabel(f"{record['parameter']} [{unit}]")
+    fig.suptitle(f"Search of {record['name']}: {len(record['points'])} of at most "
+                 f"{record['budget']} solves")
+    fig.tight_layout()
+    return figures.figure_to_data_uri(fig)
+
+
+def search_text(record: dict, unit: str) -> str:
+    """A search's outcome in words."""
+    points = record["points"]
+    values = ", ".join(f"{p['value']:g}" for p in points)
+    if record["best"] is None:
+        return (f"{record['name']}: {record['parameter']} searched in {record['low']:g} .. "
+                f"{record['high']:g} {unit} at {values}: no point meets every limit.")
+    low, high = record["feasible_range"]
+    band = f"{low:g}" if low == high else f"{low:g} .. {high:g}"
+    return (f"{record['name']}: {record['parameter']} searched in {record['low']:g} .. "
+            f"{record['high']:g} {unit} at {values}; feasible at {band} {unit}; the cheapest "
+            f"feasible point is {record['best']}.")
 
 
 #: Studies with at least this many measured candidates get the Pareto plot.
@@ -850,6 +903,17 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
     overview += [_limits_table(result), _cost_table(result),
                  html.html_paragraph(cost_line(result))]
     parts.append(html.html_section("Comparison", *overview))
+    for k, record in enumerate(search_record(s, result.candidates) for s in study.searches):
+        unit = "deg" if record["parameter"] == "angle" else study.design.units
+        parts.append(html.html_section(
+            f"Search: {record['name']}", html.html_figure(
+                pictures[f"search-{k}"], search_text(record, unit),
+                how="Each point is a solve of the candidate at that value (listed below as a "
+                    "candidate of its own): green dots meet every limit, red crosses do not; "
+                    "the shaded band spans the feasible points; the ringed point is the "
+                    "cheapest feasible one. The search solves a few points across the range, "
+                    "then the midpoints beside the best point so far."),
+            anchor=f"search-{k}"))
     if "curvature" in pictures:
         parts.append(html.html_section("Where the design makes lines kink", html.html_figure(
             pictures["curvature"], "The design coloured by how far its principal "
@@ -911,6 +975,10 @@ def study_pdf(result: StudyResult, pictures: dict, *, seconds_total: float | Non
     if "curvature" in pictures:
         first.image(pictures["curvature"], "The design's |k1 - k2| over a panel (dark: near "
                     "an umbilic). " + kink_text(result))
+    for k, s in enumerate(study.searches):
+        record = search_record(s, result.candidates)
+        unit = "deg" if record["parameter"] == "angle" else study.design.units
+        first.image(pictures[f"search-{k}"], "Search: " + search_text(record, unit))
     for c in result.ranked():
         head = f"{c.rank}. {c.name}" if c.rank else c.name
         section = doc.section(head)
@@ -1236,6 +1304,8 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
             pictures["comparison"] = comparison_figure(result)
         if sum(not c.failed for c in result.candidates) >= PARETO_MIN_CANDIDATES:
             pictures["pareto"] = pareto_figure(result)
+        for k, s in enumerate(result.study.searches):
+            pictures[f"search-{k}"] = search_figure(result, search_record(s, result.candidates))
         c = _sharpest_turn(result)
         if c is not None and c.net is not None:
             turn = c.net.properties["fairness"]["line_turn_deg"]

@@ -30,6 +30,9 @@ from ..errors import FabplanError
 from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
 from ..net.geometry import face_planarity, kink_angles
 from ..report.html import counted
+from .checks import binding_check, relaxation_text, violation
+from .checks import check as _check
+from .search import first_points, next_points
 from .spec import Candidate, CostWeights, Limits, Study
 
 if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs
@@ -44,6 +47,8 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from .cache import CandidateCache
 
 __all__ = [
+    "searched_study",
+    "with_first_points",
     "CandidateResult",
     "StudyResult",
     "run_study",
@@ -220,38 +225,67 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     layouts: Layouts = {(90.0, study.panel_size): baseline}
     starts: Starts = {}
     solves: dict[tuple, CandidateResult] = {}
+    results: list[CandidateResult] = []
+
+    def run(candidates: list[Candidate], title: str = "") -> None:
+        """Run `candidates` after the ones in `results`, measured before it returns."""
+        nonlocal results
+        _run_candidates(study, design, helper, cache, resume, layouts, starts, solves, say,
+                        candidates, results, title)
+        if helper is not None:
+            measured = helper.collect()
+            results = [measured.get(r.name, r) for r in results]
+
     try:
-        results = _run_candidates(study, design, helper, cache, resume, layouts, starts, solves, say)
+        run(with_first_points(study))
+        for k in range(2, 2 + max((s.budget for s in study.searches), default=0)):
+            judged = judge_study(searched_study(study, results), design, results)
+            more = [c for s in study.searches for c in next_points(s, judged.candidates)]
+            if not more:
+                break
+            run(more, f"search round {k}: ")
     except BaseException:
         if helper is not None:
             helper.cancel()
         raise
-    made: dict[str, tuple] = {}
-    if helper is not None:
-        measured = helper.collect()
-        results = [measured.get(r.name, r) for r in results]
-        made = helper.made_files
-    judged = judge_study(study, design, results, seconds_run=time.perf_counter() - start)
-    judged.made_files = made
+    judged = judge_study(searched_study(study, results), design, results,
+                         seconds_run=time.perf_counter() - start)
+    judged.made_files = {} if helper is None else helper.made_files
     return judged
+
+
+def with_first_points(study: Study) -> list[Candidate]:
+    """The study's candidates and the first points of its searches (a point that is one
+    of the candidates already is not solved twice)."""
+    names = {c.name for c in study.candidates}
+    return [*study.candidates, *(c for s in study.searches for c in first_points(s)
+                                 if c.name not in names)]
+
+
+def searched_study(study: Study, results: list[CandidateResult]) -> Study:
+    """`study` with every candidate it ran: its own and the points of its searches."""
+    if not study.searches:
+        return study
+    return replace(study, candidates=tuple(r.candidate for r in results))
 
 
 def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: CandidateCache | None,
                     resume: bool, layouts: Layouts, starts: Starts,
-                    solves: dict[tuple, CandidateResult], say: Callable[[str], None]
-                    ) -> list[CandidateResult]:
-    """Every candidate of `study` in turn (see `run_study`): solved here, measured here or
-    by `helper` (`fabplan.study.background.BackgroundCandidates`)."""
-    results: list[CandidateResult] = []
-    count = len(study.candidates)
-    for i, candidate in enumerate(study.candidates, 1):
+                    solves: dict[tuple, CandidateResult], say: Callable[[str], None],
+                    candidates: list[Candidate], results: list[CandidateResult],
+                    title: str = "") -> None:
+    """Each of `candidates` in turn, appended to `results` (the candidates before them,
+    whose nets later ones may share: see `run_study`): solved here, measured here or by
+    `helper` (`fabplan.study.background.BackgroundCandidates`)."""
+    count = len(candidates)
+    for i, candidate in enumerate(candidates, 1):
         kept = cache.load(candidate) if cache is not None and resume else None
         if kept is not None:
-            say(f"[{i}/{count}] {candidate.name}: taken from the cache")
+            say(f"{title}[{i}/{count}] {candidate.name}: taken from the cache")
             solves.setdefault(candidate.solve_key, kept)
             results.append(kept)
             continue
-        say(f"[{i}/{count}] {candidate.name}: {candidate.describe()}")
+        say(f"{title}[{i}/{count}] {candidate.name}: {candidate.describe()}")
         clock = time.perf_counter()
         try:
             solved, twin = _solve_with_twin(study, design, candidate, layouts, starts, solves,
@@ -275,7 +309,6 @@ def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: Can
         if cache is not None:
             cache.store(result)
         results.append(result)
-    return results
 
 
 def failure_reason(exc: BaseException) -> str:
@@ -833,10 +866,6 @@ def _pick(stats: dict | None) -> dict | None:
 
 
 # ---------------------------------------------------------------------------- judging
-def _check(limit: str, bound: float, measured: float | None, ok: bool, text: str) -> dict:
-    return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text}
-
-
 def verdict(metrics: dict, limits: Limits) -> list[dict]:
     """The checks of one candidate's measured `metrics` against the `limits`.
 
@@ -1078,13 +1107,18 @@ def recommend(results: list[CandidateResult], study: Study, *,
     """
     feasible = sorted((r for r in results if r.feasible), key=_by_rank)
     if not feasible:
-        measured = sorted((r for r in results if not r.failed), key=_by_rank)
+        measured = sorted((r for r in results if not r.failed),
+                          key=lambda r: (violation(r.checks), _by_rank(r)))
         if not measured:
             return None, "No candidate produced a net; see the reasons of each below."
         best = measured[0]
-        return None, (f"No candidate meets every limit. The closest is {best.name} "
-                      f"({best.candidate.describe()}), which fails: "
-                      + "; ".join(best.reasons) + ".")
+        text = (f"No candidate meets every limit. The nearest is {best.name} "
+                f"({best.candidate.describe()}), which fails: " + "; ".join(best.reasons) + ".")
+        relax = relaxation_text(best.checks)
+        if relax:
+            text += f" It would be feasible with {relax}, the other limits as they are."
+        steps = _next_steps(best)
+        return None, text + (f" Next steps: {'; '.join(steps)}." if steps else "")
     best = feasible[0]
     base = baseline_of(best.candidate, results)
     limits = study.limits
@@ -1101,6 +1135,11 @@ def recommend(results: list[CandidateResult], study: Study, *,
     if best.same_net_as:
         words.append(f"It ends at the same net as {best.same_net_as}.")
     words += _achievements(best, None if best.candidate.baseline else base, study)
+    binding = binding_check(best.checks)
+    if binding is not None:
+        words.append(f"The limit that binds hardest is {binding['limit']}: "
+                     f"{_g3(binding['measured'])} against {binding['bound']:g} "
+                     f"({100 * binding['margin']:.0f} % to spare).")
     m = best.metrics
     words.append(f"It deviates at most {m['deviation_mm']['max']:.1f} mm from the design "
                  f"(limit {limits.max_deviation_mm:g} mm).")
@@ -1122,6 +1161,40 @@ def recommend(results: list[CandidateResult], study: Study, *,
                                             if r.same_net_as else "")
             for r in infeasible) + ".")
     return best.name, " ".join(words)
+
+
+def _g3(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.3g}"
+
+
+#: what to try when a limit fails, by limit
+_TRY = {
+    "max_sphere_residual": "let the solve run longer (max_iterations) or try another angle or "
+                           "panel size: the net did not converge",
+    "max_deviation_mm": "keep the net nearer the design: a net type that glides on it "
+                        "(isogonal, orthogonal, the baseline) or a smaller panel size",
+    "mold_tolerance_mm": "a larger mold_tolerance_mm, or a smaller panel size",
+    "max_molds": "a net type whose panels share molds (linear Weingarten, constant radius) or "
+                 "a larger mold_tolerance_mm",
+    "max_panel_step_mm": "a larger max_panel_step_mm or mold_tolerance_mm",
+    "max_kink_deg": "a smaller panel size",
+    "max_line_turn_deg": "another net type or angle, or a smaller panel size",
+    "planarity_tolerance_mm": "a net type with planar panels (char-conjugate)",
+}
+
+
+def _next_steps(best: CandidateResult) -> list[str]:
+    """What to try for the nearest candidate of a study without a feasible one: each
+    failed limit relaxed to what it measured, and what else helps with it."""
+    steps = []
+    for c in best.checks:
+        if c["ok"]:
+            continue
+        relax = (f"relax {c['limit']} to {c['relax_to']:g}" if c.get("relax_to") is not None
+                 else "")
+        other = _TRY.get(c["limit"], "")
+        steps.append(", or ".join(s for s in (relax, other) if s) or f"meet {c['limit']}")
+    return steps
 
 
 def baseline_of(candidate: Candidate, results: list[CandidateResult]) -> CandidateResult | None:

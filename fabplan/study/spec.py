@@ -51,6 +51,8 @@ __all__ = [
     "StripOptions",
     "CostWeights",
     "Candidate",
+    "Search",
+    "SEARCH_BUDGET",
     "read_study",
     "parse_study",
     "AUTO_CANDIDATES",
@@ -278,6 +280,53 @@ class Candidate:
 
 
 @dataclass(frozen=True)
+class Search:
+    """A candidate whose angle or radius the study searches for (``angle = { search =
+    [30, 60], budget = 6 }``): the value in the range with the lowest cost that meets every
+    limit, found coarse to fine (`fabplan.study.search`).
+
+    Attributes
+    ----------
+    name : the name its points are named after (``linear-weingarten`` gives
+        ``linear-weingarten-41.25``).
+    net : the net type.
+    parameter : ``"angle"`` (degrees) or ``"radius"`` (model units).
+    low, high : the range searched, both ends included.
+    budget : the most solves the search may spend (the first round's points included).
+    angle, radius : the other parameter, fixed (None: free).
+    start_angle : as `Candidate.start_angle`.
+    """
+
+    name: str
+    net: str
+    parameter: str
+    low: float
+    high: float
+    budget: int = 6
+    angle: float | None = None
+    radius: float | None = None
+    start_angle: float | None = None
+
+    def candidate(self, value: float, start_angle: float | None = None) -> Candidate:
+        """The candidate at `value` of the searched parameter; `start_angle` (a warm start
+        from a neighbouring point's layout) when given, else the search's."""
+        angle = value if self.parameter == "angle" else self.angle
+        radius = value if self.parameter == "radius" else self.radius
+        name = self.name + _name(self.net, angle, radius)[len(self.net):]
+        return Candidate(name, self.net, angle, radius,
+                         start_angle=self.start_angle if start_angle is None else start_angle)
+
+    def describe(self) -> str:
+        unit = "deg" if self.parameter == "angle" else "model units"
+        return (f"{self.net}, {self.parameter} searched in {self.low:g} .. {self.high:g} {unit} "
+                f"(at most {self.budget} solves)")
+
+
+#: Fewest and most solves a search may be given, and its default
+SEARCH_BUDGET = (3, 25, 6)
+
+
+@dataclass(frozen=True)
 class Study:
     """A validated study (see `read_study`).
 
@@ -297,6 +346,7 @@ class Study:
     max_iterations: int = 100
     layout_starts: int = 1
     extra: dict = field(default_factory=dict)
+    searches: tuple[Search, ...] = ()
 
     def panel_size_of(self, candidate: Candidate) -> float:
         """The panel size (model units) a candidate is laid out with."""
@@ -351,6 +401,7 @@ class Study:
             "cost": asdict(self.cost),
             "max_iterations": self.max_iterations,
             "layout_starts": self.layout_starts,
+            **({"searches": [asdict(s) for s in self.searches]} if self.searches else {}),
         }
 
 
@@ -550,13 +601,17 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
                                  congruence_tolerance_mm=strips.congruence_tolerance_mm
                                  if strips else 0.1)
     cost = _cost(_Table(top.get("cost", {}), "cost", file))
-    candidates = _sweep(_candidates(top.get("candidates", "auto"), file), sizes, tolerances,
-                        file)
+    fixed, searches = _candidates(top.get("candidates", "auto"), file)
+    if searches and (len(sizes) > 1 or len(tolerances) > 1):
+        raise InputError(f"{file}: a search ({searches[0].name}) and a sweep of panels.size or "
+                         "limits.mold_tolerance_mm cannot go together; search at one size and "
+                         "tolerance")
+    candidates = _sweep(fixed, sizes, tolerances, file)
     top.done()
     return Study(name=name, path=path, description=description, design=design,
                  panel_size=sizes[0], limits=limits, strips=strips, cost=cost,
                  candidates=candidates, max_iterations=max_iterations,
-                 layout_starts=int(layout_starts))
+                 layout_starts=int(layout_starts), searches=searches)
 
 
 def _design(t: _Table, folder: Path) -> DesignSpec:
@@ -797,8 +852,29 @@ def _values(t: _Table, key: str, unit: str, *, free: bool = True) -> Sequence[fl
     return out
 
 
-def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
+def _search(t: _Table, key: str, unit: str) -> tuple[float, float, int] | None:
+    """``{ search = [low, high], budget = N }`` of `key`, or None when it is no search."""
+    value = t.get(key)
+    if not (isinstance(value, dict) and "search" in value):
+        return None
+    table = _Table(value, f"{t.where}.{key}", t.file)
+    bounds = table.get("search")
+    if not (isinstance(bounds, list) and len(bounds) == 2 and all(
+            isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b) and b > 0
+            for b in bounds) and bounds[0] < bounds[1]):
+        table.fail("search", f"must be [low, high], two positive numbers ({unit}) with low < "
+                   f"high; got {bounds!r}")
+    low, high, default = SEARCH_BUDGET
+    budget = table.number("budget", default, integer=True)
+    if not low <= budget <= high:
+        table.fail("budget", f"must lie between {low} and {high} solves, got {budget}")
+    table.done()
+    return float(bounds[0]), float(bounds[1]), int(budget)
+
+
+def _candidates(value: object, file: str) -> tuple[tuple[Candidate, ...], tuple[Search, ...]]:
     baseline = Candidate("baseline", "snet", baseline=True)
+    searches: list[Search] = []
     if value == "auto":
         value = [{"net": "auto"}]
     if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
@@ -815,8 +891,12 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
         if preset.dual:
             t.fail("net", f"is the S*-net type {net!r}: studies lay out S-nets on the design; "
                    "optimize an S*-net from a study's net with `fabplan optimize`")
-        angles = _values(t, "angle", "degrees")
-        radii = _values(t, "radius", "model units")
+        searched = {key: found for key, unit in (("angle", "degrees"), ("radius", "model units"))
+                    if (found := _search(t, key, unit)) is not None}
+        if len(searched) > 1:
+            t.fail("radius", "is searched with the angle: search one of them at a time")
+        angles = [None] if "angle" in searched else _values(t, "angle", "degrees")
+        radii = [None] if "radius" in searched else _values(t, "radius", "model units")
         label = t.text("name")
         if label is not None and not SAFE_NAME.fullmatch(label):
             t.fail("name", f"is {label!r}, {_SAFE_NAME_RULE}")
@@ -829,6 +909,20 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
                    f"{'90 degrees' if preset.angle == 'right' else 'not constrained'})")
         if radii != [None] and preset.radius != "param":
             t.fail("radius", f"does not apply to net type {net!r}")
+        if "angle" in searched and preset.angle != "param":
+            t.fail("angle", f"does not apply to net type {net!r}: there is no angle to search")
+        if "radius" in searched and preset.radius != "param":
+            t.fail("radius", f"does not apply to net type {net!r}: there is no radius to search")
+        if "angle" in searched and searched["angle"][1] > 90:
+            t.fail("angle", f"search must lie in (0, 90] degrees, got up to {searched['angle'][1]:g}")
+        if searched:
+            if len(angles) * len(radii) > 1:
+                t.fail("angle" if len(angles) > 1 else "radius", "sweeps while the other is "
+                       "searched: search one parameter, the other fixed or free")
+            (parameter, (low, high, budget)), = searched.items()
+            searches.append(Search(label or net, net, parameter, low, high, budget,
+                                   angle=angles[0], radius=radii[0], start_angle=start))
+            continue
         for a in angles:
             if a is not None and not 0 < a <= 90:
                 t.fail("angle", f"must lie in (0, 90] degrees, got {a:g}: an isogonal net of "
@@ -850,7 +944,12 @@ def _candidates(value: object, file: str) -> tuple[Candidate, ...]:
         if names.count(c.name) > 1:
             raise InputError(f"{file}: two candidates are both called {c.name!r}; give them "
                              "different names (candidates[].name)")
-    return tuple(out)
+    labels = [s.name for s in searches]
+    for s in searches:
+        if labels.count(s.name) > 1 or not SAFE_NAME.fullmatch(s.name):
+            raise InputError(f"{file}: two searches are both called {s.name!r}, or the name is "
+                             "not a safe folder name; give them names (candidates[].name)")
+    return tuple(out), tuple(searches)
 
 
 def _sweep(candidates: tuple[Candidate, ...], sizes: list[float], tolerances: list[float],

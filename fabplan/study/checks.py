@@ -1,0 +1,70 @@
+"""The checks of a study candidate against its limits, and what they say: how much room
+each leaves (its margin), which binds hardest, how far an infeasible candidate is from
+feasible and which limits, relaxed to what, would make it so."""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["check", "binding_check", "violation", "relaxation_text", "nice_value"]
+
+
+def check(limit: str, bound: float, measured: float | None, ok: bool, text: str) -> dict:
+    """One check: with its `margin` (the share of the bound left, negative when it fails)
+    and, when it fails, `relax_to` (the value of the limit at which it would pass)."""
+    lower = limit.startswith("min_")          # min_*: the measured value must reach the bound
+    margin = None
+    if measured is not None and bound and math.isfinite(measured) and math.isfinite(bound):
+        margin = float((measured - bound) / abs(bound) if lower else (bound - measured) / abs(bound))
+    relax_to = None
+    # a solve that did not converge is no limit to relax: it is no net yet
+    if not ok and margin is not None and measured is not None and limit != "max_sphere_residual":
+        relax_to = (int(math.ceil(measured)) if limit in ("max_molds", "max_sheets")
+                    else nice_value(float(measured), up=not lower))
+    return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text,
+            "margin": margin, "relax_to": relax_to}
+
+
+def nice_value(value: float, *, up: bool) -> float:
+    """`value` rounded to two significant digits, up (or down), so that a limit set to it
+    is met.
+
+    Examples
+    --------
+    >>> nice_value(357.8, up=True), nice_value(0.0137, up=True), nice_value(212.0, up=False)
+    (360.0, 0.014, 210.0)
+    """
+    if value == 0 or not math.isfinite(value):
+        return value
+    step = 10 ** (math.floor(math.log10(abs(value))) - 1)
+    rounded = (math.ceil if up else math.floor)(round(value / step, 9)) * step
+    return float(f"{rounded:.12g}")
+
+
+def binding_check(checks: list[dict]) -> dict | None:
+    """The check with the least margin: the limit that binds hardest (for a feasible
+    candidate, the first to fail if the limits were tightened)."""
+    rated = [c for c in checks if c.get("margin") is not None]
+    return min(rated, key=lambda c: c["margin"]) if rated else None
+
+
+def violation(checks: list[dict]) -> float:
+    """How far a candidate is from feasible: the sum of the relative excess of its failed
+    checks (inf when its solve did not converge or a failed check cannot be rated)."""
+    excess = 0.0
+    for c in checks:
+        if c["ok"]:
+            continue
+        if c["limit"] == "max_sphere_residual" or c.get("margin") is None:
+            return math.inf
+        excess += -c["margin"]
+    return excess
+
+
+def relaxation_text(checks: list[dict]) -> str:
+    """The limits to relax, and to what, for a candidate to be feasible, in words; ''
+    when a failed check cannot be relaxed (the solve did not converge)."""
+    failed = [c for c in checks if not c["ok"]]
+    if not failed or any(c.get("relax_to") is None for c in failed):
+        return ""
+    return " and ".join(f"{c['limit']} = {c['relax_to']:g} (now {c['bound']:g})" for c in failed)
