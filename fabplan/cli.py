@@ -1137,7 +1137,7 @@ def _cmd_study(args) -> int:
         note = f"  (the same net as {c.same_net_as})" if c.same_net_as else ""
         print(f"{c.rank:>2} {c.name:<28} {'feasible' if c.feasible else 'not feasible':<12} "
               f"molds {m['molds']['count']:>4}  panels {m['panels']:>5}  deviation "
-              f"{m['deviation_mm']['max']:8.1f} mm  cost {c.cost:9.0f}{note}")
+              f"{m['largest_deviation_mm']:8.1f} mm  cost {c.cost:9.0f}{note}")
     print(result.recommendation)
     print(f"wrote {files[0]} (and study.json, candidates.csv, candidates/) in "
           f"{done - started:.0f} s: {result.seconds_run:.0f} s to run the candidates, "

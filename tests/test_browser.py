@@ -192,7 +192,7 @@ def test_the_study_table_sorts_by_a_clicked_column(browser, stadium_study):
     out, run = stadium_study
     assert run.code == 0, run.lines[-5:]
     record = json.loads((out / "study.json").read_text())
-    deviation = {c["name"]: c["metrics"]["deviation_mm"]["max"] for c in record["candidates"]
+    deviation = {c["name"]: c["metrics"]["largest_deviation_mm"] for c in record["candidates"]
                  if not c["error"]}
     page = browser.new_page()
     errors: list[str] = []

@@ -96,7 +96,8 @@ def _point(search, value, *, feasible, cost):
     failed_check = {"limit": "max_deviation_mm", "bound": 10.0, "measured": 10.0 + cost,
                     "ok": False, "margin": -cost / 10.0, "relax_to": None, "text": ""}
     return CandidateResult(search.candidate(value), feasible=feasible, cost=cost,
-                           metrics={"molds": {"count": 1}, "deviation_mm": {"max": 1.0}},
+                           metrics={"molds": {"count": 1}, "deviation_mm": {"max": 1.0},
+                                    "largest_deviation_mm": 1.0},
                            checks=[] if feasible else [failed_check])
 
 

@@ -378,7 +378,7 @@ def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, 
     infeasible, because of its deviation; the numbers stay the same (deterministic)."""
     _, _, record = study_run
     before = _candidate(record, "const-radius")
-    measured = before["metrics"]["deviation_mm"]["max"]
+    measured = before["metrics"]["largest_deviation_mm"]
     assert before["feasible"] and measured > 0.01
     path = _write_study(tmp_path, round(measured / 2, 6))
     (tmp_path / "out").mkdir()                      # an empty folder is used as it is
@@ -614,7 +614,8 @@ def test_sheets_are_charged_only_when_every_candidate_has_strips(study_result):
 
 def test_candidate_cost_charges_sheets_only_when_asked():
     metrics = {"molds": {"count": 3, "panel_types": {"planar": 10, "double_curved": 5}},
-               "coverage": 0.5, "strips": {"sheets": 7}, "deviation_mm": {"max": 2.0}}
+               "coverage": 0.5, "strips": {"sheets": 7}, "deviation_mm": {"max": 2.0},
+               "largest_deviation_mm": 2.0}
     w = CostWeights()
     charged, terms = candidate_cost(metrics, w)
     free, free_terms = candidate_cost(metrics, w, charge_sheets=False)
@@ -679,7 +680,8 @@ def test_flat_panels_need_no_mold():
     curved = mold_metrics(plan_molds(saddle, tolerance_mm=1.0, units="m"))
     assert curved["count"] >= 1 and not curved["all_panels_flat"]
     metrics = {"molds": m, "coverage": 1.0, "strips": None, "deviation_mm": {"max": 0.0},
-               "sphere_residual_relative_max": 0.0, "converged": True, "status": "converged",
+               "largest_deviation_mm": 0.0, "sphere_residual_relative_max": 0.0,
+               "converged": True, "status": "converged",
                "iterations": 1, "planarity_mm": {"max": 0.0}, "kink_deg": {"max": 0.0}}
     cost, terms = candidate_cost(metrics, CostWeights())
     assert terms["molds"] == 0 and cost == pytest.approx(12)

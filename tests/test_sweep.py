@@ -137,7 +137,7 @@ def test_candidates_of_one_net_share_the_solve_and_get_their_own_molds(swept):
 def test_the_pareto_front_and_the_baseline_of_each_candidate(swept):
     _, study, result = swept
     done = [c for c in result.candidates if not c.failed]
-    drivers = [(c.metrics["molds"]["count"], c.metrics["deviation_mm"]["max"]) for c in done]
+    drivers = [(c.metrics["molds"]["count"], c.metrics["largest_deviation_mm"]) for c in done]
     for c, (m, d) in zip(done, drivers, strict=True):
         dominated = any(m2 <= m and d2 <= d and (m2 < m or d2 < d) for m2, d2 in drivers)
         assert c.pareto == (not dominated), c.name

@@ -98,7 +98,8 @@ def facade_view(mesh) -> tuple:
 
 def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | None = None,
                      deviation_limit_mm: float | None = None, gaps: np.ndarray | None = None,
-                     infinite_radius: float | None = None) -> viewer.ViewerScene:
+                     infinite_radius: float | None = None,
+                     molds_in_all: int | None = None) -> viewer.ViewerScene:
     """The 3D view of a net and its molds (`fabplan.report.viewer`).
 
     Parameters
@@ -110,6 +111,8 @@ def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | N
     deviation_limit_mm : the limit marked on the deviation scale.
     gaps : (g, 3, 3) float, triangles of the design the net leaves uncovered, or None.
     infinite_radius : Meusnier radii above this (model units) show as planar (grey).
+    molds_in_all : the molds of the whole plan when its boundary panels need molds of their
+        own beyond the net's (a study's count), said beside the net's.
 
     Returns
     -------
@@ -121,10 +124,14 @@ def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | N
                       mm_per_unit=settings.mm_per_unit, deviation_mm=deviation_mm,
                       deviation_limit_mm=deviation_limit_mm, gaps=gaps,
                       infinite_radius=infinite_radius)
+    extra = (molds_in_all or plan.mold_count) - plan.mold_count
+    said = (f"the net's panels use {counted(plan.mold_count, 'mold')}, and its boundary panels "
+            f"{extra} more of their own: {counted(plan.mold_count + extra, 'mold')} in all"
+            if extra > 0 else counted(plan.mold_count, 'mold'))
     molds = viewer.ColourMode(
         "mold", "mold (one colour per mold)",
-        f"Each colour is one mold ({counted(plan.mold_count, 'mold')}); click a panel for its "
-        "mold id, the row of the molds table.",
+        f"Each colour is one mold ({said}); click a panel for its mold id, the row of the "
+        "molds table.",
         values=plan.mold, categorical=True, palette=_mold_colors(plan))
     scene.modes.insert(0, molds)
     if deviation_mm is None:

@@ -12,7 +12,7 @@ from ..design.mesh_surface import DesignSurface
 from ..io.output import atomic_path
 from ..net.mesh import QuadMesh
 from ..report.figures import net_view_angles, new_figure
-from ..report.html import panel_areas
+from ..report.html import counted, panel_areas
 from .trim import BoundaryPanels
 
 __all__ = ["write_layout_picture", "fairness_marks", "curvature_difference_figure",
@@ -94,7 +94,12 @@ def write_layout_picture(path: str | os.PathLike, design: DesignSurface, mesh: Q
         ax.add_collection3d(Poly3DCollection(
             [boundary_panels.vertices[p] for p in boundary_panels.polygons],
             facecolor=(0.55, 0.85, 0.55, 0.9), edgecolor=(0.1, 0.4, 0.1, 1.0), linewidths=0.4,
-            label=f"boundary panels ({boundary_panels.count})"), autolim=False)
+            # counted as in the record and the 3D view: the slivers cut with their full
+            # panel are drawn, not counted as panels
+            label=f"boundary panels ({boundary_panels.panel_count})"
+                  + (f" and {counted(boundary_panels.count - boundary_panels.panel_count, 'sliver')}"
+                     if boundary_panels.count > boundary_panels.panel_count else "")),
+            autolim=False)
     irregular = mesh.vertices[mesh.irregular_vertices]
     if len(irregular):
         ax.scatter(*irregular.T, color="red", s=18, depthshade=False, label="irregular vertices")

@@ -142,7 +142,7 @@ def _row(c: CandidateResult, study: Study) -> dict:
         "double_curved": types.get("double_curved", 0),
         "coverage": _num(m["coverage"]),
         "folded": "yes" if (m.get("folds") or {}).get("folded") else "no",
-        "deviation_max_mm": _num(m["deviation_mm"]["max"]),
+        "deviation_max_mm": _num(m["largest_deviation_mm"]),
         "deviation_p95_mm": _num(m["deviation_mm"]["p95"]),
         "planarity_max_mm": _num(m["planarity_mm"]["max"]),
         "kink_max_deg": _num(m["kink_deg"]["max"]),
@@ -286,7 +286,7 @@ def comparison_figure(result: StudyResult) -> str:
         left.legend(loc="lower right")
     for yi, n in zip(y, molds, strict=True):
         left.text(n, yi, f" {n}", va="center", fontsize=8)
-    dev = [c.metrics["deviation_mm"]["max"] for c in done]
+    dev = [c.metrics["largest_deviation_mm"] for c in done]
     right.barh(y, dev, color=colors)
     right.set_yticks(y, [""] * len(done))
     right.invert_yaxis()
@@ -569,7 +569,7 @@ def _comparison_table(result: StudyResult) -> str:
             c.rank, c.name, c.candidate.describe(), *asked, "yes" if c.feasible else "no",
             m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
             (m.get("boundary_panels") or {}).get("count", 0),
-            _rounded(100 * m["coverage"], 1), _rounded(m["deviation_mm"]["max"], 1),
+            _rounded(100 * m["coverage"], 1), _rounded(m["largest_deviation_mm"], 1),
             _rounded(m["planarity_mm"]["max"], 2), _rounded(m["kink_deg"]["max"], 2),
             _fmt_range(m["intersection_angle_deg"]),
             _meusnier_text(result, m["meusnier_radius"]) if m["meusnier_radius"] else "",
@@ -716,9 +716,10 @@ def _candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list
         ["panel area", _fmt_range(m["panel_area"], f"{units}^2")],
         ["Meusnier radius", _meusnier_text(result, m["meusnier_radius"])
          if m["meusnier_radius"] else "-"],
-        ["deviation from the design [mm]", f"max {m['deviation_mm']['max']:.2f}, mean "
-                                           f"{m['deviation_mm']['mean']:.2f}, 95 % "
-                                           f"{m['deviation_mm']['p95']:.2f}"],
+        ["deviation from the design [mm]",
+         f"largest {m['largest_deviation_mm']:.2f} (the net and its boundary panels as built); "
+         f"the net's vertices: max {m['deviation_mm']['max']:.2f}, mean "
+         f"{m['deviation_mm']['mean']:.2f}, 95 % {m['deviation_mm']['p95']:.2f}"],
         ["molds", (molds_text(molds) if molds["count"] == 0 else
                    f"{molds_text(molds)} for the curved panels "
                    f"({molds['molds_per_sqrt_panels']:.2f} x sqrt of the panel count)")
@@ -851,7 +852,8 @@ def study_viewer_scenes(result: StudyResult) -> tuple[list[viewer.ViewerScene], 
         scene = net_viewer_scene(
             c.molds, title=f"{c.rank}. {c.name}", deviation_mm=deviation,
             deviation_limit_mm=limit, gaps=gaps,
-            infinite_radius=INFINITE_RADIUS_FACTOR * result.design_size)
+            infinite_radius=INFINITE_RADIUS_FACTOR * result.design_size,
+            molds_in_all=c.metrics["molds"]["count"])
         if trimmed:
             scene.layer = boundary_layer(
                 panels, units=result.study.design.units,
@@ -941,7 +943,7 @@ def _comparison_rows(result: StudyResult) -> tuple[list[str], list[list]]:
             continue
         m = c.metrics
         rows.append([c.rank, c.name, "yes" if c.feasible else "no", m["molds"]["count"],
-                     m["panels"], f"{m['deviation_mm']['max']:.1f}", f"{c.cost:.0f}",
+                     m["panels"], f"{m['largest_deviation_mm']:.1f}", f"{c.cost:.0f}",
                      c.candidate.describe()])
     return (["rank", "candidate", "feasible", "molds [count]", "panels [count]",
              "max deviation [mm]", "cost [cost units]", "net"], rows)
@@ -1127,10 +1129,13 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
     from ..fabricate.mold_report import mold_figure
 
     molds = c.metrics["molds"]
+    own = molds["count"] - molds_plan.mold_count         # the boundary panels' own molds
     pictures["molds"] = mold_figure(molds_plan, title=f"{c.name}: {counted(molds_plan.panel_count, 'panel')}"
                                     + (", all flat: no molds" if molds["count"] == 0 else
-                                       f", {counted(molds['count'], 'mold')} for the curved "
-                                       "ones (one colour per mold)"))
+                                       f", {counted(molds_plan.mold_count, 'mold')} for the "
+                                       "curved ones (one colour per mold)"
+                                       + (f"; {molds['count']} in all with the {own} the boundary "
+                                          "panels need of their own" if own > 0 else "")))
     if c.strips is not None:
         if twin_strips:
             (folder / "strips").mkdir()

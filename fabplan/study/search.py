@@ -127,7 +127,7 @@ def search_record(search: Search, results: list[CandidateResult]) -> dict:
             "failed": p.result.failed, "cost": p.result.cost,
             "molds": None if p.result.failed else p.result.metrics["molds"]["count"],
             "deviation_mm": None if p.result.failed else
-            p.result.metrics["deviation_mm"]["max"]} for p in points],
+            p.result.metrics["largest_deviation_mm"]} for p in points],
         "best": None if best is None else best.result.name,
         "feasible_range": None if not feasible else [feasible[0].value, feasible[-1].value],
     }
