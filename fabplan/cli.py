@@ -120,18 +120,33 @@ def _net_inputs(net: str | os.PathLike | None, what: str = "the input net") -> d
     if not net:
         return {}
     path = Path(net)
-    beside = {path.with_suffix(".json"): f"the record of {path.name}",
-              boundary_path(path): f"the boundary panels of {path.name}"}
-    return {path: what, **{p: w for p, w in beside.items() if os.path.lexists(p)}}
+    files = {path: what}
+    # beside the path given, the file it links to and its other names (hard links)
+    names = [path, Path(os.path.realpath(path))]
+    try:
+        info = os.stat(path)
+        if info.st_nlink > 1:
+            names += [Path(e.path) for e in os.scandir(path.parent or ".")
+                      if e.name.lower().endswith(".obj") and e.inode() == info.st_ino]
+    except OSError:
+        pass
+    for near in dict.fromkeys(names):
+        beside = {near.with_suffix(".json"): f"the record of {near.name}",
+                  boundary_path(near): f"the boundary panels of {near.name}"}
+        files.update({p: w for p, w in beside.items() if os.path.lexists(p)})
+    return files
 
 
 def _file_inputs(*options: tuple[str | None, str]) -> dict[Path, str]:
-    """The files named by options that take a file or a spec (`--reference`, `--fix`,
-    a Rhino file with its selector after ``#``), with what each is."""
+    """The files named by options that take a file or a design (`--fix`, `--reference`,
+    a Rhino file with its choice after ``#``, a built-in surface whose parameters name
+    files), with what each is."""
+    from .design.load import design_files
+
     files = {}
     for value, what in options:
         if value:
-            files[Path(value.split("#", 1)[0])] = what
+            files.update(dict.fromkeys(design_files(value), what))
     return files
 
 
@@ -170,13 +185,16 @@ def _output_path(args) -> Path:
 def _layout_design_inputs(net: str) -> dict[Path, str]:
     """The design file a layout net's record names (``NET.json``), which `optimize`
     reads to cut the net's boundary panels again."""
+    from .design.load import design_files
+
     layout = _net_properties(net).get("layout")
     source = layout.get("design_source") if isinstance(layout, dict) else None
     names = [source.get("file")] if isinstance(source, dict) else []
     if isinstance(layout, dict):
-        names.append(layout.get("design"))
-    return {Path(n): f"the design of {Path(net).name}" for n in names
-            if isinstance(n, str) and n and os.path.isfile(n)}
+        # what `layout_again` loads the design from: its spec (an absolute path for a file)
+        names += [layout.get("design_spec"), layout.get("design")]
+    return {path: f"the design of {Path(net).name}" for n in names
+            if isinstance(n, str) and n for path in design_files(n) if path.is_file()}
 
 
 class _IterationReport:
@@ -1011,11 +1029,21 @@ def _boundary_file(args) -> Path | None:
         return None
     if args.boundary is None:
         path = boundary_path(args.net)
-        return path if path.is_file() else None
+        # a layout whose net clads its design to the boundary writes one without faces
+        return path if path.is_file() and _has_faces(path) else None
     path = Path(args.boundary)
     if not path.is_file():
         raise InputError(f"{path}: no such file (the boundary panels, NET.boundary.obj)")
     return path
+
+
+def _has_faces(path: Path) -> bool:
+    """Whether an OBJ file holds a face line."""
+    try:
+        with path.open(encoding="utf-8", errors="replace") as handle:
+            return any(line.startswith("f ") for line in handle)
+    except OSError:
+        return True           # the reader names what is wrong with it
 
 
 def _strip_boundary(args, mesh):
@@ -1544,18 +1572,23 @@ class _Stopped(KeyboardInterrupt):
 @contextmanager
 def _stopped_by_signals() -> Iterator[None]:
     """SIGTERM and SIGHUP raise `_Stopped` in the main thread while the command runs, so
-    that they leave nothing behind, as Ctrl-C does; the handlers before are restored."""
+    that they leave nothing behind, as Ctrl-C does; once one of them (or Ctrl-C) has come,
+    the others are ignored, so that the cleanup runs to its end. A signal the process was
+    started with ignored (``nohup``) stays ignored. The handlers before are restored."""
     import signal
     import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    names = [s for s in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, s)]
+    wanted = [n for n in names if signal.getsignal(getattr(signal, n)) is not signal.SIG_IGN]
 
     def stop(signum: int, frame: Any) -> None:
-        raise _Stopped(signum)
+        for name in wanted:                 # the cleanup is not interrupted again
+            signal.signal(getattr(signal, name), signal.SIG_IGN)
+        raise KeyboardInterrupt if signum == signal.SIGINT else _Stopped(signum)
 
-    wanted = [s for s in ("SIGTERM", "SIGHUP") if hasattr(signal, s)]
     before = {name: signal.signal(getattr(signal, name), stop) for name in wanted}
     try:
         yield

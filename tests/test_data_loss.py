@@ -361,3 +361,120 @@ def test_killed_strips_leave_no_worker_running(tmp_path, sig):
     if sig == signal.SIGTERM:
         assert run.returncode == 128 + signal.SIGTERM
         assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["net.obj"]
+
+
+# ---------------------------------------------------------------------------- second attack
+def _recrafted(kept: Path, key: str, *, data: bytes | None = None, tree=None) -> None:
+    """Rewrite a kept entry as an attacker who recomputes its checksum would."""
+    header = json.loads((kept / f"{key}.json").read_text())
+    if data is not None:
+        (kept / f"{key}.npz").write_bytes(data)
+        header["arrays_sha256"] = hashlib.sha256(data).hexdigest()
+    if tree is not None:
+        header["data"]["tree"] = tree(header["data"]["tree"])
+    (kept / f"{key}.json").write_text(json.dumps(header))
+
+
+def test_kept_entries_that_do_not_hold_together_are_ignored(resumed_study, tmp_path):
+    import io
+    import zipfile
+
+    study = read_study(resumed_study / "s.toml")
+    out = tmp_path / "out"
+    shutil.copytree(resumed_study / "out", out)
+    kept = out / CACHE_FOLDER
+    baseline, mine = (CandidateCache(out, study).key(c) for c in study.candidates)
+    # a truncated zip for one, a net that is a string for the other
+    _recrafted(kept, baseline, data=(kept / f"{baseline}.npz").read_bytes()[:-100])
+
+    def net_as_text(tree):
+        tree["fields"]["net"] = "not a net"
+        return tree
+
+    _recrafted(kept, mine, tree=net_as_text)
+    notes: list[str] = []
+    cache = CandidateCache(out, study, note=notes.append)
+    assert [cache.load(c) for c in study.candidates] == [None, None]
+    assert len(notes) == 2 and all("ignored" in n for n in notes)
+    # a small file that would unpack into far more than it lists is refused unread
+    with zipfile.ZipFile(resumed_study / "out" / CACHE_FOLDER / f"{baseline}.npz") as original:
+        names = original.namelist()
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name in names:
+            archive.writestr(name, b"\0" * (64 << 20))
+    assert len(buffer.getvalue()) < 1 << 20
+    _recrafted(kept, baseline, data=buffer.getvalue())
+    assert cache.load(study.candidates[0]) is None and "unpacks to" in notes[-1]
+
+
+def test_a_study_never_removes_its_inputs_or_files_it_does_not_name(resumed_study, tmp_path):
+    out = tmp_path / "out"
+    shutil.copytree(resumed_study / "out", out)
+    (out / ".fabplan-files").write_text("{not json")          # a damaged list
+    (out / "candidates" / "mine" / "notes.txt").write_text("mine")
+    design = out / "candidates" / "mine" / "net.obj"           # an earlier study's net as design
+    text = STUDY.format(name="other").replace('surface = "hyperbolic-paraboloid"',
+                                              f'file = "{design}"')
+    (tmp_path / "s.toml").write_text(text.replace("size = 2.0", "size = 1.0"), encoding="utf-8")
+    before = design.read_bytes()
+    assert main(["study", str(tmp_path / "s.toml"), "-o", str(out), "-q"]) == 0
+    assert design.read_bytes() == before
+    assert (out / "candidates" / "mine" / "notes.txt").read_text() == "mine"
+
+
+def test_files_a_surface_or_a_linked_net_reads_are_inputs(work, capsys):
+    (work / "h.json").write_text("0 0 0\n0 1 0\n0 0 1\n")
+    before = hashes(work)
+    refused(["layout", "height-field:heights=" + str(work / "h.json"), "--net", "snet",
+             "--panel-size", "2", "-o", work / "h.obj"], capsys, "refusing to overwrite the input")
+    (work / "L.obj").symlink_to(work / "lay.obj")
+    refused(["arcs", work / "L.obj", "-o", work / "lay.dxf"], capsys, "the record of lay.obj")
+    assert hashes(work) == {**before, "L.obj": "link"}
+
+
+def test_an_output_name_that_is_not_utf8_is_refused_before_the_work(tmp_path, capsys):
+    name = os.fsdecode(b"bad\xff\xfename.obj")
+    refused(["layout", "hyperbolic-paraboloid", "--net", "snet", "--panel-size", "2",
+             "-o", str(tmp_path / name)], capsys, "not valid UTF-8")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_boundary_file_without_faces_means_no_boundary_panels(tmp_path, capsys):
+    grid_net(tmp_path / "lay.obj")
+    (tmp_path / "lay.boundary.obj").write_text("# no panels\n")
+    assert main(["molds", str(tmp_path / "lay.obj"), "--tolerance-mm", "2",
+                 "-o", str(tmp_path / "m"), "-q"]) in (0, 3)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_second_signal_does_not_hang_the_cleanup(tmp_path):
+    u, v = np.meshgrid(np.arange(25.0), np.arange(25.0), indexing="ij")
+    net = tmp_path / "net.obj"
+    QuadMesh.grid(np.stack([u, v, 0.02 * (u - 12) * (v - 12)], axis=-1)).write_obj(net)
+    run = subprocess.Popen([*FABPLAN, "strips", str(net), "--height", "40", "--thickness", "4",
+                            "--sheet", "400x300", "--workers", "2", "-o", str(tmp_path / "out")],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    for line in run.stderr:
+        if line.startswith("writing"):
+            break
+    run.send_signal(signal.SIGTERM)
+    time.sleep(0.3)
+    run.send_signal(signal.SIGTERM)
+    _, err = run.communicate(timeout=60)
+    # stopped by the first (exit 143), or, its cleanup done, by the second
+    assert run.returncode in (128 + signal.SIGTERM, -signal.SIGTERM), err
+    assert err.startswith("fabplan: stopped by SIGTERM")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["net.obj"]
+
+
+def test_a_run_started_with_sighup_ignored_keeps_it_ignored(tmp_path):
+    code = ("import signal, sys\nsignal.signal(signal.SIGHUP, signal.SIG_IGN)\n"
+            "from fabplan.cli import _stopped_by_signals\n"
+            "with _stopped_by_signals():\n"
+            "    assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN\n"
+            "    signal.raise_signal(signal.SIGHUP)\n"
+            "print('alive')\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and run.stdout.strip() == "alive", run.stderr

@@ -9,9 +9,9 @@ from ..io.rhino_read import RhinoDesign, is_3dm_source, read_3dm, split_source
 from ..io.triangles import read_triangles
 from .mesh_surface import DesignSurface
 from .nurbs import NurbsSurface, trims_to_parameters
-from .parametric import SURFACES, surface_from_spec
+from .parametric import FILE_PARAMETERS, SURFACES, surface_from_spec
 
-__all__ = ["load_design", "load_3dm_design", "names_a_file", "nurbs_from_rhino"]
+__all__ = ["load_design", "load_3dm_design", "names_a_file", "nurbs_from_rhino", "design_files"]
 
 
 def names_a_file(source: str | os.PathLike) -> bool:
@@ -21,6 +21,26 @@ def names_a_file(source: str | os.PathLike) -> bool:
     path = Path(source)
     return (path.suffix.lower() in (".obj", ".stl", ".ply", ".off") or path.is_file()
             or (path.exists() and str(source).partition(":")[0] not in SURFACES))
+
+
+def design_files(source: str | os.PathLike) -> list[Path]:
+    """The files a design source reads: a mesh or Rhino file (without its ``#`` choice),
+    or the files a built-in surface's parameters name (``profile=``, ``heights=``,
+    ``control_points=``); outputs must not replace them.
+
+    Examples
+    --------
+    >>> design_files("revolution:profile=p.txt,sweep_deg=90")
+    [PosixPath('p.txt')]
+    >>> design_files("roof.3dm#layer=Roof")
+    [PosixPath('roof.3dm')]
+    """
+    text = str(source)
+    if names_a_file(text) or is_3dm_source(text):
+        return [Path(text.split("#", 1)[0])]
+    _, _, rest = text.partition(":")
+    return [Path(value.strip()) for key, eq, value in
+            (item.partition("=") for item in rest.split(",")) if eq and key.strip() in FILE_PARAMETERS]
 
 
 def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = None,

@@ -19,7 +19,6 @@ margin, no two closer than the spacing.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -728,6 +727,11 @@ def _lowest_fit(S: np.ndarray, c: _Candidate, short_side: float) -> tuple[int, f
 PARTS_PER_PROCESS = 200
 
 
+def _orientations_batch(batch: tuple) -> list:
+    """`_orientations_of` of one batch ``(parts, spacing, res)``, for a worker process."""
+    return _orientations_of(*batch)
+
+
 def _orientations_of(parts: list, spacing: float, res: float) -> list:
     return [_orientations(p, spacing, res) for p in parts]
 
@@ -738,15 +742,10 @@ def _all_orientations(parts: list[Part], spacing: float, res: float, workers: in
     count = min(workers, len(parts) // PARTS_PER_PROCESS)
     if count <= 1:
         return _orientations_of(parts, spacing, res)
-    from concurrent.futures import ProcessPoolExecutor
+    from ..io.forked import map_in_processes
 
-    from ..io.forked import die_with_parent
-
-    # workers end with this process, even when it is killed (SIGKILL) mid-run
-    with ProcessPoolExecutor(max_workers=count, initializer=die_with_parent,
-                             initargs=(os.getpid(),)) as pool:
-        batches = list(pool.map(_orientations_of, [parts[k::count] for k in range(count)],
-                                [spacing] * count, [res] * count))
+    batches = map_in_processes(_orientations_batch,
+                               [(parts[k::count], spacing, res) for k in range(count)], count)
     out: list = [None] * len(parts)
     for k, batch in enumerate(batches):
         out[k::count] = batch

@@ -14,12 +14,11 @@ import json
 import math
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..io.forked import die_with_parent
+from ..io.forked import map_in_processes
 from ..io.output import check_apart, output_folder
 from ..io.records import json_text
 from ..net.mesh import QuadMesh
@@ -321,12 +320,13 @@ def _run_sheet_jobs(jobs: list[_SheetJob], settings: StripSettings, folder: Path
         _write_sheet_jobs(jobs, settings, folder)
         return
     # interleaved batches: the first sheets hold the longest parts and take the longest
-    batches = [jobs[k::4 * count] for k in range(4 * count)]
-    # workers end with this process, even when it is killed (SIGKILL) mid-run
-    with ProcessPoolExecutor(max_workers=count, initializer=die_with_parent,
-                             initargs=(os.getpid(),)) as pool:
-        for future in [pool.submit(_write_sheet_jobs, b, settings, folder) for b in batches if b]:
-            future.result()
+    batches = [(b, settings, folder) for k in range(4 * count) if (b := jobs[k::4 * count])]
+    map_in_processes(_write_sheet_batch, batches, count)
+
+
+def _write_sheet_batch(batch: tuple[list[_SheetJob], StripSettings, Path]) -> None:
+    """`_write_sheet_jobs` of one batch, for a worker process."""
+    _write_sheet_jobs(*batch)
 
 
 def _stale_files(out_dir: Path, name: str, files: list[str]) -> list[Path]:

@@ -10,10 +10,13 @@ from __future__ import annotations
 import os
 import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["ForkedFile", "forked_processes", "die_with_parent"]
+__all__ = ["ForkedFile", "forked_processes", "die_with_parent", "map_in_processes",
+           "worker_start", "quiet_interrupts"]
 
 _PR_SET_PDEATHSIG = 1     # prctl(2): the signal a process gets when its parent ends
 
@@ -54,6 +57,52 @@ def forked_processes(processes: int | None = None) -> int:
         return 0
     count = (os.cpu_count() or 1) if processes is None else processes
     return count if count > 1 else 0
+
+
+def worker_start(parent: int) -> None:
+    """What a worker process does first: end with `parent` (`die_with_parent`), leave
+    Ctrl-C to the parent (which stops the workers) and end at SIGTERM or SIGHUP without a
+    traceback."""
+    die_with_parent(parent)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+
+
+def map_in_processes(function: Callable, batches: list, processes: int) -> list:
+    """``[function(b) for b in batches]`` in `processes` worker processes, in order.
+
+    The workers end with this process (`worker_start`); when a batch fails, or this
+    process is interrupted, they are stopped at once (not after their running batches).
+    """
+    import multiprocessing
+
+    pool = multiprocessing.get_context().Pool(processes, initializer=worker_start,
+                                              initargs=(os.getpid(),))
+    try:
+        results = pool.map(function, batches, chunksize=1)
+        pool.close()
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
+    return results
+
+
+@contextmanager
+def quiet_interrupts() -> Iterator[None]:
+    """Start processes inside this block with Ctrl-C ignored (they keep it across exec):
+    the parent stops them, and no traceback of theirs reaches the terminal."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 class ForkedFile:

@@ -46,6 +46,8 @@ STAGING_MARKER = ".fabplan-staging"   # file in every staging folder: the owner'
 #: in a folder that a run replaces (a study's): the files that run wrote there, one
 #: relative path per JSON list entry; a later run removes those and nothing else
 MANIFEST = ".fabplan-files"
+#: a manifest listing more entries than this is not read (no run writes that many files)
+MAX_MANIFEST_ENTRIES = 100_000
 # hidden names of files and folders being written: ``.fabplan-PID-HEX.tmp`` (or
 # ``.staging``, ``.old``), short whatever the output's name, naming the process that
 # owns them so that a later run can remove them once it is gone
@@ -102,6 +104,11 @@ def output_argument(text: str, *, folder: bool = False, option: str = "-o") -> P
         raise InputError(f"{option} is empty: name the output {what}")
     if "\0" in text:
         raise InputError(f"{option} {text!r}: a path cannot hold a NUL character")
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise InputError(f"{option} {text!r}: the name is not valid UTF-8 text (the files "
+                         "record their names); rename it") from None
     if not folder and text.endswith(("/", os.sep)):
         raise InputError(f"{text}: ends in '/', which names a folder; {option} takes a file")
     path = Path(text)
@@ -151,25 +158,9 @@ def check_apart(outputs: Iterable[str | os.PathLike],
     fabplan.errors.InputError: a/net.obj: is the input net (a/../a/net.obj); refusing to \
 overwrite the input: choose another output
     """
-    described = inputs if isinstance(inputs, Mapping) else {Path(p): "an input" for p in inputs}
-    known: dict[object, tuple[str, str]] = {}
-    for path, what in described.items():
-        if not path:
-            continue
-        known[os.path.realpath(path)] = (str(path), what)
-        try:
-            info = os.stat(path)
-        except (OSError, ValueError):
-            continue
-        known[(info.st_dev, info.st_ino)] = (str(path), what)
+    known = _input_keys(inputs)
     for out in outputs:
-        hit = known.get(os.path.realpath(out))
-        if hit is None:
-            try:
-                info = os.stat(out)
-                hit = known.get((info.st_dev, info.st_ino))
-            except (OSError, ValueError):
-                pass
+        hit = _input_at(out, known)
         if hit is not None:
             raise InputError(f"{out}: is {hit[1]} ({hit[0]}); refusing to overwrite the input: "
                              "choose another output")
@@ -202,6 +193,37 @@ refusing to write there
         raise InputError(f"{'/'.join(parts)}: leaves the output folder {folder}; "
                          "refusing to write there")
     return path
+
+
+def _input_keys(inputs: Mapping[Path, str] | Iterable[str | os.PathLike]
+                ) -> dict[object, tuple[str, str]]:
+    """Every input by its resolved path and by its file (device, inode): what
+    `_input_at` looks a path up in."""
+    described = inputs if isinstance(inputs, Mapping) else {Path(p): "an input" for p in inputs}
+    known: dict[object, tuple[str, str]] = {}
+    for path, what in described.items():
+        if not path:
+            continue
+        known[os.path.realpath(path)] = (str(path), what)
+        try:
+            info = os.stat(path)
+        except (OSError, ValueError):
+            continue
+        known[(info.st_dev, info.st_ino)] = (str(path), what)
+    return known
+
+
+def _input_at(path: str | os.PathLike, known: dict[object, tuple[str, str]]
+              ) -> tuple[str, str] | None:
+    """The input (its path and what it is) that `path` is, through links, or None."""
+    hit = known.get(os.path.realpath(path))
+    if hit is None:
+        try:
+            info = os.stat(path)
+            hit = known.get((info.st_dev, info.st_ino))
+        except (OSError, ValueError):
+            pass
+    return hit
 
 
 def _special_kind(path: Path) -> str | None:
@@ -445,9 +467,10 @@ def read_manifest(folder: str | os.PathLike) -> set[str] | None:
         listed = json.loads(path.read_text(encoding="utf-8")).get("files")
     except (OSError, ValueError, AttributeError, RecursionError):
         return None
-    if not isinstance(listed, list):
+    if not isinstance(listed, list) or len(listed) > MAX_MANIFEST_ENTRIES:
         return None
-    return {name for name in listed if isinstance(name, str) and _plain_relative(folder, name)}
+    return {name for name in listed if isinstance(name, str) and len(name) <= 1024
+            and _plain_relative(folder, name)}
 
 
 def _plain_relative(folder: str | os.PathLike, name: str) -> bool:
@@ -495,8 +518,11 @@ def _move_in(staging: Path, folder: Path, *, owned: set[str] | None,
                              "replace it (move it away or choose another folder)")
         if os.path.isdir(target) and not os.path.islink(target):
             raise InputError(f"{target}: is a folder in the way of a file")
+    # an input of the run is never taken away, whatever an earlier run's list says
+    inputs = _input_keys(protect)
     leaving = set(new) if owned is None else set(new) | {
-        name for name in owned if _plain_relative(folder, name)}
+        name for name in owned if _plain_relative(folder, name)
+        and _input_at(folder / name, inputs) is None}
     trash = _new_staging(folder.parent if folder.parent.exists() else folder, "old")
     moved: list[tuple[Path, Path]] = []
     created: list[Path] = []
@@ -568,13 +594,15 @@ def output_folder(folder: str | os.PathLike, *, replace: bool = False,
     staging = _new_staging(beside)
     try:
         yield staging
-        (staging / STAGING_MARKER).unlink()
+        # the marker stays until the files are in place: a run killed while moving them
+        # leaves staging that the next run knows as stale
         if replace:
             files = {"files": _staged_files(staging) + [MANIFEST]}
             (staging / MANIFEST).write_text(json.dumps(files, indent=1) + "\n", encoding="utf-8")
         if replace and not folder.exists():
             check_apart([folder / name for name in _staged_files(staging)], protect or {})
             created = _make_parents(folder.parent)
+            (staging / STAGING_MARKER).unlink()
             os.replace(staging, folder)
         else:
             created = _make_parents(folder)

@@ -28,7 +28,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["encode", "decode", "ARRAY_KINDS"]
+__all__ = ["encode", "decode", "packed_bytes", "ARRAY_KINDS"]
 
 #: dtype kinds an array may have: booleans, integers, floats, complex numbers, text
 ARRAY_KINDS = "biufcU"
@@ -113,6 +113,65 @@ def encode(obj: Any, types: Mapping[str, type]) -> tuple[dict, list[np.ndarray]]
     return {"dtypes": writer.dtypes(), "tree": tree}, writer.packed()
 
 
+def packed_bytes(data: Any) -> list[int]:
+    """The bytes each packed array of `data` (as `encode` gave it) holds by its array
+    references: what a reader may expect before it unpacks anything (a crafted file
+    that claims more is refused unread).
+
+    Raises
+    ------
+    ValueError
+        For malformed data.
+    """
+    if not isinstance(data, dict) or not isinstance(data.get("dtypes"), list):
+        raise ValueError("not a typed data file")
+    dtypes = data["dtypes"]
+    sizes = dict.fromkeys(map(str, dtypes), 0)
+    stack = [data.get("tree")]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, list):
+            stack.extend(node)
+        elif isinstance(node, dict):
+            if "$array" in node:
+                shape = node.get("shape")
+                if not (isinstance(shape, list) and all(type(n) is int and n >= 0 for n in shape)
+                        and node["$array"] in sizes):
+                    raise ValueError("a malformed array reference")
+                sizes[node["$array"]] += math.prod(shape)
+            else:
+                stack.extend(node.values())
+    return [sizes[str(d)] * np.dtype(str(d)).itemsize for d in dtypes]
+
+
+def _conforms(value: Any, hint: Any, types: Mapping[str, type]) -> bool:
+    """Whether `value` has the type `hint` (a resolved annotation) says, as far as a kept
+    result needs: unknown hints pass."""
+    import types as builtin_types
+    import typing
+
+    if hint is Any or hint is typing.Any:
+        return True
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, builtin_types.UnionType):
+        return any(_conforms(value, h, types) for h in typing.get_args(hint))
+    if hint is type(None):
+        return value is None
+    if hint is float:
+        return isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+    if hint in (bool, str):
+        return isinstance(value, (hint, np.bool_)) if hint is bool else isinstance(value, str)
+    if hint is np.ndarray or origin is np.ndarray:
+        return isinstance(value, np.ndarray)
+    if origin in (list, tuple, dict):
+        return isinstance(value, origin)
+    if isinstance(hint, type) and hint in types.values():
+        return type(value) is hint
+    return True
+
+
 class _Reader:
     def __init__(self, arrays: Sequence[np.ndarray], dtypes: Any, types: Mapping[str, type]):
         if not isinstance(dtypes, list) or len(dtypes) != len(arrays):
@@ -125,6 +184,19 @@ class _Reader:
                 raise ValueError(f"packed array {k} is not a flat array of {dtype}")
             self.packed[dtype] = values
         self.types = types
+        self.hints: dict[type, dict] = {}
+
+    def _hints(self, cls: type) -> dict:
+        """The resolved field annotations of `cls` (its listed types resolved by name);
+        {} when they cannot be resolved."""
+        import typing
+
+        if cls not in self.hints:
+            try:
+                self.hints[cls] = typing.get_type_hints(cls, localns={**self.types, "np": np})
+            except Exception:             # an annotation this reader cannot resolve
+                self.hints[cls] = {}
+        return self.hints[cls]
 
     def array(self, node: dict) -> np.ndarray:
         dtype, shape, at = node["$array"], node["shape"], node["at"]
@@ -161,7 +233,13 @@ class _Reader:
                 fields = node["fields"]
                 if not isinstance(fields, dict):
                     raise ValueError(f"malformed fields of {node['$type']}")
-                return cls(**{k: self.tree(v) for k, v in fields.items()})
+                values = {k: self.tree(v) for k, v in fields.items()}
+                hints = self._hints(cls)
+                for key, value in values.items():
+                    if key in hints and not _conforms(value, hints[key], self.types):
+                        raise ValueError(f"{node['$type']}.{key} is a {type(value).__name__}, "
+                                         "not what the field holds")
+                return cls(**values)
             return cls.from_data(self.tree(node["state"]))    # type: ignore[attr-defined]
         if any(k.startswith("$") for k in node):
             raise ValueError(f"unknown entry {sorted(node)[0]!r}")

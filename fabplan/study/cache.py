@@ -35,7 +35,7 @@ import numpy as np
 from .. import __version__
 from ..errors import InputError
 from ..io.output import remove_stale_staging, temporary_path
-from ..io.typed_data import decode, encode
+from ..io.typed_data import decode, encode, packed_bytes
 
 if TYPE_CHECKING:
     from .run import CandidateResult
@@ -47,7 +47,9 @@ CACHE_FOLDER = ".fabplan-cache"
 #: what a kept candidate's JSON says it is, and the version of its layout
 CACHE_FORMAT = {"format": "fabplan-candidate", "version": 1}
 #: largest kept file read back (a crafted huge file is ignored, not read)
-MAX_ENTRY_BYTES = 2**31
+MAX_ENTRY_BYTES = 2**29
+#: room for the header of every array in a kept .npz beyond its values
+_NPY_HEADER = 4096
 
 
 def cached_types() -> dict[str, type]:
@@ -79,6 +81,24 @@ def _file_digests(study: Study) -> dict[str, str]:
         except OSError:
             continue
     return digests
+
+
+def _arrays(data: bytes, expected: list[int]) -> list[np.ndarray]:
+    """The packed arrays of a kept ``.npz``, each checked against the bytes its JSON
+    expects before it is unpacked (a small file must not unpack into gigabytes)."""
+    import zipfile
+
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        members = {info.filename: info for info in archive.infolist()}
+    names = [f"arr_{k}.npy" for k in range(len(expected))]
+    if sorted(members) != sorted(names):
+        raise ValueError("its arrays are not the ones it lists")
+    for name, size in zip(names, expected, strict=True):
+        if members[name].file_size > size + _NPY_HEADER:
+            raise ValueError(f"{name} unpacks to {members[name].file_size} bytes, more than the "
+                             f"{size} it lists")
+    with np.load(io.BytesIO(data), allow_pickle=False) as stored:
+        return [stored[f"arr_{k}"] for k in range(len(expected))]
 
 
 def _read_regular(path: Path) -> bytes:
@@ -155,18 +175,39 @@ class CandidateCache:
             data = _read_regular(path.with_suffix(".npz"))
             if hashlib.sha256(data).hexdigest() != header.get("arrays_sha256"):
                 raise ValueError("its arrays do not match it")
-            with np.load(io.BytesIO(data), allow_pickle=False) as stored:
-                arrays = [stored[f"arr_{k}"] for k in range(len(stored.files))]
+            arrays = _arrays(data, packed_bytes(header["data"]))
             result = decode(header["data"], arrays, self._types)
-        except (OSError, ValueError, TypeError, KeyError, RecursionError) as exc:
-            self._note(f"    {CACHE_FOLDER}/{path.name} ignored ({exc}): {candidate.name} is "
+            if type(result).__name__ != "CandidateResult" or result.candidate != candidate:
+                raise ValueError("another candidate")
+            self._check(result)
+        # the entry is data from a folder someone may have shared: whatever is wrong
+        # with it (a broken zip, numbers out of range, fields that do not fit), it is
+        # ignored and the candidate computed again
+        except Exception as exc:
+            what = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+            self._note(f"    {CACHE_FOLDER}/{path.name} ignored ({what}): {candidate.name} is "
                        "computed again")
             return None
-        if type(result).__name__ != "CandidateResult" or result.candidate != candidate:
-            self._note(f"    {CACHE_FOLDER}/{path.name} ignored (another candidate): "
-                       f"{candidate.name} is computed again")
-            return None
         return result
+
+    def _check(self, result: CandidateResult) -> None:
+        """Raise unless a kept result holds together: its arrays sized to its net, and its
+        metrics judged and written as a fresh candidate's are."""
+        from ..io.records import json_text
+        from .run import candidate_cost, verdict
+
+        net, molds, deviation = result.net, result.molds, result.deviation_mm
+        if net is None or molds is None or not isinstance(result.metrics, dict):
+            raise ValueError("a kept candidate without its net, molds or metrics")
+        vertices = net.mesh.vertex_count
+        if deviation is not None and deviation.shape != (vertices,):
+            raise ValueError(f"{deviation.shape[0] if deviation.ndim else 0} deviations for "
+                             f"{vertices} vertices")
+        if molds.mold.shape != (len(net.mesh.face_sizes),) and result.boundary_molds is None:
+            raise ValueError("molds for another number of panels")
+        verdict(result.metrics, self._study.limits_of(result.candidate))
+        candidate_cost(result.metrics, self._study.cost)
+        json_text({"metrics": result.metrics, "checks": result.checks})
 
     def store(self, result: CandidateResult) -> None:
         """Keep a finished candidate (written atomically, its arrays first; failed
@@ -185,14 +226,20 @@ class CandidateCache:
                   "candidate": result.name, "arrays_sha256": hashlib.sha256(data).hexdigest(),
                   "data": tree}
         text = json.dumps(header, separators=(",", ":"))
-        os.makedirs(self.folder, exist_ok=True)
         stem = self.folder / self.key(result.candidate)
-        for path, content in ((stem.with_suffix(".npz"), data), (stem.with_suffix(".json"),
-                                                                 text.encode())):
-            tmp = temporary_path(self.folder)
-            try:
-                with open(tmp, "xb") as handle:
-                    handle.write(content)
-                os.replace(tmp, path)
-            finally:
-                tmp.unlink(missing_ok=True)
+        try:
+            os.makedirs(self.folder, exist_ok=True)
+            for path, content in ((stem.with_suffix(".npz"), data),
+                                  (stem.with_suffix(".json"), text.encode())):
+                if os.path.lexists(path) and (path.is_symlink() or not path.is_file()):
+                    raise OSError(f"{path.name} is in the way (not a file)")
+                tmp = temporary_path(self.folder)
+                try:
+                    with open(tmp, "xb") as handle:
+                        handle.write(content)
+                    os.replace(tmp, path)
+                finally:
+                    tmp.unlink(missing_ok=True)
+        except OSError as exc:      # the study goes on; the candidate is computed again later
+            self._note(f"    {result.name} is not kept for --resume "
+                       f"({exc.strerror or exc})")

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 import numpy as np
 
 from ..errors import FabplanError, InputError
+from ..io.forked import quiet_interrupts
 from ..io.resources import worker_count
 from .inputs import shared_inputs
 from .run import (
@@ -113,12 +114,19 @@ def _connect(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
         raise InputError("parallel studies need dask.distributed: pip install "
                          "\"fabplan[parallel]\"") from None
     if scheduler is not None:
+        import re
+
+        if not re.fullmatch(r"(tcp|tls|inproc|ucx|ws|wss)://[^\s/:]+(:\d{1,5})?", scheduler):
+            raise InputError(f"--scheduler {scheduler!r}: give the scheduler's address as "
+                             "tcp://HOST:PORT")
         try:
             return Client(scheduler, timeout="5s"), None
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-    cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
-                           dashboard_address=None)
+    # the workers leave Ctrl-C to this process, which closes them: no traceback of theirs
+    with quiet_interrupts():
+        cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
     return Client(cluster), cluster
 
 

@@ -13,6 +13,7 @@ import csv
 import io
 import math
 import os
+import re
 import time
 from html import escape as html_escape
 from pathlib import Path
@@ -1017,24 +1018,32 @@ def _limit_items(result: StudyResult) -> list[tuple[str, object]]:
 # ---------------------------------------------------------------------------- writing
 #: what a study writes at the top of its folder (besides ``candidates/``)
 STUDY_FILES = ("report.html", "report.pdf", "study.json", "candidates.csv")
+#: the names a study writes: only such files can be an earlier study's, whatever a
+#: folder's list of files says (a candidate's files, its strip sheets and schedule)
+_STUDY_FILE = re.compile(
+    r"(report\.html|report\.pdf|study\.json|candidates\.csv|" + re.escape(output.MANIFEST) + "|"
+    r"candidates/[^/]+/(net\.(obj|json|png|3dm|glb)|net\.boundary\.obj|molds\.(csv|json)|"
+    r"boundary-panels\.csv|reproduce\.sh|"
+    r"strips/(strips(-sheet-\d+\.(dxf|png)|-sheets\.dxf|\.csv|\.json)|sheet-preview\.png)))")
 
 
 def study_files(folder: Path) -> set[str] | None:
     """The files an earlier study wrote in `folder`, which a new study replaces: those
-    its manifest lists (`fabplan.io.output.MANIFEST`); for a study written without one,
-    its report files and ``candidates/``; an empty set for a folder that holds only the
-    candidates an interrupted study kept (`fabplan.study.cache`); None for a folder that
-    holds no study."""
+    its manifest lists (`fabplan.io.output.MANIFEST`), else (a study written without one,
+    or a list that does not read) those under ``candidates/`` and at the top that a study
+    writes; only names a study writes in either case. An empty set for a folder that
+    holds only the candidates an interrupted study kept (`fabplan.study.cache`); None for
+    a folder that holds no study."""
     folder = Path(folder)
     listed = output.read_manifest(folder)
-    if listed is not None:
-        return listed
-    if (folder / "study.json").is_file():
+    if listed is None and (folder / "study.json").is_file():
         candidates = folder / "candidates"
-        inside = [] if candidates.is_symlink() else [
+        listed = {name for name in STUDY_FILES if (folder / name).is_file()} | (set() if (
+            candidates.is_symlink() or not candidates.is_dir()) else {
             p.relative_to(folder).as_posix() for p in candidates.rglob("*")
-            if p.is_file() or p.is_symlink()]
-        return {name for name in STUDY_FILES if (folder / name).is_file()} | set(inside)
+            if p.is_file() or p.is_symlink()})
+    if listed is not None:
+        return {name for name in listed if _STUDY_FILE.fullmatch(name)}
     return set() if (folder / CACHE_FOLDER).is_dir() else None
 
 
