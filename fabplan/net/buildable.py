@@ -66,13 +66,26 @@ def best_plane_normals(X: np.ndarray, mesh: QuadMesh) -> np.ndarray:
     iterate it may keep: a LAPACK call per 3 x 3 matrix would cost more than the rest).
     """
     sizes, ptr = mesh.face_sizes, mesh.face_indptr[:-1]
-    P = X[mesh.face_indices]
-    centres = np.add.reduceat(P, ptr, axis=0) / sizes[:, None]
-    D = P - np.repeat(centres, sizes, axis=0)
-    x, y, z = D.T
-    # the scatter matrix's six entries, summed over each face's corners
-    sxx, syy, szz, sxy, sxz, syz = np.add.reduceat(
-        np.stack([x * x, y * y, z * z, x * y, x * z, y * z], axis=1), ptr, axis=0).T
+    if len(sizes) and sizes.min() == sizes.max() == 4:
+        # quads only (most nets): corners in a (q, 4, 3) block, the vector area from the
+        # diagonals
+        P = X[mesh.face_indices].reshape(-1, 4, 3)
+        D = P - P.mean(axis=1, keepdims=True)
+        x, y, z = D[..., 0], D[..., 1], D[..., 2]
+        sxx, syy, szz = np.einsum("qk,qk->q", x, x), np.einsum("qk,qk->q", y, y), \
+            np.einsum("qk,qk->q", z, z)
+        sxy, sxz, syz = np.einsum("qk,qk->q", x, y), np.einsum("qk,qk->q", x, z), \
+            np.einsum("qk,qk->q", y, z)
+        area = np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 1])
+    else:
+        P = X[mesh.face_indices]
+        centres = np.add.reduceat(P, ptr, axis=0) / sizes[:, None]
+        D = P - np.repeat(centres, sizes, axis=0)
+        x, y, z = D.T
+        # the scatter matrix's six entries, summed over each face's corners
+        sxx, syy, szz, sxy, sxz, syz = np.add.reduceat(
+            np.stack([x * x, y * y, z * z, x * y, x * z, y * z], axis=1), ptr, axis=0).T
+        area = face_normals(X, mesh)
     # its smallest eigenvalue (trigonometric form for symmetric 3 x 3 matrices)
     q = (sxx + syy + szz) / 3
     off = sxy * sxy + sxz * sxz + syz * syz
@@ -92,7 +105,6 @@ def best_plane_normals(X: np.ndarray, mesh: QuadMesh) -> np.ndarray:
     pick = np.argmax(length, axis=0)
     rows = np.arange(len(sizes))
     best = length[pick, rows]
-    area = face_normals(X, mesh)
     normal = crosses[pick, rows] / np.maximum(best, 1e-300)[:, None]
     # a face whose corners lie on a line (no plane) keeps its vector area's direction
     normal = np.where((best > 1e-12 * np.maximum(q, 1e-300) ** 2)[:, None], normal, area)
@@ -124,11 +136,12 @@ def corner_turns(X: np.ndarray, mesh: QuadMesh) -> np.ndarray:
     return np.arctan2(sine, cosine)
 
 
-def crumpled(mesh: QuadMesh, X: np.ndarray, stars: np.ndarray, max_line_turn_deg: float = 90.0
-             ) -> bool:
+def crumpled(mesh: QuadMesh, X: np.ndarray, stars: np.ndarray, max_line_turn_deg: float = 90.0,
+             *, turns: np.ndarray | None = None) -> bool:
     """Whether a net has a non-convex face or a line turning more than the limit at one of
     its canonical `stars` (s, 5): the test `measure_buildable` counts, in one answer (the
-    solver asks it of every iterate it may keep)."""
+    solver asks it of every iterate it may keep). `turns`: the (s, 2) line turns
+    (radians, `fabplan.net.fairness.line_turns`) when they were found already."""
     turns = corner_turns(X, mesh)
     face = mesh.corner_faces
     tiny = 1e-9
@@ -137,8 +150,9 @@ def crumpled(mesh: QuadMesh, X: np.ndarray, stars: np.ndarray, max_line_turn_deg
         return True
     if len(stars) == 0:
         return False
-    turn, _ = line_turns(X, stars)
-    return bool(np.any(turn > np.radians(max_line_turn_deg)))
+    if turns is None:
+        turns, _ = line_turns(X, stars)
+    return bool(np.any(turns > np.radians(max_line_turn_deg)))
 
 
 @dataclass

@@ -42,6 +42,7 @@ from .constraints import (
     NormalCone,
     RulingAngle,
     StarAngleRange,
+    TurningFairness,
 )
 from .multilevel import (
     MAX_FINE_ROUGHNESS,
@@ -186,7 +187,8 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
         families.append(CoherentOrientation())
     if fairness:
-        families.append(Fairness())
+        families += [Fairness(), TurningFairness(0.5 * (limits or BuildLimits()).max_line_turn_deg,
+                                                 (limits or BuildLimits()).max_line_turn_deg)]
     families.append(EdgeCollapseBarrier())
     if reference is None and (closeness or glide or guards or max_deviation is not None):
         reference = ReferenceSurface.from_mesh(mesh)
@@ -251,7 +253,8 @@ def _admissible(mesh: QuadMesh, families: list,
     def admissible(state: NetState) -> bool:
         if fold_edge_mask(face_normals(state.X, mesh), edge_faces).any():
             return False
-        if crumpled(mesh, state.X, state.stars, limits.max_line_turn_deg):
+        if crumpled(mesh, state.X, state.stars, limits.max_line_turn_deg,
+                    turns=state.data.get("line_turns")):
             return False
         if bound is not None and float(bound.distances(state).max(initial=0.0)) > \
                 bound.limit / state.length_scale:

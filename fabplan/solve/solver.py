@@ -53,6 +53,10 @@ class SolverSettings:
         residual (Levenberg-Marquardt with damping proportional to the residual), which
         keeps the convergence quadratic near a solution.
     fairness_weight, closeness_weight : initial row weights of the soft families.
+    turning_fairness_weight, turning_fairness_fade : initial row weight of the fairness
+        that stays where lines turn (`fabplan.solve.constraints.TurningFairness`), and the
+        factor it fades by with every step: more slowly than `fade`, so that it still
+        pulls where a line starts to double back late in the solve.
     fade : factor applied to the soft weights after every step.
     stagnation : stop when the best hard residual has not improved by 10 % over this many
         iterations.
@@ -79,6 +83,8 @@ class SolverSettings:
     epsilon: float = 1e-3
     fairness_weight: float = 1e-3
     closeness_weight: float = 1e-2
+    turning_fairness_weight: float = 1.0
+    turning_fairness_fade: float = 0.5
     fade: float = 0.1
     stagnation: int = 15
     backend: str = "auto"
@@ -302,11 +308,15 @@ class GuidedProjection:
 
     def soft_weights(self, steps: int) -> dict[str, float]:
         """Row weight of every soft family after `steps` accepted steps: they fade with
-        every step (since the last `restart_soft_terms`)."""
+        every step (since the last `restart_soft_terms`), but for those that do not
+        (``fades = False``, e.g. `fabplan.solve.constraints.TurningFairness`)."""
         s = self.settings
         fade = s.fade ** max(steps - self._fade_start, 0)
-        soft = {"fairness": s.fairness_weight, "closeness": s.closeness_weight}
-        return {c.name: soft.get(c.name, 1.0) * fade for c in self.constraints if not c.hard}
+        soft = {"fairness": s.fairness_weight, "closeness": s.closeness_weight,
+                "turning-fairness": s.turning_fairness_weight}
+        slow = s.turning_fairness_fade ** max(steps - self._fade_start, 0)
+        return {c.name: soft.get(c.name, 1.0) * (fade if c.fades else slow)
+                for c in self.constraints if not c.hard}
 
     def _weights(self, steps: int) -> list[float]:
         """Row weight of every family, in the order of `constraints`."""

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...net.fairness import line_turns
 from .base import Constraint
 
-__all__ = ["Fairness", "fairness_stencils"]
+__all__ = ["Fairness", "TurningFairness", "fairness_stencils"]
 
 
 def fairness_stencils(mesh, stars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -55,3 +56,41 @@ class Fairness(Constraint):
     def evaluate(self, state):
         r = np.einsum("mk,mkj->mj", self._jac[::3], state.X[self._verts]).ravel()
         return r, self._jac
+
+
+class TurningFairness(Constraint):
+    """Fairness that stays where lines turn: the second differences of both lines at every
+    star, each weighted by how far its line turns past `start_deg` (0 up to it, rising
+    smoothly to 1 at `full_deg` and beyond), the weights taken from the turns at the start
+    of every iteration (`fabplan.net.fairness.line_turns`; left in ``state.data`` as
+    ``"line_turns"`` for the solver's test of an iterate).
+
+    A soft family that does not fade: where a line starts to double back it keeps being
+    pulled straight however far the solve has gone, while on lines that turn less it has
+    no weight and leaves the constraints to converge.
+    """
+
+    name = "turning-fairness"
+    hard = False
+    fades = False
+
+    def __init__(self, start_deg: float = 45.0, full_deg: float = 90.0):
+        if not 0.0 <= start_deg < full_deg:
+            raise ValueError(f"the turns must satisfy 0 <= start < full, got {start_deg}, {full_deg}")
+        self._start, self._span = np.radians(start_deg), np.radians(full_deg - start_deg)
+
+    def columns(self, state):
+        self._verts = np.concatenate([state.stars[:, [1, 0, 3]], state.stars[:, [2, 0, 4]]])
+        V = state.blocks.index("vertices")[self._verts]          # (m, 3, 3)
+        return V.transpose(0, 2, 1).reshape(-1, 3)
+
+    def prepare(self, state):
+        turn, _ = line_turns(state.X, state.stars)              # (s, 2)
+        state.data["line_turns"] = turn
+        weight = np.clip((turn.T.ravel() - self._start) / self._span, 0.0, 1.0) ** 2
+        self._weight = np.repeat(weight, 3)                       # a row per coordinate
+
+    def evaluate(self, state):
+        P = state.X[self._verts]
+        r = (P[:, 0] - 2 * P[:, 1] + P[:, 2]).ravel() * self._weight
+        return r, self._weight[:, None] * np.array([1.0, -2.0, 1.0])
