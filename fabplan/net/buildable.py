@@ -142,11 +142,11 @@ def crumpled(mesh: QuadMesh, X: np.ndarray, stars: np.ndarray, max_line_turn_deg
     its canonical `stars` (s, 5): the test `measure_buildable` counts, in one answer (the
     solver asks it of every iterate it may keep). `turns`: the (s, 2) line turns
     (radians, `fabplan.net.fairness.line_turns`) when they were found already."""
-    turns = corner_turns(X, mesh)
+    corners = corner_turns(X, mesh)
     face = mesh.corner_faces
     tiny = 1e-9
-    if np.any((np.bincount(face, turns < -tiny, minlength=len(mesh.face_sizes)) > 0)
-              & (np.bincount(face, turns > tiny, minlength=len(mesh.face_sizes)) > 0)):
+    if np.any((np.bincount(face, corners < -tiny, minlength=len(mesh.face_sizes)) > 0)
+              & (np.bincount(face, corners > tiny, minlength=len(mesh.face_sizes)) > 0)):
         return True
     if len(stars) == 0:
         return False
@@ -246,11 +246,11 @@ class BuildReport:
         if self.sharp_turns.size:
             v, n = int(self.sharp_turns[0]), self.sharp_turns.size
             parts.append(f"lines turn by more than {self.limits.max_line_turn_deg:g} deg at {n} "
-                         f"vertex{'es' if n > 1 else ''}, the worst {self.turn_deg[0]:.0f} deg at "
+                         f"{'vertices' if n > 1 else 'vertex'}, the worst {self.turn_deg[0]:.0f} deg at "
                          f"vertex {v} {_point(self.points[v])}")
         if self.far_vertices.size:
             v, n = int(self.far_vertices[0]), self.far_vertices.size
-            parts.append(f"{n} vertex{'es are' if n > 1 else ' is'} farther than "
+            parts.append(f"{n} {'vertices are' if n > 1 else 'vertex is'} farther than "
                          f"{self.limits.max_deviation:.4g} from the reference, the farthest "
                          f"vertex {v} {_point(self.points[v])} at {self.deviation[0]:.4g}")
         return "; ".join(parts)

@@ -245,8 +245,7 @@ def _admissible(mesh: QuadMesh, families: list,
     the solve holds, and no farther from the reference than at the start or one mean
     edge, whichever is more (when a closeness family says how far the net is)."""
     edge_faces = mesh.interior_edge_faces
-    closeness = next((f for f in families if isinstance(f, Closeness)
-                      and not isinstance(f, DeviationBound)), None)
+    closeness = next((f for f in families if isinstance(f, Closeness)), None)
     bound = next((f for f in families if isinstance(f, DeviationBound)), None)
     allowed: list[float] = []
 
@@ -479,6 +478,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
             else 0.0, progress)
         attempts += found
     chosen = min(attempts, key=Attempt.rank)
+    if deviation is not None and deviation["smallest_converged"] is not None:
+        # a net of the type within a looser limit: the one to write, off the design
+        chosen = found[0]
     solver, build, stop = chosen.solver, chosen.build, chosen.stop
     if handle_ids.size and solver.status != "converged":
         raise SolverError(f"the handles ask for a net that cannot be reached ({solver.status} after "

@@ -83,7 +83,7 @@ class SolverSettings:
     epsilon: float = 1e-3
     fairness_weight: float = 1e-3
     closeness_weight: float = 1e-2
-    turning_fairness_weight: float = 1.0
+    turning_fairness_weight: float = 1e-2
     turning_fairness_fade: float = 0.5
     fade: float = 0.1
     stagnation: int = 15
