@@ -42,7 +42,6 @@ from .constraints import (
     NormalCone,
     RulingAngle,
     StarAngleRange,
-    TurningFairness,
 )
 from .multilevel import (
     MAX_FINE_ROUGHNESS,
@@ -187,8 +186,8 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
         families.append(CoherentOrientation())
     if fairness:
-        families += [Fairness(), TurningFairness(0.5 * (limits or BuildLimits()).max_line_turn_deg,
-                                                 (limits or BuildLimits()).max_line_turn_deg)]
+        turn = (limits or BuildLimits()).max_line_turn_deg
+        families.append(Fairness(0.5 * turn, turn))
     families.append(EdgeCollapseBarrier())
     if reference is None and (closeness or glide or guards or max_deviation is not None):
         reference = ReferenceSurface.from_mesh(mesh)

@@ -8,7 +8,7 @@ import numpy as np
 from ...net.fairness import line_turns
 from .base import Constraint
 
-__all__ = ["Fairness", "TurningFairness", "fairness_stencils"]
+__all__ = ["Fairness", "fairness_stencils"]
 
 
 def fairness_stencils(mesh, stars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -42,10 +42,44 @@ def fairness_stencils(mesh, stars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class Fairness(Constraint):
-    """Soft smoothing term; the solver fades its weight out as the solve converges."""
+    """Soft smoothing term; the solver fades its weight out as the solve converges.
+
+    With `turn_start_deg` and `turn_full_deg`, the rows of the lines' second differences at
+    the stars also get a weight that stays where a line turns: `held` (rows,) is 0 where
+    the line turns by at most `turn_start_deg`, rising smoothly to 1 at `turn_full_deg`
+    and beyond, taken from the turns (`fabplan.net.fairness.line_turns`) at the start of
+    every iteration. The solver adds it, with a weight of its own that fades slowly
+    (`SolverSettings.turning_fairness_weight`), to the fading one: where a line starts to
+    double back it keeps being pulled straight however far the solve has gone, while
+    lines that turn less are left to the constraints. The turns are left in
+    ``state.data["line_turns"]`` for the solver's test of an iterate.
+    """
 
     name = "fairness"
     hard = False
+
+    def __init__(self, turn_start_deg: float | None = None, turn_full_deg: float | None = None):
+        self.turning = turn_start_deg is not None and turn_full_deg is not None
+        if self.turning:
+            assert turn_start_deg is not None and turn_full_deg is not None
+            if not 0.0 <= turn_start_deg < turn_full_deg:
+                raise ValueError(f"the turns must satisfy 0 <= start < full, got {turn_start_deg}, "
+                                 f"{turn_full_deg}")
+            self._start = float(np.radians(turn_start_deg))
+            self._span = float(np.radians(turn_full_deg - turn_start_deg))
+        self.held: np.ndarray | None = None
+
+    def prepare(self, state):
+        if not self.turning or len(state.stars) == 0 or not hasattr(self, "_jac"):
+            return      # (before `columns`, the solver's first look at the families)
+        turn, _ = line_turns(state.X, state.stars)               # (s, 2)
+        state.data["line_turns"] = turn
+        # the first rows are the stars' second differences, family 0 then 1
+        # (`fairness_stencils`), three rows (x, y, z) each
+        held = np.zeros(len(self._jac))
+        weight = np.clip((turn.T.ravel() - self._start) / self._span, 0.0, 1.0) ** 2
+        held[:3 * len(weight)] = np.repeat(weight, 3)
+        self.held = held
 
     def columns(self, state):
         self._verts, coef = fairness_stencils(state.mesh, state.stars)
@@ -57,40 +91,3 @@ class Fairness(Constraint):
         r = np.einsum("mk,mkj->mj", self._jac[::3], state.X[self._verts]).ravel()
         return r, self._jac
 
-
-class TurningFairness(Constraint):
-    """Fairness that stays where lines turn: the second differences of both lines at every
-    star, each weighted by how far its line turns past `start_deg` (0 up to it, rising
-    smoothly to 1 at `full_deg` and beyond), the weights taken from the turns at the start
-    of every iteration (`fabplan.net.fairness.line_turns`; left in ``state.data`` as
-    ``"line_turns"`` for the solver's test of an iterate).
-
-    A soft family that does not fade: where a line starts to double back it keeps being
-    pulled straight however far the solve has gone, while on lines that turn less it has
-    no weight and leaves the constraints to converge.
-    """
-
-    name = "turning-fairness"
-    hard = False
-    fades = False
-
-    def __init__(self, start_deg: float = 45.0, full_deg: float = 90.0):
-        if not 0.0 <= start_deg < full_deg:
-            raise ValueError(f"the turns must satisfy 0 <= start < full, got {start_deg}, {full_deg}")
-        self._start, self._span = np.radians(start_deg), np.radians(full_deg - start_deg)
-
-    def columns(self, state):
-        self._verts = np.concatenate([state.stars[:, [1, 0, 3]], state.stars[:, [2, 0, 4]]])
-        V = state.blocks.index("vertices")[self._verts]          # (m, 3, 3)
-        return V.transpose(0, 2, 1).reshape(-1, 3)
-
-    def prepare(self, state):
-        turn, _ = line_turns(state.X, state.stars)              # (s, 2)
-        state.data["line_turns"] = turn
-        weight = np.clip((turn.T.ravel() - self._start) / self._span, 0.0, 1.0) ** 2
-        self._weight = np.repeat(weight, 3)                       # a row per coordinate
-
-    def evaluate(self, state):
-        P = state.X[self._verts]
-        r = (P[:, 0] - 2 * P[:, 1] + P[:, 2]).ravel() * self._weight
-        return r, self._weight[:, None] * np.array([1.0, -2.0, 1.0])
