@@ -137,10 +137,10 @@ def test_the_baseline_counts_are_those_recorded():
 
 
 def test_a_crumpled_net_is_refused_with_its_worst_place(tmp_path, capsys):
-    """Without the guards and retries, an isogonal net forced to 60 deg on a noisy dome
+    """Without the guards and retries, an isogonal net forced to 60 deg on a noisy CMC net
     meets its constraints with darts: exit 3, 'crumpled', the worst place named."""
-    start = HARD_STARTS["dome-20"]()
-    path = tmp_path / "dome.obj"
+    start = HARD_STARTS["cmc1-12"]()
+    path = tmp_path / "cmc.obj"
     start.write_obj(path)
     out = tmp_path / "out.obj"
     code = main(["optimize", str(path), "--net", "isogonal", "--angle", "60", "--no-guards",
@@ -148,14 +148,14 @@ def test_a_crumpled_net_is_refused_with_its_worst_place(tmp_path, capsys):
     _, err = capsys.readouterr()
     record = json.loads(out.with_suffix(".json").read_text())
     own = check(*_obj(out))
-    assert code == 3 and record["status"] in ("crumpled", "folded")
-    assert not own["buildable"]
-    if record["status"] == "crumpled":
-        assert "crumpled" in err and "non-convex" in record["message"] + "lines turn"
-        worst = record["properties"]["buildable"]
-        assert worst["buildable"] is False
-        assert str((worst["nonconvex_faces"]["worst"] or worst["sharp_line_turns"]["worst"])["id"]) \
-            in record["message"]
+    assert code == 3 and record["status"] == "crumpled" and "ended crumpled" in err
+    assert not own["buildable"] and own["darts"] > 0
+    build = record["properties"]["buildable"]
+    assert build["buildable"] is False and build["nonconvex_faces"]["count"] == own["darts"]
+    worst = build["nonconvex_faces"]["worst"]
+    assert f"face {worst['id']} at" in record["message"]
+    assert f"{own['darts']} faces are non-convex" in record["message"]
+    assert "try the guards" in record["message"]
 
 
 def _obj(path: Path) -> tuple:
