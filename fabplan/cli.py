@@ -749,6 +749,12 @@ def layout_warnings(properties: dict) -> list:
     if folds.get("folded"):
         out.append(f"the net folds: {folds['flipped_faces']['count']} flipped faces (ids in the "
                    f"JSON under properties.folds), {folds['fold_edges']['count']} fold edges")
+    build = properties.get("buildable") or {}
+    if build.get("crumpled"):
+        out.append(f"the net is crumpled: {build['nonconvex_faces']['count']} non-convex panels, "
+                   f"lines turning more than {build['sharp_line_turns']['turn_above_deg']:g} deg "
+                   f"at {build['sharp_line_turns']['count']} vertices (ids and the worst places "
+                   "in the JSON under properties.buildable)")
     off = properties["distance_to_design_relative_to_panel"]["max"]
     if off > 0.01:
         chord = properties.get("design_chord_error") or 0.0

@@ -137,16 +137,26 @@ def corner_turns(X: np.ndarray, mesh: QuadMesh) -> np.ndarray:
 
 
 def crumpled(mesh: QuadMesh, X: np.ndarray, stars: np.ndarray, max_line_turn_deg: float = 90.0,
-             *, turns: np.ndarray | None = None) -> bool:
+             *, turns: np.ndarray | None = None, normals: np.ndarray | None = None) -> bool:
     """Whether a net has a non-convex face or a line turning more than the limit at one of
     its canonical `stars` (s, 5): the test `measure_buildable` counts, in one answer (the
     solver asks it of every iterate it may keep). `turns`: the (s, 2) line turns
-    (radians, `fabplan.net.fairness.line_turns`) when they were found already."""
-    corners = corner_turns(X, mesh)
+    (radians, `fabplan.net.fairness.line_turns`) when they were found already.
+    `normals`: (f, 3) face normals to judge the corners' turns by instead of the
+    least-squares planes' (the solver passes the vector-area normals it has: for a quad
+    the plane parallel to both diagonals, which differs from the least-squares plane only
+    on strongly twisted quads)."""
+    if normals is None:
+        sine = corner_turns(X, mesh)
+    else:
+        here = X[mesh.face_indices]
+        sine = np.einsum("ij,ij->i", np.cross(here - X[mesh.corner_previous_vertices],
+                                              X[mesh.corner_next_vertices] - here),
+                         normals[mesh.corner_faces])
     face = mesh.corner_faces
-    tiny = 1e-9
-    if np.any((np.bincount(face, corners < -tiny, minlength=len(mesh.face_sizes)) > 0)
-              & (np.bincount(face, corners > tiny, minlength=len(mesh.face_sizes)) > 0)):
+    tiny = 1e-9 * (float(np.abs(sine).max(initial=0.0)) if normals is not None else 1.0)
+    if np.any((np.bincount(face, sine < -tiny, minlength=len(mesh.face_sizes)) > 0)
+              & (np.bincount(face, sine > tiny, minlength=len(mesh.face_sizes)) > 0)):
         return True
     if len(stars) == 0:
         return False

@@ -249,10 +249,11 @@ def _admissible(mesh: QuadMesh, families: list,
     allowed: list[float] = []
 
     def admissible(state: NetState) -> bool:
-        if fold_edge_mask(face_normals(state.X, mesh), edge_faces).any():
+        normals = face_normals(state.X, mesh)
+        if fold_edge_mask(normals, edge_faces).any():
             return False
         if crumpled(mesh, state.X, state.stars, limits.max_line_turn_deg,
-                    turns=state.data.get("line_turns")):
+                    turns=state.data.get("line_turns"), normals=normals):
             return False
         if bound is not None and float(bound.distances(state).max(initial=0.0)) > \
                 bound.limit / state.length_scale:
