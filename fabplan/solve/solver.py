@@ -323,7 +323,7 @@ class GuidedProjection:
         slow = s.turning_fairness_weight * s.turning_fairness_fade ** max(steps - self._fade_start, 0)
         weights: list = []
         for c in self.constraints:
-            held = None if c.hard else getattr(c, "held", None)
+            held = None if c.hard else c.held
             w = 1.0 if c.hard else soft.get(c.name, 1.0)
             weights.append(w if held is None or slow == 0 else w + slow * held)
         return weights

@@ -82,6 +82,7 @@ class Constraint:
 
     name = "constraint"
     hard = True
+    held: np.ndarray | None = None    # (rows,) in [0, 1]: rows a soft family holds longer
 
     def declare(self, state: NetState) -> dict:
         """Variable blocks this family needs: name -> shape."""

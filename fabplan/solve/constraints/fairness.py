@@ -67,7 +67,6 @@ class Fairness(Constraint):
                                  f"{turn_full_deg}")
             self._start = float(np.radians(turn_start_deg))
             self._span = float(np.radians(turn_full_deg - turn_start_deg))
-        self.held: np.ndarray | None = None
 
     def prepare(self, state):
         if not self.turning or len(state.stars) == 0 or not hasattr(self, "_jac"):
