@@ -158,6 +158,16 @@ def hard_summary(records: list) -> str:
     return "\n".join(rows)
 
 
+def write_run(label: str, records: list, **extra) -> Path:
+    """Write a run's records to ``results/corpus-<label>.json`` with where it ran."""
+    RESULTS.mkdir(exist_ok=True)
+    out = RESULTS / f"corpus-{label}.json"
+    out.write_text(json.dumps({"label": label, "fabplan": fabplan.__file__,
+                               "machine": f"{platform.machine()}, {platform.python_version()}",
+                               **extra, "cases": records}, indent=1))
+    return out
+
+
 def run_hard(args) -> int:
     records = []
     names = args.starts_named or list(HARD_STARTS)
@@ -171,11 +181,7 @@ def run_hard(args) -> int:
             print(f"{r['start']:<12} {r['net']:<13} {r['status']:<12} exit {r['exit']} "
                   f"darts {own.get('darts', '-')} turn {_fmt(own.get('turn_max'))} "
                   f"ratio {_fmt(own.get('edge_ratio_max'), '.2f')} {r['seconds']:.1f} s", flush=True)
-    RESULTS.mkdir(exist_ok=True)
-    out = RESULTS / f"corpus-{args.label}.json"
-    out.write_text(json.dumps({"label": args.label, "fabplan": fabplan.__file__,
-                               "machine": f"{platform.machine()}, {platform.python_version()}",
-                               "summary": hard_summary(records), "cases": records}, indent=1))
+    out = write_run(args.label, records, summary=hard_summary(records))
     print(hard_summary(records))
     print(f"wrote {out}")
     return 0
@@ -263,11 +269,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"boundary {r.get('boundary_panels')} flipped {r.get('boundary_flipped')} "
                       f"patches {r.get('boundary_patches')} "
                       f"turn {_fmt(r.get('line_turn_max'))} {r['seconds']:.1f} s", flush=True)
-    RESULTS.mkdir(exist_ok=True)
-    out = RESULTS / f"corpus-{args.label}.json"
-    out.write_text(json.dumps({"label": args.label, "fabplan": fabplan.__file__,
-                               "machine": f"{platform.machine()}, {platform.python_version()}",
-                               "cases": records}, indent=1))
+    out = write_run(args.label, records)
     print(table(records))
     print(f"wrote {out}")
     return 0
