@@ -531,6 +531,7 @@ def _cmd_layout(args) -> int:
 
     preset = get_net(args.net)
     _check_layout_options(args, preset)
+    check_limits(None, args.max_line_turn)
     out = Path(args.output)
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")

@@ -231,3 +231,24 @@ def test_optimize_max_deviation_on_the_command_line(tmp_path, capsys):
         smallest = record["parameters"]["deviation"]["smallest_converged"]
         assert smallest is not None and d.max() <= smallest * (1 + 1e-6)
         assert f"--max-deviation {smallest:.4g}" in record["message"]
+
+
+def test_layout_and_measure_refuse_bad_limits_before_working(tmp_path, capsys):
+    out = tmp_path / "out.obj"
+    assert main(["layout", "paraboloid", "--net", "snet", "--panel-size", "1",
+                 "--max-line-turn", "-5", "-o", str(out)]) == 2
+    assert "--max-line-turn" in capsys.readouterr().err and not out.exists()
+    net = str(fabplan.data_path("cmc1.obj"))
+    assert main(["measure", net, "--max-deviation", "0.1", "-o", str(tmp_path / "m.json")]) == 2
+    assert "--max-deviation needs --reference" in capsys.readouterr().err
+    assert main(["measure", net, "--reference", net, "--max-deviation", "0.1", "--max-line-turn", "5",
+                 "-o", str(tmp_path / "m.json")]) == 0
+    record = json.loads((tmp_path / "m.json").read_text())["buildable"]
+    turns = line_turns(*_stars_of(QuadMesh.from_obj(net)))[0]
+    assert record["sharp_line_turns"]["count"] == int(np.sum((turns > 5).any(axis=1)))
+    assert record["far_vertices"]["count"] == 0 and record["buildable"] is False
+    assert "not buildable" in capsys.readouterr().out
+
+
+def _stars_of(mesh: QuadMesh) -> tuple:
+    return mesh.vertices, interior_stars(mesh.faces, mesh.vertex_count)
