@@ -16,6 +16,18 @@ the angle range, folds and seconds. A run writes ``benchmarks/results/corpus-<la
 and prints a markdown table; ``--summarize`` prints the median and worst line turn and the
 coverage per net type for several runs side by side (for example the code of two commits,
 each run with its checkout on ``PYTHONPATH``).
+
+``--hard`` runs the hard starts instead (`designs.HARD_STARTS`: seeded noisy domes,
+saddles, towers, helicoids, facades and the bundled nets), each optimized as it is
+(`fabplan.optimize`) as ``snet``, ``isogonal`` at 60 deg and ``const-radius``. Each case
+records fabplan's status and exit code (0 converged, 3 not, 2 refused) beside an
+independent check of the net written (`check_buildable.py`, no fabplan code: darts, lines
+turning over 90 deg, edge ratios); the summary counts per net type the cases converged,
+converged and buildable by that check, converged but crumpled (which must be none), and
+every other status::
+
+    python benchmarks/bench_corpus.py --hard --label hard-baseline
+    python benchmarks/bench_corpus.py --hard --starts-named dome-08 tower-14 --nets snet
 """
 
 from __future__ import annotations
@@ -32,13 +44,15 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from designs import DESIGNS  # noqa: E402
+from check_buildable import check  # noqa: E402
+from designs import DESIGNS, HARD_STARTS  # noqa: E402
 
 import fabplan  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 NETS = [("snet", None), ("orthogonal", None), ("isogonal", 60.0), ("const-radius", None)]
 PANELS = (150, 500)
+HARD_NETS = [("snet", None), ("isogonal", 60.0), ("const-radius", None)]
 
 
 def line_turns_deg(X: np.ndarray, stars: np.ndarray) -> np.ndarray:
@@ -101,6 +115,78 @@ def run_case(design, net: str, angle: float | None, panels: int, starts: int = 1
     return record
 
 
+def run_hard_case(name: str, net: str, angle: float | None) -> dict:
+    """Optimize the hard start `name` as `net`; fabplan's status beside the independent
+    check of the net it writes."""
+    start = HARD_STARTS[name]()
+    record: dict = {"start": name, "net": net if angle is None else f"{net}-{angle:g}",
+                    "vertices": start.vertex_count, "start_check": check(start.vertices, start.faces)}
+    t0 = time.perf_counter()
+    try:
+        result = fabplan.optimize(start, net, angle=angle)
+    except fabplan.FabplanError as exc:
+        record.update(status="refused", exit=2, converged=False, message=str(exc),
+                      seconds=time.perf_counter() - t0)
+        return record
+    seconds = time.perf_counter() - t0
+    own = check(result.mesh.vertices, result.mesh.faces)
+    folds = result.properties.get("folds") or {}
+    record.update(status=result.status, exit=0 if result.converged else 3,
+                  converged=bool(result.converged), message=result.message,
+                  iterations=result.iterations, check=own, folded=folds.get("folded"),
+                  crumpled=bool(result.converged and not own["buildable"]),
+                  seconds=seconds)
+    return record
+
+
+def hard_summary(records: list) -> str:
+    """Counts per net type: converged, converged and buildable (independent check),
+    converged but crumpled, and the other statuses."""
+    rows = ["| net | cases | converged | converged and buildable | converged but crumpled | "
+            "other statuses (exit 3 or 2) |", "|---|---|---|---|---|---|"]
+    groups = sorted({r["net"] for r in records}) + ["all"]
+    for net in groups:
+        cases = [r for r in records if net in ("all", r["net"])]
+        ok = [r for r in cases if r["converged"]]
+        good = [r for r in ok if r["check"]["buildable"]]
+        others: dict = {}
+        for r in cases:
+            if not r["converged"]:
+                others[r["status"]] = others.get(r["status"], 0) + 1
+        rows.append(f"| {net} | {len(cases)} | {len(ok)} | {len(good)} | {len(ok) - len(good)} | "
+                    + ", ".join(f"{k} {v}" for k, v in sorted(others.items())) + " |")
+    return "\n".join(rows)
+
+
+def write_run(label: str, records: list, **extra) -> Path:
+    """Write a run's records to ``results/corpus-<label>.json`` with where it ran."""
+    RESULTS.mkdir(exist_ok=True)
+    out = RESULTS / f"corpus-{label}.json"
+    out.write_text(json.dumps({"label": label, "fabplan": fabplan.__file__,
+                               "machine": f"{platform.machine()}, {platform.python_version()}",
+                               **extra, "cases": records}, indent=1))
+    return out
+
+
+def run_hard(args) -> int:
+    records = []
+    names = args.starts_named or list(HARD_STARTS)
+    for name in names:
+        for net, angle in HARD_NETS:
+            if net not in args.nets:
+                continue
+            r = run_hard_case(name, net, angle)
+            records.append(r)
+            own = r.get("check") or {}
+            print(f"{r['start']:<12} {r['net']:<13} {r['status']:<12} exit {r['exit']} "
+                  f"darts {own.get('darts', '-')} turn {_fmt(own.get('turn_max'))} "
+                  f"ratio {_fmt(own.get('edge_ratio_max'), '.2f')} {r['seconds']:.1f} s", flush=True)
+    out = write_run(args.label, records, summary=hard_summary(records))
+    print(hard_summary(records))
+    print(f"wrote {out}")
+    return 0
+
+
 def _fmt(v, spec=".1f") -> str:
     return "-" if v is None else format(v, spec)
 
@@ -156,7 +242,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--starts", type=int, default=1,
                         help="lay out and solve every case from this many starts and keep the "
                              "fairest (fabplan.layout.starts; 1: one layout, one solve)")
+    parser.add_argument("--hard", action="store_true",
+                        help="optimize the hard starts (designs.HARD_STARTS) instead of laying "
+                             "out the designs")
+    parser.add_argument("--starts-named", nargs="*", default=None, choices=list(HARD_STARTS),
+                        metavar="START", help="with --hard: these starts only")
     args = parser.parse_args(argv)
+    if args.hard:
+        if args.nets == [n for n, _ in NETS]:
+            args.nets = [n for n, _ in HARD_NETS]
+        return run_hard(args)
     if args.summarize:
         print(summarize(args.summarize))
         return 0
@@ -174,11 +269,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"boundary {r.get('boundary_panels')} flipped {r.get('boundary_flipped')} "
                       f"patches {r.get('boundary_patches')} "
                       f"turn {_fmt(r.get('line_turn_max'))} {r['seconds']:.1f} s", flush=True)
-    RESULTS.mkdir(exist_ok=True)
-    out = RESULTS / f"corpus-{args.label}.json"
-    out.write_text(json.dumps({"label": args.label, "fabplan": fabplan.__file__,
-                               "machine": f"{platform.machine()}, {platform.python_version()}",
-                               "cases": records}, indent=1))
+    out = write_run(args.label, records)
     print(table(records))
     print(f"wrote {out}")
     return 0

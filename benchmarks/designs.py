@@ -119,3 +119,105 @@ DESIGNS: dict[str, Callable[[], DesignSurface]] = {
     "l-facade": lambda: _cut("l-facade", _wavy, 14, 10, lambda x, y: ~((x > 8) & (y > 5))),
     "long-band": lambda: _cut("long-band", _wavy, 40, 3, lambda x, y: x == x, cells=300),
 }
+
+
+# ------------------------------------------------------------------------ hard starts
+# Quad nets to optimize as they are (`fabplan.optimize`), seeded, none tuned for: smooth
+# nets of the kinds below with every vertex moved by seeded noise, so that a solve must
+# find a net of the asked type near a start that is none. Every start is a net a
+# designer could hand in: no non-convex quad, no line turning by more than 60 deg.
+#
+# ==========================  ===============================================================
+# ``dome-N``                  paraboloid cap over a square grid (both curvatures of one sign)
+# ``saddle-N``                hyperbolic paraboloid over a square grid (curvatures of two signs)
+# ``monkey-N``                ``z = (x^3 - 3 x y^2) / k``: a flat umbilic in the middle
+# ``tower-N``                 a hyperboloid tower of revolution, a full ring of quads
+# ``helicoid-N``              a patch of a helicoid (a minimal surface: K < 0 everywhere)
+# ``wavy-N``                  the wavy facade of ``door-facade`` on a grid at 60 deg
+# ``wein99-N``, ``cmc1-N``    the bundled S-nets computed by the paper's authors
+# ==========================  ===============================================================
+# N names the noise (in hundredths of the mean edge) and the seed follows the name's order.
+
+def _grid_faces(m: int, k: int, *, ring: bool = False) -> np.ndarray:
+    """(f, 4) int, the quads of an (m, k) grid of vertices ``i * k + j``; with `ring`
+    the last column joins the first (a closed band)."""
+    idx = np.arange(m * k).reshape(m, k)
+    if ring:
+        idx = np.concatenate([idx, idx[:, :1]], axis=1)
+    return np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], axis=-1).reshape(-1, 4)
+
+
+def _with_noise(points: np.ndarray, faces: np.ndarray, noise: float, seed: int, name: str):
+    """A QuadMesh on `points` (n, 3) and `faces` with every vertex moved by a seeded random
+    vector of length `noise` x its mean edge (its direction uniform on the sphere)."""
+    from fabplan.net.mesh import QuadMesh
+
+    mesh = QuadMesh(points.reshape(-1, 3), faces, name=name)
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=mesh.vertices.shape)
+    d *= noise * mesh.mean_edge_length / np.linalg.norm(d, axis=1, keepdims=True)
+    return mesh.with_vertices(mesh.vertices + d)
+
+
+def _height_grid(f: Callable, m: int, k: int, spacing: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    i, j = np.meshgrid((np.arange(m) - (m - 1) / 2) * spacing,
+                       (np.arange(k) - (k - 1) / 2) * spacing, indexing="ij")
+    return np.stack([i, j, f(i, j)], axis=-1), _grid_faces(m, k)
+
+
+def _tower(m: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """A hyperboloid of one sheet (neck radius 4 at half height 6), m rings of k vertices."""
+    z = np.linspace(-6.0, 6.0, m)
+    phi = np.linspace(0.0, 2 * np.pi, k, endpoint=False)
+    Z, P = np.meshgrid(z, phi, indexing="ij")
+    r = 4.0 * np.sqrt(1 + (Z / 8.0) ** 2)
+    return np.stack([r * np.cos(P), r * np.sin(P), Z], axis=-1), _grid_faces(m, k, ring=True)
+
+
+def _helicoid(m: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    u, v = np.meshgrid(np.linspace(1.0, 6.0, m), np.linspace(0.0, 1.6, k), indexing="ij")
+    return np.stack([u * np.cos(v), u * np.sin(v), 2.0 * v], axis=-1), _grid_faces(m, k)
+
+
+def _wavy_grid(m: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    i, j = np.meshgrid(np.arange(m) * 0.5, np.arange(k) * 0.5, indexing="ij")
+    x, y = i + 0.5 * j, j * np.sqrt(3) / 2
+    return np.stack([x, y, _wavy(x, y)], axis=-1), _grid_faces(m, k)
+
+
+def _bundled(name: str) -> tuple[np.ndarray, np.ndarray]:
+    import fabplan
+
+    mesh = fabplan.QuadMesh.from_obj(fabplan.data_path(name))
+    return mesh.vertices, mesh.quads
+
+
+_SMOOTH_STARTS: dict[str, Callable[[], tuple[np.ndarray, np.ndarray]]] = {
+    "dome": lambda: _height_grid(lambda x, y: -(x * x + y * y) / 16.0, 15, 15),
+    "saddle": lambda: _height_grid(lambda x, y: (x * x - y * y) / 12.0, 15, 13),
+    "monkey": lambda: _height_grid(lambda x, y: (x**3 - 3 * x * y * y) / 60.0, 14, 14),
+    "tower": lambda: _tower(13, 24),
+    "helicoid": lambda: _helicoid(14, 12),
+    "wavy": lambda: _wavy_grid(22, 14),
+    "wein99": lambda: _bundled("wein99.obj"),
+    "cmc1": lambda: _bundled("cmc1.obj"),
+}
+
+# (smooth net, noise in mean edges) for each hard start; seeds by position
+_HARD_NOISE: list[tuple[str, float]] = [
+    (kind, noise) for kind in ("dome", "saddle", "tower", "helicoid", "wavy")
+    for noise in (0.08, 0.14, 0.20)] + [
+    ("monkey", 0.05), ("monkey", 0.10), ("monkey", 0.14),
+    ("wein99", 0.01), ("wein99", 0.05), ("cmc1", 0.02), ("cmc1", 0.08), ("cmc1", 0.12)]
+
+
+def _hard_start(kind: str, noise: float, seed: int):
+    def make():
+        points, faces = _SMOOTH_STARTS[kind]()
+        return _with_noise(points, faces, noise, seed, f"{kind}-{round(100 * noise):02d}")
+    return make
+
+
+#: name -> a function making the start (`fabplan.QuadMesh`), seeded
+HARD_STARTS: dict = {f"{kind}-{round(100 * noise):02d}": _hard_start(kind, noise, seed)
+                     for seed, (kind, noise) in enumerate(_HARD_NOISE)}

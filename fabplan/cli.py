@@ -28,12 +28,20 @@ from .io.output import (
 )
 from .io.records import write_json
 from .io.units import DEFAULT_UNITS, MM_PER_UNIT, UNIT_WORDS, units_warning
+from .net.buildable import BuildLimits
 from .net.measure import format_summary, measure_net
 from .net.validate import load_net, net_units_warning
 from .report.html import counted, panel_areas
 from .report.progress import Progress
 from .solve.net_types import NETS, check_angle, check_radius
-from .solve.optimize import boundary_path, check_net_input, optimize, read_fixed, read_handles
+from .solve.optimize import (
+    boundary_path,
+    check_limits,
+    check_net_input,
+    optimize,
+    read_fixed,
+    read_handles,
+)
 from .solve.reference import load_reference
 from .solve.solver import SolverSettings
 
@@ -53,12 +61,16 @@ def _cmd_nets(args) -> int:
 def _cmd_measure(args) -> int:
     out = (output_argument(args.output) if args.output is not None
            else Path(args.net).with_suffix(".measure.json"))
+    check_limits(args.max_deviation, args.max_line_turn)
+    if args.max_deviation is not None and args.reference is None:
+        raise InputError("--max-deviation needs --reference: the surface to measure the distance to")
     _check_outputs([out], {**_net_inputs(args.net), **_file_inputs((args.reference, "the reference"))})
     mesh = load_net(args.net)
     units = _net_units(args, args.net)
     _check_units(args, mesh, units)
     reference = _reference(args.reference)
-    record = measure_net(mesh, reference=reference)
+    record = measure_net(mesh, reference=reference, limits=BuildLimits(
+        max_line_turn_deg=args.max_line_turn, max_deviation=args.max_deviation))
     record["file"] = str(args.net)
     record["units"] = units
     write_json(out, record)           # the file first: the terminal may go away
@@ -229,7 +241,8 @@ def _solver_options(args, progress: Progress) -> tuple[SolverSettings, _Iteratio
 
 def _warn_not_converged(result, json_path: Path) -> None:
     what = {"iteration cap": "stopped at the iteration cap", "folded": "ended folded",
-            "degenerate": "ended degenerate"}.get(
+            "degenerate": "ended degenerate", "crumpled": "ended crumpled",
+            "off-design": "ended off the design"}.get(
         result.status, f"stopped ({result.status})")
     said = f"stopped ({result.status}) "
     # the status is said once: "stopped (stagnated) with ..." continues the sentence
@@ -302,6 +315,7 @@ def _reference(spec: str | None):
 def _cmd_optimize(args) -> int:
     check_angle(args.angle)
     check_radius(args.radius)
+    check_limits(args.max_deviation, args.max_line_turn)
     if args.max_iter is not None and args.max_iter < 1:
         raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
     _check_option_files((None if args.fix == "boundary" else args.fix, "a file of vertex ids"),
@@ -321,7 +335,9 @@ def _cmd_optimize(args) -> int:
         result = optimize(mesh, args.net, angle=args.angle, radius=args.radius,
                           reference=reference, fixed=fixed, handles=handles, settings=settings,
                           coherent=args.coherent, guards=args.guards,
-                          settle_free=0.0 if args.settle_free else None, progress=report)
+                          settle_free=0.0 if args.settle_free else None,
+                          max_deviation=args.max_deviation, max_line_turn=args.max_line_turn,
+                          progress=report)
     result.properties["units"] = units
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
@@ -636,6 +652,7 @@ def _cmd_layout(args) -> int:
 
     preset = get_net(args.net)
     _check_layout_options(args, preset)
+    check_limits(None, args.max_line_turn)
     out = output_argument(args.output)
     if out.suffix.lower() != ".obj":
         raise InputError(f"{out}: the output must be an .obj file")
@@ -671,7 +688,8 @@ def _cmd_layout(args) -> int:
             design, args.panel_size, preset.name, angle=start,
             net_angle=args.angle if preset.angle == "param" else None, family=args.family,
             settings=settings_layout, solver=settings, starts=args.starts,
-            vary_smoothing=args.smoothing is None, progress=report, on_start=starting)
+            vary_smoothing=args.smoothing is None, progress=report, on_start=starting,
+            max_line_turn=args.max_line_turn)
     result.properties["units"] = units
     angle = result.parameters.get("angle_deg")
     title = (f"{preset.name} on {Path(design.name).name}, panel {args.panel_size:g}"
@@ -869,6 +887,12 @@ def layout_warnings(properties: dict) -> list:
     if folds.get("folded"):
         out.append(f"the net folds: {folds['flipped_faces']['count']} flipped faces (ids in the "
                    f"JSON under properties.folds), {folds['fold_edges']['count']} fold edges")
+    build = properties.get("buildable") or {}
+    if build.get("crumpled"):
+        out.append(f"the net is crumpled: {build['nonconvex_faces']['count']} non-convex panels, "
+                   f"lines turning more than {build['sharp_line_turns']['turn_above_deg']:g} deg "
+                   f"at {build['sharp_line_turns']['count']} vertices (ids and the worst places "
+                   "in the JSON under properties.buildable)")
     off = properties["distance_to_design_relative_to_panel"]["max"]
     if off > 0.01:
         chord = properties.get("design_chord_error") or 0.0
@@ -1208,6 +1232,13 @@ def _add_max_panels(p: argparse.ArgumentParser) -> None:
                         "half the available memory holds, at least 20000)")
 
 
+def _add_max_line_turn(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-line-turn", type=float, default=90.0, metavar="DEG",
+                   help="a converged net's lines turn in the surface by at most DEG at any vertex "
+                        "(default 90: over it a line doubles back); a net within tolerance that "
+                        "turns more, or has a non-convex quad, ends 'crumpled' (exit 3)")
+
+
 def _add_verbosity(p: argparse.ArgumentParser) -> None:
     """-q and -v, the same for every long-running command (`fabplan.report.progress`)."""
     level = p.add_mutually_exclusive_group()
@@ -1228,6 +1259,10 @@ def _add_measure(sub: Any) -> None:
     p.add_argument("-o", "--output", help="JSON file to write (default: NET.measure.json)")
     p.add_argument("--reference", help="surface to measure the distance to (OBJ/STL/PLY/OFF, "
                                        "FILE.3dm[#...] or a built-in surface)")
+    p.add_argument("--max-deviation", type=float, metavar="D",
+                   help="count the vertices farther than D (model units) from --reference as "
+                        "keeping the net from being built")
+    _add_max_line_turn(p)
     _add_units(p)
     p.set_defaults(func=_cmd_measure)
 
@@ -1259,6 +1294,11 @@ def _add_optimize(sub: Any) -> None:
                    help="move the vertices in no star (zigzag boundary tips, patch corners), "
                         "which no condition of the net holds, onto the surface the net "
                         "continues, so that the panels at them meet their neighbours' molds")
+    p.add_argument("--max-deviation", type=float, metavar="D",
+                   help="keep every vertex within D (model units) of the reference: a limit held "
+                        "in the solve; a net type that cannot keep to it ends 'off-design' (exit "
+                        "3) with the smallest limit it reached")
+    _add_max_line_turn(p)
     p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
     p.add_argument("--no-multilevel", action="store_true",
                    help="solve a large grid net at full size from the start (by default, from "
@@ -1403,6 +1443,7 @@ def _add_layout(sub: Any) -> None:
                         "the first start's, whose lines turn least (default 5; 1 is the "
                         "fastest)")
     _add_max_panels(p)
+    _add_max_line_turn(p)
     p.add_argument("-o", "--output", required=True,
                    help="output OBJ; its .json and .png sit beside it")
     _add_html(p)

@@ -268,6 +268,7 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
                   starts: int = MAX_STARTS, vary_smoothing: bool = True,
                   progress: Callable[[IterationRecord], None] | None = None,
                   on_start: Callable[[int, int, str], None] | None = None,
+                  max_line_turn: float = 90.0,
                   ) -> tuple[SurfaceLayout, OptimizationResult]:
     """Lay out and glide a net from each of `layout_starts` and keep the fairest.
 
@@ -283,6 +284,8 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
     vary_smoothing : whether a longer smoothing is one of them (see `layout_starts`).
     progress : the solver's callback, for every start's iterations.
     on_start : called as ``on_start(k, n, name)`` before start k (0-based) of n.
+    max_line_turn : a converged net's lines turn by at most this (degrees; see
+        `fabplan.optimize`).
 
     Returns
     -------
@@ -333,7 +336,7 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
                     first = layout
             edges = _edges_of(tried[0]) if start.even and tried else EDGE_RANGE
             result = glide(layout, net, angle=net_angle, settings=replace(solver, **start.solver),
-                           progress=progress, edge_range=edges)
+                           progress=progress, edge_range=edges, max_line_turn=max_line_turn)
             tried.append(_Tried(start, layout, result, None, time.perf_counter() - clock))
         except (FabplanError, ArithmeticError, np.linalg.LinAlgError) as exc:
             # this start's lattice does not hold together, or its solve broke down: the

@@ -807,7 +807,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
           fixed: np.ndarray | None = None, surface_tolerance: float = SURFACE_TOLERANCE,
           progress: Callable[[IterationRecord], None] | None = None,
           boundary_panels: bool = True,
-          edge_range: tuple[float, float] = EDGE_RANGE) -> OptimizationResult:
+          edge_range: tuple[float, float] = EDGE_RANGE,
+          max_line_turn: float = 90.0) -> OptimizationResult:
     """Optimize a layout into a net of type `net` while it glides on the design surface.
 
     The vertices are held within `surface_tolerance` panel sizes of the design surface
@@ -818,7 +819,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     Nets with a prescribed family are held on the surface (its levels are read there).
     A net that only starts another solve needs no boundary panels (``boundary_panels=False``:
     its trim to the design is left out). `edge_range`: the edges' lengths allowed, in
-    panel sizes (`EDGE_RANGE` by default).
+    panel sizes (`EDGE_RANGE` by default). `max_line_turn`: a converged net's lines turn by
+    at most this (degrees; see `fabplan.optimize`).
 
     Returns
     -------
@@ -856,7 +858,7 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
                       fixed=fixed, settings=settings, glide=True,
                       glide_boundary=layout.gliding_boundary,
                       surface_tolerance=tolerance * layout.panel_size, extra=extra,
-                      progress=progress)
+                      max_line_turn=max_line_turn, progress=progress)
     X = result.mesh.vertices
     d = design.distances(X)
     length = np.linalg.norm(X[result.mesh.edges[:, 0]] - X[result.mesh.edges[:, 1]], axis=1)

@@ -193,6 +193,13 @@ def net_numbers(record: dict, *, units: str, mm_per_unit: float,
         flipped = (folds.get("flipped_faces") or {}).get("count", 0)
         rows.append(["folds", "none" if not folds.get("folded") else
                      counted(int(flipped), "flipped panel"), ""])
+    build = props.get("buildable")
+    if build is not None:
+        darts = int(build["nonconvex_faces"]["count"])
+        sharp = int(build["sharp_line_turns"]["count"])
+        rows.append(["darts and lines doubling back", "none" if not (darts or sharp) else
+                     f"{counted(darts, 'non-convex panel')}, {counted(sharp, 'sharp line turn')}",
+                     ""])
     return rows
 
 

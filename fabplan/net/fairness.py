@@ -51,19 +51,18 @@ def line_turns(X: np.ndarray, stars: np.ndarray) -> tuple[np.ndarray, np.ndarray
     >>> np.degrees(turn).round(3).tolist(), ratio.round(4).tolist()
     ([[5.711, 0.0]], [[1.005, 1.0]])
     """
-    P = X[stars]
-    v = P[:, 0]
+    P = X[stars]                                        # (s, 5, 3)
     normal = _unit(np.cross(P[:, 3] - P[:, 1], P[:, 4] - P[:, 2]))
-    turn, ratio = np.zeros((len(stars), 2)), np.ones((len(stars), 2))
-    for family, (a, b) in enumerate(((1, 3), (2, 4))):
-        before, after = v - P[:, a], P[:, b] - v
-        la, lb = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
-        ratio[:, family] = np.maximum(la, lb) / np.maximum(np.minimum(la, lb), 1e-300)
-        # projected on the tangent plane: the bending along the surface is left out
-        pa = _unit(before - np.sum(before * normal, axis=1, keepdims=True) * normal)
-        pb = _unit(after - np.sum(after * normal, axis=1, keepdims=True) * normal)
-        turn[:, family] = np.arccos(np.clip(np.sum(pa * pb, axis=1), -1.0, 1.0))
-    return turn, ratio
+    E = P[:, 1:] - P[:, :1]                             # v -> v1, v2, v3, v4
+    length = np.sqrt(np.einsum("sij,sij->si", E, E))
+    ratio = np.maximum(length[:, :2], length[:, 2:]) / np.maximum(
+        np.minimum(length[:, :2], length[:, 2:]), 1e-300)
+    # projected on the tangent plane: the bending along the surface is left out
+    T = E - np.einsum("sij,sj->si", E, normal)[:, :, None] * normal[:, None, :]
+    size = np.maximum(np.sqrt(np.einsum("sij,sij->si", T, T)), 1e-300)
+    # a line a - v - b turns by the angle between v - a and b - v
+    cosine = -np.einsum("sij,sij->si", T[:, :2], T[:, 2:]) / (size[:, :2] * size[:, 2:])
+    return np.arccos(np.clip(cosine, -1.0, 1.0)), ratio
 
 
 def _worst(values: np.ndarray, where: np.ndarray, X: np.ndarray) -> dict:

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .buildable import BuildLimits, measure_buildable
 from .fairness import fairness_record
 from .folds import SurfaceWithNormals, measure_folds
 from .geometry import (
@@ -26,7 +27,7 @@ from .geometry import (
 if TYPE_CHECKING:
     from .mesh import QuadMesh
 
-__all__ = ["measure_net", "format_summary"]
+__all__ = ["measure_net", "format_summary", "buildable_summary"]
 
 
 def _stats(values: np.ndarray) -> dict:
@@ -39,7 +40,8 @@ def _stats(values: np.ndarray) -> dict:
             "mean": float(v.mean()), "count": int(v.size)}
 
 
-def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None) -> dict:
+def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None,
+                limits: BuildLimits | None = None) -> dict:
     """Measure the S-net properties of a quad mesh.
 
     Parameters
@@ -47,13 +49,18 @@ def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None) 
     mesh : `fabplan.mesh.QuadMesh`
     reference : optional reference surface (`fabplan.solve.reference.ReferenceSurface` or a
         design surface's) to measure the distance to, and to judge flipped faces against.
+    limits : what a buildable net keeps to (`fabplan.net.buildable.BuildLimits`; the
+        default: lines turning by at most 90 deg, no deviation limit).
 
     Returns
     -------
     dict, JSON-ready. Lengths are in model units; ``*_relative`` values are divided by the
     mean edge length; angles are in degrees; ``folds`` holds the counts and element ids
-    of `fabplan.net.folds.measure_folds`, ``fairness`` the line turns, edge ratios and
-    angle range of `fabplan.net.fairness.fairness_record` with their worst places.
+    of `fabplan.net.folds.measure_folds`, ``buildable`` the non-convex and self-crossing
+    faces, sharp line turns, edge jumps and far vertices of
+    `fabplan.net.buildable.measure_buildable` with their worst places, ``fairness`` the
+    line turns, edge ratios and angle range of `fabplan.net.fairness.fairness_record`
+    with their worst places.
     """
     X = mesh.vertices
     L = mesh.mean_edge_length
@@ -94,7 +101,10 @@ def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None) 
         d = reference.distances(X)
         record["distance_to_reference"] = _stats(d)
         record["distance_to_reference_relative"] = _stats(d / L)
-    record["folds"] = measure_folds(mesh, reference=reference).record()
+    folds = measure_folds(mesh, reference=reference)
+    record["folds"] = folds.record()
+    record["buildable"] = measure_buildable(mesh, reference=reference, limits=limits,
+                                            folds=folds).record()
     record["fairness"] = fairness_record(mesh)
     return record
 
@@ -142,8 +152,28 @@ def format_summary(record: dict) -> str:
                   (folds["degenerate_stars"]["count"], "degenerate stars"),
                   (folds["collapsed_edges"]["count"], "collapsed edges")]
         lines.append("folds: " + (", ".join(f"{n} {what}" for n, what in counts if n) or "none"))
+    build = record.get("buildable")
+    if build:
+        lines.append(buildable_summary(build))
     turn = (record.get("fairness") or {}).get("line_turn_deg") or {}
     if turn.get("max") is not None:
         lines.append(f"lines turn in the surface by up to {turn['max']:.2f} deg (median "
                      f"{turn['median']:.2f}), worst at vertex {turn['vertex']}")
     return "\n".join(lines)
+
+
+def buildable_summary(build: dict) -> str:
+    """One line from the ``buildable`` part of a `measure_net` record: what keeps the net
+    from being built, or that nothing does."""
+    said = [(build["nonconvex_faces"], "non-convex faces"),
+            (build["self_crossing_faces"], "self-crossing faces"),
+            (build["sharp_line_turns"], f"vertices where a line turns more than "
+             f"{build['sharp_line_turns']['turn_above_deg']:g} deg"),
+            (build.get("far_vertices") or {"count": 0}, "vertices beyond the deviation limit")]
+    found = ", ".join(f"{part['count']} {what}" for part, what in said if part["count"])
+    jumps = build["edge_jumps"]
+    jump = (f"; {jumps['count']} edge jumps over {jumps['ratio_above']:g}x along the lines"
+            if jumps["count"] else "")
+    if build["buildable"]:
+        return f"buildable: no fold, dart or line doubling back{jump}"
+    return f"not buildable: {found or 'folded'}{jump}"

@@ -210,6 +210,11 @@ class QuadMesh:
         return self._corners["nxt"]
 
     @cached_property
+    def corner_previous_vertices(self) -> np.ndarray:
+        """(c,) int, aligned with `face_indices`: the vertex before each corner in its face."""
+        return self._corners["prv"]
+
+    @cached_property
     def faces_across(self) -> np.ndarray:
         """(c,) int, aligned with `face_indices`: the face across the edge from each corner to
         the next corner of its face, or -1 where that edge is on the boundary."""

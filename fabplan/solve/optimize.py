@@ -14,6 +14,7 @@ from ..errors import InputError, SolverError
 from ..io.obj import format_obj
 from ..io.output import write_texts
 from ..io.records import json_text
+from ..net.buildable import BuildLimits, BuildReport, crumpled, measure_buildable
 from ..net.folds import FoldReport, fold_edge_mask, measure_folds
 from ..net.free_vertices import free_vertices, settle_free_vertices
 from ..net.geometry import (
@@ -33,6 +34,8 @@ from .constraints import (
     ConstantAngle,
     ConstantCurvature,
     ConstantMannheimRadius,
+    ConvexQuads,
+    DeviationBound,
     EdgeCollapseBarrier,
     Fairness,
     NetState,
@@ -170,7 +173,9 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
                  fairness: bool = True, coherent: bool = False,
                  closeness: bool = True, glide: bool = False,
                  glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
-                 extra: tuple = (), guards: bool = False) -> GuidedProjection:
+                 extra: tuple = (), guards: bool = False,
+                 max_deviation: float | None = None,
+                 limits: BuildLimits | None = None) -> GuidedProjection:
     """The solver `optimize` runs, ready for `GuidedProjection.run` (see `optimize`)."""
     check_net_input(mesh)
     preset = get_net(net)
@@ -181,9 +186,10 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     if coherent and not any(isinstance(f, CoherentOrientation) for f in families):
         families.append(CoherentOrientation())
     if fairness:
-        families.append(Fairness())
+        turn = (limits or BuildLimits()).max_line_turn_deg
+        families.append(Fairness(0.5 * turn, turn))
     families.append(EdgeCollapseBarrier())
-    if reference is None and (closeness or glide or guards):
+    if reference is None and (closeness or glide or guards or max_deviation is not None):
         reference = ReferenceSurface.from_mesh(mesh)
     if glide:
         assert reference is not None
@@ -196,11 +202,14 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
             families.append(BoundaryGliding(curves, glide_boundary))
     elif closeness:
         families.append(Closeness(reference))
+    if max_deviation is not None:
+        families.append(DeviationBound(reference, max_deviation))
     if guards:
-        families += [NormalCone(reference, GUARD_CONE_DEG), StarAngleRange(GUARD_STAR_ANGLE_DEG)]
+        families += [NormalCone(reference, GUARD_CONE_DEG), StarAngleRange(GUARD_STAR_ANGLE_DEG),
+                     ConvexQuads(GUARD_CORNER_DEG)]
     families += list(extra)
     solver = GuidedProjection(mesh, families, fixed=fixed, settings=settings,
-                              admissible=_admissible(mesh, families))
+                              admissible=_admissible(mesh, families, limits or BuildLimits()))
     solver.net = preset.name
     solver.reference = reference
     return solver
@@ -209,6 +218,7 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
 # the guards added against folding (`fabplan.solve.constraints.guards`)
 GUARD_CONE_DEG = 75.0        # face normals within this angle of the reference normal
 GUARD_STAR_ANGLE_DEG = 15.0  # the families of a star at least this far apart
+GUARD_CORNER_DEG = 5.0       # every quad convex, its corners turning by at least this
 
 
 def check_radius_fits(mesh: QuadMesh, radius: float | None, *, dual: bool = False) -> None:
@@ -227,16 +237,26 @@ def check_radius_fits(mesh: QuadMesh, radius: float | None, *, dual: bool = Fals
                          "and its neighbours; give a larger radius, or scale the net")
 
 
-def _admissible(mesh: QuadMesh, families: list) -> Callable[[NetState], bool]:
-    """The solver's test of an iterate: no fold edge, and no farther from the reference
-    than at the start or one mean edge, whichever is more (when a closeness family says
-    how far the net is)."""
+def _admissible(mesh: QuadMesh, families: list,
+                limits: BuildLimits) -> Callable[[NetState], bool]:
+    """The solver's test of an iterate: no fold edge, buildable (no dart, no line turning
+    more than the limit: `fabplan.net.buildable.crumpled`), within a deviation limit
+    the solve holds, and no farther from the reference than at the start or one mean
+    edge, whichever is more (when a closeness family says how far the net is)."""
     edge_faces = mesh.interior_edge_faces
     closeness = next((f for f in families if isinstance(f, Closeness)), None)
+    bound = next((f for f in families if isinstance(f, DeviationBound)), None)
     allowed: list[float] = []
 
     def admissible(state: NetState) -> bool:
-        if fold_edge_mask(face_normals(state.X, mesh), edge_faces).any():
+        normals = face_normals(state.X, mesh)
+        if fold_edge_mask(normals, edge_faces).any():
+            return False
+        if crumpled(mesh, state.X, state.stars, limits.max_line_turn_deg,
+                    turns=state.data.get("line_turns"), normals=normals):
+            return False
+        if bound is not None and float(bound.distances(state).max(initial=0.0)) > \
+                bound.limit / state.length_scale:
             return False
         if closeness is None:
             return True
@@ -324,6 +344,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              glide_boundary: np.ndarray | None = None, surface_tolerance: float = 0.0,
              extra: tuple = (), guards: bool | None = None,
              settle_free: float | None = None,
+             max_deviation: float | None = None, max_line_turn: float = 90.0,
              progress: Callable[[IterationRecord], None] | None = None
              ) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
@@ -366,16 +387,28 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         reference: those of faces whose surface steps against a neighbour's by more than
         this (model units; 0: all of them). None (default): none. The parameters record
         how many there are and how far they moved (``free_vertices``).
+    max_deviation : the largest distance of a vertex from the reference (model units),
+        held inside the solve as an inequality (`fabplan.solve.constraints.DeviationBound`).
+        When the net type cannot keep to it, the solve tightens the limit step by step
+        from a loose one (a continuation) and the result is "off-design": its message
+        gives the smallest limit the net converged to, or says that none was found, and
+        ``parameters["deviation"]`` records the limits tried. None (default): no limit.
+    max_line_turn : a converged net's lines turn in the surface by at most this at any
+        vertex (degrees, in (0, 180]); over 90 a line doubles back.
     progress : called after every iteration with its record.
 
     Returns
     -------
     OptimizationResult, with the properties measured on the result. Its status is
-    "converged" (hard residuals within tolerance, no fold, no degenerate star or collapsed
-    edge), "folded" or "degenerate" (within tolerance, but folded, or with stars whose
-    lines run together or edges collapsed: `fabplan.net.folds`), "stagnated" or
-    "iteration cap" (stopped short: the net is the best iterate, fold-free and near the
-    reference where one was reached); `message` says what stood in the way.
+    "converged" (hard residuals within tolerance and buildable: no fold, no non-convex
+    quad, no line turning more than `max_line_turn`, within `max_deviation`, no
+    degenerate star or collapsed edge: `fabplan.net.buildable`, `fabplan.net.folds`);
+    "folded", "crumpled" (a dart or a line doubling back), "degenerate" (stars whose lines
+    run together, or edges collapsed) or "off-design" (beyond `max_deviation`) when the
+    residuals are within tolerance but the net is not buildable; "stagnated" or
+    "iteration cap" (stopped short: the net is the best iterate, buildable and near the
+    reference where one was reached). `message` says what stood in the way, where and
+    what to try.
 
     Raises
     ------
@@ -384,24 +417,35 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         constraint families left unmet and their residuals), or the residuals are not
         finite.
     """
+    check_limits(max_deviation, max_line_turn)
+    limits = BuildLimits(max_line_turn_deg=max_line_turn, max_deviation=max_deviation)
     handle_ids, targets = _handle_arrays(handles, mesh)
     held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
+    if reference is None and max_deviation is not None:
+        reference = ReferenceSurface.from_mesh(mesh)
 
     def make(with_guards: bool, start_mesh: QuadMesh = mesh,
-             start_reference: ReferenceSurface | None = reference) -> GuidedProjection:
+             start_reference: ReferenceSurface | None = reference,
+             deviation: float | None = max_deviation) -> GuidedProjection:
         return build_solver(start_mesh, net, angle=angle, radius=radius, reference=start_reference,
                             fixed=held, settings=settings, fairness=fairness, coherent=coherent,
                             closeness=closeness, glide=glide, glide_boundary=glide_boundary,
-                            surface_tolerance=surface_tolerance, extra=extra, guards=with_guards)
+                            surface_tolerance=surface_tolerance, extra=extra, guards=with_guards,
+                            max_deviation=deviation, limits=limits)
+
+    def judge(name: str, solver: GuidedProjection, deviation: float | None = max_deviation,
+              stop: Stage | None = None) -> Attempt:
+        return Attempt(name, solver, measure_buildable(
+            mesh, solver.vertices, reference=solver.reference,
+            limits=replace(limits, max_deviation=deviation)), stop)
 
     def attempt(name: str, solver: GuidedProjection) -> Attempt:
-        stop = _solve(solver, handle_ids, targets, progress)
-        return Attempt(name, solver, measure_folds(mesh, solver.vertices, reference=solver.reference),
-                       stop)
+        return judge(name, solver, stop=_solve(solver, handle_ids, targets, progress))
 
     levels: list[dict] = []
-    grid = _multilevel_grid(mesh, net, settings, plain=not (held.size or glide or extra or guards))
+    grid = _multilevel_grid(mesh, net, settings, plain=not (held.size or glide or extra or guards
+                                                            or max_deviation is not None))
     attempts: list[Attempt] = []
     if grid is not None:
         if reference is None and (closeness or guards):
@@ -414,9 +458,10 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         attempts.append(attempt("guards" if guards else "plain", make(bool(guards))))
     first = attempts[-1]
     unreachable = handle_ids.size and first.solver.status != "converged"
-    if guards is None and (first.folds.folded or first.folds.degenerate) and not unreachable:
-        # a start far from every net of the type: first the guards against folding, then
-        # the same two solves from a smoothed start, still pulled towards the original
+    if guards is None and first.needs_guards and not unreachable:
+        # a start far from every net of the type: first the guards against folding and
+        # crumpling, then the same two solves from a smoothed start, still pulled towards
+        # the original
         attempts.append(attempt("guards", make(True)))
         if not attempts[-1].succeeded:
             base = first.solver.reference
@@ -424,8 +469,19 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
             attempts.append(attempt("smoothed start", make(False, smooth, base)))
             if not attempts[-1].succeeded:
                 attempts.append(attempt("smoothed start with guards", make(True, smooth, base)))
+    deviation = None
+    if max_deviation is not None and not min(attempts, key=Attempt.rank).succeeded \
+            and not unreachable:
+        found, deviation = _deviation_continuation(
+            lambda limit: make(bool(guards), deviation=limit), judge, max_deviation,
+            float(np.max(reference.distances(mesh.vertices), initial=0.0)) if reference is not None
+            else 0.0, progress)
+        attempts += found
     chosen = min(attempts, key=Attempt.rank)
-    solver, folds, stop = chosen.solver, chosen.folds, chosen.stop
+    if deviation is not None and deviation["smallest_converged"] is not None:
+        # a net of the type within a looser limit: the one to write, off the design
+        chosen = found[0]
+    solver, build, stop = chosen.solver, chosen.build, chosen.stop
     if handle_ids.size and solver.status != "converged":
         raise SolverError(f"the handles ask for a net that cannot be reached ({solver.status} after "
                           f"{len(solver.history) - 1} iterations{_stopped_at(stop)}): "
@@ -439,7 +495,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     if settle_free is not None and free.any() and not faces_held and not glide:
         result_mesh, moved = settle_free_vertices(result_mesh, keep=held, step=settle_free)
         if moved.any():
-            folds = measure_folds(mesh, result_mesh.vertices, reference=solver.reference)
+            build = measure_buildable(mesh, result_mesh.vertices, reference=solver.reference,
+                                      limits=limits)
     seconds = time.perf_counter() - start
     parameters = {"angle_deg": angle, "radius": radius, **solved_parameters(solver),
                   "coherent": coherent, "fixed_vertices": int(len(solver.fixed)),
@@ -449,10 +506,10 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
                                     "largest_move": float(moved.max(initial=0.0))},
                   "handles": {int(i): t.tolist() for i, t in zip(handle_ids, targets, strict=True)},
                   "multilevel": {"levels": levels, "full_iterations": solver.accepted_steps}
-                  if chosen.name == "multilevel" else None}
-    status = solver.status
-    if status == "converged" and (folds.folded or folds.degenerate):
-        status = "folded" if folds.folded else "degenerate"
+                  if chosen.name == "multilevel" else None,
+                  "max_line_turn_deg": max_line_turn, "max_deviation": max_deviation,
+                  "deviation": deviation}
+    status = _status(solver.status, build)
     return OptimizationResult(
         mesh=result_mesh,
         net=solver.net,
@@ -462,9 +519,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         seconds=seconds,
         linear_solver=solver.linear_solver,
         history=[h.as_dict() for h in solver.history],
-        properties=measure_net(result_mesh, reference=solver.reference),
-        message=_explain(solver, status, folds, mesh, angle, attempts if len(attempts) > 1 else [],
-                         glide=glide),
+        properties=measure_net(result_mesh, reference=solver.reference, limits=limits),
+        message=_explain(solver, status, build, mesh, angle, attempts if len(attempts) > 1 else [],
+                         glide=glide, deviation=deviation),
     )
 
 
@@ -532,25 +589,106 @@ class Attempt:
 
     name: str                   # "plain", "guards", "smoothed start", ...
     solver: GuidedProjection
-    folds: FoldReport           # measured on the net it ends with
+    build: BuildReport          # measured on the net it ends with (its folds too)
     stop: Stage | None          # the handle stage its continuation gave up at, if it did
 
     @property
+    def folds(self) -> FoldReport:
+        return self.build.folds
+
+    @property
     def succeeded(self) -> bool:
-        """Converged, fold-free and without degenerate stars or collapsed edges."""
-        return self.solver.status == "converged" and not (self.folds.folded or self.folds.degenerate)
+        """Converged, buildable and without degenerate stars or collapsed edges."""
+        return self.solver.status == "converged" and self.build.buildable \
+            and not self.folds.degenerate
+
+    @property
+    def needs_guards(self) -> bool:
+        """Folded, crumpled or degenerate: what the guards and a smoothed start are for."""
+        return self.folds.folded or self.build.crumpled or self.folds.degenerate
 
     def rank(self) -> tuple:
-        """Sort key: fold-free first, then converged, then by hard residual."""
+        """Sort key: buildable first (no fold, then no dart or sharp turn, then within the
+        deviation limit), then without degenerate stars, then converged, then by hard
+        residual."""
         history = self.solver.history
         hard = history[-1].hard_residual if history else np.inf
-        return (self.folds.folded, self.folds.degenerate, self.solver.status != "converged", hard)
+        return (self.folds.folded, self.build.crumpled, self.build.off_design,
+                self.folds.degenerate, self.solver.status != "converged", hard)
 
     def outcome(self) -> str:
         """A few words: how this solve ended."""
-        if self.solver.status == "converged":
-            return "folded" if self.folds.folded else "degenerate"
-        return self.solver.status
+        return _status(self.solver.status, self.build)
+
+
+def _status(solver_status: str, build: BuildReport) -> str:
+    """The status of a result: the solver's, or for a net within tolerance what keeps it
+    from being built."""
+    if solver_status != "converged":
+        return solver_status
+    if build.folds.folded:
+        return "folded"
+    if build.crumpled:
+        return "crumpled"
+    if build.folds.degenerate:
+        return "degenerate"
+    if build.off_design:
+        return "off-design"
+    return "converged"
+
+
+def check_limits(max_deviation: float | None, max_line_turn: float) -> None:
+    """Refuse a deviation limit or a line-turn limit no net can keep to."""
+    if max_deviation is not None and not (np.isfinite(max_deviation) and max_deviation > 0):
+        raise InputError(f"--max-deviation must be a positive length, got {max_deviation}")
+    if not (np.isfinite(max_line_turn) and 0 < max_line_turn <= 180):
+        raise InputError(f"--max-line-turn must lie in (0, 180] degrees, got {max_line_turn}")
+
+
+# a deviation limit the net type cannot keep to is approached from a loose one: limits
+# shrinking by this factor, from the first at least this many times the asked one (and
+# the start's own distance), in at most this many stages
+DEVIATION_FACTOR, DEVIATION_START, DEVIATION_STAGES = 2.0, 32.0, 8
+
+
+def _deviation_continuation(make: Callable[[float], GuidedProjection],
+                            judge: Callable[[str, GuidedProjection, float], Attempt],
+                            limit: float, start_distance: float,
+                            progress: Callable[[IterationRecord], None] | None
+                            ) -> tuple[list[Attempt], dict]:
+    """Tighten a deviation limit from a loose one towards `limit` (model units), each
+    stage continuing from the net of the one before, until a stage does not converge
+    buildable within its limit.
+
+    Returns the attempt at the smallest limit the net converged buildable to (or, when
+    none did, the first stage's), judged by `judge(name, solver, limit)`, and a record:
+    the limits tried, and the smallest at which the net converged (None when none did).
+    """
+    loosest = max(limit * DEVIATION_START, 1.5 * start_distance)
+    stages = int(min(DEVIATION_STAGES, np.ceil(np.log(loosest / limit) / np.log(DEVIATION_FACTOR))))
+    limits = [limit * (loosest / limit) ** (k / stages) for k in range(stages, -1, -1)]
+    solver = make(limits[0])
+    bound = next(c for c in solver.constraints if isinstance(c, DeviationBound))
+    tried: list[float] = []
+    met: tuple[float, np.ndarray] | None = None
+    for k, value in enumerate(limits):
+        bound.limit = value
+        if k:
+            solver.restart_soft_terms()
+        solver.run(callback=progress)
+        tried.append(value)
+        if not judge("", solver, value).succeeded:
+            break
+        met = (value, solver.state.x.copy())
+    if met is not None and met[0] != tried[-1]:
+        # back to the net that met the smallest limit (the next stage moved the solver on)
+        bound.limit = met[0]
+        solver.state.x[:] = met[1]
+        solver.status = "converged"
+    smallest = None if met is None else met[0]
+    name = f"continuation to {smallest:.4g}" if smallest is not None else "continuation"
+    record = {"limit": limit, "tried": tried, "smallest_converged": smallest}
+    return [judge(name, solver, limit)], record
 
 
 # a prescribed angle this far (degrees) from the start's is reached in stages
@@ -685,27 +823,42 @@ def _stopped_at(stage: Stage | None) -> str:
             "were not tried")
 
 
-def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: QuadMesh,
-             angle: float | None, attempts: list[Attempt], *, glide: bool = False) -> str:
-    """One line: what stood in the way of a converged net, and what to try; `attempts`
-    are the solves tried when there were more than one; with `glide` the start is a
-    layout's lattice on its design, not the user's net."""
+def _explain(solver: GuidedProjection, status: str, build: BuildReport, start: QuadMesh,
+             angle: float | None, attempts: list[Attempt], *, glide: bool = False,
+             deviation: dict | None = None) -> str:
+    """One line: what stood in the way of a converged net, where, and what to try;
+    `attempts` are the solves tried when there were more than one; with `glide` the start
+    is a layout's lattice on its design, not the user's net; `deviation` the record of a
+    deviation limit's continuation."""
     if status == "converged":
         return ""
+    folds = build.folds
     parts = []
-    if status in ("folded", "degenerate"):
-        parts.append(f"the constraints are met but {folds.describe()}")
+    if status in ("folded", "degenerate", "crumpled", "off-design"):
+        parts.append(f"the constraints are met but {_obstacles(build)}")
     else:
         unmet = describe_unmet(unmet_constraints(solver))
         parts.append(f"stopped ({status}) with {unmet or 'residuals above the tolerance'}")
         best = solver.best
-        if best is not None and best.admissible:
-            parts.append("the net written is the best iterate, fold-free")
+        if best is not None and best.admissible and build.buildable and not folds.degenerate:
+            parts.append("the net written is the best iterate, buildable (no fold, dart or line "
+                         "doubling back)")
         if best is not None and best.iteration <= solver.run_start:
             parts.append("no step improved on the start: it may be far from any net of this "
                          "type, or the type may not exist on this surface")
-        if folds.folded or folds.degenerate:
-            parts.append(f"on the net written {folds.describe()}")
+        if not build.buildable or folds.degenerate:
+            parts.append(f"on the net written {_obstacles(build)}")
+    if deviation is not None and build.off_design:
+        smallest = deviation["smallest_converged"]
+        loosest = deviation["tried"][0] if deviation["tried"] else None
+        if smallest is not None:
+            parts.append(f"tightening the limit from {loosest:.4g} step by step, the net converged "
+                         f"buildable down to a limit of {smallest:.4g} (the smallest found): give "
+                         f"--max-deviation {smallest:.4g} or more, or another net type")
+        elif loosest is not None:
+            parts.append(f"tightening the limit from {loosest:.4g} step by step, no limit gave a "
+                         "converged buildable net (none found): this net type may not fit the "
+                         "reference; try another net type or a finer net")
     if attempts:
         tried = ", ".join(f"{a.name} {a.outcome()}" for a in attempts)
         written = next(a.name for a in attempts if a.solver is solver)
@@ -716,12 +869,15 @@ def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: Qu
                          "another panel size or net type may avoid it")
         elif glide:
             parts.append("the layout is too far from any net of this type on this design for "
-                         "a fold-free one near it: try another panel size or net type")
+                         "a buildable one near it: try another panel size or net type")
         elif start_folds.folded:
             parts.append(f"the input itself folds ({start_folds.describe()}): repair or smooth it")
-        else:
-            parts.append("the input is too far from any net of this type for a fold-free one "
+        elif not build.off_design or build.crumpled or folds.folded:
+            parts.append("the input is too far from any net of this type for a buildable one "
                          "near it: smooth it, or lay a net out on its design with `fabplan layout`")
+    if build.crumpled and not attempts:
+        parts.append("try the guards from the start (--guards), a smoother input, or "
+                     "`fabplan layout` on the design")
     if angle is not None and len(start.stars):
         here = float(np.degrees(np.median(intersection_angles(start.vertices,
                                                               canonical_stars(start.vertices,
@@ -732,6 +888,14 @@ def _explain(solver: GuidedProjection, status: str, folds: FoldReport, start: Qu
                          "try `fabplan layout` on the design, which starts from the right "
                          "directions")
     return "; ".join(parts)
+
+
+def _obstacles(build: BuildReport) -> str:
+    """What keeps a net from being built, with its degenerate stars and collapsed edges."""
+    said = [build.describe()]
+    if build.folds.degenerate and not build.folds.folded:
+        said.append(build.folds.describe())
+    return "; ".join(p for p in said if p)
 
 
 def _handle_arrays(handles: dict | None, mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray]:

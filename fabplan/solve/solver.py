@@ -53,6 +53,10 @@ class SolverSettings:
         residual (Levenberg-Marquardt with damping proportional to the residual), which
         keeps the convergence quadratic near a solution.
     fairness_weight, closeness_weight : initial row weights of the soft families.
+    turning_fairness_weight, turning_fairness_fade : initial weight of the fairness rows
+        held where lines turn (`fabplan.solve.constraints.Fairness`), and the factor it
+        fades by with every step: more slowly than `fade`, so that it still pulls where a
+        line starts to double back late in the solve.
     fade : factor applied to the soft weights after every step.
     stagnation : stop when the best hard residual has not improved by 10 % over this many
         iterations.
@@ -79,6 +83,8 @@ class SolverSettings:
     epsilon: float = 1e-3
     fairness_weight: float = 1e-3
     closeness_weight: float = 1e-2
+    turning_fairness_weight: float = 1e-2
+    turning_fairness_fade: float = 0.5
     fade: float = 0.1
     stagnation: int = 15
     backend: str = "auto"
@@ -217,7 +223,7 @@ class GuidedProjection:
             raise SolverError("the solver has not been run yet: no sparsity pattern")
         return self._pattern
 
-    def _assemble(self, jacobians: list, residuals: list, weights: list[float],
+    def _assemble(self, jacobians: list, residuals: list, weights: list,
                   damping: float) -> tuple[sp.csr_matrix, np.ndarray]:
         """Upper triangle of ``J^T J + damping I`` (CSR) and the gradient ``J^T r`` of the
         weighted system (`jacobians` and `residuals` unweighted, one row weight per family).
@@ -239,7 +245,7 @@ class GuidedProjection:
             start += out.size
             if J.size == 0:
                 continue
-            np.multiply(J, w, out=entries)              # the weighted Jacobian
+            np.multiply(J, w if np.ndim(w) == 0 else w[:, None], out=entries)  # weighted
             np.copyto(columns, entries.T)                # and entry-major
             k, pair = len(columns), 0
             for i in range(k):     # entries of a row, not rows: k <= 16 broadcast multiplies
@@ -308,10 +314,19 @@ class GuidedProjection:
         soft = {"fairness": s.fairness_weight, "closeness": s.closeness_weight}
         return {c.name: soft.get(c.name, 1.0) * fade for c in self.constraints if not c.hard}
 
-    def _weights(self, steps: int) -> list[float]:
-        """Row weight of every family, in the order of `constraints`."""
+    def _weights(self, steps: int) -> list:
+        """Row weight of every family, in the order of `constraints`: a number, or (rows,)
+        for a soft family that holds some of its rows (``held``, e.g. `Fairness` where
+        lines turn), those rows' weight fading by `SolverSettings.turning_fairness_fade`."""
+        s = self.settings
         soft = self.soft_weights(steps)
-        return [soft.get(c.name, 1.0) if not c.hard else 1.0 for c in self.constraints]
+        slow = s.turning_fairness_weight * s.turning_fairness_fade ** max(steps - self._fade_start, 0)
+        weights: list = []
+        for c in self.constraints:
+            held = None if c.hard else c.held
+            w = 1.0 if c.hard else soft.get(c.name, 1.0)
+            weights.append(w if held is None or slow == 0 else w + slow * held)
+        return weights
 
     def restart_soft_terms(self, faded: int = 0) -> None:
         """Give the soft terms their initial weights again (a new stage of a continuation:
@@ -446,7 +461,7 @@ class GuidedProjection:
             self.return_to_best()
         return self.status
 
-    def _step(self, current: _Evaluation, weights: list[float], merit: float, base: float,
+    def _step(self, current: _Evaluation, weights: list, merit: float, base: float,
               hard_index: list[int], ceiling: float | None
               ) -> tuple[_Evaluation, IterationRecord] | None:
         """Find the next step.
@@ -498,7 +513,7 @@ class GuidedProjection:
             c.prepare(self.state)
         return None
 
-    def _acceptable(self, trial: _Evaluation, weights: list[float], merit: float, damping: float,
+    def _acceptable(self, trial: _Evaluation, weights: list, merit: float, damping: float,
                     h: np.ndarray, gradient: np.ndarray, hard_index: list[int],
                     ceiling: float | None, *, length: float = 1.0) -> bool:
         """Whether a trial step `h` (`length` times the solution of the damped system) is
@@ -559,9 +574,11 @@ class _Evaluation:
     measured: dict             # family name -> max |residual|
     finite: bool
 
-    def merit(self, weights: list[float]) -> float:
-        """Half the weighted sum of squares of all residuals."""
-        return 0.5 * sum(w * w * _dot(r, r) for w, r in zip(weights, self.residuals, strict=True))
+    def merit(self, weights: list) -> float:
+        """Half the weighted sum of squares of all residuals (a weight per family, or per
+        row)."""
+        return 0.5 * sum(w * w * _dot(r, r) if np.ndim(w) == 0 else _dot(w * r, w * r)
+                         for w, r in zip(weights, self.residuals, strict=True))
 
     def hard_merit(self, hard_index: list[int]) -> float:
         """Half the sum of squares of the hard residuals (comparable across iterations)."""

@@ -749,6 +749,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "intersection_angle_deg": _pick(props.get("intersection_angle_deg")),
         "meusnier_radius": _pick(props.get("meusnier_radius")),
         "folds": _fold_counts(props.get("folds")),
+        "buildable": _buildable_counts(props.get("buildable")),
         "line_turn_deg": (props.get("fairness") or {}).get("line_turn_deg"),
         "free_vertices": _free_vertex_record(net, mm_per_unit),
         "molds": mold_metrics(molds, boundary),
@@ -783,6 +784,17 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
     metrics["largest_deviation_mm"] = (max(metrics["deviation_mm"]["max"], edge)
                                        if edge is not None else metrics["deviation_mm"]["max"])
     return metrics
+
+
+def _buildable_counts(build: dict | None) -> dict | None:
+    """The counts of `fabplan.net.buildable` on the net (non-convex and self-crossing
+    faces, sharp line turns, edge jumps, far vertices) and whether it can be built."""
+    if build is None:
+        return None
+    keys = ("nonconvex_faces", "self_crossing_faces", "sharp_line_turns", "edge_jumps",
+            "far_vertices")
+    return {"buildable": bool(build["buildable"]),
+            **{k: int((build.get(k) or {"count": 0})["count"]) for k in keys}}
 
 
 def _fold_counts(folds: dict | None) -> dict | None:
@@ -888,6 +900,13 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
                  f"faces, {folds['fold_edges']} fold edges)" if folds["folded"] else
                  f"met its constraints on a degenerate net ({folds['degenerate_stars']} stars "
                  f"with their lines run together, {folds['collapsed_edges']} collapsed edges)")
+    build = metrics.get("buildable")
+    if build and metrics["status"] in ("crumpled", "off-design"):
+        state = (f"met its constraints on a crumpled net ({build['nonconvex_faces']} non-convex "
+                 f"faces, {build['sharp_line_turns']} vertices where a line turns too much)"
+                 if metrics["status"] == "crumpled" else
+                 f"met its constraints off the design ({build['far_vertices']} vertices beyond "
+                 "the deviation limit)")
     checks.append(_check(
         "max_sphere_residual", limits.max_sphere_residual, res, res_ok,
         f"the solve {state} after {metrics['iterations']} iterations; largest sphere residual "
@@ -1024,7 +1043,7 @@ def candidate_cost(metrics: dict, weights: CostWeights, *,
     Examples
     --------
     >>> m = {"molds": {"count": 2, "panel_types": {"planar": 10}}, "coverage": 1.0,
-    ...      "strips": {"sheets": 3}, "deviation_mm": {"max": 5.0}}
+    ...      "strips": {"sheets": 3}, "deviation_mm": {"max": 5.0}, "largest_deviation_mm": 5.0}
     >>> candidate_cost(m, CostWeights())[0], candidate_cost(m, CostWeights(), charge_sheets=False)[0]
     (230.0, 215.0)
     """

@@ -4,8 +4,9 @@ from .angle import ConstantAngle
 from .base import Constraint, NetState, VariableBlocks
 from .closeness import BoundaryGliding, Closeness
 from .collapse import EdgeCollapseBarrier, EdgeLengthRange
+from .deviation import DeviationBound
 from .fairness import Fairness
-from .guards import NormalCone, StarAngleRange
+from .guards import ConvexQuads, NormalCone, StarAngleRange
 from .levels import FamilyLevels
 from .mannheim import (
     ConstantMannheimRadius,
@@ -33,6 +34,8 @@ __all__ = [
     "Fairness",
     "NormalCone",
     "StarAngleRange",
+    "ConvexQuads",
+    "DeviationBound",
     "EdgeCollapseBarrier",
     "EdgeLengthRange",
     "FamilyLevels",

@@ -74,11 +74,15 @@ class Constraint:
     `columns`, and return residuals ``(m,)`` and Jacobian values ``(m, k)`` in `evaluate`.
     `prepare` runs once per iteration before evaluation (rebasing, footpoints).
     Soft families (fairness, closeness) have ``hard = False``: they guide the solution and
-    are not part of the convergence test.
+    are not part of the convergence test; their weight fades as the solve goes on. A soft
+    family may hold part of its rows longer: an attribute ``held`` (rows,) in [0, 1],
+    set by `prepare`, gives those rows a slowly fading weight of their own on top (see
+    `Fairness`).
     """
 
     name = "constraint"
     hard = True
+    held: np.ndarray | None = None    # (rows,) in [0, 1]: rows a soft family holds longer
 
     def declare(self, state: NetState) -> dict:
         """Variable blocks this family needs: name -> shape."""

@@ -51,7 +51,7 @@ class Closeness(Constraint):
         self.tolerance = float(tolerance)
 
     def declare(self, state):
-        return {"surface-band": (len(self._ids(state)),)} if self.tolerance > 0 else {}
+        return {f"{self.name}-band": (len(self._ids(state)),)} if self.tolerance > 0 else {}
 
     def _ids(self, state):
         return np.arange(state.mesh.vertex_count) if self.vertices is None else self.vertices
@@ -77,7 +77,7 @@ class Closeness(Constraint):
     def columns(self, state):
         ids = state.blocks.index("vertices")[self._ids(state)]
         if self.tolerance > 0:
-            ids = np.concatenate([ids, state.blocks.index("surface-band")[:, None]], axis=1)
+            ids = np.concatenate([ids, state.blocks.index(f"{self.name}-band")[:, None]], axis=1)
         return np.repeat(ids, 2, axis=0)
 
     def evaluate(self, state):
@@ -86,7 +86,7 @@ class Closeness(Constraint):
         r = np.einsum("kij,kj->ki", rows, d)
         if self.tolerance <= 0:
             return r.ravel(), rows.reshape(-1, 3)
-        band = state.blocks.view(state.x, "surface-band")
+        band = state.blocks.view(state.x, f"{self.name}-band")
         tol = self.tolerance / state.length_scale
         r[:, 0] -= tol * np.sin(band)
         slack = np.zeros((len(band), 2, 1))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...net.fairness import line_turns
 from .base import Constraint
 
 __all__ = ["Fairness", "fairness_stencils"]
@@ -41,10 +42,43 @@ def fairness_stencils(mesh, stars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class Fairness(Constraint):
-    """Soft smoothing term; the solver fades its weight out as the solve converges."""
+    """Soft smoothing term; the solver fades its weight out as the solve converges.
+
+    With `turn_start_deg` and `turn_full_deg`, the rows of the lines' second differences at
+    the stars also get a weight that stays where a line turns: `held` (rows,) is 0 where
+    the line turns by at most `turn_start_deg`, rising smoothly to 1 at `turn_full_deg`
+    and beyond, taken from the turns (`fabplan.net.fairness.line_turns`) at the start of
+    every iteration. The solver adds it, with a weight of its own that fades slowly
+    (`SolverSettings.turning_fairness_weight`), to the fading one: where a line starts to
+    double back it keeps being pulled straight however far the solve has gone, while
+    lines that turn less are left to the constraints. The turns are left in
+    ``state.data["line_turns"]`` for the solver's test of an iterate.
+    """
 
     name = "fairness"
     hard = False
+
+    def __init__(self, turn_start_deg: float | None = None, turn_full_deg: float | None = None):
+        self.turning = turn_start_deg is not None and turn_full_deg is not None
+        if self.turning:
+            assert turn_start_deg is not None and turn_full_deg is not None
+            if not 0.0 <= turn_start_deg < turn_full_deg:
+                raise ValueError(f"the turns must satisfy 0 <= start < full, got {turn_start_deg}, "
+                                 f"{turn_full_deg}")
+            self._start = float(np.radians(turn_start_deg))
+            self._span = float(np.radians(turn_full_deg - turn_start_deg))
+
+    def prepare(self, state):
+        if not self.turning or len(state.stars) == 0 or not hasattr(self, "_jac"):
+            return      # (before `columns`, the solver's first look at the families)
+        turn, _ = line_turns(state.X, state.stars)               # (s, 2)
+        state.data["line_turns"] = turn
+        # the first rows are the stars' second differences, family 0 then 1
+        # (`fairness_stencils`), three rows (x, y, z) each
+        held = np.zeros(len(self._jac))
+        weight = np.clip((turn.T.ravel() - self._start) / self._span, 0.0, 1.0) ** 2
+        held[:3 * len(weight)] = np.repeat(weight, 3)
+        self.held = held
 
     def columns(self, state):
         self._verts, coef = fairness_stencils(state.mesh, state.stars)
@@ -55,3 +89,4 @@ class Fairness(Constraint):
     def evaluate(self, state):
         r = np.einsum("mk,mkj->mj", self._jac[::3], state.X[self._verts]).ravel()
         return r, self._jac
+

@@ -1,0 +1,80 @@
+"""A limit on the distance to the reference surface, held inside the solve.
+
+``|v_k - p_k| <= D`` at every vertex, ``p_k`` its closest point on the reference
+(recomputed every iteration, as for `Closeness`): in the band form of the guards, the
+signed distance ``delta_k = sign(n_k . (v_k - p_k)) |v_k - p_k|`` (``n_k`` the reference's
+normal at ``p_k``) is ``D sin(s_k)``, with one auxiliary angle per vertex. It is an
+inequality, not a pull: inside the band the net is free, and the limit does not fade.
+
+The gradient of the distance is the unit offset ``(v - p) / |v - p|`` (the closest point
+moves, but only along the surface): it turns continuously where the closest point passes
+from one triangle to the next or over the surface's boundary, where a point-to-plane
+distance would jump from one triangle's normal to the next.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Constraint
+from .guards import slack_start
+
+__all__ = ["DeviationBound"]
+
+
+class DeviationBound(Constraint):
+    """Every vertex within `limit` (model units) of the reference surface.
+
+    Parameters
+    ----------
+    reference : surface in model units, with ``closest_points`` (a `ReferenceSurface`).
+    limit : the largest distance allowed (model units, > 0). It may be changed between
+        runs of a solver (a continuation tightening it).
+    """
+
+    name = "deviation"
+
+    def __init__(self, reference, limit: float):
+        if not (np.isfinite(limit) and limit > 0):
+            raise ValueError(f"the deviation limit must be a positive length, got {limit}")
+        self.reference = reference
+        self.limit = float(limit)
+
+    def declare(self, state):
+        return {f"{self.name}-band": (state.mesh.vertex_count,)}
+
+    def prepare(self, state):
+        model = state.X * state.length_scale + state.origin
+        foot, self._normal, _ = self.reference.closest_points(model)
+        self._foot = (foot - state.origin) / state.length_scale
+
+    def distances(self, state) -> np.ndarray:
+        """(n,) float, distance of each vertex from its closest point (normalized units),
+        as found by the last `prepare`."""
+        return np.linalg.norm(state.X - self._foot, axis=1)
+
+    def _signed(self, state) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distances (n,) and their gradients (n, 3), normalized units."""
+        d = state.X - self._foot
+        length = np.linalg.norm(d, axis=1)
+        side = np.where(np.sum(d * self._normal, axis=1) < 0, -1.0, 1.0)
+        # on the surface the offset has no direction: the surface normal is its limit
+        on = length <= 1e-12
+        gradient = np.where(on[:, None], self._normal,
+                            side[:, None] * d / np.where(on, 1.0, length)[:, None])
+        return side * length, gradient
+
+    def initialize(self, state):
+        self.prepare(state)
+        signed, _ = self._signed(state)
+        state.blocks.view(state.x, f"{self.name}-band")[:] = slack_start(
+            signed, 0.0, self.limit / state.length_scale)
+
+    def columns(self, state):
+        return np.c_[state.blocks.index("vertices"), state.blocks.index(f"{self.name}-band")]
+
+    def evaluate(self, state):
+        signed, gradient = self._signed(state)
+        s = state.blocks.view(state.x, f"{self.name}-band")
+        limit = self.limit / state.length_scale
+        return signed - limit * np.sin(s), np.c_[gradient, -limit * np.cos(s)]
