@@ -573,9 +573,13 @@ def _boundary_text(boundary: dict | None) -> str:
         return ""
     own = boundary["own_molds"]
     text = (f"; and {counted(boundary['count'], 'boundary panel')} trimmed to the design "
-            "boundary, each cut from the mold of the full panel it continues")
-    if boundary.get("deviation_max_mm") is not None:
-        text += f" (up to {boundary['deviation_max_mm']:.1f} mm from the design)"
+            "boundary, each cut from a mold of the net's panels and placed to meet its "
+            "neighbours")
+    if boundary.get("step_max_mm") is not None:
+        text += f" (steps up to {boundary['step_max_mm']:.2f} mm"
+        if boundary.get("deviation_max_mm") is not None:
+            text += f", up to {boundary['deviation_max_mm']:.1f} mm from the design"
+        text += ")"
     if own:
         text += f", {counted(own, 'panel')} on a mold of its own"
     if boundary.get("flipped"):
@@ -1007,10 +1011,15 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
         "net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
         "molds_json": "molds.json", "picture": "net.png"}
     if net.boundary_panels is not None and c.boundary_molds is not None:
-        output.write_texts({folder / "boundary-panels.csv": boundary_panels_csv(
-            net.boundary_panels, c.boundary_molds)})
+        output.write_texts({
+            folder / "boundary-panels.csv": boundary_panels_csv(net.boundary_panels,
+                                                                c.boundary_molds),
+            folder / "boundary-panels.obj": c.boundary_molds.cut_obj_text(
+                "fabplan boundary panels as cut from their molds (placements in "
+                "boundary-panels.csv), one face per panel of net.boundary.obj")})
         outputs["boundary_panels"] = "net.boundary.obj"
         outputs["boundary_panels_csv"] = "boundary-panels.csv"
+        outputs["boundary_panels_cut"] = "boundary-panels.obj"
     title = f"{c.name}: {c.candidate.describe()}"
     write_layout_picture(folder / "net.png", design, net.mesh, title=title,
                          singular_points=c.singular_points,
