@@ -25,9 +25,9 @@ boundary panels find their molds among the net's. Every boundary panel is fitted
    put midway between their two molds and both are fitted again, for a few sweeps; then
    they too are brought closer to their outlines where the steps leave room.
 5. Steps are measured along every shared side as between the net's panels
-   (`fabplan.fabricate.molds.chord_steps`). A panel that steps against a neighbour by more
-   than the limit on the mold kept gets a mold of its own, its curvatures fitted to the
-   same targets: only these add molds.
+   (`fabplan.fabricate.molds.chord_steps`), at eleven points of it, its ends included. A
+   panel that steps against a neighbour by more than the limit on the mold kept gets a
+   mold of its own, its curvatures fitted to the same targets: only these add molds.
 
 The panel as cut is its outline moved onto its mold along the mold's axis
 (`BoundaryMolds.cut_outlines`). Where the design is known its distance from the design is
@@ -63,6 +63,9 @@ class BoundaryFitSettings:
     ----------
     side_fractions : where along every shared side its points are put on the neighbour's
         mold (fractions of the side, ends included).
+    step_fractions : where along every shared side the step is measured, ends included
+        (denser than the net's `MoldSettings.step_fractions`: a boundary panel's mold is
+        placed to meet its neighbour's, and it steps most at the side's ends).
     outline_weight : the weight of the trimmed outline's points beside a target's 1.
     outline_weights : the heavier outline weights tried once the steps are met, in order;
         each is kept where the gaps to the targets stay within half the step limit.
@@ -71,6 +74,7 @@ class BoundaryFitSettings:
     """
 
     side_fractions: tuple[float, ...] = tuple(np.linspace(0.0, 1.0, 9))
+    step_fractions: tuple[float, ...] = tuple(np.linspace(0.0, 1.0, 11))
     outline_weight: float = 0.05
     outline_weights: tuple[float, ...] = (0.3, 1.0, 3.0)
     rings: int = 2
@@ -357,7 +361,7 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, *, design=None,
     if fitted.size:
         fit = _Fit(plan, panels, sides, fitted, settings, placement, shape, limit)
         placement, shape, mold, own_shapes = fit.run(mold)
-    side_step = _side_steps(sides, panels, plan, placement, shape, mm)
+    side_step = _side_steps(sides, panels, plan, placement, shape, mm, settings.step_fractions)
     step = np.zeros(p)
     known = np.isfinite(side_step)
     np.maximum.at(step, sides.panel[known], side_step[known])
@@ -567,7 +571,7 @@ class _Fit:
     def _panel_steps(self) -> np.ndarray:
         """(p,) float, every panel's largest step against a neighbour (mm)."""
         side = _side_steps(self.sides, self.panels, self.plan, self.placement, self.shape,
-                           self.plan.settings.mm_per_unit)
+                           self.plan.settings.mm_per_unit, self.settings.step_fractions)
         step = np.zeros(self.panels.count)
         known = np.isfinite(side)
         np.maximum.at(step, self.sides.panel[known], side[known])
@@ -594,10 +598,12 @@ def _padded(owner: np.ndarray, points: np.ndarray, weights: np.ndarray, must: np
 
 
 def _side_steps(sides: BoundarySides, panels: BoundaryPanels, plan: MoldPlan,
-                placement: np.ndarray, shape: np.ndarray, mm: float) -> np.ndarray:
+                placement: np.ndarray, shape: np.ndarray, mm: float,
+                fractions: tuple[float, ...]) -> np.ndarray:
     """(s,) float, the step along every side between its panel's mold and the mold across
-    (a net face's or a boundary panel's; mm), as between the net's panels; NaN for a
-    side along the design boundary, and for the second of two panels' copies of a side."""
+    (a net face's or a boundary panel's; mm) at `fractions` of the side, as between the
+    net's panels; NaN for a side along the design boundary, and for the second of two
+    panels' copies of a side."""
     step = np.full(len(sides.panel), np.nan)
     net = sides.face >= 0
     mutual = (sides.across >= 0) & (sides.panel < sides.across)
@@ -614,8 +620,7 @@ def _side_steps(sides: BoundarySides, panels: BoundaryPanels, plan: MoldPlan,
     k = sides.panel[which]
     M = np.stack([placement[k], M_other], axis=1)
     K = np.stack([shape[k], K_other], axis=1)
-    fractions = np.asarray(plan.settings.step_fractions, float)
-    step[which] = chord_steps(chords, M, K, mm, fractions=fractions)[0]
+    step[which] = chord_steps(chords, M, K, mm, fractions=np.asarray(fractions, float))[0]
     return step
 
 
