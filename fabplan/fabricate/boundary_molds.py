@@ -367,10 +367,8 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, *, design=None,
     np.maximum.at(step, sides.panel[known], side_step[known])
     np.maximum.at(step, sides.across[known & (sides.across >= 0)],
                   side_step[known & (sides.across >= 0)])
-    cut = [mold_points(panels.vertices[np.asarray(q)][None], placement[k:k + 1],
-                       shape[k:k + 1], closest=False)[0] for k, q in enumerate(panels.polygons)]
-    gap = np.array([np.linalg.norm(c - panels.vertices[np.asarray(q)], axis=1).max() * mm
-                    for c, q in zip(cut, panels.polygons, strict=True)]) if p else np.zeros(0)
+    cut, gap = _cut_outlines(panels, placement, shape)
+    gap = gap * mm
     deviation = np.full(p, np.nan)
     if design is not None and p:
         deviation = _design_distances(design, panels, cut, placement, shape) * mm
@@ -622,6 +620,25 @@ def _side_steps(sides: BoundarySides, panels: BoundaryPanels, plan: MoldPlan,
     K = np.stack([shape[k], K_other], axis=1)
     step[which] = chord_steps(chords, M, K, mm, fractions=np.asarray(fractions, float))[0]
     return step
+
+
+def _cut_outlines(panels: BoundaryPanels, placement: np.ndarray, shape: np.ndarray
+                  ) -> tuple[list, np.ndarray]:
+    """Every panel's outline moved onto its mold along the mold's axis (a list of (k, 3)
+    arrays, model units) and how far it moved at most ((p,) float, model units)."""
+    if not panels.polygons:
+        return [], np.zeros(0)
+    sizes = np.array([len(q) for q in panels.polygons])
+    owner = np.repeat(np.arange(len(sizes)), sizes)
+    ids = np.concatenate(panels.polygons).astype(np.int64)
+    points, _, _ = _padded(owner, panels.vertices[ids], np.ones(len(ids)),
+                           np.ones(len(ids), bool), len(sizes))
+    moved = mold_points(points, placement, shape, closest=False)
+    slot = np.arange(len(ids)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    flat = moved[owner, slot]
+    gap = np.zeros(len(sizes))
+    np.maximum.at(gap, owner, np.linalg.norm(flat - panels.vertices[ids], axis=1))
+    return np.split(flat, np.cumsum(sizes)[:-1]), gap
 
 
 def _design_distances(design, panels: BoundaryPanels, cut: list, placement: np.ndarray,
