@@ -23,11 +23,14 @@ boundary panels find their molds among the net's. Every boundary panel is fitted
    smallest gap to its targets.
 4. Boundary panels beside each other meet halfway: the points of their shared sides are
    put midway between their two molds and both are fitted again, for a few sweeps; then
-   they too are brought closer to their outlines where the steps leave room.
+   they too are brought closer to their outlines where the steps leave room (a quarter of
+   the limit to the points midway).
 5. Steps are measured along every shared side as between the net's panels
    (`fabplan.fabricate.molds.chord_steps`), at eleven points of it, its ends included. A
    panel that steps against a neighbour by more than the limit on the mold kept gets a
-   mold of its own, its curvatures fitted to the same targets: only these add molds.
+   mold of its own, its curvatures fitted to the same targets (where it still steps over
+   the limit, its largest gap brought down exactly by linear programs): only these add
+   molds.
 
 The panel as cut is its outline moved onto its mold along the mold's axis
 (`BoundaryMolds.cut_outlines`). Where the design is known its distance from the design is
@@ -48,7 +51,7 @@ import scipy.sparse as sp
 
 from ..layout.trim import BoundaryPanels
 from ..report.viewer import PanelInfo
-from .mold_fits import fit_mold_placements, mold_gaps, mold_points
+from .mold_fits import fit_mold_placements, mold_gaps, mold_points, polish_mold_placements
 from .molds import MOLD_TYPES, MoldPlan, chord_steps
 
 __all__ = ["BoundarySides", "BoundaryMolds", "BoundaryFitSettings", "boundary_sides",
@@ -411,6 +414,7 @@ class _Fit:
         K = np.where((f >= 0)[:, None], net_shape[np.maximum(f, 0)], shape[np.maximum(other[self.held], 0)])
         self.held_targets = mold_points(chord, M, K)                       # (h, t, 3)
         self.outline_weight = np.full(len(fitted), settings.outline_weight)
+        self.room = np.zeros((len(fitted), 0))
 
     def _chords(self, which: np.ndarray) -> np.ndarray:
         """(w, t, 3) points of the sides `which` at the fit's fractions."""
@@ -430,7 +434,7 @@ class _Fit:
         """The padded points (q, s, 3), weights (q, s) and the points that must be met
         (q, s) of every fitted panel: its held sides' targets and the mutual sides'
         `midway` points (weight 1, to be met), its outline (its outline weight; to be met
-        where it is the panel's only points)."""
+        where it is the panel's only points). `room` gives how far each may be off."""
         t = len(self.t)
         owner = [np.repeat(self.row[self.sides.panel[self.held]], t)]
         points = [self.held_targets.reshape(-1, 3)]
@@ -445,7 +449,14 @@ class _Fit:
         points_o = self.X[np.concatenate(outline)]
         weight_o = np.where(has, self.outline_weight, 1.0)[owner_o]
         must_o = (~has)[owner_o]
-        return _padded(np.r_[owner_t, owner_o], np.vstack([points_t, points_o]),
+        owner_all = np.r_[owner_t, owner_o]
+        # a held side's step is the panel's gap to it; a mutual side's is both panels'
+        # gaps to the points midway: each may take half of what a held side may
+        share = np.r_[np.full(len(self.held) * t, 0.5), np.full(len(owner_t) - len(self.held) * t, 0.25),
+                      np.full(len(owner_o), np.inf)]
+        self.room = _padded(owner_all, np.zeros((len(owner_all), 3)), share,
+                            np.ones(len(owner_all), bool), len(self.fitted))[1]
+        return _padded(owner_all, np.vstack([points_t, points_o]),
                        np.r_[np.ones(len(owner_t)), weight_o],
                        np.r_[np.ones(len(owner_t), bool), must_o], len(self.fitted))
 
@@ -524,6 +535,16 @@ class _Fit:
             self.outline_weight[own] = self.settings.outline_weight
             self._sweeps(own, grown)
             self._closer(own, grown)
+            # those still over the limit: their largest gap brought down exactly
+            step = self._panel_steps()[fitted]
+            still = own[step[own] > self.limit]
+            if still.size:
+                points, _, must = self._targets(self._midway() if len(self.mutual) else None)
+                M, K, _ = polish_mold_placements(points[still], must[still],
+                                                 self.placement[fitted[still]],
+                                                 self.shape[fitted[still]],
+                                                 free_shape=np.ones(still.size, bool))
+                self.placement[fitted[still]], self.shape[fitted[still]] = M, K
             mold[fitted[own]] = plan.mold_count + np.arange(own.size)
             own_shapes = self.shape[fitted[own]].copy()
         return self.placement, self.shape, mold, own_shapes
@@ -532,16 +553,18 @@ class _Fit:
         """The panels `rows` (those `free` with their curvatures) brought closer to their
         trimmed outlines where the steps leave room: each heavier outline weight
         (`BoundaryFitSettings.outline_weights`) is kept where the gaps to the targets stay
-        within half the step limit."""
+        within half the step limit (to the points midway on a side two fitted panels
+        share: a quarter)."""
         fitted = self.fitted[rows]
         for weight in self.settings.outline_weights:
             before = self.outline_weight[rows].copy()
             self.outline_weight[rows] = weight
             points, weights, must = self._targets(self._midway() if len(self.mutual) else None)
-            M, K, gap = fit_mold_placements(points[rows], weights[rows], self.placement[fitted],
-                                            self.shape[fitted], must=must[rows],
-                                            free_shape=free[rows])
-            keep = gap <= 0.5 * self.limit
+            M, K, _ = fit_mold_placements(points[rows], weights[rows], self.placement[fitted],
+                                          self.shape[fitted], must=must[rows],
+                                          free_shape=free[rows])
+            gap = np.abs(mold_gaps(points[rows], M, K))
+            keep = np.all((gap <= self.room[rows] * self.limit) | (weights[rows] == 0), axis=1)
             self.placement[fitted[keep]], self.shape[fitted[keep]] = M[keep], K[keep]
             self.outline_weight[rows] = np.where(keep, weight, before)
 
