@@ -491,3 +491,24 @@ def test_the_boundary_panels_of_a_net_off_its_design_continue_the_net():
     record = follows.record()
     assert record["follow_net"] and record["offset_from_design_max_relative_to_panel"] == \
         pytest.approx(lift(under).max() / h, rel=0.1)
+
+
+def test_a_net_off_its_design_clads_a_corner_once():
+    """Regression: a minimal net optimized off a saddle canopy (44 mm at its corners) had
+    its boundary panels lifted with it before its gaps were judged; tilted against the
+    design at a corner, they seemed to leave a gap there, and a patch around the corner
+    clad it a second time (its outline crossing itself in the design's xy-plane)."""
+    import fabplan
+    from fabplan.layout.trim import OFF_DESIGN_TOUCH, trim_to_design
+
+    design = load_design("hyperbolic-paraboloid:width=10,depth=10,rise=4", triangles=12000)
+    layout = layout_surface(design, 1.0)
+    start = glide(layout, "snet")
+    net = fabplan.optimize(start.mesh, "minimal", reference=design.reference)
+    panels = trim_to_design(net.mesh, layout, touch=OFF_DESIGN_TOUCH, follow_net=True)
+    assert panels.coverage >= 0.999 and panels.follows_net
+    outlines = [shapely.Polygon(panels.vertices[q][:, :2]) for q in panels.polygons]
+    assert all(p.is_valid for p in outlines)
+    # the panels overlap each other by nothing in the xy-plane (a height field's)
+    union = shapely.union_all(outlines)
+    assert sum(p.area for p in outlines) - union.area <= 1e-3 * union.area
