@@ -1183,8 +1183,9 @@ def _add_molds(sub: Any) -> None:
                         "face, fitted to the corners around it; neighbours may step apart), "
                         "corners (least curved through its corners), auto (corners for a net "
                         "of flat faces, else shared); smooth is local_fit's earlier name")
-    _add_boundary_options(p, "they are planned as panels with the net's (slivers cut with "
-                             "their full panel)", "plan the net's own panels only")
+    _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "
+                             "its neighbours (a mold of its own where none does; slivers cut "
+                             "with their full panel)", "plan the net's own panels only")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     _add_3dm(p, units=False)
     p.add_argument("--no-3d", action="store_true",
