@@ -30,7 +30,8 @@ boundary panels find their molds among the net's. Every boundary panel is fitted
    panel that steps against a neighbour by more than the limit on the mold kept gets a
    mold of its own, its curvatures fitted to the same targets (where it still steps over
    the limit, its largest gap brought down exactly by linear programs): only these add
-   molds.
+   molds. One that meets its neighbours no better on it keeps the net's mold it had; a
+   step still over the limit is reported.
 
 The panel as cut is its outline moved onto its mold along the mold's axis
 (`BoundaryMolds.cut_outlines`). Where the design is known its distance from the design is
@@ -530,6 +531,8 @@ class _Fit:
         own = np.flatnonzero((step > self.limit) | free)
         own_shapes = np.zeros((0, 2))
         if own.size:
+            kept = (self.placement[fitted[own]].copy(), self.shape[fitted[own]].copy(),
+                    step[own].copy())
             grown = np.zeros(len(fitted), bool)
             grown[own] = True
             self.outline_weight[own] = self.settings.outline_weight
@@ -545,6 +548,13 @@ class _Fit:
                                                  self.shape[fitted[still]],
                                                  free_shape=np.ones(still.size, bool))
                 self.placement[fitted[still]], self.shape[fitted[still]] = M, K
+            # a mold of its own that meets the neighbours no better than the net's mold
+            # the panel had is no use: that one is kept, and the step reported
+            step = self._panel_steps()[fitted]
+            useless = (step[own] > self.limit) & (step[own] >= kept[2]) & ~free[own]
+            back = own[useless]
+            self.placement[fitted[back]], self.shape[fitted[back]] = kept[0][useless], kept[1][useless]
+            own = own[~useless]
             mold[fitted[own]] = plan.mold_count + np.arange(own.size)
             own_shapes = self.shape[fitted[own]].copy()
         return self.placement, self.shape, mold, own_shapes
