@@ -422,12 +422,11 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
 def _cmd_molds(args) -> int:
     import numpy as np
 
-    from .fabricate.boundary_molds import boundary_molds_text, planned_boundary_molds
+    from .fabricate.boundary_molds import boundary_molds, boundary_molds_text
     from .fabricate.mold_report import MOLD_FILES, write_mold_report
     from .fabricate.molds import MoldSettings, plan_molds
     from .fabricate.panels import check_panels
     from .layout.trim import read_boundary_panels
-    from .net.mesh import QuadMesh
 
     settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=_net_units(args, args.net),
                             max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface,
@@ -454,18 +453,16 @@ def _cmd_molds(args) -> int:
     panels = None if boundary_file is None else read_boundary_panels(
         mesh, boundary_file, _boundary_record(args))
     progress = _progress(args)
-    planned = mesh
+    with progress.stage(f"fitting molds to {len(mesh.face_sizes)} panels"):
+        plan = plan_molds(mesh, settings, design=design)
+    boundary = None
     if panels is not None:
-        # the boundary panels are panels: planned with the net's, each on the mold that
-        # fits it (slivers are cut with their full panel)
-        planned = QuadMesh(panels.vertices, list(mesh.faces) + [
-            q for q, sliver in zip(panels.polygons, panels.extension, strict=True) if not sliver],
-            name=mesh.name)
-    with progress.stage(f"fitting molds to {len(planned.face_sizes)} panels"):
-        plan = plan_molds(planned, settings, design=design)
-        boundary = None if panels is None else (panels, planned_boundary_molds(plan, panels))
+        # each boundary panel on a mold of the net's panels, placed to meet its
+        # neighbours (a mold of its own where none does)
+        with progress.stage(f"placing {panels.panel_count} boundary panels on the molds"):
+            boundary = (panels, boundary_molds(plan, panels))
     with progress.stage("writing the report"), \
-            _viewer_files(args, out / "net", planned, units=settings.units, molds=plan) as viewers:
+            _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
         files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary,
                                   protect=inputs) + viewers
     if args.quiet:
@@ -477,25 +474,18 @@ def _cmd_molds(args) -> int:
             print(boundary_molds_text(boundary[1], plan.mold_count, boundary_file))
         print(f"wrote {', '.join(str(f) for f in files)}")
     molds = None if boundary is None else boundary[1]
-    over = np.zeros(0, np.int64) if molds is None else molds.slivers_over_limit
+    over = np.zeros(0, np.int64) if molds is None else molds.steps_over_limit
     if molds is not None and over.size:
         one = over.size == 1
-        print(f"fabplan: warning: {counted(over.size, 'sliver')} cut with {'its' if one else 'their'} "
-              f"full panel stand{'s' if one else ''} up to {molds.sliver_deviation_max_mm:.2f} mm "
-              f"off the design on its mold (tolerance {settings.tolerance_mm:g} mm; ids in "
-              f"{boundary_file}: {over.tolist()[:10]}): cut them as panels of their own or trim them by hand",
-              file=sys.stderr)
+        slivers = int(molds.extension[over].sum())
+        print(f"fabplan: warning: {counted(over.size, 'boundary panel')} step{'s' if one else ''} "
+              f"against a neighbour by up to {molds.step_mm[over].max():.2f} mm (limit "
+              f"{molds.step_limit_mm:g} mm; ids in {boundary_file}: {over.tolist()[:10]}"
+              + (f", {counted(slivers, 'sliver')} cut with its full panel among them"
+                 if slivers else "")
+              + "): trim them by hand or give a looser tolerance", file=sys.stderr)
     if plan.failures.size:
         too_large = sum("needs a mold of" in (plan.problem[i] or "") for i in plan.failures)
-        if panels is not None:
-            # faces past the net's are boundary panels: named as in their own file
-            own = np.flatnonzero(~np.asarray(panels.extension, bool))
-            failed = plan.failures[plan.failures >= len(mesh.faces)]
-            if failed.size:
-                print(f"fabplan: note: of the panels that fit no mold, faces "
-                      f"{failed.tolist()[:10]} are the boundary panels "
-                      f"{own[failed - len(mesh.faces)].tolist()[:10]} of {boundary_file}",
-                      file=sys.stderr)
         why = []
         if too_large:
             why.append(f"{too_large} need a mold larger than --max-mold-size "
@@ -1338,8 +1328,9 @@ def _add_molds(sub: Any) -> None:
     p.add_argument("--step-limit", type=float, metavar="MM",
                    help="largest step between neighbouring panels' molds in mm (default twice "
                         "the tolerance)")
-    _add_boundary_options(p, "they are planned as panels with the net's (slivers cut with "
-                             "their full panel)", "plan the net's own panels only")
+    _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "
+                             "its neighbours (a mold of its own where none does; slivers cut "
+                             "with their full panel)", "plan the net's own panels only")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the report")
     _add_3dm(p)
     p.add_argument("--no-3d", action="store_true",

@@ -136,3 +136,95 @@ def interruptible() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _placed(M: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Points (k, 3) placed by the 4 x 4 matrices M (k, 4, 4)."""
+    return np.einsum("kij,kj->ki", M[:, :3, :3], p) + M[:, :3, 3]
+
+
+def mold_gaps(points: np.ndarray, M: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(k,) mm, vertical gaps of points (k, 3) placed by M (k, 4, 4) to molds K (k, 2)."""
+    q = _placed(M, points)
+    return np.abs(q[:, 2] - 0.5 * (K[:, 0] * q[:, 0] ** 2 + K[:, 1] * q[:, 1] ** 2))
+
+
+STEP_FRACTIONS = np.linspace(0.02, 0.98, 13)
+"""Where `chord_steps` measures along a side: other points than the planner's."""
+
+
+def chord_steps(chords: np.ndarray, A: np.ndarray, KA: np.ndarray, B: np.ndarray,
+                KB: np.ndarray, fractions: np.ndarray = STEP_FRACTIONS) -> np.ndarray:
+    """(k,) mm, the step between two placed molds along chords (k, 2, 3), written apart
+    from the planner: every chord point put on mold A (closest point) and measured against
+    mold B, and the other way round."""
+    out = np.zeros(len(chords))
+    for t in fractions:
+        p = (1 - t) * chords[:, 0] + t * chords[:, 1]
+        for (M, K), (N, L) in (((A, KA), (B, KB)), ((B, KB), (A, KA))):
+            on = closest_on_mold(_placed(M, p), K)
+            back = np.linalg.solve(M[:, :3, :3], (on - M[:, :3, 3])[..., None])[..., 0]
+            q = _placed(N, back)
+            out = np.maximum(out, np.linalg.norm(q - closest_on_mold(q, L), axis=1))
+    return out
+
+
+def exported_molds(net_obj, boundary_obj, molds_json, boundary_csv, cut_obj) -> dict:
+    """Everything about a net's molds read from the files a study or `fabplan molds`
+    writes, and rechecked here: ``steps`` (mm) of the sides two panels share, by kind
+    (``net-net``, ``net-boundary``, ``boundary-boundary``), ``cut_gap_mm`` (the largest
+    gap of the boundary panels as cut to their molds), ``molds_in_all`` (the curved molds
+    the panels use, boundary panels' own included), ``panels`` (full and boundary panels
+    made as panels) and ``record`` (molds.json)."""
+    import csv
+    import json
+
+    from fabplan.io.obj import read_obj
+
+    record = json.loads(open(molds_json, encoding="utf-8").read())
+    shapes = {m["id"]: (m["k1"], m["k2"]) for m in record["molds"]}
+    for j, shape in enumerate(record["boundary_panels"]["own_mold_shapes_per_mm"]):
+        shapes[len(record["molds"]) + j] = tuple(shape)
+    with open(boundary_csv, newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    M = np.array([[float(r[f"m{i}{j}"]) for i in range(4) for j in range(4)]
+                  for r in rows]).reshape(-1, 4, 4)
+    K = np.array([shapes[int(r["mold"])] for r in rows])
+    cut_v, cut_f = read_obj(cut_obj)
+    assert len(cut_f) == len(rows)
+    cut_gap = max((mold_gaps(cut_v[f], np.repeat(M[k][None], len(f), 0),
+                             np.repeat(K[k][None], len(f), 0)).max()
+                   for k, f in enumerate(cut_f)), default=0.0)
+    V, outlines = read_obj(boundary_obj)
+    _, faces = read_obj(net_obj)
+    NM = np.array([p["placement"] for p in record["panels"]])
+    NK = np.array([shapes[p["mold"]] for p in record["panels"]])
+    owner = {}
+    for f, q in enumerate(faces):
+        for a, b in zip(q, np.roll(q, -1), strict=True):
+            owner[(int(a), int(b))] = ("net", f)
+    for k, q in enumerate(outlines):
+        for a, b in zip(q, np.roll(q, -1), strict=True):
+            owner[(int(a), int(b))] = ("boundary", k)
+    groups: dict = {"net-net": [], "net-boundary": [], "boundary-boundary": []}
+    for (a, b), (kind, i) in owner.items():
+        other = owner.get((b, a))
+        if other is None or (kind, i) > other:
+            continue
+        key = "net-net" if kind == other[0] == "net" else (
+            "boundary-boundary" if kind == other[0] else "net-boundary")
+        sides = [(NM[j], NK[j]) if which == "net" else (M[j], K[j])
+                 for which, j in ((kind, i), other)]
+        groups[key].append((V[[a, b]], *sides[0], *sides[1]))
+    steps = {}
+    for key, rows_ in groups.items():
+        if rows_:
+            chords, A, KA, B, KB = (np.array(v) for v in zip(*rows_, strict=True))
+            steps[key] = chord_steps(chords, A, KA, B, KB)
+        else:
+            steps[key] = np.zeros(0)
+    curved = {p["mold"] for p in record["panels"] if p["type"] != "planar"}
+    own = {int(r["mold"]) for r in rows if int(r["mold"]) >= len(record["molds"])}
+    panels = len(faces) + sum(1 for r in rows if r["kind"] != "extension")
+    return {"steps": steps, "cut_gap_mm": cut_gap, "molds_in_all": len(curved) + len(own),
+            "panels": panels, "record": record}

@@ -115,6 +115,17 @@ def resumed_study(tmp_path_factory):
     return folder
 
 
+def test_every_file_a_study_writes_is_one_a_later_study_may_replace(resumed_study):
+    from fabplan.study.report import study_files
+
+    listed = json.loads((resumed_study / "out" / ".fabplan-files").read_text())["files"]
+    written = {p.relative_to(resumed_study / "out").as_posix()
+               for p in (resumed_study / "out").rglob("*")
+               if p.is_file() and CACHE_FOLDER not in p.parts}
+    assert set(listed) == written
+    assert study_files(resumed_study / "out") == written
+
+
 def test_a_crafted_cache_runs_nothing_and_a_fifo_does_not_hang(resumed_study, tmp_path):
     out = tmp_path / "out"
     shutil.copytree(resumed_study / "out", out)

@@ -97,8 +97,14 @@ def test_molds_on_the_design_needs_the_design(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_every_canopy_candidate_is_reproduced_by_its_commands(tmp_path, monkeypatch):
+    from fabplan.study.report import study_files
+
     assert main(["study", "canopy", "-o", str(tmp_path / "out"), "-q"]) == 0
     record = json.loads((tmp_path / "out" / "study.json").read_text())
+    # every file it wrote (strip sheets included) is one a later study replaces
+    written = {p.relative_to(tmp_path / "out").as_posix() for p in (tmp_path / "out").rglob("*")
+               if p.is_file()}
+    assert study_files(tmp_path / "out") == written
     for candidate in record["candidates"]:
         if candidate.get("error"):
             continue

@@ -322,8 +322,33 @@ def test_candidate_files_are_real(study_run):
         _, faces = read_obj(out / outputs["boundary_panels"])
         assert len(faces) == len(edge) - 1
         curved = {int(r.split(",")[1]) for r in rows[1:] if r.split(",")[2] != "planar"}
-        own_molds = sum(1 for r in edge[1:] if r.split(",")[3] == "own")
-        assert len(curved) + own_molds == c["metrics"]["molds"]["count"]   # flat panels need none
+        # the boundary panels' own molds are numbered after the net's
+        net_molds = json.loads((out / outputs["molds_json"]).read_text())["mold_count"]
+        own_molds = {int(r.split(",")[3]) for r in edge[1:] if int(r.split(",")[3]) >= net_molds}
+        assert len(curved) + len(own_molds) == c["metrics"]["molds"]["count"]   # flat panels need none
+        _, cut = read_obj(out / outputs["boundary_panels_cut"])
+        assert [len(f) for f in cut] == [len(f) for f in faces]
+
+
+def test_fabplan_molds_on_a_candidates_files_finds_its_boundary_molds(study_run, tmp_path):
+    """The study's boundary panel molds are reproduced by `fabplan molds` on the files it
+    wrote for a net that leaves the design: the same mold for every panel, the same steps
+    and molds in all."""
+    _, out, record = study_run
+    c = _candidate(record, "const-radius")
+    folder = out / Path(c["outputs"]["net"]).parent
+    study_molds = json.loads((folder / "molds.json").read_text(encoding="utf-8"))
+    tolerance = study_molds["tolerance_mm"]
+    assert main(["molds", str(folder / "net.obj"), "--tolerance-mm", f"{tolerance:.17g}",
+                 "--no-3d", "-q", "-o", str(tmp_path / "molds")]) in (0, 3)
+    again = json.loads((tmp_path / "molds" / "molds.json").read_text(encoding="utf-8"))
+    mine, theirs = study_molds["boundary_panels"], again["boundary_panels"]
+    assert mine["panels"] > 0
+    assert theirs["mold"] == mine["mold"]
+    assert theirs["molds_in_all"] == mine["molds_in_all"]
+    assert theirs["step_max_mm"] == pytest.approx(mine["step_max_mm"], rel=1e-9, abs=1e-12)
+    assert c["metrics"]["molds"]["count"] == mine["molds_in_all"] - (
+        study_molds["mold_count"] - study_molds["curved_mold_count"])
 
 
 def test_lamella_candidates_get_strips_that_read_back(study_run):

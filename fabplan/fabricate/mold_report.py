@@ -520,7 +520,8 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
     """Write ``report.html``, ``report.pdf``, ``molds.json`` and ``panels.csv`` into
     `folder`, all or none (`view_3d`: the HTML report with its interactive 3D view). With
     `boundary` (the net's boundary panels and their molds, `boundary_molds`) also
-    ``boundary-panels.csv``, and ``boundary_panels`` in ``molds.json``. No file replaces
+    ``boundary-panels.csv``, ``boundary-panels.obj`` (the panels as cut from their molds)
+    and ``boundary_panels`` in ``molds.json``. No file replaces
     one of `protect` (the run's inputs, path -> what it is).
 
     Returns
@@ -535,6 +536,9 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
         panels, molds = boundary
         record["boundary_panels"] = molds.record(net_molds=plan.mold_count)
         texts["boundary-panels.csv"] = boundary_panels_csv(panels, molds)
+        texts["boundary-panels.obj"] = molds.cut_obj_text(
+            "fabplan boundary panels as cut from their molds (placements in "
+            "boundary-panels.csv), one face per panel of the net's boundary panels")
     with output_folder(folder, protect=protect) as staging:
         write_texts({staging / "report.html": mold_report_html(
                          plan, view_3d=view_3d, pictures=pictures,
@@ -546,4 +550,5 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
 
 
 #: the files `write_mold_report` may write into its folder
-MOLD_FILES = ("report.html", "report.pdf", "molds.json", "panels.csv", "boundary-panels.csv")
+MOLD_FILES = ("report.html", "report.pdf", "molds.json", "panels.csv", "boundary-panels.csv",
+              "boundary-panels.obj")

@@ -75,6 +75,7 @@ __all__ = [
     "placement_deviations",
     "closest_mold_points",
     "panel_steps",
+    "chord_steps",
     "mold_count_bound",
 ]
 
@@ -260,7 +261,7 @@ def panel_steps(mesh: QuadMesh, placement: np.ndarray, shape: np.ndarray, mm: fl
     At points of the edge's chord (`fractions` of the way from its first vertex) the point
     is put on panel A's mold (its closest point there, through A's placement) and measured
     against panel B's mold (the distance to B's closest point); and the other way round.
-    This is the step a fabricator sees between the two finished panels.
+    This is the step a fabricator sees between the two finished panels (`chord_steps`).
 
     Parameters
     ----------
@@ -277,23 +278,57 @@ def panel_steps(mesh: QuadMesh, placement: np.ndarray, shape: np.ndarray, mm: fl
     pairs, edges = mesh.interior_edge_faces, mesh.interior_edges
     if len(pairs) == 0:
         return np.zeros(0), np.zeros(0)
-    t = np.array([0.25, 0.5, 0.75]) if fractions is None else np.asarray(fractions, float)
     X = mesh.vertices
-    P = (1 - t[None, :, None]) * X[edges[:, :1]] + t[None, :, None] * X[edges[:, 1:]]  # (i, t, 3)
-    step = np.zeros(len(pairs))
-    kink = np.zeros(len(pairs))
+    return chord_steps(X[edges], placement[pairs], shape[pairs], mm, fractions=fractions)
+
+
+def chord_steps(chords: np.ndarray, placement: np.ndarray, shape: np.ndarray, mm: float, *,
+                fractions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The step and the kink between two molds along the chords of their shared sides.
+
+    Parameters
+    ----------
+    chords : (i, 2, 3) float, the two ends of every shared side (model units).
+    placement : (i, 2, 4, 4) float, model -> mold coordinates (mm) of the two panels.
+    shape : (i, 2, 2) float, ``(k1, k2)`` of their molds (1/mm).
+    mm : millimetres per model unit.
+    fractions : (t,) float, where along the chords (default ``(0.25, 0.5, 0.75)``).
+
+    Returns
+    -------
+    step : (i,) float, mm: the chord's points put on the first mold (their closest points
+        there) and measured against the second, and the other way round; the largest.
+    kink : (i,) float, degrees, the largest angle between the two molds' normals there.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> flat = np.eye(4) * np.array([1000.0, 1000.0, 1000.0, 1.0])
+    >>> up = flat.copy()
+    >>> up[2, 3] = -2.0                              # the second mold 2 mm lower
+    >>> step, kink = chord_steps(np.array([[[0.0, 0, 0], [1.0, 0, 0]]]),
+    ...                          np.array([[flat, up]]), np.zeros((1, 2, 2)), 1000.0)
+    >>> np.round(step, 9), np.round(kink, 9)
+    (array([2.]), array([0.]))
+    """
+    if len(chords) == 0:
+        return np.zeros(0), np.zeros(0)
+    t = np.array([0.25, 0.5, 0.75]) if fractions is None else np.asarray(fractions, float)
+    P = (1 - t[None, :, None]) * chords[:, :1] + t[None, :, None] * chords[:, 1:]   # (i, t, 3)
+    step = np.zeros(len(chords))
+    kink = np.zeros(len(chords))
     for a, b in ((0, 1), (1, 0)):
-        A, B = placement[pairs[:, a]], placement[pairs[:, b]]
+        A, B = placement[:, a], placement[:, b]
         qa = np.einsum("eij,etj->eti", A[:, :3, :3], P) + A[:, None, :3, 3]
-        ca = closest_mold_points(qa, shape[pairs[:, a], None, :])
+        ca = closest_mold_points(qa, shape[:, a, None, :])
         # back to model coordinates (A's block is mm times a rotation), then into B's mold
         Ra = A[:, :3, :3] / mm
         pa = np.einsum("eji,etj->eti", Ra, ca - A[:, None, :3, 3]) / mm
         qb = np.einsum("eij,etj->eti", B[:, :3, :3], pa) + B[:, None, :3, 3]
-        cb = closest_mold_points(qb, shape[pairs[:, b], None, :])
+        cb = closest_mold_points(qb, shape[:, b, None, :])
         step = np.maximum(step, np.linalg.norm(qb - cb, axis=2).max(axis=1))
-        na = np.einsum("eji,etj->eti", Ra, _mold_normals(ca, shape[pairs[:, a], None, :]))
-        nb = np.einsum("eji,etj->eti", B[:, :3, :3] / mm, _mold_normals(cb, shape[pairs[:, b], None, :]))
+        na = np.einsum("eji,etj->eti", Ra, _mold_normals(ca, shape[:, a, None, :]))
+        nb = np.einsum("eji,etj->eti", B[:, :3, :3] / mm, _mold_normals(cb, shape[:, b, None, :]))
         cos = np.abs(np.sum(na * nb, axis=2)).min(axis=1)
         kink = np.maximum(kink, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
     return step, kink

@@ -324,6 +324,9 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
     offset = np.zeros((0, 3))
+    # where the panels stand over the design: their points before the lift (which is
+    # along the design's normals)
+    footprint = vertices
     if follow_net and len(vertices) > mesh.vertex_count:
         # lifted before the outlines are checked: what crosses is judged where it is cut
         offset = _follow_net(vertices[mesh.vertex_count:], mesh.vertices, design)
@@ -331,14 +334,16 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         vertices[mesh.vertex_count:] += offset
     polygons, changed, crossed = _untangled(vertices, polygons, corner)
     triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
-    # coverage is measured on the surface, independently of the plane (`_under`)
+    # coverage is measured on the surface, independently of the plane (`_under`), by the
+    # panels' footprints: lifted with a net that leaves the design, a panel tilts against
+    # it where the lift changes fast (a corner), and would seem to leave a gap beside it
     samples, normals, weight = _design_samples(design)
     on_net = _clad(samples, normals, mesh.vertices, mesh.triangles(), h)
-    on_any = on_net | _clad(samples, normals, vertices,
+    on_any = on_net | _clad(samples, normals, footprint,
                             np.vstack([mesh.triangles(), triangles]), h)
     # the small gaps left (pieces around singular points the plane could not cut) are
     # cut in their own tangent planes
-    extra = gap_patches(design, vertices, np.vstack([mesh.triangles(), triangles]), on_any, h) \
+    extra = gap_patches(design, footprint, np.vstack([mesh.triangles(), triangles]), on_any, h) \
         if patch_gaps else None
     if extra is not None and extra.count:
         owner = np.r_[owner, len(polygons) + extra.owner]
@@ -348,12 +353,13 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
             lifted = _follow_net(extra.points, mesh.vertices, design)
             offset = np.vstack([offset, lifted])
         vertices = np.vstack([vertices, extra.points + lifted])
+        footprint = np.vstack([footprint, extra.points])
         polygons = polygons + extra.polygons
         triangles = np.vstack([triangles, extra.triangles])
         patch = np.r_[patch, np.ones(extra.count, bool)]
         on_boundary = np.r_[on_boundary, extra.on_boundary]
         corner = np.r_[corner, ~extra.on_boundary]
-        on_any |= _clad(samples, normals, vertices, np.vstack([mesh.triangles(), triangles]), h)
+        on_any |= _clad(samples, normals, footprint, np.vstack([mesh.triangles(), triangles]), h)
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     area = np.bincount(owner, tri_area, minlength=len(polygons))

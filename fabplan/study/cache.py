@@ -45,7 +45,7 @@ __all__ = ["CACHE_FOLDER", "CACHE_FORMAT", "CandidateCache", "cached_types"]
 
 CACHE_FOLDER = ".fabplan-cache"
 #: what a kept candidate's JSON says it is, and the version of its layout
-CACHE_FORMAT = {"format": "fabplan-candidate", "version": 1}
+CACHE_FORMAT = {"format": "fabplan-candidate", "version": 2}
 #: largest kept file read back (a crafted huge file is ignored, not read)
 MAX_ENTRY_BYTES = 2**29
 #: room for the header of every array in a kept .npz beyond its values
@@ -54,7 +54,7 @@ _NPY_HEADER = 4096
 
 def cached_types() -> dict[str, type]:
     """The only classes a kept candidate may hold: a study candidate's results."""
-    from ..fabricate.boundary_molds import BoundaryMolds
+    from ..fabricate.boundary_molds import BoundaryMolds, BoundarySides
     from ..fabricate.molds import MoldPlan, MoldSettings
     from ..fabricate.nesting import Label, Nesting, Part, Placement, Sheet
     from ..fabricate.strip_plan import StripPlan
@@ -67,7 +67,7 @@ def cached_types() -> dict[str, type]:
 
     classes: list[type] = [
         CandidateResult, Candidate, OptimizationResult, QuadMesh, BoundaryPanels, MoldPlan,
-        MoldSettings, BoundaryMolds, StripPlan, StripSet, Strip, StripSettings, ReferenceCurve,
+        MoldSettings, BoundaryMolds, BoundarySides, StripPlan, StripSet, Strip, StripSettings, ReferenceCurve,
         ArcRun, Crossing, Part, Label, Placement, Sheet, Nesting]
     return {cls.__name__: cls for cls in classes}
 

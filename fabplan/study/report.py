@@ -627,9 +627,13 @@ def _boundary_text(boundary: dict | None) -> str:
         return ""
     own = boundary["own_molds"]
     text = (f"; and {counted(boundary['count'], 'boundary panel')} trimmed to the design "
-            "boundary, each cut from the mold of the full panel it continues")
-    if boundary.get("deviation_max_mm") is not None:
-        text += f" (up to {boundary['deviation_max_mm']:.1f} mm from the design)"
+            "boundary, each cut from a mold of the net's panels and placed to meet its "
+            "neighbours")
+    if boundary.get("step_max_mm") is not None:
+        text += f" (steps up to {boundary['step_max_mm']:.2f} mm"
+        if boundary.get("deviation_max_mm") is not None:
+            text += f", up to {boundary['deviation_max_mm']:.1f} mm from the design"
+        text += ")"
     if own:
         text += f", {counted(own, 'panel')} on a mold of its own"
     if boundary.get("flipped"):
@@ -1023,7 +1027,7 @@ STUDY_FILES = ("report.html", "report.pdf", "study.json", "candidates.csv")
 _STUDY_FILE = re.compile(
     r"(report\.html|report\.pdf|study\.json|candidates\.csv|" + re.escape(output.MANIFEST) + "|"
     r"candidates/[^/]+/(net\.(obj|json|png|3dm|glb)|net\.boundary\.obj|molds\.(csv|json)|"
-    r"boundary-panels\.csv|reproduce\.sh|"
+    r"boundary-panels\.(csv|obj)|reproduce\.sh|"
     r"strips/(strips(-sheet-\d+\.(dxf|png)|-sheets\.dxf|\.csv|\.json)|sheet-preview\.png)))")
 
 
@@ -1064,9 +1068,10 @@ def check_output_folder(folder: str | os.PathLike, study: Study | None = None) -
 
 def reproduce_commands(c: CandidateResult, study: Study) -> list[list[str]]:
     """The commands that give a candidate's molds (and strips) from the files in its
-    folder, as the study planned them: `fabplan molds` on ``net.obj`` at the candidate's
-    mold tolerance and step limit, on the design's patches for a net that glides on it;
-    `fabplan strips` with the study's strip options. Run in the candidate's folder."""
+    folder, as the study planned them: `fabplan molds` on ``net.obj`` (with its boundary
+    panels, ``net.boundary.obj``) at the candidate's mold tolerance and step limit, on the
+    design's patches for a net that glides on it; `fabplan strips` with the study's strip
+    options. Run in the candidate's folder."""
     units = study.design.units
     limits = study.limits_of(c.candidate)
     molds = ["fabplan", "molds", "net.obj", "--tolerance-mm", f"{limits.mold_tolerance_mm!r}",
@@ -1075,7 +1080,7 @@ def reproduce_commands(c: CandidateResult, study: Study) -> list[list[str]]:
         molds += ["--panel-surface", "design", "--design", study.design.source]
         if study.design.triangles is not None:
             molds += ["--triangles", str(study.design.triangles)]
-    molds += ["--no-boundary", "-o", "reproduced/molds"]
+    molds += ["-o", "reproduced/molds"]
     commands = [molds]
     options = study.strips
     if c.strips is not None and options is not None:
@@ -1123,10 +1128,15 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
         "net": "net.obj", "measured": "net.json", "molds_csv": "molds.csv",
         "molds_json": "molds.json", "picture": "net.png", "reproduce": "reproduce.sh"}
     if net.boundary_panels is not None and c.boundary_molds is not None:
-        output.write_texts({folder / "boundary-panels.csv": boundary_panels_csv(
-            net.boundary_panels, c.boundary_molds)})
+        output.write_texts({
+            folder / "boundary-panels.csv": boundary_panels_csv(net.boundary_panels,
+                                                                c.boundary_molds),
+            folder / "boundary-panels.obj": c.boundary_molds.cut_obj_text(
+                "fabplan boundary panels as cut from their molds (placements in "
+                "boundary-panels.csv), one face per panel of net.boundary.obj")})
         outputs["boundary_panels"] = "net.boundary.obj"
         outputs["boundary_panels_csv"] = "boundary-panels.csv"
+        outputs["boundary_panels_cut"] = "boundary-panels.obj"
     title = f"{c.name}: {c.candidate.describe()}"
     write_layout_picture(folder / "net.png", design, net.mesh, title=title,
                          singular_points=c.singular_points,

@@ -509,7 +509,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     """
     from ..layout.starts import glide_fairest
     from ..layout.surface_layout import glide, layout_surface
-    from ..layout.trim import add_boundary_panels
+    from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
     from ..solve.optimize import optimize
     from ..solve.solver import SolverSettings
 
@@ -567,7 +567,9 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         net = optimize(starts[key].mesh, candidate.net, angle=candidate.angle,
                        radius=candidate.radius, reference=design.reference, settings=settings,
                        settle_free=step, progress=report)
-        add_boundary_panels(net, layout)
+        # its boundary panels continue it where it stands off the design, as `fabplan
+        # optimize` cuts them: their molds are fitted to the net's panels beside them
+        add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True)
     seconds["optimize"] = time.perf_counter() - clock
     if several and "layout_starts" in net.properties:
         # the starts' layouts were made in the solve: counted as layout time
@@ -617,7 +619,9 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
                            design=design if candidate.glides else None)
     bounds = None
     if net.boundary_panels is not None:
-        bounds = boundary_molds(molds, net.boundary_panels, study.limits.max_deviation_mm)
+        # on the net's molds, placed to meet their neighbours; their distance from the
+        # design measured as cut
+        bounds = boundary_molds(molds, net.boundary_panels, design=design)
     seconds["molds"] = time.perf_counter() - clock
     say(f"    {molds_text(mold_metrics(molds, bounds))} for {counted(molds.panel_count, 'panel')}"
         + (f" and {counted(bounds.count, 'boundary panel')}" if bounds is not None else "")
@@ -731,8 +735,12 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "full_panels": int(len(mesh.face_sizes)),
         "boundary_panels": None if boundary is None else {
             "count": boundary.count,
+            "on_net_molds": boundary.on_net_molds,
             "own_molds": boundary.own_molds,
-            "deviation_max_mm": boundary.record()["deviation_max_mm"],
+            # as cut from their molds: their largest distance from the design, and step
+            # against a neighbour
+            "deviation_max_mm": boundary.deviation_max_mm,
+            "step_max_mm": boundary.step_max_mm,
             "flipped": len(trimmed.get("flipped") or []),
             "patches": len(trimmed.get("patches") or []),
         },
@@ -817,42 +825,48 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
     ----------
     plan : `fabplan.molds.MoldPlan`.
     boundary : the `BoundaryMolds` of the net's boundary panels, or None. A boundary
-        panel is of its neighbour's type and cut from its mold; one that needs a mold of
-        its own adds a curved mold and counts as double curved.
+        panel is cut from one of the net's molds (and is of that mold's type) or from a
+        mold of its own (a paraboloid, counted); its steps against its neighbours count
+        with the net's.
 
     Returns
     -------
-    dict: ``count`` (molds of the curved panels), ``all_panels_flat``, ``fits_all``,
-    ``failures``, ``max_deviation_mm`` (largest panel-to-mold gap, flat panels measured
-    against a plane), ``molds_per_sqrt_panels`` (``count / sqrt(panels)``),
-    ``panel_types``, ``mold_types`` (the plane type counts the plane flat panels are
-    checked against), ``panels_per_mold_max`` (over the curved molds; 0 without any),
+    dict: ``count`` (molds of the curved panels, the boundary panels' own included),
+    ``all_panels_flat``, ``fits_all``, ``failures``, ``max_deviation_mm`` (largest
+    panel-to-mold gap, flat panels measured against a plane), ``molds_per_sqrt_panels``
+    (``count / sqrt(panels)``, boundary panels counted), ``panel_types``, ``mold_types``
+    (the plane type counts the plane flat panels are checked against),
+    ``panels_per_mold_max`` (over the curved molds; 0 without any),
     ``max_panel_step_mm`` (largest step between neighbouring panels' molds at a shared
-    edge), ``panel_steps_over`` (shared edges whose step exceeds twice the tolerance) and
-    ``bound`` (an estimate of the fewest molds the panels' curvature set allows,
-    `MoldPlan.mold_count_bound`).
+    edge, boundary panels included), ``panel_steps_over`` (shared edges whose step exceeds
+    the step limit), ``bound`` (an estimate of the fewest molds the panels' curvature set
+    allows, `MoldPlan.mold_count_bound`), ``boundary_own_molds`` and ``net_molds`` (the
+    curved molds of the net's own panels).
     """
     curved = np.asarray(plan.mold_type) > 0
     per_mold = plan.panels_per_mold.copy()
     panel_type = np.asarray(plan.panel_type)
     own = 0
+    step = plan.max_step_mm
+    over = int(plan.steps_over.size)
     if boundary is not None and boundary.count:
-        cut = boundary.mold >= 0
+        cut = (boundary.mold >= 0) & (boundary.mold < len(per_mold)) & ~boundary.extension
         per_mold += np.bincount(boundary.mold[cut], minlength=len(per_mold))
         own = boundary.own_molds
-        double = PANEL_TYPES.index("double_curved")
-        own_panel = ~boundary.extension
-        panel_type = np.r_[panel_type, np.where(
-            cut, plan.panel_type[np.maximum(boundary.neighbour_face, 0)], double)[own_panel]]
+        panel_type = np.r_[panel_type, boundary.panel_types()[~boundary.extension]]
+        step = max(step, boundary.step_max_mm)
+        known = np.isfinite(boundary.side_step_mm)
+        over += int(np.sum(boundary.side_step_mm[known] > boundary.step_limit_mm + 1e-9))
     count = int(curved.sum()) + own
     panels = len(panel_type)
     return {
         "count": count,
+        "net_molds": int(curved.sum()),
         "all_panels_flat": count == 0,
-        "fits_all": bool(plan.fits_all),
+        "fits_all": bool(plan.fits_all) and over == int(plan.steps_over.size),
         "failures": int(plan.failures.size),
-        "max_panel_step_mm": plan.max_step_mm,
-        "panel_steps_over": int(plan.steps_over.size),
+        "max_panel_step_mm": step,
+        "panel_steps_over": over,
         "bound": plan.mold_count_bound()[1],
         "max_deviation_mm": float(np.max(plan.deviation_mm)),
         "molds_per_sqrt_panels": count / math.sqrt(panels),
@@ -918,12 +932,9 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     checks.append(_check(
         "max_deviation_mm", limits.max_deviation_mm, both, both <= limits.max_deviation_mm,
         f"the net deviates up to {dev:.1f} mm from the design"
-        # the boundary panels' gap is within the limit by construction: the others are
-        # on molds of their own
-        + (f", the boundary panels cut from their neighbours' molds up to {edge:.2f} mm"
+        + (f", its boundary panels as cut from their molds up to {edge:.1f} mm"
+           + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
            if edge is not None else "")
-        + (f" (and {counted(own, 'boundary panel')} further off on molds of their own)"
-           if own else "")
         + f" (limit {limits.max_deviation_mm:g} mm)"))
     molds = metrics["molds"]
     panels_fit = molds["failures"] == 0
