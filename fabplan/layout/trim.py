@@ -49,13 +49,15 @@ from ..design.mesh_surface import DesignSurface
 from ..errors import InputError
 from ..net.mesh import QuadMesh
 from .gap_patches import gap_patches, outline_triangles, unclad_components
+from .off_design import MIN_OFF_PANELS, OffDesign, area_off_design
+from .overlaps import edge_clashes, overlapping_pairs, self_crossing
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
     from .surface_layout import SurfaceLayout
 
-__all__ = ["BoundaryPanels", "ParameterChart", "trim_to_design", "add_boundary_panels",
-           "read_boundary_panels", "net_coverage"]
+__all__ = ["BoundaryPanels", "ParameterChart", "Soundness", "trim_to_design",
+           "add_boundary_panels", "read_boundary_panels", "net_coverage", "soundness"]
 
 
 @dataclass
@@ -90,6 +92,8 @@ class BoundaryPanels:
     boundary_distance_max : largest distance of a point flagged `on_boundary` from the
         design's boundary curve (the exact one for a built-in design), in panel sizes
         (with `follows_net`, lifted points: about the lift there).
+    soundness : what is wrong with the net and its panels, measured on the surface
+        (`Soundness.record`: ``off_design`` and ``crossings``); empty where unknown.
     follows_net : the points off the net stand off the design as the net does beside
         them (`trim_to_design(..., follow_net=True)`); offset_max : the largest such lift
         (model units).
@@ -125,6 +129,7 @@ class BoundaryPanels:
     gaps: list = field(default_factory=list)
     follows_net: bool = False
     offset_max: float = 0.0
+    soundness: dict = field(default_factory=dict)
 
     @property
     def count(self) -> int:
@@ -204,6 +209,7 @@ class BoundaryPanels:
             # a net optimized off its design: its boundary panels stand off it with it
             "follow_net": self.follows_net,
             "offset_from_design_max_relative_to_panel": self.offset_max / self.panel_size,
+            **self.soundness,
             "seconds": round(self.seconds, 4),
         }
 
@@ -291,7 +297,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     if by_sheet:
         piece_region = np.repeat(np.arange(len(cut)), [len(c[0]) for c in cut])
         sheets = (rest, rest_triangle, rest_region, piece_region)
-    vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+    vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
         pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
     # a piece over a seam of the parametrization, where the plane holds several sheets
     # of the design, may map to points of different sheets: its sides then stretch far
@@ -302,7 +308,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         pieces = pieces[sane]
         if sheets is not None:
             sheets = (*sheets[:3], sheets[3][sane])
-        vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
     patch = patch[sane]
     triangles, owner = _triangles_on_surface(pieces, ring_ids)
@@ -320,17 +326,28 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         pieces, patch = pieces[~double], patch[~double]
         if sheets is not None:
             sheets = (*sheets[:3], sheets[3][~double])
-        vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
     offset = np.zeros((0, 3))
     if follow_net and len(vertices) > mesh.vertex_count:
         # lifted before the outlines are checked: what crosses is judged where it is cut
         offset = _follow_net(vertices[mesh.vertex_count:], mesh.vertices, design)
+        # the points on the net's sides are where the net is already
+        offset[on_side[mesh.vertex_count:]] = 0.0
         vertices = vertices.copy()
         vertices[mesh.vertex_count:] += offset
     polygons, changed, crossed = _untangled(vertices, polygons, corner)
     triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
+    recut = 0
+    if patch_gaps:
+        # checked on the surface: what the plane cut wrongly (off the design, over a hole;
+        # crossing itself; facing against the design; over the net or another panel) is
+        # left out, and its place is cut again in its tangent plane with the gaps below
+        unsound = _unsound_pieces(vertices, polygons, triangles, owner, mesh, design, h)
+        recut = int(unsound.sum())
+        polygons, triangles, owner, patch = _without_pieces(polygons, triangles, owner, patch,
+                                                            unsound)
     # coverage is measured on the surface, independently of the plane (`_under`)
     samples, normals, weight = _design_samples(design)
     on_net = _clad(samples, normals, mesh.vertices, mesh.triangles(), h)
@@ -354,24 +371,135 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         on_boundary = np.r_[on_boundary, extra.on_boundary]
         corner = np.r_[corner, ~extra.on_boundary]
         on_any |= _clad(samples, normals, vertices, np.vstack([mesh.triangles(), triangles]), h)
+    if extra is not None and extra.count:
+        # a patch cut in its plane that still clashes (rare) is left out: a gap, reported
+        unsound = _unsound_pieces(vertices, polygons, triangles, owner, mesh, design, h)
+        if unsound.any():
+            polygons, triangles, owner, patch = _without_pieces(polygons, triangles, owner,
+                                                                patch, unsound)
+            on_any = on_net | _clad(samples, normals, vertices,
+                                    np.vstack([mesh.triangles(), triangles]), h)
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     area = np.bincount(owner, tri_area, minlength=len(polygons))
     neighbour = _neighbour_faces(polygons, mesh, vertices)
     extension = area < min_panel * h * h
     flipped = _flipped(vertices, polygons, design, 1e-3 * h * h)
+    crossed = np.flatnonzero(self_crossing(vertices, polygons))
+    sound = soundness(vertices, polygons, triangles, owner, mesh, design, h)
     return BoundaryPanels(
         vertices=vertices, polygons=polygons, net_vertex_count=mesh.vertex_count,
         on_boundary=on_boundary, corner=corner, neighbour_face=neighbour,
         area=area, panel_size=h, extension=extension,
         coverage_net=float(weight[on_net].sum() / weight.sum()),
         coverage=float(weight[on_any].sum() / weight.sum()),
-        flipped=flipped[~extension[flipped]], crossed=crossed[~extension[crossed]], patch=patch,
+        flipped=flipped[~extension[flipped]], crossed=crossed, patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
         net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h),
         follows_net=follow_net,
-        offset_max=float(np.linalg.norm(offset, axis=1).max()) if len(offset) else 0.0)
+        offset_max=float(np.linalg.norm(offset, axis=1).max()) if len(offset) else 0.0,
+        soundness=sound.record(h, recut))
+
+
+@dataclass
+class Soundness:
+    """What is wrong with a cladding (a net and its boundary panels), measured on the
+    surface: nothing in a sound one.
+
+    Attributes
+    ----------
+    off_net : `OffDesign` of the net's faces (over a hole, or past the design boundary).
+    off_panels : `OffDesign` of the boundary panels.
+    crossing : (k,) int, panels whose outline crosses itself (`self_crossing`).
+    overlaps : (m, 2) int, pairs of pieces that cover the same part of the surface
+        (`overlapping_pairs`); overlap_area (m,) float, the area each shares.
+    clashes : (c, 2) int, pairs of pieces that use a side in the same direction
+        (`edge_clashes`). Pieces in `overlaps` and `clashes` are numbered the net's
+        `faces` first, then the panels.
+    faces : the number of the net's faces.
+    """
+
+    off_net: OffDesign
+    off_panels: OffDesign
+    crossing: np.ndarray
+    overlaps: np.ndarray
+    overlap_area: np.ndarray
+    clashes: np.ndarray
+    faces: int
+
+    def _piece(self, k: int) -> dict:
+        return {"face": int(k)} if k < self.faces else {"panel": int(k - self.faces)}
+
+    def record(self, panel_size: float, cut_again: int = 0) -> dict:
+        """JSON-ready: ``off_design`` (the area of panels off the design: over a hole or
+        past its boundary, an error; where the largest pieces are) and ``crossings``
+        (counts of panels crossing themselves, pairs of pieces overlapping and sides
+        used twice the same way, with the pieces named; the panels cut again on the
+        surface)."""
+        least = MIN_OFF_PANELS * panel_size ** 2
+        net_area = self.off_net.area[self.off_net.area > least]
+        panel_area = self.off_panels.area[self.off_panels.area > least]
+        total = float(net_area.sum() + panel_area.sum())
+        places = self.off_net.places(least, label="face") + \
+            self.off_panels.places(least, label="panel")
+        places.sort(key=lambda p: -p["area"])
+        return {
+            "off_design": {
+                "area": total, "area_relative_to_panel": total / panel_size ** 2,
+                "faces": int(len(net_area)), "panels": int(len(panel_area)),
+                "places": places[:5]},
+            "crossings": {
+                "self_crossing": int(len(self.crossing)),
+                "overlapping": int(len(self.overlaps)),
+                "edge_clashes": int(len(self.clashes)),
+                "pairs": [[self._piece(a), self._piece(b)] for a, b in
+                          np.concatenate([self.overlaps, self.clashes]).tolist()][:10],
+                "cut_again": int(cut_again)},
+        }
+
+
+def soundness(vertices: np.ndarray, polygons: list, triangles: np.ndarray, owner: np.ndarray,
+              mesh: QuadMesh, design: DesignSurface, h: float) -> Soundness:
+    """The `Soundness` of a net `mesh` and its boundary panels (`polygons` into `vertices`,
+    cut into `triangles` of `owner` each) on `design`, panel size `h`."""
+    from .off_design import faces_off_design
+
+    pieces = list(mesh.faces) + list(polygons)
+    overlaps, shared = overlapping_pairs(vertices, pieces, len(mesh.face_sizes), h)
+    return Soundness(
+        off_net=faces_off_design(design, vertices, mesh.faces, h),
+        off_panels=area_off_design(design, vertices, triangles, owner, len(polygons), h),
+        crossing=np.flatnonzero(self_crossing(vertices, polygons)),
+        overlaps=overlaps, overlap_area=shared,
+        clashes=edge_clashes(pieces, len(vertices)), faces=len(mesh.face_sizes))
+
+
+def _unsound_pieces(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
+                    owner: np.ndarray, mesh: QuadMesh, design: DesignSurface, h: float
+                    ) -> np.ndarray:
+    """(p,) bool, the panels that are off the design, cross themselves, face against it,
+    overlap a net face or another panel, or share a side with one the same way."""
+    sound = soundness(vertices, polygons, triangles, owner, mesh, design, h)
+    bad = np.zeros(len(polygons), bool)
+    bad[sound.crossing] = True
+    bad[sound.off_panels.area > MIN_OFF_PANELS * h * h] = True
+    bad[_flipped(vertices, polygons, design, 1e-3 * h * h)] = True
+    for pairs in (sound.overlaps, sound.clashes):
+        ids = pairs.ravel()
+        bad[ids[ids >= sound.faces] - sound.faces] = True
+    return bad
+
+
+def _without_pieces(polygons: list, triangles: np.ndarray, owner: np.ndarray, patch: np.ndarray,
+                    drop: np.ndarray) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
+    """The panels less those marked in `drop` (p,) bool: their outlines, triangles (t, 3)
+    with the panel of each renumbered, and `patch` (p,) bool."""
+    keep = ~np.asarray(drop, bool)
+    new_id = np.cumsum(keep) - 1
+    kept = keep[owner]
+    return ([q for q, k in zip(polygons, keep, strict=True) if k], triangles[kept],
+            new_id[owner[kept]], patch[keep])
 
 
 def _follow_net(points: np.ndarray, net: np.ndarray, design: DesignSurface,
@@ -972,11 +1100,14 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     Returns
     -------
     vertices (m, 3), polygons (list of int arrays), on_boundary (m,) bool, corner (m,) bool,
-    and the id of every point of every piece's ring (list of int arrays, repeats kept).
+    the id of every point of every piece's ring (list of int arrays, repeats kept), and
+    on_side (m,) bool, the points put on a boundary side of the net
+    (`_net_side_points`).
     """
     n = mesh.vertex_count
     if len(pieces) == 0:
-        return (mesh.vertices.copy(), [], np.zeros(n, bool), np.ones(n, bool), [])
+        return (mesh.vertices.copy(), [], np.zeros(n, bool), np.ones(n, bool), [],
+                np.zeros(n, bool))
     rings = [np.asarray(g.exterior.coords)[:-1] for g in pieces]
     points = np.concatenate(rings)
     # a point is a net vertex when the parameters agree to the grid
@@ -1018,6 +1149,13 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     # only, to rounding: the triangles within `tol` are candidates too
     reach = tol if sheets is not None else 0.0
     vertices = np.vstack([mesh.vertices, chart.to_surface(exact, near, reach=reach)])
+    # a point on a side of the net in the plane is on that side on the surface too: the
+    # straight edge between its two vertices, not the chart's curve under it (which
+    # leaves a sliver between the panel and the face, over or beside it)
+    at, chord = _net_side_points(new_p, p_net, mesh, tol)
+    vertices[n + at] = chord
+    on_side = np.zeros(len(vertices), bool)
+    on_side[n + at] = True
     on_ray = np.zeros(len(vertices), bool)
     if len(rays) and len(new_p):
         on_ray[n:] = shapely.distance(new_points, shapely.union_all(rays)) <= tol
@@ -1035,7 +1173,29 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     ob[:n] = touching
     corner = np.zeros(len(vertices), bool)
     corner[ring[(ring < n) | ~ob[ring] | ~ob[before] | ~ob[after] | on_ray[ring]]] = True
-    return vertices, polygons, on_boundary, corner, ring_ids
+    return vertices, polygons, on_boundary, corner, ring_ids, on_side
+
+
+def _net_side_points(points: np.ndarray, p_net: np.ndarray, mesh: QuadMesh, tol: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The points (m, 2) of the plane within `tol` of a boundary edge of the net (its
+    vertices at `p_net` (n, 2)), not at its ends: (k,) int which, and (k, 3) float, where
+    they lie on the edge's straight side in space (at the same share of its length)."""
+    edges = mesh.boundary_edges
+    if len(points) == 0 or len(edges) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    A, B = p_net[edges[:, 0]], p_net[edges[:, 1]]
+    tree = shapely.STRtree(shapely.linestrings(np.stack([A, B], axis=1)))
+    point, edge = tree.query(shapely.points(points), predicate="dwithin", distance=tol)
+    d = B[edge] - A[edge]
+    share = np.sum((points[point] - A[edge]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300)
+    length = np.sqrt(np.sum(d * d, axis=1))
+    inner = (share * length > tol) & ((1 - share) * length > tol)
+    point, edge, share = point[inner], edge[inner], share[inner]
+    point, first = np.unique(point, return_index=True)
+    edge, share = edge[first], share[first]
+    X = mesh.vertices
+    return point, (1 - share)[:, None] * X[edges[edge, 0]] + share[:, None] * X[edges[edge, 1]]
 
 
 def _piece_anchors(pieces: np.ndarray, rest: np.ndarray, rest_triangle: np.ndarray,
