@@ -759,6 +759,24 @@ def boundary_warnings(properties: dict) -> list:
                    f"{'crosses itself' if one else 'cross themselves'} (ids under "
                    "properties.boundary_panels.crossed): the outline turns back at a net vertex "
                    "off the design boundary; trim the net there by hand")
+    off = panels.get("off_design") or {}
+    if off.get("area", 0.0) > 0:
+        places = off.get("places") or []
+        where = "" if not places else (
+            f"; the largest, {places[0]['area']:.4g} units squared of "
+            f"{'face' if 'face' in places[0] else 'boundary panel'} "
+            f"{places[0].get('face', places[0].get('panel'))}, around "
+            f"({', '.join(f'{v:.4g}' for v in places[0]['point'])})")
+        out.append(f"{off['area']:.4g} units squared of panels lie off the design, over a hole "
+                   f"or past its boundary ({off.get('faces', 0)} net faces and "
+                   f"{off.get('panels', 0)} boundary panels{where}; listed under "
+                   "properties.boundary_panels.off_design): trim them there by hand")
+    crossings = panels.get("crossings") or {}
+    clashes = crossings.get("overlapping", 0) + crossings.get("edge_clashes", 0)
+    if clashes:
+        out.append(f"{counted(clashes, 'pair')} of panels overlap or share a side the same way "
+                   "(listed under properties.boundary_panels.crossings.pairs: a face is a net "
+                   "face, a panel a face of the boundary OBJ, numbered from 0)")
     return out
 
 

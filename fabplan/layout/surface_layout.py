@@ -886,6 +886,9 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         # gliding on the boundary, a face may come to span a corner of it (a door's) or
         # line up three corners along it: it is no panel, and its place is cut as
         # boundary panels of a net solved without it
+        # (a net that did not converge is reported as it is: its faces say why)
+        if not result.converged:
+            break
         unsound = ~sound_faces(design, result.mesh.vertices, result.mesh.faces,
                                layout.panel_size)
         if not unsound.any() or unsound.all():

@@ -479,15 +479,16 @@ def _unsound_pieces(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
                     owner: np.ndarray, mesh: QuadMesh, design: DesignSurface, h: float
                     ) -> np.ndarray:
     """(p,) bool, the panels that are off the design, cross themselves, face against it,
-    overlap a net face or another panel, or share a side with one the same way."""
+    overlap a net face or an earlier panel, or share a side with one the same way."""
     sound = soundness(vertices, polygons, triangles, owner, mesh, design, h)
     bad = np.zeros(len(polygons), bool)
     bad[sound.crossing] = True
     bad[sound.off_panels.area > MIN_OFF_PANELS * h * h] = True
     bad[_flipped(vertices, polygons, design, 1e-3 * h * h)] = True
+    # of two panels that overlap, the later goes (a patch cut twice, from two gaps that
+    # meet, is kept once); a panel over a net face goes
     for pairs in (sound.overlaps, sound.clashes):
-        ids = pairs.ravel()
-        bad[ids[ids >= sound.faces] - sound.faces] = True
+        bad[pairs.max(axis=1) - sound.faces] = True
     return bad
 
 
@@ -1152,7 +1153,10 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     # a point on a side of the net in the plane is on that side on the surface too: the
     # straight edge between its two vertices, not the chart's curve under it (which
     # leaves a sliver between the panel and the face, over or beside it)
+    # (points on the design boundary stay on its curve)
     at, chord = _net_side_points(new_p, p_net, mesh, tol)
+    inside = ~on_boundary[n + at]
+    at, chord = at[inside], chord[inside]
     vertices[n + at] = chord
     on_side = np.zeros(len(vertices), bool)
     on_side[n + at] = True
