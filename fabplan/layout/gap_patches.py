@@ -147,6 +147,8 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
         return GapPatches(np.zeros((0, 3)), np.zeros(0, bool), [], np.zeros((0, 3), np.int64),
                           np.zeros(0, np.int64))
     tris, owner = _triangulated(pieces, polygons)
+    # two points of a ring snapped to one point of the cladding are one corner
+    polygons = [q[q != np.roll(q, 1)] for q in polygons]
     return GapPatches(np.concatenate(new_points), np.concatenate(new_boundary), polygons,
                       tris, owner)
 

@@ -372,6 +372,10 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         corner = np.r_[corner, ~extra.on_boundary]
         on_any |= _clad(samples, normals, vertices, np.vstack([mesh.triangles(), triangles]), h)
     if extra is not None and extra.count:
+        # a patch's outline may run out along the boundary past a neighbour's corner and
+        # back (a sliver of no width between the two): the spike goes
+        polygons, changed, _ = _untangled(vertices, polygons, corner)
+        triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
         # a patch cut in its plane that still clashes (rare) is left out: a gap, reported
         unsound = _unsound_pieces(vertices, polygons, triangles, owner, mesh, design, h)
         if unsound.any():
