@@ -543,7 +543,9 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
     ------
     InputError
         When the file does not continue `mesh`: fewer vertices than the net, or the net's
-        vertices moved (the net was changed after its boundary panels were cut).
+        vertices moved (the net was changed after its boundary panels were cut); or when
+        a panel runs along a side of the net or of another panel the same way (they
+        overlap), naming the panel by its face in the file.
     """
     from ..io.obj import read_obj
 
@@ -563,6 +565,16 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
                          "boundary panel (the net itself given as its boundary file?); give "
                          "NET.boundary.obj or use --no-boundary")
     vertices = np.asarray(vertices, float)
+    # a panel on a side of the net or of another panel the same way folds over it: named
+    # by its face in the file (numbered from 1, as in the OBJ), not in a combined mesh
+    clash = edge_clashes(list(mesh.faces) + polygons, len(vertices))
+    if len(clash):
+        a, b = (int(k) for k in clash[0])
+        f = len(mesh.face_sizes)
+        other = f"face {a + 1} of the net {mesh.name}" if a < f else f"face {a - f + 1}"
+        raise InputError(f"{path}: face {b - f + 1} (boundary panel {b - f}) runs along a side "
+                         f"of {other} the same way (the two overlap): cut the boundary panels "
+                         "again with fabplan, or use --no-boundary")
     record = record or {}
     p = len(polygons)
     flags = {key: np.isin(np.arange(p), np.asarray(record.get(key, []), np.int64))
@@ -587,7 +599,8 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
         coverage_net=record.get("coverage_net", math.nan), coverage=coverage,
         patch=flags["patches"], extension=flags["extensions"], net_on_boundary=net_on_boundary,
         flipped=_ids(record.get("flipped"), p), crossed=_ids(record.get("crossed"), p),
-        gaps=list(record.get("gaps") or []))
+        gaps=list(record.get("gaps") or []),
+        soundness={key: record[key] for key in ("off_design", "crossings") if key in record})
 
 
 def _ids(values, count: int) -> np.ndarray:
