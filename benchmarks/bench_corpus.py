@@ -13,7 +13,8 @@ the solver's status, or the one-line refusal), the share of the design covered, 
 the net's lines turn within the surface (measured here, independently of fabplan: the
 angle between consecutive edges of a line projected onto the tangent plane of the star),
 the angle range, folds, the boundary panels that cross themselves or overlap (counted on
-the surface, `fabplan.layout.trim.Soundness`; the total is printed last) and seconds. A run writes ``benchmarks/results/corpus-<label>.json``
+the surface, `fabplan.layout.trim.Soundness`; the total is printed last) and seconds.
+A run writes ``benchmarks/results/corpus-<label>.json``
 and prints a markdown table; ``--summarize`` prints the median and worst line turn and the
 coverage per net type for several runs side by side (for example the code of two commits,
 each run with its checkout on ``PYTHONPATH``).

@@ -85,8 +85,8 @@ def _sample_pattern(level: int) -> np.ndarray:
     >>> _sample_pattern(3).shape, bool(np.allclose(_sample_pattern(3).sum(axis=1), 1))
     ((9, 3), True)
     """
-    i, j = np.meshgrid(np.arange(level), np.arange(level), indexing="ij")
-    i, j = i.ravel(), j.ravel()
+    grid_i, grid_j = np.meshgrid(np.arange(level), np.arange(level), indexing="ij")
+    i, j = grid_i.ravel(), grid_j.ravel()
     up = i + j <= level - 1
     down = i + j <= level - 2
     uv = np.concatenate([np.stack([i[up] + 1 / 3, j[up] + 1 / 3], axis=1),
@@ -156,7 +156,7 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
         off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= 1e-6 * panel_size
     if not off.any() and len(triangles) == 0:
         return OffDesign(area, where)
-    area = np.bincount(piece[off], weight[off], minlength=count)
+    area = np.bincount(piece[off], weight[off], minlength=count).astype(np.float64)
     # a sliver along a side that leaves the design by less than the interior samples'
     # spacing: its area is the side's distance off the design summed along it
     side_area, side_where = _sides_off_design(design, points, triangles, owner, count,
@@ -212,7 +212,7 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
         off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= 1e-6 * panel_size
     if not off.any():
         return area, where
-    area = np.bincount(at[off], sideways[off] * step[off], minlength=count)
+    area = np.bincount(at[off], sideways[off] * step[off], minlength=count).astype(np.float64)
     hit = np.flatnonzero(off)
     order = hit[np.lexsort((-sideways[hit], at[hit]))]
     first = order[np.r_[True, at[order][1:] != at[order][:-1]]]
@@ -246,9 +246,8 @@ def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | 
     j = np.arange(len(face)) - np.repeat(np.r_[0, np.cumsum(fans)[:-1]], fans) + 1
     area, point = np.zeros(count), np.full((count, 3), np.nan)
     for first in (0, 1):          # the fan from corner 0, then from corner 1
-        def at(k: np.ndarray) -> np.ndarray:
-            return ring[start[face] + (first + k) % sizes[face]]
-        fan = np.stack([at(np.zeros_like(j)), at(j), at(j + 1)], axis=1)
+        corner = [ring[start[face] + (first + k) % sizes[face]] for k in (0 * j, j, j + 1)]
+        fan = np.stack(corner, axis=1)
         off = area_off_design(design, vertices, fan, face, count, panel_size)
         area += 0.5 * off.area
         point = np.where(np.isnan(point), off.point, point)
