@@ -9,7 +9,10 @@ centres of its `SAMPLE_LEVEL` squared sub-triangles, each carrying its share of 
 and a sample is off the design when its closest design point lies on the design's
 boundary curve and it stands beside that point rather than above or below it (sideways
 by more than `OFF_TOLERANCE` of a panel). A sample over a gap between panels has its
-closest point inside the design, straight below it: gaps are not counted here.
+closest point inside the design, straight below it: gaps are not counted here. A side
+running from the boundary to the boundary close along it (a chord of a curved stretch,
+`CHORD_SAG`) sags off it by its nature; that sag is not counted either: straight sides
+cannot follow a curve, and a window's round rim is clad by faceted panels.
 
 The same module says which faces are *degenerate*: three corners in a line (a corner
 whose sides run straight on, or fold back), which a mill, a mold or a strip cannot read.
@@ -39,9 +42,18 @@ OFF_TOLERANCE = 1e-3
 #: it (the sampling's noise along a boundary the piece follows)
 MIN_OFF_PANELS = 1e-4
 
+#: a side from the design boundary to the design boundary that never leaves it by more
+#: than this share of its length is a chord of a curved boundary (its sag: an arc of
+#: radius 1.25 sides sags a tenth of a side), not a panel spanning a corner or a hole
+CHORD_SAG = 0.1
+
+#: a chord's ends may turn this much more than its arc (degrees): the boundary of a
+#: triangle mesh turns in steps
+CHORD_TURN_SLACK_DEG = 5.0
+
 #: a corner whose sides turn by less than this from a straight line (or from folding back
 #: on themselves) makes a face degenerate (degrees)
-STRAIGHT_DEG = 5.0
+STRAIGHT_DEG = 2.0
 
 
 @dataclass
@@ -154,13 +166,15 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
         # beside a foot inside the design is a fold of the design mesh, not its edge
         edge_foot, _ = closest_points_on_polylines(foot[off], curves)
         off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= 1e-6 * panel_size
-    if not off.any() and len(triangles) == 0:
-        return OffDesign(area, where)
     area = np.bincount(piece[off], weight[off], minlength=count).astype(np.float64)
     # a sliver along a side that leaves the design by less than the interior samples'
-    # spacing: its area is the side's distance off the design summed along it
-    side_area, side_where = _sides_off_design(design, points, triangles, owner, count,
-                                              panel_size, curves)
+    # spacing: its area is the side's distance off the design summed along it. A side
+    # from the boundary to the boundary along a curved stretch of it (a chord) sags off
+    # it by its nature: what lies within that sag (and half again, the samples' error)
+    # is no panel over a hole
+    side_area, side_where, sag = _sides_off_design(design, points, triangles, owner, count,
+                                                   panel_size, curves)
+    area = np.maximum(area - 1.5 * sag, 0.0)
     take = (area == 0) & (side_area > 0)
     area = np.where(take, side_area, area)
     if not off.any():
@@ -179,15 +193,21 @@ SIDE_SAMPLES = 32
 
 def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
                       owner: np.ndarray, count: int, panel_size: float, curves: list
-                      ) -> tuple[np.ndarray, np.ndarray]:
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(count,) float, the area between each piece's outline and the design boundary
     where the outline leaves the design (its distance off the design integrated along
-    it, `SIDE_SAMPLES` samples a side), and (count, 3) float the point farthest off
-    (NaN where none). The outline is the triangles' sides that no other triangle of
-    the same piece shares."""
+    it, `SIDE_SAMPLES` samples a side), less its chords of the boundary; (count, 3)
+    float, the point farthest off (NaN where none); (count,) float, the area between
+    each piece's chords and the boundary (the sag it may have). The outline is the
+    triangles' sides that no other triangle of the same piece shares; a chord is a side
+    from the boundary to the boundary that stays within `CHORD_SAG` of its length of it,
+    where the boundary turns between its ends as an arc of that sag would (not at a
+    corner).
+    """
     from ..solve.constraints.closeness import closest_points_on_polylines
 
     area, where = np.zeros(count), np.full((count, 3), np.nan)
+    sag = np.zeros(count)
     sides = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     piece = np.tile(owner, 3)
     key = np.column_stack([np.sort(sides, axis=1), piece])
@@ -195,7 +215,7 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
     rim = counts[inverse.ravel()] == 1
     sides, piece = sides[rim], piece[rim]
     if len(sides) == 0:
-        return area, where
+        return area, where, sag
     t = (np.arange(SIDE_SAMPLES) + 0.5) / SIDE_SAMPLES
     A, B = points[sides[:, 0]], points[sides[:, 1]]
     S = (A[:, None] + t[None, :, None] * (B - A)[:, None]).reshape(-1, 3)
@@ -211,13 +231,36 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
         edge_foot, _ = closest_points_on_polylines(foot[off], curves)
         off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= 1e-6 * panel_size
     if not off.any():
-        return area, where
+        return area, where, sag
+    # chords: both ends on the boundary curve, never farther off it than a sag
+    ends = np.unique(sides)
+    end_foot, end_tangent = closest_points_on_polylines(points[ends], curves)
+    on_curve = np.zeros(len(points), bool)
+    on_curve[ends] = np.linalg.norm(end_foot - points[ends], axis=1) <= OFF_TOLERANCE * panel_size
+    tangent = np.zeros((len(points), 3))
+    tangent[ends] = end_tangent / np.maximum(np.linalg.norm(end_tangent, axis=1, keepdims=True),
+                                             1e-300)
+    length = np.linalg.norm(B - A, axis=1)
+    deepest = np.max(np.where(off, sideways, 0.0).reshape(-1, SIDE_SAMPLES), axis=1)
+    # an arc whose chord sags s turns by 4 atan(2 s / L) between its ends; a side across
+    # a corner of the boundary (a door's) sags little but the boundary turns sharply
+    turn = np.arccos(np.clip(np.abs(np.sum(tangent[sides[:, 0]] * tangent[sides[:, 1]], axis=1)),
+                             0.0, 1.0))
+    arc_turn = 4.0 * np.arctan(2.0 * deepest / np.maximum(length, 1e-300))
+    chord = on_curve[sides[:, 0]] & on_curve[sides[:, 1]] & (deepest <= CHORD_SAG * length) & \
+        (turn <= 1.5 * arc_turn + np.radians(CHORD_TURN_SLACK_DEG))
+    on_chord = np.repeat(chord, SIDE_SAMPLES)
+    sag = np.bincount(at[off & on_chord], (sideways * step)[off & on_chord],
+                      minlength=count).astype(np.float64)
+    off &= ~on_chord
+    if not off.any():
+        return area, where, sag
     area = np.bincount(at[off], sideways[off] * step[off], minlength=count).astype(np.float64)
     hit = np.flatnonzero(off)
     order = hit[np.lexsort((-sideways[hit], at[hit]))]
     first = order[np.r_[True, at[order][1:] != at[order][:-1]]]
     where[at[first]] = S[first]
-    return area, where
+    return area, where, sag
 
 
 def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | np.ndarray,
