@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from . import __version__
-from .errors import FabplanError, InputError
+from .errors import CannotMakeError, FabplanError, InputError
 from .io.inputs import check_input_file
 from .io.output import (
     atomic_path,
@@ -1505,6 +1505,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with _stopped_by_signals():
             return args.func(args)
+    except CannotMakeError as exc:
+        # the input is sound; what was asked cannot be made from it as it stands
+        print(f"fabplan: cannot make it: {exc}", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     except FabplanError as exc:
         print(f"fabplan: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
