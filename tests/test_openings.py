@@ -126,3 +126,100 @@ def test_no_net_face_has_three_corners_in_a_line(door_net):
         a, b = np.roll(P, 1, axis=0) - P, np.roll(P, -1, axis=0) - P
         sine = np.linalg.norm(np.cross(a, b), axis=1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
         assert sine.min() > np.sin(np.radians(1.0))
+
+
+# ------------------------------------------------------------------ the measure itself
+
+
+def _square_with_door(size: float = 4.0, step: float = 0.1) -> DesignSurface:
+    """A flat square with a door 1 wide and 2 high from (1.5, 0)."""
+    n = int(round(size / step))
+    x, y = np.meshgrid(np.linspace(0, size, n + 1), np.linspace(0, size, n + 1), indexing="ij")
+    V = np.stack([x, y, 0 * x], axis=-1).reshape(-1, 3)
+    idx = np.arange(len(V)).reshape(x.shape)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    centre = V[T].mean(axis=1)
+    door = (centre[:, 0] > 1.5) & (centre[:, 0] < 2.5) & (centre[:, 1] < 2.0)
+    return DesignSurface(V, T[~door], name="square with a door")
+
+
+def test_a_quad_across_the_door_is_measured_off_the_design_by_its_area():
+    """A unit quad over the door's top left corner has a quarter of its area (0.25) over
+    the opening; one beside the door has none; a sliver one centimetre into the door
+    along its side is found though it lies between the interior samples."""
+    from fabplan.layout.off_design import faces_off_design
+
+    design = _square_with_door()
+    V = np.array([[1.0, 1.5, 0], [2.0, 1.5, 0], [2.0, 2.5, 0], [1.0, 2.5, 0],
+                  [0.2, 0.2, 0], [1.2, 0.2, 0], [1.2, 1.2, 0], [0.2, 1.2, 0],
+                  [0.5, 0.0, 0], [1.5, 0.0, 0], [1.51, 2.0, 0], [0.5, 2.0, 0]])
+    off = faces_off_design(design, V, [np.arange(4), np.arange(4, 8), np.arange(8, 12)], 1.0)
+    assert off.area[0] == pytest.approx(0.25, rel=0.1)
+    assert off.area[1] == 0.0
+    assert off.area[2] == pytest.approx(0.5 * 2.0 * 0.01, rel=0.2)      # the sliver's triangle
+    assert 1.5 < off.point[0][0] < 2.0 and 1.5 < off.point[0][1] < 2.0
+
+
+def test_a_chord_of_a_round_opening_is_no_panel_over_it():
+    """A quad whose side joins two points of a round window's rim sags into the window by
+    its nature (straight sides cannot follow the rim): not counted. A quad across the
+    window is, and so is one whose side runs 1 cm into a door along its straight side
+    (`test_a_quad_across_the_door_is_measured_off_the_design_by_its_area`)."""
+    from fabplan.layout.off_design import faces_off_design
+
+    rings, around = 40, 360
+    radius = np.linspace(1.5, 3.0, rings + 1)
+    angle = np.linspace(0, 2 * np.pi, around, endpoint=False)
+    r, t = np.meshgrid(radius, angle, indexing="ij")
+    V = np.stack([r * np.cos(t), r * np.sin(t), 0 * r], axis=-1).reshape(-1, 3)
+    idx = np.arange(len(V)).reshape(r.shape)
+    a, b = idx[:-1], idx[1:]
+    c, d = np.roll(b, -1, axis=1), np.roll(a, -1, axis=1)
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    design = DesignSurface(V, T, name="round window")
+    rim = design.boundary_curves()
+    inner = min(rim, key=lambda r: np.abs(r).max())
+    angle = np.arctan2(inner[:, 1], inner[:, 0])
+    p, q = inner[np.argmin(np.abs(angle - 0.3))], inner[np.argmin(np.abs(angle - 0.6))]
+    outward = 0.5 * (p + q) / np.linalg.norm(0.5 * (p + q)) * 0.8
+    chord = np.array([p, q, q + outward, p + outward])
+    across = np.array([[-2.0, -0.5, 0], [2.0, -0.5, 0], [2.0, 0.5, 0], [-2.0, 0.5, 0]])
+    off = faces_off_design(design, np.vstack([chord, across]), [np.arange(4), np.arange(4, 8)], 0.5)
+    assert off.area[0] == 0.0
+    assert off.area[1] > 2.5
+
+
+def test_a_boundary_file_folded_over_the_net_names_the_panel_in_the_file(tmp_path, capsys):
+    """A boundary panel running along a net face's side the same way (written by hand or
+    by an older cut) is named by its face in NET.boundary.obj, not by its number in a
+    mesh of net and panels together; exit 2 (the file is not one fabplan writes)."""
+    from fabplan.cli import main
+    from fabplan.net.mesh import QuadMesh
+
+    g = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0), [0.0], indexing="ij"), -1)[:, :, 0]
+    net = QuadMesh.grid(g)
+    net.write_obj(tmp_path / "net.obj")
+    f = net.faces[0]
+    lines = [f"v {x} {y} {z}" for x, y, z in net.vertices] + ["v -1 -1 0"]
+    lines += [f"f {len(net.vertices) + 1} {f[1] + 1} {f[0] + 1}",     # panel 0: fine
+              f"f {f[0] + 1} {f[1] + 1} {len(net.vertices) + 1}"]     # panel 1: along a side
+    (tmp_path / "net.boundary.obj").write_text("\n".join(lines) + "\n")
+    code = main(["molds", str(tmp_path / "net.obj"), "--tolerance-mm", "2", "-o",
+                 str(tmp_path / "molds")])
+    err = capsys.readouterr().err
+    assert code == 2 and "boundary panel 1" in err and "face 2" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_panels_off_the_design_are_warned_about_with_where():
+    from fabplan.cli import boundary_warnings
+
+    record = {"coverage": 1.0, "boundary_panels": {"off_design": {
+        "area": 0.25, "area_relative_to_panel": 0.25, "faces": 1, "panels": 0,
+        "places": [{"face": 12, "area": 0.25, "point": [1.75, 1.75, 0.0]}]},
+        "crossings": {"self_crossing": 0, "overlapping": 1, "edge_clashes": 0,
+                      "pairs": [[{"panel": 3}, {"face": 12}]], "cut_again": 2}}}
+    words = " ".join(boundary_warnings(record))
+    assert "0.25" in words and "face 12" in words and "1.75, 1.75" in words
+    assert "1 pair" in words

@@ -27,6 +27,7 @@ import numpy as np
 from ..design.mesh_surface import DesignSurface
 
 __all__ = ["OffDesign", "area_off_design", "faces_off_design", "degenerate_faces",
+           "boundary_turning",
            "MIN_OFF_PANELS", "SAMPLE_LEVEL", "OFF_TOLERANCE",
            "STRAIGHT_DEG"]
 
@@ -202,7 +203,7 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
     triangles' sides that no other triangle of the same piece shares; a chord is a side
     from the boundary to the boundary that stays within `CHORD_SAG` of its length of it,
     where the boundary turns between its ends as an arc of that sag would (not at a
-    corner).
+    corner, nor not at all: `boundary_turning`).
     """
     from ..solve.constraints.closeness import closest_points_on_polylines
 
@@ -234,21 +235,20 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
         return area, where, sag
     # chords: both ends on the boundary curve, never farther off it than a sag
     ends = np.unique(sides)
-    end_foot, end_tangent = closest_points_on_polylines(points[ends], curves)
+    end_foot, _ = closest_points_on_polylines(points[ends], curves)
     on_curve = np.zeros(len(points), bool)
     on_curve[ends] = np.linalg.norm(end_foot - points[ends], axis=1) <= OFF_TOLERANCE * panel_size
-    tangent = np.zeros((len(points), 3))
-    tangent[ends] = end_tangent / np.maximum(np.linalg.norm(end_tangent, axis=1, keepdims=True),
-                                             1e-300)
     length = np.linalg.norm(B - A, axis=1)
     deepest = np.max(np.where(off, sideways, 0.0).reshape(-1, SIDE_SAMPLES), axis=1)
-    # an arc whose chord sags s turns by 4 atan(2 s / L) between its ends; a side across
-    # a corner of the boundary (a door's) sags little but the boundary turns sharply
-    turn = np.arccos(np.clip(np.abs(np.sum(tangent[sides[:, 0]] * tangent[sides[:, 1]], axis=1)),
-                             0.0, 1.0))
-    arc_turn = 4.0 * np.arctan(2.0 * deepest / np.maximum(length, 1e-300))
-    chord = on_curve[sides[:, 0]] & on_curve[sides[:, 1]] & (deepest <= CHORD_SAG * length) & \
-        (turn <= 1.5 * arc_turn + np.radians(CHORD_TURN_SLACK_DEG))
+    chord = on_curve[sides[:, 0]] & on_curve[sides[:, 1]] & (deepest <= CHORD_SAG * length)
+    if chord.any():
+        # an arc whose chord sags s turns by 4 atan(2 s / L) between its ends; a side
+        # across a corner of the boundary (a door's), or beside a straight stretch of it,
+        # sags little but the boundary turns sharply, or not at all, between its ends
+        arc_turn = 4.0 * np.arctan(2.0 * deepest[chord] / np.maximum(length[chord], 1e-300))
+        turn = boundary_turning(curves, points[sides[chord, 0]], points[sides[chord, 1]])
+        slack = np.radians(CHORD_TURN_SLACK_DEG)
+        chord[chord] = (turn <= 1.5 * arc_turn + slack) & (turn >= 0.5 * arc_turn - slack)
     on_chord = np.repeat(chord, SIDE_SAMPLES)
     sag = np.bincount(at[off & on_chord], (sideways * step)[off & on_chord],
                       minlength=count).astype(np.float64)
@@ -261,6 +261,65 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
     first = order[np.r_[True, at[order][1:] != at[order][:-1]]]
     where[at[first]] = S[first]
     return area, where, sag
+
+
+def boundary_turning(curves: list, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(m,) float, how far the design boundary turns (radians, the sizes of the turns at
+    its vertices added up) between the points nearest `start` (m, 3) and `end` (m, 3),
+    along the shorter way; inf where the two lie on different boundary curves. A corner
+    counts whole, and so does every step of a boundary that zigzags along a grid.
+
+    Examples
+    --------
+    The unit square's boundary turns a quarter turn between two points on sides that
+    meet, and not at all between two points of one side:
+
+    >>> square = DesignSurface([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+    ...                        [[0, 1, 2], [0, 2, 3]])
+    >>> turn = boundary_turning(square.boundary_curves(),
+    ...                         np.array([[0.5, 0, 0], [0.2, 0, 0]]),
+    ...                         np.array([[1, 0.5, 0], [0.7, 0, 0]]))
+    >>> np.degrees(turn).round(6).tolist()
+    [90.0, 0.0]
+    """
+    lengths = [len(c) for c in curves]
+    first = np.r_[0, np.cumsum(lengths)[:-1]]
+    a = np.concatenate(curves)
+    curve_of = np.repeat(np.arange(len(curves)), lengths)
+    local = np.arange(len(a)) - first[curve_of]
+    after = first[curve_of] + (local + 1) % np.asarray(lengths)[curve_of]
+    before = first[curve_of] + (local - 1) % np.asarray(lengths)[curve_of]
+    # the turn at every vertex
+    d_in, d_out = a - a[before], a[after] - a
+    turn_at = np.arctan2(np.linalg.norm(np.cross(d_in, d_out), axis=1),
+                         np.sum(d_in * d_out, axis=1))
+    step = np.linalg.norm(d_out, axis=1)
+    # running sums per curve: turn before vertex i, length before vertex i
+    turn_sum = np.cumsum(turn_at) - np.r_[0, np.cumsum(turn_at)][first[curve_of]]
+    length_sum = np.cumsum(step) - step - np.r_[0, np.cumsum(step)][first[curve_of]]
+
+    def segment(points: np.ndarray) -> np.ndarray:
+        b = a[after]
+        ab = b - a
+        length2 = np.maximum(np.sum(ab * ab, axis=1), 1e-300)
+        out = np.empty(len(points), np.int64)
+        for lo in range(0, len(points), 256):      # blocks bound the memory
+            P = points[lo:lo + 256, None, :]
+            t = np.clip(np.sum((P - a) * ab, axis=2) / length2, 0.0, 1.0)
+            out[lo:lo + 256] = np.argmin(np.sum((a + t[..., None] * ab - P) ** 2, axis=2), axis=1)
+        return out
+
+    i, j = segment(np.asarray(start, np.float64)), segment(np.asarray(end, np.float64))
+    same = curve_of[i] == curve_of[j]
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    # forward from segment lo to segment hi: the turns at vertices lo + 1 .. hi
+    forward_turn = turn_sum[hi] - turn_sum[lo]
+    forward_length = length_sum[hi] - length_sum[lo]
+    total_turn = np.bincount(curve_of, turn_at, minlength=len(curves))[curve_of[lo]]
+    total_length = np.bincount(curve_of, step, minlength=len(curves))[curve_of[lo]]
+    shorter = np.where(forward_length <= total_length - forward_length, forward_turn,
+                       total_turn - forward_turn)
+    return np.where(same, shorter, np.inf)
 
 
 def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | np.ndarray,

@@ -838,8 +838,9 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     panel sizes (`EDGE_RANGE` by default). A face the glide leaves spanning a corner of
     the design boundary (a door's) or with three corners in a line is no panel
     (`sound_faces`): it is dropped from the layout and the net solved again, up to
-    `RECUTS` times; the layout record of the result lists the faces dropped
-    (``dropped_faces``), and the trimming cuts their place as boundary panels.
+    `RECUTS` times, as long as the net solved again converges; the layout record of the
+    result lists the faces dropped (``dropped_faces``), and the trimming cuts their place
+    as boundary panels.
 
     Returns
     -------
@@ -896,10 +897,14 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         kept = layout_without_faces(layout, unsound)
         if len(kept.mesh.stars) == 0:
             break
-        if fixed is not None:
-            fixed = _renumbered(np.asarray(fixed, np.int64), layout.mesh, kept.mesh)
-        layout = kept
-        result = solve(layout, fixed)
+        kept_fixed = None if fixed is None else \
+            _renumbered(np.asarray(fixed, np.int64), layout.mesh, kept.mesh)
+        again = solve(kept, kept_fixed)
+        if not again.converged:
+            # the net without them does not form: the converged one is kept, and the
+            # trimming reports its faces off the design
+            break
+        layout, fixed, result = kept, kept_fixed, again
     X = result.mesh.vertices
     d = design.distances(X)
     length = np.linalg.norm(X[result.mesh.edges[:, 0]] - X[result.mesh.edges[:, 1]], axis=1)

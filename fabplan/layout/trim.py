@@ -27,6 +27,15 @@ around a singularity of the directions) are cut the same way, by the lines that 
 their rim: their pieces are *patches*. Coverage is measured on the surface, independently
 of the plane: samples of the design count as clad when a panel lies straight above or
 below them (`_under`).
+
+What the plane cut is then checked on the surface (`soundness`): a piece that lies off
+the design (over an opening or past the boundary, `fabplan.layout.off_design`), crosses
+itself, faces against the design, overlaps the net or another piece, or runs along a side
+of one the same way (`fabplan.layout.overlaps`) is left out, and its place is cut again in
+its tangent plane with the gaps (`fabplan.layout.gap_patches`). Where a piece's point lies
+on a side of the net in the plane, it is put on that side's straight edge in space, so
+that panel and face meet without a sliver. What is still wrong is measured and recorded
+(`Soundness.record`).
 """
 
 from __future__ import annotations
@@ -48,7 +57,7 @@ from scipy.spatial import cKDTree
 from ..design.mesh_surface import DesignSurface
 from ..errors import InputError
 from ..net.mesh import QuadMesh
-from .gap_patches import gap_patches, outline_triangles, unclad_components
+from .gap_patches import MAX_GAP_PANELS, gap_patches, outline_triangles, unclad_components
 from .off_design import MIN_OFF_PANELS, OffDesign, area_off_design
 from .overlaps import edge_clashes, overlapping_pairs, self_crossing
 
@@ -339,13 +348,16 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         vertices[mesh.vertex_count:] += offset
     polygons, changed, crossed = _untangled(vertices, polygons, corner)
     triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
-    recut = 0
+    recut, recut_area = 0, 0.0
     if patch_gaps:
         # checked on the surface: what the plane cut wrongly (off the design, over a hole;
         # crossing itself; facing against the design; over the net or another panel) is
         # left out, and its place is cut again in its tangent plane with the gaps below
         unsound = _unsound_pieces(vertices, polygons, triangles, owner, mesh, design, h)
         recut = int(unsound.sum())
+        T = vertices[triangles[unsound[owner]]]
+        recut_area = float(0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]),
+                                                axis=1).sum())
         polygons, triangles, owner, patch = _without_pieces(polygons, triangles, owner, patch,
                                                             unsound)
     # coverage is measured on the surface, independently of the plane (`_under`)
@@ -355,8 +367,10 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
                             np.vstack([mesh.triangles(), triangles]), h)
     # the small gaps left (pieces around singular points the plane could not cut) are
     # cut in their own tangent planes
-    extra = gap_patches(design, vertices, np.vstack([mesh.triangles(), triangles]), on_any, h) \
-        if patch_gaps else None
+    # a gap where pieces were left out is no failure of the layout: it is patched however
+    # large those pieces were
+    extra = gap_patches(design, vertices, np.vstack([mesh.triangles(), triangles]), on_any, h,
+                        max_panels=MAX_GAP_PANELS + recut_area / (h * h)) if patch_gaps else None
     if extra is not None and extra.count:
         owner = np.r_[owner, len(polygons) + extra.owner]
         lifted = np.zeros((len(extra.points), 3))
