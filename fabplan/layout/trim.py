@@ -841,6 +841,23 @@ def _polygonal(geometries) -> np.ndarray:
     return parts[shapely.get_type_id(parts) == 3]
 
 
+def _areas_only(geometries: np.ndarray) -> np.ndarray:
+    """The geometries with the lines and points that snap-rounding leaves beside their
+    areas dropped (a collection of both is no input to a further overlay).
+
+    Examples
+    --------
+    >>> mixed = shapely.GeometryCollection([shapely.box(0, 0, 1, 1),
+    ...                                     shapely.LineString([(2, 0), (3, 0)])])
+    >>> [g.geom_type for g in _areas_only(np.array([mixed, shapely.box(0, 0, 1, 1)]))]
+    ['Polygon', 'Polygon']
+    """
+    out = np.asarray(geometries, dtype=object).copy()
+    for k in np.flatnonzero(shapely.get_type_id(out) == 7):       # collections only
+        out[k] = shapely.union_all(_polygonal([out[k]]))
+    return out
+
+
 def _transition_maps(cuts: list) -> list[tuple[int, np.ndarray]]:
     """The maps ``p -> sign p + shift`` between the sides of the layout's cuts (the
     identity first): a loop cut open shifts by its jump both ways, a seam turns a half
@@ -936,7 +953,8 @@ def _unclad_by_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh, h
     rest[usable] = chart.triangles[usable]
     for k in range(int(rank.max(initial=-1)) + 1):
         at = rank == k
-        rest[tri[at]] = shapely.difference(rest[tri[at]], parts[part[at]], grid_size=grid)
+        rest[tri[at]] = _areas_only(shapely.difference(rest[tri[at]], parts[part[at]],
+                                                       grid_size=grid))
     left = usable[~shapely.is_empty(rest[usable])]
     rest, at = shapely.get_parts(rest[left], return_index=True)
     polygon = shapely.get_type_id(rest) == 3
