@@ -12,7 +12,9 @@ two panel sizes (about 150 and 500 panels). Each case records how it ended (conv
 the solver's status, or the one-line refusal), the share of the design covered, how far
 the net's lines turn within the surface (measured here, independently of fabplan: the
 angle between consecutive edges of a line projected onto the tangent plane of the star),
-the angle range, folds and seconds. A run writes ``benchmarks/results/corpus-<label>.json``
+the angle range, folds, the boundary panels that cross themselves or overlap (counted on
+the surface, `fabplan.layout.trim.Soundness`; the total is printed last) and seconds.
+A run writes ``benchmarks/results/corpus-<label>.json``
 and prints a markdown table; ``--summarize`` prints the median and worst line turn and the
 coverage per net type for several runs side by side (for example the code of two commits,
 each run with its checkout on ``PYTHONPATH``).
@@ -105,6 +107,10 @@ def run_case(design, net: str, angle: float | None, panels: int, starts: int = 1
         boundary_panels=(props.get("boundary_panels") or {}).get("count"),
         boundary_flipped=len((props.get("boundary_panels") or {}).get("flipped") or []),
         boundary_patches=len((props.get("boundary_panels") or {}).get("patches") or []),
+        # boundary panels crossing themselves, overlapping one another or the net, or
+        # sharing a side the same way: measured on the surface (0 in a sound cladding)
+        boundary_crossings=_crossings(props.get("boundary_panels") or {}),
+        off_design_area=((props.get("boundary_panels") or {}).get("off_design") or {}).get("area"),
         line_turn_max=float(turns.max()) if turns.size else None,
         line_turn_median=float(np.median(turns)) if turns.size else None,
         line_turn_p95=float(np.percentile(turns, 95)) if turns.size else None,
@@ -185,6 +191,15 @@ def run_hard(args) -> int:
     print(hard_summary(records))
     print(f"wrote {out}")
     return 0
+
+
+def _crossings(record: dict) -> int | None:
+    """Panels crossing themselves plus pairs of pieces overlapping or clashing at a side,
+    from a net's ``boundary_panels`` record (None where it does not say)."""
+    crossings = record.get("crossings")
+    if crossings is None:
+        return None
+    return int(crossings["self_crossing"] + crossings["overlapping"] + crossings["edge_clashes"])
 
 
 def _fmt(v, spec=".1f") -> str:
@@ -268,9 +283,13 @@ def main(argv: list[str] | None = None) -> int:
                       f"coverage {_fmt(None if r.get('coverage') is None else 100 * r['coverage'], '.2f')} "
                       f"boundary {r.get('boundary_panels')} flipped {r.get('boundary_flipped')} "
                       f"patches {r.get('boundary_patches')} "
+                      f"crossings {r.get('boundary_crossings')} "
+                      f"off design {_fmt(r.get('off_design_area'), '.3g')} "
                       f"turn {_fmt(r.get('line_turn_max'))} {r['seconds']:.1f} s", flush=True)
     out = write_run(args.label, records)
     print(table(records))
+    crossings = [r["boundary_crossings"] for r in records if r.get("boundary_crossings") is not None]
+    print(f"boundary panels crossing or overlapping: {sum(crossings)} in {len(crossings)} layouts")
     print(f"wrote {out}")
     return 0
 

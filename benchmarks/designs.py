@@ -16,6 +16,9 @@ Each design is a `fabplan.design.mesh_surface.DesignSurface` in metres, named by
 ``door-facade``             a wavy 12 x 6 m facade with a 1.2 x 2.4 m door cut out
 ``l-facade``                a wavy L-shaped facade (a re-entrant corner)
 ``long-band``               a 40 x 3 m wavy band
+``door-facade-1``, ``-2``   seeded facades (size, door size and place, flat or wavy)
+``flat-door-facade``        a flat 20 x 10 m facade with a 2 x 3 m door
+``bowl-mm``                 a paraboloid bowl 150 mm wide, in millimetres, read from an STL
 ==========================  ===============================================================
 """
 
@@ -118,6 +121,11 @@ DESIGNS: dict[str, Callable[[], DesignSurface]] = {
                                 lambda x, y: ~((np.abs(x - 6) < 0.6) & (y < 2.4))),
     "l-facade": lambda: _cut("l-facade", _wavy, 14, 10, lambda x, y: ~((x > 8) & (y > 5))),
     "long-band": lambda: _cut("long-band", _wavy, 40, 3, lambda x, y: x == x, cells=300),
+    "door-facade-1": lambda: door_facade(1),
+    "door-facade-2": lambda: door_facade(2),
+    "flat-door-facade": lambda: _cut("flat-door-facade", lambda x, y: 0 * x, 20, 10,
+                                     lambda x, y: ~((np.abs(x - 10) < 1) & (y < 3)), cells=160),
+    "bowl-mm": lambda: bowl_mm(),
 }
 
 
@@ -221,3 +229,63 @@ def _hard_start(kind: str, noise: float, seed: int):
 #: name -> a function making the start (`fabplan.QuadMesh`), seeded
 HARD_STARTS: dict = {f"{kind}-{round(100 * noise):02d}": _hard_start(kind, noise, seed)
                      for seed, (kind, noise) in enumerate(_HARD_NOISE)}
+
+
+def door_facade(seed: int) -> DesignSurface:
+    """A facade with a door (seeded): 10-24 m wide, 5-12 m high, flat or wavy, a door
+    0.9-2.5 m wide and 2.1-3.2 m high at a random place along the ground. Its door is the
+    box ``door_facade_opening(seed)``."""
+    width, height, wavy, (x0, x1, top) = _door_facade_sizes(seed)
+    amplitude = 0.4 if wavy else 0.0
+    return _cut(f"door-facade-{seed}",
+                lambda x, y: amplitude * np.sin(0.5 * x) * np.cos(0.4 * y) + 0 * x, width, height,
+                lambda x, y: ~((x > x0) & (x < x1) & (y < top)), cells=int(round(10 * width)))
+
+
+def door_facade_opening(seed: int) -> tuple[float, float, float, float]:
+    """The door of `door_facade(seed)`: (x0, x1, y0, y1) in the facade's xy-plane."""
+    _, _, _, (x0, x1, top) = _door_facade_sizes(seed)
+    return x0, x1, 0.0, top
+
+
+def _door_facade_sizes(seed: int) -> tuple:
+    rng = np.random.default_rng(seed)
+    width, height = float(rng.uniform(10, 24)), float(rng.uniform(5, 12))
+    wide, high = float(rng.uniform(0.9, 2.5)), float(rng.uniform(2.1, 3.2))
+    cells = int(round(10 * width))
+    step = width / cells
+    # the door's sides on the grid's lines, so that the design's boundary is the door
+    x0 = step * round(float(rng.uniform(1.0, width - wide - 1.0)) / step)
+    x1 = x0 + step * max(1, round(wide / step))
+    rows = max(2, int(round(cells * height / width)))
+    top = (height / rows) * max(1, round(high / (height / rows)))
+    return width, height, bool(rng.integers(2)), (x0, x1, top)
+
+
+def bowl_mm(path: str | None = None) -> DesignSurface:
+    """A paraboloid bowl 150 x 150 mm, 30 mm deep, in millimetres, written as an STL with
+    trimesh and read back as a user's file is (`fabplan.design.load.load_design`)."""
+    import tempfile
+    from pathlib import Path
+
+    import trimesh
+
+    from fabplan.design.load import load_design
+
+    n, half = 100, 75.0
+    x, y = np.meshgrid(np.linspace(-half, half, n + 1), np.linspace(-half, half, n + 1),
+                       indexing="ij")
+    V = np.stack([x.ravel(), y.ravel(), (30.0 * (x * x + y * y) / half**2).ravel()], axis=1)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = (i * (n + 1) + j).ravel()
+    T = np.concatenate([np.stack([a, a + n + 1, a + n + 2], axis=1),
+                        np.stack([a, a + n + 2, a + 1], axis=1)])
+    if path is not None:
+        trimesh.Trimesh(V, T).export(path)
+        return load_design(path)
+    with tempfile.TemporaryDirectory() as folder:
+        stl = str(Path(folder) / "bowl.stl")
+        trimesh.Trimesh(V, T).export(stl)
+        design = load_design(stl)
+    design.name = "bowl-mm"
+    return design

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from . import __version__
-from .errors import FabplanError, InputError
+from .errors import CannotMakeError, FabplanError, InputError
 from .io.inputs import check_input_file
 from .io.output import (
     atomic_path,
@@ -846,6 +846,24 @@ def boundary_warnings(properties: dict) -> list:
                    f"{'crosses itself' if one else 'cross themselves'} (ids under "
                    "properties.boundary_panels.crossed): the outline turns back at a net vertex "
                    "off the design boundary; trim the net there by hand")
+    off = panels.get("off_design") or {}
+    if off.get("area", 0.0) > 0:
+        places = off.get("places") or []
+        where = "" if not places else (
+            f"; the largest, {places[0]['area']:.4g} units squared of "
+            f"{'face' if 'face' in places[0] else 'boundary panel'} "
+            f"{places[0].get('face', places[0].get('panel'))}, around "
+            f"({', '.join(f'{v:.4g}' for v in places[0]['point'])})")
+        out.append(f"{off['area']:.4g} units squared of panels lie off the design, over a hole "
+                   f"or past its boundary ({off.get('faces', 0)} net faces and "
+                   f"{off.get('panels', 0)} boundary panels{where}; listed under "
+                   "properties.boundary_panels.off_design): trim them there by hand")
+    crossings = panels.get("crossings") or {}
+    clashes = crossings.get("overlapping", 0) + crossings.get("edge_clashes", 0)
+    if clashes:
+        out.append(f"{counted(clashes, 'pair')} of panels overlap or share a side the same way "
+                   "(listed under properties.boundary_panels.crossings.pairs: a face is a net "
+                   "face, a panel a face of the boundary OBJ, numbered from 0)")
     return out
 
 
@@ -1639,6 +1657,10 @@ def main(argv: list[str] | None = None) -> int:
         for message in getattr(args, "warnings_after", []):
             _warn(message, getattr(args, "quiet", False))
         return code
+    except CannotMakeError as exc:
+        # the input is sound; what was asked cannot be made from it as it stands
+        print(f"fabplan: cannot make it: {exc}", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     except FabplanError as exc:
         print(f"fabplan: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

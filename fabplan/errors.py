@@ -1,6 +1,6 @@
 """Error hierarchy: every failure fabplan reports to a user derives from `FabplanError`."""
 
-__all__ = ["FabplanError", "InputError", "SolverError"]
+__all__ = ["FabplanError", "InputError", "SolverError", "CannotMakeError"]
 
 
 class FabplanError(Exception):
@@ -13,3 +13,9 @@ class InputError(FabplanError, ValueError):
 
 class SolverError(FabplanError, RuntimeError):
     """The optimization could not produce a result (divergence, impossible constraints)."""
+
+
+class CannotMakeError(FabplanError, RuntimeError):
+    """Sound input from which what was asked cannot be made as it stands (a net milled in
+    one piece whose lines break at irregular vertices, spheres on both sides of it): the
+    CLI says why and exits 3, as for a result that misses its limits, not 2 (bad input)."""

@@ -37,7 +37,7 @@ def _cylinder(radius: float, length: float, arc: float, cells: int) -> DesignSur
 @pytest.fixture(scope="module")
 def cylinder():
     """A 6 x 8 m piece of a cylinder of radius 12 m, its gliding isogonal net of 60 degrees
-    (a staircase of boundary panels along its edges, and slivers), its molds at 1 mm and
+    (a staircase of boundary panels along its edges), its molds at 1 mm and
     its boundary panels' molds."""
     design = _cylinder(12.0, 8.0, 0.5, 48)
     net = glide(layout_surface(design, 0.9, angle=60.0), "isogonal", angle=60.0)
@@ -50,7 +50,7 @@ def test_boundary_panels_of_a_cylinder_are_cut_from_its_one_mold(cylinder):
     net's one mold, and as cut they lie on the cylinder."""
     design, net, plan, molds = cylinder
     panels = net.boundary_panels
-    assert panels.panel_count >= 10 and panels.extension.any()
+    assert panels.panel_count >= 10
     assert int(np.sum(plan.mold_type > 0)) == 1
     assert molds.own_molds == 0 and np.all(molds.mold == 0)
     # the panels as cut, measured against the cylinder itself: x^2 + z^2 = r^2

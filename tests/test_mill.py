@@ -307,8 +307,14 @@ def test_tool_larger_than_the_safety_sphere_is_refused(tmp_path, capsys):
 
 
 def test_spheres_switching_sides_are_refused_with_the_region(tmp_path, capsys):
+    """A sound net that cannot be face milled from one side: exit 3 with the region (a
+    net fabplan wrote is never refused as bad input)."""
     net = write_net(bowl_grid(flip_right=True), tmp_path / "wave.obj")
-    err = refused(tmp_path, capsys, net, "--tool", "face:D=40")
+    out = tmp_path / "out"
+    code = main(["mill", str(net), "--tool", "face:D=40", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 3 and not out.exists()
+    assert err.startswith("fabplan: cannot make it: ") and len(err.strip().splitlines()) == 1
     assert "switch sides" in err and "vertices" in err
 
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import CannotMakeError, InputError
 
 __all__ = [
     "Cutter",
@@ -152,13 +152,15 @@ def height_target(points_mm: np.ndarray, triangles: np.ndarray, up: np.ndarray, 
     e1, e2 = P[triangles[:, 1], :2] - P[triangles[:, 0], :2], P[triangles[:, 2], :2] - P[triangles[:, 0], :2]
     area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     if np.any(area * np.sign(np.median(area)) <= 0):
-        raise InputError("the surface is not a height field seen from the mill direction: some "
-                         "faces are seen edge-on or from behind (undercut)")
+        raise CannotMakeError("the surface is not a height field seen from the mill direction: "
+                              "some faces are seen edge-on or from behind (undercut)")
     lo, hi = P[:, :2].min(axis=0), P[:, :2].max(axis=0)
     cells = np.prod(np.ceil((hi - lo) / step_mm) + 1)
     if cells > max_cells:
-        raise InputError(f"the simulation grid at {step_mm:g} mm would have {cells:.3g} cells "
-                         f"(limit {max_cells}): use a coarser simulation step")
+        fits = float(np.sqrt(np.prod(hi - lo) / max_cells)) * 1.05
+        raise CannotMakeError(f"the simulation grid at {step_mm:g} mm would have {cells:.3g} "
+                              f"cells (limit {max_cells}): use a coarser simulation step "
+                              f"(--sim-step {fits:.3g} or more), or --no-simulation")
     x = np.arange(lo[0], hi[0] + step_mm / 2, step_mm)
     y = np.arange(lo[1], hi[1] + step_mm / 2, step_mm)
     gx, gy = np.meshgrid(x, y)

@@ -32,7 +32,7 @@ import scipy.sparse as sp
 from scipy.interpolate import CubicSpline
 from scipy.sparse import csgraph
 
-from ..errors import InputError
+from ..errors import CannotMakeError, InputError
 from ..io.units import MM_PER_UNIT, check_units
 from ..net.geometry import (
     fit_star_spheres,
@@ -512,7 +512,7 @@ def _net_nodes(mesh: QuadMesh, settings: MillSettings) -> tuple[_Nodes, str]:
     k = sign * k
     wrong = np.flatnonzero((k < 0) & ~flat)
     if wrong.size:
-        raise InputError(
+        raise CannotMakeError(
             f"{mesh.name}: the Meusnier spheres switch sides: at "
             f"{describe_region(mesh, stars[wrong, 0])} they lie on the {'-+'[side == '-']} "
             f"side, the others on the {side} side; a face mill can only cut from the side of "
@@ -619,8 +619,8 @@ def line_sequence(mesh: QuadMesh, vertex: np.ndarray, cross_neighbour: np.ndarra
                 runs.append(piece)
                 line_of_run.append(i)
     if not runs:
-        raise InputError(f"{mesh.name}: no line of family {'AB'[family]} runs through two regular "
-                         "stars: nothing to mill along")
+        raise CannotMakeError(f"{mesh.name}: no line of family {'AB'[family]} runs through two "
+                              "regular stars: nothing to mill along")
     line_ids, run_line = np.unique(np.array(line_of_run), return_inverse=True)
     star_line = np.full(len(vertex), -1)
     star_line[np.concatenate(runs)] = np.repeat(run_line, [len(r) for r in runs])
@@ -635,9 +635,9 @@ def line_sequence(mesh: QuadMesh, vertex: np.ndarray, cross_neighbour: np.ndarra
     degree = np.asarray(graph.sum(axis=1)).ravel()
     count, _ = csgraph.connected_components(graph, directed=False)
     if count > 1 or degree.max(initial=0) > 2 or (n > 1 and graph.nnz // 2 != n - 1):
-        raise InputError(f"{mesh.name}: the lines of family {'AB'[family]} do not follow one "
-                         "another in one sequence across the net (irregular vertices or a "
-                         "net with holes): mill the regular parts separately")
+        raise CannotMakeError(f"{mesh.name}: the lines of family {'AB'[family]} do not follow "
+                              "one another in one sequence across the net (irregular vertices "
+                              "or a net with holes): mill the regular parts separately")
     start = int(np.flatnonzero(degree <= 1)[0])
     order_of_line = np.empty(n, dtype=np.int64)
     order_of_line[csgraph.breadth_first_order(graph, start, directed=False,
@@ -991,9 +991,12 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     Raises
     ------
     InputError
-        No regular star; spheres on both sides of the surface (the nodes named); a tool
-        larger than a safety sphere allows (the nodes and the largest diameter named);
-        lines that do not form one sequence.
+        No regular star; a tool larger than a safety sphere allows (the nodes and the
+        largest diameter named).
+    CannotMakeError
+        Spheres on both sides of the surface (the nodes named); lines that do not form one
+        sequence (irregular vertices, holes): the net is sound, but cannot be face milled
+        in one piece from one side.
     """
     started = time.perf_counter()
     settings.check()

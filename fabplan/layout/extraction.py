@@ -4,7 +4,10 @@ The integer points are located triangle by triangle (barycentric test, vectorize
 candidate points) and become vertices; unit squares whose corners and centre exist
 become quads, oriented with the surface. Quads that fold or stretch (near singularities
 and seams) are dropped, the largest piece is kept, pinched vertices are separated, and
-small interior holes are closed by a fan of quads around a new, irregular vertex.
+small interior holes are closed by a fan of quads around a new, irregular vertex. A quad
+whose corners lie on the design may still span a corner of its boundary (a door's) or
+line up three corners along it: such quads are no panels (`sound_quads`), and the
+trimming cuts their place as boundary panels.
 """
 
 from __future__ import annotations
@@ -20,11 +23,12 @@ from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
 from ..net.mesh import QuadMesh
+from .off_design import MIN_OFF_PANELS, degenerate_faces, faces_off_design
 
 if TYPE_CHECKING:
     from .settings import LayoutSettings
 
-__all__ = ["extract_quads", "fill_boundary_cells"]
+__all__ = ["extract_quads", "fill_boundary_cells", "sound_quads"]
 
 
 @dataclass
@@ -403,6 +407,9 @@ def fill_boundary_cells(vertices: np.ndarray, quads: np.ndarray, keys: np.ndarra
         facing = np.sum(np.cross(Q[:, 2] - Q[:, 0], Q[:, 3] - Q[:, 1])
                         * design.face_normals[tri], axis=1) > 0
         good = (edge.min(axis=1) >= min_edge * h) & (edge.max(axis=1) <= max_edge * h) & facing
+        # a corner snapped onto the boundary curve may line up with its neighbours there, or
+        # the quad may span a corner of the boundary (a door's): neither is a panel
+        good[good] = sound_quads(design, vertices, candidate[good], h)
         if not good.any():
             vertices, keys = vertices[:base], keys[:base]
             break
@@ -411,6 +418,17 @@ def fill_boundary_cells(vertices: np.ndarray, quads: np.ndarray, keys: np.ndarra
         used, quads = clean_quads(vertices, quads)
         vertices, keys = vertices[used], keys[used]
     return vertices, quads, keys, added
+
+
+def sound_quads(design: DesignSurface, vertices: np.ndarray, quads: np.ndarray,
+                panel_size: float) -> np.ndarray:
+    """(q,) bool, the quads (q, 4) int into `vertices` (n, 3) that are panels: wholly on
+    the design (none of their area over a hole or past the boundary, `faces_off_design`)
+    and without three corners in a line (`degenerate_faces`)."""
+    if len(quads) == 0:
+        return np.zeros(0, bool)
+    off = faces_off_design(design, vertices, quads, panel_size)
+    return (off.area <= MIN_OFF_PANELS * panel_size ** 2) & ~degenerate_faces(vertices, quads)
 
 
 def _lookup(table: _KeyTable, key: np.ndarray) -> np.ndarray:

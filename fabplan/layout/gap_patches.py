@@ -33,7 +33,7 @@ MIN_GAP_PANELS = 0.01
 
 #: a gap is cut in its tangent plane only where every design triangle around it faces
 #: within this angle of the plane's normal (degrees)
-MAX_TILT_DEG = 40.0
+MAX_TILT_DEG = 60.0
 
 
 @dataclass
@@ -128,7 +128,10 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
     count = len(points)
     for gap in np.flatnonzero((area >= MIN_GAP_PANELS * h * h) & (area <= max_panels * h * h)):
         made: tuple | None = None
-        for grown in (rings, 2 * rings, 4 * rings):   # until the region holds the gap
+        # until the region holds the gap: a few rings, then up to two panels around it
+        # (a gap may run on as a slit between two pieces of the cladding)
+        panel_rings = int(np.ceil(h / design.mean_edge_length))
+        for grown in sorted({rings, 2 * rings, 4 * rings, panel_rings, 2 * panel_rings}):
             made = _patch_gap(design, points, triangles, unclad[label == gap], h, grown, grid,
                               design_boundary)
             if made is not None:
@@ -147,6 +150,8 @@ def gap_patches(design: DesignSurface, points: np.ndarray, triangles: np.ndarray
         return GapPatches(np.zeros((0, 3)), np.zeros(0, bool), [], np.zeros((0, 3), np.int64),
                           np.zeros(0, np.int64))
     tris, owner = _triangulated(pieces, polygons)
+    # two points of a ring snapped to one point of the cladding are one corner
+    polygons = [q[q != np.roll(q, 1)] for q in polygons]
     return GapPatches(np.concatenate(new_points), np.concatenate(new_boundary), polygons,
                       tris, owner)
 
@@ -186,6 +191,13 @@ def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
     near = np.linalg.norm(C.mean(axis=1) - centre, axis=1) <= reach
     clad_2d = shapely.union_all(shapely.polygons(flat(C[near])), grid_size=grid)
     rest = shapely.difference(design_2d, clad_2d, grid_size=grid)
+    # seams thinner than `SEAM_PANELS` between pieces of the cladding (where a panel cut
+    # in the parameter plane meets a face along a slightly different line) are no part
+    # of a gap: they would join it to the region's edge
+    seam = SEAM_PANELS * h
+    rest = shapely.set_precision(
+        shapely.buffer(shapely.buffer(rest, -seam, join_style="mitre"), seam, join_style="mitre"),
+        grid)
     # where the region's edge is not the design's, the gap must not reach it
     edge = _region_edges(T, region, design_boundary, len(V))
     inner = shapely.union_all(shapely.linestrings(flat(V[edge[0]])))
@@ -196,12 +208,13 @@ def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
     cut: list = []
     fresh: dict = {}                # a new point's plane coordinates (on the grid) -> j
     for whole in shapely.get_parts(rest):
-        if not isinstance(whole, shapely.Polygon) or whole.interiors or \
+        if not isinstance(whole, shapely.Polygon) or \
                 whole.area < 0.01 * h * h or shapely.intersection(whole, gap_2d).area < 1e-3 * h * h:
             continue
         if shapely.distance(whole.exterior, inner) <= 4 * grid:
             return None                               # the gap goes on beyond the region
-        for piece in _split_piece(whole, h, grid):
+        simple = _cut_through_holes(whole, grid) if whole.interiors else [whole]
+        for piece in (p for part in simple for p in _split_piece(part, h, grid)):
             ring = np.asarray(piece.exterior.coords)[:-1]
             distance, at = tree.query(ring)
             ids = np.where(distance <= 8 * grid, ids_near[at], -1)
@@ -217,6 +230,10 @@ def _patch_gap(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
         shapely.distance(shapely.points(plane), outer) <= 4 * grid
     return cut, lifted, on_edge
 
+
+#: unclad seams up to twice this wide (full panels) between pieces of the cladding are
+#: not part of a gap
+SEAM_PANELS = 0.005
 
 #: patches larger than this many full panels of area are cut into pieces of about one
 SPLIT_ABOVE = 1.5
@@ -246,6 +263,18 @@ def _split_piece(piece, h: float, grid: float) -> list:
     parts = [p for p in shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
              if shapely.contains(piece, shapely.point_on_surface(p)) and p.area > 1e-6 * h * h]
     return [orient(p) for p in parts] or [orient(piece)]
+
+
+def _cut_through_holes(polygon, grid: float) -> list:
+    """The polygon with holes (a gap around an island of cladding) cut into polygons
+    without: a line across it through a point of every hole, noded on `grid`."""
+    x0, _, x1, _ = polygon.bounds
+    lines = [shapely.linestrings([[x0 - 1, y], [x1 + 1, y]]) for y in
+             (shapely.point_on_surface(shapely.Polygon(hole)).y for hole in polygon.interiors)]
+    noded = shapely.union_all([polygon.exterior, *polygon.interiors, *lines], grid_size=grid)
+    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(noded)))
+    inside = shapely.contains(polygon, shapely.point_on_surface(faces)) & (shapely.area(faces) > 0)
+    return [f for f in faces[inside] if not f.interiors]
 
 
 def _boundary_edge_keys(T: np.ndarray, n: int) -> np.ndarray:

@@ -69,7 +69,8 @@ from .directions import (
     smooth_direction_field,
     snet_directions,
 )
-from .extraction import clean_quads, extract_quads, fill_boundary_cells, fill_holes
+from .extraction import clean_quads, extract_quads, fill_boundary_cells, fill_holes, sound_quads
+from .off_design import MIN_OFF_PANELS, degenerate_faces, faces_off_design
 from .parametrization import (
     CutMesh,
     boundary_circulation,
@@ -86,7 +87,8 @@ if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
     from ..solve.solver import IterationRecord, SolverSettings
 
-__all__ = ["SurfaceLayout", "layout_surface", "layout_again", "layout_angle", "glide"]
+__all__ = ["SurfaceLayout", "layout_surface", "layout_again", "layout_angle", "glide",
+           "layout_without_faces", "sound_faces"]
 
 
 @dataclass
@@ -129,6 +131,10 @@ class SurfaceLayout:
     seconds : time per stage.
     max_gap_panels : a net glided from this layout whose trimming leaves a larger gap (in
         full panels of area) is refused (`glide`); None: not judged.
+    dropped_faces : (d,) int, faces of the layout as extracted that a glided net made no
+        panels (spanning a corner of the design boundary, or three corners in a line:
+        `sound_faces`) and that were dropped (`layout_without_faces`); the trimming cuts
+        their place as boundary panels.
     """
 
     mesh: QuadMesh
@@ -154,6 +160,7 @@ class SurfaceLayout:
     bisector: str = "max"
     max_gap_panels: float | None = None
     smoothing_tried: list = field(default_factory=list)
+    dropped_faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     seconds: dict = field(default_factory=dict)
 
     @property
@@ -205,6 +212,7 @@ class SurfaceLayout:
             "cuts": [list(map(int, c)) for c in self.cuts],
             "filled_holes": int(self.filled_holes),
             "open_holes": int(self.open_holes),
+            "dropped_faces": np.asarray(self.dropped_faces, np.int64).tolist(),
             "gliding_boundary_vertices": int(len(self.gliding_boundary)),
             "boundary_vertices": int(mesh.is_boundary_vertex.sum()),
             "seconds": self.seconds,
@@ -381,10 +389,17 @@ def layout_again(record: dict) -> SurfaceLayout:
                                   max_smoothing=0.0 if line else
                                   max(LayoutSettings.max_smoothing, smoothing),
                                   bisector=record.get("bisector", "max"))
-        return layout_surface(design, float(record["panel_size"]),
-                              angle=float(record["angle_deg"]),
-                              family=record.get("prescribed_family"), settings=settings,
-                              refuse_broken=False)
+        layout = layout_surface(design, float(record["panel_size"]),
+                                angle=float(record["angle_deg"]),
+                                family=record.get("prescribed_family"), settings=settings,
+                                refuse_broken=False)
+        # the faces a glide dropped from it (`layout_without_faces`), dropped again
+        dropped = np.asarray(record.get("dropped_faces") or [], np.int64)
+        if dropped.size and dropped.max() < len(layout.mesh.faces):
+            drop = np.zeros(len(layout.mesh.faces), bool)
+            drop[dropped] = True
+            layout = layout_without_faces(layout, drop)
+        return layout
     except InputError:
         raise
     except (KeyError, TypeError, ValueError) as exc:
@@ -626,6 +641,8 @@ def _extract(design: DesignSurface, P2: np.ndarray, transitions: list, h: float,
             # the grid degenerates towards a point the field turns around: leave a hole
             gap, _ = cKDTree(V[whole_turns]).query(verts[quads].mean(axis=1))
             quads = quads[gap > 2 * h]
+        # quads spanning a corner of the boundary (a door's) are cut as boundary panels
+        quads = quads[sound_quads(design, verts, quads, h)]
         used, quads = clean_quads(verts, quads)
         if best is None or len(quads) > len(best[1]):
             best = (verts[used], quads, keys[used], off)
@@ -820,7 +837,12 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     A net that only starts another solve needs no boundary panels (``boundary_panels=False``:
     its trim to the design is left out). `edge_range`: the edges' lengths allowed, in
     panel sizes (`EDGE_RANGE` by default). `max_line_turn`: a converged net's lines turn by
-    at most this (degrees; see `fabplan.optimize`).
+    at most this (degrees; see `fabplan.optimize`). A face the glide leaves spanning a
+    corner of the design boundary (a door's) or with three corners in a line is no panel
+    (`sound_faces`): it is dropped from the layout and the net solved again, up to
+    `RECUTS` times, as long as the net solved again converges; the layout record of the
+    result lists the faces dropped (``dropped_faces``), and the trimming cuts their place
+    as boundary panels.
 
     Returns
     -------
@@ -840,25 +862,51 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     from ..solve.net_types import get_net
     from ..solve.optimize import optimize
 
-    mesh, design = layout.mesh, layout.design
+    design = layout.design
     if get_net(net).dual:
         raise InputError(f"net type {net!r}: layouts are computed for S-nets; optimize the "
                          "S-net first and then the S*-net with `fabplan optimize`")
-    extra: tuple[Constraint, ...] = ()
-    # a prescribed family's levels are read on the surface: its nets are held on it
-    tolerance = 0.0 if layout.prescribed is not None else surface_tolerance
-    if layout.prescribed is not None:
-        on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
-        extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
-                              layout.vertex_keys[on_level, 0]),)
-    # edges within their range (the shorter ones at their start length)
-    extra += (EdgeLengthRange(edge_range[0] * layout.panel_size,
-                              edge_range[1] * layout.panel_size),)
-    result = optimize(mesh, net, angle=angle, radius=radius, reference=design.reference,
-                      fixed=fixed, settings=settings, glide=True,
-                      glide_boundary=layout.gliding_boundary,
-                      surface_tolerance=tolerance * layout.panel_size, extra=extra,
-                      max_line_turn=max_line_turn, progress=progress)
+
+    def solve(layout: SurfaceLayout, fixed: np.ndarray | None) -> OptimizationResult:
+        extra: tuple[Constraint, ...] = ()
+        # a prescribed family's levels are read on the surface: its nets are held on it
+        tolerance = 0.0 if layout.prescribed is not None else surface_tolerance
+        if layout.prescribed is not None:
+            on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
+            extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
+                                  layout.vertex_keys[on_level, 0]),)
+        # edges within their range (the shorter ones at their start length)
+        extra += (EdgeLengthRange(edge_range[0] * layout.panel_size,
+                                  edge_range[1] * layout.panel_size),)
+        return optimize(layout.mesh, net, angle=angle, radius=radius, reference=design.reference,
+                        fixed=fixed, settings=settings, glide=True,
+                        glide_boundary=layout.gliding_boundary,
+                        surface_tolerance=tolerance * layout.panel_size, extra=extra,
+                        max_line_turn=max_line_turn, progress=progress)
+
+    result = solve(layout, fixed)
+    for _ in range(RECUTS):
+        # gliding on the boundary, a face may come to span a corner of it (a door's) or
+        # line up three corners along it: it is no panel, and its place is cut as
+        # boundary panels of a net solved without it
+        # (a net that did not converge is reported as it is: its faces say why)
+        if not result.converged:
+            break
+        unsound = ~sound_faces(design, result.mesh.vertices, result.mesh.faces,
+                               layout.panel_size)
+        if not unsound.any() or unsound.all():
+            break
+        kept = layout_without_faces(layout, unsound)
+        if len(kept.mesh.stars) == 0:
+            break
+        kept_fixed = None if fixed is None else \
+            _renumbered(np.asarray(fixed, np.int64), layout.mesh, kept.mesh)
+        again = solve(kept, kept_fixed)
+        if not again.converged:
+            # the net without them does not form: the converged one is kept, and the
+            # trimming reports its faces off the design
+            break
+        layout, fixed, result = kept, kept_fixed, again
     X = result.mesh.vertices
     d = design.distances(X)
     length = np.linalg.norm(X[result.mesh.edges[:, 0]] - X[result.mesh.edges[:, 1]], axis=1)
@@ -884,3 +932,53 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size
     return result
+
+
+#: a glided net is checked this many times for faces that are no panels (`sound_faces`);
+#: each time they are dropped from its layout and the net is solved again
+RECUTS = 3
+
+
+def sound_faces(design: DesignSurface, vertices: np.ndarray, faces: list, panel_size: float
+                ) -> np.ndarray:
+    """(f,) bool, the faces (list of (k,) int into `vertices` (n, 3)) that are panels:
+    wholly on the design (`fabplan.layout.off_design.faces_off_design`) and without three
+    corners in a line (`fabplan.layout.off_design.degenerate_faces`)."""
+    if len(faces) == 0:
+        return np.zeros(0, bool)
+    off = faces_off_design(design, vertices, faces, panel_size)
+    return (off.area <= MIN_OFF_PANELS * panel_size ** 2) & ~degenerate_faces(vertices, faces)
+
+
+def layout_without_faces(layout: SurfaceLayout, drop: np.ndarray) -> SurfaceLayout:
+    """The layout less the faces marked in `drop` (f,) bool, and less the vertices left
+    without a face (the others keep their order); the dropped faces are recorded by their
+    number in the layout as extracted (`SurfaceLayout.dropped_faces`), so that
+    `layout_again` drops them too."""
+    from dataclasses import replace
+
+    mesh = layout.mesh
+    drop = np.asarray(drop, bool)
+    faces = [f for f, gone in zip(mesh.faces, drop, strict=True) if not gone]
+    used = np.unique(np.concatenate(faces))
+    new_id = np.full(mesh.vertex_count, -1)
+    new_id[used] = np.arange(len(used))
+    kept_mesh = QuadMesh(mesh.vertices[used], [new_id[f] for f in faces], name=mesh.name)
+    glide_ids = new_id[layout.gliding_boundary]
+    # the faces' numbers in the layout as extracted: the ones not dropped before, in order
+    total = len(mesh.faces) + len(layout.dropped_faces)
+    original = np.setdiff1d(np.arange(total), layout.dropped_faces)
+    out = replace(layout, mesh=kept_mesh, vertex_keys=layout.vertex_keys[used],
+                  gliding_boundary=glide_ids[glide_ids >= 0],
+                  dropped_faces=np.sort(np.r_[layout.dropped_faces, original[drop]]).astype(np.int64))
+    if "chart" in layout.__dict__:          # the chart depends on the design only
+        out.__dict__["chart"] = layout.__dict__["chart"]
+    return out
+
+
+def _renumbered(ids: np.ndarray, before: QuadMesh, after: QuadMesh) -> np.ndarray:
+    """(k,) int, the vertices `ids` of `before` that `after` (its vertices less some,
+    in order) still has, by their numbers there."""
+    _, where = cKDTree(after.vertices).query(before.vertices[ids])
+    found = np.linalg.norm(after.vertices[where] - before.vertices[ids], axis=1) == 0
+    return where[found]

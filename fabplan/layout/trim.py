@@ -27,6 +27,15 @@ around a singularity of the directions) are cut the same way, by the lines that 
 their rim: their pieces are *patches*. Coverage is measured on the surface, independently
 of the plane: samples of the design count as clad when a panel lies straight above or
 below them (`_under`).
+
+What the plane cut is then checked on the surface (`soundness`): a piece that lies off
+the design (over an opening or past the boundary, `fabplan.layout.off_design`), crosses
+itself, faces against the design, overlaps the net or another piece, or runs along a side
+of one the same way (`fabplan.layout.overlaps`) is left out, and its place is cut again in
+its tangent plane with the gaps (`fabplan.layout.gap_patches`). Where a piece's point lies
+on a side of the net in the plane, it is put on that side's straight edge in space, so
+that panel and face meet without a sliver. What is still wrong is measured and recorded
+(`Soundness.record`).
 """
 
 from __future__ import annotations
@@ -48,14 +57,16 @@ from scipy.spatial import cKDTree
 from ..design.mesh_surface import DesignSurface
 from ..errors import InputError
 from ..net.mesh import QuadMesh
-from .gap_patches import gap_patches, outline_triangles, unclad_components
+from .gap_patches import MAX_GAP_PANELS, gap_patches, outline_triangles, unclad_components
+from .off_design import MIN_OFF_PANELS, OffDesign, area_off_design
+from .overlaps import edge_clashes, overlapping_pairs, self_crossing
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
     from .surface_layout import SurfaceLayout
 
-__all__ = ["BoundaryPanels", "ParameterChart", "trim_to_design", "add_boundary_panels",
-           "read_boundary_panels", "net_coverage"]
+__all__ = ["BoundaryPanels", "ParameterChart", "Soundness", "trim_to_design",
+           "add_boundary_panels", "read_boundary_panels", "net_coverage", "soundness"]
 
 
 @dataclass
@@ -90,6 +101,8 @@ class BoundaryPanels:
     boundary_distance_max : largest distance of a point flagged `on_boundary` from the
         design's boundary curve (the exact one for a built-in design), in panel sizes
         (with `follows_net`, lifted points: about the lift there).
+    soundness : what is wrong with the net and its panels, measured on the surface
+        (`Soundness.record`: ``off_design`` and ``crossings``); empty where unknown.
     follows_net : the points off the net stand off the design as the net does beside
         them (`trim_to_design(..., follow_net=True)`); offset_max : the largest such lift
         (model units).
@@ -125,6 +138,7 @@ class BoundaryPanels:
     gaps: list = field(default_factory=list)
     follows_net: bool = False
     offset_max: float = 0.0
+    soundness: dict = field(default_factory=dict)
 
     @property
     def count(self) -> int:
@@ -204,6 +218,7 @@ class BoundaryPanels:
             # a net optimized off its design: its boundary panels stand off it with it
             "follow_net": self.follows_net,
             "offset_from_design_max_relative_to_panel": self.offset_max / self.panel_size,
+            **self.soundness,
             "seconds": round(self.seconds, 4),
         }
 
@@ -291,7 +306,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     if by_sheet:
         piece_region = np.repeat(np.arange(len(cut)), [len(c[0]) for c in cut])
         sheets = (rest, rest_triangle, rest_region, piece_region)
-    vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+    vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
         pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
     # a piece over a seam of the parametrization, where the plane holds several sheets
     # of the design, may map to points of different sheets: its sides then stretch far
@@ -302,7 +317,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         pieces = pieces[sane]
         if sheets is not None:
             sheets = (*sheets[:3], sheets[3][sane])
-        vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
     patch = patch[sane]
     triangles, owner = _triangles_on_surface(pieces, ring_ids)
@@ -320,7 +335,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         pieces, patch = pieces[~double], patch[~double]
         if sheets is not None:
             sheets = (*sheets[:3], sheets[3][~double])
-        vertices, polygons, on_boundary, corner, ring_ids = _to_surface(
+        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
             pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
         triangles, owner = _triangles_on_surface(pieces, ring_ids)
     offset = np.zeros((0, 3))
@@ -330,10 +345,24 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     if follow_net and len(vertices) > mesh.vertex_count:
         # lifted before the outlines are checked: what crosses is judged where it is cut
         offset = _follow_net(vertices[mesh.vertex_count:], mesh.vertices, design)
+        # the points on the net's sides are where the net is already
+        offset[on_side[mesh.vertex_count:]] = 0.0
         vertices = vertices.copy()
         vertices[mesh.vertex_count:] += offset
     polygons, changed, crossed = _untangled(vertices, polygons, corner)
     triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
+    recut, recut_area = 0, 0.0
+    if patch_gaps:
+        # checked on the surface: what the plane cut wrongly (off the design, over a hole;
+        # crossing itself; facing against the design; over the net or another panel) is
+        # left out, and its place is cut again in its tangent plane with the gaps below
+        unsound = _unsound_pieces(footprint, polygons, triangles, owner, mesh, design, h)
+        recut = int(unsound.sum())
+        T = footprint[triangles[unsound[owner]]]
+        recut_area = float(0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]),
+                                                axis=1).sum())
+        polygons, triangles, owner, patch = _without_pieces(polygons, triangles, owner, patch,
+                                                            unsound)
     # coverage is measured on the surface, independently of the plane (`_under`), by the
     # panels' footprints: lifted with a net that leaves the design, a panel tilts against
     # it where the lift changes fast (a corner), and would seem to leave a gap beside it
@@ -343,8 +372,10 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
                             np.vstack([mesh.triangles(), triangles]), h)
     # the small gaps left (pieces around singular points the plane could not cut) are
     # cut in their own tangent planes
-    extra = gap_patches(design, footprint, np.vstack([mesh.triangles(), triangles]), on_any, h) \
-        if patch_gaps else None
+    # a gap where pieces were left out is no failure of the layout: it is patched however
+    # large those pieces were
+    extra = gap_patches(design, footprint, np.vstack([mesh.triangles(), triangles]), on_any, h,
+                        max_panels=MAX_GAP_PANELS + recut_area / (h * h)) if patch_gaps else None
     if extra is not None and extra.count:
         owner = np.r_[owner, len(polygons) + extra.owner]
         lifted = np.zeros((len(extra.points), 3))
@@ -360,24 +391,140 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         on_boundary = np.r_[on_boundary, extra.on_boundary]
         corner = np.r_[corner, ~extra.on_boundary]
         on_any |= _clad(samples, normals, footprint, np.vstack([mesh.triangles(), triangles]), h)
+    if extra is not None and extra.count:
+        # a patch's outline may run out along the boundary past a neighbour's corner and
+        # back (a sliver of no width between the two): the spike goes
+        polygons, changed, _ = _untangled(vertices, polygons, corner)
+        triangles, owner = _retriangulated(vertices, polygons, triangles, owner, changed)
+        # a patch cut in its plane that still clashes (rare) is left out: a gap, reported
+        unsound = _unsound_pieces(footprint, polygons, triangles, owner, mesh, design, h)
+        if unsound.any():
+            polygons, triangles, owner, patch = _without_pieces(polygons, triangles, owner,
+                                                                patch, unsound)
+            on_any = on_net | _clad(samples, normals, footprint,
+                                    np.vstack([mesh.triangles(), triangles]), h)
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     area = np.bincount(owner, tri_area, minlength=len(polygons))
     neighbour = _neighbour_faces(polygons, mesh, vertices)
     extension = area < min_panel * h * h
     flipped = _flipped(vertices, polygons, design, 1e-3 * h * h)
+    crossed = np.flatnonzero(self_crossing(vertices, polygons))
+    sound = soundness(vertices, polygons, triangles, owner, mesh, design, h)
     return BoundaryPanels(
         vertices=vertices, polygons=polygons, net_vertex_count=mesh.vertex_count,
         on_boundary=on_boundary, corner=corner, neighbour_face=neighbour,
         area=area, panel_size=h, extension=extension,
         coverage_net=float(weight[on_net].sum() / weight.sum()),
         coverage=float(weight[on_any].sum() / weight.sum()),
-        flipped=flipped[~extension[flipped]], crossed=crossed[~extension[crossed]], patch=patch,
+        flipped=flipped[~extension[flipped]], crossed=crossed, patch=patch,
         boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
         net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h),
         follows_net=follow_net,
-        offset_max=float(np.linalg.norm(offset, axis=1).max()) if len(offset) else 0.0)
+        offset_max=float(np.linalg.norm(offset, axis=1).max()) if len(offset) else 0.0,
+        soundness=sound.record(h, recut))
+
+
+@dataclass
+class Soundness:
+    """What is wrong with a cladding (a net and its boundary panels), measured on the
+    surface: nothing in a sound one.
+
+    Attributes
+    ----------
+    off_net : `OffDesign` of the net's faces (over a hole, or past the design boundary).
+    off_panels : `OffDesign` of the boundary panels.
+    crossing : (k,) int, panels whose outline crosses itself (`self_crossing`).
+    overlaps : (m, 2) int, pairs of pieces that cover the same part of the surface
+        (`overlapping_pairs`); overlap_area (m,) float, the area each shares.
+    clashes : (c, 2) int, pairs of pieces that use a side in the same direction
+        (`edge_clashes`). Pieces in `overlaps` and `clashes` are numbered the net's
+        `faces` first, then the panels.
+    faces : the number of the net's faces.
+    """
+
+    off_net: OffDesign
+    off_panels: OffDesign
+    crossing: np.ndarray
+    overlaps: np.ndarray
+    overlap_area: np.ndarray
+    clashes: np.ndarray
+    faces: int
+
+    def _piece(self, k: int) -> dict:
+        return {"face": int(k)} if k < self.faces else {"panel": int(k - self.faces)}
+
+    def record(self, panel_size: float, cut_again: int = 0) -> dict:
+        """JSON-ready: ``off_design`` (the area of panels off the design: over a hole or
+        past its boundary, an error; where the largest pieces are) and ``crossings``
+        (counts of panels crossing themselves, pairs of pieces overlapping and sides
+        used twice the same way, with the pieces named; the panels cut again on the
+        surface)."""
+        least = MIN_OFF_PANELS * panel_size ** 2
+        net_area = self.off_net.area[self.off_net.area > least]
+        panel_area = self.off_panels.area[self.off_panels.area > least]
+        total = float(net_area.sum() + panel_area.sum())
+        places = self.off_net.places(least, label="face") + \
+            self.off_panels.places(least, label="panel")
+        places.sort(key=lambda p: -p["area"])
+        return {
+            "off_design": {
+                "area": total, "area_relative_to_panel": total / panel_size ** 2,
+                "faces": int(len(net_area)), "panels": int(len(panel_area)),
+                "places": places[:5]},
+            "crossings": {
+                "self_crossing": int(len(self.crossing)),
+                "overlapping": int(len(self.overlaps)),
+                "edge_clashes": int(len(self.clashes)),
+                "pairs": [[self._piece(a), self._piece(b)] for a, b in
+                          np.concatenate([self.overlaps, self.clashes]).tolist()][:10],
+                "cut_again": int(cut_again)},
+        }
+
+
+def soundness(vertices: np.ndarray, polygons: list, triangles: np.ndarray, owner: np.ndarray,
+              mesh: QuadMesh, design: DesignSurface, h: float) -> Soundness:
+    """The `Soundness` of a net `mesh` and its boundary panels (`polygons` into `vertices`,
+    cut into `triangles` of `owner` each) on `design`, panel size `h`."""
+    from .off_design import faces_off_design
+
+    pieces = list(mesh.faces) + list(polygons)
+    overlaps, shared = overlapping_pairs(vertices, pieces, len(mesh.face_sizes), h)
+    return Soundness(
+        off_net=faces_off_design(design, vertices, mesh.faces, h),
+        off_panels=area_off_design(design, vertices, triangles, owner, len(polygons), h),
+        crossing=np.flatnonzero(self_crossing(vertices, polygons)),
+        overlaps=overlaps, overlap_area=shared,
+        clashes=edge_clashes(pieces, len(vertices)), faces=len(mesh.face_sizes))
+
+
+def _unsound_pieces(vertices: np.ndarray, polygons: list, triangles: np.ndarray,
+                    owner: np.ndarray, mesh: QuadMesh, design: DesignSurface, h: float
+                    ) -> np.ndarray:
+    """(p,) bool, the panels that are off the design, cross themselves, face against it,
+    overlap a net face or an earlier panel, or share a side with one the same way."""
+    sound = soundness(vertices, polygons, triangles, owner, mesh, design, h)
+    bad = np.zeros(len(polygons), bool)
+    bad[sound.crossing] = True
+    bad[sound.off_panels.area > MIN_OFF_PANELS * h * h] = True
+    bad[_flipped(vertices, polygons, design, 1e-3 * h * h)] = True
+    # of two panels that overlap, the later goes (a patch cut twice, from two gaps that
+    # meet, is kept once); a panel over a net face goes
+    for pairs in (sound.overlaps, sound.clashes):
+        bad[pairs.max(axis=1) - sound.faces] = True
+    return bad
+
+
+def _without_pieces(polygons: list, triangles: np.ndarray, owner: np.ndarray, patch: np.ndarray,
+                    drop: np.ndarray) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
+    """The panels less those marked in `drop` (p,) bool: their outlines, triangles (t, 3)
+    with the panel of each renumbered, and `patch` (p,) bool."""
+    keep = ~np.asarray(drop, bool)
+    new_id = np.cumsum(keep) - 1
+    kept = keep[owner]
+    return ([q for q, k in zip(polygons, keep, strict=True) if k], triangles[kept],
+            new_id[owner[kept]], patch[keep])
 
 
 def _follow_net(points: np.ndarray, net: np.ndarray, design: DesignSurface,
@@ -416,7 +563,9 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
     ------
     InputError
         When the file does not continue `mesh`: fewer vertices than the net, or the net's
-        vertices moved (the net was changed after its boundary panels were cut).
+        vertices moved (the net was changed after its boundary panels were cut); or when
+        a panel runs along a side of the net or of another panel the same way (they
+        overlap), naming the panel by its face in the file.
     """
     from ..io.obj import read_obj
 
@@ -436,6 +585,16 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
                          "boundary panel (the net itself given as its boundary file?); give "
                          "NET.boundary.obj or use --no-boundary")
     vertices = np.asarray(vertices, float)
+    # a panel on a side of the net or of another panel the same way folds over it: named
+    # by its face in the file (numbered from 1, as in the OBJ), not in a combined mesh
+    clash = edge_clashes(list(mesh.faces) + polygons, len(vertices))
+    if len(clash):
+        a, b = (int(k) for k in clash[0])
+        f = len(mesh.face_sizes)
+        other = f"face {a + 1} of the net {mesh.name}" if a < f else f"face {a - f + 1}"
+        raise InputError(f"{path}: face {b - f + 1} (boundary panel {b - f}) runs along a side "
+                         f"of {other} the same way (the two overlap): cut the boundary panels "
+                         "again with fabplan, or use --no-boundary")
     record = record or {}
     p = len(polygons)
     flags = {key: np.isin(np.arange(p), np.asarray(record.get(key, []), np.int64))
@@ -460,7 +619,8 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
         coverage_net=record.get("coverage_net", math.nan), coverage=coverage,
         patch=flags["patches"], extension=flags["extensions"], net_on_boundary=net_on_boundary,
         flipped=_ids(record.get("flipped"), p), crossed=_ids(record.get("crossed"), p),
-        gaps=list(record.get("gaps") or []))
+        gaps=list(record.get("gaps") or []),
+        soundness={key: record[key] for key in ("off_design", "crossings") if key in record})
 
 
 def _ids(values, count: int) -> np.ndarray:
@@ -687,6 +847,23 @@ def _polygonal(geometries) -> np.ndarray:
     return parts[shapely.get_type_id(parts) == 3]
 
 
+def _areas_only(geometries: np.ndarray) -> np.ndarray:
+    """The geometries with the lines and points that snap-rounding leaves beside their
+    areas dropped (a collection of both is no input to a further overlay).
+
+    Examples
+    --------
+    >>> mixed = shapely.GeometryCollection([shapely.box(0, 0, 1, 1),
+    ...                                     shapely.LineString([(2, 0), (3, 0)])])
+    >>> [g.geom_type for g in _areas_only(np.array([mixed, shapely.box(0, 0, 1, 1)]))]
+    ['Polygon', 'Polygon']
+    """
+    out = np.asarray(geometries, dtype=object).copy()
+    for k in np.flatnonzero(shapely.get_type_id(out) == 7):       # collections only
+        out[k] = shapely.union_all(_polygonal([out[k]]))
+    return out
+
+
 def _transition_maps(cuts: list) -> list[tuple[int, np.ndarray]]:
     """The maps ``p -> sign p + shift`` between the sides of the layout's cuts (the
     identity first): a loop cut open shifts by its jump both ways, a seam turns a half
@@ -782,7 +959,8 @@ def _unclad_by_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh, h
     rest[usable] = chart.triangles[usable]
     for k in range(int(rank.max(initial=-1)) + 1):
         at = rank == k
-        rest[tri[at]] = shapely.difference(rest[tri[at]], parts[part[at]], grid_size=grid)
+        rest[tri[at]] = _areas_only(shapely.difference(rest[tri[at]], parts[part[at]],
+                                                       grid_size=grid))
     left = usable[~shapely.is_empty(rest[usable])]
     rest, at = shapely.get_parts(rest[left], return_index=True)
     polygon = shapely.get_type_id(rest) == 3
@@ -978,11 +1156,14 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     Returns
     -------
     vertices (m, 3), polygons (list of int arrays), on_boundary (m,) bool, corner (m,) bool,
-    and the id of every point of every piece's ring (list of int arrays, repeats kept).
+    the id of every point of every piece's ring (list of int arrays, repeats kept), and
+    on_side (m,) bool, the points put on a boundary side of the net
+    (`_net_side_points`).
     """
     n = mesh.vertex_count
     if len(pieces) == 0:
-        return (mesh.vertices.copy(), [], np.zeros(n, bool), np.ones(n, bool), [])
+        return (mesh.vertices.copy(), [], np.zeros(n, bool), np.ones(n, bool), [],
+                np.zeros(n, bool))
     rings = [np.asarray(g.exterior.coords)[:-1] for g in pieces]
     points = np.concatenate(rings)
     # a point is a net vertex when the parameters agree to the grid
@@ -1024,6 +1205,16 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     # only, to rounding: the triangles within `tol` are candidates too
     reach = tol if sheets is not None else 0.0
     vertices = np.vstack([mesh.vertices, chart.to_surface(exact, near, reach=reach)])
+    # a point on a side of the net in the plane is on that side on the surface too: the
+    # straight edge between its two vertices, not the chart's curve under it (which
+    # leaves a sliver between the panel and the face, over or beside it)
+    # (points on the design boundary stay on its curve)
+    at, chord = _net_side_points(new_p, p_net, mesh, tol)
+    inside = ~on_boundary[n + at]
+    at, chord = at[inside], chord[inside]
+    vertices[n + at] = chord
+    on_side = np.zeros(len(vertices), bool)
+    on_side[n + at] = True
     on_ray = np.zeros(len(vertices), bool)
     if len(rays) and len(new_p):
         on_ray[n:] = shapely.distance(new_points, shapely.union_all(rays)) <= tol
@@ -1041,7 +1232,29 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     ob[:n] = touching
     corner = np.zeros(len(vertices), bool)
     corner[ring[(ring < n) | ~ob[ring] | ~ob[before] | ~ob[after] | on_ray[ring]]] = True
-    return vertices, polygons, on_boundary, corner, ring_ids
+    return vertices, polygons, on_boundary, corner, ring_ids, on_side
+
+
+def _net_side_points(points: np.ndarray, p_net: np.ndarray, mesh: QuadMesh, tol: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The points (m, 2) of the plane within `tol` of a boundary edge of the net (its
+    vertices at `p_net` (n, 2)), not at its ends: (k,) int which, and (k, 3) float, where
+    they lie on the edge's straight side in space (at the same share of its length)."""
+    edges = mesh.boundary_edges
+    if len(points) == 0 or len(edges) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    A, B = p_net[edges[:, 0]], p_net[edges[:, 1]]
+    tree = shapely.STRtree(shapely.linestrings(np.stack([A, B], axis=1)))
+    point, edge = tree.query(shapely.points(points), predicate="dwithin", distance=tol)
+    d = B[edge] - A[edge]
+    share = np.sum((points[point] - A[edge]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300)
+    length = np.sqrt(np.sum(d * d, axis=1))
+    inner = (share * length > tol) & ((1 - share) * length > tol)
+    point, edge, share = point[inner], edge[inner], share[inner]
+    point, first = np.unique(point, return_index=True)
+    edge, share = edge[first], share[first]
+    X = mesh.vertices
+    return point, (1 - share)[:, None] * X[edges[edge, 0]] + share[:, None] * X[edges[edge, 1]]
 
 
 def _piece_anchors(pieces: np.ndarray, rest: np.ndarray, rest_triangle: np.ndarray,

@@ -171,6 +171,18 @@ def net_numbers(record: dict, *, units: str, mm_per_unit: float,
         if props.get("coverage_net") is not None:
             rows.append(["design covered by the full panels", 100 * props["coverage_net"], "%"])
         rows.append(["design covered by all panels", 100 * props["coverage"], "%"])
+    off = boundary.get("off_design")
+    if off is not None:
+        # panels over a hole or past the boundary: an error, said with where it is
+        places = off.get("places") or []
+        where = "" if not places else " (largest around " + ", ".join(
+            f"{v:.4g}" for v in places[0]["point"]) + ")"
+        rows.append([f"panel area off the design{where}", off["area"], f"{units}²"])
+    crossings = boundary.get("crossings")
+    if crossings is not None:
+        rows.append(["boundary panels crossing themselves or overlapping",
+                     crossings["self_crossing"] + crossings["overlapping"]
+                     + crossings["edge_clashes"], "count"])
     residual = _stat(props, "sphere_residual_relative", "max")
     if residual is not None:
         rows.append(["sphere residual, largest / mean edge", residual, "(ratio)"])
