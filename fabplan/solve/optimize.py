@@ -647,8 +647,9 @@ def check_limits(max_deviation: float | None, max_line_turn: float) -> None:
 
 # a deviation limit the net type cannot keep to is approached from a loose one: limits
 # shrinking by this factor, from the first at least this many times the asked one (and
-# the start's own distance), in at most this many stages
-DEVIATION_FACTOR, DEVIATION_START, DEVIATION_STAGES = 2.0, 32.0, 8
+# the start's own distance), in at most this many stages; then the smallest limit met is
+# narrowed down by this many bisections between it and the first one missed
+DEVIATION_FACTOR, DEVIATION_START, DEVIATION_STAGES, DEVIATION_BISECTIONS = 2.0, 32.0, 8, 2
 
 
 def _deviation_continuation(make: Callable[[float], GuidedProjection],
@@ -671,6 +672,7 @@ def _deviation_continuation(make: Callable[[float], GuidedProjection],
     bound = next(c for c in solver.constraints if isinstance(c, DeviationBound))
     tried: list[float] = []
     met: tuple[float, np.ndarray] | None = None
+    missed: float | None = None
     for k, value in enumerate(limits):
         bound.limit = value
         if k:
@@ -678,8 +680,23 @@ def _deviation_continuation(make: Callable[[float], GuidedProjection],
         solver.run(callback=progress)
         tried.append(value)
         if not judge("", solver, value).succeeded:
+            missed = value
             break
         met = (value, solver.state.x.copy())
+    for _ in range(DEVIATION_BISECTIONS if met is not None and missed is not None else 0):
+        assert met is not None and missed is not None
+        # halfway (in the log) between the smallest limit met and the first missed, from
+        # the net that met it
+        value = float(np.sqrt(met[0] * missed))
+        solver.state.x[:] = met[1]
+        bound.limit = value
+        solver.restart_soft_terms()
+        solver.run(callback=progress)
+        tried.append(value)
+        if judge("", solver, value).succeeded:
+            met = (value, solver.state.x.copy())
+        else:
+            missed = value
     if met is not None and met[0] != tried[-1]:
         # back to the net that met the smallest limit (the next stage moved the solver on)
         bound.limit = met[0]
