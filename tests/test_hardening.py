@@ -424,7 +424,9 @@ def test_a_warning_on_the_panel_size_reaches_the_user_of_molds(work, capsys):
                  "-o", str(work / "m")])
     err = capsys.readouterr().err
     assert code in (0, 3)
-    assert err.startswith(f"fabplan: warning: {work / 'small.obj'}: panels of 5.02 mm")
+    # after the run, on its own line: a refusal on the way would have come alone
+    assert f"\nfabplan: warning: {work / 'small.obj'}: panels of 5.02 mm" in err
+    assert err.rstrip().splitlines()[-1].startswith("fabplan: warning:")
 
 
 @pytest.mark.parametrize("size, units, fragment", [

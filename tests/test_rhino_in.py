@@ -409,8 +409,9 @@ def test_the_same_design_as_obj_and_as_3dm_gives_agreeing_nets(shell, shell_layo
     obj = tmp_path / "shell.obj"
     shell.triangulate((160, 120)).write(obj)
     out = tmp_path / "net" / "from-obj.obj"
+    # an OBJ has no unit system: the millimetres the .3dm file states are said
     assert main(["layout", str(obj), "--net", "snet", "--panel-size", str(PANEL_MM), "-q",
-                 "-o", str(out)]) == 0
+                 "--units", "mm", "-o", str(out)]) == 0
     a = json.loads(shell_layout.with_suffix(".json").read_text())["properties"]
     b = json.loads(out.with_suffix(".json").read_text())["properties"]
     assert abs(a["coverage"] - b["coverage"]) <= 0.01

@@ -398,14 +398,17 @@ def test_the_report_embeds_a_picture_per_candidate(study_run):
 
 
 @pytest.mark.slow
-def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, capsys):
-    """Lower max_deviation_mm below what const-radius measured: it alone becomes
-    infeasible, because of its deviation; the numbers stay the same (deterministic)."""
+def test_a_tighter_limit_is_designed_for_in_the_solve(study_run, tmp_path, capsys):
+    """Lower max_deviation_mm below what const-radius measured: the solve holds the net
+    within the new limit (it designs for it), or the candidate fails for its deviation
+    alone, naming the limit it would meet; the nets on the design stay the same
+    (deterministic)."""
     _, _, record = study_run
     before = _candidate(record, "const-radius")
     measured = before["metrics"]["largest_deviation_mm"]
     assert before["feasible"] and measured > 0.01
-    path = _write_study(tmp_path, round(measured / 2, 6))
+    limit = round(measured / 2, 6)
+    path = _write_study(tmp_path, limit)
     (tmp_path / "out").mkdir()                      # an empty folder is used as it is
     assert main(["study", str(path), "-o", str(tmp_path / "out")]) == 0
     again = json.loads((tmp_path / "out" / "study.json").read_text(encoding="utf-8"))
@@ -416,20 +419,18 @@ def test_a_tighter_limit_flips_the_verdict_for_that_reason(study_run, tmp_path, 
     assert abs(total - (run + write)) <= 1 and write >= 1
     assert total >= round(again["seconds_total"]) >= round(again["seconds_run"])
     after = _candidate(again, "const-radius")
-    assert not after["feasible"]
-    failed = [ck for ck in after["checks"] if not ck["ok"]]
-    assert [ck["limit"] for ck in failed] == ["max_deviation_mm"]
-    assert after["reasons"] == [failed[0]["text"]] and f"{measured:.1f} mm" in after["reasons"][0]
-    for name in ("baseline", "isogonal-80", "const-radius"):
-        a, b = _candidate(record, name)["metrics"], _candidate(again, name)["metrics"]
-        # boundary panels whose neighbour's mold strays beyond the (now lower) deviation
-        # limit get molds of their own: everything else is the same
-        a, b = ({k: v for k, v in m.items() if k not in ("seconds", "molds", "boundary_panels")}
-                for m in (a, b))
-        assert a == b
-        ma, mb = _candidate(record, name)["metrics"]["molds"], _candidate(again, name)["metrics"]["molds"]
-        assert ma["count"] - ma["boundary_own_molds"] == mb["count"] - mb["boundary_own_molds"]
-    assert again["recommended"] != "const-radius"
+    net_mm = after["metrics"]["deviation_mm"]["max"]
+    if after["metrics"]["status"] == "off-design":
+        failed = [ck for ck in after["checks"] if not ck["ok"]]
+        assert "max_deviation_mm" in [ck["limit"] for ck in failed]
+        deviation = next(ck for ck in failed if ck["limit"] == "max_deviation_mm")
+        assert deviation["relax_to"] >= deviation["measured"] > limit
+    else:                   # held within the limit, less the boundary panels' share
+        assert net_mm <= limit * (1 + 1e-6)
+    assert net_mm < measured
+    for name in ("baseline", "isogonal-80"):       # the nets on the design: as before
+        a, b = (_candidate(r, name)["metrics"] for r in (record, again))
+        assert a["deviation_mm"] == b["deviation_mm"] and a["iterations"] == b["iterations"]
 
 
 @pytest.mark.slow

@@ -350,4 +350,13 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
     best.result.properties["layout_starts"] = [
         t.record(t is best, t.uneven_against(solved[0]), solved[0].start.name) for t in tried]
     best.result.properties["layout_starts_left_out"] = left_out
-    return best.layout, best.result
+    layout = best.layout
+    if first is not None and layout is not first and "layout" in best.result.properties:
+        # the singular points are the design's (its umbilics): said as the least smoothed
+        # field has them, whichever start's lattice is kept (a longer smoothing moves them)
+        layout = replace(layout, singular_points=first.singular_points,
+                         singular_index=first.singular_index)
+        best.result.properties["layout"].update(
+            singular_points=first.singular_points.tolist(),
+            singular_index=first.singular_index.tolist())
+    return layout, best.result

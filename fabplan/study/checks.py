@@ -6,7 +6,36 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["check", "binding_check", "violation", "relaxation_text", "nice_value"]
+__all__ = ["check", "binding_check", "violation", "relaxation_text", "nice_value", "LIMIT_NAMES",
+           "limit_words"]
+
+#: every limit of a study in words, with its unit
+LIMIT_NAMES = {
+    "max_deviation_mm": ("largest deviation from the design", "mm"),
+    "mold_tolerance_mm": ("largest gap between a panel and its mold", "mm"),
+    "max_panel_step_mm": ("largest step between neighbouring panels' molds", "mm"),
+    "max_molds": ("most molds", "molds"),
+    "planar_panels": ("panels must be flat", ""),
+    "planarity_tolerance_mm": ("largest distance of a panel corner from the panel's plane", "mm"),
+    "max_kink_deg": ("largest kink between neighbouring panels", "deg"),
+    "max_line_turn_deg": ("largest turn of a net line at a vertex", "deg"),
+    "min_strip_radius_mm": ("smallest arc radius of an unrolled strip", "mm"),
+    "max_strip_radius_mm": ("largest arc radius of an unrolled strip", "mm"),
+    "max_sheets": ("most sheets of strip material", "sheets"),
+    "congruent_strips": ("strips must be congruent (one bending jig)", ""),
+    "congruence_tolerance_mm": ("largest difference of a strip from the common arc", "mm"),
+    "min_coverage": ("smallest share of the design covered by panels", "%"),
+    "max_sphere_residual": ("largest sphere residual (of the mean edge length)", "ratio"),
+}
+
+
+def limit_words(limit: str, value: float) -> str:
+    """A limit's name and a value of it, in words: ``largest deviation from the design
+    of 260 mm``."""
+    name, unit = LIMIT_NAMES.get(limit, (limit, ""))
+    if unit == "%":
+        return f"{name} of {100 * value:g} %"
+    return f"{name} of {value:g}" + (f" {unit}" if unit and unit not in ("ratio",) else "")
 
 
 def check(limit: str, bound: float, measured: float | None, ok: bool, text: str) -> dict:
@@ -67,4 +96,5 @@ def relaxation_text(checks: list[dict]) -> str:
     failed = [c for c in checks if not c["ok"]]
     if not failed or any(c.get("relax_to") is None for c in failed):
         return ""
-    return " and ".join(f"{c['limit']} = {c['relax_to']:g} (now {c['bound']:g})" for c in failed)
+    return " and ".join(f"a {limit_words(c['limit'], c['relax_to'])} (now "
+                        f"{limit_words(c['limit'], c['bound']).rsplit(' of ', 1)[1]})" for c in failed)

@@ -37,7 +37,7 @@ from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
-from .checks import binding_check, relaxation_text
+from .checks import LIMIT_NAMES, binding_check, relaxation_text
 from .run import CandidateResult, StudyResult, cost_drivers, molds_text, vertex_deviation_mm
 from .search import search_record
 
@@ -465,23 +465,6 @@ def _strip_radius_text(result: StudyResult, r) -> str:
 
 
 #: Human names of the limits of a study (`fabplan.study.spec.Limits`), with their units.
-LIMIT_NAMES = {
-    "max_deviation_mm": ("largest deviation from the design", "mm"),
-    "mold_tolerance_mm": ("largest gap between a panel and its mold", "mm"),
-    "max_panel_step_mm": ("largest step between neighbouring panels' molds", "mm"),
-    "max_molds": ("most molds", "molds"),
-    "planar_panels": ("panels must be flat", ""),
-    "planarity_tolerance_mm": ("largest distance of a panel corner from the panel's plane", "mm"),
-    "max_kink_deg": ("largest kink between neighbouring panels", "deg"),
-    "max_line_turn_deg": ("largest turn of a net line at a vertex", "deg"),
-    "min_strip_radius_mm": ("smallest arc radius of an unrolled strip", "mm"),
-    "max_strip_radius_mm": ("largest arc radius of an unrolled strip", "mm"),
-    "max_sheets": ("most sheets of strip material", "sheets"),
-    "congruent_strips": ("strips must be congruent (one bending jig)", ""),
-    "congruence_tolerance_mm": ("largest difference of a strip from the common arc", "mm"),
-    "min_coverage": ("smallest share of the design covered by panels", "%"),
-    "max_sphere_residual": ("largest sphere residual (of the mean edge length)", "ratio"),
-}
 
 _RANK_RULE = ("Rank: the candidates that meet every limit (feasible) come first, cheapest "
               "first; then those that break a limit (red rows), cheapest first. So a cheaper "

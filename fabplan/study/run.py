@@ -30,7 +30,7 @@ from ..errors import FabplanError
 from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
 from ..net.geometry import face_planarity, kink_angles
 from ..report.html import counted
-from .checks import binding_check, relaxation_text, violation
+from .checks import LIMIT_NAMES, binding_check, relaxation_text, violation
 from .checks import check as _check
 from .search import first_points, next_points
 from .spec import Candidate, CostWeights, Limits, Study
@@ -78,6 +78,9 @@ __all__ = [
     "Layouts",
     "Starts",
 ]
+
+# the limits a lamella study does not speak of: its strips are bent, not molded
+_MOLD_LIMITS = ("mold_tolerance_mm", "max_molds", "max_panel_step_mm")
 
 
 @dataclass
@@ -401,8 +404,9 @@ def judge_study(study: Study, design: DesignSurface, results: list[CandidateResu
 
 
 #: Two candidates end at the same net when they share the combinatorics and every vertex
-#: lies within this fraction of the panel size of its counterpart.
-SAME_NET_TOLERANCE = 1e-6
+#: lies within this fraction of the panel size of its counterpart (10 micrometres on a 1 m
+#: panel: two solves of one net, held to the design by a bound, end this close)
+SAME_NET_TOLERANCE = 1e-5
 
 
 def same_net(a: QuadMesh, b: QuadMesh, tolerance: float) -> bool:
@@ -1160,17 +1164,17 @@ def recommend(results: list[CandidateResult], study: Study, *,
         if not measured:
             return None, "No candidate produced a net; see the reasons of each below."
         best = measured[0]
-        text = (f"No candidate meets every limit. The nearest is {best.name} "
-                f"({best.candidate.describe()}), which fails: " + "; ".join(best.reasons) + ".")
+        text = (f"No candidate meets every limit. The nearest is {_named(best)}, which "
+                "fails: " + "; ".join(best.reasons) + ".")
         relax = relaxation_text(best.checks)
         if relax:
             text += f" It would be feasible with {relax}, the other limits as they are."
         steps = _next_steps(best)
-        return None, text + (f" Next steps: {'; '.join(steps)}." if steps else "")
+        return None, text + (f" Other ways: {'; '.join(steps)}." if steps else "")
     best = feasible[0]
     base = baseline_of(best.candidate, results)
     limits = study.limits
-    words = [f"Recommended: {best.name} ({best.candidate.describe()})."]
+    words = [f"Recommended: {_named(best)}."]
     said = None                        # a candidate whose failure is already told
     if best.candidate.baseline:
         words.append("The general S-net on the design meets every limit, and no other "
@@ -1183,9 +1187,12 @@ def recommend(results: list[CandidateResult], study: Study, *,
     if best.same_net_as:
         words.append(f"It ends at the same net as {best.same_net_as}.")
     words += _achievements(best, None if best.candidate.baseline else base, study)
-    binding = binding_check(best.checks)
+    # a lamella study is told in strips: its binding limit among the others
+    binding = binding_check([c for c in best.checks if not (
+        is_lamella_study(study) and c["limit"] in _MOLD_LIMITS)])
     if binding is not None:
-        words.append(f"The limit that binds hardest is {binding['limit']}: "
+        name = LIMIT_NAMES.get(binding["limit"], (binding["limit"],))[0]
+        words.append(f"The limit that binds hardest is the {name}: "
                      f"{_g3(binding['measured'])} against {binding['bound']:g} "
                      f"({100 * binding['margin']:.0f} % to spare).")
     m = best.metrics
@@ -1224,25 +1231,25 @@ _TRY = {
     "mold_tolerance_mm": "a larger mold_tolerance_mm, or a smaller panel size",
     "max_molds": "a net type whose panels share molds (linear Weingarten, constant radius) or "
                  "a larger mold_tolerance_mm",
-    "max_panel_step_mm": "a larger max_panel_step_mm or mold_tolerance_mm",
+    "max_panel_step_mm": "a smaller panel size or a larger mold_tolerance_mm",
     "max_kink_deg": "a smaller panel size",
     "max_line_turn_deg": "another net type or angle, or a smaller panel size",
     "planarity_tolerance_mm": "a net type with planar panels (char-conjugate)",
 }
 
 
+def _named(result: CandidateResult) -> str:
+    """A candidate's name, with its description where that says more."""
+    described = result.candidate.describe()
+    return result.name if described == result.name else f"{result.name} ({described})"
+
+
 def _next_steps(best: CandidateResult) -> list[str]:
-    """What to try for the nearest candidate of a study without a feasible one: each
-    failed limit relaxed to what it measured, and what else helps with it."""
-    steps = []
-    for c in best.checks:
-        if c["ok"]:
-            continue
-        relax = (f"relax {c['limit']} to {c['relax_to']:g}" if c.get("relax_to") is not None
-                 else "")
-        other = _TRY.get(c["limit"], "")
-        steps.append(", or ".join(s for s in (relax, other) if s) or f"meet {c['limit']}")
-    return steps
+    """What else to try for the nearest candidate of a study without a feasible one,
+    beside relaxing its failed limits (`relaxation_text`): one suggestion per failed
+    limit."""
+    steps = [_TRY[c["limit"]] for c in best.checks if not c["ok"] and c["limit"] in _TRY]
+    return list(dict.fromkeys(steps))
 
 
 def baseline_of(candidate: Candidate, results: list[CandidateResult]) -> CandidateResult | None:
