@@ -26,6 +26,7 @@ from .io.output import (
     check_output_folder,
     output_argument,
 )
+from .io.parameters import Parameter, option_parameter
 from .io.records import write_json
 from .io.units import DEFAULT_UNITS, MM_PER_UNIT, UNIT_WORDS, units_warning
 from .net.buildable import BuildLimits
@@ -316,8 +317,6 @@ def _cmd_optimize(args) -> int:
     check_angle(args.angle)
     check_radius(args.radius)
     check_limits(args.max_deviation, args.max_line_turn)
-    if args.max_iter is not None and args.max_iter < 1:
-        raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
     _check_option_files((None if args.fix == "boundary" else args.fix, "a file of vertex ids"),
                         *[(h, "a file of handles") for h in args.handle or []])
     out = _output_path(args)
@@ -434,8 +433,6 @@ def _cmd_molds(args) -> int:
     settings.check()
     if args.design is None and args.panel_surface == "design":
         raise InputError("--panel-surface design needs --design SURFACE, the design the net lies on")
-    if not 100 <= args.triangles <= 5_000_000:
-        raise InputError(f"--triangles must lie between 100 and 5000000, got {args.triangles}")
     out = output_argument(args.output, folder=True)
     check_output_folder(out)
     inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"),
@@ -515,8 +512,6 @@ def _cmd_mill(args) -> int:
                             margin_mm=args.margin,
                             scallop_mm=args.scallop, side=args.side)
     settings.check()
-    if not 0.01 <= args.sim_step <= 10:
-        raise InputError(f"--sim-step must lie in 0.01 .. 10 mm, got {args.sim_step}")
     out = output_argument(args.output, folder=True)
     check_output_folder(out)
     inputs = _net_inputs(args.net)
@@ -546,9 +541,6 @@ def _cmd_mill(args) -> int:
 def _check_layout_options(args: argparse.Namespace, preset: Any) -> None:
     """Refuse options of `fabplan layout` that cannot go together, before any work."""
     check_angle(args.angle)
-    _check_max_panels(args)
-    if not (args.panel_size > 0 and args.panel_size < float("inf")):
-        raise InputError(f"--panel-size must be a positive length, got {args.panel_size}")
     if args.family is not None and args.angle is not None:
         raise InputError("--family and --angle exclude each other: the prescribed family "
                          "decides the angle")
@@ -558,16 +550,6 @@ def _check_layout_options(args: argparse.Namespace, preset: Any) -> None:
         raise InputError(f"--family and net type {preset.name!r} exclude each other: a prescribed "
                          "family decides the angle, which this net type fixes (use snet, "
                          "const-radius, anet or char-conjugate)")
-    if not 100 <= args.triangles <= 5_000_000:
-        raise InputError(f"--triangles must lie between 100 and 5000000, got {args.triangles}")
-    if args.max_iter is not None and args.max_iter < 1:
-        raise InputError(f"--max-iter must be at least 1, got {args.max_iter}")
-    if args.smoothing is not None and not 0 < args.smoothing <= 20:
-        raise InputError(f"--smoothing must lie in (0, 20] panels, got {args.smoothing}")
-    from .layout.settings import MAX_STARTS
-
-    if not 1 <= args.starts <= MAX_STARTS:
-        raise InputError(f"--starts must lie between 1 and {MAX_STARTS}, got {args.starts}")
 
 
 def _start_text(start: dict) -> str:
@@ -775,16 +757,15 @@ def _units_said(units: str | None) -> str:
             "ft": "feet"}.get(units or "", "model units (the file has no unit system)")
 
 
-def _check_max_panels(args) -> None:
-    if args.max_panels is not None and args.max_panels < 1:
-        raise InputError(f"--max-panels must be at least 1, got {args.max_panels}")
-
-
 def _check_layout_size(design: Any, panel_size: float, max_panels: int | None) -> None:
     """Refuse a layout whose panel count (design area / panel size squared) would exhaust
     the memory, before the layout starts (see `fabplan.io.resources`)."""
     from .io.resources import check_panel_count, default_max_panels
 
+    if panel_size > design.extent:
+        raise InputError(f"--panel-size {panel_size:g}: must be at most the extent of "
+                         f"{Path(design.name).name} ({design.extent:.4g} model units, the diagonal "
+                         "of its bounding box)")
     panels = design.area / panel_size**2
     limit = default_max_panels() if max_panels is None else max_panels
     fitting = (design.area / (0.5 * limit)) ** 0.5
@@ -946,7 +927,6 @@ def _cmd_strips(args) -> int:
     from .fabricate.strips import StripSettings, build_strips
     from .io.resources import check_panel_count, worker_count
 
-    _check_max_panels(args)
     worker_count(args.workers)  # a bad value fails before any work
 
     settings = StripSettings(
@@ -1145,7 +1125,6 @@ def _cmd_study(args) -> int:
     from .study.run import run_study
     from .study.spec import read_study, resolve_study
 
-    _check_max_panels(args)
     progress = _progress(args)
     say = progress.say()
     started = time.perf_counter()
@@ -1234,17 +1213,45 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"fabplan: error: {message} (see '{self.prog} --help')\n")
 
 
+class _InRange(argparse.Action):
+    """Store an option's number checked against its range (`fabplan.io.parameters`) as
+    the command line is parsed: a bad value is refused before any work, in one line
+    naming the option, the value and the range."""
+
+    def __init__(self, option_strings: list[str], dest: str, *, parameter: Parameter,
+                 **kwargs: Any):
+        super().__init__(option_strings, dest, **kwargs)
+        self.parameter = parameter
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        try:
+            setattr(namespace, self.dest, self.parameter.check(values))
+        except InputError as exc:
+            parser.error(str(exc))
+
+
+def _add_number(p: argparse.ArgumentParser, option: str, *, help: str, **kwargs: Any) -> None:
+    """A numeric option, checked against its range in `fabplan.io.parameters.OPTIONS`
+    (which every numeric option must have), the range stated in its help."""
+    parameter = option_parameter(p.prog.split()[-1], option)
+    units = f" {parameter.units}" if parameter.units else ""
+    p.add_argument(option, action=_InRange, parameter=parameter,
+                   help=f"{help} (range {parameter.interval}{units}"
+                        f"{', a whole number' if parameter.integer else ''})", **kwargs)
+
+
 def _add_max_panels(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--max-panels", type=int, metavar="N",
-                   help="refuse runs estimated to need more panels than this (default: what "
-                        "half the available memory holds, at least 20000)")
+    _add_number(p, "--max-panels", metavar="N",
+                help="refuse runs estimated to need more panels than this (default: what "
+                     "half the available memory holds, at least 20000)")
 
 
 def _add_max_line_turn(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--max-line-turn", type=float, default=90.0, metavar="DEG",
-                   help="a converged net's lines turn in the surface by at most DEG at any vertex "
-                        "(default 90: over it a line doubles back); a net within tolerance that "
-                        "turns more, or has a non-convex quad, ends 'crumpled' (exit 3)")
+    _add_number(p, "--max-line-turn", default=90.0, metavar="DEG",
+                help="a converged net's lines turn in the surface by at most DEG at any vertex "
+                     "(default 90: over it a line doubles back); a net within tolerance that "
+                     "turns more, or has a non-convex quad, ends 'crumpled' (exit 3)")
 
 
 def _add_verbosity(p: argparse.ArgumentParser) -> None:
@@ -1267,9 +1274,9 @@ def _add_measure(sub: Any) -> None:
     p.add_argument("-o", "--output", help="JSON file to write (default: NET.measure.json)")
     p.add_argument("--reference", help="surface to measure the distance to (OBJ/STL/PLY/OFF, "
                                        "FILE.3dm[#...] or a built-in surface)")
-    p.add_argument("--max-deviation", type=float, metavar="D",
-                   help="count the vertices farther than D (model units) from --reference as "
-                        "keeping the net from being built")
+    _add_number(p, "--max-deviation", metavar="D",
+                help="count the vertices farther than D (model units) from --reference as "
+                     "keeping the net from being built")
     _add_max_line_turn(p)
     _add_units(p)
     p.set_defaults(func=_cmd_measure)
@@ -1280,8 +1287,8 @@ def _add_optimize(sub: Any) -> None:
     p.add_argument("input", help="quad mesh (OBJ)")
     p.add_argument("--net", required=True, choices=list(NETS), metavar="NAME",
                    help="net type (see `fabplan nets`)")
-    p.add_argument("--angle", type=float, help="intersection angle in degrees (isogonal types)")
-    p.add_argument("--radius", type=float, help="Meusnier radius in model units")
+    _add_number(p, "--angle", help="intersection angle in degrees (isogonal types)")
+    _add_number(p, "--radius", help="Meusnier radius in model units")
     p.add_argument("--reference", help="surface to stay close to: a mesh file, a .3dm file or a "
                                        "built-in surface as for `fabplan layout` (default: the input)")
     p.add_argument("--fix", help="'boundary' or a file of vertex ids to hold in place")
@@ -1302,12 +1309,12 @@ def _add_optimize(sub: Any) -> None:
                    help="move the vertices in no star (zigzag boundary tips, patch corners), "
                         "which no condition of the net holds, onto the surface the net "
                         "continues, so that the panels at them meet their neighbours' molds")
-    p.add_argument("--max-deviation", type=float, metavar="D",
-                   help="keep every vertex within D (model units) of the reference: a limit held "
-                        "in the solve; a net type that cannot keep to it ends 'off-design' (exit "
-                        "3) with the smallest limit it reached")
+    _add_number(p, "--max-deviation", metavar="D",
+                help="keep every vertex within D (model units) of the reference: a limit held "
+                     "in the solve; a net type that cannot keep to it ends 'off-design' (exit "
+                     "3) with the smallest limit it reached")
     _add_max_line_turn(p)
-    p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
+    _add_number(p, "--max-iter", help="iteration cap (default 50)")
     p.add_argument("--no-multilevel", action="store_true",
                    help="solve a large grid net at full size from the start (by default, from "
                         "20,000 vertices, its coarse net of every second line is solved first)")
@@ -1323,11 +1330,11 @@ def _add_molds(sub: Any) -> None:
     p = sub.add_parser("molds", help="count the molds a net's curved panels need and write a "
                                      "report (report.html, molds.json, panels.csv)")
     p.add_argument("net", help="quad mesh (OBJ); every face is a panel")
-    p.add_argument("--tolerance-mm", type=float, required=True, metavar="T",
-                   help="largest allowed gap between a panel and its mold, in mm")
+    _add_number(p, "--tolerance-mm", required=True, metavar="T",
+                help="largest allowed gap between a panel and its mold, in mm")
     _add_units(p)
-    p.add_argument("--max-mold-size", type=float, metavar="MM",
-                   help="largest mold side in mm (default: no limit)")
+    _add_number(p, "--max-mold-size", metavar="MM",
+                help="largest mold side in mm (default: no limit)")
     p.add_argument("--panel-surface", default="auto",
                    choices=["auto", "shared", "local_fit", "corners", "design", "smooth"],
                    help="panel shape: shared (pieces of one surface through the net: "
@@ -1340,12 +1347,12 @@ def _add_molds(sub: Any) -> None:
     p.add_argument("--design", metavar="SURFACE",
                    help="the design the net lies on, for --panel-surface design: a built-in "
                         "surface spec or a .3dm NURBS surface as for `fabplan layout`")
-    p.add_argument("--triangles", type=int, default=20000, metavar="N",
-                   help="triangles of the --design's triangulation, where the exact surface is "
-                        "searched from (default 20000, a study's)")
-    p.add_argument("--step-limit", type=float, metavar="MM",
-                   help="largest step between neighbouring panels' molds in mm (default twice "
-                        "the tolerance)")
+    _add_number(p, "--triangles", default=20000, metavar="N",
+                help="triangles of the --design's triangulation, where the exact surface is "
+                     "searched from (default 20000, a study's)")
+    _add_number(p, "--step-limit", metavar="MM",
+                help="largest step between neighbouring panels' molds in mm (default twice "
+                     "the tolerance)")
     _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "
                              "its neighbours (a mold of its own where none does; slivers cut "
                              "with their full panel)", "plan the net's own panels only")
@@ -1389,18 +1396,18 @@ def _add_mill(sub: Any) -> None:
     p.add_argument("--along", choices=["A", "B"], default="A",
                    help="family whose lines the passes follow (A: the first, default)")
     _add_units(p, default="mm")
-    p.add_argument("--margin", type=float, metavar="MM",
-                   help="Meusnier radius minus safety sphere radius (cone: Mannheim radius "
-                        "minus at least this) (default: the rule of docs/milling.md, which keeps "
-                        "the cut above the target)")
-    p.add_argument("--scallop", type=float, default=0.01, metavar="MM",
-                   help="largest predicted scallop height between passes (default 0.01)")
+    _add_number(p, "--margin", metavar="MM",
+                help="Meusnier radius minus safety sphere radius (cone: Mannheim radius "
+                     "minus at least this) (default: the rule of docs/milling.md, which keeps "
+                     "the cut above the target)")
+    _add_number(p, "--scallop", default=0.01, metavar="MM",
+                help="largest predicted scallop height between passes (default 0.01)")
     p.add_argument("--side", choices=["auto", "+", "-"], default="auto",
                    help="side the tool comes from: that of the Meusnier (cone: Mannheim) "
                         "spheres (auto), of the face normals (cone: the vn normals) (+) or the "
                         "other (-)")
-    p.add_argument("--sim-step", type=float, default=0.5, metavar="MM",
-                   help="grid step of the milling simulation (default 0.5)")
+    _add_number(p, "--sim-step", default=0.5, metavar="MM",
+                help="grid step of the milling simulation (default 0.5)")
     p.add_argument("--no-simulation", action="store_true",
                    help="plan only: no simulated scallop, gouge check or comparison")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
@@ -1427,30 +1434,30 @@ def _add_layout(sub: Any) -> None:
                                    "revolution, tower-facade, height-field, bspline)")
     p.add_argument("--net", required=True, choices=list(NETS), metavar="NAME",
                    help="net type (see `fabplan nets`)")
-    p.add_argument("--angle", type=float,
-                   help="intersection angle of the two families in degrees (default 90)")
-    p.add_argument("--panel-size", type=float, required=True, metavar="L",
-                   help="target edge length in model units")
+    _add_number(p, "--angle",
+                help="intersection angle of the two families in degrees (default 90)")
+    _add_number(p, "--panel-size", required=True, metavar="L",
+                help="target edge length in model units")
     p.add_argument("--family", metavar="x|y|z[:STEP]|FILE",
                    help="prescribe the first family: x, y or z (levels of a coordinate, e.g. "
                         "floors; z:3.5 for levels every 3.5), or a file of polylines (OBJ "
                         "'l' lines or 'x y z' rows with blank lines between curves)")
-    p.add_argument("--triangles", type=int, default=40000,
-                   help="triangles of a built-in surface's triangulation (default 40000)")
-    p.add_argument("--max-iter", type=int, help="iteration cap (default 50)")
-    p.add_argument("--smoothing", type=float, metavar="PANELS",
-                   help="smooth the principal directions over this many panels and no other "
-                        "(default: from half a panel, longer while the lattice leaves the design "
-                        "unclad; longer smoothing holds the lattice together near umbilics, "
-                        "shorter keeps the lines fairer after the solve)")
-    p.add_argument("--starts", type=int, default=5, metavar="N",
-                   help="lay the net out and solve it from up to N starts (as set; the "
-                        "fairness term held longer in the solve; the other principal direction "
-                        "as the bisector, at angles other than 90 deg; the directions smoothed "
-                        "twice as long; smoothed as a line field) and keep the one that clads "
-                        "the design, converges and, among those whose panels are as even as "
-                        "the first start's, whose lines turn least (default 5; 1 is the "
-                        "fastest)")
+    _add_number(p, "--triangles", default=40000,
+                help="triangles of a built-in surface's triangulation (default 40000)")
+    _add_number(p, "--max-iter", help="iteration cap (default 50)")
+    _add_number(p, "--smoothing", metavar="PANELS",
+                help="smooth the principal directions over this many panels and no other "
+                     "(default: from half a panel, longer while the lattice leaves the design "
+                     "unclad; longer smoothing holds the lattice together near umbilics, "
+                     "shorter keeps the lines fairer after the solve)")
+    _add_number(p, "--starts", default=5, metavar="N",
+                help="lay the net out and solve it from up to N starts (as set; the "
+                     "fairness term held longer in the solve; the other principal direction "
+                     "as the bisector, at angles other than 90 deg; the directions smoothed "
+                     "twice as long; smoothed as a line field) and keep the one that clads "
+                     "the design, converges and, among those whose panels are as even as "
+                     "the first start's, whose lines turn least (default 5; 1 is the "
+                     "fastest)")
     _add_max_panels(p)
     _add_max_line_turn(p)
     p.add_argument("-o", "--output", required=True,
@@ -1466,42 +1473,42 @@ def _add_strips(sub: Any) -> None:
     p = sub.add_parser("strips", help="lamella strips along the parameter lines, unrolled, "
                                       "slit, labelled and nested on sheets (DXF + schedule)")
     p.add_argument("net", help="the net (OBJ)")
-    p.add_argument("--height", type=float, required=True, metavar="MM",
-                   help="lamella height; the surface runs along its middle")
-    p.add_argument("--thickness", type=float, required=True, metavar="MM",
-                   help="material thickness (the slits are this plus --clearance wide)")
+    _add_number(p, "--height", required=True, metavar="MM",
+                help="lamella height; the surface runs along its middle")
+    _add_number(p, "--thickness", required=True, metavar="MM",
+                help="material thickness (the slits are this plus --clearance wide)")
     _add_units(p)
     p.add_argument("--sheet", default="2500x1250", metavar="WxH",
                    help="sheet size in mm (default 2500x1250)")
-    p.add_argument("--spacing", type=float, default=10.0, metavar="MM",
-                   help="gap between parts (default 10)")
-    p.add_argument("--margin", type=float, default=10.0, metavar="MM",
-                   help="gap to the sheet edge (default 10)")
-    p.add_argument("--kerf", type=float, default=0.0, metavar="MM",
-                   help="cut width to compensate: outlines grow, slits shrink by half (default 0)")
-    p.add_argument("--clearance", type=float, default=0.2, metavar="MM",
-                   help="play added to the slit width (default 0.2)")
-    p.add_argument("--tolerance", type=float, default=0.1, metavar="MM",
-                   help="cutting tolerance for fitting arcs (default 0.1)")
+    _add_number(p, "--spacing", default=10.0, metavar="MM",
+                help="gap between parts (default 10)")
+    _add_number(p, "--margin", default=10.0, metavar="MM",
+                help="gap to the sheet edge (default 10)")
+    _add_number(p, "--kerf", default=0.0, metavar="MM",
+                help="cut width to compensate: outlines grow, slits shrink by half (default 0)")
+    _add_number(p, "--clearance", default=0.2, metavar="MM",
+                help="play added to the slit width (default 0.2)")
+    _add_number(p, "--tolerance", default=0.1, metavar="MM",
+                help="cutting tolerance for fitting arcs (default 0.1)")
     p.add_argument("--end", choices=["square", "round"], default="square",
                    help="strip ends (default square)")
-    p.add_argument("--extension", type=float, metavar="MM",
-                   help="material beyond the end crossings at free ends (default height / 2)")
+    _add_number(p, "--extension", metavar="MM",
+                help="material beyond the end crossings at free ends (default height / 2)")
     _add_boundary_options(p, "strips run through them to the edge of the cladding and are "
                              "cut square against a boundary member there",
                           "end the strips at the net's last vertices")
-    p.add_argument("--boundary-member", type=float, metavar="MM",
-                   help="thickness of the boundary member strips end against (default "
-                        "--thickness)")
+    _add_number(p, "--boundary-member", metavar="MM",
+                help="thickness of the boundary member strips end against (default "
+                     "--thickness)")
     p.add_argument("--splice", choices=["overlap", "lap"], default="overlap",
                    help="joint of a strip split to fit the sheets (default overlap)")
-    p.add_argument("--splice-length", type=float, metavar="MM",
-                   help="length of a splice (default 2 x height)")
+    _add_number(p, "--splice-length", metavar="MM",
+                help="length of a splice (default 2 x height)")
     p.add_argument("--labels", choices=["stroke", "outline", "text"], default="stroke",
                    help="engraved labels: single-stroke lines, glyph outlines or DXF TEXT "
                         "(default stroke)")
-    p.add_argument("--label-height", type=float, metavar="MM",
-                   help="strip label height (default 0.12 x height, 3-20 mm)")
+    _add_number(p, "--label-height", metavar="MM",
+                help="strip label height (default 0.12 x height, 3-20 mm)")
     p.add_argument("--layer", action="append", metavar="KIND=NAME[:COLOUR]",
                    help="layer name and colour for cut, slit or engrave (defaults CUT:1 red, "
                         "SLIT:6 magenta, ENGRAVE:5 blue); repeatable")
@@ -1650,7 +1657,11 @@ def _stopped_by_signals() -> Iterator[None]:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        # a usage error or a value out of its range (one line printed), --help, --version
+        return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     try:
         with _stopped_by_signals():
             code = args.func(args)

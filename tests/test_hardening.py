@@ -348,17 +348,19 @@ def test_a_design_in_millimetres_read_with_a_panel_in_metres_is_refused(tmp_path
     (["layout", "hyperbolic-paraboloid", "--net", "snet", "--panel-size", "2",
       "--max-panels", "50"], "about 103 panels (about 4 MB of memory), more than the limit of 50"),
     (["layout", "hyperbolic-paraboloid", "--net", "snet", "--panel-size", "2",
-      "--max-panels", "0"], "--max-panels must be at least 1, got 0"),
+      "--max-panels", "0"], "--max-panels 0: must be at least 1 (range [1, 1000000000])"),
     (["strips", "{net}", "--height", "40", "--thickness", "4", "--max-panels", "10"],
      "strips of a net of 20 faces: about 20 panels"),
     (["strips", "{net}", "--height", "40", "--thickness", "4", "--spacing", "1e9"],
-     "--spacing 1e+09 mm is wider than the sheet inside its margins (1230 mm)"),
+     "--spacing 1e9: must be at most 20000 mm (range [0, 20000])"),
+    (["strips", "{net}", "--height", "40", "--thickness", "4", "--spacing", "1500"],
+     "--spacing 1500 mm is wider than the sheet inside its margins (1230 mm)"),
     (["strips", "{net}", "--height", "40", "--thickness", "4", "--sheet", "1e9x1e9"],
      "no sheet is larger than 20000 mm"),
     (["strips", "{net}", "--height", "2000", "--thickness", "4"],
      "--height 2000 mm does not fit on the 1250 mm side of the sheet"),
     (["strips", "{net}", "--height", "40", "--thickness", "4", "--tolerance", "1e12"],
-     "--tolerance 1e+12 mm lies outside 0.001 .. 10 mm"),
+     "--tolerance 1e12: must be at most 10 mm (range [0.001, 10])"),
 ])
 def test_runs_beyond_the_limits_are_refused_before_the_work(work, capsys, argv, fragment):
     argv = [a.format(net=work / "grid.obj") for a in argv]
@@ -394,8 +396,9 @@ def test_molds_in_millimetres_on_a_model_in_metres_is_refused(tmp_path, capsys):
 
 @pytest.mark.parametrize("value", ["1e12", "1e-5", "inf"])
 def test_a_mold_tolerance_outside_its_range_is_refused(work, capsys, value):
-    fragment = ("lies outside 0.01 .. 1000 mm" if value != "inf" else
-                "must be a positive number of millimetres")
+    fragment = {"1e12": "--tolerance-mm 1e12: must be at most 1000 mm (range [0.01, 1000])",
+                "1e-5": "--tolerance-mm 1e-5: must be at least 0.01 mm (range [0.01, 1000])",
+                "inf": "--tolerance-mm inf: must be a finite number between 0.01 and 1000 mm"}[value]
     refused(["molds", work / "grid.obj", "--tolerance-mm", value, "-o", work / "m"], capsys, work,
             fragment)
 

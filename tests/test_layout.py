@@ -295,12 +295,12 @@ def test_a_moebius_strip_cannot_be_oriented(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--panel-size", "40"], "panel size 40 is too large for the surface"),
-    (["--panel-size", "0"], "--panel-size must be a positive length"),
-    (["--panel-size", "1", "--angle", "200"], "--angle must lie strictly between 0 and 180"),
+    (["--panel-size", "40"], "--panel-size 40: must be at most the extent of hyperbolic-paraboloid"),
+    (["--panel-size", "0"], "--panel-size 0: must be at least 1e-06 model units"),
+    (["--panel-size", "1", "--angle", "200"], "--angle 200: must be at most 179 degrees"),
     (["--panel-size", "1", "--family", "z", "--angle", "60"], "exclude each other"),
     (["--panel-size", "1", "--family", "missing.txt"], "not x, y, z nor a file of polylines"),
-    (["--panel-size", "1", "--triangles", "-5"], "--triangles must lie between 100"),
+    (["--panel-size", "1", "--triangles", "-5"], "--triangles -5: must be at least 100 (range [100, 5000000"),
 ])
 def test_bad_layout_options_are_refused(tmp_path, capsys, args, fragment):
     code = main(["layout", "hyperbolic-paraboloid", "--net", "snet", "--triangles", "2000",
@@ -311,7 +311,7 @@ def test_bad_layout_options_are_refused(tmp_path, capsys, args, fragment):
 @pytest.mark.parametrize("spec, fragment", [
     ("saddle", "unknown surface 'saddle'; known: hyperbolic-paraboloid"),
     ("torus:minor=12", "the minor radius must be smaller than the major radius"),
-    ("paraboloid:width=wide", "width must be a number"),
+    ("paraboloid:width=wide", "paraboloid: width wide: must be a number between 0.001 and 1e+07"),
     ("bspline:control_points=nothing.txt", "nothing.txt: no such file"),
     ("paraboloid:radius=5", "surface 'paraboloid' has no parameter 'radius'; its parameters: "
      "radius_x=10, radius_y=10, width=6, depth=6"),

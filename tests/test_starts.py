@@ -182,7 +182,8 @@ def test_the_cli_lists_its_starts_and_refuses_a_bad_count(tmp_path, capsys):
     code = main(["layout", "tower-facade", "--net", "snet", "--panel-size", "2",
                  "--starts", "6", "-o", str(tmp_path / "six.obj")])
     _, err = capsys.readouterr()
-    assert code == 2 and err == "fabplan: error: --starts must lie between 1 and 5, got 6\n"
+    assert code == 2 and err == ("fabplan: error: --starts 6: must be at most 5 (range [1, 5]) "
+                                  "(see 'fabplan layout --help')\n")
     assert not list(tmp_path.glob("six*"))
 
 

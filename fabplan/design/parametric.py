@@ -34,6 +34,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
+from ..io.parameters import surface_parameter
 from .mesh_surface import DesignSurface
 
 __all__ = [
@@ -517,7 +518,25 @@ def make_surface(name: str, **parameters) -> ParametricSurface:
                 f"{FILE_PARAMETERS.get(missing[0], 'VALUE')}")
         raise InputError(f"surface {name!r} {what}; its parameters: "
                          f"{describe_surface_parameters(name)}")
-    return SURFACES[name](**parameters)
+    return SURFACES[name](**{k: _checked(name, k, v) for k, v in parameters.items()})
+
+
+def _checked(surface: str, key: str, value: object) -> object:
+    """A surface parameter checked against its range (`fabplan.io.parameters`): a number
+    as a float (an int for a count), a ``LO..HI`` angle range as a pair; a parameter
+    without a range (a file's grid, a callable) as it is."""
+    parameter = surface_parameter(surface, key)
+    if parameter is None:
+        return value
+    where = f"{surface}: "
+    if key not in ("u_deg", "v_deg"):
+        return parameter.check(value, where=where)
+    if not (isinstance(value, (tuple, list)) and len(value) == 2):
+        raise InputError(f"{where}{key} must be a range LO..HI of two angles, got {value!r}")
+    low, high = (parameter.check(v, where=where) for v in value)
+    if not low < high:
+        raise InputError(f"{where}{key} {low:g}..{high:g}: the first angle must be the smaller")
+    return (low, high)
 
 
 def surface_from_spec(spec: str) -> ParametricSurface:
@@ -544,11 +563,11 @@ def surface_from_spec(spec: str) -> ParametricSurface:
             parameters[key] = _read_grid_file(value.strip(), key)
         elif key in ("u_deg", "v_deg"):
             parts = value.split("..")
-            try:
-                lo, hi = (float(p) for p in parts)
-            except ValueError:
-                raise InputError(f"surface spec {spec!r}: {key} is LO..HI degrees") from None
-            parameters[key] = (lo, hi)
+            if len(parts) != 2:
+                raise InputError(f"surface spec {spec!r}: {key} is LO..HI degrees")
+            parameters[key] = tuple(parts)     # the numbers are read by `make_surface`
+        elif surface_parameter(name, key) is not None:
+            parameters[key] = value            # read and checked by `make_surface`
         else:
             try:
                 parameters[key] = float(value)
@@ -590,12 +609,15 @@ def _read_grid_file(path: str, key: str) -> np.ndarray:
     except (UnicodeDecodeError, ValueError):
         raise InputError(f"{path}: not a text file of numbers (surface parameter {key})") from None
     if key == "control_points":
-        shape = [line.split()[2:4] for line in text.splitlines() if line.startswith("# shape")]
+        shape = [line.split()[2:] for line in text.splitlines() if line.startswith("# shape")]
         if shape:
-            m, k = (int(s) for s in shape[0])
+            try:
+                m, k = (int(s) for s in shape[0])
+            except ValueError:
+                m = k = -1
         else:
             m = k = int(round(math.sqrt(len(data))))
-        if data.shape[1] != 3 or m * k != len(data):
+        if data.shape[1] != 3 or m < 1 or k < 1 or m * k != len(data):
             raise InputError(f"{path}: control points must be m*k rows 'x y z' "
                              "(give '# shape m k' for a non-square grid)")
         return data.reshape(m, k, 3)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..io.parameters import OPTIONS
+
 __all__ = ["LayoutSettings", "SURFACE_TOLERANCE", "MAX_STARTS"]
 
 
@@ -12,7 +14,7 @@ __all__ = ["LayoutSettings", "SURFACE_TOLERANCE", "MAX_STARTS"]
 SURFACE_TOLERANCE = 0.005
 
 #: the starts a net may be laid out and solved from (`fabplan.layout.starts`)
-MAX_STARTS = 5
+MAX_STARTS = int(OPTIONS["--starts"].high or 1)
 
 
 @dataclass

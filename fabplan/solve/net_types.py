@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..io.parameters import OPTIONS
 from .constraints import (
     CoherentOrientation,
     ConstantAngle,
@@ -102,13 +103,15 @@ def get_net(name: str) -> NetType:
 
 
 def check_angle(angle_deg: float | None) -> None:
-    if angle_deg is not None and not (0.0 < angle_deg < 180.0 and math.isfinite(angle_deg)):
-        raise InputError(f"--angle must lie strictly between 0 and 180 degrees, got {angle_deg}")
+    """Refuse an intersection angle outside its range (`fabplan.io.parameters.OPTIONS`)."""
+    if angle_deg is not None:
+        OPTIONS["--angle"].check(angle_deg)
 
 
 def check_radius(radius: float | None) -> None:
-    if radius is not None and not (radius > 0.0 and math.isfinite(radius)):
-        raise InputError(f"--radius must be a positive length, got {radius}")
+    """Refuse a Meusnier radius outside its range (`fabplan.io.parameters.OPTIONS`)."""
+    if radius is not None:
+        OPTIONS["--radius"].check(radius)
 
 
 def net_constraints(net: NetType, *, angle_deg: float | None = None,

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import InputError, SolverError
 from ..io.obj import format_obj
 from ..io.output import write_texts
+from ..io.parameters import OPTIONS
 from ..io.records import json_text
 from ..net.buildable import BuildLimits, BuildReport, crumpled, measure_buildable
 from ..net.folds import FoldReport, fold_edge_mask, measure_folds
@@ -157,12 +158,24 @@ def read_fixed(spec: str | None, mesh: QuadMesh) -> np.ndarray:
     except (UnicodeDecodeError, OSError):
         raise InputError(f"{spec}: not a text file of vertex ids") from None
     try:
-        ids = np.array([int(t) for t in tokens], dtype=np.int64)
+        values = [int(t) for t in tokens]
     except ValueError:
         raise InputError(f"{spec}: vertex ids must be integers") from None
+    return _vertex_ids(values, mesh, spec)
+
+
+def _vertex_ids(values: list[int], mesh: QuadMesh, where: str) -> np.ndarray:
+    """(k,) int64, vertex ids read from a file or an option, each checked to exist; an id
+    too large for any integer array (2**64) is named as the others are."""
+    try:
+        ids = np.array(values, dtype=np.int64)
+    except OverflowError:
+        first = next(v for v in values if abs(v) >= 2**62)
+        raise InputError(f"{where}: vertex {first} does not exist (the mesh has "
+                         f"{mesh.vertex_count} vertices, numbered from 0)") from None
     bad = ids[(ids < 0) | (ids >= mesh.vertex_count)]
     if bad.size:
-        raise InputError(f"{spec}: vertex {bad[0]} does not exist (the mesh has "
+        raise InputError(f"{where}: vertex {bad[0]} does not exist (the mesh has "
                          f"{mesh.vertex_count} vertices, numbered from 0)")
     return ids
 
@@ -639,10 +652,9 @@ def _status(solver_status: str, build: BuildReport) -> str:
 
 def check_limits(max_deviation: float | None, max_line_turn: float) -> None:
     """Refuse a deviation limit or a line-turn limit no net can keep to."""
-    if max_deviation is not None and not (np.isfinite(max_deviation) and max_deviation > 0):
-        raise InputError(f"--max-deviation must be a positive length, got {max_deviation}")
-    if not (np.isfinite(max_line_turn) and 0 < max_line_turn <= 180):
-        raise InputError(f"--max-line-turn must lie in (0, 180] degrees, got {max_line_turn}")
+    if max_deviation is not None:
+        OPTIONS["--max-deviation"].check(max_deviation)
+    OPTIONS["--max-line-turn"].check(max_line_turn)
 
 
 # a deviation limit the net type cannot keep to is approached from a loose one: limits
@@ -915,17 +927,31 @@ def _obstacles(build: BuildReport) -> str:
     return "; ".join(p for p in said if p)
 
 
+#: how far a handle may move a vertex from the net's bounding box, in net extents
+HANDLE_REACH = 10.0
+
+
 def _handle_arrays(handles: dict | None, mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray]:
     if not handles:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    ids = np.array(list(handles), dtype=np.int64)
+    ids = _vertex_ids(list(handles), mesh, "--handle")
     targets = np.array([np.asarray(handles[i], dtype=np.float64) for i in handles]).reshape(-1, 3)
-    bad = ids[(ids < 0) | (ids >= mesh.vertex_count)]
-    if bad.size:
-        raise InputError(f"handle vertex {bad[0]} does not exist (the mesh has "
-                         f"{mesh.vertex_count} vertices, numbered from 0)")
     if not np.isfinite(targets).all():
-        raise InputError("handle targets must be finite coordinates")
+        k = int(np.flatnonzero(~np.isfinite(targets).all(axis=1))[0])
+        raise InputError(f"--handle {ids[k]}:{','.join(f'{c:g}' for c in targets[k])}: the target "
+                         "must be finite coordinates")
+    # a handle moves a vertex within the net's reach: farther than this many times the
+    # net's extent from its bounding box is a typing or unit mistake
+    low, high = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    extent = float(np.linalg.norm(high - low))
+    # along the farthest axis: a norm of 1e300 would overflow
+    away = np.maximum(np.maximum(low - targets, targets - high), 0.0).max(axis=1)
+    far = np.flatnonzero(away > HANDLE_REACH * extent)
+    if far.size:
+        k = far[0]
+        raise InputError(f"--handle {ids[k]}:{','.join(f'{c:g}' for c in targets[k])}: the target "
+                         f"lies {away[k]:.3g} from the net, more than {HANDLE_REACH:g} times its "
+                         f"extent ({extent:.4g} model units, the diagonal of its bounding box)")
     return ids, targets
 
 
