@@ -131,13 +131,14 @@ def test_auto_candidates_cover_the_rationalizations():
     (("net = \"const-radius\"", "net = \"const-radios\""), "candidates[1].net must be one of"),
     (("surface = \"hyperbolic-paraboloid\"", "surface = \"hypar\""), "design.surface is 'hypar'"),
     (("rise = 1.2", "rise = 1.2, wdth = 3"), "design.parameters do not describe a surface"),
-    (("angle = 80", "angle = 200"), "candidates[0].angle must lie in (0, 90] degrees, got 200"),
-    (("angle = 80", "angle = 120"), "candidates[0].angle must lie in (0, 90] degrees, got 120: an "
+    (("angle = 80", "angle = 200"), "candidates[0].angle must lie in [1, 90] degrees, got 200"),
+    (("angle = 80", "angle = 120"), "candidates[0].angle must lie in [1, 90] degrees, got 120: an "
                                     "isogonal net of angle a is the same net as one of 180 - a "
                                     "with the families swapped (ask for 60)"),
     (("angle = 80", "angle = { from = 80, to = 100, step = 10 }"),
-     "candidates[0].angle must lie in (0, 90] degrees, got 100"),
+     "candidates[0].angle must lie in [1, 90] degrees, got 100"),
     (("angle = 80", "angle = 0"), "candidates[0].angle must be"),
+    (("angle = 80", "angle = 0.5"), "candidates[0].angle must lie in [1, 90] degrees, got 0.5"),
     (("[panels]", "[panel]"), "study: [panel] is not a known table (did you mean [panels]?)"),
     (("[limits]", "[limts]"), "[limts] is not a known table (did you mean [limits]?)"),
     (("triangles = 4000", "triangles = 4000\nresolution = 3"), "design.resolution is not a known key"),

@@ -35,6 +35,7 @@ from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
 from ..io.inputs import check_input_file, check_text
+from ..io.parameters import OPTIONS
 from ..io.units import MM_PER_UNIT
 from ..layout.settings import MAX_STARTS
 from ..solve.net_types import NETS, get_net
@@ -913,8 +914,10 @@ def _candidates(value: object, file: str) -> tuple[tuple[Candidate, ...], tuple[
             t.fail("angle", f"does not apply to net type {net!r}: there is no angle to search")
         if "radius" in searched and preset.radius != "param":
             t.fail("radius", f"does not apply to net type {net!r}: there is no radius to search")
-        if "angle" in searched and searched["angle"][1] > 90:
-            t.fail("angle", f"search must lie in (0, 90] degrees, got up to {searched['angle'][1]:g}")
+        lowest = float(OPTIONS["--angle"].low or 0)      # the solver's smallest angle
+        if "angle" in searched and not lowest <= searched["angle"][0] <= searched["angle"][1] <= 90:
+            t.fail("angle", f"search must lie in [{lowest:g}, 90] degrees, got "
+                   f"{searched['angle'][0]:g} to {searched['angle'][1]:g}")
         if searched:
             if len(angles) * len(radii) > 1:
                 t.fail("angle" if len(angles) > 1 else "radius", "sweeps while the other is "
@@ -924,11 +927,17 @@ def _candidates(value: object, file: str) -> tuple[tuple[Candidate, ...], tuple[
                                    angle=angles[0], radius=radii[0], start_angle=start))
             continue
         for a in angles:
-            if a is not None and not 0 < a <= 90:
-                t.fail("angle", f"must lie in (0, 90] degrees, got {a:g}: an isogonal net of "
-                       f"angle a is the same net as one of 180 - a with the families swapped "
-                       f"(ask for {180 - a:g})" if 90 < a < 180 else
-                       f"must lie in (0, 90] degrees, got {a:g}")
+            if a is not None and not lowest <= a <= 90:
+                t.fail("angle", f"must lie in [{lowest:g}, 90] degrees, got {a:g}: an isogonal "
+                       f"net of angle a is the same net as one of 180 - a with the families "
+                       f"swapped (ask for {180 - a:g})" if 90 < a < 180 else
+                       f"must lie in [{lowest:g}, 90] degrees, got {a:g}")
+        for r in radii:
+            if r is not None:
+                try:
+                    OPTIONS["--radius"].check(r)
+                except InputError as exc:
+                    t.fail("radius", str(exc).split(": ", 1)[1])
         sweep = len(angles) * len(radii) > 1
         for a in angles:
             for r in radii:
