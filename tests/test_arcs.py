@@ -105,6 +105,27 @@ def test_arcs_of_a_plane_net_are_straight():
     assert summary["straight_arcs"] == len(arcs.edges) and summary["radius"]["max"] is None
 
 
+@pytest.mark.parametrize("bend", [1e-6, 1e-8, 1e-10])
+def test_arcs_of_a_nearly_plane_net_end_at_their_vertices(bend):
+    """Arcs of radii up to 1e10 edges (a facade that is almost flat) still end where their
+    edges do, and bow by the sagitta their radius gives."""
+    u, v = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-1, 1, 5), indexing="ij")
+    mesh = fabplan.QuadMesh.grid(np.stack([u, v, bend * (u * u + v * v)], axis=-1))
+    arcs = arc_structure(mesh)
+    X = mesh.vertices
+    assert np.abs(arcs.points(0.0) - X[arcs.edges[:, 0]]).max() < 1e-12
+    assert np.abs(arcs.points(1.0) - X[arcs.edges[:, 1]]).max() < 1e-12
+    assert arcs.summary()["end_vertex_gap_relative_to_edge"] < 1e-10
+    curved = ~arcs.straight
+    chord = np.linalg.norm(X[arcs.edges[curved, 1]] - X[arcs.edges[curved, 0]], axis=1)
+    R = arcs.radius[curved]
+    assert curved.any() and np.allclose(arcs.sagitta[curved],
+                                        chord**2 / 4 / (R + np.sqrt(R**2 - chord**2 / 4)),
+                                        rtol=1e-9, atol=0)
+    mid = arcs.points(0.5)[curved] - 0.5 * (X[arcs.edges[curved, 0]] + X[arcs.edges[curved, 1]])
+    assert np.allclose(np.linalg.norm(mid, axis=1), arcs.sagitta[curved], rtol=1e-6, atol=1e-14)
+
+
 NETS = [pytest.param(0.12, id="wein99-patch"),
         pytest.param(None, id="wein99", marks=pytest.mark.slow)]
 

@@ -119,7 +119,9 @@ class ArcStructure:
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), self.radius.shape)
         phi = (t * self.angle)[:, None]
         start = a - self.centre
-        curved = (self.centre + np.cos(phi) * start
+        # from the start point, not the centre: a centre a radius of 1e8 edges away would
+        # lose the arc's points to rounding (1 - cos phi = 2 sin^2(phi / 2) keeps them)
+        curved = (a - 2 * np.sin(phi / 2) ** 2 * start
                   + np.sin(phi) * np.cross(self.axis, start))
         return np.where(self.straight[:, None], a + t[:, None] * (b - a), curved)
 
@@ -430,14 +432,19 @@ def arc_structure(mesh: QuadMesh) -> ArcStructure:
     tangent = _unit(tangent)
     tangent *= np.where(np.sum(tangent * u, axis=1) < 0, -1.0, 1.0)[:, None]
     cos_half = np.clip(np.sum(tangent * u, axis=1), -1.0, 1.0)
-    half = np.arccos(cos_half)
+    # from sine and cosine: arccos alone loses half the digits of a nearly straight arc's
+    # angle, and its end then misses the vertex by up to an edge
+    binormal = np.cross(tangent, u)
+    half = np.arctan2(np.linalg.norm(binormal, axis=1), cos_half)
     straight = half < 1e-12
     with np.errstate(invalid="ignore", divide="ignore"):
         radius = np.where(straight, np.inf, length / (2 * np.sin(half)))
-        inward = _unit(u - cos_half[:, None] * tangent)
+        # at right angles to the tangent to the last digit (u - cos * tangent is not, when
+        # the arc is nearly straight)
+        inward = _unit(np.cross(binormal, tangent))
         centre = np.where(straight[:, None], np.nan, X[v] + radius[:, None] * inward)
         axis = np.where(straight[:, None], np.nan, np.cross(tangent, inward))
-        sagitta = np.where(straight, 0.0, radius * (1 - np.cos(half)))
+        sagitta = np.where(straight, 0.0, 2 * radius * np.sin(half / 2) ** 2)
     angle = np.where(straight, 0.0, 2 * half)
     end_tangent = 2 * cos_half[:, None] * u - tangent
     # tangent-plane defect at each vertex: the arcs' tangents against its plane
