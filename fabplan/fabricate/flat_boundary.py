@@ -3,10 +3,10 @@
 A boundary panel (`fabplan.layout.trim`) borders the net along some of its sides. Where
 the net's panels across those sides are flat (on the plan's plane molds), the boundary
 panel is flat too when one plane holds its net sides: the plane through two sides
-meeting at a net vertex (the V between two tips of a zigzag net boundary), through the
-one side it shares (turned about it to lie closest to the panel's outline, which follows
-the design), or fitted to longer runs of sides where they are that flat. It then meets
-each face beside it without a step, with a kink only.
+meeting at a net vertex (the V between two tips of a zigzag net boundary), the plane of
+the one face it continues (one pane with it), or the plane fitted to longer runs of sides
+where they are that flat. It then meets each face beside it without a step, with a kink
+only.
 
 Two flat panels meet without a step only along the line where their planes cross. A
 side they share that runs from a point of both planes (a tip of the net) to the design
@@ -140,18 +140,17 @@ def boundary_planes(plan: MoldPlan, panels: BoundaryPanels, sides: BoundarySides
     np.add.at(cov, who, d[:, :, None] * d[:, None, :])
     value, vector = np.linalg.eigh(cov)
     normal = vector[:, :, 0]
-    # sides on one line (one side, or several in a row) leave the plane open: it turns
-    # about them to lie closest to the panel's outline (on the design where the net is)
-    span = np.sqrt(np.maximum(value[:, 2], 0.0))
-    open_ = np.sqrt(np.maximum(value[:, 1], 0.0)) <= 1e-6 * np.maximum(span, 1e-300)
-    if open_.any():
-        normal[open_] = _turned_normals(panels, np.flatnonzero(open_), centre[open_],
-                                        vector[open_, :, 2])
     first = np.full(p, -1)
     first[owner[::-1]] = face[::-1]
     along = plan.placement[np.maximum(first, 0), 2, :3] / mm       # the face's mold normal
     normal = np.where((np.sum(normal * along, axis=1) < 0)[:, None], -normal, normal)
     placement = plane_placements(normal, centre, mm)
+    # sides on one line (one side, or several in a row) leave the plane open: the panel
+    # continues the face beside it, one pane with it (a panel beside it continuing the
+    # same face, a sliver, then lies in its plane too)
+    span = np.sqrt(np.maximum(value[:, 2], 0.0))
+    open_ = np.sqrt(np.maximum(value[:, 1], 0.0)) <= 1e-6 * np.maximum(span, 1e-300)
+    placement[open_] = plan.placement[np.maximum(first, 0)][open_]
     candidate = (count > 0) & on_plane
     # flat where every net side meets its face within the step limit
     chords = np.stack([X[sides.start[net]], X[sides.end[net]]], axis=1)
@@ -174,25 +173,8 @@ def boundary_planes(plan: MoldPlan, panels: BoundaryPanels, sides: BoundarySides
     return flat, placement, mold
 
 
-def _turned_normals(panels: BoundaryPanels, which: np.ndarray, points: np.ndarray,
-                    axes: np.ndarray) -> np.ndarray:
-    """(k,) unit normals of the planes through the lines (``points``, ``axes``: (k, 3))
-    that lie closest to the outlines of the panels `which` (least squares)."""
-    outlines = [np.asarray(panels.polygons[k], np.int64) for k in which]
-    owner = np.repeat(np.arange(len(which)), [len(q) for q in outlines])
-    y = panels.vertices[np.concatenate(outlines)] - points[owner]
-    y -= np.sum(y * axes[owner], axis=1)[:, None] * axes[owner]
-    spread = np.zeros((len(which), 3, 3))
-    np.add.at(spread, owner, y[:, :, None] * y[:, None, :])
-    # the axis itself is no normal: weighed out
-    scale = np.trace(spread, axis1=1, axis2=2) + 1e-300
-    spread += scale[:, None, None] * axes[:, :, None] * axes[:, None, :]
-    return np.linalg.eigh(spread)[1][:, :, 0]
-
-
 def flat_boundary_panels(plan: MoldPlan, panels: BoundaryPanels, *,
-                         step_limit_mm: float | None = None, reach: float = 0.1,
-                         rounds: int = 8) -> FlatBoundary:
+                         step_limit_mm: float | None = None, reach: float = 0.1) -> FlatBoundary:
     """The flat boundary panels of a net, and the panels with the sides two flat panels
     share slid onto the lines where their planes cross (see the module's text).
 
@@ -204,7 +186,6 @@ def flat_boundary_panels(plan: MoldPlan, panels: BoundaryPanels, *,
     reach : how far the line of two planes may pass from the design boundary for the side
         on it to end there (`fabplan.layout.trim.slide_splits`), in the net's mean edge
         lengths.
-    rounds : rounds of planes and slides at most (see the function's comments).
 
     Returns
     -------
@@ -214,22 +195,11 @@ def flat_boundary_panels(plan: MoldPlan, panels: BoundaryPanels, *,
     size = plan.mesh.mean_edge_length
     sides = boundary_sides(panels, plan.mesh)
     flat, placement, mold = boundary_planes(plan, panels, sides, limit)
-    slid = np.zeros(0, np.int64)
-    # a plane turned about a panel's one net side follows its outline, which the slides
-    # change: planes and slides again until they agree (at once where every plane is held
-    # by two net sides), so that the panels as written slide no further when read back
-    for _ in range(rounds):
-        r, origin, direction = _crossing_lines(plan, panels, sides, flat, placement)
-        if not len(r):
-            break
-        moved_panels, moved = slide_splits(panels, r, origin, direction, reach=reach * size)
-        slid = np.union1d(slid, r[moved])
-        shift = np.linalg.norm(moved_panels.vertices - panels.vertices, axis=1).max(initial=0.0)
-        panels = moved_panels
-        sides = boundary_sides(panels, plan.mesh)
-        flat, placement, mold = boundary_planes(plan, panels, sides, limit)
-        if shift <= 1e-9 * size:
-            break
+    # the planes are the net's: sliding the panels' splits leaves them, and panels slid
+    # once (as written to NET.boundary.obj) slide no further
+    r, origin, direction = _crossing_lines(plan, panels, sides, flat, placement)
+    panels, moved = slide_splits(panels, r, origin, direction, reach=reach * size)
+    slid = r[moved]
     return FlatBoundary(panels=panels, flat=flat, placement=placement, mold=mold, slid=slid)
 
 
