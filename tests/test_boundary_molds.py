@@ -207,3 +207,79 @@ def test_a_net_off_its_design_gets_few_molds_of_its_own(off_design):
     again = boundary_molds(plan, panels)
     assert again.mold.tolist() == bp["mold"]
     assert again.step_max_mm == pytest.approx(bp["step_max_mm"], rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def flat_glass(tmp_path_factory):
+    """A characteristic conjugate net (planar quads: flat glass) optimized off an elliptic
+    paraboloid from an S-net layout, its boundary panels following it, its molds at 1 mm
+    (one plane) and its boundary panels' molds; written as a study writes them (the
+    boundary panels as made) with `fabplan molds` run on the files."""
+    import fabplan
+
+    folder = tmp_path_factory.mktemp("flat")
+    design = load_design("paraboloid:radius_x=9,radius_y=15,width=8,depth=6", triangles=6000)
+    layout = layout_surface(design, 1.5)
+    net = fabplan.optimize(glide(layout, "snet").mesh, "char-conjugate",
+                           reference=design.reference)
+    add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True)
+    cut = net.boundary_panels
+    plan = plan_molds(net.mesh, MoldSettings(tolerance_mm=1.0, units="m"))
+    molds = boundary_molds(plan, cut, design=design)
+    net.boundary_panels = molds.panels
+    net.write(folder / "net.obj")
+    assert main(["molds", str(folder / "net.obj"), "--tolerance-mm", "1", "--units", "m",
+                 "--no-3d", "-q", "-o", str(folder / "molds")]) == 0
+    return net, cut, plan, molds, folder
+
+
+def test_boundary_panels_beside_flat_panels_are_flat(flat_glass):
+    """Beside a net of flat panels every boundary panel is flat, on the net's plane: no
+    mold of its own. Rechecked from the placements, it meets the faces beside it without
+    a step (it lies in the plane of the net sides it borders), and the panels beside it
+    within the limit; where two flat panels part on the design boundary, their shared side
+    runs along the line where their planes cross (a point of both planes)."""
+    net, cut, plan, molds, _ = flat_glass
+    assert plan.mold_type.tolist() == [0]
+    assert molds.count >= 15 and molds.flat == molds.count
+    assert molds.own_molds == 0 and np.all(molds.mold == 0) and np.all(molds.shape == 0)
+    with_net, between = _recheck(net, plan, molds)
+    assert len(with_net) >= 20 and with_net.max() <= 1e-6
+    assert len(between) >= 4 and between.max() <= molds.step_limit_mm
+    moved = np.flatnonzero(np.any(molds.panels.vertices != cut.vertices, axis=1))
+    assert len(moved) >= 4 and np.all(moved >= net.mesh.vertex_count)
+    assert np.all(molds.panels.on_design_boundary[moved])
+    mm = plan.settings.mm_per_unit
+    for r in moved:
+        holders = [k for k, q in enumerate(molds.panels.polygons) if r in q]
+        assert len(holders) == 2
+        for k in holders:
+            height = molds.placement[k, 2, :3] @ molds.panels.vertices[r] + molds.placement[k, 2, 3]
+            assert abs(height) <= 1e-6 * mm
+    # the outlines are the trimmed ones but for the slid points and the boundary's points
+    # they passed: the area clad is the same
+    assert sum(molds.panels.area) == pytest.approx(sum(cut.area), rel=1e-3)
+
+
+def test_flat_boundary_panels_are_found_again_from_their_file(flat_glass):
+    """Read back from NET.boundary.obj (the panels as made), the flat panels slide no
+    further and sit where they did; `fabplan molds` on the files writes the same, rechecked
+    from its files alone: every step within the limit and no mold in all."""
+    from fabplan.layout.trim import read_boundary_panels
+
+    net, _, plan, molds, folder = flat_glass
+    panels = read_boundary_panels(net.mesh, folder / "net.boundary.obj",
+                                  net.properties["boundary_panels"])
+    again = boundary_molds(plan, panels)
+    assert np.array_equal(again.panels.vertices, panels.vertices)
+    assert all(np.array_equal(a, b) for a, b in zip(again.panels.polygons, panels.polygons,
+                                                     strict=True))
+    assert np.allclose(again.placement, molds.placement, atol=1e-9)
+    out = folder / "molds"
+    found = exported_molds(folder / "net.obj", folder / "net.boundary.obj", out / "molds.json",
+                           out / "boundary-panels.csv", out / "boundary-panels.obj")
+    steps = found["steps"]
+    assert max(v.max() for v in steps.values() if len(v)) <= plan.step_limit_mm
+    assert found["molds_in_all"] == 0 and found["cut_gap_mm"] <= 1e-6
+    bp = found["record"]["boundary_panels"]
+    assert bp["flat"] == bp["panels"] == molds.count and bp["own_molds"] == 0

@@ -7,7 +7,10 @@ and to continue the net it must meet its neighbours: the full panels it shares s
 (their molds as the net's plan places them) and the boundary panels beside it. On a
 Weingarten net the panels along a curve of constant curvature share a mold, and the
 surface goes on past the net's last row with the curvatures of the rows before it: the
-boundary panels find their molds among the net's. Every boundary panel is fitted:
+boundary panels find their molds among the net's. Beside flat panels (on the plan's plane
+molds) a boundary panel is cut flat where a plane holds its net sides, and two such
+panels part along the line where their planes cross (`fabplan.fabricate.flat_boundary`):
+these are placed, not fitted. Every other boundary panel is fitted:
 
 1. Its sides (`boundary_sides`): shared with a net face (or a sliver cut as part of one),
    with another boundary panel, or with nothing (the design boundary).
@@ -52,6 +55,8 @@ import scipy.sparse as sp
 
 from ..layout.trim import BoundaryPanels
 from ..report.viewer import PanelInfo
+from .boundary_sides import BoundarySides, boundary_sides
+from .flat_boundary import flat_boundary_panels
 from .mold_fits import fit_mold_placements, mold_gaps, mold_points, polish_mold_placements
 from .molds import MOLD_TYPES, MoldPlan, chord_steps
 
@@ -75,6 +80,11 @@ class BoundaryFitSettings:
         each is kept where the gaps to the targets stay within half the step limit.
     rings : rings of net faces about a panel's corners whose molds are tried.
     sweeps : rounds in which boundary panels beside each other meet halfway.
+    flat : panels beside the net's flat panels cut flat where a plane holds their net
+        sides, the sides two such panels share put on the line where their planes cross
+        (`fabplan.fabricate.flat_boundary`).
+    split_reach : how far that line may pass from the design boundary for such a side to
+        end on it (the net's mean edge lengths).
     """
 
     side_fractions: tuple[float, ...] = tuple(np.linspace(0.0, 1.0, 9))
@@ -83,65 +93,8 @@ class BoundaryFitSettings:
     outline_weights: tuple[float, ...] = (0.3, 1.0, 3.0)
     rings: int = 2
     sweeps: int = 6
-
-
-@dataclass(frozen=True)
-class BoundarySides:
-    """The sides of boundary panels and what lies across each.
-
-    Attributes
-    ----------
-    panel : (s,) int, the boundary panel of every side.
-    start, end : (s,) int, its ends (ids into `BoundaryPanels.vertices`, in outline order).
-    face : (s,) int, the net face across the side, -1 where none.
-    across : (s,) int, the boundary panel across the side, -1 where none (a net face, or
-        the design boundary).
-    """
-
-    panel: np.ndarray
-    start: np.ndarray
-    end: np.ndarray
-    face: np.ndarray
-    across: np.ndarray
-
-
-def boundary_sides(panels: BoundaryPanels, mesh) -> BoundarySides:
-    """The sides of every boundary panel (consecutive outline points) and the net face or
-    boundary panel that runs along each the other way.
-
-    Parameters
-    ----------
-    panels : `BoundaryPanels` of `mesh` (its net vertices numbered as the net's).
-    mesh : the net (`fabplan.net.mesh.QuadMesh`).
-
-    Returns
-    -------
-    BoundarySides
-    """
-    polygons = [np.asarray(q, np.int64) for q in panels.polygons]
-    if not polygons:
-        empty = np.zeros(0, np.int64)
-        return BoundarySides(empty, empty, empty, empty, empty)
-    start = np.concatenate(polygons)
-    end = np.concatenate([np.roll(q, -1) for q in polygons])
-    panel = np.repeat(np.arange(len(polygons)), [len(q) for q in polygons])
-    n = max(len(panels.vertices), mesh.vertex_count)
-    back = end * n + start
-    # net faces: their half-edges the other way
-    key = mesh.face_indices.astype(np.int64) * n + mesh.corner_next_vertices
-    face = _lookup(key, mesh.corner_faces, back)
-    # boundary panels: their sides the other way (not where a net face is across)
-    across = np.where(face < 0, _lookup(start * n + end, panel, back), -1)
-    return BoundarySides(panel, start, end, face, across)
-
-
-def _lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """The value of every `wanted` key among `keys` (each once), -1 where absent."""
-    if len(keys) == 0:
-        return np.full(len(wanted), -1)
-    order = np.argsort(keys, kind="stable")
-    at = np.clip(np.searchsorted(keys[order], wanted), 0, len(keys) - 1)
-    return np.where(keys[order][at] == wanted, np.asarray(values)[order[at]], -1)
+    flat: bool = True
+    split_reach: float = 0.1
 
 
 @dataclass
@@ -174,6 +127,9 @@ class BoundaryMolds:
     net_mold_count : the molds of the net's plan.
     sides : the panels' `BoundarySides`; side_step_mm : (s,) float, the step along every
         side (mm; NaN for a side along the design boundary).
+    panels : the `BoundaryPanels` as made: those given, with the sides two flat panels
+        share put on the line where their planes cross (`fabplan.fabricate.flat_boundary`);
+        None where not known.
     """
 
     neighbour_face: np.ndarray
@@ -191,6 +147,7 @@ class BoundaryMolds:
     net_mold_count: int
     sides: BoundarySides | None = None
     side_step_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    panels: BoundaryPanels | None = None
 
     @property
     def count(self) -> int:
@@ -202,6 +159,12 @@ class BoundaryMolds:
     def own_molds(self) -> int:
         """Molds only boundary panels use (each fitted to one panel)."""
         return len(self.own_shapes)
+
+    @property
+    def flat(self) -> int:
+        """Boundary panels cut flat, from a plane (slivers aside): they need no mold."""
+        plane = np.asarray(self.mold_type) == MOLD_TYPES.index("plane")
+        return int(np.sum(plane & ~self.extension))
 
     @property
     def on_net_molds(self) -> int:
@@ -244,6 +207,7 @@ class BoundaryMolds:
             "panels": self.count,
             "extensions_of_full_panels": int(self.extension.sum()),
             "on_molds_full_panels_use": self.on_net_molds,
+            "flat": self.flat,
             "own_molds": self.own_molds,
             "own_mold_shapes_per_mm": self.own_shapes.tolist(),
             "step_limit_mm": self.step_limit_mm,
@@ -279,7 +243,8 @@ def boundary_molds_text(molds: BoundaryMolds, net_molds: int, source: object = N
     over = molds.steps_over_limit
     steps = (f"steps up to {molds.step_max_mm:.2f} mm (limit {molds.step_limit_mm:g} mm"
              + (f", {len(over)} over it" if len(over) else "") + ")")
-    return (f"{head}: {molds.on_net_molds} cut from molds the net's panels use, "
+    flat = f" ({molds.flat} flat)" if molds.flat else ""
+    return (f"{head}: {molds.on_net_molds} cut from molds the net's panels use{flat}, "
             f"{molds.own_molds} on molds of their own{slivers}, placed to meet their "
             f"neighbours: {steps}; {net_molds + molds.own_molds} molds in all")
 
@@ -359,8 +324,15 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, *, design=None,
     sliver = np.flatnonzero(extension & (face >= 0))
     placement[sliver], shape[sliver], mold[sliver] = (plan.placement[face[sliver]],
                                                       net_shape[face[sliver]], plan.mold[face[sliver]])
+    flat = np.zeros(p, bool)
+    if settings.flat and p:
+        # beside flat panels, flat panels where a plane holds their net sides, parting
+        # along the lines where their planes cross: placed, not fitted
+        made = flat_boundary_panels(plan, panels, step_limit_mm=limit, reach=settings.split_reach)
+        panels, flat = made.panels, made.flat
+        placement[flat], shape[flat], mold[flat] = made.placement[flat], 0.0, made.mold[flat]
     sides = boundary_sides(panels, mesh)
-    fitted = np.flatnonzero(~extension | (face < 0))
+    fitted = np.flatnonzero((~extension | (face < 0)) & ~flat)
     own_shapes = np.zeros((0, 2))
     if fitted.size:
         fit = _Fit(plan, panels, sides, fitted, settings, placement, shape, limit)
@@ -383,7 +355,8 @@ def boundary_molds(plan: MoldPlan, panels: BoundaryPanels, *, design=None,
                          mold_type=np.asarray(types, np.int64), own_shapes=own_shapes,
                          step_mm=step, outline_gap_mm=gap, deviation_mm=deviation,
                          cut_outlines=cut, step_limit_mm=limit, extension=extension,
-                         net_mold_count=plan.mold_count, sides=sides, side_step_mm=side_step)
+                         net_mold_count=plan.mold_count, sides=sides, side_step_mm=side_step,
+                         panels=panels)
 
 
 class _Fit:

@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING
 
@@ -66,7 +66,8 @@ if TYPE_CHECKING:
     from .surface_layout import SurfaceLayout
 
 __all__ = ["BoundaryPanels", "ParameterChart", "Soundness", "trim_to_design",
-           "add_boundary_panels", "read_boundary_panels", "net_coverage", "soundness"]
+           "add_boundary_panels", "read_boundary_panels", "net_coverage", "soundness",
+           "slide_splits"]
 
 
 @dataclass
@@ -621,6 +622,162 @@ def read_boundary_panels(mesh: QuadMesh, path: str | os.PathLike,
         flipped=_ids(record.get("flipped"), p), crossed=_ids(record.get("crossed"), p),
         gaps=list(record.get("gaps") or []),
         soundness={key: record[key] for key in ("off_design", "crossings") if key in record})
+
+
+def slide_splits(panels: BoundaryPanels, ids: np.ndarray, origins: np.ndarray,
+                 directions: np.ndarray, *, reach: float
+                 ) -> tuple[BoundaryPanels, np.ndarray]:
+    """Where two boundary panels part on the design boundary, moved along it onto given
+    lines: the point ``ids[i]``, the end on the design boundary of a side two panels share,
+    slides along the boundary to where the line through ``origins[i]`` along
+    ``directions[i]`` passes closest to it, and is put on that line; the boundary's points
+    it passes go over from one panel to the other.
+
+    The point slides between the two panels' next corners on the boundary (points of the
+    net, or shared with another panel; it stays where it is where the line passes
+    closest at or beyond one of them, leaving a panel without a rim), and only where the
+    line passes within `reach` of the boundary. Points shared by more than two panels
+    stay too. What it does depends only on what ``NET.boundary.obj`` and its record hold
+    (`read_boundary_panels`), so that panels read back slide as they did when cut. The
+    panels changed are cut into triangles again and their areas measured again.
+
+    Parameters
+    ----------
+    panels : `BoundaryPanels`.
+    ids : (k,) int, points of ``panels.vertices`` on the design boundary.
+    origins, directions : (k, 3) float, the lines (model units; any length but zero).
+    reach : how far from the boundary a line may pass (model units); points within a
+        hundredth of it of a moved point are dropped (no side of no length).
+
+    Returns
+    -------
+    panels : a copy of `panels` with the points moved.
+    moved : (k,) bool, the points of `ids` that moved.
+
+    Examples
+    --------
+    Two panels on the boundary ``y = 0`` between the net's vertices 0, 1 and 2, parting at
+    the point 3 (``x = 1``), moved onto ``x = 1.4`` and ``x = 1.7``, past the point 4:
+
+    >>> import numpy as np
+    >>> V = np.array([[0.0, 0, 0], [2, 0, 0], [1, 1, 0], [1, 0, 0], [1.5, 0, 0]])
+    >>> polygons = [np.array([0, 3, 2]), np.array([3, 4, 1, 2])]
+    >>> on = np.array([True, True, False, True, True])
+    >>> panels = BoundaryPanels(V, polygons, 3, on, ~on, np.zeros(2, int), np.ones(2), 1.0,
+    ...                         1.0, 1.0)
+    >>> up = np.array([[0.0, 1, 0]])
+    >>> moved, ok = slide_splits(panels, np.array([3]), np.array([[1.4, 1, 0]]), up, reach=0.1)
+    >>> ok.tolist(), moved.vertices[3].tolist(), [q.tolist() for q in moved.polygons]
+    ([True], [1.4, 0.0, 0.0], [[0, 3, 2], [3, 4, 1, 2]])
+    >>> moved, ok = slide_splits(panels, np.array([3]), np.array([[1.7, 1, 0]]), up, reach=0.1)
+    >>> moved.vertices[3].tolist(), [q.tolist() for q in moved.polygons]
+    ([1.7, 0.0, 0.0], [[0, 4, 3, 2], [3, 1, 2]])
+    """
+    ids = np.asarray(ids, np.int64)
+    moved = np.zeros(len(ids), bool)
+    polygons = [np.asarray(q, np.int64).copy() for q in panels.polygons]
+    if not len(ids) or not polygons:
+        return panels, moved
+    V = np.array(panels.vertices, dtype=np.float64)
+    on = panels.on_design_boundary
+    d = np.asarray(directions, float)
+    d = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+    # the panels holding each point (a point moves only its two panels' outlines; which
+    # panels hold it never changes, nor which points are corners)
+    flat = np.concatenate(polygons)
+    owner = np.repeat(np.arange(len(polygons)), [len(q) for q in polygons])
+    corner = np.bincount(flat, minlength=len(V)) >= 2
+    corner[:panels.net_vertex_count] = True
+    changed: set = set()
+    for i, r in enumerate(ids):
+        holders = np.unique(owner[flat == r])
+        if len(holders) != 2 or not on[r]:
+            continue
+        ends = _rim_chains(polygons, holders, r, on, corner)
+        if ends is None:
+            continue
+        (fwd, at_f, chain_f), (bwd, at_b, chain_b) = ends
+        C = np.r_[chain_b[::-1], chain_f]               # corner .. corner, through r
+        if len(C) < 2:
+            continue
+        S0, E = V[C[:-1]], V[C[1:]] - V[C[:-1]]
+        # the line's closest approach to every segment of the boundary between the corners
+        w = origins[i] - S0
+        b, c = E @ d[i], np.sum(E * E, axis=1)
+        denom = np.maximum(c - b * b, 1e-300)
+        u = np.clip((np.sum(E * w, axis=1) - b * (w @ d[i])) / denom, 0.0, 1.0)
+        s = u * b - w @ d[i]
+        gap = np.linalg.norm(origins[i] + s[:, None] * d[i] - S0 - u[:, None] * E, axis=1)
+        j = int(np.argmin(gap))
+        foot = S0[j] + u[j] * E[j]
+        eps = 1e-2 * reach
+        if (gap[j] > reach or np.linalg.norm(foot - V[C[0]]) <= eps
+                or np.linalg.norm(foot - V[C[-1]]) <= eps):
+            continue
+        # points within a thousandth of a panel of the new place go (no side of no length)
+        length = np.sqrt(c[j])
+        keep_b = C[:j + 1] if (u[j] * length > eps or j == 0) else C[:j]
+        keep_f = C[j + 1:] if ((1 - u[j]) * length > eps or j + 1 == len(C) - 1) else C[j + 2:]
+        for k, ring in ((bwd, np.r_[np.roll(polygons[bwd], -at_b)[:len(polygons[bwd]) - len(chain_b)],
+                                    keep_b]),
+                        (fwd, np.r_[r, keep_f, np.roll(polygons[fwd], -at_f)[1 + len(chain_f):]])):
+            # each outline starts where it did, where that point is still in it
+            start = np.flatnonzero(ring == polygons[k][0])
+            polygons[k] = np.roll(ring, -int(start[0])) if len(start) else ring
+        V[r] = origins[i] + s[j] * d[i]
+        moved[i] = True
+        changed.update((int(fwd), int(bwd)))
+    if not changed:
+        return panels, moved
+    which = np.array(sorted(changed), np.int64)
+    triangles, triangle_panel = panels.triangles, panels.triangle_panel
+    if triangles is not None and triangle_panel is not None:
+        triangles, triangle_panel = _retriangulated(V, polygons, np.asarray(triangles, np.int64),
+                                                    np.asarray(triangle_panel, np.int64), which)
+    out = replace(panels, vertices=V, polygons=polygons, triangles=triangles,
+                  triangle_panel=triangle_panel)
+    T, panel = out.panel_triangles()
+    P = V[T]
+    area = np.bincount(panel, 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]),
+                                                   axis=1), minlength=len(polygons))
+    out.area = np.where(np.isin(np.arange(len(polygons)), which), area, panels.area)
+    return out, moved
+
+
+def _rim_chains(polygons: list, holders: np.ndarray, r: int, on: np.ndarray,
+                corner: np.ndarray) -> tuple | None:
+    """The two panels `holders` parting at the boundary point `r`: for the one whose
+    shared side runs towards `r` and then the other, ``(panel, index of r, chain)``, the
+    chain being its points along the boundary from `r` (excluded) to its next corner
+    (included), or to its last point before the outline leaves the boundary, forwards and
+    backwards; None where the two do not share a side at `r`."""
+    a, b = (int(k) for k in holders)
+    qa, qb = polygons[a], polygons[b]
+    ia, ib = int(np.flatnonzero(qa == r)[0]), int(np.flatnonzero(qb == r)[0])
+    if qa[ia - 1] == qb[(ib + 1) % len(qb)]:
+        fwd, at_f, bwd, at_b = a, ia, b, ib
+    elif qb[ib - 1] == qa[(ia + 1) % len(qa)]:
+        fwd, at_f, bwd, at_b = b, ib, a, ia
+    else:
+        return None
+    chains = []
+    for panel, at, step in ((fwd, at_f, 1), (bwd, at_b, -1)):
+        q = polygons[panel]
+        chain = []
+        for k in range(1, len(q) - 1):
+            p = q[(at + step * k) % len(q)]
+            if not (on[p] or corner[p]):
+                # the outline leaves the boundary: its last point there ends the chain
+                break
+            chain.append(p)
+            if corner[p]:
+                break
+        else:
+            return None
+        if not chain:
+            return None
+        chains.append((panel, at, np.array(chain, np.int64)))
+    return tuple(chains)
 
 
 def _ids(values, count: int) -> np.ndarray:

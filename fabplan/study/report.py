@@ -609,9 +609,14 @@ def _boundary_text(boundary: dict | None) -> str:
     if not boundary or not boundary["count"]:
         return ""
     own = boundary["own_molds"]
-    text = (f"; and {counted(boundary['count'], 'boundary panel')} trimmed to the design "
-            "boundary, each cut from a mold of the net's panels and placed to meet its "
-            "neighbours")
+    flat = boundary.get("flat") or 0
+    if flat == boundary["count"]:
+        how = "all flat (no molds), placed to meet their neighbours"
+    else:
+        how = "each cut from a mold of the net's panels and placed to meet its neighbours"
+        if flat:
+            how += f" ({flat} of them flat)"
+    text = f"; and {counted(boundary['count'], 'boundary panel')} trimmed to the design boundary, {how}"
     if boundary.get("step_max_mm") is not None:
         text += f" (steps up to {boundary['step_max_mm']:.2f} mm"
         if boundary.get("deviation_max_mm") is not None:

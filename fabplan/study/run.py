@@ -631,6 +631,11 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
         # on the net's molds, placed to meet their neighbours; their distance from the
         # design measured as cut
         bounds = boundary_molds(molds, net.boundary_panels, design=design)
+        if bounds.panels is not None and bounds.panels is not net.boundary_panels:
+            # flat panels part along the lines where their planes cross: written so, the
+            # boundary file gives `fabplan molds` the same panels
+            net.boundary_panels = bounds.panels
+            net.properties["boundary_panels"] = bounds.panels.record()
     seconds["molds"] = time.perf_counter() - clock
     say(f"    {molds_text(mold_metrics(molds, bounds))} for {counted(molds.panel_count, 'panel')}"
         + (f" and {counted(bounds.count, 'boundary panel')}" if bounds is not None else "")
@@ -751,6 +756,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "boundary_panels": None if boundary is None else {
             "count": boundary.count,
             "on_net_molds": boundary.on_net_molds,
+            "flat": boundary.flat,
             "own_molds": boundary.own_molds,
             # as cut from their molds: their largest distance from the design, and step
             # against a neighbour
