@@ -52,8 +52,9 @@ def _mold_rows(path: Path) -> list[dict]:
 
 def _same_molds(study_folder: Path, made: Path) -> None:
     """The molds the command gave are the study's: count, every panel's mold, type and fit,
-    and its gap and placement within 1e-3 mm (a candidate that is the same net as an
-    earlier one takes that one's plan: its vertices agree to 1e-6 of the panel size)."""
+    and its gap and placement within 0.01 mm (a candidate that is the same net as an
+    earlier one takes that one's plan: its vertices agree to 1e-5 of the panel size,
+    `fabplan.study.run.SAME_NET_TOLERANCE`, 0.01 mm on a 1 m panel)."""
     ours = json.loads((made / "molds.json").read_text())
     theirs = json.loads((study_folder / "molds.json").read_text())
     for key in ("mold_count", "panel_count", "panel_surface", "tolerance_mm", "units"):
@@ -66,7 +67,7 @@ def _same_molds(study_folder: Path, made: Path) -> None:
             if key in ("face", "mold", "type", "fits"):
                 assert a[key] == b[key], (key, a, b)
             else:
-                assert float(a[key]) == pytest.approx(float(b[key]), rel=1e-6, abs=1e-3), key
+                assert float(a[key]) == pytest.approx(float(b[key]), rel=1e-6, abs=1e-2), key
 
 
 def test_a_gliding_candidate_is_planned_on_the_design_by_its_reproduce_commands(
