@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["check", "binding_check", "violation", "relaxation_text", "nice_value", "LIMIT_NAMES",
-           "limit_words"]
+           "limit_words", "limit_value"]
 
 #: every limit of a study in words, with its unit
 LIMIT_NAMES = {
@@ -30,12 +30,30 @@ LIMIT_NAMES = {
 
 
 def limit_words(limit: str, value: float) -> str:
-    """A limit's name and a value of it, in words: ``largest deviation from the design
-    of 260 mm``."""
-    name, unit = LIMIT_NAMES.get(limit, (limit, ""))
+    """A limit set to `value`, in words.
+
+    Examples
+    --------
+    >>> limit_words("max_deviation_mm", 260.0)
+    'a largest deviation from the design of 260 mm'
+    >>> limit_words("max_molds", 228), limit_words("congruent_strips", 8.4)
+    ('at most 228 molds', 'a congruence tolerance of the strips of 8.4 mm')
+    """
+    if limit in ("max_molds", "max_sheets"):
+        return f"at most {value:g} {LIMIT_NAMES[limit][1]}"
+    name = "congruence tolerance of the strips" if limit == "congruent_strips" else \
+        LIMIT_NAMES.get(limit, (limit,))[0]
+    return f"a {name} of {limit_value(limit, value)}"
+
+
+def limit_value(limit: str, value: float) -> str:
+    """A value of a limit with its unit: ``260 mm``, ``95 %``, ``100`` (a count)."""
+    unit = "mm" if limit == "congruent_strips" else LIMIT_NAMES.get(limit, ("", ""))[1]
     if unit == "%":
-        return f"{name} of {100 * value:g} %"
-    return f"{name} of {value:g}" + (f" {unit}" if unit and unit not in ("ratio",) else "")
+        return f"{100 * value:g} %"
+    if unit in ("molds", "sheets", "ratio", ""):
+        return f"{value:g}"
+    return f"{value:g} {unit}"
 
 
 def check(limit: str, bound: float, measured: float | None, ok: bool, text: str) -> dict:
@@ -96,5 +114,5 @@ def relaxation_text(checks: list[dict]) -> str:
     failed = [c for c in checks if not c["ok"]]
     if not failed or any(c.get("relax_to") is None for c in failed):
         return ""
-    return " and ".join(f"a {limit_words(c['limit'], c['relax_to'])} (now "
-                        f"{limit_words(c['limit'], c['bound']).rsplit(' of ', 1)[1]})" for c in failed)
+    return " and ".join(f"{limit_words(c['limit'], c['relax_to'])} "
+                        f"(now {limit_value(c['limit'], c['bound'])})" for c in failed)
