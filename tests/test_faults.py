@@ -11,6 +11,7 @@ from __future__ import annotations
 import builtins
 import errno
 import io
+import json
 import os
 import signal
 import subprocess
@@ -197,13 +198,23 @@ def test_strips_killed_while_writing_leave_the_earlier_ones(net, tmp_path, sig):
     _, err = process.communicate(timeout=60)
     assert staged, "the run never staged its files"
     left = {k: v for k, v in listing(out).items() if not k.startswith(".")}
-    assert left == before                     # earlier output intact
+    # the earlier output intact; or, where the signal came after the new files were all
+    # moved in (a loaded machine), the new output whole: never a mix of the two
+    finished = left != before
+    if finished:
+        listed = json.loads(left["strips.json"])["files"]
+        assert sorted(left) == sorted(listed)
+        assert all(left[name] != before.get(name) for name in listed if name.endswith(".dxf"))
+    else:
+        assert left == before
     if sig == signal.SIGINT:
-        assert process.returncode == 130 and err == b"fabplan: interrupted\n"
+        assert process.returncode in ((0, 130) if finished else (130,))
+        assert process.returncode == 0 or err == b"fabplan: interrupted\n"
     elif sig != signal.SIGKILL:
-        assert process.returncode == 128 + sig
-        assert err == f"fabplan: stopped by {signal.Signals(sig).name}\n".encode()
+        assert process.returncode in ((0, 128 + sig) if finished else (128 + sig,))
+        assert process.returncode == 0 or \
+            err == f"fabplan: stopped by {signal.Signals(sig).name}\n".encode()
     if sig != signal.SIGKILL:
-        assert listing(out) == before         # and nothing left behind
+        assert listing(out) == left           # and nothing left behind
     subprocess.run([*argv, "--height", "50"], check=True, capture_output=True)
     assert not [p for p in out.rglob(".*")], "the stale staging folder was not removed"
