@@ -3,12 +3,15 @@
 What is checked (the README's template table quotes the measured numbers, these tests the
 claims that must hold whatever the exact numbers):
 
-- stadium: a linear Weingarten candidate's panels meet their neighbours' molds within twice
-  the tolerance (rechecked from the export) on at most 30 molds, a fifth of the baseline's;
-  its boundary panels are cut from the same molds and meet their neighbours within the
-  limit too (rechecked), its molds in all within twice the square root of its panels;
-  its zigzag tips follow the net's surface and leave the deviation limit at the top rim,
-  so no candidate meets every limit, and the study names the closest and its failures;
+- every template: the comparison table of report.html and of report.pdf shows, for every
+  candidate, the rank, verdict, molds, panels, coverage, deviation and cost study.json
+  holds;
+- stadium: the linear Weingarten candidates keep the deviation limit in their solve or
+  end off the design naming the smallest limit they met; the one with fewest molds has
+  its panels and boundary panels meeting their neighbours (rechecked from the export) on
+  at most a fifth of the baseline's molds and at most twice the square root of its panels;
+  no candidate meets every limit, and the study names the nearest, its failures and the
+  relaxation that makes it feasible;
 - pavilion: a constant-radius candidate is feasible with congruent strips (one arc
   radius) that read back from their DXF files, where the baseline's are not congruent;
   the recommendation leads with the baseline's congruence failure and the strips, not
@@ -61,7 +64,48 @@ def _run(name: str, folder) -> dict:
             assert c["metrics"]["boundary_panels"]["flipped"] == 0
     report = (folder / "report.html").read_text(encoding="utf-8")
     assert "boundary panel" in report and "design covered" in report
+    _pages_agree_with_the_record(folder, record)
     return record
+
+
+def _cells(row: str) -> list[str]:
+    return [html.unescape(re.sub(r"<.*?>", "", c)).strip()
+            for c in re.findall(r"<t[hd][^>]*>.*?</t[hd]>", row, flags=re.S)]
+
+
+def _pages_agree_with_the_record(folder, record: dict) -> None:
+    """Every figure of the comparison table, in report.html and in report.pdf, is the one
+    study.json holds for its candidate (read from the written pages, as a person reads
+    them)."""
+    from pypdf import PdfReader
+
+    page = re.sub(r"<(script|style).*?</\1>", "", (folder / "report.html").read_text(
+        encoding="utf-8"), flags=re.S)
+    table = next(t for t in re.findall(r"<table.*?</table>", page, flags=re.S)
+                 if "molds [count]" in t)
+    rows = [_cells(r) for r in re.findall(r"<tr.*?</tr>", table, flags=re.S)]
+    head, body = rows[0], rows[1:]
+    measured = [c for c in record["candidates"] if c["rank"] is not None]
+    assert len(body) == len(measured)
+    pdf = " ".join(p.extract_text() for p in PdfReader(folder / "report.pdf").pages[:3])
+    pdf = re.sub(r"\s+", " ", pdf)
+    for row in body:
+        cell = dict(zip(head, row, strict=True))
+        c = next(c for c in measured if c["name"] == cell["candidate"])
+        m = c["metrics"]
+        shown = {"rank": str(c["rank"]), "feasible": "yes" if c["feasible"] else "no",
+                 "molds [count]": str(m["molds"]["count"]), "panels [count]": str(m["panels"]),
+                 "design covered [%]": f"{100 * m['coverage']:.1f}",
+                 "max deviation [mm]": f"{m['largest_deviation_mm']:.1f}",
+                 "cost [cost units]": f"{c['cost']:.0f}"}
+        for key, value in shown.items():
+            assert cell[key] == value, (c["name"], key, cell[key], value)
+        if "of them boundary panels [count]" in cell:
+            assert cell["of them boundary panels [count]"] == str(m["boundary_panels"]["count"])
+        # the PDF's comparison row: rank, name, verdict, molds, panels, deviation, cost
+        assert (f"{c['rank']} {c['name']} {shown['feasible']} {shown['molds [count]']} "
+                f"{shown['panels [count]']} {shown['max deviation [mm]']} "
+                f"{shown['cost [cost units]']}") in pdf, c["name"]
 
 
 def _by_net(record: dict, net: str) -> list:

@@ -464,11 +464,11 @@ def _strip_radius_text(result: StudyResult, r) -> str:
     return radius_text(r, "mm", beyond, "infinite (straight)")
 
 
-#: Human names of the limits of a study (`fabplan.study.spec.Limits`), with their units.
-
+#: How the comparison table is ordered (`fabplan.study.run.rank_candidates`).
 _RANK_RULE = ("Rank: the candidates that meet every limit (feasible) come first, cheapest "
-              "first; then those that break a limit (red rows), cheapest first. So a cheaper "
-              "candidate that breaks a limit ranks below a dearer one that meets them all.")
+              "first; then those that break a limit (red rows), those breaking fewer limits "
+              "first, cheapest first among equals. So a cheaper candidate that breaks a limit "
+              "ranks below a dearer one that meets them all.")
 
 
 def limit_text(key: str, value) -> tuple[str, str]:
