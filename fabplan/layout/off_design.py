@@ -272,8 +272,15 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
     sag = np.zeros(count)
     sides = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     piece = np.tile(owner, 3)
-    key = np.column_stack([np.sort(sides, axis=1), piece])
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    lo_hi = np.sort(sides, axis=1)
+    span = max(len(points), 1)
+    if span * span * max(count, 1) < 2**62:
+        # one integer per (side, piece): a sort of numbers instead of rows
+        key = (lo_hi[:, 0] * span + lo_hi[:, 1]) * max(count, 1) + piece
+        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    else:
+        _, inverse, counts = np.unique(np.column_stack([lo_hi, piece]), axis=0,
+                                       return_inverse=True, return_counts=True)
     rim = counts[inverse.ravel()] == 1
     sides, piece = sides[rim], piece[rim]
     if len(sides) == 0:
