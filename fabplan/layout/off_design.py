@@ -28,7 +28,7 @@ from ..design.mesh_surface import DesignSurface
 
 __all__ = ["OffDesign", "area_off_design", "faces_off_design", "degenerate_faces",
            "boundary_turning", "may_leave_design",
-           "MIN_OFF_PANELS", "SAMPLE_LEVEL", "OFF_TOLERANCE",
+           "BOUNDARY_FOOT", "MIN_OFF_PANELS", "SAMPLE_LEVEL", "OFF_TOLERANCE",
            "STRAIGHT_DEG"]
 
 #: each cladding triangle is cut into this many sub-triangles per side, one sample each
