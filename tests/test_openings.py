@@ -190,6 +190,28 @@ def test_a_chord_of_a_round_opening_is_no_panel_over_it():
     assert off.area[1] > 2.5
 
 
+def test_measuring_only_what_may_leave_the_design_changes_no_number(door_net, monkeypatch):
+    """The net faces and boundary panels of a door facade, lifted off it and pushed past
+    its edges in places, measured as `faces_off_design` does (only the triangles and sides
+    that `may_leave_design` keeps) and with every sample measured: the same areas and
+    points to the bit, and some of them off the design."""
+    import fabplan.layout.off_design as off_design
+
+    design, _, h, net = door_net
+    pieces = [*net.mesh.faces, *(np.asarray(q) + net.mesh.vertex_count
+                                 for q in net.boundary_panels.polygons)]
+    V = np.vstack([net.mesh.vertices, net.boundary_panels.vertices])
+    rng = np.random.default_rng(7)
+    V = V + rng.normal(scale=0.1 * h, size=V.shape) * (rng.random((len(V), 1)) < 0.2)
+    kept = off_design.faces_off_design(design, V, pieces, h)
+    monkeypatch.setattr(off_design, "may_leave_design",
+                        lambda d, centre, *args: np.ones(len(centre), bool))
+    every = off_design.faces_off_design(design, V, pieces, h)
+    assert (every.area > 0).sum() >= 3
+    assert np.array_equal(kept.area, every.area)
+    assert np.array_equal(kept.point, every.point, equal_nan=True)
+
+
 def test_a_boundary_file_folded_over_the_net_names_the_panel_in_the_file(tmp_path, capsys):
     """A boundary panel running along a net face's side the same way (written by hand or
     by an older cut) is named by its face in NET.boundary.obj, not by its number in a

@@ -189,28 +189,41 @@ class ParametricSurface:
         # the surface's points at uv, kept as uv moves (not evaluated again)
         at = self.points(uv[:, 0], uv[:, 1])
         best = _row_dot(at - P, at - P)
+        # a point that no trial of an iteration brings closer stays where it is: the next
+        # iteration would try the same steps from the same place. Only the others (`live`)
+        # are computed, each as in a step of all of them
+        live = np.arange(len(P))
         for _ in range(iterations):
-            u, v = uv[:, 0], uv[:, 1]
+            if live.size == 0:
+                break
+            settled = live.size < len(P)
+            Pl, uvl, atl, bestl = P[live], uv[live], at[live], best[live]
+            u, v = uvl[:, 0], uvl[:, 1]
             fu = (self.points(u + du, v) - self.points(u - du, v)) / (2 * du)
             fv = (self.points(u, v + dv) - self.points(u, v - dv)) / (2 * dv)
-            r = at - P
+            r = atl - Pl
             a, b, c = _row_dot(fu, fu), _row_dot(fu, fv), _row_dot(fv, fv)
             gu, gv = _row_dot(fu, r), _row_dot(fv, r)
             det = np.maximum(a * c - b * b, 1e-300)
             step = np.stack([(c * gu - b * gv) / det, (a * gv - b * gu) / det], axis=1)
+            moves = np.zeros(live.size, bool)
             # a step that does not bring the point closer is halved, up to three times
             for _ in range(4):
-                trial = inside(uv - step)
+                trial = inside(uvl - step)
                 moved = self.points(trial[:, 0], trial[:, 1])
-                distance = _row_dot(moved - P, moved - P)
-                better = distance < best
+                distance = _row_dot(moved - Pl, moved - Pl)
+                better = distance < bestl
                 column = better[:, None]
-                uv = np.where(column, trial, uv)
-                best = np.where(better, distance, best)
-                at = np.where(column, moved, at)
-                if better.all():
+                uvl = np.where(column, trial, uvl)
+                bestl = np.where(better, distance, bestl)
+                atl = np.where(column, moved, atl)
+                moves |= better
+                # (a settled point is never brought closer: with one, they never all are)
+                if better.all() and not settled:
                     break
                 step = np.where(column, step, 0.5 * step)
+            uv[live], at[live], best[live] = uvl, atl, bestl
+            live = live[moves]
         return uv
 
     def triangulate(self, resolution: int | tuple[int, int] = 100) -> "DesignSurface":

@@ -109,33 +109,46 @@ def fit_mold_placements(points: np.ndarray, weights: np.ndarray, placements: np.
     unknowns = 8 if free.any() else 6
     damping = np.full(p, 1e-4)
 
-    def cost(M: np.ndarray, K: np.ndarray) -> np.ndarray:
-        return np.sum(w * mold_gaps(points, M, K) ** 2, axis=1)
+    def placed(M: np.ndarray) -> np.ndarray:
+        # the points in mold coordinates, as `mold_gaps` places them
+        return points @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]
 
-    def largest(M: np.ndarray, K: np.ndarray) -> np.ndarray:
-        return np.max(np.where(must, np.abs(mold_gaps(points, M, K)), 0.0), axis=1)
+    def gaps(q: np.ndarray, K: np.ndarray) -> np.ndarray:
+        # `mold_gaps` of placed points
+        return q[..., 2] - 0.5 * (K[:, None, 0] * q[..., 0] ** 2 + K[:, None, 1] * q[..., 1] ** 2)
 
+    # the placed points and their gaps follow the placements as steps are taken
+    q = placed(M)
+    r = gaps(q, K)
     # the reweighting may overshoot: the round with the smallest largest gap is kept
-    best_M, best_K, best_gap = M.copy(), K.copy(), largest(M, K)
+    best_M, best_K = M.copy(), K.copy()
+    best_gap = np.max(np.where(must, np.abs(r), 0.0), axis=1)
     for _ in range(max(rounds, 1)):
-        current = cost(M, K)
+        current = np.sum(w * r ** 2, axis=1)
         for _ in range(iterations):
-            q = points @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]
-            r = q[..., 2] - 0.5 * (K[:, None, 0] * q[..., 0] ** 2 + K[:, None, 1] * q[..., 1] ** 2)
-            g = np.stack([-K[:, None, 0] * q[..., 0], -K[:, None, 1] * q[..., 1],
-                          np.ones_like(r)], axis=-1)
+            x, y, z = q[..., 0], q[..., 1], q[..., 2]
             # a rotation w and shift t in mold coordinates move q by w x q + t: the gap by
-            # w . (q x g) + t . g; the curvatures enter with -x^2 / 2, -y^2 / 2
-            J = np.concatenate([np.cross(q, g), g], axis=-1)
+            # w . (q x g) + t . g with g = (-k1 x, -k2 y, 1); the curvatures enter with
+            # -x^2 / 2, -y^2 / 2. The columns are written in place: the terms of q x g
+            # are those of np.cross (its products by g's 1 left out: the same numbers)
+            J = np.empty(q.shape[:2] + (unknowns,))
+            gx, gy = J[..., 3], J[..., 4]
+            np.multiply(-K[:, None, 0], x, out=gx)
+            np.multiply(-K[:, None, 1], y, out=gy)
+            J[..., 5] = 1.0
+            np.subtract(y, z * gy, out=J[..., 0])
+            np.subtract(z * gx, x, out=J[..., 1])
+            np.subtract(x * gy, y * gx, out=J[..., 2])
             if unknowns == 8:
-                J = np.concatenate([J, -0.5 * q[..., :2] ** 2 * free[:, None, None]], axis=-1)
+                J[..., 6:] = -0.5 * q[..., :2] ** 2 * free[:, None, None]
             # columns scaled to unit size: the curvature columns are a million times the
             # shift's, the rotation's a thousand
             Jw = J * w[..., None]
             scale = np.sqrt(np.sum(Jw * J, axis=1)) + 1e-300
             Js = J / scale[:, None, :]
-            A = (Jw / scale[:, None, :]).transpose(0, 2, 1) @ Js
-            b = -np.sum(Jw / scale[:, None, :] * r[..., None], axis=1)
+            Jw /= scale[:, None, :]
+            A = Jw.transpose(0, 2, 1) @ Js
+            b = -np.sum(Jw * r[..., None], axis=1)
             A[:, np.arange(unknowns), np.arange(unknowns)] += damping[:, None]
             step = np.linalg.solve(A, b[..., None])[..., 0] / scale
             D = np.zeros((p, 4, 4))
@@ -144,23 +157,27 @@ def fit_mold_placements(points: np.ndarray, weights: np.ndarray, placements: np.
             D[:, 3, 3] = 1.0
             trial_M = D @ M
             trial_K = K + step[:, 6:8] * free[:, None] if unknowns == 8 else K
-            trial = cost(trial_M, trial_K)
+            trial_q = placed(trial_M)
+            trial_r = gaps(trial_q, trial_K)
+            trial = np.sum(w * trial_r ** 2, axis=1)
             # Levenberg-Marquardt: a step that lowers the cost is taken and the damping
             # eased; one that does not is refused and the damping raised
             better = trial < current
             M = np.where(better[:, None, None], trial_M, M)
             K = np.where(better[:, None], trial_K, K)
+            q = np.where(better[:, None, None], trial_q, q)
+            r = np.where(better[:, None], trial_r, r)
             current = np.where(better, trial, current)
             damping = np.clip(np.where(better, damping / 3.0, damping * 10.0), 1e-12, 1e12)
             if not np.any(better & (np.abs(step[:, 3:6]).max(axis=1) > 1e-9)):
                 break
-        r = np.abs(mold_gaps(points, M, K))
-        top = np.max(np.where(must, r, 0.0), axis=1, keepdims=True)
+        size = np.abs(r)
+        top = np.max(np.where(must, size, 0.0), axis=1, keepdims=True)
         better = top[:, 0] < best_gap
         best_M[better], best_K[better], best_gap[better] = M[better], K[better], top[better, 0]
         # Lawson: the weights of the points that must be met grow with their gaps (the
         # lighter points keep theirs)
-        lawson = np.where(must, lawson * (r + 1e-3 * top + 1e-12), 0.0)
+        lawson = np.where(must, lawson * (size + 1e-3 * top + 1e-12), 0.0)
         lawson = lawson * np.sum(must, axis=1, keepdims=True) / np.maximum(
             np.sum(lawson, axis=1, keepdims=True), 1e-300)
         w = base * np.where(must, lawson, 1.0)

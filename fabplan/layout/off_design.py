@@ -27,8 +27,8 @@ import numpy as np
 from ..design.mesh_surface import DesignSurface
 
 __all__ = ["OffDesign", "area_off_design", "faces_off_design", "degenerate_faces",
-           "boundary_turning",
-           "MIN_OFF_PANELS", "SAMPLE_LEVEL", "OFF_TOLERANCE",
+           "boundary_turning", "may_leave_design",
+           "BOUNDARY_FOOT", "MIN_OFF_PANELS", "SAMPLE_LEVEL", "OFF_TOLERANCE",
            "STRAIGHT_DEG"]
 
 #: each cladding triangle is cut into this many sub-triangles per side, one sample each
@@ -38,6 +38,9 @@ SAMPLE_LEVEL = 4
 #: below it, the chord between two outline points on a curved boundary (a ten-thousandth
 #: of a panel on the designs of the corpus)
 OFF_TOLERANCE = 1e-3
+
+#: a closest design point this close to the design boundary (panel sizes) is on it
+BOUNDARY_FOOT = 1e-6
 
 #: a piece with less of its area off the design than this share of a full panel is on
 #: it (the sampling's noise along a boundary the piece follows)
@@ -141,8 +144,6 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
     ...                 np.array([0]), 1, 1.0).area.tolist()
     [0.0]
     """
-    from ..solve.constraints.closeness import closest_points_on_polylines
-
     points = np.asarray(points, np.float64)
     triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
     owner = np.asarray(owner, np.int64)
@@ -157,16 +158,16 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     weight = np.repeat(tri_area / len(pattern), len(pattern))
     piece = np.repeat(owner, len(pattern))
-    foot, _, tri = design.reference.closest_points(samples)
-    offset = samples - foot
-    normal = design.face_normals[tri]
-    beside = offset - np.sum(offset * normal, axis=1, keepdims=True) * normal
-    sideways = np.linalg.norm(beside, axis=1)
-    off = sideways > OFF_TOLERANCE * panel_size
-    if off.any():
-        # beside a foot inside the design is a fold of the design mesh, not its edge
-        edge_foot, _ = closest_points_on_polylines(foot[off], curves)
-        off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= 1e-6 * panel_size
+    centre = T.mean(axis=1)
+    near = np.repeat(may_leave_design(design, centre,
+                                      np.linalg.norm(T - centre[:, None], axis=2).max(axis=1),
+                                      curves, panel_size), len(pattern))
+    sideways = np.zeros(len(samples))
+    off = np.zeros(len(samples), bool)
+    # only the samples of triangles that may reach the design boundary are measured: no
+    # other sample can be off the design
+    if near.any():
+        sideways[near], off[near] = _off_boundary(design, samples[near], curves, panel_size)
     area = np.bincount(piece[off], weight[off], minlength=count).astype(np.float64)
     # a sliver along a side that leaves the design by less than the interior samples'
     # spacing: its area is the side's distance off the design summed along it. A side
@@ -186,6 +187,66 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
     where[piece[first]] = samples[first]
     where[take] = side_where[take]
     return OffDesign(area, where)
+
+
+def _off_boundary(design: DesignSurface, samples: np.ndarray, curves: list,
+                  panel_size: float) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) float, how far each sample (m, 3) stands beside its closest design point,
+    along the design; (m,) bool, which samples are off the design: beside that point by
+    more than `OFF_TOLERANCE` of a panel, with the point on the design boundary."""
+    from ..solve.constraints.closeness import closest_points_on_polylines
+
+    foot, _, tri = design.reference.closest_points(samples)
+    offset = samples - foot
+    normal = design.face_normals[tri]
+    sideways = np.linalg.norm(offset - np.sum(offset * normal, axis=1, keepdims=True) * normal,
+                              axis=1)
+    off = sideways > OFF_TOLERANCE * panel_size
+    if off.any():
+        # beside a foot inside the design is a fold of the design mesh, not its edge
+        edge_foot, _ = closest_points_on_polylines(foot[off], curves)
+        off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= BOUNDARY_FOOT * panel_size
+    return sideways, off
+
+
+def may_leave_design(design: DesignSurface, centre: np.ndarray, radius: np.ndarray,
+                     curves: list, panel_size: float) -> np.ndarray:
+    """(m,) bool, which balls (centres (m, 3), radii (m,)) may hold a point whose closest
+    design point lies on the design boundary (`curves`, closed polylines, within
+    `BOUNDARY_FOOT` of a panel): False only where none can.
+
+    A point within ``r`` of the centre ``c`` is at most ``d(c) + r`` from the design, so
+    its closest design point is on the boundary only if the boundary is at most
+    ``d(c) + 2 r`` (and the tolerance) from ``c``; the boundary is no nearer to ``c``
+    than its nearest vertex less half its longest side. Most of a cladding is far from
+    the design boundary and on the design: its samples need no closest points.
+
+    Examples
+    --------
+    >>> square = DesignSurface([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+    ...                        [[0, 1, 2], [0, 2, 3]])
+    >>> centres = np.array([[0.5, 0.5, 0.0], [0.95, 0.5, 0.0], [0.5, 0.5, 2.0]])
+    >>> may_leave_design(square, centres, np.full(3, 0.01), square.boundary_curves(),
+    ...                  0.01).tolist()
+    [False, True, True]
+    >>> may_leave_design(square, np.zeros((0, 3)), np.zeros(0), square.boundary_curves(),
+    ...                  1.0).tolist()
+    []
+    """
+    from scipy.spatial import cKDTree
+
+    centre = np.asarray(centre, np.float64).reshape(-1, 3)
+    if len(centre) == 0:
+        return np.zeros(0, bool)
+    corners = np.concatenate(curves)
+    longest = max(float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).max()) for c in curves)
+    to_corner, _ = cKDTree(corners).query(centre)
+    to_edge = to_corner - 0.5 * longest
+    foot, _, _ = design.reference.closest_points(centre)
+    to_design = np.linalg.norm(centre - foot, axis=1)
+    # the margin covers the tolerance and the rounding of the distances many times over
+    margin = (BOUNDARY_FOOT + 1e-3) * panel_size + 1e-9 * (to_corner + to_design + longest)
+    return to_edge <= to_design + 2.0 * np.asarray(radius, np.float64) + margin
 
 
 #: samples along every side of a piece's outline
@@ -211,26 +272,31 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
     sag = np.zeros(count)
     sides = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     piece = np.tile(owner, 3)
-    key = np.column_stack([np.sort(sides, axis=1), piece])
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    lo_hi = np.sort(sides, axis=1)
+    span = max(len(points), 1)
+    if span * span * max(count, 1) < 2**62:
+        # one integer per (side, piece): a sort of numbers instead of rows
+        key = (lo_hi[:, 0] * span + lo_hi[:, 1]) * max(count, 1) + piece
+        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    else:
+        _, inverse, counts = np.unique(np.column_stack([lo_hi, piece]), axis=0,
+                                       return_inverse=True, return_counts=True)
     rim = counts[inverse.ravel()] == 1
     sides, piece = sides[rim], piece[rim]
     if len(sides) == 0:
         return area, where, sag
-    t = (np.arange(SIDE_SAMPLES) + 0.5) / SIDE_SAMPLES
+    # sides that cannot reach the design boundary have no sample off it: left out
     A, B = points[sides[:, 0]], points[sides[:, 1]]
+    near = may_leave_design(design, 0.5 * (A + B), 0.5 * np.linalg.norm(B - A, axis=1), curves,
+                            panel_size)
+    sides, piece, A, B = sides[near], piece[near], A[near], B[near]
+    if len(sides) == 0:
+        return area, where, sag
+    t = (np.arange(SIDE_SAMPLES) + 0.5) / SIDE_SAMPLES
     S = (A[:, None] + t[None, :, None] * (B - A)[:, None]).reshape(-1, 3)
     step = np.repeat(np.linalg.norm(B - A, axis=1) / SIDE_SAMPLES, SIDE_SAMPLES)
     at = np.repeat(piece, SIDE_SAMPLES)
-    foot, _, tri = design.reference.closest_points(S)
-    offset = S - foot
-    normal = design.face_normals[tri]
-    sideways = np.linalg.norm(offset - np.sum(offset * normal, axis=1, keepdims=True) * normal,
-                              axis=1)
-    off = sideways > OFF_TOLERANCE * panel_size
-    if off.any():
-        edge_foot, _ = closest_points_on_polylines(foot[off], curves)
-        off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= 1e-6 * panel_size
+    sideways, off = _off_boundary(design, S, curves, panel_size)
     if not off.any():
         return area, where, sag
     # chords: both ends on the boundary curve, never farther off it than a sag
