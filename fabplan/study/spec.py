@@ -423,6 +423,15 @@ class _Table:
     def fail(self, key: str, what: str) -> NoReturn:
         raise InputError(f"{self._name(key)} {what}")
 
+    def within(self, key: str, value: float | None, option: str) -> None:
+        """Refuse `value` of `key` outside the range of the command-line option it is
+        given to (`fabplan.io.parameters.OPTIONS`), naming the key."""
+        if value is not None:
+            try:
+                OPTIONS[option].check(value)
+            except InputError as exc:
+                self.fail(key, str(exc).split(": ", 1)[1])
+
     def missing(self, key: str, what: str) -> NoReturn:
         """A required key is absent: name a present key that looks like a typo of it."""
         close = difflib.get_close_matches(key, [k for k in self.data if k not in self.used], n=1)
@@ -745,6 +754,11 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits,
         min_coverage=t.number("min_coverage"),
         max_sphere_residual=t.number("max_sphere_residual", 1e-6),
     )
+    # the limits the study hands to the solver and the mold plan: their ranges there
+    for tolerance in tolerances:
+        t.within("mold_tolerance_mm", tolerance, "--tolerance-mm")
+    t.within("max_panel_step_mm", limits.max_panel_step_mm, "--step-limit")
+    t.within("max_line_turn_deg", limits.max_line_turn_deg, "--max-line-turn")
     for key in ("max_kink_deg", "max_line_turn_deg"):
         value = getattr(limits, key)
         if value is not None and not 0 < value < 180:
@@ -781,6 +795,8 @@ def _strips(t: _Table) -> StripOptions:
                            sheet_mm=(float(sheet[0]), float(sheet[1])), nets=nets,
                            congruence_tolerance_mm=t.number("congruence_tolerance_mm", 0.1,
                                                             unit="mm"))
+    t.within("height_mm", options.height_mm, "--height")
+    t.within("thickness_mm", options.thickness_mm, "--thickness")
     t.done()
     return options
 
