@@ -164,9 +164,9 @@ def _obj(path: Path) -> tuple:
 
 
 @pytest.mark.parametrize("option, value, says", [
-    ("--max-line-turn", "0", "(0, 180]"), ("--max-line-turn", "200", "(0, 180]"),
-    ("--max-line-turn", "nan", "(0, 180]"), ("--max-deviation", "-1", "positive length"),
-    ("--max-deviation", "inf", "positive length")])
+    ("--max-line-turn", "0", "at least 0.1 degrees"), ("--max-line-turn", "200", "at most 180"),
+    ("--max-line-turn", "nan", "between 0.1 and 180"), ("--max-deviation", "-1", "at least 1e-06"),
+    ("--max-deviation", "inf", "finite number")])
 def test_bad_limits_are_refused_naming_the_option(tmp_path, capsys, option, value, says):
     out = tmp_path / "out.obj"
     code = main(["optimize", str(fabplan.data_path("cmc1.obj")), "--net", "snet", option, value,
