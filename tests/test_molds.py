@@ -404,12 +404,12 @@ def _degenerate_obj(path: Path) -> None:
 @pytest.mark.parametrize("case, fragment", [
     ("no-faces", "no faces"),
     ("degenerate", "face 1 is degenerate"),
-    ("zero-tolerance", "tolerance must be a positive"),
-    ("negative-tolerance", "tolerance must be a positive"),
-    ("nan-tolerance", "tolerance must be a positive"),
+    ("zero-tolerance", "--tolerance-mm 0: must be at least 0.01 mm"),
+    ("negative-tolerance", "--tolerance-mm -1: must be at least 0.01 mm"),
+    ("nan-tolerance", "--tolerance-mm nan: must be a finite number"),
     ("units", "read in centimetres: implausible for a building; if the file is in metres, give "
               "--units m (--strict-units)"),
-    ("mold-size", "largest mold size must be a positive"),
+    ("mold-size", "--max-mold-size 0: must be at least 1 mm"),
     ("missing", "no such file"),
 ])
 def test_bad_input_is_refused_in_one_line_and_writes_nothing(tmp_path, capsys, case, fragment):
