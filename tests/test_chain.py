@@ -24,16 +24,21 @@ from fabplan.net.mesh import QuadMesh
 pytestmark = pytest.mark.slow
 
 
+def _grid_triangles(shape: tuple[int, int]) -> np.ndarray:
+    """(t, 3) int, two triangles per cell of a grid of points `shape` (row-major ids)."""
+    idx = np.arange(shape[0] * shape[1]).reshape(shape)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    return np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                           np.stack([a, c, d], -1).reshape(-1, 3)])
+
+
 def _height_field(f, width: float, height: float, step: float, keep=None) -> tuple:
     """Triangles of the facade ``(x, f(x, y), y)`` over [0, width] x [0, height] (y up),
     without those whose centre `keep` refuses."""
     x, y = np.meshgrid(np.linspace(0, width, round(width / step) + 1),
                        np.linspace(0, height, round(height / step) + 1), indexing="ij")
     V = np.stack([x, f(x, y), y], axis=-1).reshape(-1, 3)
-    idx = np.arange(len(V)).reshape(x.shape)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                        np.stack([a, c, d], -1).reshape(-1, 3)])
+    T = _grid_triangles(x.shape)
     if keep is not None:
         centre = V[T].mean(axis=1)
         T = T[keep(centre[:, 0], centre[:, 2])]
@@ -63,10 +68,7 @@ def _bowl_mm(folder: Path) -> Path:
     half = 75.0
     x, y = np.meshgrid(np.linspace(-half, half, 81), np.linspace(-half, half, 81), indexing="ij")
     V = np.stack([x, y, 30.0 * (x * x + y * y) / half**2], axis=-1).reshape(-1, 3)
-    idx = np.arange(len(V)).reshape(x.shape)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                        np.stack([a, c, d], -1).reshape(-1, 3)])
+    T = _grid_triangles(x.shape)
     path = folder / "bowl.stl"
     trimesh.Trimesh(V, T, process=False).export(path)
     return path

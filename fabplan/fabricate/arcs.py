@@ -443,7 +443,7 @@ def arc_structure(mesh: QuadMesh) -> ArcStructure:
         # the arc is nearly straight)
         inward = _unit(np.cross(binormal, tangent))
         centre = np.where(straight[:, None], np.nan, X[v] + radius[:, None] * inward)
-        axis = np.where(straight[:, None], np.nan, np.cross(tangent, inward))
+        axis = np.where(straight[:, None], np.nan, _unit(binormal))   # tangent x inward
         sagitta = np.where(straight, 0.0, 2 * radius * np.sin(half / 2) ** 2)
     angle = np.where(straight, 0.0, 2 * half)
     end_tangent = 2 * cos_half[:, None] * u - tangent

@@ -107,20 +107,30 @@ class Parameter:
             is due, or a value outside the range; one line naming the parameter, the
             value and the range.
         """
-        shown = _shown(value)
-        name = f"{where}{self.name} {shown}"
+        number, reason = self._judged(value)
+        if reason is not None or number is None:
+            raise InputError(f"{where}{self.name} {_shown(value)}: {reason}")
+        return number
+
+    def reason(self, value: object) -> str | None:
+        """Why `value` is refused (``must be at least 0.01 mm (range [0.01, 1000])``), or
+        None when it is in range: for a caller that names the parameter its own way."""
+        return self._judged(value)[1]
+
+    def _judged(self, value: object) -> tuple[float | int | None, str | None]:
+        """The number in `value` and why it is refused (None when it is not)."""
         number = self._number(value)
         if number is None or (isinstance(number, float) and not math.isfinite(number)):
             what = self.kind if number is None else f"a finite {self.kind[2:]}"
-            raise InputError(f"{name}: must be {what} {self.allowed}")
+            return number, f"must be {what} {self.allowed}"
         size = abs(number) if self.signed else number
         if self.low is not None and (size < self.low or (self.low_open and size == self.low)):
             bound = f"{'more than' if self.low_open else 'at least'} {self._text(self.low)}"
-            raise InputError(f"{name}: must be {self._bound_words(bound)}")
+            return number, f"must be {self._bound_words(bound)}"
         if self.high is not None and (size > self.high or (self.high_open and size == self.high)):
             bound = f"{'less than' if self.high_open else 'at most'} {self._text(self.high)}"
-            raise InputError(f"{name}: must be {self._bound_words(bound)}")
-        return number
+            return number, f"must be {self._bound_words(bound)}"
+        return number, None
 
     @property
     def interval(self) -> str:

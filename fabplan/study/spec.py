@@ -426,11 +426,9 @@ class _Table:
     def within(self, key: str, value: float | None, option: str) -> None:
         """Refuse `value` of `key` outside the range of the command-line option it is
         given to (`fabplan.io.parameters.OPTIONS`), naming the key."""
-        if value is not None:
-            try:
-                OPTIONS[option].check(value)
-            except InputError as exc:
-                self.fail(key, str(exc).split(": ", 1)[1])
+        reason = None if value is None else OPTIONS[option].reason(value)
+        if reason is not None:
+            self.fail(key, reason)
 
     def missing(self, key: str, what: str) -> NoReturn:
         """A required key is absent: name a present key that looks like a typo of it."""
@@ -949,11 +947,7 @@ def _candidates(value: object, file: str) -> tuple[tuple[Candidate, ...], tuple[
                        f"swapped (ask for {180 - a:g})" if 90 < a < 180 else
                        f"must lie in [{lowest:g}, 90] degrees, got {a:g}")
         for r in radii:
-            if r is not None:
-                try:
-                    OPTIONS["--radius"].check(r)
-                except InputError as exc:
-                    t.fail("radius", str(exc).split(": ", 1)[1])
+            t.within("radius", r, "--radius")
         sweep = len(angles) * len(radii) > 1
         for a in angles:
             for r in radii:
