@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import math
 
+from ..fabricate.limits import LIMITS
+
 __all__ = ["check", "binding_check", "violation", "relaxation_text", "nice_value", "LIMIT_NAMES",
            "limit_words", "limit_value"]
 
-#: every limit of a study in words, with its unit
+#: every limit of a study in words, with its unit; those the commands also check
+#: (`fabplan.fabricate.limits.LIMITS`) in the same words
 LIMIT_NAMES = {
-    "max_deviation_mm": ("largest deviation from the design", "mm"),
+    "max_deviation_mm": (LIMITS["max_deviation_mm"].words, LIMITS["max_deviation_mm"].unit),
     "mold_tolerance_mm": ("largest gap between a panel and its mold", "mm"),
     "max_panel_step_mm": ("largest step between neighbouring panels' molds", "mm"),
     "max_molds": ("most molds", "molds"),
@@ -23,7 +26,8 @@ LIMIT_NAMES = {
     "max_strip_radius_mm": ("largest arc radius of an unrolled strip", "mm"),
     "max_sheets": ("most sheets of strip material", "sheets"),
     "congruent_strips": ("strips must be congruent (one bending jig)", ""),
-    "congruence_tolerance_mm": ("largest difference of a strip from the common arc", "mm"),
+    "congruence_tolerance_mm": (LIMITS["congruence_tolerance_mm"].words,
+                                LIMITS["congruence_tolerance_mm"].unit),
     "min_coverage": ("smallest share of the design covered by panels", "%"),
     "max_sphere_residual": ("largest sphere residual (of the mean edge length)", "ratio"),
 }
