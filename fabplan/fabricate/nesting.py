@@ -44,6 +44,7 @@ __all__ = [
     "nest_parts",
     "bulge_polygon",
     "congruence",
+    "part_congruence_mm",
     "check_nesting",
     "bulge_points",
     "placed_footprints",
@@ -554,19 +555,40 @@ def congruence(parts: list[Part], strips: "StripSet") -> dict:
     """Whether all parts are pieces of one annulus (or all straight) within the tolerance.
 
     The deviation of a part from the common radius ``R`` (the median arc radius) is bounded
-    by ``L^2 / 8 |1/r - 1/R|`` over each of its arc runs of length ``L`` and radius ``r``.
+    by ``L^2 / 8 |1/r - 1/R|`` over each of its arc runs of length ``L`` and radius ``r``
+    (`part_congruence_mm`).
 
     Returns
     -------
-    dict with ``congruent`` (bool), ``common_radius_mm`` (inf when straight) and
-    ``congruence_deviation_mm`` (the largest bound over all parts).
+    dict with ``congruent`` (bool), ``common_radius_mm`` (inf when straight),
+    ``congruence_deviation_mm`` (the largest bound over all parts) and
+    ``parts_not_congruent`` (how many parts exceed the tolerance).
     """
     tol = strips.settings.tolerance_mm
+    common, deviation = part_congruence_mm(parts, strips)
+    worst = float(deviation.max()) if deviation.size else 0.0
+    return {"congruent": bool(worst <= tol), "common_radius_mm": common,
+            "congruence_deviation_mm": worst,
+            "parts_not_congruent": int(np.count_nonzero(deviation > tol))}
+
+
+def part_congruence_mm(parts: list[Part], strips: "StripSet") -> tuple[float, np.ndarray]:
+    """The common arc radius of the strips and how far each part differs from it.
+
+    Returns
+    -------
+    common_radius_mm : float, the median |radius| of the fitted arc runs (inf when every
+        strip is straight).
+    deviation_mm : (len(parts),) float, the largest ``L^2 / 8 |1/r - 1/R|`` over the arc runs
+        of each part (the part's length ``L`` in a run of radius ``r``, ``R`` the common
+        radius): how far the part's reference curve leaves the common arc (mm).
+    """
     radii = np.array([abs(r) for s in strips.strips for r in s.arc_radii_mm])
     finite = radii[np.isfinite(radii)]
     common = float(np.median(finite)) if finite.size else math.inf
-    worst = 0.0
-    for part in parts:
+    k_common = 0.0 if not math.isfinite(common) else 1 / common
+    deviation = np.zeros(len(parts))
+    for i, part in enumerate(parts):
         strip = strips.strips[part.strip]
         a, b = part.s_range
         for run in strip.runs:
@@ -575,10 +597,8 @@ def congruence(parts: list[Part], strips: "StripSet") -> dict:
             if L <= 0:
                 continue
             k_run = 0.0 if not math.isfinite(run.radius_mm) else 1 / abs(run.radius_mm)
-            k_common = 0.0 if not math.isfinite(common) else 1 / common
-            worst = max(worst, L * L / 8 * abs(k_run - k_common))
-    return {"congruent": bool(worst <= tol), "common_radius_mm": common,
-            "congruence_deviation_mm": float(worst)}
+            deviation[i] = max(deviation[i], L * L / 8 * abs(k_run - k_common))
+    return common, deviation
 
 
 # ---------------------------------------------------------------------- nesting

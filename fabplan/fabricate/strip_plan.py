@@ -18,16 +18,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
 from ..io.forked import map_in_processes
 from ..io.output import check_apart, output_folder
 from ..io.records import json_text
 from ..net.mesh import QuadMesh
 from .dxf import SheetGeometry, check_sheet, geometry_preview_png, sheet_geometry, write_sheet_file
-from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts
+from .limits import LimitCheck, limit_check, limits_record
+from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts, part_congruence_mm
 from .strip_boundary import StripBoundary
 from .strips import Strip, StripSet, StripSettings, build_strips
 
-__all__ = ["StripPlan", "plan_strips", "schedule_rows", "write_plan", "SHEETS_PER_PROCESS", "STRIP_FILES"]
+__all__ = ["StripPlan", "plan_strips", "strip_limit_checks", "schedule_rows", "write_plan",
+           "SHEETS_PER_PROCESS", "STRIP_FILES"]
 
 SHEETS_PER_PROCESS = 8
 """Fewest sheets per process when sheets are written in several processes."""
@@ -43,12 +47,15 @@ class StripPlan:
     parts : list of `fabplan.fabricate.nesting.Part`.
     nesting : the `Nesting` of the parts on sheets.
     seconds : wall time of the planning.
+    limits : the fabrication limits the strips were measured against
+        (`strip_limit_checks`), in the summary as ``limits``.
     """
 
     strips: StripSet
     parts: list[Part]
     nesting: Nesting
     seconds: float = 0.0
+    limits: list[LimitCheck] = field(default_factory=list)
     _measured: dict | None = field(default=None, init=False, repr=False, compare=False)
 
     def summary(self) -> dict:
@@ -58,6 +65,7 @@ class StripPlan:
             rec = self.strips.summary()
             rec.update(congruence(self.parts, self.strips))
             rec.update(self.nesting.summary())
+            rec["limits"] = limits_record(self.limits)
             self._measured = rec
         return {**self._measured, "seconds": self.seconds}
 
@@ -77,7 +85,37 @@ class StripPlan:
                           protect=protect)
 
 
-def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None) -> StripPlan:
+def strip_limit_checks(strips: StripSet, parts: list[Part], *,
+                       constant_radius: bool = False) -> list[LimitCheck]:
+    """The strips measured against their fabrication limits (`fabplan.fabricate.limits`).
+
+    Parameters
+    ----------
+    strips : the StripSet; its settings give the bounds (`StripSettings.max_twist_deg_per_m`,
+        and `StripSettings.tolerance_mm` for congruence).
+    parts : the parts the strips are cut into (`make_parts`).
+    constant_radius : the net claims a constant (or infinite) Meusnier radius, so its
+        strips claim to be pieces of one arc: each part is held to the common arc within
+        the cutting tolerance (as a study's ``congruent_strips`` limit holds them).
+
+    Returns
+    -------
+    list of LimitCheck: ``max_twist_deg_per_m`` over the strips, and with
+    `constant_radius` ``congruence_tolerance_mm`` over the parts.
+    """
+    settings = strips.settings
+    twist = np.array([s.twist_deg_per_m for s in strips.strips], dtype=np.float64)
+    checks = [limit_check("max_twist_deg_per_m", twist, settings.max_twist_deg_per_m,
+                          parts="strips")]
+    if constant_radius:
+        _, deviation = part_congruence_mm(parts, strips)
+        checks.append(limit_check("congruence_tolerance_mm", deviation, settings.tolerance_mm,
+                                  parts="strip parts"))
+    return checks
+
+
+def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None,
+                constant_radius: bool = False) -> StripPlan:
     """Build the strips of a net, split them into parts that fit the sheets and nest them.
 
     Parameters
@@ -88,6 +126,8 @@ def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None
         `fabplan.fabricate.strip_boundary.StripBoundary`): the strips run through them to
         the edge of the cladding and end at a boundary member there. None: they end at
         the net's last vertices.
+    constant_radius : the net claims a constant (or infinite) Meusnier radius: its strip
+        parts are held to one common arc (`strip_limit_checks`).
 
     Returns
     -------
@@ -106,7 +146,8 @@ def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None
     parts = make_parts(strips, settings)
     nesting = nest_parts(parts, settings)
     return StripPlan(strips=strips, parts=parts, nesting=nesting,
-                     seconds=time.perf_counter() - t0)
+                     seconds=time.perf_counter() - t0,
+                     limits=strip_limit_checks(strips, parts, constant_radius=constant_radius))
 
 
 def schedule_rows(plan: StripPlan) -> list:

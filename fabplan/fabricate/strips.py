@@ -52,6 +52,7 @@ from ..errors import InputError
 from ..io.units import check_units
 from ..net.geometry import circumcircle_tangent, face_normals, fit_star_spheres, star_normals
 from ..net.mesh import Polylines, QuadMesh
+from .limits import DEFAULT_MAX_TWIST_DEG_PER_M
 from .molds import UNITS
 from .strip_boundary import StripBoundary, StripEnds, member_setback_mm, tip_setback_mm
 
@@ -112,6 +113,9 @@ class StripSettings:
         exactly two of them end (the corners of a staircase boundary).
     boundary_member_mm : thickness of the boundary member a strip run to the edge of the
         cladding ends against (default: `thickness_mm`).
+    max_twist_deg_per_m : the largest twist a strip may take (degrees per metre,
+        `Strip.twist_deg_per_m`); a strip that twists more is counted against it
+        (`fabplan.fabricate.limits`, ``docs/fabrication-limits.md``).
     """
 
     height_mm: float
@@ -135,6 +139,7 @@ class StripSettings:
     one_file: bool = False
     join_boundary: bool = True
     boundary_member_mm: float | None = None
+    max_twist_deg_per_m: float = DEFAULT_MAX_TWIST_DEG_PER_M
 
     @property
     def scale(self) -> float:
@@ -192,6 +197,10 @@ class StripSettings:
         non_negative("--boundary-member", self.member_mm)
         positive("--splice-length", self.splice_mm)
         positive("--label-height", self.text_height_mm)
+        if not (isinstance(self.max_twist_deg_per_m, (int, float))
+                and math.isfinite(self.max_twist_deg_per_m) and self.max_twist_deg_per_m > 0):
+            raise InputError(f"--max-twist must be a positive number of degrees per metre, got "
+                             f"{self.max_twist_deg_per_m}")
         check_units(self.units)
         if len(self.sheet_mm) != 2:
             raise InputError(f"--sheet must be WIDTHxHEIGHT, got {self.sheet_mm}")
