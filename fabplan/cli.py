@@ -18,6 +18,12 @@ from typing import Any, Iterator
 
 from . import __version__
 from .errors import CannotMakeError, FabplanError, InputError
+from .fabricate.limits import (
+    DEFAULT_MAX_ARC_ANGLE_DEG,
+    DEFAULT_MAX_DEVIATION_MM,
+    DEFAULT_MAX_TWIST_DEG_PER_M,
+    limits_record,
+)
 from .io.inputs import check_input_file
 from .io.output import (
     atomic_path,
@@ -338,6 +344,11 @@ def _cmd_optimize(args) -> int:
                           max_deviation=args.max_deviation, max_line_turn=args.max_line_turn,
                           progress=report)
     result.properties["units"] = units
+    limits = []
+    if reference is not None:
+        limits = [deviation_check(reference.distances(result.mesh.vertices), units=units,
+                                  max_deviation=args.max_deviation, option="--max-deviation")]
+        result.properties["limits"] = limits_record(limits)
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             _html_file(args, out) as page, \
@@ -362,6 +373,8 @@ def _cmd_optimize(args) -> int:
         print(format_summary(result.properties))
         print(f"{result.net}: {result.status} after {result.iterations} iterations in "
               f"{result.seconds:.2f} s" + (f" ({params})" if params else ""))
+        for check in limits:
+            print(f"limit: {check.text()}")
     written = [obj_path, json_path]
     if result.boundary_panels is not None:
         written.append(boundary_path(out))
@@ -383,7 +396,30 @@ def _cmd_optimize(args) -> int:
     if not result.converged:
         _warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
-    return 0
+    return _limits_exit(limits, json_path)
+
+
+def deviation_check(distances: Any, *, units: str, max_deviation: float | None = None,
+                    option: str = "--max-deviation-mm") -> Any:
+    """The net's vertices against the deviation limit (`fabplan.fabricate.limits`).
+
+    Parameters
+    ----------
+    distances : (n,) float, each vertex's distance from the design or reference (model
+        units).
+    units : the model units (`MM_PER_UNIT` key).
+    max_deviation : the limit in model units (``optimize --max-deviation``); None for the
+        default in mm.
+    option : the option that changes the limit.
+    """
+    import numpy as np
+
+    from .fabricate.limits import DEFAULT_MAX_DEVIATION_MM, limit_check
+
+    mm = MM_PER_UNIT[units]
+    bound = DEFAULT_MAX_DEVIATION_MM if max_deviation is None else max_deviation * mm
+    return limit_check("max_deviation_mm", np.asarray(distances, dtype=np.float64) * mm, bound,
+                       parts="vertices", option=option)
 
 
 def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
@@ -452,6 +488,10 @@ def _cmd_molds(args) -> int:
     progress = _progress(args)
     with progress.stage(f"fitting molds to {len(mesh.face_sizes)} panels"):
         plan = plan_molds(mesh, settings, design=design)
+    limits = []
+    if design is not None:
+        limits = [deviation_check(design.distances(mesh.vertices), units=settings.units,
+                                  max_deviation=args.max_deviation_mm / MM_PER_UNIT[settings.units])]
     boundary = None
     if panels is not None:
         # each boundary panel on a mold of the net's panels, placed to meet its
@@ -461,7 +501,7 @@ def _cmd_molds(args) -> int:
     with progress.stage("writing the report"), \
             _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
         files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary,
-                                  protect=inputs) + viewers
+                                  protect=inputs, limits=limits) + viewers
     if args.quiet:
         print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')} at "
               f"{settings.tolerance_mm:g} mm; wrote {files[0]}")
@@ -469,6 +509,8 @@ def _cmd_molds(args) -> int:
         print(plan.summary())
         if boundary is not None:
             print(boundary_molds_text(boundary[1], plan.mold_count, boundary_file))
+        for check in limits:
+            print(f"limit: {check.text()}")
         print(f"wrote {', '.join(str(f) for f in files)}")
     molds = None if boundary is None else boundary[1]
     over = np.zeros(0, np.int64) if molds is None else molds.steps_over_limit
@@ -499,7 +541,9 @@ def _cmd_molds(args) -> int:
               f"(limit {plan.step_limit_mm:g} mm); see the step map in {out / 'report.html'}",
               file=sys.stderr)
         return EXIT_NOT_CONVERGED
-    return EXIT_NOT_CONVERGED if over.size else 0
+    if over.size:
+        return EXIT_NOT_CONVERGED
+    return _limits_exit(limits, out / "molds.json")
 
 
 def _cmd_mill(args) -> int:
@@ -923,7 +967,7 @@ def _parse_layers(specs: list | None) -> dict:
 
 def _cmd_strips(args) -> int:
     from .fabricate.nesting import make_parts, nest_parts
-    from .fabricate.strip_plan import STRIP_FILES, StripPlan
+    from .fabricate.strip_plan import STRIP_FILES, StripPlan, strip_limit_checks
     from .fabricate.strips import StripSettings, build_strips
     from .io.resources import check_panel_count, worker_count
 
@@ -936,7 +980,8 @@ def _cmd_strips(args) -> int:
         spacing_mm=args.spacing, margin_mm=args.margin, kerf_mm=args.kerf, end=args.end,
         end_extension_mm=args.extension, splice=args.splice, splice_length_mm=args.splice_length,
         labels=args.labels, label_height_mm=args.label_height, layers=_parse_layers(args.layer),
-        one_file=args.one_file, boundary_member_mm=args.boundary_member)
+        one_file=args.one_file, boundary_member_mm=args.boundary_member,
+        max_twist_deg_per_m=args.max_twist)
     settings.check()
     out = output_argument(args.output, folder=True)
     check_output_folder(out)
@@ -958,8 +1003,10 @@ def _cmd_strips(args) -> int:
         parts = make_parts(strips, settings)
     with progress.stage(f"nesting {len(parts)} parts"):
         nesting = nest_parts(parts, settings, workers=worker_count(args.workers))
+    claim = _constant_radius_claim(args.net)
     plan = StripPlan(strips=strips, parts=parts, nesting=nesting,
-                     seconds=time.perf_counter() - planning)
+                     seconds=time.perf_counter() - planning,
+                     limits=strip_limit_checks(strips, parts, constant_radius=claim is not None))
     with progress.stage(f"writing {len(nesting.sheets)} sheets and checking them"), \
             _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
         files = plan.write(out, previews=not args.no_previews,
@@ -973,7 +1020,7 @@ def _cmd_strips(args) -> int:
     if args.quiet:
         print(f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
               f"{counted(s['sheets'], 'sheet')}; wrote {len(files)} files to {out}")
-        return 0
+        return _limits_exit(plan.limits, out / "strips.json", claim)
     radius = s["radius_mm"]
     print(f"{s['strips']} strips ({s['strips_per_family'][0]} A, {s['strips_per_family'][1]} B), "
           f"{s['crossings']} crossings, {s['total_length_mm'] / 1000:.2f} m of strip, "
@@ -988,6 +1035,8 @@ def _cmd_strips(args) -> int:
         print("all strips straight")
     print(f"twist up to {s['twist_deg_per_m']:.2f} deg/m; flat panels would lean up to "
           f"{s['off_orthogonal_deg']:.2f} deg from orthogonal")
+    for check in plan.limits:
+        print(f"limit: {check.text()}")
     print(f"{s['parts']} parts on {s['sheets']} sheets of {settings.sheet_mm[0]:g}x"
           f"{settings.sheet_mm[1]:g} mm, material use {100 * s['material_use']:.1f} %")
     print(f"wrote {len(files)} files to {out} in {time.perf_counter() - started:.1f} s "
@@ -1015,7 +1064,38 @@ def _cmd_strips(args) -> int:
         print(f"fabplan: note: {s['junctions']} vertices join more than one strip of a family "
               "(irregular vertices): no slits there, they need node connectors; listed in "
               f"{out / 'strips.json'}", file=sys.stderr)
-    return 0
+    return _limits_exit(plan.limits, out / "strips.json", claim)
+
+
+def _constant_radius_claim(net: str | os.PathLike) -> str | None:
+    """The net type a net's record ``NET.json`` names when that type claims a constant (or
+    infinite) Meusnier radius, so that its strips claim to be pieces of one arc
+    (``const-radius``, ``cmc``, ``linear-weingarten``, the A-nets); None otherwise."""
+    import json
+
+    try:
+        name = json.loads(Path(net).with_suffix(".json").read_text(encoding="utf-8")).get("net")
+    except (OSError, ValueError, AttributeError):
+        return None
+    preset = NETS.get(name) if isinstance(name, str) else None
+    if preset is None or preset.dual or preset.radius not in ("param", "infinite"):
+        return None
+    return name
+
+
+def _limits_exit(checks: list, record: Path, claim: str | None = None) -> int:
+    """Exit 3, with a warning naming each limit exceeded and by how much, when a part
+    exceeds a fabrication limit (`fabplan.fabricate.limits`); else 0."""
+    from .fabricate.limits import exceeded_text
+
+    text = exceeded_text(checks)
+    if text is None:
+        return 0
+    why = (f" (the net's record names it a {claim} net, whose strips are pieces of one arc)"
+           if claim is not None and any(c.exceeded and c.limit == "congruence_tolerance_mm"
+                                        for c in checks) else "")
+    print(f"fabplan: warning: {text}{why}; counted in {record} (limits)", file=sys.stderr)
+    return EXIT_NOT_CONVERGED
 
 
 def _free_ends_text(summary: dict) -> str:
@@ -1088,7 +1168,7 @@ def _boundary_record(args) -> dict | None:
 
 
 def _cmd_arcs(args) -> int:
-    from .fabricate.arcs import arc_structure, write_arcs
+    from .fabricate.arcs import arc_limit_checks, arc_structure, write_arcs
 
     out = output_argument(args.output)
     if out.suffix.lower() not in (".3dm", ".dxf"):
@@ -1100,12 +1180,13 @@ def _cmd_arcs(args) -> int:
     progress = _progress(args)
     with progress.stage("the arcs"):
         arcs = arc_structure(mesh)
+    limits = arc_limit_checks(arcs, max_arc_angle_deg=args.max_arc_angle)
     with progress.stage("writing the arcs"):
-        files = write_arcs(arcs, out, units=units)
+        files = write_arcs(arcs, out, units=units, limits=limits)
     s = arcs.summary()
     if args.quiet:
         print(f"{counted(s['arcs'], 'arc')}; wrote {files[0]}")
-        return 0
+        return _limits_exit(limits, files[1])
     sources = ", ".join(f"{count} {name}" for name, count in s["plane_sources"].items() if count)
     print(f"{s['arcs']} arcs ({s['straight_arcs']} straight): radius {s['radius']['min']:.4g} .. "
           f"{s['radius']['max']:.4g}, angle {s['angle_deg']['min']:.3g} .. "
@@ -1116,8 +1197,10 @@ def _cmd_arcs(args) -> int:
           f"off the vertex spheres by up to {s['sphere_deviation_relative_to_edge']['max']:.1e} "
           f"of the mean edge")
     print(f"vertex planes: {sources}")
+    for check in limits:
+        print(f"limit: {check.text()}")
     print(f"wrote {', '.join(str(f) for f in files)}")
-    return 0
+    return _limits_exit(limits, files[1])
 
 
 def _cmd_study(args) -> int:
@@ -1312,7 +1395,9 @@ def _add_optimize(sub: Any) -> None:
     _add_number(p, "--max-deviation", metavar="D",
                 help="keep every vertex within D (model units) of the reference: a limit held "
                      "in the solve; a net type that cannot keep to it ends 'off-design' (exit "
-                     "3) with the smallest limit it reached")
+                     "3) with the smallest limit it reached. Without it a net with --reference "
+                     f"is checked against {DEFAULT_MAX_DEVIATION_MM:g} mm (not held in the "
+                     "solve; exit 3 beyond it, see docs/fabrication-limits.md)")
     _add_max_line_turn(p)
     _add_number(p, "--max-iter", help="iteration cap (default 50)")
     p.add_argument("--no-multilevel", action="store_true",
@@ -1353,6 +1438,10 @@ def _add_molds(sub: Any) -> None:
     _add_number(p, "--step-limit", metavar="MM",
                 help="largest step between neighbouring panels' molds in mm (default twice "
                      "the tolerance)")
+    _add_number(p, "--max-deviation-mm", default=DEFAULT_MAX_DEVIATION_MM, metavar="MM",
+                help="with --design: the largest distance of a net vertex from the design, in "
+                     f"mm; a net farther off ends the run in exit 3 (default "
+                     f"{DEFAULT_MAX_DEVIATION_MM:g}, see docs/fabrication-limits.md)")
     _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "
                              "its neighbours (a mold of its own where none does; slivers cut "
                              "with their full panel)", "plan the net's own panels only")
@@ -1489,7 +1578,13 @@ def _add_strips(sub: Any) -> None:
     _add_number(p, "--clearance", default=0.2, metavar="MM",
                 help="play added to the slit width (default 0.2)")
     _add_number(p, "--tolerance", default=0.1, metavar="MM",
-                help="cutting tolerance for fitting arcs (default 0.1)")
+                help="cutting tolerance for fitting arcs, and on a net whose record claims a "
+                     "constant radius how far a strip part may differ from the common arc "
+                     "(exit 3 beyond it; default 0.1)")
+    _add_number(p, "--max-twist", default=DEFAULT_MAX_TWIST_DEG_PER_M, metavar="DEG_PER_M",
+                help="the largest twist of a strip, in degrees per metre; a strip that twists "
+                     f"more ends the run in exit 3 (default {DEFAULT_MAX_TWIST_DEG_PER_M:g}, see "
+                     "docs/fabrication-limits.md)")
     p.add_argument("--end", choices=["square", "round"], default="square",
                    help="strip ends (default square)")
     _add_number(p, "--extension", metavar="MM",
@@ -1558,6 +1653,10 @@ def _add_arcs(sub: Any) -> None:
     p.add_argument("-o", "--output", required=True, metavar="OUT.3dm|OUT.dxf",
                    help="the arcs as Rhino ArcCurves or DXF ARC entities; the report goes to "
                         "OUT.json")
+    _add_number(p, "--max-arc-angle", default=DEFAULT_MAX_ARC_ANGLE_DEG, metavar="DEG",
+                help="the largest central angle of an arc the bending shop takes; a longer arc "
+                     f"ends the run in exit 3 (default {DEFAULT_MAX_ARC_ANGLE_DEG:g}, see "
+                     "docs/fabrication-limits.md)")
     _add_verbosity(p)
     p.set_defaults(func=_cmd_arcs)
 

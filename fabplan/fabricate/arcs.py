@@ -47,9 +47,10 @@ from ..io.records import json_text
 from ..io.rhino_write import FAMILY_NAMES, MM_PER_UNIT, RHINO_UNITS, Rhino3dmWriter
 from ..net.geometry import StarSpheres, circumcircle_tangent, fit_star_spheres
 from ..net.mesh import QuadMesh
+from .limits import DEFAULT_MAX_ARC_ANGLE_DEG, LimitCheck, limit_check, limits_record
 
-__all__ = ["ArcStructure", "PLANE_SOURCES", "MIRROR_TOLERANCE", "arc_structure", "write_arcs_3dm",
-           "write_arcs_dxf", "write_arcs"]
+__all__ = ["ArcStructure", "PLANE_SOURCES", "MIRROR_TOLERANCE", "arc_structure", "arc_limit_checks",
+           "write_arcs_3dm", "write_arcs_dxf", "write_arcs"]
 
 PLANE_SOURCES = ("own sphere", "arcs on neighbouring spheres", "a neighbouring sphere",
                  "arcs from neighbours with a plane", "faces")
@@ -551,9 +552,23 @@ def write_arcs_dxf(arcs: ArcStructure, path: str | os.PathLike, *, units: str = 
     return path
 
 
-def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m") -> list[Path]:
+def arc_limit_checks(arcs: ArcStructure, *,
+                     max_arc_angle_deg: float = DEFAULT_MAX_ARC_ANGLE_DEG) -> list[LimitCheck]:
+    """The arcs measured against their fabrication limit (`fabplan.fabricate.limits`): the
+    central angle of every arc (0 for a straight one) against `max_arc_angle_deg`.
+
+    Returns
+    -------
+    list of one LimitCheck, ``max_arc_angle_deg`` over the arcs.
+    """
+    return [limit_check("max_arc_angle_deg", np.degrees(arcs.angle), max_arc_angle_deg,
+                        parts="arcs")]
+
+
+def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m",
+               limits: list[LimitCheck] | None = None) -> list[Path]:
     """Write the arcs to ``OUT.3dm`` or ``OUT.dxf`` and their report to ``OUT.json``: both,
-    or neither.
+    or neither. `limits` (`arc_limit_checks`) go into the report as ``limits``.
 
     Returns
     -------
@@ -570,6 +585,7 @@ def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m")
     record["units"] = units if suffix == ".3dm" else "mm"
     record["model_units"] = units
     record["file"] = path.name
+    record["limits"] = limits_record(limits or [])
     with atomic_path(path) as staged, atomic_path(report) as staged_report:
         write = write_arcs_3dm if suffix == ".3dm" else write_arcs_dxf
         write(arcs, staged, units=units)

@@ -25,6 +25,7 @@ from ..report import figures, html, viewer
 from ..report.html import counted
 from ..report.pdf import PdfDocument
 from .boundary_molds import BoundaryMolds, boundary_molds_text, boundary_panels_csv
+from .limits import LimitCheck, limit_row_text, limits_record
 from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
 
 __all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "mold_report_html",
@@ -312,10 +313,12 @@ def mold_pictures(plan: MoldPlan) -> dict[str, str]:
 
 def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
                      pictures: dict[str, str] | None = None,
-                     boundary: BoundaryMolds | None = None) -> str:
+                     boundary: BoundaryMolds | None = None,
+                     limits: dict | None = None) -> str:
     """The self-contained HTML report of a mold plan (`view_3d`: with the interactive 3D
     view, about 0.6 MB more; `pictures`: `mold_pictures` when already drawn; `boundary`:
-    the molds of the net's boundary panels, listed in ``boundary-panels.csv``)."""
+    the molds of the net's boundary panels, listed in ``boundary-panels.csv``; `limits`:
+    the fabrication limits checked, as ``molds.json`` holds them, `limits_record`)."""
     r = plan.record()
     tol = r["tolerance_mm"]
     w = plan.weingarten
@@ -354,6 +357,8 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
          "no limit" if r["max_mold_size_mm"] is None else f"{r['max_mold_size_mm']:g} mm"],
         ["run time", f"{r['seconds']:.1f} s"],
     ]
+    summary_rows += [[f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})",
+                      limit_row_text(c)] for c in (limits or {}).values()]
     if boundary is not None:
         summary_rows.insert(6, ["boundary panels (boundary-panels.csv)",
                                 boundary_molds_text(boundary, plan.mold_count)])
@@ -516,12 +521,15 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None) -> P
 
 def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: bool = True,
                       boundary: tuple[BoundaryPanels, BoundaryMolds] | None = None,
-                      protect: Mapping[Path, str] | None = None) -> list[Path]:
+                      protect: Mapping[Path, str] | None = None,
+                      limits: list[LimitCheck] | None = None) -> list[Path]:
     """Write ``report.html``, ``report.pdf``, ``molds.json`` and ``panels.csv`` into
     `folder`, all or none (`view_3d`: the HTML report with its interactive 3D view). With
     `boundary` (the net's boundary panels and their molds, `boundary_molds`) also
     ``boundary-panels.csv``, ``boundary-panels.obj`` (the panels as cut from their molds)
-    and ``boundary_panels`` in ``molds.json``. No file replaces
+    and ``boundary_panels`` in ``molds.json``. `limits` (fabrication limits checked, such
+    as the net's deviation from its design) go into ``molds.json`` as ``limits`` and into
+    the report's summary. No file replaces
     one of `protect` (the run's inputs, path -> what it is).
 
     Returns
@@ -531,6 +539,7 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
     folder = Path(folder)
     pictures = mold_pictures(plan)
     record = plan.record()
+    record["limits"] = limits_record(limits or [])
     texts = {"panels.csv": plan.panels_csv()}
     if boundary is not None:
         panels, molds = boundary
@@ -542,7 +551,8 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
     with output_folder(folder, protect=protect) as staging:
         write_texts({staging / "report.html": mold_report_html(
                          plan, view_3d=view_3d, pictures=pictures,
-                         boundary=None if boundary is None else boundary[1]),
+                         boundary=None if boundary is None else boundary[1],
+                         limits=record["limits"]),
                      staging / "molds.json": json_text(record),
                      **{staging / name: text for name, text in texts.items()}})
         mold_report_pdf(plan, pictures).write(staging / "report.pdf")

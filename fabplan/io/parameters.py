@@ -224,6 +224,7 @@ _OPTIONS = [
     _mm("--tolerance-mm", 0.01, 1000.0),
     _mm("--max-mold-size", 1.0, 1e6),
     _mm("--step-limit", 0.001, 1000.0),
+    _mm("--max-deviation-mm", 0.001, 1e7),
     # strips (millimetres)
     _mm("--height", 1.0, SHEET_MM),
     _mm("--thickness", 0.01, 1000.0),
@@ -236,6 +237,9 @@ _OPTIONS = [
     _mm("--boundary-member", 0.0, 10_000.0),
     _mm("--splice-length", 1.0, SHEET_MM),
     _mm("--label-height", 0.1, 1000.0),
+    Parameter("--max-twist", 0.01, 36_000.0, units="deg/m"),
+    # arcs
+    Parameter("--max-arc-angle", 0.1, 360.0, units="degrees"),
     # mill
     _mm("mill --margin", 0.0, 1000.0),
     _mm("--scallop", 1e-5, 10.0),

@@ -183,6 +183,12 @@ def net_numbers(record: dict, *, units: str, mm_per_unit: float,
         rows.append(["boundary panels crossing themselves or overlapping",
                      crossings["self_crossing"] + crossings["overlapping"]
                      + crossings["edge_clashes"], "count"])
+    for check in (props.get("limits") or {}).values():
+        # a fabrication limit checked on the net (`fabplan.fabricate.limits`), as recorded
+        rows.append([f"{check['words']}: limit ({check['option']})", check["limit"], check["unit"]])
+        rows.append([f"{check['words']}: {check['parts']} over the limit", check["over"], "count"])
+        if check["worst"] is not None:
+            rows.append([f"{check['words']}: largest", check["worst"], check["unit"]])
     residual = _stat(props, "sphere_residual_relative", "max")
     if residual is not None:
         rows.append(["sphere residual, largest / mean edge", residual, "(ratio)"])
