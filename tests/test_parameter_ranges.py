@@ -40,6 +40,7 @@ BASE = {
     "strips": ["{net}", "--height", "40", "--thickness", "4", "--no-previews", "--workers", "1",
                "-o", "{out}", "-q"],
     "mill": ["{net}", "--tool", "face:D=10", "--no-simulation", "-o", "{out}", "-q"],
+    "arcs": ["{net}", "-o", "{out}/a.3dm", "-q"],
     "study": ["canopy", "-o", "{out}", "-q"],
 }
 
