@@ -3,7 +3,8 @@
 Exit codes: 0 success; 2 bad input or a solver that failed (one-line message, nothing
 written); 3 the optimization stopped without converging (result written, with its
 measured residuals and status), or some panels fit no mold (`molds`: report written, the
-failures listed).
+failures listed), or a part goes past a fabrication limit (`fabplan.fabricate.limits`:
+files written, the limit and the excess named).
 """
 
 from __future__ import annotations

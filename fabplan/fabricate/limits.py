@@ -35,9 +35,8 @@ DEFAULT_MAX_TWIST_DEG_PER_M = 30.0
 (235 / 210000 = 0.11 %): the strip takes its twist elastically as it is assembled."""
 
 DEFAULT_MAX_ARC_ANGLE_DEG = 90.0
-"""A conservative shop default: a quarter circle, the largest arc a roll-bending shop bends
-from a bar without a jig of its own; an arc beyond it rises more than 0.29 of its radius
-over its chord."""
+"""A conservative shop default: a quarter circle; an arc beyond it rises more than 0.29 of
+its radius over its chord, while the arcs of a fair net span a few degrees."""
 
 DEFAULT_MAX_DEVIATION_MM = 20.0
 """The flatness tolerance DIN 18202:2019-07, Table 3, row 6 gives finished walls and wall
