@@ -986,7 +986,8 @@ def _cmd_strips(args) -> int:
     settings.check()
     out = output_argument(args.output, folder=True)
     check_output_folder(out)
-    inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"))}
+    inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"),
+                                                      (args.design, "the design"))}
     _folder_apart(out, [*STRIP_FILES, "strips.3dm", "strips.glb"], inputs)
     started = time.perf_counter()
     mesh = load_net(args.net)
@@ -995,6 +996,11 @@ def _cmd_strips(args) -> int:
                       what=f"{args.net}: strips of a net of {len(mesh.face_sizes)} faces",
                       fix="plan the strips of a coarser net or of parts of it")
     _check_units(args, mesh, settings.units)
+    design = None
+    if args.design is not None:
+        from .design.load import load_design
+
+        design = load_design(args.design, triangles=args.triangles)
     # the stages of `plan_strips`, one by one so that each shows its progress
     progress = _progress(args)
     planning = time.perf_counter()
@@ -1008,6 +1014,10 @@ def _cmd_strips(args) -> int:
     plan = StripPlan(strips=strips, parts=parts, nesting=nesting,
                      seconds=time.perf_counter() - planning,
                      limits=strip_limit_checks(strips, parts, constant_radius=claim is not None))
+    if design is not None:
+        plan.limits.append(deviation_check(
+            design.distances(mesh.vertices), units=settings.units,
+            max_deviation=args.max_deviation_mm / MM_PER_UNIT[settings.units]))
     with progress.stage(f"writing {len(nesting.sheets)} sheets and checking them"), \
             _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
         files = plan.write(out, previews=not args.no_previews,
@@ -1596,6 +1606,17 @@ def _add_strips(sub: Any) -> None:
     _add_number(p, "--boundary-member", metavar="MM",
                 help="thickness of the boundary member strips end against (default "
                      "--thickness)")
+    p.add_argument("--design", metavar="SURFACE",
+                   help="the design the net lies on (a mesh file, a built-in surface spec or "
+                        "a .3dm NURBS surface as for `fabplan layout`): the net's vertices are "
+                        "checked against --max-deviation-mm from it")
+    _add_number(p, "--triangles", default=20000, metavar="N",
+                help="triangles of the --design's triangulation, where the exact surface is "
+                     "searched from (default 20000)")
+    _add_number(p, "--max-deviation-mm", default=DEFAULT_MAX_DEVIATION_MM, metavar="MM",
+                help="with --design: the largest distance of a net vertex from the design, in "
+                     f"mm; a net farther off ends the run in exit 3 (default "
+                     f"{DEFAULT_MAX_DEVIATION_MM:g}, see docs/fabrication-limits.md)")
     p.add_argument("--splice", choices=["overlap", "lap"], default="overlap",
                    help="joint of a strip split to fit the sheets (default overlap)")
     _add_number(p, "--splice-length", metavar="MM",

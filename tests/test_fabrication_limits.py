@@ -241,6 +241,25 @@ def test_molds_without_a_design_check_no_deviation(hypar_net, tmp_path):
     assert json.loads((out / "molds.json").read_text())["limits"] == {}
 
 
+# ---------------------------------------------------------------- deviation: strips
+@pytest.mark.parametrize("limit_mm, code", [(0.01, 3), (None, 0)])
+def test_strips_check_the_net_against_its_design(hypar_net, tmp_path, capsys, limit_mm, code):
+    out = tmp_path / "strips"
+    limit = [] if limit_mm is None else ["--max-deviation-mm", str(limit_mm)]
+    assert main(["strips", str(hypar_net), *STRIPS, "--design", "hyperbolic-paraboloid", *limit,
+                 "-o", str(out)]) == code
+    printed, err = capsys.readouterr()
+    check = json.loads((out / "strips.json").read_text())["summary"]["limits"]["max_deviation_mm"]
+    assert check["limit"] == (limit_mm or 20.0) and check["measured"] == 121
+    assert check["exceeded"] == (code == 3) and (check["over"] > 0) == (code == 3)
+    assert 0 < check["worst"] < 1.0
+    if code == 3:
+        assert "(--max-deviation-mm)" in _warning(err)
+    else:
+        assert "limit: all 121 vertices within the largest deviation from the design of 20 mm " \
+               f"(up to {check['worst']:.3g} mm)" in printed
+
+
 # -------------------------------------------------------------------- the definitions
 def test_the_study_names_the_shared_limits_in_the_same_words():
     from fabplan.study.checks import LIMIT_NAMES
