@@ -1058,14 +1058,16 @@ def reproduce_commands(c: CandidateResult, study: Study) -> list[list[str]]:
     """The commands that give a candidate's molds (and strips) from the files in its
     folder, as the study planned them: `fabplan molds` on ``net.obj`` (with its boundary
     panels, ``net.boundary.obj``) at the candidate's mold tolerance and step limit, on the
-    design's patches for a net that glides on it; `fabplan strips` with the study's strip
-    options. Run in the candidate's folder."""
+    design's patches for a net that glides on it (checked against the study's deviation
+    limit); `fabplan strips` with the study's strip options. Run in the candidate's
+    folder."""
     units = study.design.units
     limits = study.limits_of(c.candidate)
     molds = ["fabplan", "molds", "net.obj", "--tolerance-mm", f"{limits.mold_tolerance_mm!r}",
              "--step-limit", f"{limits.panel_step_limit_mm!r}", "--units", units]
     if c.molds is not None and c.molds.panel_surface == "design":
-        molds += ["--panel-surface", "design", "--design", study.design.source]
+        molds += ["--panel-surface", "design", "--design", study.design.source,
+                  "--max-deviation-mm", f"{limits.max_deviation_mm!r}"]
         if study.design.triangles is not None:
             molds += ["--triangles", str(study.design.triangles)]
     molds += ["-o", "reproduced/molds"]
