@@ -15,8 +15,8 @@ code 3 when a part exceeds one. The defaults and where they come from are in
   the largest difference of a strip part from the common arc (`fabplan.fabricate.nesting.
   congruence`), ``strips --tolerance`` (the cutting tolerance, as in a study).
 - ``max_deviation_mm``: the largest distance of a net vertex from its design or reference,
-  ``optimize --max-deviation`` (model units, also held in the solve) and ``molds
-  --max-deviation-mm``.
+  ``optimize --max-deviation`` (model units, also held in the solve), ``molds
+  --max-deviation-mm`` and ``strips --max-deviation-mm`` (with ``--design``).
 """
 
 from __future__ import annotations
