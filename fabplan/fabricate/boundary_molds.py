@@ -92,7 +92,7 @@ class BoundaryFitSettings:
     outline_weight: float = 0.05
     outline_weights: tuple[float, ...] = (0.3, 1.0, 3.0)
     rings: int = 2
-    sweeps: int = 6
+    sweeps: int = 12
     flat: bool = True
     split_reach: float = 0.1
 

@@ -240,7 +240,7 @@ OFF_DESIGN_TOUCH = 1e-2
 
 def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05,
                    touch: float = TOUCH, patch_gaps: bool = True,
-                   follow_net: bool = False) -> BoundaryPanels:
+                   follow_net: bool = False, follow: tuple | None = None) -> BoundaryPanels:
     """The boundary panels of a net laid out on a design (see the module's text).
 
     Parameters
@@ -255,6 +255,10 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     follow_net : the net left the design (optimized off it): the panels' points off the
         net stand off the design as the net does near them (`_follow_net`), so that a
         boundary panel continues its net instead of stepping down to the design.
+    follow : with `follow_net`, ``(points, surface)``: the points (k, 3) the panels
+        follow instead of the net's vertices, and the surface they stand off (a net
+        solved past the design's edge on the design continued there, and that
+        continuation: `fabplan.layout.margin`). Default: the net and the design.
 
     Returns
     -------
@@ -343,9 +347,10 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     # where the panels stand over the design: their points before the lift (which is
     # along the design's normals)
     footprint = vertices
+    followed = (mesh.vertices, design) if follow is None else follow
     if follow_net and len(vertices) > mesh.vertex_count:
         # lifted before the outlines are checked: what crosses is judged where it is cut
-        offset = _follow_net(vertices[mesh.vertex_count:], mesh.vertices, design)
+        offset = _follow_net(vertices[mesh.vertex_count:], *followed)
         # the points on the net's sides are where the net is already
         offset[on_side[mesh.vertex_count:]] = 0.0
         vertices = vertices.copy()
@@ -382,7 +387,7 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         lifted = np.zeros((len(extra.points), 3))
         if follow_net and len(extra.points):
             # the patches' new points are on the design: they stand off it with the net too
-            lifted = _follow_net(extra.points, mesh.vertices, design)
+            lifted = _follow_net(extra.points, *followed)
             offset = np.vstack([offset, lifted])
         vertices = np.vstack([vertices, extra.points + lifted])
         footprint = np.vstack([footprint, extra.points])
@@ -787,15 +792,17 @@ def _ids(values, count: int) -> np.ndarray:
 
 
 def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout, *,
-                        touch: float = TOUCH, follow_net: bool = False) -> BoundaryPanels | None:
+                        touch: float = TOUCH, follow_net: bool = False,
+                        follow: tuple | None = None) -> BoundaryPanels | None:
     """Trim a net solved from `layout` to the design (`trim_to_design`), attach the panels
     to `result` (written beside its OBJ) and record what they give in its properties:
     ``coverage`` (full and boundary panels), ``coverage_net`` (full panels only) and
     ``boundary_panels`` (`BoundaryPanels.record`). A net the overlays fail on gets none,
     and the reason under ``boundary_panels.error``. `touch`: as in `trim_to_design`
-    (`OFF_DESIGN_TOUCH` for a net that left the design), `follow_net` too."""
+    (`OFF_DESIGN_TOUCH` for a net that left the design), `follow_net` and `follow` too."""
     try:
-        panels = trim_to_design(result.mesh, layout, touch=touch, follow_net=follow_net)
+        panels = trim_to_design(result.mesh, layout, touch=touch, follow_net=follow_net,
+                                follow=follow)
     except shapely.errors.GEOSException as exc:
         # the overlays failed on a degenerate net: it is reported without boundary panels
         coverage = net_coverage(result.mesh, layout.design, layout.panel_size)

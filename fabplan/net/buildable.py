@@ -50,11 +50,15 @@ class BuildLimits:
         count as an edge jump (reported, not part of buildable).
     max_deviation : largest distance of a vertex from the reference surface (model
         units); None: no limit.
+    deviation_vertices : (k,) int, the vertices the limit holds at; None: all. A net
+        continued past its design's edge (`fabplan.layout.margin`) is held where it will
+        be built: not at its tips (in no star) nor its rows beyond the edge.
     """
 
     max_line_turn_deg: float = 90.0
     max_edge_ratio: float = 3.0
     max_deviation: float | None = None
+    deviation_vertices: np.ndarray | None = None
 
 
 def best_plane_normals(X: np.ndarray, mesh: QuadMesh) -> np.ndarray:
@@ -341,6 +345,8 @@ def measure_buildable(mesh: QuadMesh, X: np.ndarray | None = None, *,
     far_ids, far = np.zeros(0, np.int64), np.zeros(0)
     if reference is not None and limits.max_deviation is not None:
         d = reference.distances(X)
+        if limits.deviation_vertices is not None:
+            d[np.setdiff1d(np.arange(len(d)), limits.deviation_vertices)] = 0.0
         outside = np.flatnonzero(d > limits.max_deviation)
         far_ids, far = _sorted_desc(outside, d[outside])
     return BuildReport(folds=folds, nonconvex_faces=nonconvex_ids, reflex_deg=reflex_deg,

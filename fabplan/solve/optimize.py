@@ -68,6 +68,7 @@ __all__ = [
     "OptimizationResult",
     "boundary_path",
     "check_net_input",
+    "kept_faces",
     "read_fixed",
     "read_handles",
     "solved_parameters",
@@ -216,7 +217,8 @@ def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = Non
     elif closeness:
         families.append(Closeness(reference))
     if max_deviation is not None:
-        families.append(DeviationBound(reference, max_deviation))
+        families.append(DeviationBound(reference, max_deviation,
+                                       (limits or BuildLimits()).deviation_vertices))
     if guards:
         families += [NormalCone(reference, GUARD_CONE_DEG), StarAngleRange(GUARD_STAR_ANGLE_DEG),
                      ConvexQuads(GUARD_CORNER_DEG)]
@@ -358,6 +360,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              extra: tuple = (), guards: bool | None = None,
              settle_free: float | None = None,
              max_deviation: float | None = None, max_line_turn: float = 90.0,
+             deviation_vertices: np.ndarray | None = None,
              progress: Callable[[IterationRecord], None] | None = None
              ) -> OptimizationResult:
     """Optimize `mesh` into a net of type `net`.
@@ -408,6 +411,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         ``parameters["deviation"]`` records the limits tried. None (default): no limit.
     max_line_turn : a converged net's lines turn in the surface by at most this at any
         vertex (degrees, in (0, 180]); over 90 a line doubles back.
+    deviation_vertices : (k,) int, the vertices `max_deviation` holds at (default: all):
+        a net continued past its design's edge is held where it will be built
+        (`fabplan.net.buildable.BuildLimits.deviation_vertices`).
     progress : called after every iteration with its record.
 
     Returns
@@ -431,7 +437,8 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         finite.
     """
     check_limits(max_deviation, max_line_turn)
-    limits = BuildLimits(max_line_turn_deg=max_line_turn, max_deviation=max_deviation)
+    limits = BuildLimits(max_line_turn_deg=max_line_turn, max_deviation=max_deviation,
+                         deviation_vertices=deviation_vertices)
     handle_ids, targets = _handle_arrays(handles, mesh)
     held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
@@ -536,6 +543,47 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         message=_explain(solver, status, build, mesh, angle, attempts if len(attempts) > 1 else [],
                          glide=glide, deviation=deviation),
     )
+
+
+# the statuses of a solve whose residuals are within tolerance: judged again on a part
+_SOLVED = ("converged", "folded", "crumpled", "degenerate", "off-design")
+
+
+def kept_faces(result: OptimizationResult, keep: np.ndarray, reference: ReferenceSurface,
+               max_line_turn: float = 90.0, max_deviation: float | None = None
+               ) -> OptimizationResult:
+    """The part of a solved net on faces `keep` (f,) bool, measured and judged again on
+    its own against `reference` (a net solved on a design continued past its edges, kept
+    where the design is: `fabplan.layout.margin`). Vertices left without a face go; the
+    others keep their order.
+
+    Returns
+    -------
+    OptimizationResult, its status judged on the part (the solve's residuals hold for
+    the whole net), its properties measured on the part, ``parameters["continued"]`` the
+    faces solved and kept.
+    """
+    mesh = result.mesh
+    keep = np.asarray(keep, bool)
+    faces = [f for f, kept in zip(mesh.faces, keep, strict=True) if kept]
+    used = np.unique(np.concatenate(faces)) if faces else np.zeros(0, np.int64)
+    new_id = np.full(mesh.vertex_count, -1)
+    new_id[used] = np.arange(len(used))
+    part = QuadMesh(mesh.vertices[used], [new_id[f] for f in faces], name=mesh.name)
+    limits = BuildLimits(max_line_turn_deg=max_line_turn, max_deviation=max_deviation)
+    build = measure_buildable(part, reference=reference, limits=limits)
+    status = _status("converged", build) if result.status in _SOLVED else result.status
+    free = free_vertices(part)
+    parameters = {**result.parameters,
+                  "free_vertices": {"count": int(free.sum()), "settled": False,
+                                    "largest_move": 0.0},
+                  "continued": {"faces_solved": len(mesh.faces), "faces_kept": len(faces),
+                                "vertices_solved": mesh.vertex_count}}
+    message = "" if status == "converged" else (build.describe() if status in _SOLVED
+                                                else result.message)
+    return replace(result, mesh=part, parameters=parameters, status=status, message=message,
+                   properties=measure_net(part, reference=reference, limits=limits),
+                   boundary_panels=None)
 
 
 def _multilevel_grid(mesh: QuadMesh, net: str, settings: SolverSettings | None, *,

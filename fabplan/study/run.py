@@ -41,10 +41,11 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..fabricate.boundary_molds import BoundaryMolds
     from ..fabricate.molds import MoldPlan
     from ..fabricate.strip_plan import StripPlan
+    from ..layout.margin import ContinuedDesign
     from ..layout.surface_layout import SurfaceLayout
     from ..net.mesh import QuadMesh
     from ..solve.optimize import OptimizationResult
-    from ..solve.solver import IterationRecord
+    from ..solve.solver import IterationRecord, SolverSettings
     from .cache import CandidateCache
 
 __all__ = [
@@ -464,9 +465,9 @@ def _where(exc: BaseException) -> str:
 
 
 #: Layouts of a study by start angle (degrees) and panel size (model units).
-Layouts = dict[tuple[float, float], "SurfaceLayout"]
+Layouts = dict[tuple, "SurfaceLayout"]
 #: Gliding S-nets that the nets leaving the design start from, keyed as `Layouts`.
-Starts = dict[tuple[float, float], "OptimizationResult"]
+Starts = dict[tuple, "OptimizationResult"]
 
 
 def _solve_with_twin(study: Study, design: DesignSurface, candidate: Candidate,
@@ -556,6 +557,11 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                     progress=report)
         if candidate.net == "snet":
             starts[key] = net
+    elif _on_molds(study, candidate) and (continued := _continued(study, design, size)):
+        # curved panels on molds: the net is solved past the design's edge, so that its
+        # boundary panels continue it within the deviation limit
+        net, layout = _solve_continued(study, design, candidate, continued, angle, size,
+                                       layouts, starts, settings, report, say)
     else:
         if key not in starts and several:
             # the fairest S-net starts the nets that leave the design, on its own layout
@@ -590,6 +596,68 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     net.properties["units"] = study.design.units     # read back by the commands on net.obj
     return CandidateResult(candidate, metrics={"seconds": seconds}, net=net,
                            singular_points=None if layout is None else layout.singular_points)
+
+
+def _on_molds(study: Study, candidate: Candidate) -> bool:
+    """The candidate's panels are curved panels on molds: not a lamella study's strips
+    (they end on the net's own settled tips) nor flat panels (their boundary panels are
+    cut flat in the planes of the net's sides: `fabplan.fabricate.flat_boundary`)."""
+    from ..solve.net_types import get_net
+
+    return not is_lamella_study(study) and not get_net(candidate.net).planar_faces
+
+
+def _continued(study: Study, design: DesignSurface, size: float) -> ContinuedDesign | None:
+    """The design continued past its edges for the nets that leave it
+    (`fabplan.layout.margin`), made once per panel size; None where it cannot be."""
+    from ..layout.margin import MARGIN_PANELS, continued_design
+
+    cache = design.__dict__.setdefault("_continued", {})
+    if size not in cache:
+        cache[size] = continued_design(design, MARGIN_PANELS * size)
+    return cache[size]
+
+
+def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
+                     continued: ContinuedDesign, angle: float, size: float, layouts: Layouts,
+                     starts: Starts, settings: SolverSettings, report: Callable,
+                     say: Callable[[str], None]) -> tuple[OptimizationResult, SurfaceLayout]:
+    """A net that leaves the design, solved on the design continued past its edges: laid
+    out there, started from the S-net glided there, held to the deviation limit at the
+    vertices of its stars; the faces over the design are kept, and its boundary panels
+    follow the whole net solved (`fabplan.layout.margin`).
+
+    Returns
+    -------
+    net : OptimizationResult, the faces kept, with their boundary panels.
+    layout : the layout read on the design itself.
+    """
+    from ..layout.margin import design_layout, faces_on_design, held_vertices
+    from ..layout.surface_layout import glide, layout_surface
+    from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
+    from ..solve.optimize import kept_faces, optimize
+
+    key = (angle, size, "continued")
+    if key not in layouts:
+        say(f"    layout at {angle:g} deg, panel size {size:g}, on the design continued "
+            "past its edges")
+        layouts[key] = layout_surface(continued.design, size, angle=angle)
+    if key not in starts:
+        starts[key] = glide(layouts[key], "snet", settings=settings, boundary_panels=False)
+    limits = study.limits_of(candidate)
+    limit = DEVIATION_HELD * limits.max_deviation_mm / study.design.mm_per_unit
+    start = starts[key].mesh
+    solved = optimize(start, candidate.net, angle=candidate.angle, radius=candidate.radius,
+                      reference=continued.design.reference, settings=settings,
+                      max_deviation=limit, deviation_vertices=held_vertices(start, continued),
+                      progress=report)
+    net = kept_faces(solved, faces_on_design(solved.mesh, continued), design.reference,
+                     max_deviation=limit)
+    layout = design_layout(layouts[key], continued, design)
+    held = np.unique(np.asarray(solved.mesh.stars).ravel())
+    add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True,
+                        follow=(solved.mesh.vertices[held], continued.design))
+    return net, layout
 
 
 def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateResult,

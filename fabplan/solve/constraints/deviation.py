@@ -30,32 +30,42 @@ class DeviationBound(Constraint):
     reference : surface in model units, with ``closest_points`` (a `ReferenceSurface`).
     limit : the largest distance allowed (model units, > 0). It may be changed between
         runs of a solver (a continuation tightening it).
+    vertices : (k,) int, the vertices held to it; None (default): every vertex. A vertex
+        in no star (a zigzag tip) is placed after the solve, or lies past the design's
+        edge where the net is continued, and is left out.
     """
 
     name = "deviation"
 
-    def __init__(self, reference, limit: float):
+    def __init__(self, reference, limit: float, vertices: np.ndarray | None = None):
         if not (np.isfinite(limit) and limit > 0):
             raise ValueError(f"the deviation limit must be a positive length, got {limit}")
         self.reference = reference
         self.limit = float(limit)
+        self.vertices = None if vertices is None else np.asarray(vertices, np.int64)
+
+    def _held(self, state) -> np.ndarray:
+        """(k,) int, the vertices held to the limit."""
+        if self.vertices is None:
+            return np.arange(state.mesh.vertex_count)
+        return self.vertices
 
     def declare(self, state):
-        return {f"{self.name}-band": (state.mesh.vertex_count,)}
+        return {f"{self.name}-band": (len(self._held(state)),)}
 
     def prepare(self, state):
-        model = state.X * state.length_scale + state.origin
+        model = state.X[self._held(state)] * state.length_scale + state.origin
         foot, self._normal, _ = self.reference.closest_points(model)
         self._foot = (foot - state.origin) / state.length_scale
 
     def distances(self, state) -> np.ndarray:
-        """(n,) float, distance of each vertex from its closest point (normalized units),
-        as found by the last `prepare`."""
-        return np.linalg.norm(state.X - self._foot, axis=1)
+        """(k,) float, distance of each vertex held from its closest point (normalized
+        units), as found by the last `prepare`."""
+        return np.linalg.norm(state.X[self._held(state)] - self._foot, axis=1)
 
     def _signed(self, state) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distances (n,) and their gradients (n, 3), normalized units."""
-        d = state.X - self._foot
+        """Signed distances (k,) and their gradients (k, 3), normalized units."""
+        d = state.X[self._held(state)] - self._foot
         length = np.linalg.norm(d, axis=1)
         side = np.where(np.sum(d * self._normal, axis=1) < 0, -1.0, 1.0)
         # on the surface the offset has no direction: the surface normal is its limit
@@ -71,7 +81,8 @@ class DeviationBound(Constraint):
             signed, 0.0, self.limit / state.length_scale)
 
     def columns(self, state):
-        return np.c_[state.blocks.index("vertices"), state.blocks.index(f"{self.name}-band")]
+        return np.c_[state.blocks.index("vertices")[self._held(state)],
+                     state.blocks.index(f"{self.name}-band")]
 
     def evaluate(self, state):
         signed, gradient = self._signed(state)
