@@ -563,3 +563,33 @@ def test_passes_on_a_net_off_its_design_gouge_it_with_exit_3_saying_why(tmp_path
     assert record["against_net"]["max_gouge_mm"] <= 0.005
     assert err[-1].startswith("fabplan: warning: the simulated cut gouges the design by ")
     assert "off the design" in err[-1] and "--paths-on design" in err[-1]
+
+
+def test_a_design_that_misses_part_of_the_net_is_said_in_a_note():
+    """A design covering half the net (its x > 0 half): the rest of the cut is not
+    measured against anything, and the plan's notes say how much the design reaches."""
+    from fabplan.design.parametric import ParametricSurface
+    from fabplan.fabricate.mill_report import mill_net
+
+    def half_cap(u, v):
+        return np.stack([u, v, 300.0 - np.sqrt(300.0**2 - u * u - v * v)], axis=-1)
+
+    design = ParametricSurface("half", half_cap, ((0.0, 50.0), (-50.0, 50.0))).triangulate(40)
+    result = mill_net(bowl_grid(), parse_tool("face:D=40"), MillSettings(),
+                      simulation=SimulationSettings(step_mm=1.5), conventional=False,
+                      design=design)
+    distance = result.net_distance
+    assert distance is not None and distance.coverage is not None
+    assert 0.45 < distance.coverage < 0.55
+    assert result.record()["net_from_design"]["design_covers_part"] == distance.coverage
+    assert any(f"reaches only {100 * distance.coverage:.1f} %" in note for note in result.plan.notes)
+    # the nodes beyond the design's edge stay on the net's vertices, the others on it
+    plan = result.plan
+    nodes = plan.path.vertex >= 0
+    beyond = plan.path.contact[nodes, 0] < -1e-9
+    assert beyond.any() and (~beyond).any()
+    vertex = plan.path.vertex[nodes]
+    assert np.abs(plan.path.contact[nodes][beyond] - bowl_grid().vertices[vertex[beyond]]).max() < 1e-9
+    assert plan.node_shift_mm.max() < 1e-9   # the half design is the net's own sphere
+    assert any(f"{beyond.sum()} of {nodes.sum()} pass nodes have no point of the design" in note
+               for note in plan.notes)

@@ -54,6 +54,7 @@ from .milling import (
     MillPlan,
     MillSettings,
     MillTool,
+    beyond_design_notes,
     choose_stride,
     describe_region,
     pass_lines,
@@ -563,8 +564,9 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *
                nodes.vertex[run]) for run in lines.pass_runs(stride)]
     placed_on, shift = "net", np.zeros(0)
     if design is not None and settings.paths_on == "design":
-        passes, shift = place_passes_on_design(passes, design, settings.mm_per_unit)
+        passes, shift, beyond = place_passes_on_design(passes, design, settings.mm_per_unit)
         placed_on = "design"
+        notes += beyond_design_notes(beyond)
     path = trace_passes(passes, pose, settings.chordal_tolerance_mm)
     ahead, behind = _flank_reach(safety, tool)
     return ConePlan(net=mesh.name, tool=tool, settings=settings, path=path, margin_mm=margin,

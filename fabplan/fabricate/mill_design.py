@@ -132,7 +132,7 @@ def _exact_heights(parametric: Any, uv: np.ndarray, gx: np.ndarray, gy: np.ndarr
 
 
 def design_heights(design: Any, target: HeightTarget, mm_per_unit: float, *,
-                   chunk: int = 2_000_000) -> np.ndarray:
+                   chunk: int = 1_000_000) -> np.ndarray:
     """The design's heights on the grid of a height map: where each vertical line of the
     mill frame crosses the design.
 
@@ -246,6 +246,7 @@ class NetDistance:
         simulation measures without a design) above and below the design along the mill
         direction, the largest on the simulation grid (None without a simulation).
     cells : grid points where both are known.
+    part_cells : grid points of the part (where the net's surface is known).
     """
 
     vertex_max_mm: float
@@ -253,13 +254,20 @@ class NetDistance:
     above_max_mm: float | None = None
     below_max_mm: float | None = None
     cells: int = 0
+    part_cells: int = 0
+
+    @property
+    def coverage(self) -> float | None:
+        """Share of the part the design reaches on the grid (None without a grid)."""
+        return self.cells / self.part_cells if self.part_cells else None
 
     def to_json(self) -> dict:
         return {"units": "mm", "vertex_max_mm": self.vertex_max_mm,
                 "vertex_mean_mm": self.vertex_mean_mm,
                 "surface_above_design_max_mm": self.above_max_mm,
                 "surface_below_design_max_mm": self.below_max_mm,
-                "measured_cells": self.cells}
+                "measured_cells": self.cells, "part_cells": self.part_cells,
+                "design_covers_part": self.coverage}
 
 
 def net_distance_from_design(design: Any, vertices_mm: np.ndarray, mm_per_unit: float,
@@ -280,6 +288,7 @@ def net_distance_from_design(design: Any, vertices_mm: np.ndarray, mm_per_unit: 
     distance = design.distances(X) * mm_per_unit
     result = NetDistance(vertex_max_mm=float(distance.max()), vertex_mean_mm=float(distance.mean()))
     if net_heights is not None and heights is not None:
+        result.part_cells = int(np.isfinite(net_heights).sum())
         gap = net_heights - heights
         known = np.isfinite(gap)
         if known.any():

@@ -228,6 +228,11 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
             design, mesh.vertices * scale, scale, None if net_target is None else net_target.z,
             None if target is None else target.z)
         seconds["design_distance"] = time.perf_counter() - clock
+        if distance.coverage is not None and distance.coverage < 0.99:
+            plan.notes.append(
+                f"the design reaches only {100 * distance.coverage:.1f} % of the part the net's "
+                "faces cover, seen from the mill direction: the rest is not measured (is it the "
+                "net's design, in the net's units?)")
     seconds["total"] = time.perf_counter() - started
     return MillResult(plan=plan, target=target, simulation=adaptive, conventional=ball,
                       simulation_settings=sim_settings, seconds=seconds,

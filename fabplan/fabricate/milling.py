@@ -64,6 +64,7 @@ __all__ = [
     "walk_across_lines",
     "trace_passes",
     "place_passes_on_design",
+    "beyond_design_notes",
 ]
 
 
@@ -995,10 +996,14 @@ def trace_passes(passes: Iterable[tuple[np.ndarray, ...]],
 
 
 def place_passes_on_design(passes: list, design: Any, mm_per_unit: float
-                           ) -> tuple[list, np.ndarray]:
+                           ) -> tuple[list, np.ndarray, np.ndarray]:
     """The passes' nodes moved onto the design: each contact to the design's closest point
     to it, each normal to the design's there (on the tool's side); the cutting directions
     and safety radii stay the net's (the frames project them into the new tangent planes).
+
+    A node whose closest point is not straight below or above it (the line to it more
+    than about 6 degrees off the design's normal: a point on the design's boundary, the
+    node beyond it) stays on its vertex.
 
     Parameters
     ----------
@@ -1011,20 +1016,44 @@ def place_passes_on_design(passes: list, design: Any, mm_per_unit: float
     -------
     passes : the same, contacts and normals on the design.
     shift : (total nodes,) float, distance each node moved (mm), in pass order.
+    beyond : (total nodes,) bool, the nodes left on their vertices (no design beneath).
     """
     from .mill_design import design_frames
 
     if not passes:
-        return passes, np.zeros(0)
+        return passes, np.zeros(0), np.zeros(0, bool)
     contact = np.concatenate([p[0] for p in passes])
     normal = np.concatenate([p[1] for p in passes])
     foot, design_normal = design_frames(design, contact, mm_per_unit)
     design_normal = np.where((np.sum(design_normal * normal, axis=1) < 0)[:, None],
                              -design_normal, design_normal)
+    gap = contact - foot
+    along = np.sum(gap * design_normal, axis=1)
+    sideways = np.linalg.norm(gap - along[:, None] * design_normal, axis=1)
+    beyond = sideways > 0.1 * np.abs(along) + 1e-9 * max(float(np.abs(contact).max()), 1.0)
+    foot = np.where(beyond[:, None], contact, foot)
+    design_normal = np.where(beyond[:, None], normal, design_normal)
     bounds = np.cumsum([len(p[0]) for p in passes])[:-1]
     moved = [(c, n, *rest) for (_, _, *rest), c, n in
              zip(passes, np.split(foot, bounds), np.split(design_normal, bounds), strict=True)]
-    return moved, np.linalg.norm(foot - contact, axis=1)
+    return moved, np.linalg.norm(foot - contact, axis=1), beyond
+
+
+def beyond_design_notes(beyond: np.ndarray) -> list[str]:
+    """The note on pass nodes left on the net, beyond the design (`place_passes_on_design`).
+
+    Examples
+    --------
+    >>> print(*beyond_design_notes(np.array([False, True, True])))
+    2 of 3 pass nodes have no point of the design straight beneath them (the design ends \
+before them): they stay on the net
+    >>> beyond_design_notes(np.zeros(2, bool))
+    []
+    """
+    if not beyond.any():
+        return []
+    return [f"{int(beyond.sum())} of {len(beyond)} pass nodes have no point of the design "
+            "straight beneath them (the design ends before them): they stay on the net"]
 
 
 def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
@@ -1110,8 +1139,9 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
         passes.append((nodes.point[run], nodes.normal[run], cross, safety[run], nodes.vertex[run]))
     placed_on, shift = "net", np.zeros(0)
     if design is not None and settings.paths_on == "design":
-        passes, shift = place_passes_on_design(passes, design, settings.mm_per_unit)
+        passes, shift, beyond = place_passes_on_design(passes, design, settings.mm_per_unit)
         placed_on = "design"
+        notes += beyond_design_notes(beyond)
 
     def pose(p, n, c, R, motion):
         tip, axis, tilt = circle_tool_pose(p, n, c, -motion, R, r, tool.corner_mm)
