@@ -570,9 +570,9 @@ def _mill_design(args: argparse.Namespace, units: str) -> Any:
                 design = load_design(spec, triangles=int(layout.get("design_triangles") or 40000),
                                      resolution=None if resolution is None else tuple(resolution))
             except (InputError, OSError) as exc:
-                _warn(f"the design {spec} that {Path(args.net).with_suffix('.json')} names could "
-                      f"not be read ({exc}): the cut is measured against the net's surface",
-                      args.quiet)
+                _warn_after(args, f"the design {spec} that {Path(args.net).with_suffix('.json')} "
+                                  f"names could not be read ({exc}): the cut was measured "
+                                  "against the net's surface")
                 return None
     if design is not None and design.units is not None and design.units != units \
             and design.units in MM_PER_UNIT:

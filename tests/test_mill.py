@@ -593,3 +593,16 @@ def test_a_design_that_misses_part_of_the_net_is_said_in_a_note():
     assert plan.node_shift_mm.max() < 1e-9   # the half design is the net's own sphere
     assert any(f"{beyond.sum()} of {nodes.sum()} pass nodes have no point of the design" in note
                for note in plan.notes)
+
+
+def test_a_design_its_record_names_that_is_gone_is_said_and_the_net_measured(tmp_path, capsys):
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    gone = tmp_path / "moved.stl"
+    (tmp_path / "bowl.json").write_text(json.dumps(
+        {"properties": {"units": "mm", "layout": {"design_spec": str(gone)}}}))
+    out = tmp_path / "out"
+    assert main(["mill", str(net), "--tool", "face:D=40", "--no-simulation", "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"the design {gone} that {tmp_path / 'bowl.json'} names could not be read" in err
+    record = json.loads((out / "mill.json").read_text())
+    assert record["target"]["surface"] == "net" and record["paths"]["placed_on"] == "net"
