@@ -555,17 +555,20 @@ def _cmd_mill(args) -> int:
     tool = parse_tool(args.tool)
     settings = MillSettings(along=args.along, units=_net_units(args, args.net, default="mm"),
                             margin_mm=args.margin,
-                            scallop_mm=args.scallop, side=args.side)
+                            scallop_mm=args.scallop, side=args.side, paths_on=args.paths_on)
     settings.check()
     out = output_argument(args.output, folder=True)
     check_output_folder(out)
-    inputs = _net_inputs(args.net)
+    inputs = {**_net_inputs(args.net), **_file_inputs((args.design, "the design")),
+              **_layout_design_inputs(args.net)}
     _folder_apart(out, [*MILL_FILES, "paths.3dm"], inputs)
     mesh = load_net(args.net)
     progress = _progress(args)
+    with progress.stage("reading the design"):
+        design = _mill_design(args, settings.units)
     with progress.stage("planning the passes and simulating the cut"):
         result = mill_net(mesh, tool, settings, simulate=not args.no_simulation,
-                          simulation=SimulationSettings(step_mm=args.sim_step))
+                          simulation=SimulationSettings(step_mm=args.sim_step), design=design)
     with progress.stage("writing the tool paths and the report"):
         files = write_mill_report(result, out, rhino=args.rhino, protect=inputs)
     if args.quiet:
@@ -576,11 +579,55 @@ def _cmd_mill(args) -> int:
         for note in result.plan.notes:
             _warn(note)
     if not result.gouge_free and result.simulation is not None:
-        print(f"fabplan: warning: the simulated cut gouges the target by "
-              f"{result.simulation.max_gouge_mm:.4g} mm: give a larger --margin "
+        why = "give a larger --margin"
+        distance = result.net_distance
+        if distance is not None and result.plan.placed_on == "net":
+            why = (f"the passes follow the net, which is up to "
+                   f"{distance.vertex_max_mm:.4g} mm off the design: place them on "
+                   "the design (--paths-on design) or give a larger --margin")
+        print(f"fabplan: warning: the simulated cut gouges "
+              f"{'the net' if result.design is None else 'the design'} by "
+              f"{result.simulation.max_gouge_mm:.4g} mm: {why} "
               f"(details in {out / 'report.html'})", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     return 0
+
+
+def _mill_design(args: argparse.Namespace, units: str) -> Any:
+    """The design `fabplan mill` measures against: ``--design``, else the design the
+    net's record (``NET.json``, a layout's) names, else None (the net's own surface).
+
+    A design its record names that cannot be loaded again (a file moved) is said in a
+    warning, and the net's surface is measured instead. A design whose file states other
+    units than the net's is scaled to the net's."""
+    from .design.load import load_design
+
+    design = None
+    if args.design is not None:
+        design = load_design(args.design, triangles=args.triangles)
+    else:
+        layout = _net_properties(args.net).get("layout")
+        spec = (layout.get("design_spec") or layout.get("design")) if isinstance(layout, dict) else None
+        if isinstance(spec, str) and spec:
+            assert isinstance(layout, dict)
+            resolution = layout.get("design_resolution")
+            try:
+                design = load_design(spec, triangles=int(layout.get("design_triangles") or 40000),
+                                     resolution=None if resolution is None else tuple(resolution))
+            except (InputError, OSError) as exc:
+                _warn_after(args, f"the design {spec} that {Path(args.net).with_suffix('.json')} "
+                                  f"names could not be read ({exc}): the cut was measured "
+                                  "against the net's surface")
+                return None
+    if design is not None and design.units is not None and design.units != units \
+            and design.units in MM_PER_UNIT:
+        from .design.mesh_surface import DesignSurface
+
+        scale = MM_PER_UNIT[design.units] / MM_PER_UNIT[units]
+        scaled = DesignSurface(design.vertices * scale, design.triangles, name=design.name)
+        scaled.units = units
+        return scaled
+    return design
 
 
 def _check_layout_options(args: argparse.Namespace, preset: Any) -> None:
@@ -1510,6 +1557,19 @@ def _add_mill(sub: Any) -> None:
                 help="grid step of the milling simulation (default 0.5)")
     p.add_argument("--no-simulation", action="store_true",
                    help="plan only: no simulated scallop, gouge check or comparison")
+    p.add_argument("--design", metavar="SURFACE",
+                   help="the design the net was made for, which the cut is measured against "
+                        "(the net's distance from it reported apart): a triangle mesh, a "
+                        "Rhino file or a built-in surface spec as for `fabplan layout` "
+                        "(default: the design NET.json names, for a layout's net; else the "
+                        "net's own surface)")
+    _add_number(p, "--triangles", default=40000, metavar="N",
+                help="triangles of a built-in or NURBS --design's triangulation, where its "
+                     "exact surface is searched from (default 40000)")
+    p.add_argument("--paths-on", choices=["design", "net"], default="design",
+                   help="with a design: put the passes' nodes on the design (its closest "
+                        "points to the net's vertices, its normals; default), or keep them "
+                        "on the net's vertices")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the files")
     p.add_argument("--3dm", dest="rhino", action="store_true",
                    help="also write the tool paths as DIR/paths.3dm (a polyline of cutter tips "

@@ -196,6 +196,9 @@ def test_the_chain_on_a_users_design(name, k, tmp_path, capsys):
     if run("mill", "mill", lay, "--tool", f"face:D={tool}", "-o", folder) == 0:
         mill = json.loads((folder / "mill.json").read_text())
         assert (folder / "path.cl").stat().st_size > 0 and mill
+        # the layout's record names its design: the cut is measured against it
+        assert mill["target"]["surface"] == "design" and mill["gouge_check"]["passed"]
+        assert mill["net_from_design"]["units"] == "mm"
 
     arcs = tmp_path / "arcs.3dm"
     code = run("arcs", "arcs", nets["const-radius"], "-o", arcs)

@@ -48,6 +48,21 @@ def bowl_grid(radius: float = 300.0, half: float = 45.0, step: float = 7.5, *,
     return QuadMesh.grid(np.stack([x, y, z], axis=-1), name="bowl.obj")
 
 
+def cap_design(radius: float = 300.0, offset: float = -0.02, half: float = 50.0,
+               resolution: int = 60):
+    """The design of `bowl_grid`'s sphere with its radius changed by `offset` (mm), same
+    centre: with a negative offset the design lies that much above the net, towards the
+    tool (an analytic design: distances and heights are the exact sphere's)."""
+    from fabplan.design.parametric import ParametricSurface
+
+    design_radius = radius + offset
+
+    def cap(u, v):
+        return np.stack([u, v, radius - np.sqrt(design_radius**2 - u * u - v * v)], axis=-1)
+
+    return ParametricSurface("cap", cap, ((-half, half), (-half, half))).triangulate(resolution)
+
+
 def write_net(mesh: QuadMesh, path: Path) -> Path:
     mesh.write_obj(path)
     return path
@@ -107,10 +122,12 @@ def test_every_cl_location_has_its_circle_on_the_safety_sphere(milled):
         assert all(float(row["normal_z"]) > 0 for row in csv.DictReader(handle))
 
 
-def check_cl_geometry(out: Path, mesh: QuadMesh, r: float) -> None:
+def check_cl_geometry(out: Path, mesh: QuadMesh, r: float, design=None) -> None:
     """The circle of every CL location (radius r) on its safety sphere within 1e-6 mm,
     through its contact point and tangent there to the surface and to the cross line; at
-    the nodes the contact, normal and Meusnier radius of the net (computed here)."""
+    the nodes the contact, normal and Meusnier radius of the net (computed here), or with
+    a paraboloid `design` (its `ParametricSurface` parameters) the contact on the design
+    within the net's distance from it and the design's normal there (its closed form)."""
     values, passes = goto_rows(out / "path.cl")
     cut = np.array([p is not None for p in passes])
     tip, axis = values[cut, :3], values[cut, 3:]
@@ -146,13 +163,25 @@ def check_cl_geometry(out: Path, mesh: QuadMesh, r: float) -> None:
     record = json.loads((out / "mill.json").read_text())
     node = col["vertex"] >= 0
     vertex = col["vertex"][node].astype(int)
-    assert np.allclose(contact[node], mesh.vertices[vertex], atol=1e-8)
+    if design is None:
+        assert np.allclose(contact[node], mesh.vertices[vertex], atol=1e-8)
+    else:
+        rx, ry = design["radius_x"], design["radius_y"]
+        x, y, z = contact[node].T
+        assert np.abs(z - x * x / (2 * rx) - y * y / (2 * ry)).max() < 1e-9
+        exact = np.column_stack([-x / rx, -y / ry, np.ones_like(x)])
+        exact /= np.linalg.norm(exact, axis=1)[:, None]
+        assert np.sum(exact * normal[node], axis=1).min() > 1 - 1e-12
+        shift = np.linalg.norm(contact[node] - mesh.vertices[vertex], axis=1)
+        assert shift.max() <= record["net_from_design"]["vertex_max_mm"] + 1e-9
+        assert shift.max() == pytest.approx(record["paths"]["node_shift_from_net_mm"]["max"])
     stars = mesh.stars[np.searchsorted(mesh.stars[:, 0], vertex)] \
         if np.all(np.diff(mesh.stars[:, 0]) > 0) else None
     assert stars is not None and np.array_equal(stars[:, 0], vertex)
     n, R = independent_normals_and_radii(mesh.vertices, stars)
     n *= np.sign(np.sum(n * normal[node], axis=1))[:, None]
-    assert np.abs(np.sum(n * normal[node], axis=1)).min() > 1 - 1e-9
+    # on the design its normal, within the angle the net's normals make with it
+    assert np.abs(np.sum(n * normal[node], axis=1)).min() > 1 - (1e-9 if design is None else 1e-6)
     assert np.allclose(radius[node], R - record["margin_mm"], atol=1e-6)
 
 
@@ -278,6 +307,10 @@ def test_mill_frame_is_a_rotation_with_up_as_z():
 def test_bowl_simulation_has_no_gouge_and_matches_the_prediction(milled):
     out, _ = milled
     record = json.loads((out / "mill.json").read_text())
+    # without a design the target is the net's own surface, and the files say so
+    assert record["target"]["surface"] == "net" and record["gouge_check"]["measured_against"] == "net"
+    assert "net_from_design" not in record and "against_net" not in record
+    assert "the net&#x27;s surface" in (out / "report.html").read_text()
     assert record["gouge_check"]["passed"]
     assert record["simulation"]["max_gouge_mm"] <= 0.005
     # on the coarse 1 mm grid of this quick test the cusps are sampled up to 0.5 mm off
@@ -343,19 +376,26 @@ def test_bad_tool_specs_are_refused(tool):
 # ------------------------------------------------------------------------------ example
 @pytest.mark.slow
 def test_paraboloid_example_mills_without_gouge_and_beats_the_ball_end(tmp_path):
+    from fabplan.design.load import load_design
     from tests.test_examples import load_example
 
     example = load_example("mill_paraboloid")
     result = example.main(["-o", str(tmp_path)])
     record = json.loads((tmp_path / "mill.json").read_text())
+    # measured against the analytic paraboloid, the passes placed on it
+    assert record["target"]["surface"] == "design" and record["paths"]["placed_on"] == "design"
     assert record["gouge_check"]["max_gouge_mm"] <= 0.005
+    assert record["gouge_check"]["measured_against"] == "design"
+    assert 0 < record["net_from_design"]["vertex_max_mm"] < 0.005
+    assert record["against_net"]["max_gouge_mm"] != record["gouge_check"]["max_gouge_mm"]
     predicted, simulated = record["predicted_scallop_mm"], record["simulation"]["max_scallop_mm"]
     assert simulated == pytest.approx(predicted, rel=0.10)
     assert simulated <= 0.01
     assert record["passes"] <= 12
     assert record["comparison"]["scallop_ratio"] >= 5
     assert result.plan.path.pass_count == record["passes"]
-    check_cl_geometry(tmp_path, QuadMesh.from_obj(tmp_path / "net.obj"), 25.0)
+    check_cl_geometry(tmp_path, QuadMesh.from_obj(tmp_path / "net.obj"), 25.0,
+                      design=load_design(example.DESIGN).parametric.parameters)
 
 
 def test_toroidal_entry_matches_the_closed_form_of_an_upright_torus():
@@ -419,3 +459,150 @@ def test_3dm_holds_one_tip_polyline_per_pass_as_in_the_cl_file(tmp_path):
     for k in range(count):
         cl = rows[[p == k for p in passes], :3]
         assert np.allclose(tips[k + 1], cl, atol=1e-6)
+
+
+# ------------------------------------------------------------------------------ design
+def test_a_net_off_its_design_is_milled_on_the_design():
+    """The bowl's net 0.02 mm below its analytic design: passes through the net's
+    vertices gouge the design by those 0.02 mm where the net's own surface sees none;
+    placed on the design they cut it within the tolerance, and the net's distance is
+    reported apart."""
+    from fabplan.fabricate.mill_report import mill_net
+
+    design = cap_design(offset=-0.02)
+    sim = SimulationSettings(step_mm=1.0)
+    runs = {on: mill_net(bowl_grid(), parse_tool("face:D=40"),
+                         MillSettings(scallop_mm=0.003, paths_on=on), simulation=sim,
+                         conventional=False, design=design) for on in ("net", "design")}
+    on_net, on_design = runs["net"], runs["design"]
+    assert on_net.simulation is not None and on_net.against_net is not None
+    assert on_net.against_net.max_gouge_mm <= 0.005 < on_net.simulation.max_gouge_mm
+    assert on_net.simulation.max_gouge_mm == pytest.approx(0.02, abs=0.002)
+    assert not on_net.gouge_free and on_design.gouge_free
+    assert on_design.simulation is not None
+    assert on_design.simulation.max_gouge_mm <= 0.005
+    assert 0 <= on_design.simulation.max_scallop_mm <= on_net.against_net.max_scallop_mm + 0.001
+    for run in runs.values():
+        assert run.net_distance is not None
+        assert run.net_distance.vertex_max_mm == pytest.approx(0.02, abs=1e-6)
+        assert run.net_distance.vertex_mean_mm == pytest.approx(0.02, abs=1e-6)
+        # the net's surface below the design (away from the tool) by about as much
+        assert run.net_distance.below_max_mm == pytest.approx(0.02, abs=0.001)
+        assert run.net_distance.above_max_mm < 0.001
+    assert on_design.plan.node_shift_mm == pytest.approx(0.02, abs=1e-6)
+    # the design heights the cut is measured against are the sphere's
+    target = on_design.target
+    assert target is not None
+    gx, gy = np.meshgrid(target.x, target.y)
+    points = target.origin + np.stack([gx, gy, target.z], axis=-1) @ target.rotation
+    on_sphere = np.linalg.norm(points - [0.0, 0.0, 300.0], axis=-1)
+    assert np.nanmax(np.abs(on_sphere - 299.98)) < 1e-9
+
+
+def _report_rows(html: str) -> dict:
+    """The summary table of a report: quantity -> value text (read here with a regex)."""
+    from html import unescape
+
+    rows = re.findall(r"<tr><td[^>]*>(.*?)</td><td[^>]*>(.*?)</td></tr>", html)
+    return {unescape(key): unescape(value) for key, value in rows}
+
+
+def test_mill_measures_against_the_design_its_record_names_and_files_agree(tmp_path, capsys):
+    """A layout's net (its NET.json names the design, here a mesh file): `fabplan mill`
+    measures against the design without being told, and every design figure of the
+    report is the one in mill.json."""
+    design = tmp_path / "cap.obj"
+    cap_design(offset=-0.02, resolution=150).write(design)
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    (tmp_path / "bowl.json").write_text(json.dumps(
+        {"properties": {"units": "mm", "layout": {"design_spec": str(design)}}}))
+    out = tmp_path / "out"
+    assert main(["mill", str(net), "--tool", "face:D=40", "--sim-step", "1.0",
+                 "--scallop", "0.003", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    record = json.loads((out / "mill.json").read_text())
+    assert record["target"] == {"surface": "design", "design": str(design), "units": "mm",
+                                "measured_against": f"the design {design}"}
+    distance = record["net_from_design"]
+    assert distance["units"] == "mm"
+    # the design is its triangles here: 0.02 mm off the net's sphere, and their chords
+    # up to 0.0004 mm further
+    assert distance["vertex_max_mm"] == pytest.approx(0.02, abs=0.0005)
+    assert record["gouge_check"]["max_gouge_mm"] <= 0.005 and record["gouge_check"]["passed"]
+    rows = _report_rows((out / "report.html").read_text())
+    assert rows["measured against"] == f"the design {design}"
+    assert rows["net's vertices off the design [mm]"] == (
+        f"max {distance['vertex_max_mm']:.4g}, mean {distance['vertex_mean_mm']:.4g}")
+    assert rows["net's surface above / below the design [mm]"] == (
+        f"{distance['surface_above_design_max_mm']:.4g} / "
+        f"{distance['surface_below_design_max_mm']:.4g}")
+    assert rows["simulated gouge against the design [mm]"].startswith(
+        f"{record['gouge_check']['max_gouge_mm']:.4g} (passed")
+    assert rows["simulated scallop against the design [mm]"] == (
+        f"{record['simulation']['max_scallop_mm']:.4g}")
+    assert rows["the same cut against the net's surface: scallop / gouge [mm]"] == (
+        f"{record['against_net']['max_scallop_mm']:.4g} / "
+        f"{record['against_net']['max_gouge_mm']:.4g}")
+    assert rows["passes placed on"].startswith("the design (nodes moved up to "
+                                               f"{record['paths']['node_shift_from_net_mm']['max']:.4g} mm")
+    assert f"up to {distance['vertex_max_mm']:.4g} mm off the design" in said
+
+
+def test_passes_on_a_net_off_its_design_gouge_it_with_exit_3_saying_why(tmp_path, capsys):
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    design = tmp_path / "cap.obj"
+    cap_design(offset=-0.02).write(design)
+    out = tmp_path / "out"
+    code = main(["mill", str(net), "--tool", "face:D=40", "--sim-step", "1.0", "--scallop",
+                 "0.003", "--design", str(design), "--paths-on", "net", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3
+    record = json.loads((out / "mill.json").read_text())
+    assert not record["gouge_check"]["passed"] and record["paths"]["placed_on"] == "net"
+    assert record["gouge_check"]["max_gouge_mm"] > 0.015
+    assert record["against_net"]["max_gouge_mm"] <= 0.005
+    assert err[-1].startswith("fabplan: warning: the simulated cut gouges the design by ")
+    assert "off the design" in err[-1] and "--paths-on design" in err[-1]
+
+
+def test_a_design_that_misses_part_of_the_net_is_said_in_a_note():
+    """A design covering half the net (its x > 0 half): the rest of the cut is not
+    measured against anything, and the plan's notes say how much the design reaches."""
+    from fabplan.design.parametric import ParametricSurface
+    from fabplan.fabricate.mill_report import mill_net
+
+    def half_cap(u, v):
+        return np.stack([u, v, 300.0 - np.sqrt(300.0**2 - u * u - v * v)], axis=-1)
+
+    design = ParametricSurface("half", half_cap, ((0.0, 50.0), (-50.0, 50.0))).triangulate(40)
+    result = mill_net(bowl_grid(), parse_tool("face:D=40"), MillSettings(),
+                      simulation=SimulationSettings(step_mm=1.5), conventional=False,
+                      design=design)
+    distance = result.net_distance
+    assert distance is not None and distance.coverage is not None
+    assert 0.45 < distance.coverage < 0.55
+    assert result.record()["net_from_design"]["design_covers_part"] == distance.coverage
+    assert any(f"reaches only {100 * distance.coverage:.1f} %" in note for note in result.plan.notes)
+    # the nodes beyond the design's edge stay on the net's vertices, the others on it
+    plan = result.plan
+    nodes = plan.path.vertex >= 0
+    beyond = plan.path.contact[nodes, 0] < -1e-9
+    assert beyond.any() and (~beyond).any()
+    vertex = plan.path.vertex[nodes]
+    assert np.abs(plan.path.contact[nodes][beyond] - bowl_grid().vertices[vertex[beyond]]).max() < 1e-9
+    assert plan.node_shift_mm.max() < 1e-9   # the half design is the net's own sphere
+    assert any(f"{beyond.sum()} of {nodes.sum()} pass nodes have no point of the design" in note
+               for note in plan.notes)
+
+
+def test_a_design_its_record_names_that_is_gone_is_said_and_the_net_measured(tmp_path, capsys):
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    gone = tmp_path / "moved.stl"
+    (tmp_path / "bowl.json").write_text(json.dumps(
+        {"properties": {"units": "mm", "layout": {"design_spec": str(gone)}}}))
+    out = tmp_path / "out"
+    assert main(["mill", str(net), "--tool", "face:D=40", "--no-simulation", "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"the design {gone} that {tmp_path / 'bowl.json'} names could not be read" in err
+    record = json.loads((out / "mill.json").read_text())
+    assert record["target"]["surface"] == "net" and record["paths"]["placed_on"] == "net"

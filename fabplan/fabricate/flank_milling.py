@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -53,9 +54,11 @@ from .milling import (
     MillPlan,
     MillSettings,
     MillTool,
+    beyond_design_notes,
     choose_stride,
     describe_region,
     pass_lines,
+    place_passes_on_design,
     trace_passes,
     walk_across_lines,
 )
@@ -484,7 +487,8 @@ def _predicted_scallops(nodes: _ConeNodes, safety: np.ndarray, tool: MillTool,
 
 
 # ---------------------------------------------------------------------------- the plan
-def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -> ConePlan:
+def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
+                       design: Any = None) -> ConePlan:
     """Plan flank milling passes with a cone along one family of an S*-net.
 
     Parameters
@@ -493,6 +497,9 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
         ``settings.units``).
     tool : a cone (`fabplan.fabricate.milling.parse_tool`).
     settings : the options (``margin_mm``: Mannheim radius minus safety radius).
+    design : the `fabplan.design.DesignSurface` the net was made for (its model units), or
+        None; with ``settings.paths_on == "design"`` the passes' nodes are put on it
+        (`fabplan.fabricate.milling.place_passes_on_design`).
 
     Returns
     -------
@@ -553,14 +560,20 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -
         tip, axis, _ = cone_tool_pose(p, n, u, R, tool.angle_deg, tool.radius_mm)
         return tip, axis, np.full(len(p), tilt), R
 
-    path = trace_passes([(nodes.point[run], nodes.normal[run], nodes.ruling[run], safety[run],
-                          nodes.vertex[run]) for run in lines.pass_runs(stride)],
-                        pose, settings.chordal_tolerance_mm)
+    passes = [(nodes.point[run], nodes.normal[run], nodes.ruling[run], safety[run],
+               nodes.vertex[run]) for run in lines.pass_runs(stride)]
+    placed_on, shift = "net", np.zeros(0)
+    if design is not None and settings.paths_on == "design":
+        passes, shift, beyond = place_passes_on_design(passes, design, settings.mm_per_unit)
+        placed_on = "design"
+        notes += beyond_design_notes(beyond)
+    path = trace_passes(passes, pose, settings.chordal_tolerance_mm)
     ahead, behind = _flank_reach(safety, tool)
     return ConePlan(net=mesh.name, tool=tool, settings=settings, path=path, margin_mm=margin,
                     margin_rule=rule, stride=stride, lines=lines.count, predicted_scallop_mm=predicted,
                     meusnier_radius_mm=nodes.radius, side=side,
                     sphere_residual_mm=float(nodes.residual.max()),
-                    seconds=time.perf_counter() - started, notes=notes,
-                    ruling_curvature=nodes.ruling_curvature, foot_offset_mm=nodes.foot_offset,
+                    seconds=time.perf_counter() - started, notes=notes, placed_on=placed_on,
+                    node_shift_mm=shift, ruling_curvature=nodes.ruling_curvature,
+                    foot_offset_mm=nodes.foot_offset,
                     flank_reach_mm=np.array([ahead.min(), behind.min()]))

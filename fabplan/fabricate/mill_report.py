@@ -1,18 +1,21 @@
 """A milling run and its files: ``path.cl``, ``path.csv``, ``mill.json`` and ``report.html``.
 
 `mill_net` plans the curvature-adaptive passes (`fabplan.fabricate.milling`), builds the
-target height map from the net, simulates the planned cut and the conventional one (a
-ball end of the same diameter normal to the surface through the same contact points) with
-`fabplan.fabricate.mill_simulation`, and keeps the evidence side by side.
+target height map, simulates the planned cut and the conventional one (a ball end of the
+same diameter normal to the surface through the same contact points) with
+`fabplan.fabricate.mill_simulation`, and keeps the evidence side by side. The target is the
+design the net was made for when one is given (`fabplan.fabricate.mill_design`): the cut
+is measured against it, and against the net's own surface apart, with the net's distance
+from the design; without one it is the net's surface.
 """
 
 from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -23,6 +26,7 @@ from ..io.rhino_write import Rhino3dmWriter
 from ..net.mesh import QuadMesh
 from ..report import figures, html
 from .flank_milling import plan_flank_milling
+from .mill_design import NetDistance, design_heights, net_distance_from_design
 from .mill_simulation import (
     Cutter,
     HeightTarget,
@@ -30,6 +34,7 @@ from .mill_simulation import (
     SimulationSettings,
     ball_end_path,
     height_target,
+    measure_cut,
     simulate_milling,
 )
 from .milling import MillPlan, MillSettings, MillTool, plan_face_milling
@@ -47,11 +52,16 @@ class MillResult:
     Attributes
     ----------
     plan : the passes.
-    target : the target height map (None without simulation).
-    simulation : the simulated adaptive cut (None without simulation).
+    target : the target height map (None without simulation): the design's heights when
+        a design is given, else the net's surface (the spline through its vertices).
+    simulation : the simulated adaptive cut, measured against `target` (None without
+        simulation).
     conventional : the simulated ball-end cut through the same contacts (or None).
     simulation_settings : resolution used.
     seconds : time per stage.
+    design : name of the design measured against (None: the net's surface).
+    against_net : with a design, the same adaptive cut measured against the net's surface.
+    net_distance : with a design, the net's distance from it.
     """
 
     plan: MillPlan
@@ -60,6 +70,16 @@ class MillResult:
     conventional: SimulationResult | None
     simulation_settings: SimulationSettings
     seconds: dict = field(default_factory=dict)
+    design: str | None = None
+    against_net: SimulationResult | None = None
+    net_distance: NetDistance | None = None
+
+    @property
+    def measured_against(self) -> str:
+        """What the cut is measured against, in words."""
+        if self.design is None:
+            return "the net's surface (the spline through its vertices; no design given)"
+        return f"the design {self.design}"
 
     @property
     def gouge_free(self) -> bool:
@@ -77,12 +97,23 @@ class MillResult:
             "step_mm": settings.step_mm, "pose_spacing_mm": settings.pose_spacing_mm,
             "golden_rounds": settings.golden_rounds, "body_mm": settings.body_mm,
             "end_trim_mm": settings.end_trim_mm}
+        record["target"] = {"surface": "net" if self.design is None else "design",
+                            "design": self.design, "measured_against": self.measured_against,
+                            "units": "mm"}
+        if self.net_distance is not None:
+            record["net_from_design"] = self.net_distance.to_json()
         if sim is not None:
             predicted = self.plan.predicted_max_scallop_mm
             record["simulation"] = sim.record()
             record["gouge_check"] = {"tolerance_mm": settings.gouge_tolerance_mm,
                                      "max_gouge_mm": sim.max_gouge_mm,
+                                     "measured_against": record["target"]["surface"],
                                      "passed": self.gouge_free}
+            if self.against_net is not None:
+                net = self.against_net
+                record["against_net"] = {"units": "mm", "max_scallop_mm": net.max_scallop_mm,
+                                         "max_gouge_mm": net.max_gouge_mm,
+                                         "gouge_cells": net.gouge_cells}
             record["scallop_simulated_over_predicted"] = (
                 sim.max_scallop_mm / predicted if 0 < predicted < np.inf else None)
         if conv is not None and sim is not None:
@@ -101,11 +132,22 @@ class MillResult:
     def summary(self) -> str:
         lines = [self.plan.summary()]
         sim, conv = self.simulation, self.conventional
+        distance = self.net_distance
+        if distance is not None:
+            lines.append(f"the net is up to {distance.vertex_max_mm:.4g} mm off the design "
+                         f"{self.design} (vertices; mean {distance.vertex_mean_mm:.4g} mm); the "
+                         f"passes are placed on the {self.plan.placed_on}")
         if sim is not None:
-            lines.append(f"simulated: scallop {sim.max_scallop_mm:.4g} mm (predicted "
-                         f"{self.plan.predicted_max_scallop_mm:.4g}), gouge {sim.max_gouge_mm:.4g} mm "
+            against = "the net's surface" if self.design is None else "the design"
+            lines.append(f"simulated against {against}: scallop {sim.max_scallop_mm:.4g} mm "
+                         f"(predicted {self.plan.predicted_max_scallop_mm:.4g}), gouge "
+                         f"{sim.max_gouge_mm:.4g} mm "
                          f"({'within' if self.gouge_free else 'BEYOND'} "
                          f"{self.simulation_settings.gouge_tolerance_mm:g} mm), {sim.seconds:.1f} s")
+        if self.against_net is not None:
+            lines.append(f"the same cut against the net's surface: scallop "
+                         f"{self.against_net.max_scallop_mm:.4g} mm, gouge "
+                         f"{self.against_net.max_gouge_mm:.4g} mm")
         if sim is not None and conv is not None:
             lines.append(f"conventional ball end, same passes: scallop {conv.max_scallop_mm:.4g} mm "
                          f"({conv.max_scallop_mm / sim.max_scallop_mm:.1f} x)")
@@ -119,7 +161,8 @@ def _median_between(sim: SimulationResult) -> float:
 
 
 def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate: bool = True,
-             simulation: SimulationSettings | None = None, conventional: bool = True) -> MillResult:
+             simulation: SimulationSettings | None = None, conventional: bool = True,
+             design: Any = None) -> MillResult:
     """Plan face milling on an S-net, or flank milling with a cone on an S*-net, and check
     it by simulation.
 
@@ -127,10 +170,15 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
     ----------
     mesh : the net.
     tool, settings : see `plan_face_milling` and `plan_flank_milling` (for a cone).
-    simulate : run the simulation (the target is the thin-plate spline through the net's
-        vertices, seen from the mean tool-side normal).
+    simulate : run the simulation. The target is the design's heights when `design` is
+        given, else the thin-plate spline through the net's vertices, on a grid seen from
+        the mean tool-side normal over the part the net's faces cover.
     simulation : its resolution.
     conventional : also simulate the conventional ball-end path (face mills only).
+    design : the `fabplan.design.DesignSurface` the net was made for (the net's model
+        units), or None. With it the passes are placed on the design
+        (``settings.paths_on``), the cut is measured against it, and against the net's
+        surface apart, and the net's distance from it is measured.
 
     Returns
     -------
@@ -139,15 +187,20 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
     sim_settings = simulation or SimulationSettings()
     started = time.perf_counter()
     cone = tool.kind == "cone"
-    plan = plan_flank_milling(mesh, tool, settings) if cone else plan_face_milling(mesh, tool, settings)
+    planner = plan_flank_milling if cone else plan_face_milling
+    plan = planner(mesh, tool, settings, design=design)
     seconds = {"plan": plan.seconds}
-    target = adaptive = ball = None
+    target = adaptive = ball = against_net = None
+    scale = settings.mm_per_unit
+    net_target = None
     if simulate:
         clock = time.perf_counter()
         path = plan.path
         up = path.normal.mean(axis=0)
-        target = height_target(mesh.vertices * settings.mm_per_unit, mesh.triangles(), up,
-                               step_mm=sim_settings.step_mm)
+        net_target = target = height_target(mesh.vertices * scale, mesh.triangles(), up,
+                                            step_mm=sim_settings.step_mm)
+        if design is not None:
+            target = replace(net_target, z=design_heights(design, net_target, scale))
         seconds["target"] = time.perf_counter() - clock
         if cone:   # the whole flank cuts
             cutter = Cutter("cone", tool.radius_mm, tool.length_mm, angle_deg=tool.angle_deg)
@@ -157,6 +210,10 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
         adaptive = simulate_milling(target, cutter, path.tip, path.axis, path.contact,
                                     path.pass_id, sim_settings)
         seconds["simulate"] = adaptive.seconds
+        if design is not None and adaptive.strip is not None:
+            against_net = measure_cut(adaptive.cut, net_target.z, adaptive.strip,
+                                      len(adaptive.scallop_by_strip_mm),
+                                      sim_settings.gouge_tolerance_mm)
         if conventional and not cone:
             tips, axes = ball_end_path(path.contact, path.normal, tool.radius_mm)
             ball_cutter = Cutter("ball", tool.radius_mm,
@@ -164,9 +221,33 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
             ball = simulate_milling(target, ball_cutter, tips, axes, path.contact, path.pass_id,
                                     sim_settings)
             seconds["conventional"] = ball.seconds
+    distance = None
+    if design is not None:
+        clock = time.perf_counter()
+        distance = net_distance_from_design(
+            design, mesh.vertices * scale, scale, None if net_target is None else net_target.z,
+            None if target is None else target.z)
+        seconds["design_distance"] = time.perf_counter() - clock
+        if distance.coverage is not None and distance.coverage < 0.99:
+            plan.notes.append(
+                f"the design reaches only {100 * distance.coverage:.1f} % of the part the net's "
+                "faces cover, seen from the mill direction: the rest is not measured (is it the "
+                "net's design, in the net's units?)")
     seconds["total"] = time.perf_counter() - started
     return MillResult(plan=plan, target=target, simulation=adaptive, conventional=ball,
-                      simulation_settings=sim_settings, seconds=seconds)
+                      simulation_settings=sim_settings, seconds=seconds,
+                      design=None if design is None else design_label(design),
+                      against_net=against_net, net_distance=distance)
+
+
+def design_label(design: Any) -> str:
+    """The design as the record names it: its built-in surface spec with its parameters,
+    else its file (or Rhino source)."""
+    from ..design.parametric import spec_of_surface
+
+    parametric = getattr(design, "parametric", None)
+    spec = spec_of_surface(parametric) if parametric is not None else None
+    return spec or str(getattr(design, "name", "the design"))
 
 
 # ------------------------------------------------------------------------------ pictures
@@ -250,11 +331,28 @@ def mill_report_html(result: MillResult) -> str:
                  ("ruling curvature [1/mm]", f"{r['ruling_curvature_per_mm']['min']:.3g} .. "
                                              f"{r['ruling_curvature_per_mm']['max']:.3g}")]
     parts = []
+    rows.append(("measured against", r["target"]["measured_against"]))
+    distance = r.get("net_from_design")
+    if distance is not None:
+        rows += [("passes placed on", f"the {r['paths']['placed_on']}"
+                  + (f" (nodes moved up to {r['paths']['node_shift_from_net_mm']['max']:.4g} mm "
+                     "from the net's vertices)" if r["paths"]["placed_on"] == "design" else "")),
+                 ("net's vertices off the design [mm]", f"max {distance['vertex_max_mm']:.4g}, "
+                  f"mean {distance['vertex_mean_mm']:.4g}")]
+        if distance["measured_cells"]:
+            rows.append(("net's surface above / below the design [mm]",
+                         f"{distance['surface_above_design_max_mm']:.4g} / "
+                         f"{distance['surface_below_design_max_mm']:.4g}"))
     if "simulation" in r:
-        rows += [("simulated scallop [mm]", f"{r['simulation']['max_scallop_mm']:.4g}"),
-                 ("simulated gouge [mm]", f"{r['gouge_check']['max_gouge_mm']:.4g} "
+        against = "" if distance is None else " against the design"
+        rows += [(f"simulated scallop{against} [mm]", f"{r['simulation']['max_scallop_mm']:.4g}"),
+                 (f"simulated gouge{against} [mm]", f"{r['gouge_check']['max_gouge_mm']:.4g} "
                   f"({'passed' if r['gouge_check']['passed'] else 'FAILED'}, tolerance "
                   f"{r['gouge_check']['tolerance_mm']:g})")]
+    if "against_net" in r:
+        rows += [("the same cut against the net's surface: scallop / gouge [mm]",
+                  f"{r['against_net']['max_scallop_mm']:.4g} / "
+                  f"{r['against_net']['max_gouge_mm']:.4g}")]
     parts.append(html.html_section("Summary", html.html_table(["quantity", "value"], rows)))
     if "comparison" in r:
         c = r["comparison"]
@@ -274,7 +372,8 @@ def mill_report_html(result: MillResult) -> str:
     figures_html = [html.html_figure(_paths_figure(result), "Passes on the part.")]
     if result.target is not None and result.simulation is not None:
         figures_html.append(html.html_figure(_scallop_figure(result),
-                                             "Material left above the target (scallop height map)."))
+                                             "Material left above the target (scallop height map), "
+                                             f"the target being {result.measured_against}."))
     figures_html.append(html.html_figure(_tilt_figure(result), "Tool tilt along each pass."))
     parts.append(html.html_section("Pictures", *figures_html))
     direction = ("ruling (towards the tip), tilt, safety sphere radius and contact circle "

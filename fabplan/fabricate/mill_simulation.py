@@ -41,6 +41,7 @@ __all__ = [
     "entry_heights",
     "ball_end_path",
     "simulate_milling",
+    "measure_cut",
 ]
 
 _GOLDEN = (np.sqrt(5.0) - 1) / 2
@@ -376,6 +377,8 @@ class SimulationResult:
     max_gouge_mm : largest depth below the target (0 when none).
     gouge_cells : grid points deeper than the gouge tolerance.
     seconds : time taken.
+    strip : (ny, nx) int, the strip between passes of each grid point (its index, the
+        passes in order), -1 outside the strips (None: not kept).
     """
 
     cut: np.ndarray
@@ -386,6 +389,7 @@ class SimulationResult:
     max_gouge_mm: float
     gouge_cells: int
     seconds: float
+    strip: np.ndarray | None = None
 
     def record(self) -> dict:
         return {"max_scallop_mm": self.max_scallop_mm,
@@ -574,21 +578,52 @@ def simulate_milling(target: HeightTarget, cutter: Cutter, tip: np.ndarray, axis
             continue
         cut = np.minimum(cut, _sweep_pass(target, cutter, T[sel], A[sel], settings))
         contacts.append(C[sel])
-    part = np.isfinite(target.z)
+    strip = np.full(target.z.shape, -1)
+    for number, mask in enumerate(_strip_masks(target, contacts, settings.end_trim_mm)):
+        strip[mask & (strip < 0)] = number
+    return measure_cut(cut, target.z, strip, max(len(contacts) - 1, 0),
+                       settings.gouge_tolerance_mm, seconds=time.perf_counter() - started)
+
+
+def measure_cut(cut: np.ndarray, z: np.ndarray, strip: np.ndarray, strips: int,
+                gouge_tolerance_mm: float, *, seconds: float = 0.0) -> SimulationResult:
+    """What a cut leaves against a target: scallop between passes and gouge.
+
+    Parameters
+    ----------
+    cut : (ny, nx) float, height of the cut (mm; inf where no pass reached).
+    z : (ny, nx) float, target heights on the same grid (mm; NaN off the part).
+    strip : (ny, nx) int, the strip between passes of each grid point, -1 outside.
+    strips : number of strips (passes - 1).
+    gouge_tolerance_mm : depth below the target that counts as a gouge.
+    seconds : time to record.
+
+    Returns
+    -------
+    SimulationResult
+
+    Examples
+    --------
+    >>> cut = np.array([[1.0, 1.2, np.inf]])
+    >>> r = measure_cut(cut, np.array([[1.01, 1.0, 1.0]]), np.array([[-1, 0, 0]]), 1, 0.005)
+    >>> round(r.max_gouge_mm, 6), round(r.max_scallop_mm, 6), r.gouge_cells
+    (0.01, 0.2, 1)
+    """
+    part = np.isfinite(z)
     reached = part & np.isfinite(cut)
-    left = np.where(reached, cut - target.z, np.nan)
-    masks = _strip_masks(target, contacts, settings.end_trim_mm)
-    between = np.zeros(target.z.shape, bool)
+    left = np.where(reached, cut - np.where(part, z, 0.0), np.nan)
+    between = (strip >= 0) & reached
     by_strip = []
-    for mask in masks:
-        inside = mask & reached
-        between |= inside
+    for number in range(strips):
+        inside = between & (strip == number)
         by_strip.append(float(np.max(left[inside])) if inside.any() else np.nan)
     depth = -np.nanmin(left) if reached.any() else 0.0
+    with np.errstate(invalid="ignore"):
+        scallop = float(np.nanmax(by_strip)) if np.isfinite(by_strip).any() else float("nan")
     return SimulationResult(
         cut=cut, left=left, between=between,
-        max_scallop_mm=float(np.nanmax(by_strip)) if by_strip else float("nan"),
+        max_scallop_mm=scallop,
         scallop_by_strip_mm=np.array(by_strip),
         max_gouge_mm=float(max(depth, 0.0)),
-        gouge_cells=int(np.sum(left[reached] < -settings.gouge_tolerance_mm)),
-        seconds=time.perf_counter() - started)
+        gouge_cells=int(np.sum(left[reached] < -gouge_tolerance_mm)),
+        seconds=seconds, strip=strip)

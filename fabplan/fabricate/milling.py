@@ -26,6 +26,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -62,6 +63,8 @@ __all__ = [
     "choose_stride",
     "walk_across_lines",
     "trace_passes",
+    "place_passes_on_design",
+    "beyond_design_notes",
 ]
 
 
@@ -210,6 +213,9 @@ class MillSettings:
         their Mannheim sphere for the net to count as an S*-net.
     flank_dig_mm : cone: largest depth the straight flank may reach below the target along
         its contact line where the target curves towards the tool.
+    paths_on : with a design, where the passes' nodes are put: ``"design"``, its closest
+        points to the net's vertices with its normals there (the cut follows the design),
+        or ``"net"``, the net's vertices and normals as they are.
     """
 
     along: str = "A"
@@ -222,6 +228,7 @@ class MillSettings:
     flat_curvature: float = 1e-9
     mannheim_tolerance_mm: float = 0.001
     flank_dig_mm: float = 0.001
+    paths_on: str = "design"
 
     @property
     def mm_per_unit(self) -> float:
@@ -234,6 +241,8 @@ class MillSettings:
         check_units(self.units)
         if self.side not in ("auto", "+", "-"):
             raise InputError(f"--side must be auto, + or -, got {self.side!r}")
+        if self.paths_on not in ("design", "net"):
+            raise InputError(f"--paths-on must be design or net, got {self.paths_on!r}")
         if self.margin_mm is not None and not (np.isfinite(self.margin_mm) and self.margin_mm >= 0):
             raise InputError(f"--margin must be a length >= 0 mm, got {self.margin_mm}")
         if not (np.isfinite(self.scallop_mm) and 1e-5 <= self.scallop_mm <= 10):
@@ -392,6 +401,10 @@ class MillPlan:
     sphere_residual_mm : largest distance of a star vertex from its fitted sphere.
     seconds : planning time.
     notes : what a user should know (not an S-net, scallop limit out of reach).
+    placed_on : ``"net"`` (the nodes are the net's vertices) or ``"design"`` (the design's
+        closest points to them, with its normals).
+    node_shift_mm : (m,) float, distance each pass node was moved from its vertex onto the
+        design (mm; empty when placed on the net).
     """
 
     net: str
@@ -408,6 +421,8 @@ class MillPlan:
     sphere_residual_mm: float = 0.0
     seconds: float = 0.0
     notes: list = field(default_factory=list)
+    placed_on: str = "net"
+    node_shift_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def predicted_max_scallop_mm(self) -> float:
@@ -443,6 +458,11 @@ class MillPlan:
             "path_length_mm": path.path_length_mm(),
             "predicted_scallop_mm": float(self.predicted_max_scallop_mm),
             "predicted_scallop_by_stride_mm": self.predicted_scallop_mm.tolist(),
+            "paths": {
+                "placed_on": self.placed_on,
+                "node_shift_from_net_mm": {
+                    "max": float(self.node_shift_mm.max()) if self.node_shift_mm.size else 0.0,
+                    "mean": float(self.node_shift_mm.mean()) if self.node_shift_mm.size else 0.0}},
             "plan_seconds": self.seconds,
             "notes": list(self.notes),
         }
@@ -975,7 +995,69 @@ def trace_passes(passes: Iterable[tuple[np.ndarray, ...]],
     return ToolPath(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
 
 
-def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) -> MillPlan:
+def place_passes_on_design(passes: list, design: Any, mm_per_unit: float
+                           ) -> tuple[list, np.ndarray, np.ndarray]:
+    """The passes' nodes moved onto the design: each contact to the design's closest point
+    to it, each normal to the design's there (on the tool's side); the cutting directions
+    and safety radii stay the net's (the frames project them into the new tangent planes).
+
+    A node whose closest point is not straight below or above it (the line to it more
+    than about 6 degrees off the design's normal: a point on the design's boundary, the
+    node beyond it) stays on its vertex.
+
+    Parameters
+    ----------
+    passes : in pass order, each pass's nodes as (contact (m, 3) float in mm, unit normal
+        (m, 3), unit cutting direction (m, 3), safety radius (m,) in mm, vertex (m,) int).
+    design : a `fabplan.design.DesignSurface` in the net's model units.
+    mm_per_unit : millimetres per model unit.
+
+    Returns
+    -------
+    passes : the same, contacts and normals on the design.
+    shift : (total nodes,) float, distance each node moved (mm), in pass order.
+    beyond : (total nodes,) bool, the nodes left on their vertices (no design beneath).
+    """
+    from .mill_design import design_frames
+
+    if not passes:
+        return passes, np.zeros(0), np.zeros(0, bool)
+    contact = np.concatenate([p[0] for p in passes])
+    normal = np.concatenate([p[1] for p in passes])
+    foot, design_normal = design_frames(design, contact, mm_per_unit)
+    design_normal = np.where((np.sum(design_normal * normal, axis=1) < 0)[:, None],
+                             -design_normal, design_normal)
+    gap = contact - foot
+    along = np.sum(gap * design_normal, axis=1)
+    sideways = np.linalg.norm(gap - along[:, None] * design_normal, axis=1)
+    beyond = sideways > 0.1 * np.abs(along) + 1e-9 * max(float(np.abs(contact).max()), 1.0)
+    foot = np.where(beyond[:, None], contact, foot)
+    design_normal = np.where(beyond[:, None], normal, design_normal)
+    bounds = np.cumsum([len(p[0]) for p in passes])[:-1]
+    moved = [(c, n, *rest) for (_, _, *rest), c, n in
+             zip(passes, np.split(foot, bounds), np.split(design_normal, bounds), strict=True)]
+    return moved, np.linalg.norm(foot - contact, axis=1), beyond
+
+
+def beyond_design_notes(beyond: np.ndarray) -> list[str]:
+    """The note on pass nodes left on the net, beyond the design (`place_passes_on_design`).
+
+    Examples
+    --------
+    >>> print(*beyond_design_notes(np.array([False, True, True])))
+    2 of 3 pass nodes have no point of the design straight beneath them (the design ends \
+before them): they stay on the net
+    >>> beyond_design_notes(np.zeros(2, bool))
+    []
+    """
+    if not beyond.any():
+        return []
+    return [f"{int(beyond.sum())} of {len(beyond)} pass nodes have no point of the design "
+            "straight beneath them (the design ends before them): they stay on the net"]
+
+
+def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
+                      design: Any = None) -> MillPlan:
     """Plan curvature-adaptive face milling passes along one family of an S-net.
 
     Parameters
@@ -983,6 +1065,9 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     mesh : the net (model units ``settings.units``).
     tool : a face mill (`parse_tool`).
     settings : the options.
+    design : the `fabplan.design.DesignSurface` the net was made for (its model units), or
+        None; with ``settings.paths_on == "design"`` the passes' nodes are put on it
+        (`place_passes_on_design`): the spheres are the net's, the surface cut the design.
 
     Returns
     -------
@@ -1052,6 +1137,11 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
         # consistent cross tangent along the run (the discrete tangents may flip sign)
         cross = cross * np.where(np.sum(cross * cross[:1], axis=1) < 0, -1.0, 1.0)[:, None]
         passes.append((nodes.point[run], nodes.normal[run], cross, safety[run], nodes.vertex[run]))
+    placed_on, shift = "net", np.zeros(0)
+    if design is not None and settings.paths_on == "design":
+        passes, shift, beyond = place_passes_on_design(passes, design, settings.mm_per_unit)
+        placed_on = "design"
+        notes += beyond_design_notes(beyond)
 
     def pose(p, n, c, R, motion):
         tip, axis, tilt = circle_tool_pose(p, n, c, -motion, R, r, tool.corner_mm)
@@ -1061,5 +1151,6 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings) ->
     return MillPlan(net=mesh.name, tool=tool, settings=settings, path=path, margin_mm=margin,
                     margin_rule=rule, stride=stride, lines=lines.count, predicted_scallop_mm=predicted,
                     meusnier_radius_mm=nodes.radius, side=side, sphere_residual_mm=residual,
-                    seconds=time.perf_counter() - started, notes=notes)
+                    seconds=time.perf_counter() - started, notes=notes, placed_on=placed_on,
+                    node_shift_mm=shift)
 

@@ -276,19 +276,26 @@ def plan_strips(net: NetLike, settings: StripSettings | None = None, *, boundary
 
 
 def mill(net: NetLike, tool: MillTool | str, settings: MillSettings | None = None, *,
-         simulate: bool = True, **options: Any) -> MillResult:
+         simulate: bool = True, design: Any = None, **options: Any) -> MillResult:
     """Curvature-adaptive milling of a net (``fabplan mill``): face milling of an S-net, or
     flank milling of an S*-net with a cone; the tool as a `MillTool` or its spec
     (``"face:D=50"``, ``"cone:angle=45,length=10,tip=24"``), `MillSettings` or its fields as keyword
     options (``along="A", units="mm", scallop_mm=0.01``); with `simulate` the paths are
-    checked by the milling simulation against the conventional ball-end cut. The result's
-    ``record()`` is what ``mill.json`` holds."""
+    checked by the milling simulation against the conventional ball-end cut. `design`: the
+    design the net was made for (a `fabplan.design.DesignSurface` or what `load_design`
+    reads, in the net's units), which the passes are placed on and the cut is measured
+    against (``fabplan mill --design``). The result's ``record()`` is what ``mill.json``
+    holds."""
     if settings is None:
         settings = MillSettings(**options)
     elif options:
         raise InputError("give either settings or keyword options, not both")
+    if isinstance(design, (str, os.PathLike)):
+        from ..design.load import load_design
+
+        design = load_design(design)
     return mill_net(as_mesh(net), parse_tool(tool) if isinstance(tool, str) else tool, settings,
-                    simulate=simulate)
+                    simulate=simulate, design=design)
 
 
 def run_study(study: Study | str | os.PathLike, **options: Any) -> StudyResult:
