@@ -79,7 +79,10 @@ class BoundaryFitSettings:
     outline_weights : the heavier outline weights tried once the steps are met, in order;
         each is kept where the gaps to the targets stay within half the step limit.
     rings : rings of net faces about a panel's corners whose molds are tried.
-    sweeps : rounds in which boundary panels beside each other meet halfway.
+    sweeps : rounds in which boundary panels beside each other meet halfway, at most.
+    settled : a panel is fitted again only while the points midway on a side it shares
+        with another boundary panel moved by more than this share of the step limit in the
+        last round.
     flat : panels beside the net's flat panels cut flat where a plane holds their net
         sides, the sides two such panels share put on the line where their planes cross
         (`fabplan.fabricate.flat_boundary`).
@@ -93,6 +96,7 @@ class BoundaryFitSettings:
     outline_weights: tuple[float, ...] = (0.3, 1.0, 3.0)
     rings: int = 2
     sweeps: int = 12
+    settled: float = 0.01
     flat: bool = True
     split_reach: float = 0.1
 
@@ -557,16 +561,25 @@ class _Fit:
         mutual sides)."""
         count = self.settings.sweeps if len(self.mutual) else 1
         rows = np.asarray(rows)
+        previous = None
         for sweep in range(count):
+            midway = self._midway() if len(self.mutual) else None
             if sweep:
-                # only the panels with a mutual side change from one sweep to the next
+                # only the panels beside a mutual side whose midway points still move
+                # change from one sweep to the next
+                assert midway is not None and previous is not None
+                change = np.abs(midway - previous).max(axis=(1, 2)) * self.plan.settings.mm_per_unit
+                moving = change > self.settings.settled * self.limit
+                ends = self.row[np.r_[self.sides.panel[self.mutual][moving],
+                                      self.sides.across[self.mutual][moving]]]
                 meets = np.zeros(len(self.fitted), bool)
-                meets[self.row[self.sides.panel[self.mutual]]] = True
+                meets[ends[ends >= 0]] = True
                 rows = rows[meets[rows]]
                 if rows.size == 0:
                     break
+            previous = midway
             fitted = self.fitted[rows]
-            points, weights, must = self._targets(self._midway() if len(self.mutual) else None)
+            points, weights, must = self._targets(midway)
             M, K, _ = fit_mold_placements(points[rows], weights[rows], self.placement[fitted],
                                           self.shape[fitted], must=must[rows],
                                           free_shape=free[rows])

@@ -525,7 +525,10 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     size = study.panel_size_of(candidate)
     key = (angle, size)
     several = study.layout_starts > 1
-    if key not in layouts and not several:
+    # curved panels on molds of a net that leaves a built-in design: solved past its edges
+    continued = None if candidate.glides or not _on_molds(study, candidate) \
+        else _continued(study, design, size)
+    if key not in layouts and not several and continued is None:
         say(f"    layout at {angle:g} deg, panel size {size:g}")
         layouts[key] = layout_surface(design, size, angle=angle)
     layout = layouts.get(key)
@@ -546,7 +549,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                         for t in solved.properties["layout_starts"]))
         return laid, solved
 
-    clock = time.perf_counter()
+    clock, laid_before = time.perf_counter(), seconds["layout"]
     if candidate.glides and several:
         layout, net = fairest(candidate.net, candidate.angle)
         if candidate.net == "snet":     # it starts the nets that leave the design too
@@ -557,11 +560,10 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
                     progress=report)
         if candidate.net == "snet":
             starts[key] = net
-    elif _on_molds(study, candidate) and (continued := _continued(study, design, size)):
-        # curved panels on molds: the net is solved past the design's edge, so that its
-        # boundary panels continue it within the deviation limit
+    elif continued is not None:
+        # its boundary panels then continue it within the deviation limit
         net, layout = _solve_continued(study, design, candidate, continued, angle, size,
-                                       layouts, starts, settings, report, say)
+                                       layouts, starts, settings, report, say, seconds)
     else:
         if key not in starts and several:
             # the fairest S-net starts the nets that leave the design, on its own layout
@@ -586,7 +588,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         # its boundary panels continue it where it stands off the design, as `fabplan
         # optimize` cuts them: their molds are fitted to the net's panels beside them
         add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True)
-    seconds["optimize"] = time.perf_counter() - clock
+    seconds["optimize"] = time.perf_counter() - clock - (seconds["layout"] - laid_before)
     if several and "layout_starts" in net.properties:
         # the starts' layouts were made in the solve: counted as layout time
         laid_out = sum(t.get("layout_seconds", 0.0) for t in net.properties["layout_starts"])
@@ -621,7 +623,8 @@ def _continued(study: Study, design: DesignSurface, size: float) -> ContinuedDes
 def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
                      continued: ContinuedDesign, angle: float, size: float, layouts: Layouts,
                      starts: Starts, settings: SolverSettings, report: Callable,
-                     say: Callable[[str], None]) -> tuple[OptimizationResult, SurfaceLayout]:
+                     say: Callable[[str], None], seconds: dict[str, float]
+                     ) -> tuple[OptimizationResult, SurfaceLayout]:
     """A net that leaves the design, solved on the design continued past its edges: laid
     out there, started from the S-net glided there, held to the deviation limit at the
     vertices of its stars; the faces over the design are kept, and its boundary panels
@@ -639,9 +642,12 @@ def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
 
     key = (angle, size, "continued")
     if key not in layouts:
+        clock = time.perf_counter()
         say(f"    layout at {angle:g} deg, panel size {size:g}, on the design continued "
             "past its edges")
         layouts[key] = layout_surface(continued.design, size, angle=angle)
+        # counted as layout time (`seconds` is the candidate's record)
+        seconds["layout"] += time.perf_counter() - clock
     if key not in starts:
         starts[key] = glide(layouts[key], "snet", settings=settings, boundary_panels=False)
     limits = study.limits_of(candidate)
