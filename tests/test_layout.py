@@ -510,8 +510,9 @@ def test_a_net_type_that_changes_the_surface_is_pointed_to_optimize(tmp_path, ca
     _, err = capsys.readouterr()
     assert code == 3 and "exist on special surfaces only" in err
     second = tmp_path / "free.obj"
+    # within 0.1 (held in the solve: the default limit of 20 mm is for facades in metres)
     code = main(["optimize", str(first), "--net", "linear-weingarten", "--reference",
-                 "paraboloid", "-q", "-o", str(second)])
+                 "paraboloid", "--max-deviation", "0.1", "-q", "-o", str(second)])
     props = json.loads(second.with_suffix(".json").read_text())["properties"]
     assert code == 0 and props["sphere_residual_relative"]["max"] <= 1e-6
     assert props["distance_to_reference"]["max"] <= 0.1

@@ -47,6 +47,14 @@ def test_a_design_without_a_formula_or_one_that_breaks_down_is_not_continued():
     saddle = hyperbolic_paraboloid(width=2.0, depth=2.0).triangulate(6)
     as_mesh = DesignSurface(saddle.vertices, saddle.triangles, name="mesh")
     assert continued_design(as_mesh, 1.0) is None
+    # a NURBS surface is evaluated on its own domain only
+    from fabplan.design.nurbs import NurbsSurface
+
+    grid = np.stack(np.meshgrid(np.linspace(0, 3, 4), np.linspace(0, 3, 4), indexing="ij"), -1)
+    P = np.concatenate([grid, 0.1 * (grid[..., :1] - 1.5) ** 2], axis=-1)
+    knots = np.r_[0.0, 0, 0, 0, 1, 1, 1, 1]
+    patch = NurbsSurface(P, np.ones((4, 4)), knots, knots, 3, 3).triangulate(8)
+    assert continued_design(patch, 1.0) is None
     # a profile whose radius reaches zero just below the design: the cells collapse
     cone = revolution(np.array([[0.5, 0.0], [3.0, 2.5], [5.5, 5.0]])).triangulate((16, 8))
     assert continued_design(cone, 3.0) is None

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
+from ..design.parametric import ParametricSurface
 from ..net.mesh import QuadMesh
 
 __all__ = ["ContinuedDesign", "continued_design", "design_layout", "faces_on_design",
@@ -90,6 +91,8 @@ def continued_design(design: DesignSurface, margin: float) -> ContinuedDesign | 
     kv = _cells(surface, margin, dv, along_u=False)
     if ku is None or kv is None:
         return None
+    if type(surface) is not ParametricSurface:
+        return None             # a NURBS surface is evaluated on its own domain only
     wider = replace(surface, domain=((u0 - ku * du, u1 + ku * du), (v0 - kv * dv, v1 + kv * dv)))
     with np.errstate(all="ignore"):
         try:
