@@ -489,3 +489,27 @@ def test_a_run_started_with_sighup_ignored_keeps_it_ignored(tmp_path):
             "print('alive')\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert run.returncode == 0 and run.stdout.strip() == "alive", run.stderr
+
+
+def test_strips_remove_only_their_own_earlier_files(tmp_path):
+    """A strips run removes the sheets of an earlier run it no longer writes, but only
+    files still as that run wrote them: a user's file named like a sheet, listed in a
+    crafted strips.json, or a sheet edited since, stays."""
+    net = fabplan.data_path("cmc1.obj")
+    out = tmp_path / "strips"
+    common = ["--height", "60", "--thickness", "4", "--workers", "1", "-q", "-o", str(out)]
+    assert main(["strips", str(net), *common]) in (0, 3)
+    sheets = sorted(out.glob("strips-sheet-*.dxf"))
+    assert sheets
+    edited, *rest = sheets
+    edited.write_text(edited.read_text() + "\n", encoding="utf-8")
+    record = json.loads((out / "strips.json").read_text())
+    mine = out / "strips-sheet-999.png"
+    mine.write_bytes(b"the user's own picture")
+    record["files"].append(mine.name)
+    (out / "strips.json").write_text(json.dumps(record), encoding="utf-8")
+    # one file of every sheet: the separate sheets are no longer written
+    assert main(["strips", str(net), *common, "--one-file"]) in (0, 3)
+    assert (out / "strips-sheets.dxf").is_file()
+    assert mine.read_bytes() == b"the user's own picture" and edited.is_file()
+    assert not any(p.exists() for p in rest)

@@ -320,6 +320,8 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
         (tmp / f"{name}.csv").write_text(_schedule_csv(rows, header), encoding="utf-8")
         files += [f"{name}.csv", f"{name}.json"]
         record = _plan_record(plan, files, sheet_files, summary)
+        # what a later run may remove as its own: only a file still as written here
+        record["file_sha256"] = {f: _sha256(tmp / f) for f in files[:-1]}
         (tmp / f"{name}.json").write_text(json_text(record), encoding="utf-8")
         stale = _stale_files(out_dir, name, files)
         check_apart(stale, protect or {})
@@ -379,11 +381,24 @@ def _stale_files(out_dir: Path, name: str, files: list[str]) -> list[Path]:
         listed = json.loads(old.read_text(encoding="utf-8")).get("files", [])
     except (ValueError, OSError, AttributeError):
         listed = []
-    # only names such a run writes: the list is data from the folder, and must not make a
-    # run remove anything else
+    try:
+        written = dict(json.loads(old.read_text(encoding="utf-8")).get("file_sha256", {}))
+    except (ValueError, OSError, AttributeError, TypeError):
+        written = {}
+    # only names such a run writes, and only files still as it wrote them: the list is
+    # data from the folder, and must not make a run remove anything else (a file of the
+    # user's that happens to be named like a sheet, or one edited since)
     targets = [out_dir / Path(str(f)).name for f in listed]
     return [t for t in targets if t.is_file() and not t.is_symlink() and t.name not in files
-            and any(fnmatch.fnmatchcase(t.name, p.replace("strips", name, 1)) for p in STRIP_FILES)]
+            and any(fnmatch.fnmatchcase(t.name, p.replace("strips", name, 1)) for p in STRIP_FILES)
+            and written.get(t.name) == _sha256(t)]
+
+
+def _sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes, in hex."""
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 #: the files `write_plan` writes into its folder (of the default name ``strips``)

@@ -636,15 +636,22 @@ def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
     layout : the layout read on the design itself.
     """
     from ..layout.margin import design_layout, faces_on_design, held_vertices
+    from ..layout.starts import glide_fairest
     from ..layout.surface_layout import glide, layout_surface
     from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
     from ..solve.optimize import kept_faces, optimize
 
     key = (angle, size, "continued")
+    where = f"at {angle:g} deg, panel size {size:g}, on the design continued past its edges"
+    if key not in starts and study.layout_starts > 1:
+        # the fairest S-net of several starts starts it (`fabplan.layout.starts`)
+        say(f"    S-nets from {study.layout_starts} starts {where}")
+        layouts[key], starts[key] = glide_fairest(
+            continued.design, size, "snet", angle=angle, solver=settings,
+            starts=study.layout_starts, progress=report)
     if key not in layouts:
         clock = time.perf_counter()
-        say(f"    layout at {angle:g} deg, panel size {size:g}, on the design continued "
-            "past its edges")
+        say(f"    layout {where}")
         layouts[key] = layout_surface(continued.design, size, angle=angle)
         # counted as layout time (`seconds` is the candidate's record)
         seconds["layout"] += time.perf_counter() - clock
@@ -659,6 +666,8 @@ def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
                       progress=report)
     net = kept_faces(solved, faces_on_design(solved.mesh, continued), design.reference,
                      max_deviation=limit)
+    net.parameters["continued"]["starts"] = len(
+        starts[key].properties.get("layout_starts") or [None])
     layout = design_layout(layouts[key], continued, design)
     held = np.unique(np.asarray(solved.mesh.stars).ravel())
     add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True,
