@@ -9,6 +9,7 @@ failures listed).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -440,11 +441,13 @@ def _cmd_molds(args) -> int:
     _folder_apart(out, [*MOLD_FILES, "net.3dm", "net.glb"], inputs)
     mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
+    _check_net_memory(args, mesh, "molds")
     _check_units(args, mesh, settings.units)
     design = None
     if args.design is not None:
         from .design.load import load_design
 
+        _check_triangles(args.design, args.triangles)
         design = load_design(args.design, triangles=args.triangles)
     boundary_file = _boundary_file(args)
     panels = None if boundary_file is None else read_boundary_panels(
@@ -517,6 +520,9 @@ def _cmd_mill(args) -> int:
     inputs = _net_inputs(args.net)
     _folder_apart(out, [*MILL_FILES, "paths.3dm"], inputs)
     mesh = load_net(args.net)
+    _check_net_memory(args, mesh, "mill")
+    if not args.no_simulation:
+        _check_simulation_memory(mesh, settings.mm_per_unit, args.sim_step)
     progress = _progress(args)
     with progress.stage("planning the passes and simulating the cut"):
         result = mill_net(mesh, tool, settings, simulate=not args.no_simulation,
@@ -634,6 +640,7 @@ def _cmd_layout(args) -> int:
     _check_outputs([out, out.with_suffix(".json"), boundary_path(out), picture,
                     *_viewer_paths(args, out)],
                    _file_inputs((args.surface, "the design"), (family_file, "the family file")))
+    _check_triangles(args.surface, args.triangles)
     design = load_design(args.surface, triangles=args.triangles)
     if design.source is not None and not args.quiet:
         print(f"design: {design.source['object']} of {design.source['file']}, in "
@@ -755,6 +762,53 @@ def _units_said(units: str | None) -> str:
     """Model units in words for the terminal (a unitless .3dm file has none)."""
     return {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches",
             "ft": "feet"}.get(units or "", "model units (the file has no unit system)")
+
+
+def _check_net_memory(args: argparse.Namespace, mesh: Any, command: str) -> None:
+    """Refuse a net whose `command` (``molds``, ``mill``) would need more memory than this
+    run may use, or more faces than ``--max-panels`` when it is given, before the work
+    (`fabplan.io.resources`)."""
+    from .io.resources import MILL_MEMORY, MOLDS_MEMORY, check_memory, check_panel_count
+
+    model = {"molds": MOLDS_MEMORY, "mill": MILL_MEMORY}[command]
+    faces = len(mesh.face_sizes)
+    fix = f"run {command} on a coarser net or on parts of it"
+    if args.max_panels is not None:
+        check_panel_count(faces, max_panels=args.max_panels, bytes_per_panel=model.bytes_per_unit,
+                          what=f"{args.net}: {model.work} a net of {faces:,} faces", fix=fix)
+    else:
+        check_memory(model, faces, where=str(args.net),
+                     fix=f"{fix}, or give --max-panels to run it anyway")
+
+
+def _check_simulation_memory(mesh: Any, mm_per_unit: float, step_mm: float) -> None:
+    """Refuse a milling simulation whose grid at ``--sim-step`` would need more memory than
+    is left beside the plan, naming the smallest step that fits (a grid over the cap of
+    `height_target` is refused there, before it is made)."""
+    from .fabricate.mill_simulation import MAX_SIMULATION_CELLS, simulation_cells
+    from .io.resources import MILL_MEMORY, SIMULATION_MEMORY, check_memory, memory_limit
+
+    cells = simulation_cells(mesh.vertices * mm_per_unit, mesh.triangles(), step_mm)
+    if cells > MAX_SIMULATION_CELLS:
+        return
+    plan = MILL_MEMORY.peak_bytes(len(mesh.face_sizes))
+    fits = max(SIMULATION_MEMORY.largest_fitting(memory_limit() - plan), 1)
+    check_memory(SIMULATION_MEMORY, cells, where=f"--sim-step {step_mm:g}", beside_bytes=plan,
+                 fix=f"a --sim-step of {1.01 * step_mm * math.sqrt(cells / fits):.3g} mm or more "
+                     "fits, or give --no-simulation")
+
+
+def _check_triangles(surface: str, triangles: int) -> None:
+    """Refuse a ``--triangles`` whose triangulation of a built-in or NURBS surface would
+    need more memory than this run may use (a mesh file keeps its own triangles, checked
+    as it is read)."""
+    from .design.load import names_a_file
+    from .io.resources import DESIGN_MEMORY, check_memory
+    from .io.rhino_read import is_3dm_source
+
+    if is_3dm_source(surface) or not names_a_file(surface):
+        check_memory(DESIGN_MEMORY, triangles, where=f"--triangles {triangles}",
+                     fix="give fewer --triangles")
 
 
 def _check_layout_size(design: Any, panel_size: float, max_panels: int | None) -> None:
@@ -1241,9 +1295,11 @@ def _add_number(p: argparse.ArgumentParser, option: str, *, help: str, **kwargs:
                         f"{', a whole number' if parameter.integer else ''})", **kwargs)
 
 
-def _add_max_panels(p: argparse.ArgumentParser) -> None:
+def _add_max_panels(p: argparse.ArgumentParser, *, memory: bool = False) -> None:
     _add_number(p, "--max-panels", metavar="N",
-                help="refuse runs estimated to need more panels than this (default: what "
+                help="refuse nets of more faces than this (default: what half the available "
+                     "memory holds, estimated from the net's faces)" if memory else
+                     "refuse runs estimated to need more panels than this (default: what "
                      "half the available memory holds, at least 20000)")
 
 
@@ -1353,6 +1409,7 @@ def _add_molds(sub: Any) -> None:
     _add_number(p, "--step-limit", metavar="MM",
                 help="largest step between neighbouring panels' molds in mm (default twice "
                      "the tolerance)")
+    _add_max_panels(p, memory=True)
     _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "
                              "its neighbours (a mold of its own where none does; slivers cut "
                              "with their full panel)", "plan the net's own panels only")
@@ -1406,6 +1463,7 @@ def _add_mill(sub: Any) -> None:
                    help="side the tool comes from: that of the Meusnier (cone: Mannheim) "
                         "spheres (auto), of the face normals (cone: the vn normals) (+) or the "
                         "other (-)")
+    _add_max_panels(p, memory=True)
     _add_number(p, "--sim-step", default=0.5, metavar="MM",
                 help="grid step of the milling simulation (default 0.5)")
     p.add_argument("--no-simulation", action="store_true",

@@ -380,7 +380,7 @@ def test_a_study_beyond_the_panel_limit_is_refused_before_any_layout(tmp_path, c
     study.write_text(_study_text().replace("size = 2.0", "size = 0.02"), encoding="utf-8")
     refused(["study", study, "-q", "-o", tmp_path / "out", "--max-panels", "100000"], capsys,
             tmp_path, "layouts of panel size 0.02 m on a design of area 411.8 m^2: about "
-            "1,029,405 panels (about 41 GB of memory), more than the limit of 100,000",
+            "1,029,405 panels (about 50 GB of memory), more than the limit of 100,000",
             "give a larger panels.size")
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..io.resources import DESIGN_MEMORY, check_memory
 from ..io.rhino_read import RhinoDesign, is_3dm_source, read_3dm, split_source
 from ..io.triangles import read_triangles
 from .mesh_surface import DesignSurface
@@ -63,6 +64,8 @@ def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = N
         surface = surface_from_spec(str(source))
         return surface.triangulate(resolution or surface.resolution_for(triangles))
     vertices, faces = read_triangles(path)
+    check_memory(DESIGN_MEMORY, len(faces), where=str(path),
+                 fix="lay out a coarser mesh of the design (fewer triangles)")
     return DesignSurface(vertices, faces, name=str(path))
 
 

@@ -652,7 +652,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
                    "triangles")
         t.done()
         return DesignSpec(str(source), Path(file).name, {}, None, units)
-    triangles = t.number("triangles", 20000, integer=True)
+    triangles = _triangles(t)
     if surface is None or surface not in SURFACES:
         t.fail("surface", f"is {surface!r}, not a built-in surface; known: {', '.join(SURFACES)}"
                + _suggest(surface, SURFACES))
@@ -676,6 +676,19 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     return DesignSpec(spec, surface, dict(parameters), triangles, units)
 
 
+def _triangles(t: _Table) -> int:
+    """``design.triangles``: within the range of ``--triangles`` and the memory this run
+    may use (`fabplan.io.resources.DESIGN_MEMORY`)."""
+    from ..io.resources import DESIGN_MEMORY, memory_reason
+
+    triangles = t.number("triangles", 20000, integer=True)
+    t.within("triangles", triangles, "--triangles")
+    reason = memory_reason(DESIGN_MEMORY, triangles)
+    if reason is not None:
+        t.fail("triangles", f"{triangles}: {reason}; give fewer")
+    return triangles
+
+
 def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     """A design in a .3dm file: the object that `layer`, `object` and `face` pick, read
     now so that a bad choice is named before the study starts. The model units are
@@ -691,7 +704,7 @@ def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     if face is not None and face < 0:
         t.fail("face", f"must be a face number (0, 1, ...), got {face}")
     asked = t.text("units", None, choices=tuple(MM_PER_UNIT))
-    triangles = t.number("triangles", 20000, integer=True)
+    triangles = _triangles(t)
     t.done()
     read = read_3dm(source, layer=layer, object_name=name, face=face)
     if asked is not None and read.file_units is None:
