@@ -624,7 +624,10 @@ def simulate_milling(target: HeightTarget, cutter: Cutter, tip: np.ndarray, axis
     depth = -np.nanmin(left) if reached.any() else 0.0
     return SimulationResult(
         cut=cut, left=left, between=between,
-        max_scallop_mm=float(np.nanmax(by_strip)) if by_strip else float("nan"),
+        # no strip between two passes measured (a net of two or three lines): no scallop
+        # measured, without numpy's warning about an all-NaN maximum
+        max_scallop_mm=(float(np.nanmax(by_strip)) if np.isfinite(by_strip).any()
+                        else float("nan")),
         scallop_by_strip_mm=np.array(by_strip),
         max_gouge_mm=float(max(depth, 0.0)),
         gouge_cells=int(np.sum(left[reached] < -settings.gouge_tolerance_mm)),

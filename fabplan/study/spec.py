@@ -582,6 +582,10 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{file}: not a valid TOML study file: {exc}") from None
+    except RecursionError:
+        # the parser recurses once per level of nested arrays and inline tables
+        raise InputError(f"{file}: not a valid TOML study file: its arrays or tables nest "
+                         "too deep (a study nests a few levels)") from None
     top = _Table(data, "", file)
     top.only(TABLES)
     folder = path.parent if path else Path.cwd()
