@@ -169,15 +169,15 @@ class MemoryModel:
 
 # Fitted to peaks measured by benchmarks/bench_memory.py (figures and command in
 # benchmarks/README.md), rounded up a little: each line lies at or above every measured peak.
-#: molds of a net, per face (`plan_molds` and its report): 221, 572 and 1,949 MiB at
+#: molds of a net, per face (`plan_molds` and its report): 221, 572 (574) and 1,949 MiB at
 #: 2,500, 10,000 and 40,000 faces (4, 10 and 31 s)
-MOLDS_MEMORY = MemoryModel("molds of", "faces", 115e6, 48_500, 0.0008)
+MOLDS_MEMORY = MemoryModel("molds of", "faces", 120e6, 48_500, 0.0008)
 #: milling paths of a net, per face (the plan and its files, no simulation): 265, 473 and
 #: 1,626 MiB at 2,500, 10,000 and 40,000 faces (4, 8 and 30 s)
 MILL_MEMORY = MemoryModel("milling paths of", "faces", 185e6, 39_000, 0.00075)
 #: the milling simulation, per cell of its grid (the adaptive and the conventional path
 #: simulated), on top of MILL_MEMORY: 420 and 1,203 MiB at 250,000 and 1 million cells
-#: against 265 MiB without (28 s and 4 min 15 s)
+#: against 265 MiB without (28 s, and 2 to 4 minutes on the shared machine)
 SIMULATION_MEMORY = MemoryModel("a milling simulation of", "cells", 0.0, 1_100, 0.00026)
 #: a design triangulated and laid out, per triangle (`fabplan layout --triangles`, a
 #: study's ``design.triangles``, `molds --design`, a design mesh file): 484, 1,738 and
