@@ -1712,9 +1712,38 @@ def _stopped_by_signals() -> Iterator[None]:
             signal.signal(getattr(signal, name), handler)
 
 
+def _one_line(message: str) -> str:
+    """A message on one line: a line break or other control character that came in with a
+    name the user gave is shown as its escape (``\\n``).
+
+    Examples
+    --------
+    >>> _one_line("a\\nb.obj: no such file")
+    'a\\\\nb.obj: no such file'
+    """
+    if message.isprintable():
+        return message
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+
+
+def _name_text(name: object) -> str:
+    """A file name for a one-line message: as given when printable, else quoted with its
+    escapes (a line break in it), shortened past 200 characters."""
+    text = os.fsdecode(name) if isinstance(name, (str, bytes, os.PathLike)) else str(name)
+    if not text.isprintable():
+        text = repr(text)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     parser = build_parser()
+    nul = next((a for a in (sys.argv[1:] if argv is None else argv) if "\x00" in str(a)), None)
+    if nul is not None:
+        # no shell passes one (argv is NUL-terminated): only a caller in Python can
+        print(f"fabplan: error: {_one_line(_name_text(nul))}: an argument cannot hold a NUL "
+              "character", file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
@@ -1728,10 +1757,10 @@ def main(argv: list[str] | None = None) -> int:
         return code
     except CannotMakeError as exc:
         # the input is sound; what was asked cannot be made from it as it stands
-        print(f"fabplan: cannot make it: {exc}", file=sys.stderr)
+        print(f"fabplan: cannot make it: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     except FabplanError as exc:
-        print(f"fabplan: error: {exc}", file=sys.stderr)
+        print(f"fabplan: error: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except _Stopped as exc:
         import signal
@@ -1752,7 +1781,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         # a file system failure while writing (disk full, a vanished folder): outputs are
         # staged, so nothing half-written is left; say what failed in one line
-        where = f"{exc.filename}: " if exc.filename else ""
+        where = f"{_name_text(exc.filename)}: " if exc.filename else ""
         print(f"fabplan: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
 

@@ -533,3 +533,56 @@ def test_mill_with_no_strip_between_passes_warns_nothing(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code in (0, 3) and "Warning" not in err, err
     assert (tmp_path / "m" / "mill.json").is_file()
+
+
+@pytest.mark.parametrize("argv", [
+    ["optimize", "{net}", "--net", "snet", "--handle=\x00", "-o", "{out}/o.obj"],
+    ["measure", "{folder}/g\x00.obj", "-o", "{out}/m.json"],
+])
+def test_a_nul_character_in_an_argument_is_refused(argv, work, capsys):
+    """--handle=\\x00 ended in 'ValueError: embedded null byte' (no shell passes one, a
+    Python caller can)."""
+    argv = [a.format(net=work / "grid.obj", out=work / "out", folder=work) for a in argv]
+    err = _one_line(argv, capsys)
+    assert "an argument cannot hold a NUL character" in err and "\\x00" in err
+    assert not (work / "out").exists()
+
+
+def test_a_line_break_in_a_name_stays_on_one_line(tmp_path, capsys):
+    """A surface spec with a line break, too long to be a file name, printed 'File name
+    too long' over two lines."""
+    spec = "hyperbolic-paraboloid:width=\n," + "0" * 300 + "=1"
+    err = _one_line(["layout", spec, "--net", "snet", "--panel-size", "1",
+                     "-o", tmp_path / "l.obj"], capsys)
+    assert "has no parameter" in err
+    err = _one_line(["measure", tmp_path / "a\nb.obj", "-o", tmp_path / "m.json"], capsys)
+    assert "a\\nb.obj: no such file" in err
+
+
+@pytest.mark.parametrize("key, value", [("file", "a\\u0000b.stl"),
+                                        ("file", "a" * 300 + ".stl"),
+                                        ("parameters.profile", "a\\u0000b")])
+def test_a_study_file_name_no_file_can_have_is_refused_naming_the_key(key, value, tmp_path,
+                                                                      capsys):
+    """design.file = "a\\u0000b.stl" ended in 'ValueError: embedded null byte'."""
+    design = (f'file = "{value}"' if key == "file" else
+              f'surface = "revolution"\nparameters = {{ profile = "{value}" }}')
+    study = tmp_path / "s.toml"
+    study.write_text(_study_text().replace('surface = "hyperbolic-paraboloid"', design),
+                     encoding="utf-8")
+    err = _one_line(["study", study, "-o", tmp_path / "out"], capsys)
+    assert f"{study}: design.{key} names " in err and "which cannot name a file" in err
+
+
+def test_molds_on_a_design_the_net_overhangs_fits_without_a_traceback(tmp_path, capsys):
+    """molds --panel-surface design on a design the net lies far off (its panels' samples
+    pulled onto one boundary line) ended in 'LinAlgError: Singular matrix'."""
+    net = tmp_path / "grid.obj"
+    QuadMesh.grid(grid_points()).write_obj(net)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code = main(["molds", str(net), "--tolerance-mm", "1", "--panel-surface", "design",
+                     "--design", "torus:major=224", "--triangles", "2000", "--no-3d", "-q",
+                     "-o", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert code == 3 and "fit no mold" in err, err

@@ -20,8 +20,12 @@ def names_a_file(source: str | os.PathLike) -> bool:
     suffix, an existing file, or another existing path (a folder, refused as such later)
     unless it is named like a built-in surface, which it does not shadow."""
     path = Path(source)
-    return (path.suffix.lower() in (".obj", ".stl", ".ply", ".off") or path.is_file()
-            or (path.exists() and str(source).partition(":")[0] not in SURFACES))
+    if path.suffix.lower() in (".obj", ".stl", ".ply", ".off"):
+        return True
+    try:
+        return path.is_file() or (path.exists() and str(source).partition(":")[0] not in SURFACES)
+    except OSError:         # a name too long for the system (a spec with many keys) is no file
+        return False
 
 
 def design_files(source: str | os.PathLike) -> list[Path]:

@@ -648,7 +648,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     if file is not None:
         if parameters:
             t.fail("parameters", "belongs to a built-in surface, not to a design file")
-        source = (folder / file).resolve()
+        source = _resolved(t, "file", folder, file)
         if not source.is_file():
             t.fail("file", f"names {file!r}, which does not exist (looked in {folder})")
         if t.has("triangles"):
@@ -667,7 +667,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
         elif isinstance(value, (int, float)) and not isinstance(value, bool):
             items.append(f"{key}={value}")
         elif isinstance(value, str) and key in ("heights", "control_points", "profile"):
-            target = (folder / value).resolve()
+            target = _resolved(t, f"parameters.{key}", folder, value)
             if not target.is_file():
                 t.fail(f"parameters.{key}", f"names {value!r}, which does not exist "
                        f"(looked in {folder})")
@@ -678,6 +678,19 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     spec = surface + (":" + ",".join(items) if items else "")
     _check_surface(spec, t)
     return DesignSpec(spec, surface, dict(parameters), triangles, units)
+
+
+def _resolved(t: _Table, key: str, folder: Path, name: str) -> Path:
+    """The file `name` of `key`, beside the study file; a name no file can have (a NUL
+    character in it, too long for the system, a link loop) refused naming the key."""
+    try:
+        path = (folder / name).resolve()
+        path.is_file()
+    except (OSError, ValueError, RuntimeError) as exc:
+        why = "a NUL character" if "\x00" in name else getattr(exc, "strerror", None) or exc
+        shown = name if len(name) <= 80 else name[:77] + "..."
+        t.fail(key, f"names {shown!r}, which cannot name a file ({why})")
+    return path
 
 
 def _triangles(t: _Table) -> int:
@@ -700,7 +713,7 @@ def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     unit system, else (a file without one) metres."""
     from ..io.rhino_read import read_3dm
 
-    source = (folder / file).resolve()
+    source = _resolved(t, "file", folder, file)
     if not source.is_file():
         t.fail("file", f"names {file!r}, which does not exist (looked in {folder})")
     layer, name = t.text("layer"), t.text("object")
