@@ -1735,14 +1735,27 @@ def _name_text(name: object) -> str:
     return text if len(text) <= 200 else text[:197] + "..."
 
 
+def _unparsable(argv: list[str]) -> str | None:
+    """Why an argument cannot be parsed as fabplan means it, or None: a NUL character (no
+    shell passes one, a caller in Python can), or ``--`` given as an option's value
+    (``--units=--``, ``-o--``), which argparse drops, handing the command an empty list
+    (no option takes ``--``; a file of that name is ``./--``)."""
+    for arg in map(str, argv):
+        if "\x00" in arg:
+            return f"{_one_line(_name_text(arg))}: an argument cannot hold a NUL character"
+        if arg.startswith("-") and arg != "--" and (
+                arg.endswith("=--") or (arg[1:2] != "-" and arg[2:] == "--")):
+            return (f"{_one_line(_name_text(arg))}: '--' is no value of an option (a file "
+                    "named '--' is ./--)")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     parser = build_parser()
-    nul = next((a for a in (sys.argv[1:] if argv is None else argv) if "\x00" in str(a)), None)
-    if nul is not None:
-        # no shell passes one (argv is NUL-terminated): only a caller in Python can
-        print(f"fabplan: error: {_one_line(_name_text(nul))}: an argument cannot hold a NUL "
-              "character", file=sys.stderr)
+    refused = _unparsable(sys.argv[1:] if argv is None else argv)
+    if refused is not None:
+        print(f"fabplan: error: {refused}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
         args = parser.parse_args(argv)

@@ -586,3 +586,13 @@ def test_molds_on_a_design_the_net_overhangs_fits_without_a_traceback(tmp_path, 
                      "-o", str(tmp_path / "m")])
     err = capsys.readouterr().err
     assert code == 3 and "fit no mold" in err, err
+
+
+@pytest.mark.parametrize("option", ["--units=--", "--tool=--", "--reference=--", "-o--"])
+def test_a_double_dash_as_an_option_value_is_refused(option, work, capsys):
+    """mill --tool=-- ended in "AttributeError: 'list' object has no attribute
+    'partition'": argparse drops the '--' and hands the command an empty list."""
+    argv = ["mill", work / "grid.obj", "--tool", "face:D=10", "-o", work / "out", option]
+    err = _one_line(argv, capsys)
+    assert f"{option}: '--' is no value of an option" in err
+    assert not (work / "out").exists()
