@@ -145,6 +145,8 @@ def _net_inputs(net: str | os.PathLike | None, what: str = "the input net") -> d
     except OSError:
         pass
     for near in dict.fromkeys(names):
+        if not near.name:           # '.', '/': a folder, refused where the net is read
+            continue
         beside = {near.with_suffix(".json"): f"the record of {near.name}",
                   boundary_path(near): f"the boundary panels of {near.name}"}
         files.update({p: w for p, w in beside.items() if os.path.lexists(p)})

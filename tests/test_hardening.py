@@ -596,3 +596,12 @@ def test_a_double_dash_as_an_option_value_is_refused(option, work, capsys):
     err = _one_line(argv, capsys)
     assert f"{option}: '--' is no value of an option" in err
     assert not (work / "out").exists()
+
+
+@pytest.mark.parametrize("net", [".", "/", ".."])
+def test_a_folder_named_without_a_file_name_is_refused_as_a_net(net, tmp_path, capsys):
+    """arcs . ended in "ValueError: PosixPath('.') has an empty name" while the records
+    beside the net were looked for."""
+    err = _one_line(["arcs", net, "-o", tmp_path / "a.dxf"], capsys)
+    assert f"{net}: is a folder, not a quad mesh" in err
+    assert not (tmp_path / "a.dxf").exists()
