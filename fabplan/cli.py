@@ -10,6 +10,7 @@ files written, the limit and the excess named).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -151,6 +152,8 @@ def _net_inputs(net: str | os.PathLike | None, what: str = "the input net") -> d
     except OSError:
         pass
     for near in dict.fromkeys(names):
+        if not near.name:           # '.', '/': a folder, refused where the net is read
+            continue
         beside = {near.with_suffix(".json"): f"the record of {near.name}",
                   boundary_path(near): f"the boundary panels of {near.name}"}
         files.update({p: w for p, w in beside.items() if os.path.lexists(p)})
@@ -477,11 +480,13 @@ def _cmd_molds(args) -> int:
     _folder_apart(out, [*MOLD_FILES, "net.3dm", "net.glb"], inputs)
     mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
+    _check_net_memory(args, mesh, "molds")
     _check_units(args, mesh, settings.units)
     design = None
     if args.design is not None:
         from .design.load import load_design
 
+        _check_triangles(args.design, args.triangles)
         design = load_design(args.design, triangles=args.triangles)
     boundary_file = _boundary_file(args)
     panels = None if boundary_file is None else read_boundary_panels(
@@ -563,6 +568,9 @@ def _cmd_mill(args) -> int:
               **_layout_design_inputs(args.net)}
     _folder_apart(out, [*MILL_FILES, "paths.3dm"], inputs)
     mesh = load_net(args.net)
+    _check_net_memory(args, mesh, "mill")
+    if not args.no_simulation:
+        _check_simulation_memory(mesh, settings.mm_per_unit, args.sim_step)
     progress = _progress(args)
     with progress.stage("reading the design"):
         design = _mill_design(args, settings.units)
@@ -726,6 +734,7 @@ def _cmd_layout(args) -> int:
     _check_outputs([out, out.with_suffix(".json"), boundary_path(out), picture,
                     *_viewer_paths(args, out)],
                    _file_inputs((args.surface, "the design"), (family_file, "the family file")))
+    _check_triangles(args.surface, args.triangles)
     design = load_design(args.surface, triangles=args.triangles)
     if design.source is not None and not args.quiet:
         print(f"design: {design.source['object']} of {design.source['file']}, in "
@@ -847,6 +856,53 @@ def _units_said(units: str | None) -> str:
     """Model units in words for the terminal (a unitless .3dm file has none)."""
     return {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches",
             "ft": "feet"}.get(units or "", "model units (the file has no unit system)")
+
+
+def _check_net_memory(args: argparse.Namespace, mesh: Any, command: str) -> None:
+    """Refuse a net whose `command` (``molds``, ``mill``) would need more memory than this
+    run may use, or more faces than ``--max-panels`` when it is given, before the work
+    (`fabplan.io.resources`)."""
+    from .io.resources import MILL_MEMORY, MOLDS_MEMORY, check_memory, check_panel_count
+
+    model = {"molds": MOLDS_MEMORY, "mill": MILL_MEMORY}[command]
+    faces = len(mesh.face_sizes)
+    fix = f"run {command} on a coarser net or on parts of it"
+    if args.max_panels is not None:
+        check_panel_count(faces, max_panels=args.max_panels, bytes_per_panel=model.bytes_per_unit,
+                          what=f"{args.net}: {model.work} a net of {faces:,} faces", fix=fix)
+    else:
+        check_memory(model, faces, where=str(args.net),
+                     fix=f"{fix}, or give --max-panels to run it anyway")
+
+
+def _check_simulation_memory(mesh: Any, mm_per_unit: float, step_mm: float) -> None:
+    """Refuse a milling simulation whose grid at ``--sim-step`` would need more memory than
+    is left beside the plan, naming the smallest step that fits (a grid over the cap of
+    `height_target` is refused there, before it is made)."""
+    from .fabricate.mill_simulation import MAX_SIMULATION_CELLS, simulation_cells
+    from .io.resources import MILL_MEMORY, SIMULATION_MEMORY, check_memory, memory_limit
+
+    cells = simulation_cells(mesh.vertices * mm_per_unit, mesh.triangles(), step_mm)
+    if cells > MAX_SIMULATION_CELLS:
+        return
+    plan = MILL_MEMORY.peak_bytes(len(mesh.face_sizes))
+    fits = max(SIMULATION_MEMORY.largest_fitting(memory_limit() - plan), 1)
+    check_memory(SIMULATION_MEMORY, cells, where=f"--sim-step {step_mm:g}", beside_bytes=plan,
+                 fix=f"a --sim-step of {1.01 * step_mm * math.sqrt(cells / fits):.3g} mm or more "
+                     "fits, or give --no-simulation")
+
+
+def _check_triangles(surface: str, triangles: int) -> None:
+    """Refuse a ``--triangles`` whose triangulation of a built-in or NURBS surface would
+    need more memory than this run may use (a mesh file keeps its own triangles, checked
+    as it is read)."""
+    from .design.load import names_a_file
+    from .io.resources import DESIGN_MEMORY, check_memory
+    from .io.rhino_read import is_3dm_source
+
+    if is_3dm_source(surface) or not names_a_file(surface):
+        check_memory(DESIGN_MEMORY, triangles, where=f"--triangles {triangles}",
+                     fix="give fewer --triangles")
 
 
 def _check_layout_size(design: Any, panel_size: float, max_panels: int | None) -> None:
@@ -1382,9 +1438,11 @@ def _add_number(p: argparse.ArgumentParser, option: str, *, help: str, **kwargs:
                         f"{', a whole number' if parameter.integer else ''})", **kwargs)
 
 
-def _add_max_panels(p: argparse.ArgumentParser) -> None:
+def _add_max_panels(p: argparse.ArgumentParser, *, memory: bool = False) -> None:
     _add_number(p, "--max-panels", metavar="N",
-                help="refuse runs estimated to need more panels than this (default: what "
+                help="refuse nets of more faces than this (default: what half the available "
+                     "memory holds, estimated from the net's faces)" if memory else
+                     "refuse runs estimated to need more panels than this (default: what "
                      "half the available memory holds, at least 20000)")
 
 
@@ -1500,6 +1558,7 @@ def _add_molds(sub: Any) -> None:
                 help="with --design: the largest distance of a net vertex from the design, in "
                      f"mm; a net farther off ends the run in exit 3 (default "
                      f"{DEFAULT_MAX_DEVIATION_MM:g}, see docs/fabrication-limits.md)")
+    _add_max_panels(p, memory=True)
     _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "
                              "its neighbours (a mold of its own where none does; slivers cut "
                              "with their full panel)", "plan the net's own panels only")
@@ -1553,6 +1612,7 @@ def _add_mill(sub: Any) -> None:
                    help="side the tool comes from: that of the Meusnier (cone: Mannheim) "
                         "spheres (auto), of the face normals (cone: the vn normals) (+) or the "
                         "other (-)")
+    _add_max_panels(p, memory=True)
     _add_number(p, "--sim-step", default=0.5, metavar="MM",
                 help="grid step of the milling simulation (default 0.5)")
     p.add_argument("--no-simulation", action="store_true",
@@ -1835,9 +1895,51 @@ def _stopped_by_signals() -> Iterator[None]:
             signal.signal(getattr(signal, name), handler)
 
 
+def _one_line(message: str) -> str:
+    """A message on one line: a line break or other control character that came in with a
+    name the user gave is shown as its escape (``\\n``).
+
+    Examples
+    --------
+    >>> _one_line("a\\nb.obj: no such file")
+    'a\\\\nb.obj: no such file'
+    """
+    if message.isprintable():
+        return message
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+
+
+def _name_text(name: object) -> str:
+    """A file name for a one-line message: as given when printable, else quoted with its
+    escapes (a line break in it), shortened past 200 characters."""
+    text = os.fsdecode(name) if isinstance(name, (str, bytes, os.PathLike)) else str(name)
+    if not text.isprintable():
+        text = repr(text)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def _unparsable(argv: list[str]) -> str | None:
+    """Why an argument cannot be parsed as fabplan means it, or None: a NUL character (no
+    shell passes one, a caller in Python can), or ``--`` given as an option's value
+    (``--units=--``, ``-o--``), which argparse drops, handing the command an empty list
+    (no option takes ``--``; a file of that name is ``./--``)."""
+    for arg in map(str, argv):
+        if "\x00" in arg:
+            return f"{_one_line(_name_text(arg))}: an argument cannot hold a NUL character"
+        if arg.startswith("-") and arg != "--" and (
+                arg.endswith("=--") or (arg[1:2] != "-" and arg[2:] == "--")):
+            return (f"{_one_line(_name_text(arg))}: '--' is no value of an option (a file "
+                    "named '--' is ./--)")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     parser = build_parser()
+    refused = _unparsable(sys.argv[1:] if argv is None else argv)
+    if refused is not None:
+        print(f"fabplan: error: {refused}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
@@ -1851,10 +1953,10 @@ def main(argv: list[str] | None = None) -> int:
         return code
     except CannotMakeError as exc:
         # the input is sound; what was asked cannot be made from it as it stands
-        print(f"fabplan: cannot make it: {exc}", file=sys.stderr)
+        print(f"fabplan: cannot make it: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     except FabplanError as exc:
-        print(f"fabplan: error: {exc}", file=sys.stderr)
+        print(f"fabplan: error: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except _Stopped as exc:
         import signal
@@ -1875,7 +1977,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         # a file system failure while writing (disk full, a vanished folder): outputs are
         # staged, so nothing half-written is left; say what failed in one line
-        where = f"{exc.filename}: " if exc.filename else ""
+        where = f"{_name_text(exc.filename)}: " if exc.filename else ""
         print(f"fabplan: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
 

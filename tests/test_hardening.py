@@ -3,8 +3,9 @@
 Regression tests: device files replaced by outputs, study candidate names leaving the
 output folder, a folder or FIFO given as input reported as missing, meshes
 with 1e300 coordinates, coincident or duplicate vertices, triangles or non-manifold
-edges accepted or ending in a traceback, binary STL failing on a missing package.
-The tests make their own FIFOs and sockets; they never touch the system's devices.
+edges accepted or ending in a traceback, binary STL failing on a missing package; and
+the cases `test_property_fuzz` found. The tests make their own FIFOs and sockets; they
+never read the system's devices (``/proc/self/mem`` is only looked at).
 """
 
 from __future__ import annotations
@@ -380,7 +381,7 @@ def test_a_study_beyond_the_panel_limit_is_refused_before_any_layout(tmp_path, c
     study.write_text(_study_text().replace("size = 2.0", "size = 0.02"), encoding="utf-8")
     refused(["study", study, "-q", "-o", tmp_path / "out", "--max-panels", "100000"], capsys,
             tmp_path, "layouts of panel size 0.02 m on a design of area 411.8 m^2: about "
-            "1,029,405 panels (about 41 GB of memory), more than the limit of 100,000",
+            "1,029,405 panels (about 50 GB of memory), more than the limit of 100,000",
             "give a larger panels.size")
 
 
@@ -463,3 +464,144 @@ def test_a_folder_or_fifo_given_to_a_file_option_is_named(work, capsys, option, 
         argv = _argv("optimize", work, "o.obj")
     argv[-2:-2] = [*option, str(target)]
     refused(argv, capsys, work, f"{target}: is a {kind.replace('fifo', 'FIFO')}, not {what}")
+
+
+# ---------------------------------------------------------------------------- found by fuzzing
+def _one_line(argv: list, capsys) -> str:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code = main([str(a) for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("fabplan: error: ") and err.count("\n") == 1, err
+    return err
+
+
+@pytest.mark.parametrize("depth", [400, 1100])
+def test_a_study_nested_too_deep_is_refused_in_one_line(depth, tmp_path, capsys):
+    """A study with inline tables 400 deep ended in a RecursionError traceback."""
+    study = tmp_path / "s.toml"
+    study.write_text(_study_text() + "[deep]\nx = " + "{a = " * depth + "1" + "}" * depth
+                     + "\n", encoding="utf-8")
+    err = _one_line(["study", study, "-o", tmp_path / "out"], capsys)
+    assert f"{study}: not a valid TOML study file: its arrays or tables nest too deep" in err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("kind, words", [
+    ("proc", "/proc/self/mem: empty file (not a text file of numbers for the surface "
+             "parameter profile)"),
+    ("folder", "is a folder, not a text file of numbers for the surface parameter profile"),
+    ("fifo", "is a FIFO, not a text file of numbers for the surface parameter profile"),
+    ("comments", "not a text file of numbers for the surface parameter profile"),
+    ("binary", "not a text profile file (binary content at byte 0)"),
+])
+def test_a_surface_file_that_is_no_file_of_numbers_is_named(kind, words, tmp_path, capsys):
+    """profile=/proc/self/mem said only 'Input/output error'; a folder or FIFO was 'no
+    such file'; a file of comments only printed a numpy warning first."""
+    path = {"proc": Path("/proc/self/mem")}.get(kind, tmp_path / "profile.txt")
+    if kind == "folder":
+        path.mkdir()
+    elif kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "comments":
+        path.write_text("# r z\n")
+    elif kind == "binary":
+        path.write_bytes(b"\xff\x00\x01")
+    err = _one_line(["layout", f"revolution:profile={path}", "--net", "snet", "--panel-size",
+                     "1", "-o", tmp_path / "o" / "l.obj"], capsys)
+    assert words in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("spec", ["torus:nan=", "tower-facade:=", "bspline:=x"])
+def test_an_unknown_surface_key_is_named_before_its_value(spec, tmp_path, capsys):
+    """'torus:nan=' said "nan must be a number, got ''" instead of naming the parameters."""
+    name, _, key = spec.partition(":")
+    err = _one_line(["layout", spec, "--net", "snet", "--panel-size", "1",
+                     "-o", tmp_path / "l.obj"], capsys)
+    assert f"surface '{name}' has no parameter {key.split('=')[0]!r}; its parameters: " in err
+
+
+def test_mill_with_no_strip_between_passes_warns_nothing(tmp_path, capsys):
+    """The simulation of a net whose passes leave no strip to measure printed numpy's
+    'All-NaN axis encountered' before the report."""
+    net = tmp_path / "grid.obj"
+    QuadMesh.grid(grid_points()).write_obj(net)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code = main(["mill", str(net), "--tool", "face:D=10", "-q", "-o", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert code in (0, 3) and "Warning" not in err, err
+    assert (tmp_path / "m" / "mill.json").is_file()
+
+
+@pytest.mark.parametrize("argv", [
+    ["optimize", "{net}", "--net", "snet", "--handle=\x00", "-o", "{out}/o.obj"],
+    ["measure", "{folder}/g\x00.obj", "-o", "{out}/m.json"],
+])
+def test_a_nul_character_in_an_argument_is_refused(argv, work, capsys):
+    """--handle=\\x00 ended in 'ValueError: embedded null byte' (no shell passes one, a
+    Python caller can)."""
+    argv = [a.format(net=work / "grid.obj", out=work / "out", folder=work) for a in argv]
+    err = _one_line(argv, capsys)
+    assert "an argument cannot hold a NUL character" in err and "\\x00" in err
+    assert not (work / "out").exists()
+
+
+def test_a_line_break_in_a_name_stays_on_one_line(tmp_path, capsys):
+    """A surface spec with a line break, too long to be a file name, printed 'File name
+    too long' over two lines."""
+    spec = "hyperbolic-paraboloid:width=\n," + "0" * 300 + "=1"
+    err = _one_line(["layout", spec, "--net", "snet", "--panel-size", "1",
+                     "-o", tmp_path / "l.obj"], capsys)
+    assert "has no parameter" in err
+    err = _one_line(["measure", tmp_path / "a\nb.obj", "-o", tmp_path / "m.json"], capsys)
+    assert "a\\nb.obj: no such file" in err
+
+
+@pytest.mark.parametrize("key, value", [("file", "a\\u0000b.stl"),
+                                        ("file", "a" * 300 + ".stl"),
+                                        ("parameters.profile", "a\\u0000b")])
+def test_a_study_file_name_no_file_can_have_is_refused_naming_the_key(key, value, tmp_path,
+                                                                      capsys):
+    """design.file = "a\\u0000b.stl" ended in 'ValueError: embedded null byte'."""
+    design = (f'file = "{value}"' if key == "file" else
+              f'surface = "revolution"\nparameters = {{ profile = "{value}" }}')
+    study = tmp_path / "s.toml"
+    study.write_text(_study_text().replace('surface = "hyperbolic-paraboloid"', design),
+                     encoding="utf-8")
+    err = _one_line(["study", study, "-o", tmp_path / "out"], capsys)
+    assert f"{study}: design.{key} names " in err and "which cannot name a file" in err
+
+
+def test_molds_on_a_design_the_net_overhangs_fits_without_a_traceback(tmp_path, capsys):
+    """molds --panel-surface design on a design the net lies far off (its panels' samples
+    pulled onto one boundary line) ended in 'LinAlgError: Singular matrix'."""
+    net = tmp_path / "grid.obj"
+    QuadMesh.grid(grid_points()).write_obj(net)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code = main(["molds", str(net), "--tolerance-mm", "1", "--panel-surface", "design",
+                     "--design", "torus:major=224", "--triangles", "2000", "--no-3d", "-q",
+                     "-o", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert code == 3 and "fit no mold" in err, err
+
+
+@pytest.mark.parametrize("option", ["--units=--", "--tool=--", "--reference=--", "-o--"])
+def test_a_double_dash_as_an_option_value_is_refused(option, work, capsys):
+    """mill --tool=-- ended in "AttributeError: 'list' object has no attribute
+    'partition'": argparse drops the '--' and hands the command an empty list."""
+    argv = ["mill", work / "grid.obj", "--tool", "face:D=10", "-o", work / "out", option]
+    err = _one_line(argv, capsys)
+    assert f"{option}: '--' is no value of an option" in err
+    assert not (work / "out").exists()
+
+
+@pytest.mark.parametrize("net", [".", "/", ".."])
+def test_a_folder_named_without_a_file_name_is_refused_as_a_net(net, tmp_path, capsys):
+    """arcs . ended in "ValueError: PosixPath('.') has an empty name" while the records
+    beside the net were looked for."""
+    err = _one_line(["arcs", net, "-o", tmp_path / "a.dxf"], capsys)
+    assert f"{net}: is a folder, not a quad mesh" in err
+    assert not (tmp_path / "a.dxf").exists()

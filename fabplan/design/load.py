@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..io.resources import DESIGN_MEMORY, check_memory
 from ..io.rhino_read import RhinoDesign, is_3dm_source, read_3dm, split_source
 from ..io.triangles import read_triangles
 from .mesh_surface import DesignSurface
@@ -19,8 +20,12 @@ def names_a_file(source: str | os.PathLike) -> bool:
     suffix, an existing file, or another existing path (a folder, refused as such later)
     unless it is named like a built-in surface, which it does not shadow."""
     path = Path(source)
-    return (path.suffix.lower() in (".obj", ".stl", ".ply", ".off") or path.is_file()
-            or (path.exists() and str(source).partition(":")[0] not in SURFACES))
+    if path.suffix.lower() in (".obj", ".stl", ".ply", ".off"):
+        return True
+    try:
+        return path.is_file() or (path.exists() and str(source).partition(":")[0] not in SURFACES)
+    except OSError:         # a name too long for the system (a spec with many keys) is no file
+        return False
 
 
 def design_files(source: str | os.PathLike) -> list[Path]:
@@ -63,6 +68,8 @@ def load_design(source: str | os.PathLike, *, resolution: int | tuple | None = N
         surface = surface_from_spec(str(source))
         return surface.triangulate(resolution or surface.resolution_for(triangles))
     vertices, faces = read_triangles(path)
+    check_memory(DESIGN_MEMORY, len(faces), where=str(path),
+                 fix="lay out a coarser mesh of the design (fewer triangles)")
     return DesignSurface(vertices, faces, name=str(path))
 
 

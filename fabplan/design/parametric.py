@@ -27,13 +27,14 @@ Built-in parametric surfaces (`SURFACES`, looked up with `make_surface` or a spe
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from ..errors import InputError
+from ..io.inputs import check_input_file, check_text
 from ..io.parameters import surface_parameter
 from .mesh_surface import DesignSurface
 
@@ -579,8 +580,10 @@ def surface_from_spec(spec: str) -> ParametricSurface:
             if len(parts) != 2:
                 raise InputError(f"surface spec {spec!r}: {key} is LO..HI degrees")
             parameters[key] = tuple(parts)     # the numbers are read by `make_surface`
-        elif surface_parameter(name, key) is not None:
-            parameters[key] = value            # read and checked by `make_surface`
+        elif surface_parameter(name, key) is not None or _unknown_parameter(name, key):
+            # read and checked by `make_surface`, which names a parameter the surface
+            # does not have before reading its value
+            parameters[key] = value
         else:
             try:
                 parameters[key] = float(value)
@@ -588,6 +591,12 @@ def surface_from_spec(spec: str) -> ParametricSurface:
                 raise InputError(f"surface spec {spec!r}: {key} must be a number, got "
                                  f"{value!r}") from None
     return make_surface(name, **parameters)
+
+
+def _unknown_parameter(surface: str, key: str) -> bool:
+    """Whether `key` is no parameter of built-in surface `surface` (an unknown surface
+    has none)."""
+    return surface not in SURFACES or key not in surface_parameters(surface)
 
 
 def spec_of_surface(surface: ParametricSurface) -> str | None:
@@ -613,14 +622,17 @@ def spec_of_surface(surface: ParametricSurface) -> str | None:
 
 
 def _read_grid_file(path: str, key: str) -> np.ndarray:
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{path}: no such file (surface parameter {key})")
+    what = f"a text file of numbers for the surface parameter {key}"
+    # a folder, a FIFO, a device or an unreadable file (/proc/self/mem) named as such
+    text = check_text(check_input_file(path, what), key)
     try:
-        text = p.read_text(encoding="utf-8")
-        data = np.loadtxt(text.splitlines(), ndmin=2)
-    except (UnicodeDecodeError, ValueError):
-        raise InputError(f"{path}: not a text file of numbers (surface parameter {key})") from None
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")      # numpy warns of a file of comments only
+            data = np.loadtxt(text.splitlines(), ndmin=2)
+    except (ValueError, UserWarning):
+        raise InputError(f"{path}: not {what}") from None
+    if data.size == 0:
+        raise InputError(f"{path}: holds no numbers (the surface parameter {key})")
     if key == "control_points":
         shape = [line.split()[2:] for line in text.splitlines() if line.startswith("# shape")]
         if shape:

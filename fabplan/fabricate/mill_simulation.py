@@ -37,6 +37,8 @@ __all__ = [
     "SimulationSettings",
     "SimulationResult",
     "mill_frame",
+    "simulation_cells",
+    "MAX_SIMULATION_CELLS",
     "height_target",
     "entry_heights",
     "ball_end_path",
@@ -45,6 +47,10 @@ __all__ = [
 ]
 
 _GOLDEN = (np.sqrt(5.0) - 1) / 2
+
+#: the largest simulation grid `height_target` makes (cells): about 4 GB and 17 minutes
+#: (`fabplan.io.resources.SIMULATION_MEMORY`)
+MAX_SIMULATION_CELLS = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -122,8 +128,39 @@ def mill_frame(up: np.ndarray) -> np.ndarray:
     return np.stack([ex, np.cross(up, ex), up])
 
 
+def simulation_cells(points_mm: np.ndarray, triangles: np.ndarray, step_mm: float) -> float:
+    """The cells of the simulation grid of a surface at `step_mm`, estimated before the
+    passes are planned: the grid over the bounding box of the points seen along their
+    triangles' mean normal (the mill direction `height_target` takes is the passes' mean
+    tool-side normal, close to it).
+
+    Parameters
+    ----------
+    points_mm : (n, 3) float, the net's vertices (mm).
+    triangles : (t, 3) int, a triangulation of them.
+    step_mm : grid spacing.
+
+    Returns
+    -------
+    float, the estimated cell count (may be huge).
+
+    Examples
+    --------
+    >>> P = np.array([[0.0, 0, 0], [100, 0, 0], [100, 50, 0], [0, 50, 0]])
+    >>> simulation_cells(P, np.array([[0, 1, 2], [0, 2, 3]]), 1.0)
+    5151.0
+    """
+    a, b, c = (points_mm[triangles[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a).sum(axis=0)
+    length = np.linalg.norm(normal)
+    up = normal / length if length > 0 else np.array([0.0, 0.0, 1.0])
+    P = points_mm @ mill_frame(up).T
+    extent = P[:, :2].max(axis=0) - P[:, :2].min(axis=0)
+    return float(np.prod(np.ceil(extent / step_mm) + 1))
+
+
 def height_target(points_mm: np.ndarray, triangles: np.ndarray, up: np.ndarray, *,
-                  step_mm: float, max_cells: int = 4_000_000) -> HeightTarget:
+                  step_mm: float, max_cells: int = MAX_SIMULATION_CELLS) -> HeightTarget:
     """The target height map of a surface sampled by points (a net's vertices).
 
     Heights are interpolated by a thin-plate spline with a quadratic polynomial part

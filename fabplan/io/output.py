@@ -204,10 +204,12 @@ def _input_keys(inputs: Mapping[Path, str] | Iterable[str | os.PathLike]
     for path, what in described.items():
         if not path:
             continue
-        known[os.path.realpath(path)] = (str(path), what)
         try:
+            known[os.path.realpath(path)] = (str(path), what)
             info = os.stat(path)
         except (OSError, ValueError):
+            # no file by that name (a NUL byte in it, say): nothing an output can replace;
+            # the command refuses the input where it reads it
             continue
         known[(info.st_dev, info.st_ino)] = (str(path), what)
     return known
@@ -216,13 +218,13 @@ def _input_keys(inputs: Mapping[Path, str] | Iterable[str | os.PathLike]
 def _input_at(path: str | os.PathLike, known: dict[object, tuple[str, str]]
               ) -> tuple[str, str] | None:
     """The input (its path and what it is) that `path` is, through links, or None."""
-    hit = known.get(os.path.realpath(path))
-    if hit is None:
-        try:
+    try:
+        hit = known.get(os.path.realpath(path))
+        if hit is None:
             info = os.stat(path)
             hit = known.get((info.st_dev, info.st_ino))
-        except (OSError, ValueError):
-            pass
+    except (OSError, ValueError):
+        return None         # no such file yet, or no name of a file (a NUL byte in it)
     return hit
 
 

@@ -122,7 +122,13 @@ def fit_height_fields(points: np.ndarray, weight: np.ndarray, origin: np.ndarray
     total = weight.sum(axis=1) if ridge_weight is None else ridge_weight
     ridge = _RIDGE * total[:, None] * np.array([0, 0, 0, 1, 1, 1.0])
     normal_matrix[:, np.arange(6), np.arange(6)] += ridge
-    return np.linalg.solve(normal_matrix, (AtW @ z[..., None]))[..., 0]
+    rhs = AtW @ z[..., None]
+    try:
+        return np.linalg.solve(normal_matrix, rhs)[..., 0]
+    except np.linalg.LinAlgError:
+        # points that leave a slope free (all on one line: the samples of a design a face
+        # overhangs, pulled onto its boundary): the least-norm fit, as pinv gives it
+        return (np.linalg.pinv(normal_matrix) @ rhs)[..., 0]
 
 
 def height_field_values(coefficients: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ import igl
 import numpy as np
 
 from ..errors import InputError
+from ..io.resources import REFERENCE_MEMORY, check_memory
 from ..io.triangles import read_triangles
 from ..net.mesh import QuadMesh
 
@@ -133,9 +134,12 @@ def load_reference(path: str | os.PathLike) -> ReferenceSurface:
     Raises
     ------
     InputError
-        When the file is missing, unreadable, or holds no triangles with area.
+        When the file is missing, unreadable, holds no triangles with area, or more
+        triangles than the memory holds (`fabplan.io.resources.REFERENCE_MEMORY`).
     """
     vertices, triangles = read_triangles(path)
+    check_memory(REFERENCE_MEMORY, len(triangles), where=str(path),
+                 fix="give a coarser mesh as the reference (fewer triangles)")
     if not np.isfinite(vertices).all():
         raise InputError(f"{path}: non-finite vertex coordinates")
     surface = ReferenceSurface(vertices, triangles)

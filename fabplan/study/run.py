@@ -351,7 +351,7 @@ def load_study_design(study: Study, say: Callable[[str], None],
         `max_panels`.
     """
     from ..design.load import load_design
-    from ..io.resources import check_panel_count
+    from ..io.resources import STUDY_BYTES_PER_PANEL, check_panel_count
 
     source, triangles = study.design.source, study.design.triangles
     design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
@@ -359,6 +359,7 @@ def load_study_design(study: Study, say: Callable[[str], None],
         f"{design.area:.4g} {study.design.units}^2")
     smallest = min(study.panel_size_of(c) for c in study.candidates)
     check_panel_count(design.area / smallest**2, max_panels=max_panels,
+                      bytes_per_panel=STUDY_BYTES_PER_PANEL,
                       what=f"{study.path or study.name}: layouts of panel size "
                            f"{smallest:g} {study.design.units} on a design of area "
                            f"{design.area:.4g} {study.design.units}^2",

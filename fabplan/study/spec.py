@@ -582,6 +582,10 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{file}: not a valid TOML study file: {exc}") from None
+    except RecursionError:
+        # the parser recurses once per level of nested arrays and inline tables
+        raise InputError(f"{file}: not a valid TOML study file: its arrays or tables nest "
+                         "too deep (a study nests a few levels)") from None
     top = _Table(data, "", file)
     top.only(TABLES)
     folder = path.parent if path else Path.cwd()
@@ -644,7 +648,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     if file is not None:
         if parameters:
             t.fail("parameters", "belongs to a built-in surface, not to a design file")
-        source = (folder / file).resolve()
+        source = _resolved(t, "file", folder, file)
         if not source.is_file():
             t.fail("file", f"names {file!r}, which does not exist (looked in {folder})")
         if t.has("triangles"):
@@ -652,7 +656,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
                    "triangles")
         t.done()
         return DesignSpec(str(source), Path(file).name, {}, None, units)
-    triangles = t.number("triangles", 20000, integer=True)
+    triangles = _triangles(t)
     if surface is None or surface not in SURFACES:
         t.fail("surface", f"is {surface!r}, not a built-in surface; known: {', '.join(SURFACES)}"
                + _suggest(surface, SURFACES))
@@ -663,7 +667,7 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
         elif isinstance(value, (int, float)) and not isinstance(value, bool):
             items.append(f"{key}={value}")
         elif isinstance(value, str) and key in ("heights", "control_points", "profile"):
-            target = (folder / value).resolve()
+            target = _resolved(t, f"parameters.{key}", folder, value)
             if not target.is_file():
                 t.fail(f"parameters.{key}", f"names {value!r}, which does not exist "
                        f"(looked in {folder})")
@@ -676,6 +680,32 @@ def _design(t: _Table, folder: Path) -> DesignSpec:
     return DesignSpec(spec, surface, dict(parameters), triangles, units)
 
 
+def _resolved(t: _Table, key: str, folder: Path, name: str) -> Path:
+    """The file `name` of `key`, beside the study file; a name no file can have (a NUL
+    character in it, too long for the system, a link loop) refused naming the key."""
+    try:
+        path = (folder / name).resolve()
+        path.is_file()
+    except (OSError, ValueError, RuntimeError) as exc:
+        why = "a NUL character" if "\x00" in name else getattr(exc, "strerror", None) or exc
+        shown = name if len(name) <= 80 else name[:77] + "..."
+        t.fail(key, f"names {shown!r}, which cannot name a file ({why})")
+    return path
+
+
+def _triangles(t: _Table) -> int:
+    """``design.triangles``: within the range of ``--triangles`` and the memory this run
+    may use (`fabplan.io.resources.DESIGN_MEMORY`)."""
+    from ..io.resources import DESIGN_MEMORY, memory_reason
+
+    triangles = t.number("triangles", 20000, integer=True)
+    t.within("triangles", triangles, "--triangles")
+    reason = memory_reason(DESIGN_MEMORY, triangles)
+    if reason is not None:
+        t.fail("triangles", f"{triangles}: {reason}; give fewer")
+    return triangles
+
+
 def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     """A design in a .3dm file: the object that `layer`, `object` and `face` pick, read
     now so that a bad choice is named before the study starts. The model units are
@@ -683,7 +713,7 @@ def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     unit system, else (a file without one) metres."""
     from ..io.rhino_read import read_3dm
 
-    source = (folder / file).resolve()
+    source = _resolved(t, "file", folder, file)
     if not source.is_file():
         t.fail("file", f"names {file!r}, which does not exist (looked in {folder})")
     layer, name = t.text("layer"), t.text("object")
@@ -691,7 +721,7 @@ def _rhino_design(t: _Table, folder: Path, file: str) -> DesignSpec:
     if face is not None and face < 0:
         t.fail("face", f"must be a face number (0, 1, ...), got {face}")
     asked = t.text("units", None, choices=tuple(MM_PER_UNIT))
-    triangles = t.number("triangles", 20000, integer=True)
+    triangles = _triangles(t)
     t.done()
     read = read_3dm(source, layer=layer, object_name=name, face=face)
     if asked is not None and read.file_units is None:
