@@ -45,9 +45,10 @@ from pathlib import Path
 import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results"
-STUDY_NETS = {"stadium-lw44": "linear-weingarten-44", "stadium-baseline": "baseline",
-              "stadium-lw38": "linear-weingarten-38", "stadium-lw50": "linear-weingarten-50",
-              "stadium-isogonal60": "isogonal-60"}
+# the stadium template's candidates (its linear Weingarten angle searched in [36, 52])
+STUDY_NETS = {"stadium-lw41": "linear-weingarten-41.3333", "stadium-baseline": "baseline",
+              "stadium-lw36": "linear-weingarten-36", "stadium-lw44": "linear-weingarten-44",
+              "stadium-lw52": "linear-weingarten-52", "stadium-isogonal60": "isogonal-60"}
 
 
 # ----------------------------------------------------------------------------- the recheck

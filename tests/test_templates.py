@@ -42,7 +42,7 @@ from fabplan.design.load import load_design
 from fabplan.io.obj import read_obj
 from fabplan.net.mesh import QuadMesh
 from fabplan.study.run import DEVIATION_HELD
-from fabplan.study.spec import read_study, template_names, template_path
+from fabplan.study.spec import GLIDING_NETS, read_study, template_names, template_path
 
 # every template study runs for 10 to 90 s: the full suite runs them, `-m "not slow"` does not
 pytestmark = pytest.mark.slow
@@ -55,15 +55,14 @@ def _run(name: str, folder) -> dict:
     assert all(c["error"] is None for c in record["candidates"]), \
         [c["error"] for c in record["candidates"]]
     # the whole facade is clad: full panels and boundary panels trimmed to the design.
-    # Nets held on the design are clad to 99.9 %; nets that leave it (by up to 290 mm at
-    # the stadium's top rim) meet the design boundary through boundary panels continuing
-    # their surface, some of which are cut again where they would overlap: clad to 98 %,
-    # the rest reported as gaps
-    glides = {c.name: c.glides for c in read_study(template_path(name)).candidates}
+    # Nets held on the design are clad to 99.9 %; nets that leave it meet the design
+    # boundary through boundary panels continuing their surface, some of which are cut
+    # again where they would overlap: clad to 98 %, the rest reported as gaps
     for c in record["candidates"]:
         coverage = c["metrics"]["coverage"]
-        assert coverage >= (0.999 if glides[c["name"]] else 0.98), (c["name"], coverage)
-        if glides[c["name"]]:
+        glides = c["net"] in GLIDING_NETS
+        assert coverage >= (0.999 if glides else 0.98), (c["name"], coverage)
+        if glides:
             assert c["metrics"]["boundary_panels"]["flipped"] == 0
     report = (folder / "report.html").read_text(encoding="utf-8")
     assert "boundary panel" in report and "design covered" in report
@@ -146,21 +145,26 @@ def test_stadium_linear_weingarten_nets_keep_the_design_limit_in_the_solve(tmp_p
     base_plan = json.loads((out / "candidates" / "baseline" / "molds.json").read_text())
     for c in lw:
         m = c["metrics"]
-        # the deviation limit is held inside the solve: a net that cannot keep to it ends
-        # off the design at the smallest limit it met, and its verdict names that limit
+        # the deviation limit is held inside the solve (at 90 % of it): a net that cannot
+        # keep to that ends off the design at the smallest limit it met, and is judged
+        # against the study's limit like every other
         deviation = next(ck for ck in c["checks"] if ck["limit"] == "max_deviation_mm")
-        if m["status"] == "off-design":
-            assert not deviation["ok"] and deviation["relax_to"] >= deviation["measured"]
+        if not deviation["ok"]:
+            assert deviation["relax_to"] >= deviation["measured"]
             assert "largest deviation from the design of" in c["relaxation"]
         # solved past the design's edge, the whole net kept keeps the bound the solve was
-        # given, and its boundary panels, cut from the molds, continue it within the limit
+        # given (or, off the design, the smallest it reached), and its boundary panels, cut
+        # from the molds, continue it
         solved = json.loads((out / "candidates" / c["name"] / "net.json").read_text())
         continued = solved["parameters"]["continued"]
         assert continued["faces_kept"] == len(QuadMesh.from_obj(
             out / "candidates" / c["name"] / "net.obj").faces) < continued["faces_solved"]
-        assert m["deviation_mm"]["max"] <= DEVIATION_HELD * limits.max_deviation_mm + 1e-6
-        assert m["boundary_panels"]["deviation_max_mm"] <= limits.max_deviation_mm
-        assert deviation["ok"]
+        held = DEVIATION_HELD * limits.max_deviation_mm
+        if m["status"] == "off-design":
+            held = 1000 * solved["parameters"]["deviation"]["smallest_converged"]
+        assert m["deviation_mm"]["max"] <= held + 1e-6
+        largest = max(m["deviation_mm"]["max"], m["boundary_panels"]["deviation_max_mm"])
+        assert deviation["ok"] is (largest <= limits.max_deviation_mm)
     # the study recommends a linear Weingarten net that meets every limit, as the paper's
     # stadium (Fig. 19): rechecked from the exported files by code apart from the planner
     chosen = next(c for c in record["candidates"] if c["recommended"])
