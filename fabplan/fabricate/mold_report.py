@@ -484,9 +484,12 @@ def mold_report_files(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
             folder / "panels.csv": plan.panels_csv()}
 
 
-def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None) -> PdfDocument:
-    """The printable report (``report.pdf``): summary, why this many molds, the pictures
-    and the molds table (the panels are in ``panels.csv``)."""
+def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None, *,
+                    boundary: BoundaryMolds | None = None,
+                    limits: dict | None = None) -> PdfDocument:
+    """The printable report (``report.pdf``): summary (the verification's figures, the
+    boundary panels' molds and the fabrication limits as report.html gives them), why
+    this many molds, the pictures and the molds table (the panels are in ``panels.csv``)."""
     r = plan.record()
     pictures = pictures or mold_pictures(plan)
     doc = PdfDocument(f"Mold report: {Path(str(r['net'])).name}",
@@ -501,6 +504,14 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None) -> P
         ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
         ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
         ["panels that do not fit", counted(len(r["failures"]), "panel")],
+        ["largest step between neighbouring panels' molds",
+         f"{r['panel_steps']['max_mm']:.3f} mm (limit {r['panel_steps']['limit_mm']:g} mm)"],
+        ["shared edges with a step over the limit",
+         f"{len(r['panel_steps']['over_limit'])} of {r['panel_steps']['edge_count']}"],
+        *([["boundary panels (boundary-panels.csv)",
+            boundary_molds_text(boundary, plan.mold_count)]] if boundary is not None else []),
+        *[[f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})",
+           limit_row_text(c)] for c in (limits or {}).values()],
     ], widths=[2, 1])
     figures_section = doc.section("Pictures")
     for key, caption in (("molds", "Panels coloured by mold; numbers are mold ids."),
@@ -555,7 +566,8 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
                          limits=record["limits"]),
                      staging / "molds.json": json_text(record),
                      **{staging / name: text for name, text in texts.items()}})
-        mold_report_pdf(plan, pictures).write(staging / "report.pdf")
+        mold_report_pdf(plan, pictures, boundary=None if boundary is None else boundary[1],
+                        limits=record["limits"]).write(staging / "report.pdf")
     return [folder / name for name in ("report.html", "report.pdf", "molds.json", *texts)]
 
 
