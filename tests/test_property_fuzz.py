@@ -33,9 +33,9 @@ Tiers: the quick tier draws 460 examples in every test run, CI's included (about
 this project's 2-core machine). The slow tier draws 5,400 more (5 to 8 minutes there, and
 minutes more to shrink a failure): marked ``slow`` and run only with ``FABPLAN_FUZZ_SLOW=1``,
 which the README's whole-suite command sets, so that a plain ``python -m pytest -q`` while
-working is not a third longer for examples of the same kinds the quick tier draws. Examples are derandomized (a fixed
-seed per test): every run draws the same examples, and a failure prints the argv (or the
-study's text) that reproduces it.
+working is not a third longer for examples of the same kinds the quick tier draws.
+Examples are derandomized (a fixed seed per test): every run draws the same examples, and
+a failure prints the argv (or the study's text) that reproduces it.
 """
 
 from __future__ import annotations
