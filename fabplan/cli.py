@@ -587,7 +587,9 @@ def _cmd_mill(args) -> int:
         for note in result.plan.notes:
             _warn(note)
     if not result.gouge_free and result.simulation is not None:
-        why = "give a larger --margin"
+        # a margin keeps the tool inside the spheres; a face wider than the surface's
+        # curvature allows over its width gouges whatever the margin
+        why = "try a smaller tool or a larger --margin"
         distance = result.net_distance
         if distance is not None and result.plan.placed_on == "net":
             why = (f"the passes follow the net, which is up to "
