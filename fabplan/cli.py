@@ -488,6 +488,8 @@ def _cmd_molds(args) -> int:
 
         _check_triangles(args.design, args.triangles)
         design = load_design(args.design, triangles=args.triangles)
+        if args.panel_surface == "design":
+            _check_net_on_design(args, mesh, design)
     boundary_file = _boundary_file(args)
     panels = None if boundary_file is None else read_boundary_panels(
         mesh, boundary_file, _boundary_record(args))
@@ -892,6 +894,27 @@ def _check_simulation_memory(mesh: Any, mm_per_unit: float, step_mm: float) -> N
     check_memory(SIMULATION_MEMORY, cells, where=f"--sim-step {step_mm:g}", beside_bytes=plan,
                  fix=f"a --sim-step of {1.01 * step_mm * math.sqrt(cells / fits):.3g} mm or more "
                      "fits, or give --no-simulation")
+
+
+#: with --panel-surface design, a net whose vertices lie farther than this many of its mean
+#: edges from the design is refused: its panels would be cut from a surface they are not on
+NET_OFF_DESIGN_EDGES = 2.0
+
+
+def _check_net_on_design(args: argparse.Namespace, mesh: Any, design: Any) -> None:
+    """Refuse `--panel-surface design` for a net (`QuadMesh`) that does not lie on its
+    design (`DesignSurface`)."""
+    import numpy as np
+
+    with np.errstate(all="ignore"):
+        distance = design.distances(mesh.vertices)
+    edge = mesh.mean_edge_length
+    far = float(np.max(distance)) if np.all(np.isfinite(distance)) else math.inf
+    if far > NET_OFF_DESIGN_EDGES * edge:
+        raise InputError(f"{args.net}: --panel-surface design: the net lies up to {far:.4g} "
+                         f"from the design {args.design} ({far / edge:.3g} of its mean edges): "
+                         "its panels are cut from the design only where they lie on it; give "
+                         "the design the net was laid out on, or another --panel-surface")
 
 
 def _check_triangles(surface: str, triangles: int) -> None:

@@ -574,9 +574,10 @@ def test_a_study_file_name_no_file_can_have_is_refused_naming_the_key(key, value
     assert f"{study}: design.{key} names " in err and "which cannot name a file" in err
 
 
-def test_molds_on_a_design_the_net_overhangs_fits_without_a_traceback(tmp_path, capsys):
+def test_molds_on_a_design_the_net_lies_far_off_is_refused(tmp_path, capsys):
     """molds --panel-surface design on a design the net lies far off (its panels' samples
-    pulled onto one boundary line) ended in 'LinAlgError: Singular matrix'."""
+    pulled onto one boundary line) ended in 'LinAlgError: Singular matrix'; its panels
+    would be cut from a surface they are not on."""
     net = tmp_path / "grid.obj"
     QuadMesh.grid(grid_points()).write_obj(net)
     with warnings.catch_warnings():
@@ -585,7 +586,8 @@ def test_molds_on_a_design_the_net_overhangs_fits_without_a_traceback(tmp_path, 
                      "--design", "torus:major=224", "--triangles", "2000", "--no-3d", "-q",
                      "-o", str(tmp_path / "m")])
     err = capsys.readouterr().err
-    assert code == 3 and "fit no mold" in err, err
+    assert code == 2 and "--panel-surface design: the net lies up to" in err, err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "m").exists()
 
 
 @pytest.mark.parametrize("option", ["--units=--", "--tool=--", "--reference=--", "-o--"])
