@@ -627,9 +627,10 @@ def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
                      say: Callable[[str], None], seconds: dict[str, float]
                      ) -> tuple[OptimizationResult, SurfaceLayout]:
     """A net that leaves the design, solved on the design continued past its edges: laid
-    out there, started from the S-net glided there, held to the deviation limit at the
-    vertices of its stars; the faces over the design are kept, and its boundary panels
-    follow the whole net solved (`fabplan.layout.margin`).
+    out there, started from the S-net glided there (the fairest of several with
+    `Study.layout_starts`), held to the deviation limit at its vertices in stars over the
+    design and one edge beyond; the faces over the design are kept, and its boundary
+    panels follow the whole net solved (`fabplan.layout.margin`).
 
     Returns
     -------
