@@ -1463,6 +1463,14 @@ def _add_number(p: argparse.ArgumentParser, option: str, *, help: str, **kwargs:
                         f"{', a whole number' if parameter.integer else ''})", **kwargs)
 
 
+def _add_max_deviation_mm(p: argparse.ArgumentParser) -> None:
+    """The deviation limit of a net checked against its --design (molds, strips)."""
+    _add_number(p, "--max-deviation-mm", default=DEFAULT_MAX_DEVIATION_MM, metavar="MM",
+                help="with --design: the largest distance of a net vertex from the design, in "
+                     f"mm; a net farther off ends the run in exit 3 (default "
+                     f"{DEFAULT_MAX_DEVIATION_MM:g}, see docs/fabrication-limits.md)")
+
+
 def _add_max_panels(p: argparse.ArgumentParser, *, memory: bool = False) -> None:
     _add_number(p, "--max-panels", metavar="N",
                 help="refuse nets of more faces than this (default: what half the available "
@@ -1579,10 +1587,7 @@ def _add_molds(sub: Any) -> None:
     _add_number(p, "--step-limit", metavar="MM",
                 help="largest step between neighbouring panels' molds in mm (default twice "
                      "the tolerance)")
-    _add_number(p, "--max-deviation-mm", default=DEFAULT_MAX_DEVIATION_MM, metavar="MM",
-                help="with --design: the largest distance of a net vertex from the design, in "
-                     f"mm; a net farther off ends the run in exit 3 (default "
-                     f"{DEFAULT_MAX_DEVIATION_MM:g}, see docs/fabrication-limits.md)")
+    _add_max_deviation_mm(p)
     _add_max_panels(p, memory=True)
     _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "
                              "its neighbours (a mold of its own where none does; slivers cut "
@@ -1758,10 +1763,7 @@ def _add_strips(sub: Any) -> None:
     _add_number(p, "--triangles", default=20000, metavar="N",
                 help="triangles of the --design's triangulation, where the exact surface is "
                      "searched from (default 20000)")
-    _add_number(p, "--max-deviation-mm", default=DEFAULT_MAX_DEVIATION_MM, metavar="MM",
-                help="with --design: the largest distance of a net vertex from the design, in "
-                     f"mm; a net farther off ends the run in exit 3 (default "
-                     f"{DEFAULT_MAX_DEVIATION_MM:g}, see docs/fabrication-limits.md)")
+    _add_max_deviation_mm(p)
     p.add_argument("--splice", choices=["overlap", "lap"], default="overlap",
                    help="joint of a strip split to fit the sheets (default overlap)")
     _add_number(p, "--splice-length", metavar="MM",

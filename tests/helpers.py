@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+
 import numpy as np
 
 from fabplan.net.mesh import QuadMesh
@@ -228,3 +231,22 @@ def exported_molds(net_obj, boundary_obj, molds_json, boundary_csv, cut_obj) -> 
     panels = len(faces) + sum(1 for r in rows if r["kind"] != "extension")
     return {"steps": steps, "cut_gap_mm": cut_gap, "molds_in_all": len(curved) + len(own),
             "panels": panels, "record": record}
+
+
+@contextlib.contextmanager
+def memory_cap(extra: int):
+    """Cap this process's address space at its current size plus `extra` bytes while
+    fuzzing: an example that slips past the guards ends in a MemoryError (a failure of the
+    test), not in the machine's swap; the commands then also see the cap as the memory
+    they may use."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    with open("/proc/self/statm") as handle:
+        size = int(handle.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    cap = size + extra if hard == resource.RLIM_INFINITY else min(hard, size + extra)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))

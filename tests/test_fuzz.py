@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import os
 import re
 import shutil
 import struct
@@ -31,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import memory_cap
 
 from fabplan.cli import main
 from fabplan.net.mesh import QuadMesh
@@ -307,24 +307,6 @@ def _run_case(kind: str, seed: int, folder: Path, monkeypatch) -> str | None:
     return "accepted"
 
 
-@contextlib.contextmanager
-def _memory_cap(extra: int = 4 * 2**30):
-    """Cap this process's address space at its current size plus `extra` while fuzzing:
-    a mutant that slips past the guards ends in a MemoryError, not in the machine's
-    swap (the commands then also see the cap as the memory they may use)."""
-    import resource
-
-    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
-    with open("/proc/self/statm") as handle:
-        size = int(handle.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
-    cap = size + extra if hard == resource.RLIM_INFINITY else min(hard, size + extra)
-    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
-    try:
-        yield
-    finally:
-        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
-
-
 def _fuzz(kind: str, seeds: range, tmp_path: Path, monkeypatch) -> Counter:
     from fabplan.study import run
 
@@ -334,7 +316,7 @@ def _fuzz(kind: str, seeds: range, tmp_path: Path, monkeypatch) -> Counter:
     monkeypatch.setattr(run, "run_study", accepted)
     outcomes: Counter = Counter()
     failures = []
-    with _memory_cap():
+    with memory_cap(4 * 2**30):
         for seed in seeds:
             try:
                 outcomes[_run_case(kind, seed, tmp_path / "case", monkeypatch)] += 1

@@ -55,6 +55,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import memory_cap
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -491,25 +492,8 @@ def sandbox(tmp_path_factory, monkeypatch):
         monkeypatch.chdir(made[-1])                   # relative names land in the example
         return made[-1], _files(made[-1])
 
-    with _memory_cap():
+    with memory_cap(3 * 2**30):
         yield make
-
-
-@contextlib.contextmanager
-def _memory_cap(extra: int = 3 * 2**30):
-    """Cap the address space at its current size plus `extra`: an example that slips
-    past the guards ends in a MemoryError (a failure here), not in the machine's swap."""
-    import resource
-
-    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
-    with open("/proc/self/statm") as handle:
-        size = int(handle.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
-    cap = size + extra if hard == resource.RLIM_INFINITY else min(hard, size + extra)
-    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
-    try:
-        yield
-    finally:
-        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
 
 
 def _output_of(argv: list[str]) -> str | None:

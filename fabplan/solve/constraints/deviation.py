@@ -45,9 +45,10 @@ class DeviationBound(Constraint):
         self.vertices = None if vertices is None else np.asarray(vertices, np.int64)
 
     def _held(self, state) -> np.ndarray:
-        """(k,) int, the vertices held to the limit."""
+        """(k,) int, the vertices held to the limit (every vertex made once, not per
+        iteration)."""
         if self.vertices is None:
-            return np.arange(state.mesh.vertex_count)
+            self.vertices = np.arange(state.mesh.vertex_count)
         return self.vertices
 
     def declare(self, state):
