@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_solver.py                       # bundled net + 10k, 30k, 100k
+    python benchmarks/bench_solver.py                       # bundled net + 3k, 10k, 30k, 100k
     python benchmarks/bench_solver.py --quick               # bundled net + 10k only
     python benchmarks/bench_solver.py --sizes 10000 30000 --profile wein99 weingarten-173x173
 
@@ -235,6 +235,14 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
         "linear_algebra_over_numeric": (
             _median([h["assembly_seconds"] + h["factor_seconds"] + h["solve_seconds"] for h in steps])
             / _median(numeric) if numeric and steps else None),
+        # set-up in iterations: pattern, symbolic analysis and the first assembly, over
+        # the median iteration
+        "setup_iterations": ((sum(hooks["pattern"]) + sum(hooks["analysis"])
+                              + steps[0]["assembly_seconds"]) / median_iteration
+                             if steps and median_iteration else None),
+        # the whole solve's seconds (set-up and coarse levels included) until the hard
+        # residual first came below 1e-6 and 1e-10 (None: never)
+        "seconds_to": {tol: _seconds_to(result, float(tol)) for tol in ("1e-6", "1e-10")},
         "optimize_wall_seconds": wall,
         # about 1 when the run had a core to itself (the solver's work is single-threaded);
         # well below 1 when other processes competed for the CPUs
@@ -275,6 +283,16 @@ def run_case(name: str, profile: bool = False, max_iterations: int | None = None
     return record
 
 
+def _seconds_to(result, tolerance: float) -> float | None:
+    """Seconds of `result`'s whole solve until its hard residual was first at most
+    `tolerance`: the solve's time less that of the iterations after that point."""
+    history = result.history
+    reached = [i for i, h in enumerate(history) if h["hard_residual"] <= tolerance]
+    if not reached:
+        return None
+    return result.seconds - sum(h["seconds"] for h in history[reached[0] + 1:])
+
+
 # ---------------------------------------------------------------------------- driver side
 def run_in_subprocess(name: str, profile: bool, max_iterations: int | None,
                       timeout: float | None, backend: str = "auto",
@@ -309,23 +327,28 @@ def run_in_subprocess(name: str, profile: bool, max_iterations: int | None,
 def comparison_table(records: list[dict]) -> str:
     """One line per run of `--compare`: set-up, iteration, factorization and whole solve."""
     head = ("| case | vertices | code | run | iterations | set-up s (pattern + analysis) "
-            "| s / iteration | numeric factorization s | iteration / factorization "
-            "| assembly + factor + solve / factorization | whole solve s | final hard residual "
+            "| set-up / iteration | s / iteration | numeric factorization s "
+            "| iteration / factorization | assembly + factor + solve / factorization "
+            "| s to 1e-6 / 1e-10 | whole solve s | final hard residual | peak RSS GB "
             "| load before / after |")
     lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
     for r in records:
         if "median_iteration_seconds" not in r:
             lines.append(f"| {r['case']} | | {r.get('code', '')} | {r.get('run', '')} | "
-                         f"{r['status']} | | | | | | | | |")
+                         f"{r['status']} | | | | | | | | | | | |")
             continue
+        to = r.get("seconds_to") or {}
         lines.append(
             f"| {r['case']} | {r['vertices']:,} | {r['code']} | {r['run']} | {r['iterations']} "
             f"| {r['setup_seconds']:.2f} ({r['pattern_seconds']:.2f} + {r['analysis_seconds']:.2f}) "
+            f"| {_fmt(r.get('setup_iterations'), '.1f')} "
             f"| {_fmt(r['median_iteration_seconds'], '.3f')} "
             f"| {_fmt(r['median_numeric_seconds'], '.3f')} "
             f"| {_fmt(r['iteration_over_numeric'], '.2f')} "
             f"| {_fmt(r['linear_algebra_over_numeric'], '.2f')} "
+            f"| {_fmt(to.get('1e-6'), '.2f')} / {_fmt(to.get('1e-10'), '.2f')} "
             f"| {r['solver_seconds']:.2f} | {r['final_hard_residual']:.3e} "
+            f"| {r['peak_rss_gb']:.2f} "
             f"| {r['load_average_before']:.2f} / {r['load_average_after']:.2f} |")
     return "\n".join(lines)
 
@@ -439,7 +462,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="*", default=None,
                         help="approximate vertex counts of the generated nets "
-                             "(default 10000 30000 100000)")
+                             "(default 3000 10000 30000 100000)")
     parser.add_argument("--quick", action="store_true",
                         help="bundled net and a 10k net only (unless --sizes is given)")
     parser.add_argument("--cases", nargs="*", default=[], metavar="CASE",
@@ -475,7 +498,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     sizes = args.sizes if args.sizes is not None else ([10_000] if args.quick else
-                                                       [10_000, 30_000, 100_000])
+                                                       [3_000, 10_000, 30_000, 100_000])
     names = case_names(sizes) + [n for n in args.cases if n not in case_names(sizes)]
     env = environment()
     print(f"fabplan at {env['fabplan']} (commit {str(env['git_commit'])[:10]}"

@@ -29,6 +29,7 @@ import scipy.sparse as sp
 
 from ..errors import SolverError
 from ..net.geometry import canonical_stars
+from . import kernels
 from .constraints import Constraint, NetState, VariableBlocks
 from .linalg import SparseSPDSolver
 from .pattern import NormalPattern, normal_pattern, pattern_cache, pattern_key
@@ -163,6 +164,7 @@ class GuidedProjection:
         self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free))
         self._pattern: NormalPattern | None = None
         self._buffers: _AssemblyBuffers | None = None    # reused by every assembly
+        self._kernels = kernels.compiled()   # the assembly's compiled sums, or None: numpy
         self._upper: sp.csr_matrix | None = None        # the normal equations, refilled
         self.status = "not started"
         self.admissible = admissible
@@ -235,9 +237,48 @@ class GuidedProjection:
         pat = self.pattern
         nnz, nfree = pat.nnz, len(self.free)
         if self._buffers is None:
-            self._buffers = _AssemblyBuffers.for_pattern(pat, self._linear.values(nnz))
+            self._buffers = _AssemblyBuffers.for_pattern(pat, self._linear.values(nnz),
+                                                         products=self._kernels is None)
         buffers = self._buffers
         gradient = np.zeros(nfree + 1)
+        if self._kernels is not None:
+            self._assemble_compiled(jacobians, residuals, weights, gradient)
+        else:
+            self._assemble_numpy(jacobians, residuals, weights, gradient)
+        buffers.data[pat.diagonal] += damping
+        if self._upper is None:
+            self._upper = sp.csr_matrix((buffers.data, pat.indices, pat.indptr),
+                                        shape=(nfree, nfree))
+            self._upper.data = buffers.data     # the buffer itself, not a view: no copy
+        return self._upper, gradient[:nfree]
+
+    def _assemble_compiled(self, jacobians: list, residuals: list, weights: list,
+                           gradient: np.ndarray) -> None:
+        """`_assemble`'s sums by the compiled kernels: the same terms in the same order as
+        `_assemble_numpy`, without the buffer of all products."""
+        pat, buffers, compiled = self.pattern, self._buffers, self._kernels
+        assert buffers is not None and compiled is not None
+        buffers.summed.fill(0.0)
+        start = 0
+        for f, J, r, w, columns in zip(pat.families, jacobians, residuals, weights,
+                                       buffers.columns, strict=True):
+            if J.size == 0:
+                start += int(np.prod(f.shape))
+                continue
+            np.multiply(J.T, w, out=columns)                 # weighted, entry-major
+            start = compiled.sum_products(columns, f.multiplicity, pat.slots, start,
+                                          buffers.summed)
+            compiled.sum_gradient(J, w, r, f.gradient_cols, gradient)
+        if buffers.summed is not buffers.data:
+            buffers.data[:] = buffers.summed[:pat.nnz]
+
+    def _assemble_numpy(self, jacobians: list, residuals: list, weights: list,
+                        gradient: np.ndarray) -> None:
+        """`_assemble`'s sums in numpy: every product into one buffer, summed by one
+        `np.add.at`, and the gradient by `np.bincount`."""
+        pat, buffers = self.pattern, self._buffers
+        assert buffers is not None
+        nfree = len(self.free)
         start = 0
         for f, J, r, w, columns, entries in zip(pat.families, jacobians, residuals, weights,
                                                 buffers.columns, buffers.entries, strict=True):
@@ -261,13 +302,7 @@ class GuidedProjection:
         buffers.summed.fill(0.0)
         np.add.at(buffers.summed, pat.slots, buffers.products)
         if buffers.summed is not buffers.data:
-            buffers.data[:] = buffers.summed[:nnz]
-        buffers.data[pat.diagonal] += damping
-        if self._upper is None:
-            self._upper = sp.csr_matrix((buffers.data, pat.indices, pat.indptr),
-                                        shape=(nfree, nfree))
-            self._upper.data = buffers.data     # the buffer itself, not a view: no copy
-        return self._upper, gradient[:nfree]
+            buffers.data[:] = buffers.summed[:pat.nnz]
 
     def _factor(self, upper: sp.csr_matrix, damping: float) -> None:
         """Factor, adding damping when rounding makes the matrix lose definiteness."""
@@ -548,7 +583,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
 class _AssemblyBuffers:
     """Arrays an assembly fills, allocated once per solver (not shared: a pattern may be)."""
 
-    products: np.ndarray       # (products,) every family's entry products
+    products: np.ndarray       # (products,) every family's entry products (numpy path)
     columns: list              # per family (k, m): the weighted Jacobian, entry-major
     entries: list              # per family (m, k): weighted Jacobian times weighted residual
     data: np.ndarray           # (nnz,) the matrix's values: the linear solver's buffer
@@ -556,11 +591,14 @@ class _AssemblyBuffers:
                                # when some products fall on held variables (the last slot)
 
     @classmethod
-    def for_pattern(cls, pattern: NormalPattern, data: np.ndarray) -> _AssemblyBuffers:
-        """Buffers for `pattern`; `data`: the (nnz,) array the matrix's values go to."""
+    def for_pattern(cls, pattern: NormalPattern, data: np.ndarray, *,
+                    products: bool = True) -> _AssemblyBuffers:
+        """Buffers for `pattern`; `data`: the (nnz,) array the matrix's values go to;
+        `products`: whether to hold every product (the numpy path; the compiled kernels sum
+        them as they form them)."""
         shapes = [f.gradient_cols.shape for f in pattern.families]
         held = len(pattern.slots) > 0 and int(pattern.slots.max()) >= pattern.nnz
-        return cls(np.empty(len(pattern.slots)), [np.empty((k, m)) for m, k in shapes],
+        return cls(np.empty(len(pattern.slots) if products else 0), [np.empty((k, m)) for m, k in shapes],
                    [np.empty((m, k)) for m, k in shapes], data,
                    np.empty(pattern.nnz + 1) if held else data)
 
