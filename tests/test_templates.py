@@ -160,11 +160,17 @@ def test_stadium_linear_weingarten_nets_keep_the_design_limit_in_the_solve(tmp_p
         assert continued["faces_kept"] == len(QuadMesh.from_obj(
             out / "candidates" / c["name"] / "net.obj").faces) < continued["faces_solved"]
         held = DEVIATION_HELD * limits.max_deviation_mm
-        if m["status"] == "off-design":
+        if m.get("solve_status", m["status"]) == "off-design":
+            assert solved["status"] == "off-design"          # the net record keeps the solver's
             held = 1000 * solved["parameters"]["deviation"]["smallest_converged"]
         assert m["deviation_mm"]["max"] <= held + 1e-6
         largest = max(m["deviation_mm"]["max"], m["boundary_panels"]["deviation_max_mm"])
         assert deviation["ok"] is (largest <= limits.max_deviation_mm)
+        # off only the share the solve held, within the study's limit: converged for the study
+        assert ("solve_status" in m) is (solved["status"] == "off-design"
+                                         and largest <= limits.max_deviation_mm)
+        if "solve_status" in m:
+            assert m["status"] == "converged" and f"{largest:.1f} mm" in m["status_note"]
     # the study recommends a linear Weingarten net that meets every limit, as the paper's
     # stadium (Fig. 19): rechecked from the exported files by code apart from the planner
     chosen = next(c for c in record["candidates"] if c["recommended"])

@@ -696,7 +696,8 @@ def _candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list
     molds = m["molds"]
     facts = [
         ["net", c.candidate.describe()],
-        ["solve", f"{m['status']} after {m['iterations']} iterations"],
+        ["solve", f"{m['status']} after {m['iterations']} iterations"
+                  + (f" ({m['status_note']})" if m.get("status_note") else "")],
         ["solved parameters", ", ".join(parameters) or "-"],
         ["panels", f"{m['panels']}: {m['quads']} quads, {m['other_faces']} other "
                    f"({m['irregular_vertices']} irregular vertices)"
