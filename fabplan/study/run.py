@@ -998,7 +998,8 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
     out: dict[str, Any] = {
         "count": count,
         "net_molds": int(made.sum()),
-        "all_panels_flat": count == 0,
+        # no curved panel at all (with a material a curved panel may need no mold either)
+        "all_panels_flat": int(curved.sum()) + own == 0,
         "fits_all": bool(plan.fits_all) and over == int(plan.steps_over.size),
         "failures": int(plan.failures.size),
         "max_panel_step_mm": step,
