@@ -57,7 +57,8 @@ def _same_molds(study_folder: Path, made: Path) -> None:
     `fabplan.study.run.SAME_NET_TOLERANCE`, 0.01 mm on a 1 m panel)."""
     ours = json.loads((made / "molds.json").read_text())
     theirs = json.loads((study_folder / "molds.json").read_text())
-    for key in ("mold_count", "panel_count", "panel_surface", "tolerance_mm", "units"):
+    for key in ("mold_count", "panel_count", "panel_surface", "tolerance_mm", "units",
+                "molds_made", "molds_saved_by_material"):
         assert ours[key] == theirs[key], key
     rows, study_rows = _mold_rows(made / "panels.csv"), _mold_rows(study_folder / "molds.csv")
     assert len(rows) == len(study_rows)

@@ -605,6 +605,11 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None, *,
     summary.table(["quantity", "value"], [
         ["panels", counted(r["panel_count"], "panel")],
         ["molds", counted(r["mold_count"], "mold")],
+        *([["panel classes (" + plan.classes.material.label + ")",
+            ", ".join(f"{n} {CLASS_WORDS[c]}" for c, n in plan.classes.counts.items())],
+           ["molds made for the molded panels",
+            f"{counted(r['molds_made'], 'mold')} ({r['molds_saved_by_material']} saved by the "
+            "material)"]] if plan.classes is not None else []),
         ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
         ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
         ["panels that do not fit", counted(len(r["failures"]), "panel")],
