@@ -462,6 +462,7 @@ def _cmd_molds(args) -> int:
     import numpy as np
 
     from .fabricate.boundary_molds import boundary_molds, boundary_molds_text
+    from .fabricate.materials import parse_material
     from .fabricate.mold_report import MOLD_FILES, write_mold_report
     from .fabricate.molds import MoldSettings, plan_molds
     from .fabricate.panels import check_panels
@@ -469,7 +470,8 @@ def _cmd_molds(args) -> int:
 
     settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=_net_units(args, args.net),
                             max_mold_size_mm=args.max_mold_size, panel_surface=args.panel_surface,
-                            step_limit_mm=args.step_limit)
+                            step_limit_mm=args.step_limit,
+                            material=None if args.material is None else parse_material(args.material))
     settings.check()
     if args.design is None and args.panel_surface == "design":
         raise InputError("--panel-surface design needs --design SURFACE, the design the net lies on")
@@ -511,8 +513,9 @@ def _cmd_molds(args) -> int:
         files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary,
                                   protect=inputs, limits=limits) + viewers
     if args.quiet:
-        print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')} at "
-              f"{settings.tolerance_mm:g} mm; wrote {files[0]}")
+        made = "" if plan.classes is None else f" ({plan.made_mold_count} made for the molded panels)"
+        print(f"{counted(plan.panel_count, 'panel')} on {counted(plan.mold_count, 'mold')}{made} "
+              f"at {settings.tolerance_mm:g} mm; wrote {files[0]}")
     else:
         print(plan.summary())
         if boundary is not None:
@@ -1587,6 +1590,12 @@ def _add_molds(sub: Any) -> None:
     _add_number(p, "--step-limit", metavar="MM",
                 help="largest step between neighbouring panels' molds in mm (default twice "
                      "the tolerance)")
+    p.add_argument("--material", metavar="NAME[:THICKNESS]",
+                   help="the panels' sheet: each panel is then flat, cold-bent, roll-bent or "
+                        "molded, and only molded panels get molds (glass-annealed, "
+                        "glass-heat-strengthened, glass-tempered, glass-laminated[-tempered], "
+                        "aluminium, steel; e.g. glass-tempered:8mm, glass-laminated:2x8mm; "
+                        "docs/materials.md)")
     _add_max_deviation_mm(p)
     _add_max_panels(p, memory=True)
     _add_boundary_options(p, "each is cut from a mold of the net's panels, placed to meet "

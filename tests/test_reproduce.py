@@ -57,14 +57,15 @@ def _same_molds(study_folder: Path, made: Path) -> None:
     `fabplan.study.run.SAME_NET_TOLERANCE`, 0.01 mm on a 1 m panel)."""
     ours = json.loads((made / "molds.json").read_text())
     theirs = json.loads((study_folder / "molds.json").read_text())
-    for key in ("mold_count", "panel_count", "panel_surface", "tolerance_mm", "units"):
+    for key in ("mold_count", "panel_count", "panel_surface", "tolerance_mm", "units",
+                "molds_made", "molds_saved_by_material"):
         assert ours[key] == theirs[key], key
     rows, study_rows = _mold_rows(made / "panels.csv"), _mold_rows(study_folder / "molds.csv")
     assert len(rows) == len(study_rows)
     for a, b in zip(rows, study_rows, strict=True):
         assert a.keys() == b.keys()
         for key in a:
-            if key in ("face", "mold", "type", "fits"):
+            if key in ("face", "mold", "type", "fits", "class", "class_unit"):
                 assert a[key] == b[key], (key, a, b)
             else:
                 assert float(a[key]) == pytest.approx(float(b[key]), rel=1e-6, abs=1e-2), key

@@ -101,10 +101,14 @@ def _pages_agree_with_the_record(folder, record: dict) -> None:
                  "max deviation [mm]": f"{m['largest_deviation_mm']:.1f}",
                  "cost [cost units]": f"{c['cost']:.0f}"}
         flat = m["molds"]["count"] == 0 and m["molds"]["all_panels_flat"]
+        bent = m["molds"]["count"] == 0 and "panel_classes" in m["molds"]
         for key, value in shown.items():
-            if key == "molds [count]" and flat:
-                value = "none (all flat)"          # the page says why there are none
+            if key == "molds [count]" and (flat or bent):
+                # the page says why there are none
+                value = "none (none molded)" if bent else "none (all flat)"
             assert cell[key] == value, (c["name"], key, cell[key], value)
+        if "molds saved by the material [count]" in cell:
+            assert cell["molds saved by the material [count]"] == str(m["molds"]["saved"])
         if "of them boundary panels [count]" in cell:
             assert cell["of them boundary panels [count]"] == str(m["boundary_panels"]["count"])
         # the PDF's comparison row: rank, name, verdict, molds, panels, deviation, cost

@@ -27,8 +27,10 @@ from ..report.pdf import PdfDocument
 from .boundary_molds import BoundaryMolds, boundary_molds_text, boundary_panels_csv
 from .limits import LimitCheck, limit_row_text, limits_record
 from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
+from .panel_classes import CLASS_WORDS, CLASSES
 
-__all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "mold_report_html",
+__all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "class_figure",
+           "classes_section", "mold_report_html",
            "mold_report_files",
            "write_mold_report", "net_viewer_scene", "net_edges", "mold_pictures", "mold_report_pdf",
            "MOLD_FILES"]
@@ -204,6 +206,102 @@ def step_figure(plan: MoldPlan) -> str:
     return figures.figure_to_data_uri(fig)
 
 
+#: colours of the panel classes (flat, cold-bent, roll-bent, molded)
+CLASS_COLORS = ("#b8c4cc", "#3a8fd0", "#39a85a", "#d9822b")
+
+
+def class_figure(plan: MoldPlan) -> str:
+    """Data URI: the map of the panel classes (left) and every panel's governing figure
+    against its limit (right: the cold-bent and molded panels' stress, the flat panels'
+    gap to a plane, the roll-bent panels' smallest radius as limit over radius)."""
+    from matplotlib.patches import Patch
+
+    classes = plan.classes
+    assert classes is not None
+    mesh = plan.mesh
+    normals, view = facade_view(mesh)
+    colors = np.array([figures.rgba(CLASS_COLORS[k]) for k in classes.panel_class])
+    fig = figures.new_figure((13, 5.6))
+    left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.4, 1]})
+    figures.draw_mesh(left, mesh.vertices, mesh.faces, colors, view, normals=normals)
+    counts = classes.counts
+    left.legend(handles=[Patch(color=CLASS_COLORS[i], label=f"{CLASS_WORDS[c]} ({counts[c]})")
+                         for i, c in enumerate(CLASSES)], loc="upper center", fontsize=9,
+                bbox_to_anchor=(0.5, -0.01), ncol=4, frameon=False)
+    left.set_title(f"Panel classes in {classes.material.label}")
+    value, limit, _ = classes.figure()
+    use = np.where(classes.panel_class == CLASSES.index("roll_bent"),
+                   limit / np.maximum(value, 1e-300), value / np.maximum(limit, 1e-300))
+    bins = np.linspace(0.0, max(2.0, float(np.quantile(use, 0.98))), 40)
+    for i, c in enumerate(CLASSES):
+        pick = classes.panel_class == i
+        if pick.any():
+            right.hist(np.minimum(use[pick], bins[-1]), bins=bins, color=CLASS_COLORS[i],
+                       label=CLASS_WORDS[c], alpha=0.85)
+    right.axvline(1.0, color="#c0392b", lw=1.5, label="limit")
+    right.set_xlabel("governing figure / its limit (stress, gap to a plane; roll: limit / radius)")
+    right.set_ylabel("panels")
+    right.legend(fontsize=9)
+    right.set_title("How close each panel comes to its class's limit")
+    return figures.figure_to_data_uri(fig)
+
+
+def classes_section(plan: MoldPlan) -> str:
+    """The report's section on the panel classes (with a material), or ""."""
+    classes = plan.classes
+    if classes is None:
+        return ""
+    m = classes.material
+    counts = classes.counts
+    cold = classes.panel_class == CLASSES.index("cold_bent")
+    roll = classes.panel_class == CLASSES.index("roll_bent")
+    rows = [
+        ["material", m.label],
+        ["cold-bend limit (largest permanent stress)", f"{m.max_bend_stress_mpa:.3g} MPa"],
+        ["smallest roll radius", "not rolled" if m.min_roll_radius_mm is None
+         else f"{m.min_roll_radius_mm:.3g} mm"],
+        ["flatness tolerance", f"the mold tolerance {classes.tolerance_mm:g} mm"
+         + ("" if m.flatness_mm_per_m is None else
+            f", at most {m.flatness_mm_per_m:g} mm per m of the panel's span")],
+        ["panels by class", ", ".join(f"{counts[c]} {CLASS_WORDS[c]}" for c in CLASSES)],
+        ["largest stress of a cold-bent panel",
+         f"{classes.stress_mpa[cold].max():.1f} MPa (bending "
+         f"{classes.bending_stress_mpa[cold].max():.1f}, membrane "
+         f"{classes.membrane_stress_mpa[cold].max():.1f})" if cold.any() else "-"],
+        ["largest twist of a cold-bent panel",
+         f"{np.abs(classes.curvature[cold, 2]).max() * _PER_M:.3g} 1/m" if cold.any() else "-"],
+        ["smallest radius of a roll-bent panel",
+         f"{classes.roll['min_radius_mm'][roll].min():.0f} mm" if roll.any() else "-"],
+        ["molds made (for molded panels)", counted(plan.made_mold_count, "mold")],
+        ["molds saved against every curved panel molded",
+         f"{counted(plan.molds_saved, 'mold')} (of "
+         f"{plan.made_mold_count + plan.molds_saved} curved molds)"],
+    ]
+    value, limit, unit = classes.figure()
+    table = html.html_details(f"{counted(plan.panel_count, 'panel')}: class and governing "
+                              "figure (click to open)", html.html_table(
+        ["face id", "class", "figure", "limit", "unit", "why"],
+        [[i, CLASS_WORDS[CLASSES[classes.panel_class[i]]], float(value[i]), float(limit[i]),
+          unit[i], classes.reason(i)] for i in range(plan.panel_count)]))
+    return html.html_section(
+        "Panel classes",
+        html.html_paragraph(
+            "Every panel goes to the cheapest class whose check it passes on its densely "
+            "sampled surface: flat (a plane within the flatness tolerance), cold-bent (the "
+            "best shape a flat sheet takes when bent onto its supports, a twist plus "
+            "cylindrical bending, fits within the mold tolerance, and its bending and "
+            "membrane stress stays within the material's limit), roll-bent (a cone or "
+            "cylinder fits, no tighter than the smallest roll radius), else molded. Only "
+            "molded panels need molds (docs/materials.md)."),
+        html.html_table(["quantity", "value"], rows),
+        html.html_figure(class_figure(plan), "Panel classes (left) and every panel's "
+                         "governing figure against its limit (right).",
+                         how="Left: one colour per class, seen from where people see the "
+                             "design. Right: a bar left of the red line is within its "
+                             "limit; molded panels are those whose cheaper checks failed."),
+        table)
+
+
 def _facade_figures(plan: MoldPlan) -> tuple[str, str]:
     """Data URIs of the facade coloured by mold and of its curvature isolines."""
     from matplotlib.lines import Line2D
@@ -330,6 +428,10 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
         ["panel surface", f"{r['panel_surface']}: {PANEL_SURFACE_TEXT[r['panel_surface']]}"],
         ["panels N", counted(r["panel_count"], "panel")],
         ["molds M", counted(r["mold_count"], "mold")],
+        *([["molds made for the molded panels (panel classes below)",
+            f"{counted(r['molds_made'], 'mold')}; {r['molds_saved_by_material']} saved by "
+            f"the material against every curved panel molded"]]
+          if plan.classes is not None else []),
         ["M / sqrt(N)", f"{r['molds_per_sqrt_panels']:.3g} (ratio)"],
         ["panels per mold (mean / median / max)",
          f"{per_mold['mean']:.1f} / {per_mold['median']:g} / {per_mold['max']} panels"],
@@ -401,6 +503,8 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
         html.html_section("Summary", verdict, html.html_table(["quantity", "value"], summary_rows)),
         html.html_section("Why this many molds", html.html_paragraph(explain_mold_count(plan))),
     ]
+    if plan.classes is not None:
+        parts.append(classes_section(plan))
     if view_3d:
         scene = net_viewer_scene(plan, title=Path(str(r["net"])).name)
         parts.append(html.html_section("3D view", viewer.viewer_block([scene])))
@@ -501,6 +605,11 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None, *,
     summary.table(["quantity", "value"], [
         ["panels", counted(r["panel_count"], "panel")],
         ["molds", counted(r["mold_count"], "mold")],
+        *([["panel classes (" + plan.classes.material.label + ")",
+            ", ".join(f"{n} {CLASS_WORDS[c]}" for c, n in plan.classes.counts.items())],
+           ["molds made for the molded panels",
+            f"{counted(r['molds_made'], 'mold')} ({r['molds_saved_by_material']} saved by the "
+            "material)"]] if plan.classes is not None else []),
         ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
         ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
         ["panels that do not fit", counted(len(r["failures"]), "panel")],

@@ -48,6 +48,8 @@ from ..errors import InputError
 from ..io.units import MM_PER_UNIT, check_units
 from ..net.mesh import QuadMesh
 from ..net.weingarten import weingarten_fit
+from .materials import Material
+from .panel_classes import CLASSES, DEFAULT_ORDER, PanelClasses, classify_panels
 from .panels import (
     SURFACE_MODELS,
     check_panels,
@@ -117,6 +119,10 @@ class MoldSettings:
         is measured (fractions of the edge from its first vertex).
     step_limit_mm : largest step allowed between neighbouring panels' molds (mm); None:
         twice the tolerance (two panels each within the tolerance of one surface).
+    material : the panels' sheet material (`fabplan.fabricate.materials`), or None. With a
+        material every panel is classified flat, cold-bent, roll-bent or molded
+        (`fabplan.fabricate.panel_classes`) and only the molded panels' molds are made.
+    class_order : the order the classes are tried in (`panel_classes.class_order`).
     """
 
     tolerance_mm: float = 5.0
@@ -129,6 +135,8 @@ class MoldSettings:
     rounds: int = 8
     step_fractions: tuple[float, ...] = (0.25, 0.5, 0.75)
     step_limit_mm: float | None = None
+    material: Material | None = None
+    class_order: tuple[str, ...] = DEFAULT_ORDER
 
     def check(self) -> None:
         """Refuse impossible settings with a one-line `InputError`."""
@@ -151,6 +159,8 @@ class MoldSettings:
         limit = self.step_limit_mm
         if limit is not None and not (math.isfinite(limit) and limit > 0):
             raise InputError(f"the step limit must be a positive number of millimetres, got {limit}")
+        if self.material is not None and not isinstance(self.material, Material):
+            raise InputError(f"the material must be a fabplan Material, got {self.material!r}")
 
     @property
     def mm_per_unit(self) -> float:
@@ -677,6 +687,12 @@ class MoldPlan:
         no mold can close.
     recast_for_steps : (k,) int, panels at edges whose first molds stepped apart by more
         than twice the tolerance, cast again on molds that fit them closer.
+    classes : with a material (`MoldSettings.material`), every panel's class
+        (`fabplan.fabricate.panel_classes.PanelClasses`); None without one (every curved
+        panel is molded). The molds are planned for every curved panel either way: a
+        cold-bent, roll-bent or flat panel keeps its mold as the surface its neighbours'
+        steps and the boundary panels are measured against, but only the molds of molded
+        panels are made (`mold_made`).
     seconds : run time.
     """
 
@@ -699,6 +715,7 @@ class MoldPlan:
     kink_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     surface_step_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     recast_for_steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    classes: PanelClasses | None = None
     seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
 
@@ -710,6 +727,26 @@ class MoldPlan:
     @property
     def mold_count(self) -> int:
         return len(self.mold_shape)
+
+    @property
+    def mold_made(self) -> np.ndarray:
+        """(m,) bool, the molds that are made: the curved molds (a plane is no mold) that a
+        molded panel sits on; without a material every curved mold."""
+        made = np.asarray(self.mold_type) > 0
+        if self.classes is not None:
+            made &= np.bincount(self.mold[self.classes.molded], minlength=self.mold_count) > 0
+        return made
+
+    @property
+    def made_mold_count(self) -> int:
+        """The molds made (`mold_made`)."""
+        return int(self.mold_made.sum())
+
+    @property
+    def molds_saved(self) -> int:
+        """The curved molds that every curved panel molded would need and the material's
+        classes do not: cold-bent, roll-bent and flat panels need none."""
+        return int(np.sum(np.asarray(self.mold_type) > 0)) - self.made_mold_count
 
     @property
     def failures(self) -> np.ndarray:
@@ -782,6 +819,7 @@ class MoldPlan:
         types, counts = np.unique(self.panel_type, return_counts=True)
         per = self.panels_per_mold
         ext, mdev = self.mold_extent_mm(), self.mold_deviation_mm()
+        made = self.mold_made
         molds = []
         for j in range(self.mold_count):
             k1, k2 = (float(v) for v in self.mold_shape[j])
@@ -795,6 +833,7 @@ class MoldPlan:
                 "size_mm": [float(ext[j, 0]), float(ext[j, 1])],
                 "panel_count": int(per[j]),
                 "max_deviation_mm": float(mdev[j]),
+                "made": bool(made[j]),
             })
         panels = []
         for i in range(self.panel_count):
@@ -809,6 +848,8 @@ class MoldPlan:
                 "footprint_mm": [float(v) for v in self.footprint_mm[i]],
                 "fits": self.problem[i] is None,
                 "problem": self.problem[i],
+                **({} if self.classes is None else
+                   {"class": CLASSES[self.classes.panel_class[i]]}),
             })
         n = self.panel_count
         length, bound = self.mold_count_bound()
@@ -838,6 +879,9 @@ class MoldPlan:
             "reassigned_by_verification": self.reassigned.tolist(),
             "recast_for_steps": self.recast_for_steps.tolist(),
             "weingarten": self.weingarten,
+            "molds_made": self.made_mold_count,
+            "molds_saved_by_material": self.molds_saved,
+            "panel_classes": None if self.classes is None else self.classes.record(mm),
             "curvature_reach_per_mm": {"median_panel": self.curvature_reach(0.5),
                                        "large_panels": self.curvature_reach(0.9)},
             "seconds": self.seconds,
@@ -871,6 +915,9 @@ class MoldPlan:
         head = ["face", "mold", "type", "k1_per_mm", "k2_per_mm", "deviation_mm",
                 "footprint_x_mm", "footprint_y_mm", "fits"]
         head += [f"m{r}{c}" for r in range(4) for c in range(4)]
+        if self.classes is not None:
+            head += ["class", "class_figure", "class_limit", "class_unit"]
+            value, limit, unit = self.classes.figure()
         lines = [",".join(head)]
         for i in range(self.panel_count):
             row = [str(i), str(int(self.mold[i])), PANEL_TYPES[self.panel_type[i]],
@@ -878,6 +925,9 @@ class MoldPlan:
                    f"{self.deviation_mm[i]:.4f}", f"{self.footprint_mm[i, 0]:.1f}",
                    f"{self.footprint_mm[i, 1]:.1f}", "yes" if self.problem[i] is None else "no"]
             row += [f"{v:.12g}" for v in self.placement[i].ravel()]
+            if self.classes is not None:
+                row += [CLASSES[self.classes.panel_class[i]], f"{value[i]:.6g}",
+                        f"{limit[i]:.6g}", unit[i]]
             lines.append(",".join(row))
         return "\n".join(lines) + "\n"
 
@@ -900,6 +950,12 @@ class MoldPlan:
             f"the curvature set's length over one mold's reach suggests about "
             f"{r['mold_count_bound']['molds']} molds (an estimate, not a bound)",
         ]
+        if self.classes is not None:
+            c = self.classes.counts
+            lines.append(f"{self.classes.material.label}: {c['flat']} flat, {c['cold_bent']} "
+                         f"cold-bent, {c['roll_bent']} roll-bent, {c['molded']} molded panels; "
+                         f"{self.made_mold_count} molds made, {self.molds_saved} saved against "
+                         "every curved panel molded")
         if w.get("thickness") is not None:
             lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
                          f"line a k1 + b k2 = c, {w['thickness']:.3f} of the curvature spread")
@@ -966,6 +1022,12 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
     clock["panel model"] = time.perf_counter() - start
 
     panel_type, cylinder = _classify(data, work)
+    # the dense samples verify the molds below; with a material they decide every panel's
+    # class first (the classes do not change the molds' assignment: the molds the curved
+    # panels would need are planned in full, and only those of molded panels are made)
+    dense = samples(settings.verify_level)
+    classes = None if settings.material is None else classify_panels(
+        mesh, dense, shapes.normal, settings.material, tol, mm, settings.class_order)
     clock["classification"] = time.perf_counter() - start - sum(clock.values())
     mold, variant, mold_shape, mold_type = _assign_by_type(data, panel_type, cylinder, work,
                                                            settings.rounds)
@@ -973,7 +1035,6 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
 
     # verification on dense samples; a panel found above the tolerance is classified again
     # on them (it may be more curved than the assignment samples showed) and gets a new mold
-    dense = samples(settings.verify_level)
     placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
     over = np.flatnonzero(deviation > tol)
 
@@ -1043,7 +1104,7 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
                     placement=placement, deviation_mm=deviation, footprint_mm=footprint,
                     problem=problem, weingarten=weingarten, reassigned=over,
                     step_mm=step, kink_deg=kink, surface_step_mm=surface_step,
-                    recast_for_steps=stepped,
+                    recast_for_steps=stepped, classes=classes,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
 
 

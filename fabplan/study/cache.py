@@ -13,7 +13,7 @@ so a crafted file in a shared study folder can at worst be ignored. The JSON hol
 format version, the key and the SHA-256 of its ``.npz``. The key hashes everything a
 candidate's result depends on: the fabplan version, the design (and the bytes of every
 file it reads), the panel size, the limits, the strip options, the iteration cap, the
-layout starts and the candidate itself. The cost weights are not in it: ranking is
+layout starts, the panel material and the candidate itself. The cost weights are not in it: ranking is
 recomputed from the measured candidates. An entry that does not match (another version,
 a damaged or foreign file, a link or a FIFO in its place) is ignored with a note and
 computed again.
@@ -55,8 +55,10 @@ _NPY_HEADER = 4096
 def cached_types() -> dict[str, type]:
     """The only classes a kept candidate may hold: a study candidate's results."""
     from ..fabricate.boundary_molds import BoundaryMolds, BoundarySides
+    from ..fabricate.materials import Material
     from ..fabricate.molds import MoldPlan, MoldSettings
     from ..fabricate.nesting import Label, Nesting, Part, Placement, Sheet
+    from ..fabricate.panel_classes import PanelClasses
     from ..fabricate.strip_plan import StripPlan
     from ..fabricate.strips import ArcRun, Crossing, ReferenceCurve, Strip, StripSet, StripSettings
     from ..layout.trim import BoundaryPanels
@@ -68,7 +70,7 @@ def cached_types() -> dict[str, type]:
     classes: list[type] = [
         CandidateResult, Candidate, OptimizationResult, QuadMesh, BoundaryPanels, MoldPlan,
         MoldSettings, BoundaryMolds, BoundarySides, StripPlan, StripSet, Strip, StripSettings, ReferenceCurve,
-        ArcRun, Crossing, Part, Label, Placement, Sheet, Nesting]
+        ArcRun, Crossing, Part, Label, Placement, Sheet, Nesting, Material, PanelClasses]
     return {cls.__name__: cls for cls in classes}
 
 
@@ -148,7 +150,7 @@ class CandidateCache:
         self._common = json.dumps({
             "fabplan": __version__, "design": record["design"], "files": _file_digests(study),
             "strips": record["strips"], "max_iterations": record["max_iterations"],
-            "layout_starts": record["layout_starts"],
+            "layout_starts": record["layout_starts"], "material": record["material"],
         }, sort_keys=True, default=str)
 
     def key(self, candidate: Candidate) -> str:

@@ -38,7 +38,14 @@ from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
 from .checks import LIMIT_NAMES, binding_check, relaxation_text
-from .run import CandidateResult, StudyResult, cost_drivers, molds_text, vertex_deviation_mm
+from .run import (
+    CandidateResult,
+    StudyResult,
+    cost_drivers,
+    material_sentence,
+    molds_text,
+    vertex_deviation_mm,
+)
 from .search import search_record
 
 if TYPE_CHECKING:
@@ -545,13 +552,15 @@ def _comparison_table(result: StudyResult) -> str:
              if "mold_tolerance_mm" in swept else [])
         if c.failed:
             rows.append(["", c.name, c.candidate.describe(), *asked, "failed",
-                         *[""] * 12, c.reasons[0]])
+                         *[""] * 13, c.reasons[0]])
             bad.append(len(rows) - 1)
             continue
         s = m["strips"]
         rows.append([
             c.rank, c.name, c.candidate.describe(), *asked, "yes" if c.feasible else "no",
-            m["molds"]["count"] if m["molds"]["count"] else "none (all flat)", m["panels"],
+            m["molds"]["count"] if m["molds"]["count"] else
+            ("none (none molded)" if m["molds"].get("panel_classes") else "none (all flat)"),
+            m["molds"].get("saved", ""), m["panels"],
             (m.get("boundary_panels") or {}).get("count", 0),
             _rounded(100 * m["coverage"], 1), _rounded(m["largest_deviation_mm"], 1),
             _rounded(m["planarity_mm"]["max"], 2), _rounded(m["kink_deg"]["max"], 2),
@@ -566,7 +575,8 @@ def _comparison_table(result: StudyResult) -> str:
         (["mold tolerance [mm]"] if "mold_tolerance_mm" in swept else [])
     return html.html_table(
         ["rank", "candidate", "net", *asked_columns, "feasible", "molds [count]",
-         "panels [count]", "of them boundary panels [count]", "design covered [%]",
+         "molds saved by the material [count]", "panels [count]",
+         "of them boundary panels [count]", "design covered [%]",
          "max deviation [mm]", "planarity [mm]", "max kink [deg]", "angle [deg]",
          f"Meusnier radius [{units}]", "strip sheets [count]", "cost [cost units]",
          "Pareto-optimal", "note"], rows,
@@ -652,8 +662,12 @@ def cost_line(result: StudyResult) -> str:
     """How the cost is made up, in words (as charged in this study)."""
     measured = [c for c in result.candidates if not c.failed]
     with_strips = [c for c in measured if c.metrics.get("strips")]
+    material = result.study.material
     text = ("Cost = the weights times the molds (of the curved panels: flat panels need "
-            "none), the panels by type, ")
+            "none), the panels by type, " if material is None else
+            f"Cost = the weights times the molds (of the molded panels: in {material.label} "
+            "flat, cold-bent and roll-bent panels need none), the panels by class (the "
+            "molded ones by type), ")
     if result.sheets_charged:
         text += "the strip sheets "
     text += "and the largest deviation in mm; feasible candidates rank first, by cost."
@@ -714,8 +728,11 @@ def _candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list
          f"largest {m['largest_deviation_mm']:.2f} (the net and its boundary panels as built); "
          f"the net's vertices: max {m['deviation_mm']['max']:.2f}, mean "
          f"{m['deviation_mm']['mean']:.2f}, 95 % {m['deviation_mm']['p95']:.2f}"],
+        *([["panel classes (material)", material_sentence(molds)]]
+          if molds.get("panel_classes") is not None else []),
         ["molds", (molds_text(molds) if molds["count"] == 0 else
-                   f"{molds_text(molds)} for the curved panels "
+                   f"{molds_text(molds)} for the "
+                   f"{'molded' if molds.get('panel_classes') is not None else 'curved'} panels "
                    f"({molds['molds_per_sqrt_panels']:.2f} x sqrt of the panel count)")
          + f"; largest gap of a panel to its mold (flat panels: to a plane) "
            f"{molds['max_deviation_mm']:.2f} mm"],
@@ -1071,6 +1088,8 @@ def reproduce_commands(c: CandidateResult, study: Study) -> list[list[str]]:
                   "--max-deviation-mm", f"{limits.max_deviation_mm!r}"]
         if study.design.triangles is not None:
             molds += ["--triangles", str(study.design.triangles)]
+    if study.material is not None:
+        molds += ["--material", study.material.spec]
     molds += ["-o", "reproduced/molds"]
     commands = [molds]
     options = study.strips

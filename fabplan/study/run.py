@@ -63,6 +63,7 @@ __all__ = [
     "vertex_deviation_mm",
     "mold_metrics",
     "molds_text",
+    "material_sentence",
     "same_net",
     "twin_of",
     "start_angle",
@@ -710,7 +711,8 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
         # a net held on the design: its panels are patches of the design itself
         limit = study.limits_of(candidate).panel_step_limit_mm
         molds = plan_molds(net.mesh, MoldSettings(tolerance_mm=tolerance, units=units,
-                                                  step_limit_mm=limit),
+                                                  step_limit_mm=limit, material=study.material,
+                                                  class_order=study_class_order(study)),
                            design=design if candidate.glides else None)
     bounds = None
     if net.boundary_panels is not None:
@@ -767,6 +769,14 @@ def _within_study_limit(metrics: dict, limit_mm: float) -> None:
         f"{metrics['largest_deviation_mm']:.1f} mm off the design: past the "
         f"{DEVIATION_HELD * limit_mm:.0f} mm the solve held, within the study's "
         f"{limit_mm:g} mm")
+
+
+def study_class_order(study: Study) -> tuple[str, ...]:
+    """The order a study's panels try the classes in (`fabplan.fabricate.panel_classes.
+    class_order`): cold or roll bending first by the study's ``[cost]``."""
+    from ..fabricate.panel_classes import class_order
+
+    return class_order(study.cost.cold_bent_panel, study.cost.roll_bent_panel)
 
 
 #: the share of a study's deviation limit its nets off the design are held within in the
@@ -943,11 +953,14 @@ def _fold_counts(folds: dict | None) -> dict | None:
 
 
 def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
-    """The mold numbers of a study: only curved panels need a mold.
+    """The mold numbers of a study: only curved panels need a mold, and with a material
+    only the molded ones.
 
     A flat panel is cut from flat stock (glass, sheet) and needs no mold, so `count` is
     the number of molds of the single and double curved panels; the plane "mold" that a
-    `fabplan.molds.MoldPlan` assigns to its flat panels is not counted.
+    `fabplan.molds.MoldPlan` assigns to its flat panels is not counted. With a material
+    (`MoldPlan.classes`) cold-bent, roll-bent and flat panels need none either: `count` is
+    the molds that molded panels sit on (`MoldPlan.mold_made`).
 
     Parameters
     ----------
@@ -955,11 +968,14 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
     boundary : the `BoundaryMolds` of the net's boundary panels, or None. A boundary
         panel is cut from one of the net's molds (and is of that mold's type) or from a
         mold of its own (a paraboloid, counted); its steps against its neighbours count
-        with the net's.
+        with the net's. With a material a boundary panel cut from a net mold that no
+        molded panel sits on is a piece of its neighbours' bent surface and is bent like
+        them (its class: the class of the net panel it continues); one on a made mold is
+        molded, and one on a mold of its own is molded on it.
 
     Returns
     -------
-    dict: ``count`` (molds of the curved panels, the boundary panels' own included),
+    dict: ``count`` (molds made for the curved panels, the boundary panels' own included),
     ``all_panels_flat``, ``fits_all``, ``failures``, ``max_deviation_mm`` (largest
     panel-to-mold gap, flat panels measured against a plane), ``molds_per_sqrt_panels``
     (``count / sqrt(panels)``, boundary panels counted), ``panel_types``, ``mold_types``
@@ -969,11 +985,16 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
     edge, boundary panels included), ``panel_steps_over`` (shared edges whose step exceeds
     the step limit), ``bound`` (an estimate of the fewest molds the panels' curvature set
     allows, `MoldPlan.mold_count_bound`), ``boundary_own_molds`` and ``net_molds`` (the
-    curved molds of the net's own panels).
+    curved molds of the net's own panels); with a material also ``panel_classes`` (panels
+    per class, boundary panels counted), ``molded_types`` (the molded panels' types),
+    ``all_curved_molded`` (the molds if every curved panel were molded) and ``saved``
+    (the molds the material saves against that).
     """
     curved = np.asarray(plan.mold_type) > 0
+    made = plan.mold_made
     per_mold = plan.panels_per_mold.copy()
     panel_type = np.asarray(plan.panel_type)
+    classes = None if plan.classes is None else plan.classes.panel_class.copy()
     own = 0
     step = plan.max_step_mm
     over = int(plan.steps_over.size)
@@ -981,16 +1002,20 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
         cut = (boundary.mold >= 0) & (boundary.mold < len(per_mold)) & ~boundary.extension
         per_mold += np.bincount(boundary.mold[cut], minlength=len(per_mold))
         own = boundary.own_molds
-        panel_type = np.r_[panel_type, boundary.panel_types()[~boundary.extension]]
+        kept = ~boundary.extension
+        panel_type = np.r_[panel_type, boundary.panel_types()[kept]]
+        if classes is not None:
+            classes = np.r_[classes, _boundary_classes(plan, boundary)[kept]]
         step = max(step, boundary.step_max_mm)
         known = np.isfinite(boundary.side_step_mm)
         over += int(np.sum(boundary.side_step_mm[known] > boundary.step_limit_mm + 1e-9))
-    count = int(curved.sum()) + own
+    count = int(made.sum()) + own
     panels = len(panel_type)
-    return {
+    out: dict[str, Any] = {
         "count": count,
-        "net_molds": int(curved.sum()),
-        "all_panels_flat": count == 0,
+        "net_molds": int(made.sum()),
+        # no curved panel at all (with a material a curved panel may need no mold either)
+        "all_panels_flat": int(curved.sum()) + own == 0,
         "fits_all": bool(plan.fits_all) and over == int(plan.steps_over.size),
         "failures": int(plan.failures.size),
         "max_panel_step_mm": step,
@@ -1001,9 +1026,54 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
         "panel_types": {t: int(np.sum(panel_type == i)) for i, t in enumerate(PANEL_TYPES)},
         "mold_types": {t: int(np.sum(plan.mold_type == i)) + (own if t == "paraboloid" else 0)
                        for i, t in enumerate(MOLD_TYPES)},
-        "panels_per_mold_max": int(per_mold[curved].max()) if curved.any() else 0,
+        "panels_per_mold_max": int(per_mold[made].max()) if made.any() else 0,
         "boundary_own_molds": own,
     }
+    if classes is not None:
+        from ..fabricate.panel_classes import CLASSES
+
+        molded = classes == CLASSES.index("molded")
+        out["panel_classes"] = {c: int(np.sum(classes == i)) for i, c in enumerate(CLASSES)}
+        out["molded_types"] = {t: int(np.sum(molded & (panel_type == i)))
+                               for i, t in enumerate(PANEL_TYPES)}
+        out["all_curved_molded"] = int(curved.sum()) + own
+        out["saved"] = out["all_curved_molded"] - count
+        out["material"] = plan.classes.material.label if plan.classes is not None else None
+    return out
+
+
+def _boundary_classes(plan: MoldPlan, boundary: BoundaryMolds) -> np.ndarray:
+    """(b,) the class of every boundary panel (`mold_metrics`)."""
+    from ..fabricate.panel_classes import CLASSES
+
+    assert plan.classes is not None
+    molded = CLASSES.index("molded")
+    net = (boundary.mold >= 0) & (boundary.mold < plan.mold_count)
+    on_made = net & plan.mold_made[np.clip(boundary.mold, 0, max(plan.mold_count - 1, 0))]
+    face = np.asarray(boundary.neighbour_face)
+    like = np.where(face >= 0, plan.classes.panel_class[np.maximum(face, 0)], molded)
+    flat = boundary.panel_types() == 0
+    return np.where(flat, CLASSES.index("flat"), np.where(net & ~on_made, like, molded))
+
+
+def material_sentence(molds: dict) -> str:
+    """What the panel material saves, in a sentence (`mold_metrics` with a material).
+
+    Examples
+    --------
+    >>> text = material_sentence({"material": "tempered glass, 8 mm", "saved": 3, "count": 1,
+    ...     "all_curved_molded": 4, "panel_classes": {"flat": 2, "cold_bent": 30,
+    ...     "roll_bent": 0, "molded": 5}})
+    >>> text[:72]
+    'In tempered glass, 8 mm its panels are 2 flat, 30 cold-bent, 0 roll-bent'
+    >>> text[72:]
+    ' and 5 molded: 1 mold instead of 4 with every curved panel molded, 3 molds saved by the material.'
+    """
+    c = molds["panel_classes"]
+    return (f"In {molds['material']} its panels are {c['flat']} flat, {c['cold_bent']} cold-bent, "
+            f"{c['roll_bent']} roll-bent and {c['molded']} molded: "
+            f"{counted(molds['count'], 'mold')} instead of {molds['all_curved_molded']} with "
+            f"every curved panel molded, {counted(molds['saved'], 'mold')} saved by the material.")
 
 
 def molds_text(molds: dict) -> str:
@@ -1014,7 +1084,9 @@ def molds_text(molds: dict) -> str:
     >>> molds_text({"count": 0}), molds_text({"count": 1}), molds_text({"count": 12})
     ('no molds: all panels flat', '1 mold', '12 molds')
     """
-    return "no molds: all panels flat" if molds["count"] == 0 else counted(molds["count"], "mold")
+    if molds["count"] == 0:
+        return "no molds: no panel molded" if molds.get("panel_classes") else "no molds: all panels flat"
+    return counted(molds["count"], "mold")
 
 
 def _pick(stats: dict | None) -> dict | None:
@@ -1090,8 +1162,12 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
             f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
     if limits.max_molds is not None:
         n = molds["count"]
-        needs = "it needs no molds: all panels are flat" if n == 0 else \
-            f"its curved panels need {counted(n, 'mold')}"
+        bent = molds.get("panel_classes") is not None
+        needs = ("it needs no molds: no panel is molded" if bent else
+                 "it needs no molds: all panels are flat") if n == 0 else \
+            f"its {'molded' if bent else 'curved'} panels need {counted(n, 'mold')}"
+        if bent:
+            needs += f" ({molds['saved']} saved by {molds['material']})"
         checks.append(_check("max_molds", limits.max_molds, n, n <= limits.max_molds,
                              f"{needs} (limit {limits.max_molds})"))
     if limits.planar_panels:
@@ -1195,12 +1271,24 @@ def candidate_cost(metrics: dict, weights: CostWeights, *,
     (230.0, 215.0)
     """
     types = metrics["molds"]["panel_types"]
+    classes = metrics["molds"].get("panel_classes")
     strips = metrics.get("strips")
     # panels are counted for the whole design: a net with gaps must not look cheaper
     whole = 1.0 / max(min(metrics["coverage"], 1.0), 1e-6)
+    bent = {}
+    if classes is not None:
+        # with a material: flat, cold-bent and roll-bent panels by class, the molded ones by
+        # their type (a molded panel within the tolerance of a plane is priced flat)
+        molded = metrics["molds"]["molded_types"]
+        types = {PANEL_TYPES[0]: classes["flat"] + molded.get(PANEL_TYPES[0], 0),
+                 PANEL_TYPES[1]: molded.get(PANEL_TYPES[1], 0),
+                 PANEL_TYPES[2]: molded.get(PANEL_TYPES[2], 0)}
+        bent = {"cold-bent panels": weights.cold_bent_panel * classes["cold_bent"] * whole,
+                "roll-bent panels": weights.roll_bent_panel * classes["roll_bent"] * whole}
     terms = {
         "molds": weights.mold * metrics["molds"]["count"],
         "flat panels": weights.flat_panel * types.get(PANEL_TYPES[0], 0) * whole,
+        **bent,
         "single curved panels": weights.single_curved_panel * types.get(PANEL_TYPES[1], 0) * whole,
         "double curved panels": weights.double_curved_panel * types.get(PANEL_TYPES[2], 0) * whole,
         "sheets": weights.sheet * strips["sheets"] if strips and charge_sheets else 0.0,
@@ -1408,7 +1496,9 @@ def _achievements(best: CandidateResult, base: CandidateResult | None, study: St
     else:
         molds, panels = m["molds"], m["panels"]
         if molds["count"] == 0:
-            text = f"It needs no molds: all its {counted(panels, 'panel')} are flat"
+            text = (f"It needs no molds: none of its {counted(panels, 'panel')} is molded"
+                    if molds.get("panel_classes") else
+                    f"It needs no molds: all its {counted(panels, 'panel')} are flat")
         else:
             text = f"It needs {counted(molds['count'], 'mold')} for its {counted(panels, 'panel')}"
         if limits.max_molds is not None:
@@ -1419,6 +1509,8 @@ def _achievements(best: CandidateResult, base: CandidateResult | None, study: St
                      f"for its {b['panels']}") + (_saving(molds["count"], bm)
                                                   if molds["count"] else "")
         words.append(text + ".")
+    if m["molds"].get("panel_classes") is not None:
+        words.append(material_sentence(m["molds"]))
     if limits.planar_panels:
         words.append(f"Its panels are planar within {m['planarity_mm']['max']:.2f} mm "
                      f"(tolerance {limits.planarity_tolerance_mm:g} mm).")

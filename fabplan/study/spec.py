@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
+from ..fabricate.materials import Material, material_from_table
 from ..io.inputs import check_input_file, check_text
 from ..io.parameters import OPTIONS
 from ..io.units import MM_PER_UNIT
@@ -63,7 +64,7 @@ __all__ = [
 GLIDING_NETS = ("snet", "isogonal", "orthogonal", "mean-curvature-spheres")
 
 #: The tables of a study file.
-TABLES = ("study", "design", "panels", "limits", "strips", "cost", "candidates")
+TABLES = ("study", "design", "panels", "limits", "strips", "material", "cost", "candidates")
 
 #: The candidates ``net = "auto"`` stands for (the baseline is always added).
 AUTO_CANDIDATES = (
@@ -210,7 +211,10 @@ class CostWeights:
     curved panels + double_curved_panel * double curved panels) / coverage + sheet * strip
     sheets + deviation_mm * largest deviation from the design (mm)``, where coverage is
     the fraction of the design's area the net's panels cover (panels are counted for the
-    whole design, so that a net with gaps at the boundary does not look cheaper).
+    whole design, so that a net with gaps at the boundary does not look cheaper). With a
+    ``[material]`` the panels are counted by class: flat, cold-bent (`cold_bent_panel`),
+    roll-bent (`roll_bent_panel`), and the molded ones as single or double curved; molds
+    are those of the molded panels.
 
     The defaults are relative prices: a mold costs as much as 100 flat panels.
     """
@@ -219,6 +223,8 @@ class CostWeights:
     flat_panel: float = 1.0
     single_curved_panel: float = 2.0
     double_curved_panel: float = 4.0
+    cold_bent_panel: float = 1.5
+    roll_bent_panel: float = 2.0
     sheet: float = 5.0
     deviation_mm: float = 1.0
 
@@ -348,6 +354,7 @@ class Study:
     layout_starts: int = 1
     extra: dict = field(default_factory=dict)
     searches: tuple[Search, ...] = ()
+    material: Material | None = None
 
     def panel_size_of(self, candidate: Candidate) -> float:
         """The panel size (model units) a candidate is laid out with."""
@@ -400,6 +407,7 @@ class Study:
             {**asdict(self.strips), "nets": self.strips.nets if isinstance(self.strips.nets, str)
              else list(self.strips.nets)},
             "cost": asdict(self.cost),
+            "material": None if self.material is None else self.material.record(),
             "max_iterations": self.max_iterations,
             "layout_starts": self.layout_starts,
             **({"searches": [asdict(s) for s in self.searches]} if self.searches else {}),
@@ -613,6 +621,12 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
                                  congruence_tolerance_mm=strips.congruence_tolerance_mm
                                  if strips else 0.1)
     cost = _cost(_Table(top.get("cost", {}), "cost", file))
+    material = None
+    if top.has("material"):
+        table = top.get("material")
+        if not isinstance(table, dict):
+            raise InputError(f"{file}: [material] must be a table")
+        material = material_from_table(table, f"{file}: material")
     fixed, searches = _candidates(top.get("candidates", "auto"), file)
     if searches and (len(sizes) > 1 or len(tolerances) > 1):
         raise InputError(f"{file}: a search ({searches[0].name}) and a sweep of panels.size or "
@@ -623,7 +637,7 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     return Study(name=name, path=path, description=description, design=design,
                  panel_size=sizes[0], limits=limits, strips=strips, cost=cost,
                  candidates=candidates, max_iterations=max_iterations,
-                 layout_starts=int(layout_starts), searches=searches)
+                 layout_starts=int(layout_starts), searches=searches, material=material)
 
 
 def _design(t: _Table, folder: Path) -> DesignSpec:
