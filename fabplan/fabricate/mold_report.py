@@ -427,7 +427,8 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
         ["tolerance (largest gap between a panel and its mold)", f"{tol:g} mm"],
         ["panel surface", f"{r['panel_surface']}: {PANEL_SURFACE_TEXT[r['panel_surface']]}"],
         ["panels N", counted(r["panel_count"], "panel")],
-        ["molds M", counted(r["mold_count"], "mold")],
+        ["molds M" + (" (every curved panel molded)" if plan.classes is not None else ""),
+         counted(r["mold_count"], "mold")],
         *([["molds made for the molded panels (panel classes below)",
             f"{counted(r['molds_made'], 'mold')}; {r['molds_saved_by_material']} saved by "
             f"the material against every curved panel molded"]]
@@ -575,9 +576,18 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
                                   "sit beside this report in its folder.")),
     ]
     return html.html_page(f"Mold report: {Path(str(r['net'])).name}", parts,
-                            subtitle=f"{counted(r['panel_count'], 'panel')}, "
-                                     f"{counted(r['mold_count'], 'mold')} at {tol:g} mm, made by "
-                                     "fabplan", scripts=viewer.viewer_assets() if view_3d else "")
+                            subtitle=f"{counted(r['panel_count'], 'panel')}, {_molds_headline(r)} "
+                                     f"at {tol:g} mm, made by fabplan",
+                            scripts=viewer.viewer_assets() if view_3d else "")
+
+
+def _molds_headline(record: dict) -> str:
+    """The molds in a report's headline: those to make, and with a material also those
+    every curved panel molded would need (one count, said the same way everywhere)."""
+    if record.get("panel_classes") is None:
+        return counted(record["mold_count"], "mold")
+    return (f"{counted(record['molds_made'], 'mold')} to make "
+            f"({record['mold_count']} with every curved panel molded)")
 
 
 def mold_report_files(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: bool = True) -> dict:

@@ -940,8 +940,9 @@ class MoldPlan:
             f"{r['panel_count']} panels ({t['planar']} planar, {t['single_curved']} single curved, "
             f"{t['double_curved']} double curved) at {r['tolerance_mm']:g} mm",
             f"{r['mold_count']} molds ({r['mold_types']['plane']} plane, "
-            f"{r['mold_types']['cylinder']} cylinder, {r['mold_types']['paraboloid']} paraboloid); "
-            f"M / sqrt(N) = {r['molds_per_sqrt_panels']:.2f}",
+            f"{r['mold_types']['cylinder']} cylinder, {r['mold_types']['paraboloid']} paraboloid)"
+            + (" with every curved panel molded" if self.classes is not None else "")
+            + f"; M / sqrt(N) = {r['molds_per_sqrt_panels']:.2f}",
             f"largest deviation {r['max_deviation_mm']:.3f} mm; "
             + ("every panel fits its mold" if self.failures.size == 0 else
                f"{len(r['failures'])} panels do not fit (faces {r['failures'][:10]})"),
@@ -953,9 +954,9 @@ class MoldPlan:
         if self.classes is not None:
             c = self.classes.counts
             lines.append(f"{self.classes.material.label}: {c['flat']} flat, {c['cold_bent']} "
-                         f"cold-bent, {c['roll_bent']} roll-bent, {c['molded']} molded panels; "
-                         f"{self.made_mold_count} molds made, {self.molds_saved} saved against "
-                         "every curved panel molded")
+                         f"cold-bent, {c['roll_bent']} roll-bent, {c['molded']} molded panels: "
+                         f"{self.made_mold_count} molds to make, {self.molds_saved} saved by "
+                         "the material")
         if w.get("thickness") is not None:
             lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
                          f"line a k1 + b k2 = c, {w['thickness']:.3f} of the curvature spread")
