@@ -37,14 +37,14 @@ from .commands import CommandQueue
 from .page import edit_page
 from .session import EditOptions, EditSession
 
-__all__ = ["EditServer", "run_editor", "LAST_PAGE_GRACE_SECONDS"]
+__all__ = ["EditServer", "run_editor", "require_web_stack", "LAST_PAGE_GRACE_SECONDS"]
 
 HOST = "127.0.0.1"
 #: after the last page closed, the server waits this long for one to come back (a reload)
 LAST_PAGE_GRACE_SECONDS = 3.0
 
 
-def _web_stack() -> tuple[Any, Any]:
+def require_web_stack() -> tuple[Any, Any]:
     """starlette and uvicorn, or an error that says how to install them."""
     try:
         import starlette  # noqa: F401
@@ -113,7 +113,7 @@ class EditServer:
 
     def __init__(self, session: EditSession, output: str | Path | None = None, *,
                  port: int = 0, token: str | None = None) -> None:
-        _, uvicorn = _web_stack()
+        _, uvicorn = require_web_stack()
         self.session = session
         self.output = None if output is None else Path(output)
         self.token = token or secrets.token_urlsafe(24)
@@ -124,6 +124,8 @@ class EditServer:
         except OSError as exc:
             self._socket.close()
             raise InputError(f"--port {port}: cannot listen on {HOST}:{port} ({exc.strerror})") from None
+        # listening from now on: a client given the address at once waits in the backlog
+        self._socket.listen(64)
         self.port = int(self._socket.getsockname()[1])
         self.origins = {f"http://{HOST}:{self.port}", f"http://localhost:{self.port}"}
         self._hosts = {f"{HOST}:{self.port}", f"localhost:{self.port}"}

@@ -90,6 +90,7 @@ class _Snapshot:
     vertices: np.ndarray
     handles: dict
     pins: frozenset
+    report: tuple          # status, residual, message, where of the net
 
 
 @dataclass
@@ -143,7 +144,6 @@ class EditSession:
         self.handles: dict[int, np.ndarray] = {int(i): self.vertices[int(i)].copy()
                                                for i in np.ravel(handles)}
         self.pins: set[int] = {int(i) for i in np.ravel(pins)} - set(self.handles)
-        self._opened = self._snapshot()
         self._reference = reference
         self.deviation_from = "the reference" if reference is not None else "the net as opened"
         self.centre = 0.5 * (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0))
@@ -160,6 +160,7 @@ class EditSession:
         self.status, self.residual, self.message = "not solved", float("nan"), ""
         self.where = np.zeros(0, np.int64)
         self._settle()
+        self._opened = self._snapshot()
 
     # ------------------------------------------------------------------ state
     @property
@@ -187,12 +188,16 @@ class EditSession:
 
     def _snapshot(self) -> _Snapshot:
         return _Snapshot(self.vertices.copy(), {k: v.copy() for k, v in self.handles.items()},
-                         frozenset(self.pins))
+                         frozenset(self.pins),
+                         (self.status, self.residual, self.message, self.where.copy()))
 
     def _restore(self, snap: _Snapshot) -> None:
+        """Go to a state seen before, as it was (solved then: no solve now)."""
         self.vertices = snap.vertices.copy()
         self.handles = {k: v.copy() for k, v in snap.handles.items()}
         self.pins = set(snap.pins)
+        self.status, self.residual, self.message, where = snap.report
+        self.where = where.copy()
         self._editor = None
 
     def _editor_now(self) -> NetEditor:
@@ -276,6 +281,11 @@ class EditSession:
             for k, v in targets.items():
                 self.handles[k] = v.copy()
             self.changes += 1
+        else:
+            # the next drag starts from a fresh solver on the last good net: one that
+            # failed may have left more than its variables behind (faded terms, the
+            # families' data of the failed iterates)
+            self._editor = None
         self.seq += 1
         g = self._gesture
         g.targets.update(targets)
@@ -351,7 +361,6 @@ class EditSession:
 
     def _after_jump(self, action: str) -> None:
         self.changes += 1
-        self._settle()
         self._log(action)
 
     def _log(self, action: str, **detail: Any) -> None:

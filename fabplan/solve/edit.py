@@ -199,7 +199,10 @@ class NetEditor:
 
         A solve that does not converge within `max_iterations` or `max_seconds`, ends
         folded or crumpled, or breaks down leaves the editor at the net it had before
-        (the last good net, handles included), and the result says why and where.
+        (the last good net, handles included), and the result says why and where. The
+        solver's variables and soft weights are restored, but not every family's data
+        of the failed iterates: a caller that wants the next drag solved as from a fresh
+        start builds a new editor on the last good net (`fabplan edit` does).
 
         Parameters
         ----------
@@ -229,6 +232,7 @@ class NetEditor:
         before_x = state.x.copy()
         before_data = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in state.data.items()}
         before = solver.vertices
+        soft_steps = solver.soft_steps       # a failed solve must not fade the soft terms
         predicted = False
         if predict and self._last_move is not None and self._free.size:
             moved, handle_move, free_move = self._last_move
@@ -286,6 +290,7 @@ class NetEditor:
             state.x[:] = before_x
             state.data = before_data
             solver.set_vertices(ids, before[ids])
+            solver.restart_soft_terms(faded=soft_steps)
             self._last_move = None
         where = np.asarray(where, dtype=np.int64)
         _, first = np.unique(where, return_index=True)
