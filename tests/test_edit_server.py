@@ -343,6 +343,8 @@ def _port_closed(url: str) -> bool:
 
 def test_ctrl_c_ends_the_server_cleanly(tmp_path):
     proc, url = _start_cli(tmp_path)
+    with urllib.request.urlopen(url, timeout=60) as page:      # serving
+        assert b"fabplan edit" in page.read()
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err

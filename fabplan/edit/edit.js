@@ -62,19 +62,31 @@
     return new THREE.Vector3(P[3 * v], P[3 * v + 1], P[3 * v + 2]);
   }
 
+  /* handles (orange), pins (blue) and failure places (red) as small octahedra drawn over
+     the net, one mesh per kind (the vendored three.js has meshes, no sprites) */
+  var OCTA = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 1, 0], [-1, 0, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, 1],
+    [0, -1, 0], [1, 0, 0], [0, 0, 1], [0, 1, 0], [1, 0, 0], [0, 0, -1], [-1, 0, 0], [0, 1, 0], [0, 0, -1],
+    [0, -1, 0], [-1, 0, 0], [0, 0, -1], [1, 0, 0], [0, -1, 0], [0, 0, -1]];
+  function markerMesh(vertices, colour, size) {
+    var pos = new Float32Array(3 * OCTA.length * vertices.length), i = 0;
+    vertices.forEach(function (v) {
+      var c = viewPoint(v);
+      OCTA.forEach(function (o) { pos[i++] = c.x + size * o[0]; pos[i++] = c.y + size * o[1]; pos[i++] = c.z + size * o[2]; });
+    });
+    var g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(pos, 3));
+    g.computeVertexNormals();
+    var m = new THREE.Mesh(g, new THREE.MeshLambertMaterial({ color: colour, emissive: colour, emissiveIntensity: 0.5, depthTest: false }));
+    m.renderOrder = 20;
+    return m;
+  }
+
   function drawMarkers() {
-    if (markers) { viewer.scene.remove(markers); markers.traverse(function (o) { if (o.geometry) o.geometry.dispose(); }); }
-    markers = new THREE.Group();
-    var r = 0.22 * state.mean_edge, ball = new THREE.SphereGeometry(r, 16, 12);
-    function add(v, colour, scale) {
-      var m = new THREE.Mesh(ball, new THREE.MeshBasicMaterial({ color: colour, depthTest: false }));
-      m.position.copy(viewPoint(v)); m.scale.setScalar(scale || 1); m.renderOrder = 20;
-      markers.add(m);
-    }
-    Object.keys(state.handles).forEach(function (k) { add(+k, 0xff7f0e, 1.2); });
-    state.pins.forEach(function (v) { add(v, 0x1f4e9a); });
-    state.where.forEach(function (v) { add(v, 0xd62728, 0.7); });
-    viewer.scene.add(markers);
+    (markers || []).forEach(function (m) { viewer.scene.remove(m); m.geometry.dispose(); });
+    var r = 0.3 * state.mean_edge;
+    markers = [markerMesh(Object.keys(state.handles).map(Number), 0xff7f0e, r),
+      markerMesh(state.pins, 0x1f4e9a, 0.8 * r), markerMesh(state.where, 0xd62728, 0.6 * r)];
+    markers.forEach(function (m) { viewer.scene.add(m); });
     viewer.render();
   }
 
@@ -122,8 +134,11 @@
       var t = (b * ray.direction.dot(w) - n.dot(w)) / denom;
       return p0.clone().addScaledVector(n, t);
     }
-    var plane = new THREE.Plane().setFromNormalAndCoplanarPoint(drag.viewDir, p0);
-    return ray.intersectPlane(plane, out) ? out : null;
+    // the plane through the handle facing the camera
+    var denom2 = ray.direction.dot(drag.viewDir);
+    if (Math.abs(denom2) < 1e-9) return null;
+    var s = p0.clone().sub(ray.origin).dot(drag.viewDir) / denom2;
+    return s > 0 ? out.copy(ray.origin).addScaledVector(ray.direction, s) : null;
   }
 
   function onDown(e) {

@@ -371,6 +371,7 @@ class EditServer:
 
         routes = [
             Route("/", guarded(page)),
+            Route("/favicon.ico", lambda request: Response(status_code=204)),
             Route("/api/session", guarded(session_post), methods=["POST"]),
             Route("/api/drag", guarded(drag), methods=["POST"]),
             Route("/api/net", guarded(net)),
@@ -426,16 +427,17 @@ def run_editor(session: EditSession, output: str | Path, *, port: int = 0,
     """Serve `session` until Ctrl-C, a shutdown request or the last page closed (the
     `fabplan edit` command). Returns the exit code (0)."""
     server = EditServer(session, output, port=port)
-    print(f"fabplan edit: {server.url}", flush=True)
-    if not quiet:
-        print("fabplan edit: open the address above in a browser; Ctrl-C ends the server",
-              file=sys.stderr, flush=True)
-    if open_browser:
-        threading.Timer(0.3, webbrowser.open, args=(server.url,)).start()
     try:
+        print(f"fabplan edit: {server.url}", flush=True)
+        if not quiet:
+            print("fabplan edit: open the address above in a browser; Ctrl-C ends the server",
+                  file=sys.stderr, flush=True)
+        if open_browser:
+            threading.Timer(0.3, webbrowser.open, args=(server.url,)).start()
         server.run()
     except KeyboardInterrupt:
         server.stopped_by = server.stopped_by or "Ctrl-C"
+        server.close()
     if session is server.session and server.session.unsaved:
         print(f"fabplan edit: the last {server.session.changes - server.session.saved_changes} "
               f"changes were not saved to {output}", file=sys.stderr)
