@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_edit_server import check_snet  # the checks of our own
 
 import fabplan
-from test_edit_server import check_snet  # the checks of our own
 
 pytest.importorskip("starlette", reason="the edit extra is missing: pip install -e '.[edit]'")
 

@@ -56,7 +56,8 @@ def edit_page(title: str) -> str:
  <span>Move</span>
  <button type="button" class="fe-move fe-on" data-move="plane">in the view plane</button>
  <button type="button" class="fe-move" data-move="normal">along the normal</button>
- <label>influence <input type="number" class="fe-influence" min="0" step="1" style="width:4em"> edges</label>
+ <label>influence <input type="number" class="fe-influence" min="0" step="1" style="width:4em">
+  edges</label>
  <button type="button" class="fe-undo">Undo</button>
  <button type="button" class="fe-redo">Redo</button>
  <button type="button" class="fe-reset">Reset</button>
@@ -65,7 +66,8 @@ def edit_page(title: str) -> str:
 <div class="fe-bar"><span class="fe-status">connecting</span>
  <span class="fe-numbers"></span></div>
 <div class="fe-message"></div>
-<div class="fp-viewer" id="fe-view"><script type="application/json" class="fp-scenes">{{"scenes":[]}}</script></div>
+<div class="fp-viewer" id="fe-view">
+<script type="application/json" class="fp-scenes">{{"scenes":[]}}</script></div>
 <p class="note">{html.escape(EDIT_HELP)}</p>
 {viewer_assets()}
 <script>{script}</script>

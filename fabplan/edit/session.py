@@ -230,7 +230,7 @@ class EditSession:
         if ids != sorted(self.handles):
             return False
         moved = [np.linalg.norm(targets[k] - centres[ids.index(k)]) for k in targets if k in ids]
-        return max(moved, default=0.0) <= radius / 3
+        return bool(max(moved, default=0.0) <= radius / 3)
 
     def _settle(self) -> None:
         """Solve the net as it stands (the net opened, or after undo): the page starts
