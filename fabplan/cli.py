@@ -1881,8 +1881,47 @@ def _add_templates(sub: Any) -> None:
 
 
 # every subcommand adds its parser; a new command is one function and one entry here
+def _cmd_edit(args) -> int:
+    from .edit.command import edit_command
+
+    out = _output_path_plain(args.output)
+    _check_outputs([out, out.with_suffix(".json")],
+                   {**_net_inputs(args.input), **_file_inputs((args.reference, "the reference"))})
+    return edit_command(args, out, reference=_reference(args.reference),
+                        units=_net_units(args, args.input))
+
+
+def _output_path_plain(text: str) -> Path:
+    out = output_argument(text)
+    if out.suffix.lower() != ".obj":
+        raise InputError(f"{out}: the output must be an .obj file")
+    return out
+
+
+def _add_edit(sub: Any) -> None:
+    p = sub.add_parser("edit", help="edit a net live in the browser: drag handles, the net "
+                                    "follows as a net of its type (a local web page)")
+    p.add_argument("input", help="quad mesh (OBJ); a net saved by fabplan edit reopens with "
+                                 "its handles, pins and history")
+    p.add_argument("--net", choices=list(NETS), metavar="NAME",
+                   help="net type (see `fabplan nets`); default: the one a saved net was "
+                        "edited as")
+    _add_number(p, "--angle", help="intersection angle in degrees (isogonal types)")
+    _add_number(p, "--radius", help="Meusnier radius in model units")
+    p.add_argument("--reference", help="surface the solves are pulled towards at their start "
+                                       "and the deviation is shown from (default: the input)")
+    p.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default: a free one)")
+    p.add_argument("--no-open", action="store_true", help="print the page's address, do not "
+                                                          "open a browser")
+    p.add_argument("-o", "--output", required=True,
+                   help="OBJ that Save writes; its record (handles, history) beside it as .json")
+    _add_units(p)
+    _add_verbosity(p)
+    p.set_defaults(func=_cmd_edit)
+
+
 _SUBCOMMANDS = [_add_nets, _add_measure, _add_optimize, _add_molds, _add_layout, _add_strips,
-               _add_arcs, _add_mill, _add_study, _add_templates]
+               _add_arcs, _add_mill, _add_study, _add_templates, _add_edit]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -14,7 +14,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "fabplan"
 
 # top of the flow first: a stage may import the stages after it, never one before it
-STAGES = ["cli", "study", "fabricate", "layout", "design", "solve", "net", "report", "io", "errors"]
+STAGES = ["cli", "edit", "study", "fabricate", "layout", "design", "solve", "net", "report", "io", "errors"]
 
 
 def _module_name(path: Path) -> str:

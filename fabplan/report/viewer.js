@@ -103,7 +103,7 @@
     });
     window.addEventListener('resize', function () { self.resize(); });
     this.resize();
-    this.setScene(0);
+    if (this.scenes.length) this.setScene(0);   // (a page may bring its scene later)
     root.dataset.ready = '1';
   }
 
@@ -121,7 +121,9 @@
     this.renderer.render(this.scene, this.camera);
   };
 
-  Viewer.prototype.setScene = function (i) {
+  /* show scene i; with keepView the camera stays where it is (a scene replaced by the
+     same net moved, as in fabplan edit) */
+  Viewer.prototype.setScene = function (i, keepView) {
     var s = this.scenes[i], self = this;
     this.index = i; this.data = s;
     if (this.sceneSelect) this.sceneSelect.value = i;
@@ -179,7 +181,7 @@
     var keep = this.mode && s.modes.some(function (m) { return m.key === self.mode; }) ? this.mode : s.modes[0].key;
     this.setMode(keep);
     this.colourEdges();
-    this.setView(s.views.initial);
+    if (keepView) this.render(); else this.setView(s.views.initial);
   };
 
   function decodeInfo(q) {

@@ -266,6 +266,9 @@ class ViewerScene:
         first view, one of ``eye``, ``front``, ``above``, ``top``.
     eye_height : 1.7 m in model units.
     layer : more panels shown beside the net (`PanelLayer`: its boundary panels), or None.
+    centre : (3,) float, the point the view is centred on (model units); None: the middle
+        of the vertices' bounding box. A view whose net changes (`fabplan edit`) keeps one
+        centre, so that its positions stay put where the net does not move.
     """
 
     title: str
@@ -281,12 +284,15 @@ class ViewerScene:
     initial: str = "front"
     eye_height: float = 1.7
     layer: PanelLayer | None = None
+    centre: np.ndarray | None = None
 
     def to_json(self) -> dict:
         if self.initial not in _VIEWS:
             raise ValueError(f"initial view must be one of {_VIEWS}, got {self.initial!r}")
         X = np.asarray(self.vertices, float)
-        centre = 0.5 * (X.min(axis=0) + X.max(axis=0))   # float32 keeps mm on a 10 km site
+        # positions relative to a centre: float32 keeps mm on a 10 km site
+        centre = (0.5 * (X.min(axis=0) + X.max(axis=0)) if self.centre is None
+                  else np.asarray(self.centre, float))
         out = {
             "title": self.title,
             "positions": encode_array(X - centre, "f4"),
