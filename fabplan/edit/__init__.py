@@ -3,7 +3,7 @@
 A local web application: `server.EditServer` (Starlette on uvicorn, bound to 127.0.0.1,
 a random token in its URL) serves the page (`page`) and a scripting interface over one
 `session.EditSession`, whose commands run one at a time on a worker thread
-(`commands.CommandQueue`: drags that wait are coalesced, the latest wins). The solves are
+(`command_queue.CommandQueue`: drags that wait are coalesced, the latest wins). The solves are
 `fabplan.solve.edit.NetEditor.solve_drag`; a saved net carries its handles and edit
 history in its record (`record`). The interface is described in ``docs/edit.md``.
 

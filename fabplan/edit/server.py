@@ -5,7 +5,7 @@ the URL the server prints (``?token=...`` or the header ``X-Fabplan-Token``); a 
 whose ``Origin`` is not the server's own, or whose ``Host`` is not 127.0.0.1 or localhost
 at its port, is refused (another web page the browser has open cannot drive it, nor can
 a DNS rebinding). The session's commands run one at a time on a worker thread
-(`fabplan.edit.commands.CommandQueue`), drags that wait being coalesced; solved states go
+(`fabplan.edit.command_queue.CommandQueue`), drags that wait being coalesced; solved states go
 to every open page over its WebSocket, the latest only when a page is slow to take them.
 
 The server ends on Ctrl-C, on ``POST /api/shutdown``, or a few seconds after the last
@@ -33,7 +33,7 @@ from ..errors import FabplanError, InputError
 from ..io.obj import format_obj
 from ..net.mesh import QuadMesh
 from ..net.validate import check_net, load_net
-from .commands import CommandQueue
+from .command_queue import CommandQueue
 from .page import edit_page
 from .session import EditOptions, EditSession
 

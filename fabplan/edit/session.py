@@ -2,7 +2,7 @@
 
 The session is the document the pages and scripts of one `fabplan edit` server work on.
 Its commands are not thread-safe: the server runs them one at a time on its worker thread
-(`fabplan.edit.commands.CommandQueue`).
+(`fabplan.edit.command_queue.CommandQueue`).
 
 A drag moves handles (a vertex dragged becomes a handle) and solves with
 `fabplan.solve.edit.NetEditor.solve_drag`: the net shown is always a solved one, the last
