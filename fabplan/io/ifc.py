@@ -253,9 +253,14 @@ def _lamella_body(curve: np.ndarray, normal: np.ndarray, height: float, thicknes
     """A lamella as a closed triangle mesh: its rectangular cross-section (height along the
     node normal, thickness across) at every node, joined along the curve and capped.
 
+    The four sides between two nodes are twisted where the normals turn about the edge;
+    each is cut into four triangles about its centre, so that no diagonal's choice bends a
+    thin lamella to one side.
+
     Returns
     -------
-    points : (4 k, 3) float; triangles : (8 (k - 1) + 4, 3) int, facing outwards.
+    points : (4 k + 4 (k - 1), 3) float; triangles : (16 (k - 1) + 4, 3) int, facing
+    outwards.
     """
     k = len(curve)
     tangent = np.gradient(curve, axis=0)
@@ -264,15 +269,18 @@ def _lamella_body(curve: np.ndarray, normal: np.ndarray, height: float, thicknes
     up /= np.linalg.norm(up, axis=1, keepdims=True)
     side = np.cross(tangent, up)
     corners = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [height / 2, thickness / 2]
-    points = (curve[:, None, :] + corners[None, :, :1] * up[:, None, :]
-              + corners[None, :, 1:] * side[:, None, :]).reshape(-1, 3)
+    ring = (curve[:, None, :] + corners[None, :, :1] * up[:, None, :]
+            + corners[None, :, 1:] * side[:, None, :]).reshape(-1, 3)
     a = np.arange(k - 1)[:, None] * 4
     s = np.arange(4)[None, :]
     p00, p10, p11, p01 = a + s, a + 4 + s, a + 4 + (s + 1) % 4, a + (s + 1) % 4
-    sides = np.concatenate([np.stack([p00, p10, p11], -1).reshape(-1, 3),
-                            np.stack([p00, p11, p01], -1).reshape(-1, 3)])
+    centre = 0.25 * (ring[p00] + ring[p10] + ring[p11] + ring[p01]).reshape(-1, 3)
+    c = 4 * k + np.arange(4 * (k - 1)).reshape(k - 1, 4)
+    sides = np.concatenate([np.stack(t, -1).reshape(-1, 3) for t in
+                            ((p00, p10, c), (p10, p11, c), (p11, p01, c), (p01, p00, c))])
     last = 4 * (k - 1)
-    caps = np.array([[0, 2, 1], [0, 3, 2], [last, last + 1, last + 2], [last, last + 2, last + 3]])
+    caps = np.array([[0, 1, 2], [0, 2, 3], [last, last + 2, last + 1], [last, last + 3, last + 2]])
+    points = np.concatenate([ring, centre])
     triangles = np.concatenate([sides, caps])
     T = points[triangles]
     volume = np.einsum("ij,ij->i", T[:, 0], np.cross(T[:, 1], T[:, 2])).sum()
