@@ -144,20 +144,23 @@ def test_plate_vertices_are_the_obj_vertices_and_the_area_the_mold_reports(wein)
     assert len(shapes) == len(plates)
     total = 0.0
     extent = np.ptp(X, axis=0).max()
+    precision, = {c.Precision for c in model.by_type("IfcGeometricRepresentationContext")
+                  if not c.is_a("IfcGeometricRepresentationSubContext")}
+    assert precision == pytest.approx(1e-6)           # a micrometre, in metres
     for plate in plates:
         props = _props(plate)["fabplan_Panel"]
         vertices, triangles = shapes[plate.id()]
         corners = X[faces[props["FaceId"]]]
         # each corner of the OBJ's face is a vertex of the plate, to the file's precision
-        gap = np.linalg.norm(corners[:, None, :] - vertices[None, :, :], axis=2).min(axis=1)
-        assert gap.max() <= 1e-12 * extent
+        gap = np.abs(corners[:, None, :] - vertices[None, :, :]).max(axis=2).min(axis=1)
+        assert gap.max() <= 0.5 * precision * (1 + 1e-9) + 1e-15 * extent
         # the surface stays near its face: off its mean plane by a tenth of a diagonal at most
         normal = np.cross(corners[2] - corners[0], corners[3] - corners[1])
         diagonal = max(np.linalg.norm(corners[2] - corners[0]), np.linalg.norm(corners[3] - corners[1]))
         off = np.abs((vertices - corners.mean(axis=0)) @ normal).max() / np.linalg.norm(normal)
         assert off < 0.1 * diagonal
         area = _area(vertices, triangles)
-        assert props["Area"] == pytest.approx(area, rel=1e-9)
+        assert props["Area"] == pytest.approx(area, rel=1e-5)    # coordinates to a micrometre
         total += area
     reported = json.loads((wein / "molds.json").read_text())["panel_area"]
     assert reported["units"] == "m^2"
@@ -184,7 +187,7 @@ def test_structure_units_and_nodes(wein):
                        for n in nodes])
     ids = [int(n.Name.split()[-1]) for n in nodes]
     assert sorted(ids) == list(range(len(X)))
-    assert np.array_equal(points, X[ids])
+    assert np.abs(points - X[ids]).max() <= 0.5e-6 * (1 + 1e-9)
     edges = {tuple(sorted((f[k], f[(k + 1) % len(f)]))) for f in faces for k in range(len(f))}
     members = model.by_type("IfcStructuralCurveMember")
     assert {tuple(int(v) for v in m.Name.split()[1].split("-")) for m in members} == edges
@@ -218,10 +221,14 @@ def test_boundary_panels_and_lamellas(hypar):
         # the plate is the panel as cut: its vertices are those of boundary-panels.obj
         outline = cut_X[cut_faces[props["FaceId"]]]
         vertices = shapes[plate.id()][0]
-        assert np.linalg.norm(vertices[:, None] - outline[None], axis=2).min(axis=1).max() < 1e-12
-    assert abs(net_area - record["panel_area"]["total"]) <= 1e-6 * net_area
+        assert np.linalg.norm(vertices[:, None] - outline[None], axis=2).min(axis=1).max() < 1e-6
+    # the total within 1e-6, each kind within 1e-6 of the total (the slivers here are tiny:
+    # a micrometre's rounding moves their own area by 1e-4 of it)
     cut = record["boundary_panels"]["cut_area"]
-    assert abs(boundary_area - cut) <= 1e-6 * cut
+    total = record["panel_area"]["total"] + cut
+    assert abs(net_area + boundary_area - total) <= 1e-6 * total
+    assert abs(net_area - record["panel_area"]["total"]) <= 1e-6 * total
+    assert abs(boundary_area - cut) <= 1e-6 * total
     assert _validation_errors(hypar / "molds" / "net.ifc", rules=False) == []
 
     # the layout's own file: the faces flat, the boundary panels as trimmed
@@ -272,7 +279,8 @@ def test_unit_assignment_follows_the_net(tmp_path, units, scale, name):
     X, _ = _obj(WEIN99)
     node = model.by_type("IfcStructuralPointConnection")[0]
     v = int(node.Name.split()[-1])
-    assert node.Representation.Representations[0].Items[0].VertexGeometry.Coordinates == tuple(X[v])
+    point = node.Representation.Representations[0].Items[0].VertexGeometry.Coordinates
+    assert np.abs(np.array(point) - X[v]).max() <= 0.5 * 10.0 ** -{"mm": 3, "ft": 6}[units] * (1 + 1e-9)
 
 
 def test_a_failed_run_leaves_no_ifc(tmp_path, monkeypatch):

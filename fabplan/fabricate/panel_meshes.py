@@ -32,8 +32,9 @@ __all__ = ["PANEL_MESH_LEVEL", "PanelMesh", "fan_grid", "fan_grid_triangles",
 
 PANEL_MESH_LEVEL = 4
 """Grid steps per side of every fan triangle of a panel's mesh: a quad becomes 64 triangles
-over 41 points. A chord of a quarter of the half-diagonal sags by ``k d^2 / 128`` (``d``
-the diagonal): 0.2 mm for a 3 m panel of 20 m radius."""
+over 41 points. A chord of a quarter of the half-diagonal sags from the surface by
+``k d^2 / 512`` (``d`` the diagonal, ``k`` the curvature): 1.8 mm for a 3 m panel of 20 m
+radius."""
 
 
 @dataclass(frozen=True)

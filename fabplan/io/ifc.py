@@ -29,6 +29,7 @@ from a net, its mold plan, boundary panels and strips.
 
 from __future__ import annotations
 
+import math
 import os
 import uuid
 from dataclasses import dataclass, field
@@ -42,13 +43,17 @@ from .output import atomic_path
 from .rhino_write import category_colours
 from .units import MM_PER_UNIT
 
-__all__ = ["IFC_UNITS", "IfcProperty", "PanelSet", "StripSet", "FacadeModel", "ifcopenshell_module",
-           "write_ifc"]
+__all__ = ["IFC_UNITS", "PRECISION_MM", "coordinate_decimals", "IfcProperty", "PanelSet",
+           "StripSet", "FacadeModel", "ifcopenshell_module", "write_ifc"]
 
 IFC_UNITS = {"mm": ("MILLI", None), "cm": ("CENTI", None), "m": (None, None),
              "in": (None, ("inch", "square inch")), "ft": (None, ("foot", "square foot"))}
 """fabplan unit -> (SI prefix of the metre, or the names of the conversion-based length and
 area units IFC knows for it)."""
+
+PRECISION_MM = 0.001
+"""The coordinates' step in the file (mm): a micrometre, far below any fabrication tolerance;
+the representation context states it as its precision."""
 
 PANEL_PSET = "fabplan_Panel"
 STRIP_PSET = "fabplan_Strip"
@@ -175,6 +180,7 @@ class _Writer:
         import ifcopenshell.guid
 
         self.model = model
+        self.decimals = coordinate_decimals(model.units)
         self.file = ifcopenshell.file(schema="IFC4")
         self._compress = ifcopenshell.guid.compress
         self.create = self.file.create_entity
@@ -243,9 +249,22 @@ class _Writer:
                         RelatedObjects=elements, RelatingMaterial=self.create("IfcMaterial", Name=name))
 
 
-def _fixed(points: np.ndarray) -> list:
-    """Coordinates as plain floats for IfcOpenShell (numpy scalars are refused)."""
-    return np.asarray(points, np.float64).tolist()
+def coordinate_decimals(units: str) -> int:
+    """Decimals of the model unit the coordinates are written with: a step of at most
+    `PRECISION_MM`.
+
+    Examples
+    --------
+    >>> [coordinate_decimals(u) for u in ("mm", "cm", "m", "in", "ft")]
+    [3, 4, 6, 5, 6]
+    """
+    return int(math.ceil(-math.log10(PRECISION_MM / MM_PER_UNIT[units]) - 1e-9))
+
+
+def _fixed(points: np.ndarray, decimals: int) -> list:
+    """Coordinates rounded to `decimals` as plain floats for IfcOpenShell (which refuses
+    numpy scalars, and writes a rounded number several times faster than a full double)."""
+    return np.round(np.asarray(points, np.float64), decimals).tolist()
 
 
 def _lamella_body(curve: np.ndarray, normal: np.ndarray, height: float, thickness: float
@@ -322,7 +341,7 @@ def _analytical_model(w: _Writer, model: FacadeModel, facade_place: Any, context
     node: dict[int, Any] = {}
     for v in np.flatnonzero(used).tolist():
         vertex[v] = create("IfcVertexPoint", VertexGeometry=create(
-            "IfcCartesianPoint", Coordinates=_fixed(nodes_xyz[v])))
+            "IfcCartesianPoint", Coordinates=_fixed(nodes_xyz[v], w.decimals)))
         shape = create("IfcProductDefinitionShape", Representations=[create(
             "IfcTopologyRepresentation", ContextOfItems=context, RepresentationIdentifier="Reference",
             RepresentationType="Vertex", Items=[vertex[v]])])
@@ -330,7 +349,7 @@ def _analytical_model(w: _Writer, model: FacadeModel, facade_place: Any, context
                          Name=f"node {v}", ObjectPlacement=shared, Representation=shape)
     members = []
     axes = _edge_axes(nodes_xyz, edges, model.node_normals)
-    for (a, b), z in zip(edges.tolist(), _fixed(axes), strict=True):
+    for (a, b), z in zip(edges.tolist(), _fixed(axes, 12), strict=True):
         shape = create("IfcProductDefinitionShape", Representations=[create(
             "IfcTopologyRepresentation", ContextOfItems=context, RepresentationIdentifier="Reference",
             RepresentationType="Edge", Items=[create("IfcEdge", EdgeStart=vertex[a], EdgeEnd=vertex[b])])])
@@ -362,7 +381,8 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
     create = w.create
     origin = create("IfcAxis2Placement3D", Location=create("IfcCartesianPoint", Coordinates=(0.0, 0.0, 0.0)))
     context = create("IfcGeometricRepresentationContext", ContextType="Model",
-                     CoordinateSpaceDimension=3, Precision=1e-9, WorldCoordinateSystem=origin)
+                     CoordinateSpaceDimension=3, Precision=10.0**-w.decimals,
+                     WorldCoordinateSystem=origin)
     body = create("IfcGeometricRepresentationSubContext", ContextIdentifier="Body", ContextType="Model",
                   ParentContext=context, TargetView="MODEL_VIEW")
     axis = create("IfcGeometricRepresentationSubContext", ContextIdentifier="Axis", ContextType="Model",
@@ -404,7 +424,7 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
             a, b = panels.point_ptr[i], panels.point_ptr[i + 1]
             t0, t1 = panels.triangle_ptr[i], panels.triangle_ptr[i + 1]
             surface = create("IfcTriangulatedFaceSet", Coordinates=create(
-                "IfcCartesianPointList3D", CoordList=_fixed(panels.points[a:b])),
+                "IfcCartesianPointList3D", CoordList=_fixed(panels.points[a:b], w.decimals)),
                 Closed=False, CoordIndex=(panels.triangles[t0:t1] - a + 1).tolist())
             mold = -1 if panels.mold is None else int(panels.mold[i])
             if mold >= 0:
@@ -446,9 +466,9 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
             points, triangles = _lamella_body(curve, np.asarray(normal, np.float64),
                                               strips.height, strips.thickness)
             centre = create("IfcPolyline", Points=[create("IfcCartesianPoint", Coordinates=p)
-                                                   for p in _fixed(curve)])
+                                                   for p in _fixed(curve, w.decimals)])
             solid = create("IfcTriangulatedFaceSet", Coordinates=create(
-                "IfcCartesianPointList3D", CoordList=_fixed(points)), Closed=True,
+                "IfcCartesianPointList3D", CoordList=_fixed(points, w.decimals)), Closed=True,
                 CoordIndex=(triangles + 1).tolist())
             shape = create("IfcProductDefinitionShape", Representations=[
                 create("IfcShapeRepresentation", ContextOfItems=axis, RepresentationIdentifier="Axis",
