@@ -335,6 +335,18 @@ def test_web_ifc_opens_the_file(wein):
     assert found["area"] == pytest.approx(reported, rel=1e-6)
 
 
+def test_web_ifc_opens_the_lamellas(hypar):
+    module = _web_ifc()
+    path = hypar / "strips" / "strips.ifc"
+    run = subprocess.run(["node", str(NODE_CHECK), str(path)], capture_output=True,
+                         text=True, timeout=300, env={**os.environ, "WEB_IFC_MODULE": str(module)})
+    assert run.returncode == 0, run.stderr
+    found = json.loads(run.stdout.strip().splitlines()[-1])
+    members = len(ifcopenshell.open(str(path)).by_type("IfcMember"))
+    assert found["errors"] == [] and found["members"] == members > 0
+    assert found["meshes"] == found["plates"] + members
+
+
 @pytest.mark.slow
 def test_template_study_with_ifc_validates(tmp_path):
     out = tmp_path / "pavilion"

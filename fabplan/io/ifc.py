@@ -456,7 +456,9 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
         profile = create("IfcRectangleProfileDef", ProfileType="AREA",
                          ProfileName=f"lamella {strips.thickness:.6g} x {strips.height:.6g}",
                          XDim=float(strips.thickness), YDim=float(strips.height))
-        material = None if not model.strip_material else create("IfcMaterial", Name=model.strip_material)
+        # IFC lets a profile go without a material; readers such as web-ifc expect one
+        material = create("IfcMaterial", Name=model.strip_material or "lamella",
+                          Category=None if model.strip_material else "not given")
         usage = create("IfcMaterialProfileSetUsage", ForProfileSet=create(
             "IfcMaterialProfileSet", Name="lamella", MaterialProfiles=[create(
                 "IfcMaterialProfile", Name="lamella", Material=material, Profile=profile)]),
