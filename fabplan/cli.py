@@ -270,10 +270,11 @@ def _listing(paths: list[Path]) -> str:
 
 
 def _viewer_paths(args: argparse.Namespace, base: Path) -> list[Path]:
-    """OUT.3dm and OUT.glb when `--3dm` asks for them, OUT.html when `--html` does
-    (checked before any work)."""
+    """OUT.3dm and OUT.glb when `--3dm` asks for them, OUT.html when `--html` does, OUT.ifc
+    when `--ifc` does (checked before any work)."""
     return ([base.with_suffix(".3dm"), base.with_suffix(".glb")] if args.rhino else []) + (
-        [base.with_suffix(".html")] if getattr(args, "html", False) else [])
+        [base.with_suffix(".html")] if getattr(args, "html", False) else []) + (
+        [base.with_suffix(".ifc")] if getattr(args, "ifc", False) else [])
 
 
 @contextmanager
@@ -289,23 +290,34 @@ def _html_file(args: argparse.Namespace, base: Path) -> Iterator[Path | None]:
 
 @contextmanager
 def _viewer_files(args: argparse.Namespace, base: Path, mesh: Any, *, units: str,
-                  molds: Any = None, strips: Any = None) -> Iterator[list[Path]]:
+                  molds: Any = None, strips: Any = None, boundary: Any = None,
+                  net_type: str | None = None) -> Iterator[list[Path]]:
     """With `--3dm`: the net as Rhino ``BASE.3dm`` (mesh, polylines per family, panels per
-    mold, strip curves) and ``BASE.glb`` (coloured by mold) for web viewers.
+    mold, strip curves) and ``BASE.glb`` (coloured by mold) for web viewers; with `--ifc`
+    the facade plan as ``BASE.ifc`` (`fabplan.io.ifc`: panels with `boundary` panels,
+    molds, lamellas, nodes).
 
-    Both are written before the block (the command's other files) runs and land only when
+    They are written before the block (the command's other files) runs and land only when
     it succeeds, so that a failure leaves neither them nor the other files behind.
     """
-    if not args.rhino:
-        yield []
-        return
-    from .study.api import write_3dm, write_glb
+    with ExitStack() as stack:
+        written = []
+        if args.rhino:
+            from .study.api import write_3dm, write_glb
 
-    rhino, glb = base.with_suffix(".3dm"), base.with_suffix(".glb")
-    with atomic_path(rhino) as staged_rhino, atomic_path(glb) as staged_glb:
-        write_3dm(mesh, staged_rhino, molds=molds, strips=strips, units=units)
-        write_glb(mesh, staged_glb, molds=molds, units=units)
-        yield [rhino, glb]
+            rhino, glb = base.with_suffix(".3dm"), base.with_suffix(".glb")
+            write_3dm(mesh, stack.enter_context(atomic_path(rhino)), molds=molds, strips=strips,
+                      units=units)
+            write_glb(mesh, stack.enter_context(atomic_path(glb)), molds=molds, units=units)
+            written += [rhino, glb]
+        if getattr(args, "ifc", False):
+            from .study.api import write_ifc
+
+            ifc = base.with_suffix(".ifc")
+            write_ifc(mesh, stack.enter_context(atomic_path(ifc)), molds=molds, boundary=boundary,
+                      strips=strips, units=units, net_type=net_type, name=Path(base).name)
+            written.append(ifc)
+        yield written
 
 
 def _reference(spec: str | None):
@@ -356,7 +368,8 @@ def _cmd_optimize(args) -> int:
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             _html_file(args, out) as page, \
-            _viewer_files(args, out, result.mesh, units=units) as viewers:
+            _viewer_files(args, out, result.mesh, units=units, boundary=result.boundary_panels,
+                          net_type=result.net) as viewers:
         if page is not None:
             from .layout.view import net_view_html
             from .solve.reference import ReferenceSurface
@@ -479,7 +492,7 @@ def _cmd_molds(args) -> int:
     check_output_folder(out)
     inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"),
                                                       (args.design, "the design"))}
-    _folder_apart(out, [*MOLD_FILES, "net.3dm", "net.glb"], inputs)
+    _folder_apart(out, [*MOLD_FILES, "net.3dm", "net.glb", "net.ifc"], inputs)
     mesh = load_net(args.net, quads=False)   # every polygon is a panel
     check_panels(mesh)
     _check_net_memory(args, mesh, "molds")
@@ -509,7 +522,9 @@ def _cmd_molds(args) -> int:
         with progress.stage(f"placing {panels.panel_count} boundary panels on the molds"):
             boundary = (panels, boundary_molds(plan, panels))
     with progress.stage("writing the report"), \
-            _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan) as viewers:
+            _viewer_files(args, out / "net", mesh, units=settings.units, molds=plan,
+                          boundary=None if boundary is None else boundary[1],
+                          net_type=_net_properties(args.net).get("net")) as viewers:
         files = write_mold_report(plan, out, view_3d=not args.no_3d, boundary=boundary,
                                   protect=inputs, limits=limits) + viewers
     if args.quiet:
@@ -778,7 +793,8 @@ def _cmd_layout(args) -> int:
     # the picture and the Rhino files land only with the net they show
     with progress.stage("writing the net and its picture" + (" and page" if args.html else "")), \
             atomic_path(picture) as staged, _html_file(args, out) as page, \
-            _viewer_files(args, out, result.mesh, units=units) as viewers:
+            _viewer_files(args, out, result.mesh, units=units, boundary=result.boundary_panels,
+                          net_type=result.net) as viewers:
         write_layout_picture(staged, design, result.mesh, title=title,
                              singular_points=layout.singular_points,
                              marks=fairness_marks(result.properties),
@@ -1119,7 +1135,7 @@ def _cmd_strips(args) -> int:
     check_output_folder(out)
     inputs = {**_net_inputs(args.net), **_file_inputs((args.boundary, "the boundary panels"),
                                                       (args.design, "the design"))}
-    _folder_apart(out, [*STRIP_FILES, "strips.3dm", "strips.glb"], inputs)
+    _folder_apart(out, [*STRIP_FILES, "strips.3dm", "strips.glb", "strips.ifc"], inputs)
     started = time.perf_counter()
     mesh = load_net(args.net)
     boundary_file, boundary = _strip_boundary(args, mesh)
@@ -1150,7 +1166,8 @@ def _cmd_strips(args) -> int:
             design.distances(mesh.vertices), units=settings.units,
             max_deviation=args.max_deviation_mm / MM_PER_UNIT[settings.units]))
     with progress.stage(f"writing {len(nesting.sheets)} sheets and checking them"), \
-            _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan) as viewers:
+            _viewer_files(args, out / "strips", mesh, units=settings.units, strips=plan,
+                          net_type=_net_properties(args.net).get("net")) as viewers:
         files = plan.write(out, previews=not args.no_previews,
                            workers=worker_count(args.workers), protect=inputs) + viewers
     s = plan.summary()
@@ -1370,7 +1387,8 @@ def _cmd_study(args) -> int:
             client = stack.enter_context(dask_client(workers, args.scheduler))
             result = run_study_parallel(study, client=client, progress=say,
                                         max_panels=args.max_panels, cache=cache,
-                                        resume=args.resume, files=True, rhino=args.rhino)
+                                        resume=args.resume, files=True, rhino=args.rhino,
+                                        ifc=args.ifc)
         else:
             from .study.background import BackgroundCandidates
 
@@ -1379,13 +1397,14 @@ def _cmd_study(args) -> int:
             with progress.stage(f"running {counted(len(study.candidates), 'candidate')}{searching}"):
                 result = run_study(study, progress=say, max_panels=args.max_panels, cache=cache,
                                    resume=args.resume, files=True, rhino=args.rhino,
+                                   ifc=args.ifc,
                                    # a --resume run keeps each candidate as it finishes,
                                    # in the order of the study
                                    background=BackgroundCandidates if cache is None else None)
         writing = time.perf_counter()
         # with workers, they make the candidates' files too
         with progress.stage("writing the report and the candidates' files"):
-            files = write_study(result, out, progress=say, rhino=args.rhino,
+            files = write_study(result, out, progress=say, rhino=args.rhino, ifc=args.ifc,
                                 view_3d=not args.no_3d, client=client, fork=client is None)
     done = time.perf_counter()
     if args.quiet:
@@ -1821,6 +1840,14 @@ def _add_3dm(p: argparse.ArgumentParser) -> None:
                    help="also write the net as a Rhino .3dm file (mesh, polylines per family, "
                         "panels per mold, strip curves; ids as in the CSV/JSON) and a .glb "
                         "for web viewers, coloured by mold")
+    _add_ifc(p, "the net as an IFC4 file beside them")
+
+
+def _add_ifc(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--ifc", action="store_true",
+                   help=f"also write {what}: panels as IfcPlate (their surfaces, mold ids), "
+                        "molds as IfcGroup, lamellas as IfcMember, the net as a structural "
+                        "analysis model (docs/ifc.md; needs pip install 'fabplan[ifc]')")
 
 
 def _add_arcs(sub: Any) -> None:
@@ -1864,6 +1891,7 @@ def _add_study(sub: Any) -> None:
     p.add_argument("--3dm", dest="rhino", action="store_true",
                    help="also write every candidate's net as candidates/NAME/net.3dm (mesh, "
                         "polylines, panels per mold, strip curves) and net.glb")
+    _add_ifc(p, "every candidate's facade plan as candidates/NAME/net.ifc")
     p.add_argument("--no-3d", action="store_true",
                    help="leave the interactive 3D view out of report.html")
     p.add_argument("-q", "--quiet", action="store_true",
@@ -2021,6 +2049,10 @@ def main(argv: list[str] | None = None) -> int:
         # a usage error or a value out of its range (one line printed), --help, --version
         return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     try:
+        if getattr(args, "ifc", False):      # before any work: is IfcOpenShell there?
+            from .io.ifc import ifcopenshell_module
+
+            ifcopenshell_module()
         with _stopped_by_signals():
             code = args.func(args)
         for message in getattr(args, "warnings_after", []):

@@ -59,6 +59,7 @@ from .boundary_sides import BoundarySides, boundary_sides
 from .flat_boundary import flat_boundary_panels
 from .mold_fits import fit_mold_placements, mold_gaps, mold_points, polish_mold_placements
 from .molds import MOLD_TYPES, MoldPlan, chord_steps
+from .panel_meshes import PanelMesh, boundary_cut_mesh
 
 __all__ = ["BoundarySides", "BoundaryMolds", "BoundaryFitSettings", "boundary_sides",
            "boundary_molds", "boundary_molds_text", "boundary_panels_csv", "boundary_mold_info"]
@@ -203,10 +204,16 @@ class BoundaryMolds:
         plane gives a planar panel, a cylinder a single curved one)."""
         return np.asarray(self.mold_type, np.int64)
 
+    def cut_mesh(self) -> PanelMesh | None:
+        """The panels as cut, as triangle meshes (`boundary_cut_mesh`: the trimming's
+        triangles over the outlines on their molds); None where the panels are not known."""
+        return None if self.panels is None else boundary_cut_mesh(self.panels, self.cut_outlines)
+
     def record(self, net_molds: int | None = None) -> dict:
         """JSON-ready summary; with the net's own mold count `net_molds`, also
         ``molds_in_all`` (the net's and the boundary panels' own)."""
         gap = self.outline_gap_mm[~self.extension]
+        cut = self.cut_mesh()
         rec = {
             "panels": self.count,
             "extensions_of_full_panels": int(self.extension.sum()),
@@ -219,6 +226,8 @@ class BoundaryMolds:
             "steps_over_limit": self.steps_over_limit.tolist(),
             "outline_gap_max_mm": float(gap.max()) if gap.size else None,
             "deviation_max_mm": self.deviation_max_mm,
+            # model units squared, on the triangles of the panels as cut (slivers included)
+            "cut_area": None if cut is None else float(cut.areas().sum()),
             "extensions_over_limit": self.slivers_over_limit.tolist(),
             "mold": self.mold.tolist(),
             "neighbour_face": self.neighbour_face.tolist(),

@@ -50,6 +50,7 @@ from ..net.mesh import QuadMesh
 from ..net.weingarten import weingarten_fit
 from .materials import Material
 from .panel_classes import CLASSES, DEFAULT_ORDER, PanelClasses, classify_panels
+from .panel_meshes import PANEL_MESH_LEVEL, PanelMesh, panel_surface_mesh
 from .panels import (
     SURFACE_MODELS,
     check_panels,
@@ -693,6 +694,9 @@ class MoldPlan:
         cold-bent, roll-bent or flat panel keeps its mold as the surface its neighbours'
         steps and the boundary panels are measured against, but only the molds of molded
         panels are made (`mold_made`).
+    surface : the panel surfaces as triangle meshes (`fabplan.fabricate.panel_meshes`,
+        `PANEL_MESH_LEVEL`), corners on the net's vertices: what the IFC export writes
+        and `panel_area` measures; None for a plan made without them.
     seconds : run time.
     """
 
@@ -716,6 +720,7 @@ class MoldPlan:
     surface_step_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     recast_for_steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     classes: PanelClasses | None = None
+    surface: PanelMesh | None = None
     seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
 
@@ -786,6 +791,12 @@ class MoldPlan:
         return mold_count_bound(turned, self.curvature_reach(0.5))
 
     @property
+    def panel_area(self) -> np.ndarray | None:
+        """(p,) float, every panel's area on its triangulated surface (`surface`; model
+        units squared), or None without it."""
+        return None if self.surface is None else self.surface.areas()
+
+    @property
     def panels_per_mold(self) -> np.ndarray:
         """(m,) int"""
         return np.bincount(self.mold, minlength=self.mold_count)
@@ -835,9 +846,11 @@ class MoldPlan:
                 "max_deviation_mm": float(mdev[j]),
                 "made": bool(made[j]),
             })
+        area = self.panel_area
         panels = []
         for i in range(self.panel_count):
             panels.append({
+                **({} if area is None else {"area": float(area[i])}),
                 "face": i,
                 "mold": int(self.mold[i]),
                 "type": PANEL_TYPES[self.panel_type[i]],
@@ -870,6 +883,10 @@ class MoldPlan:
             "panels_per_mold": {"min": int(per.min()), "median": float(np.median(per)),
                                 "mean": float(per.mean()), "max": int(per.max())},
             "max_deviation_mm": float(self.deviation_mm.max()),
+            **({} if area is None else {"panel_area": {
+                "total": float(area.sum()), "units": f"{self.settings.units}^2",
+                "surface": f"the panel surfaces triangulated, {PANEL_MESH_LEVEL} steps per side "
+                           "of every fan triangle (as the IFC export writes them)"}}),
             "panel_steps": self._steps_record(),
             "mold_count_bound": {"curvature_set_length_per_mm": length,
                                  "mold_reach_per_mm": self.curvature_reach(0.5),
@@ -1099,13 +1116,17 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
                           f"larger than the largest mold ({limit:g} mm)")
     curvature = np.column_stack([shapes.k1, shapes.k2]) / mm
     weingarten = weingarten_fit(curvature[:, 0], curvature[:, 1])
+    # the panels as triangle meshes: the assignment's samples when they are at that level
+    surface = panel_surface_mesh(mesh, points if settings.cover_level == PANEL_MESH_LEVEL
+                                 else samples(PANEL_MESH_LEVEL), PANEL_MESH_LEVEL)
+    clock["panel meshes"] = time.perf_counter() - start - sum(clock.values())
     return MoldPlan(mesh=mesh, settings=settings, panel_surface=model, panel_type=panel_type,
                     curvature=curvature, mold_type=mold_type, mold_shape=mold_shape,
                     panel_shape=kk[np.arange(n), variant], mold=mold,
                     placement=placement, deviation_mm=deviation, footprint_mm=footprint,
                     problem=problem, weingarten=weingarten, reassigned=over,
                     step_mm=step, kink_deg=kink, surface_step_mm=surface_step,
-                    recast_for_steps=stepped, classes=classes,
+                    recast_for_steps=stepped, classes=classes, surface=surface,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
 
 

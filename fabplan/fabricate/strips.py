@@ -995,6 +995,8 @@ class StripSet:
         against the boundary member (two strips meeting at a tip of the boundary).
     along_edge : polylines left out because they lie along the edge of the cladding, where
         the boundary member runs.
+    normals : (m, 3) float, the unit node normal at every one of `positions`: the line the
+        lamella stands on there (None for a set made without them).
     """
 
     strips: list
@@ -1005,6 +1007,7 @@ class StripSet:
     ends_not_continued: int = 0
     crossings_at_member: int = 0
     along_edge: int = 0
+    normals: np.ndarray | None = None
 
     @cached_property
     def crossings_of_strip(self) -> list:
@@ -1197,7 +1200,7 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
     slit = [replace(c, id=i + 1) for i, c in enumerate(slit)]
     return StripSet(strips=strips, crossings=slit, junctions=junctions, settings=settings,
                     positions=X, ends_not_continued=0 if ends is None else ends.not_continued,
-                    crossings_at_member=at_member, along_edge=along_edge)
+                    crossings_at_member=at_member, along_edge=along_edge, normals=N)
 
 
 def _member_setbacks(X: np.ndarray, ends: StripEnds, settings: StripSettings) -> np.ndarray:

@@ -36,6 +36,9 @@ from ..fabricate.strip_plan import StripPlan, schedule_rows
 from ..fabricate.strip_plan import plan_strips as _plan_strips_impl
 from ..fabricate.strips import StripSettings
 from ..io.gltf import write_glb as _write_glb_file
+from ..io.ifc import FacadeModel, IfcProperty, PanelSet
+from ..io.ifc import StripSet as IfcStripSet
+from ..io.ifc import write_ifc as _write_ifc_file
 from ..io.rhino_write import NetDrawing, read_3dm_net, write_net_3dm
 from ..net.measure import measure_net
 from ..net.mesh import QuadMesh
@@ -70,6 +73,8 @@ __all__ = [
     "net_drawing",
     "write_3dm",
     "write_glb",
+    "ifc_facade",
+    "write_ifc",
 ]
 
 NetLike = Union[QuadMesh, OptimizationResult, tuple]
@@ -364,3 +369,172 @@ def write_glb(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None =
     return _write_glb_file(path, mesh.vertices, mesh.faces,
                            face_mold=None if molds is None else molds.mold, units=units)
 
+
+
+def _panel_set(panels: Any, names: list[str], tags: list[str], mold: np.ndarray | None,
+               properties: list[IfcProperty]) -> PanelSet:
+    """A `PanelSet` of the triangle meshes `panels` (`fabplan.fabricate.panel_meshes.PanelMesh`)."""
+    return PanelSet(points=panels.points, triangles=panels.triangles, point_ptr=panels.point_ptr,
+                    triangle_ptr=panels.triangle_ptr, names=names, tags=tags, mold=mold,
+                    properties=properties)
+
+
+def _mold_text(kind: str, k1: float, k2: float) -> str:
+    """An IfcGroup's description of a mold of curvatures `k1`, `k2` (1/mm)."""
+    return f"{kind} mold, k1 {k1 * 1000:.6g} 1/m, k2 {k2 * 1000:.6g} 1/m"
+
+
+def _net_panels(mesh: QuadMesh, molds: MoldPlan | None, mm: float, net_type: str | None
+                ) -> tuple[PanelSet, dict[int, tuple[str, str]]]:
+    """The net's panels (with `molds` their triangulated surfaces, else the faces) and the
+    molds' groups."""
+    from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
+    from ..fabricate.panel_meshes import face_fan_mesh
+
+    f = len(mesh.face_sizes)
+    surface = face_fan_mesh(mesh) if molds is None or molds.surface is None else molds.surface
+    props = [IfcProperty("FaceId", "IfcInteger", range(f)),
+             IfcProperty("PanelKind", "IfcLabel", ["net panel"] * f)]
+    groups: dict[int, tuple[str, str]] = {}
+    if molds is not None:
+        kinds = [MOLD_TYPES[t] for t in molds.mold_type]
+        groups = {j: (f"mold {j}", _mold_text(kinds[j], k1, k2))
+                  for j, (k1, k2) in enumerate(molds.mold_shape.tolist())}
+        props += [IfcProperty("PanelClass", "IfcLabel", [PANEL_TYPES[t] for t in molds.panel_type]),
+                  IfcProperty("MoldId", "IfcInteger", molds.mold.tolist()),
+                  IfcProperty("MoldType", "IfcLabel", [kinds[m] for m in molds.mold]),
+                  IfcProperty("DeviationFromMold", "IfcLengthMeasure", (molds.deviation_mm / mm).tolist()),
+                  IfcProperty("FitsMold", "IfcBoolean", [p is None for p in molds.problem])]
+    props += [IfcProperty("Area", "IfcAreaMeasure", surface.areas().tolist()),
+              IfcProperty("NetType", "IfcLabel", [net_type] * f)]
+    panels = _panel_set(surface, [f"panel {i}" for i in range(f)], [str(i) for i in range(f)],
+                        None if molds is None else molds.mold, props)
+    return panels, groups
+
+
+def _boundary_panels(boundary: Any, mm: float, net_type: str | None
+                     ) -> tuple[PanelSet | None, dict[int, tuple[str, str]]]:
+    """The boundary panels: as cut from their molds (a `BoundaryMolds`) or trimmed (a
+    `BoundaryPanels`), and the groups of the molds of their own."""
+    from ..fabricate.boundary_molds import BoundaryMolds
+    from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
+    from ..fabricate.panel_meshes import boundary_cut_mesh
+
+    cut_molds = boundary if isinstance(boundary, BoundaryMolds) else None
+    made = boundary.panels if cut_molds is not None else boundary
+    if made is None or not made.polygons:
+        return None, {}
+    cut = cut_molds.cut_mesh() if cut_molds is not None else boundary_cut_mesh(made)
+    p = made.count
+    kind = np.where(made.extension, "boundary sliver",
+                    np.where(made.patch, "boundary patch", "boundary panel"))
+    props = [IfcProperty("FaceId", "IfcInteger", range(p)),
+             IfcProperty("PanelKind", "IfcLabel", kind.tolist()),
+             IfcProperty("NeighbourFace", "IfcInteger", np.asarray(made.neighbour_face).tolist())]
+    groups: dict[int, tuple[str, str]] = {}
+    mold = None
+    if cut_molds is not None and cut is not None:
+        mold = np.asarray(cut_molds.mold, np.int64)
+        first = cut_molds.net_mold_count
+        groups = {first + j: (f"mold {first + j}", _mold_text("paraboloid", k1, k2)
+                              + ", a boundary panel's own")
+                  for j, (k1, k2) in enumerate(np.asarray(cut_molds.own_shapes).tolist())}
+        types = cut_molds.panel_types()
+        props += [IfcProperty("PanelClass", "IfcLabel", [PANEL_TYPES[t] for t in types]),
+                  IfcProperty("MoldId", "IfcInteger", mold.tolist()),
+                  IfcProperty("MoldType", "IfcLabel", [MOLD_TYPES[t] for t in types]),
+                  IfcProperty("StepToNeighbours", "IfcLengthMeasure",
+                              (np.asarray(cut_molds.step_mm) / mm).tolist())]
+    assert cut is not None
+    props += [IfcProperty("Area", "IfcAreaMeasure", cut.areas().tolist()),
+              IfcProperty("NetType", "IfcLabel", [net_type] * p)]
+    panels = _panel_set(cut, [f"boundary panel {k}" for k in range(p)], [f"B{k}" for k in range(p)],
+                        mold, props)
+    return panels, groups
+
+
+def _lamellas(mesh: QuadMesh, strips: StripPlan, net_type: str | None) -> IfcStripSet:
+    """The strips as lamellas: node polylines, node normals, cross-section, ids."""
+    from ..fabricate.molds import UNITS
+
+    lamellas = strips.strips
+    scale = UNITS[lamellas.settings.units]
+    normals = lamellas.normals
+    if normals is None:        # a plan made before the normals were kept: the net's nearest
+        from scipy.spatial import cKDTree
+
+        from ..fabricate.strips import node_normals
+
+        normals = node_normals(mesh)[cKDTree(mesh.vertices).query(lamellas.positions)[1]]
+    chosen = lamellas.strips
+    n = len(chosen)
+    height, thickness = lamellas.settings.height_mm / scale, lamellas.settings.thickness_mm / scale
+    radius = [s.radius_mm / scale if np.isfinite(s.radius_mm) else None for s in chosen]
+    return IfcStripSet(
+        curves=[lamellas.positions[s.vertices] for s in chosen],
+        normals=[normals[s.vertices] for s in chosen], height=height, thickness=thickness,
+        names=[s.id for s in chosen],
+        properties=[IfcProperty("StripId", "IfcLabel", [s.id for s in chosen]),
+                    IfcProperty("Family", "IfcLabel", ["AB"[s.family] for s in chosen]),
+                    IfcProperty("Length", "IfcLengthMeasure", [s.length_mm / scale for s in chosen]),
+                    IfcProperty("ArcRadius", "IfcLengthMeasure", radius),
+                    IfcProperty("Height", "IfcLengthMeasure", [height] * n),
+                    IfcProperty("Thickness", "IfcLengthMeasure", [thickness] * n),
+                    IfcProperty("NetType", "IfcLabel", [net_type] * n)])
+
+
+def _vertex_normals(mesh: QuadMesh) -> np.ndarray:
+    """(n, 3) unit normals at the vertices: the sum of their faces' Newell vectors."""
+    newell = np.cross(mesh.vertices[mesh.face_indices], mesh.vertices[mesh.corner_next_vertices])
+    normals = np.zeros_like(mesh.vertices)
+    np.add.at(normals, mesh.face_indices, np.repeat(
+        np.add.reduceat(newell, mesh.face_indptr[:-1], axis=0), mesh.face_sizes, axis=0))
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+
+
+def ifc_facade(net: NetLike, *, molds: MoldPlan | None = None, boundary: Any = None,
+               strips: StripPlan | None = None, units: str = "m", net_type: str | None = None,
+               name: str | None = None, nodes: bool = True) -> FacadeModel:
+    """What `write_ifc` writes (`fabplan.io.ifc.FacadeModel`).
+
+    Parameters
+    ----------
+    net : the net.
+    molds : its `MoldPlan`: the panels are its triangulated panel surfaces
+        (`MoldPlan.surface`), with their molds; None: the faces themselves, flat fans.
+    boundary : the boundary panels: a `BoundaryMolds` (as cut from their molds, the
+        ``fabplan molds`` report) or the `fabplan.layout.trim.BoundaryPanels` of a layout
+        (their trimmed outlines); None: none.
+    strips : its `StripPlan`: the lamellas.
+    units : the model units.
+    net_type : the net's type, a property of every panel (default: the result's ``net``).
+    name : the project's name (default: the net's file name).
+    nodes : write the net as a structural analysis model (vertices and edges).
+    """
+    from ..fabricate.molds import UNITS
+
+    mesh = as_mesh(net)
+    mm = UNITS[units]
+    net_type = net_type if net_type is not None else getattr(net, "net", None)
+    name = name or Path(str(mesh.name)).name
+    panels, groups = _net_panels(mesh, molds, mm, net_type)
+    sets = [panels]
+    if boundary is not None:
+        more, own = _boundary_panels(boundary, mm, net_type)
+        sets += [] if more is None else [more]
+        groups.update(own)
+    lamellas = None if strips is None or not strips.strips.strips else _lamellas(mesh, strips, net_type)
+    return FacadeModel(name=name, units=units, panels=sets, molds=groups, strips=lamellas,
+                       nodes=mesh.vertices if nodes else None, edges=mesh.edges,
+                       node_normals=_vertex_normals(mesh),
+                       description=f"fabplan facade plan of {name}"
+                       + (f", a {net_type} net" if net_type else ""))
+
+def write_ifc(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None = None,
+              boundary: Any = None, strips: StripPlan | None = None, units: str = "m",
+              net_type: str | None = None, name: str | None = None) -> Path:
+    """Write a net's facade plan as an IFC4 file (`ifc_facade`, `fabplan.io.ifc`): its panels
+    (with `molds` their surfaces and molds), boundary panels, lamellas and nodes. Needs
+    IfcOpenShell (``pip install 'fabplan[ifc]'``)."""
+    return _write_ifc_file(path, ifc_facade(net, molds=molds, boundary=boundary, strips=strips,
+                                            units=units, net_type=net_type, name=name))

@@ -74,7 +74,7 @@ class _Job:
 
 def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
              twin: CandidateResult | None, files: bool, rhino: bool,
-             twin_files: dict[str, bytes] | None = None) -> tuple:
+             twin_files: dict[str, bytes] | None = None, ifc: bool = False) -> tuple:
     """What the forked process sends back: (measured candidate without net and layout or
     None, why it failed or None, progress lines, files or None, seconds). `twin_files`:
     the files made for `twin`, whose strip files a candidate sharing its strips copies."""
@@ -92,7 +92,7 @@ def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
     # without the twin's files, `write_study` copies the shared strips from its folder
     if files and (twin_files is not None or not shares_strips):
         made = candidate_file_bytes(result, study, design,
-                                    twin_files if shares_strips else None, rhino=rhino)
+                                    twin_files if shares_strips else None, rhino=rhino, ifc=ifc)
     return (replace(result, net=None), None, lines, made,
             time.perf_counter() - clock)
 
@@ -107,9 +107,10 @@ class BackgroundCandidates:
 
     def __init__(self, study: Study, design: DesignSurface, say: Callable[[str], None], *,
                  processes: int | None = None, files: bool = False, rhino: bool = False,
+                 ifc: bool = False,
                  done: Callable[[CandidateResult], None] | None = None):
         self.study, self.design, self.say, self.done = study, design, say, done
-        self.files, self.rhino = files, rhino
+        self.files, self.rhino, self.ifc = files, rhino, ifc
         self.processes = background_processes(processes)
         self.made_files: dict[str, tuple] = {}
         self._running: list[_Job] = []
@@ -143,7 +144,7 @@ class BackgroundCandidates:
                 die_with_parent(parent)
                 sys.stdout = sys.stderr = open(os.devnull, "w")
                 made = _measure(self.study, self.design, solved, twin, self.files, self.rhino,
-                                None if twin_made is None else twin_made[0])
+                                None if twin_made is None else twin_made[0], ifc=self.ifc)
                 part = path.with_suffix(".part")
                 part.write_bytes(pickle.dumps(made, protocol=pickle.HIGHEST_PROTOCOL))
                 os.replace(part, path)

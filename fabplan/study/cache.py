@@ -59,6 +59,7 @@ def cached_types() -> dict[str, type]:
     from ..fabricate.molds import MoldPlan, MoldSettings
     from ..fabricate.nesting import Label, Nesting, Part, Placement, Sheet
     from ..fabricate.panel_classes import PanelClasses
+    from ..fabricate.panel_meshes import PanelMesh
     from ..fabricate.strip_plan import StripPlan
     from ..fabricate.strips import ArcRun, Crossing, ReferenceCurve, Strip, StripSet, StripSettings
     from ..layout.trim import BoundaryPanels
@@ -70,7 +71,8 @@ def cached_types() -> dict[str, type]:
     classes: list[type] = [
         CandidateResult, Candidate, OptimizationResult, QuadMesh, BoundaryPanels, MoldPlan,
         MoldSettings, BoundaryMolds, BoundarySides, StripPlan, StripSet, Strip, StripSettings, ReferenceCurve,
-        ArcRun, Crossing, Part, Label, Placement, Sheet, Nesting, Material, PanelClasses]
+        ArcRun, Crossing, Part, Label, Placement, Sheet, Nesting, Material, PanelClasses,
+        PanelMesh]
     return {cls.__name__: cls for cls in classes}
 
 

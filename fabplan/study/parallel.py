@@ -153,7 +153,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
                        progress: Callable[[str], None] | None = None,
                        client: Any = None, max_panels: int | None = None,
                        cache: CandidateCache | None = None, resume: bool = False,
-                       files: bool = False, rhino: bool = False) -> StudyResult:
+                       files: bool = False, rhino: bool = False, ifc: bool = False) -> StudyResult:
     """Run every candidate of `study` on Dask workers and judge them (see the module).
 
     Parameters
@@ -167,7 +167,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
     cache, resume : finished candidates are kept in `cache`; with `resume` those it holds
         are taken from it (see `fabplan.study.cache`).
     files : the workers also make every candidate's files as soon as it is measured
-        (`fabplan.study.report.candidate_file_bytes`, with `rhino` as in `write_study`),
+        (`fabplan.study.report.candidate_file_bytes`, with `rhino`, `ifc` as in `write_study`),
         beside the other candidates' computation; they come back in
         `StudyResult.made_files` for `write_study` to write.
 
@@ -185,7 +185,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
         design = load_study_design(study, say, max_panels)
         first = with_first_points(study)
         results, made = _run_on(client, replace(study, candidates=tuple(first)), design, say,
-                                cache, resume, files=files, rhino=rhino)
+                                cache, resume, files=files, rhino=rhino, ifc=ifc)
         # a search's further rounds, each on the workers at once (`fabplan.study.search`)
         for k in range(2, 2 + max((s.budget for s in study.searches), default=0)):
             judged = judge_study(searched_study(study, results), design, results)
@@ -194,7 +194,8 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
                 break
             say(f"  search round {k}: {', '.join(c.name for c in more)}")
             found, made_now = _run_on(client, replace(study, candidates=tuple(more)), design,
-                                      say, cache, resume, files=files, rhino=rhino, tag=f"-r{k}")
+                                      say, cache, resume, files=files, rhino=rhino, ifc=ifc,
+                                      tag=f"-r{k}")
             results += found
             made.update(made_now)
     result = judge_study(searched_study(study, results), design, results,
@@ -205,7 +206,8 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
 
 def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str], None],
             cache: CandidateCache | None, resume: bool, *, files: bool = False,
-            rhino: bool = False, tag: str = "") -> tuple[list[CandidateResult], dict[str, tuple]]:
+            rhino: bool = False, ifc: bool = False, tag: str = ""
+            ) -> tuple[list[CandidateResult], dict[str, tuple]]:
     """The candidates' results in the order of the study, and the files the workers made
     of them (with `files`) by name; `tag` ends the task keys (a search's later rounds)."""
     from distributed import as_completed
@@ -268,7 +270,7 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
                 twin = twins[i]
                 making[i] = client.submit(
                     candidate_files_task, made[i], *shared,
-                    None if twin is None else making[twin], rhino,
+                    None if twin is None else making[twin], rhino, ifc,
                     key=f"files-{i}-{candidates[i].name}{tag}", pure=False, retries=RETRIES)
 
     submit_ready()

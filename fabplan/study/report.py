@@ -1032,7 +1032,7 @@ STUDY_FILES = ("report.html", "report.pdf", "study.json", "candidates.csv")
 #: folder's list of files says (a candidate's files, its strip sheets and schedule)
 _STUDY_FILE = re.compile(
     r"(report\.html|report\.pdf|study\.json|candidates\.csv|" + re.escape(output.MANIFEST) + "|"
-    r"candidates/[^/]+/(net\.(obj|json|png|3dm|glb)|net\.boundary\.obj|molds\.(csv|json)|"
+    r"candidates/[^/]+/(net\.(obj|json|png|3dm|glb|ifc)|net\.boundary\.obj|molds\.(csv|json)|"
     r"boundary-panels\.(csv|obj)|reproduce\.sh|"
     r"strips/(strips(-sheet-\d+\.(dxf|png)|-sheets\.dxf|\.csv|\.json)|sheet-preview\.png)))")
 
@@ -1115,7 +1115,7 @@ def reproduce_script(c: CandidateResult, study: Study) -> str:
 
 def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: DesignSurface,
                      say, twin_strips: dict[str, bytes] | None = None,
-                     rhino: bool = False) -> tuple:
+                     rhino: bool = False, ifc: bool = False) -> tuple:
     """Write one candidate's files into `folder`; `twin_strips` are the strip files
     (``strips/NAME``: bytes) of the earlier candidate whose net and strip plan this one
     shares, if any: they are copied rather than made and read back a second time."""
@@ -1190,13 +1190,20 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
         write_glb(net, folder / "net.glb", molds=molds_plan, units=study.design.units)
         outputs["rhino"] = "net.3dm"
         outputs["gltf"] = "net.glb"
+    if ifc:
+        from .api import write_ifc
+
+        write_ifc(net, folder / "net.ifc", molds=molds_plan, boundary=c.boundary_molds,
+                  strips=c.strips, units=study.design.units, net_type=net.net, name=c.name)
+        outputs["ifc"] = "net.ifc"
     say(f"    wrote {c.name}")
     return {k: (f"candidates/{c.name}/{v}" if isinstance(v, str) else
                 [f"candidates/{c.name}/{x}" for x in v]) for k, v in outputs.items()}, pictures
 
 
 def candidate_file_bytes(c: CandidateResult, study: Study, design: DesignSurface,
-                         twin_files: dict[str, bytes] | None = None, rhino: bool = False
+                         twin_files: dict[str, bytes] | None = None, rhino: bool = False,
+                         ifc: bool = False
                          ) -> tuple[dict[str, bytes], dict, dict]:
     """One candidate's files made in a folder of its own and returned as bytes, so that
     a Dask worker, on this machine or another, can make them (see `write_study`).
@@ -1218,14 +1225,15 @@ def candidate_file_bytes(c: CandidateResult, study: Study, design: DesignSurface
     with tempfile.TemporaryDirectory(prefix="fabplan-candidate-") as tmp:
         folder = Path(tmp) / "candidate"
         outputs, pictures = _candidate_files(c, folder, study, design, lambda message: None,
-                                             twin_strips=strips, rhino=rhino)
+                                             twin_strips=strips, rhino=rhino, ifc=ifc)
         files = {p.relative_to(folder).as_posix(): p.read_bytes()
                  for p in sorted(folder.rglob("*")) if p.is_file()}
     return files, outputs, pictures
 
 
 def candidate_files_task(c: CandidateResult, study: Study, design: DesignSurface,
-                         twin_made: tuple | None, rhino: bool = False) -> tuple | None:
+                         twin_made: tuple | None, rhino: bool = False,
+                         ifc: bool = False) -> tuple | None:
     """`candidate_file_bytes` as a Dask task: `twin_made` is what the task of the
     candidate's twin (`CandidateResult.twin`) made, whose strip files this one takes when
     both have strips (the same strip plan, see `fabricate_candidate`); None for a failed
@@ -1233,7 +1241,7 @@ def candidate_files_task(c: CandidateResult, study: Study, design: DesignSurface
     if c.failed:
         return None
     twin_files = twin_made[0] if twin_made is not None and c.strips is not None else None
-    return candidate_file_bytes(c, study, design, twin_files, rhino=rhino)
+    return candidate_file_bytes(c, study, design, twin_files, rhino=rhino, ifc=ifc)
 
 
 def _strip_twin(c: CandidateResult, by_name: dict[str, CandidateResult]) -> str | None:
@@ -1250,7 +1258,8 @@ def _write_files(folder: Path, files: dict[str, bytes]) -> None:
         path.write_bytes(data)
 
 
-def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) -> tuple:
+def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client,
+                      ifc: bool = False) -> tuple:
     """Every measured candidate's folder in `tmp`: from the files made already beside the
     run (`StudyResult.made_files`: a parallel run's workers, a serial run's forked
     processes), else made on the workers of `client` (each in memory, see
@@ -1279,7 +1288,8 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
                 p.relative_to(folder.parent / twin).as_posix(): p.read_bytes()
                 for p in sorted((folder.parent / twin / "strips").rglob("*")) if p.is_file()}
             outputs[c.name], pictures[c.name] = _candidate_files(
-                c, folder, result.study, result.design, say, twin_strips=strips, rhino=rhino)
+                c, folder, result.study, result.design, say, twin_strips=strips, rhino=rhino,
+                ifc=ifc)
         return outputs, pictures
     from distributed import as_completed
 
@@ -1291,7 +1301,7 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
         twin = _strip_twin(c, by_name)
         futures[c.name] = client.submit(
             candidate_files_task, c, study, design, None if twin is None else futures[twin],
-            rhino, key=f"files-{c.name}", pure=False)
+            rhino, ifc, key=f"files-{c.name}", pure=False)
     names = {f.key: name for name, f in futures.items()}
     for future in as_completed(list(futures.values())):
         name = names[future.key]
@@ -1301,7 +1311,7 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client) 
     return outputs, pictures
 
 
-def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False,
+def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False, ifc: bool = False,
                 view_3d: bool = True, pdf: bool = True, client: Any = None,
                 fork: bool = False) -> list[Path]:
     """Write every file of a study into `out_dir`, replacing the folder as a whole.
@@ -1311,7 +1321,8 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
     `fork`, in a forked process meanwhile, `fabplan.io.forked.ForkedFile`: the
     command does; a notebook or a Dask client's process had better not fork). With
     `rhino`, every candidate's folder also gets ``net.3dm`` (the net, its polylines, its
-    panels by mold and its strip curves) and ``net.glb``.
+    panels by mold and its strip curves) and ``net.glb``; with `ifc` ``net.ifc`` (its facade
+    plan for the building model, `fabplan.io.ifc`).
 
     With a Dask `client` (``distributed.Client``), the candidates' files are made on its
     workers, in parallel (`candidate_file_bytes`), and written here; a parallel run that
@@ -1333,7 +1344,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
     check_output_folder(out_dir, result.study)
     with output.output_folder(out_dir, replace=True, owned=study_files,
                               protect=result.study.input_files()) as tmp:
-        outputs, pictures = _write_candidates(result, tmp, say, rhino, client)
+        outputs, pictures = _write_candidates(result, tmp, say, rhino, client, ifc)
         if any(not c.failed for c in result.candidates):
             pictures["comparison"] = comparison_figure(result)
         if sum(not c.failed for c in result.candidates) >= PARETO_MIN_CANDIDATES:

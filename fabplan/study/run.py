@@ -192,7 +192,7 @@ class StudyResult:
 def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
               max_panels: int | None = None, cache: CandidateCache | None = None,
               resume: bool = False, background: Callable[..., Any] | None = None,
-              files: bool = False, rhino: bool = False) -> StudyResult:
+              files: bool = False, rhino: bool = False, ifc: bool = False) -> StudyResult:
     """Run every candidate of `study` and judge it.
 
     A candidate that fails (a layout or a solve that breaks) is recorded with its reason
@@ -209,7 +209,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     background : `fabplan.study.background.BackgroundCandidates` (or another class like
         it), to measure every solved candidate (molds, strips, measurements) in a forked
         process beside the next candidates' solves, one process per core (on Linux, else
-        here); with `files` (and `rhino` as in `write_study`) its files too, which come
+        here); with `files` (and `rhino`, `ifc` as in `write_study`) its files too, which come
         back in `StudyResult.made_files` for `write_study` to write. The results are those
         of the serial run. None: every candidate is measured here, in turn.
 
@@ -225,7 +225,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     design, baseline = prepare_design(study, say, max_panels)
     helper = None
     if background is not None:
-        helper = background(study, design, say, files=files, rhino=rhino,
+        helper = background(study, design, say, files=files, rhino=rhino, ifc=ifc,
                             done=None if cache is None else cache.store)
         helper = helper if helper.active else None
     layouts: Layouts = {(90.0, study.panel_size): baseline}
