@@ -136,6 +136,30 @@ def test_one_plate_per_panel_with_the_mold_of_panels_csv(wein):
     assert len(groups) == len({r["mold"] for r in rows})
 
 
+def test_a_material_gives_each_plate_its_class_and_the_plates_their_material(tmp_path):
+    """`molds --material ... --ifc`: every plate carries its class as panels.csv has it and
+    whether its mold is made (molds.json), and the plates are of the material."""
+    out = tmp_path / "molds"
+    assert main(["molds", str(WEIN99), "--tolerance-mm", "5", "--material", "aluminium:3mm",
+                 "--ifc", "-q", "-o", str(out)]) == 0
+    model = ifcopenshell.open(str(out / "net.ifc"))
+    record = json.loads((out / "molds.json").read_text())
+    made = {m["id"]: m["made"] for m in record["molds"]}
+    rows = {int(r["face"]): r for r in csv.DictReader((out / "panels.csv").open())}
+    plates = model.by_type("IfcPlate")
+    assert len(plates) == len(rows)
+    classes = set()
+    for plate in plates:
+        props = _props(plate)["fabplan_Panel"]
+        row = rows[props["FaceId"]]
+        assert props["MaterialClass"] == row["class"]
+        assert props["MoldMade"] is made[int(row["mold"])]
+        classes.add(row["class"])
+        material = ifcopenshell.util.element.get_material(plate)
+        assert material is not None and material.Name == record["panel_classes"]["material"]["label"]
+    assert len(classes) >= 2          # aluminium sheet bends most panels cold: a real mix
+
+
 def test_plate_vertices_are_the_obj_vertices_and_the_area_the_mold_reports(wein):
     model = ifcopenshell.open(str(wein / "net.ifc"))
     X, faces = _obj(WEIN99)

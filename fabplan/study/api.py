@@ -405,6 +405,14 @@ def _net_panels(mesh: QuadMesh, molds: MoldPlan | None, mm: float, net_type: str
                   IfcProperty("MoldType", "IfcLabel", [kinds[m] for m in molds.mold]),
                   IfcProperty("DeviationFromMold", "IfcLengthMeasure", (molds.deviation_mm / mm).tolist()),
                   IfcProperty("FitsMold", "IfcBoolean", [p is None for p in molds.problem])]
+        if molds.classes is not None:
+            # with a material, how each panel is made (panels.csv's `class`) and whether
+            # its mold is made at all
+            from ..fabricate.panel_classes import CLASSES
+
+            props += [IfcProperty("MaterialClass", "IfcLabel",
+                                  [CLASSES[c] for c in molds.classes.panel_class]),
+                      IfcProperty("MoldMade", "IfcBoolean", molds.mold_made[molds.mold].tolist())]
     props += [IfcProperty("Area", "IfcAreaMeasure", surface.areas().tolist()),
               IfcProperty("NetType", "IfcLabel", [net_type] * f)]
     panels = _panel_set(surface, [f"panel {i}" for i in range(f)], [str(i) for i in range(f)],
@@ -524,7 +532,9 @@ def ifc_facade(net: NetLike, *, molds: MoldPlan | None = None, boundary: Any = N
         sets += [] if more is None else [more]
         groups.update(own)
     lamellas = None if strips is None or not strips.strips.strips else _lamellas(mesh, strips, net_type)
+    material = None if molds is None or molds.classes is None else molds.classes.material.label
     return FacadeModel(name=name, units=units, panels=sets, molds=groups, strips=lamellas,
+                       panel_material=material,
                        nodes=mesh.vertices if nodes else None, edges=mesh.edges,
                        node_normals=_vertex_normals(mesh),
                        description=f"fabplan facade plan of {name}"
