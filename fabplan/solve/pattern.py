@@ -357,13 +357,14 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     packed = packed.ravel()
     indices: np.ndarray = np.empty(nnz, dtype=dtype)
     step = _CHUNK // 64
+    pair_first = first[pairs % max(nodes, 1)]       # the first column of each pair's node Q
     for t in range(0, len(pairs), step):       # chunks of node pairs: small temporaries
         present = np.flatnonzero(np.unpackbits(row_bytes[t:t + step, :, None], axis=2,
                                                bitorder="little")) + 64 * t
         word = packed[present >> 3]
         b = present & 7
         indices[(word >> 8) + _RANK_BELOW[((word & 0xFF) << 3) | b]] = \
-            first[pairs[present >> 6] % max(nodes, 1)] + b
+            pair_first[present >> 6] + b
 
     # 4. every product's slot: the start of its row in its node pair, plus the bits before it
     slots: np.ndarray = np.empty(sum(layout.within.size for layout in layouts), dtype=dtype)
