@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
@@ -250,3 +253,34 @@ def memory_cap(extra: int):
         yield
     finally:
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--no-first-run", "--disable-sync",
+                 # WebGL on the CPU: chromium no longer falls back to SwiftShader by itself
+                 "--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
+
+
+@contextlib.contextmanager
+def chromium(width: int, height: int):
+    """A headless Debian chromium driven by Playwright, with a fresh profile and a viewport
+    of `width` x `height` CSS pixels; a pytest skip that says what is missing."""
+    import pytest
+
+    playwright_api = pytest.importorskip(
+        "playwright.sync_api", reason="Playwright is missing: pip install -e '.[test]'")
+    if not Path(CHROMIUM).is_file():
+        pytest.skip("chromium is missing: apt-get install -y chromium (.ci/run does)")
+    profile = tempfile.mkdtemp(prefix="fabplan-chromium-")
+    try:
+        with playwright_api.sync_playwright() as p:
+            context = p.chromium.launch_persistent_context(
+                profile, executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True,
+                viewport={"width": width, "height": height})
+            try:
+                yield context
+            finally:
+                context.close()
+    finally:
+        shutil.rmtree(profile, ignore_errors=True)

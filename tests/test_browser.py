@@ -9,22 +9,16 @@ from __future__ import annotations
 
 import io
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import chromium
 
 import fabplan
 from fabplan.cli import main
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARTIFACTS = Path(__file__).parent / "artifacts"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--no-first-run", "--disable-sync",
-        # WebGL on the CPU: chromium no longer falls back to SwiftShader by itself
-        "--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
 
 pytestmark = pytest.mark.slow
 
@@ -32,18 +26,8 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def browser():
     """A chromium with a fresh profile, or a skip that says what is missing."""
-    playwright_api = pytest.importorskip(
-        "playwright.sync_api", reason="Playwright is missing: pip install -e '.[test]'")
-    if not Path(CHROMIUM).is_file():
-        pytest.skip("chromium is missing: apt-get install -y chromium (.ci/run does)")
-    profile = tempfile.mkdtemp(prefix="fabplan-chromium-")
-    with playwright_api.sync_playwright() as p:
-        context = p.chromium.launch_persistent_context(
-            profile, executable_path=CHROMIUM, args=ARGS,
-            headless=True, viewport={"width": 1200, "height": 900})
+    with chromium(1200, 900) as context:
         yield context
-        context.close()
-    shutil.rmtree(profile, ignore_errors=True)
 
 
 class Report:

@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import chromium
 from test_edit_server import check_snet  # the checks of our own
 
 import fabplan
@@ -27,28 +26,15 @@ from fabplan.edit.session import EditOptions, EditSession  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARTIFACTS = Path(__file__).parent / "artifacts"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--no-first-run", "--disable-sync",
-        "--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
 DRAG_PX = 30           # how far the mouse drags the handle, in CSS pixels (upwards)
 
 
 @pytest.fixture(scope="module")
 def browser():
-    playwright_api = pytest.importorskip(
-        "playwright.sync_api", reason="Playwright is missing: pip install -e '.[test]'")
-    if not Path(CHROMIUM).is_file():
-        pytest.skip("chromium is missing: apt-get install -y chromium (.ci/run does)")
-    profile = tempfile.mkdtemp(prefix="fabplan-chromium-")
-    with playwright_api.sync_playwright() as p:
-        context = p.chromium.launch_persistent_context(
-            profile, executable_path=CHROMIUM, args=ARGS, headless=True,
-            viewport={"width": 1100, "height": 820})
+    """A chromium with a fresh profile, or a skip that says what is missing."""
+    with chromium(1100, 820) as context:
         yield context
-        context.close()
-    shutil.rmtree(profile, ignore_errors=True)
 
 
 def test_dragging_a_handle_with_the_mouse_keeps_an_snet_and_saves_it(browser, wein99, tmp_path):
