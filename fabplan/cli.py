@@ -1938,7 +1938,7 @@ def _add_edit(sub: Any) -> None:
     _add_number(p, "--radius", help="Meusnier radius in model units")
     p.add_argument("--reference", help="surface the solves are pulled towards at their start "
                                        "and the deviation is shown from (default: the input)")
-    p.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default: a free one)")
+    _add_number(p, "--port", default=0, metavar="N", help="port on 127.0.0.1 (default: a free one)")
     p.add_argument("--no-open", action="store_true", help="print the page's address, do not "
                                                           "open a browser")
     p.add_argument("-o", "--output", required=True,

@@ -42,6 +42,8 @@ BASE = {
     "mill": ["{net}", "--tool", "face:D=10", "--no-simulation", "-o", "{out}", "-q"],
     "arcs": ["{net}", "-o", "{out}/a.3dm", "-q"],
     "study": ["canopy", "-o", "{out}", "-q"],
+    # every hostile value is out of the port's range: the server never starts
+    "edit": ["{net}", "--net", "snet", "--no-open", "-o", "{out}/e.obj", "-q"],
 }
 
 

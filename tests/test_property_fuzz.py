@@ -154,6 +154,8 @@ BASE = {
     "mill": ["{net}", "--tool", "face:D=10", "--no-simulation", "-o", "{out}", "-q"],
     "study": ["{study}", "-o", "{out}", "-q"],
     "templates": ["canopy", "-o", "{out}/t.toml"],
+    # stopped where it would serve the page (`sandbox`): its checks and its first solve run
+    "edit": ["{net}", "--net", "snet", "--no-open", "-o", "{out}/e.obj", "-q"],
 }
 
 
@@ -467,6 +469,7 @@ def sandbox(tmp_path_factory, monkeypatch):
     import shutil
 
     from fabplan import cli
+    from fabplan.edit import server
     from fabplan.fabricate import mill_report, mold_report, strip_plan
     from fabplan.io import resources
     from fabplan.layout import starts
@@ -476,11 +479,11 @@ def sandbox(tmp_path_factory, monkeypatch):
         raise _Accepted
 
     # the solves and the study's candidates; the reports of molds, strips and mill (their
-    # figures take seconds: the plans before them run)
+    # figures take seconds: the plans before them run); the editor's server
     for module, name in [(cli, "optimize"), (starts, "glide_fairest"), (run, "run_study"),
                          (parallel, "run_study_parallel"), (parallel, "dask_client"),
                          (mold_report, "write_mold_report"), (mill_report, "write_mill_report"),
-                         (strip_plan.StripPlan, "write")]:
+                         (strip_plan.StripPlan, "write"), (server, "run_editor")]:
         monkeypatch.setattr(module, name, stop)
     monkeypatch.setattr(resources, "available_memory", lambda: 800 * 10**6)
     made: list[Path] = []

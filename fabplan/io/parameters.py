@@ -244,6 +244,8 @@ _OPTIONS = [
     _mm("mill --margin", 0.0, 1000.0),
     _mm("--scallop", 1e-5, 10.0),
     _mm("--sim-step", 0.01, 10.0),
+    # edit: a TCP port (0, the default, is a free one: given by leaving the option out)
+    _count("--port", 1, 65535),
 ]
 
 
