@@ -99,3 +99,29 @@ def test_handle_file_and_bad_handles(tmp_path, wein99):
         read_handles(["12:1,2"])
     with pytest.raises(fabplan.InputError, match="vertex 99999 does not exist"):
         fabplan.optimize(wein99, "snet", handles={99999: [0, 0, 0]})
+
+
+@pytest.mark.parametrize("edges, budget", [(8.0, 40), (8.0, 3)])
+def test_a_refused_drag_leaves_no_trace_on_the_next(wein99, edges, budget):
+    """A drag refused (folded, or out of iterations) and then one the net can follow end
+    where the second drag alone ends on a fresh editor: nothing of the refused solve (the
+    families' first-run data, soft weights, variables) steers the next one."""
+    vid = int(np.flatnonzero(wein99.star_of_vertex >= 0)[len(wein99.stars) // 2])
+    stars = canonical_stars(wein99.vertices, wein99.stars)
+    normal = star_normals(wein99.vertices, stars)[wein99.star_of_vertex[vid]]
+    edge = wein99.mean_edge_length
+    settings = fabplan.SolverSettings(tolerance=1e-6, multilevel=False)
+    good = {vid: wein99.vertices[vid] + 0.5 * edge * normal}
+
+    refused = fabplan.NetEditor(wein99, "snet", handles=[vid], settings=settings)
+    first = refused.solve_drag({vid: wein99.vertices[vid] + edges * edge * normal},
+                               max_iterations=budget)
+    assert not first.accepted
+    assert np.abs(refused.vertices - wein99.vertices).max() <= 1e-12 * edge
+    after = refused.solve_drag(good)
+    fresh = fabplan.NetEditor(wein99, "snet", handles=[vid], settings=settings)
+    alone = fresh.solve_drag(good)
+    assert after.accepted and alone.accepted
+    assert after.iterations == alone.iterations
+    assert np.abs(refused.vertices - fresh.vertices).max() <= 1e-12 * edge
+    assert np.array_equal(refused.vertices[vid], good[vid])

@@ -281,11 +281,6 @@ class EditSession:
             for k, v in targets.items():
                 self.handles[k] = v.copy()
             self.changes += 1
-        else:
-            # the next drag starts from a fresh solver on the last good net: one that
-            # failed may have left more than its variables behind (faded terms, the
-            # families' data of the failed iterates)
-            self._editor = None
         self.seq += 1
         g = self._gesture
         g.targets.update(targets)

@@ -148,6 +148,11 @@ class NetEditor:
         self.solver = build_solver(mesh, net, angle=angle, radius=radius, fixed=held,
                                    settings=settings, coherent=coherent, reference=reference)
         self._free = np.setdiff1d(np.arange(mesh.vertex_count), held)
+        # The solver's first run fixes what its families take from the net they first see
+        # (the edge-collapse bounds, the admissible test's distance from the reference):
+        # on the net as given, not on the start of the first drag, which a refused drag
+        # would leave behind.
+        self.solver.run(0)
         # the last accepted drag: the handles' move (h, 3) and the free vertices' (f, 3)
         self._last_move: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
@@ -199,10 +204,9 @@ class NetEditor:
 
         A solve that does not converge within `max_iterations` or `max_seconds`, ends
         folded or crumpled, or breaks down leaves the editor at the net it had before
-        (the last good net, handles included), and the result says why and where. The
-        solver's variables and soft weights are restored, but not every family's data
-        of the failed iterates: a caller that wants the next drag solved as from a fresh
-        start builds a new editor on the last good net (`fabplan edit` does).
+        (the last good net, handles included), and the result says why and where: its
+        variables, the families' data and the soft terms' weights are as before the
+        drag, so the next drag solves as it would have without the refused one.
 
         Parameters
         ----------
@@ -267,7 +271,7 @@ class NetEditor:
         if status != "failed" and solved != "converged":
             status = "not converged"
             unmet = unmet_constraints(solver)
-            why = {"time budget": f"the time budget of {max_seconds:g} s ran out",
+            why = {"time budget": f"the time budget of {max_seconds or 0:g} s ran out",
                    "iteration cap": f"{max_iterations} iterations did not reach the tolerance",
                    }.get(solved, "the solve stagnated")
             message = (f"{why}: {describe_unmet(unmet) or f'residual {residual:.2e}'}; "
