@@ -125,3 +125,27 @@ def test_a_refused_drag_leaves_no_trace_on_the_next(wein99, edges, budget):
     assert after.iterations == alone.iterations
     assert np.abs(refused.vertices - fresh.vertices).max() <= 1e-12 * edge
     assert np.array_equal(refused.vertices[vid], good[vid])
+
+
+def test_the_region_a_drag_moves_holds_every_star_and_face_around_its_moving_vertices(wein99):
+    """The part a session solves holds every star (as a vertex set) and face that has a
+    moving vertex, with the same positions, and holds exactly the vertices that do not
+    move."""
+    from fabplan.solve.region import region_net
+
+    X = wein99.vertices
+    moving = np.linalg.norm(X - X[900], axis=1) <= 6 * wein99.mean_edge_length
+    part = region_net(wein99, X, moving)
+    assert np.array_equal(part.mesh.vertices, X[part.vertices])
+    held = np.zeros(part.mesh.vertex_count, bool)
+    held[part.held] = True
+    assert np.array_equal(held, ~moving[part.vertices])
+    assert moving[part.vertices].sum() == moving.sum()
+    sub_stars = {frozenset(part.vertices[s].tolist()) for s in part.mesh.stars}
+    for star in wein99.stars[moving[wein99.stars].any(axis=1)]:
+        assert frozenset(star.tolist()) in sub_stars
+    sub_faces = {frozenset(part.vertices[f].tolist()) for f in part.mesh.faces}
+    for face in wein99.faces:
+        if moving[face].any():
+            assert frozenset(np.asarray(face).tolist()) in sub_faces
+    assert part.mesh.vertex_count < wein99.vertex_count

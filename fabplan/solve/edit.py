@@ -23,6 +23,7 @@ from ..net.buildable import crumpled, measure_buildable
 from ..net.folds import measure_folds
 from ..net.geometry import canonical_stars, fit_star_spheres
 from ..net.mesh import QuadMesh
+from .constraints import DisplacementFairness
 from .net_types import get_net
 from .optimize import (
     build_solver,
@@ -140,13 +141,17 @@ class NetEditor:
     def __init__(self, mesh: QuadMesh, net: str, handles: npt.ArrayLike, *,
                  angle: float | None = None, radius: float | None = None,
                  fixed: npt.ArrayLike | None = None, settings: SolverSettings | None = None,
-                 coherent: bool = False, reference: ReferenceSurface | None = None) -> None:
+                 coherent: bool = False, reference: ReferenceSurface | None = None,
+                 smooth: bool = False) -> None:
         self.handles = np.unique(np.asarray(handles, dtype=np.int64))
+        # the fairness of each drag's move (see `solve_drag`), when asked for
+        self._smooth = DisplacementFairness() if smooth else None
         held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), self.handles)
         self._mesh = mesh
         self._dual = get_net(net).dual
         self.solver = build_solver(mesh, net, angle=angle, radius=radius, fixed=held,
-                                   settings=settings, coherent=coherent, reference=reference)
+                                   settings=settings, coherent=coherent, reference=reference,
+                                   extra=() if self._smooth is None else (self._smooth,))
         self._free = np.setdiff1d(np.arange(mesh.vertex_count), held)
         # The solver's first run fixes what its families take from the net they first see
         # (the edge-collapse bounds, the admissible test's distance from the reference):
@@ -198,7 +203,8 @@ class NetEditor:
 
     def solve_drag(self, targets: dict, *, max_iterations: int = 40,
                    max_seconds: float | None = None, influence: float = 0.0,
-                   predict: bool = False) -> DragResult:
+                   predict: bool = False, smooth: float = 0.0,
+                   smooth_fade: float = 0.25) -> DragResult:
         """Put handles at new positions and iterate until the net is converged (the
         solver's tolerance, `SolverSettings.tolerance`, in mean edges) and buildable.
 
@@ -236,6 +242,9 @@ class NetEditor:
         before_x = state.x.copy()
         before_data = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in state.data.items()}
         before = solver.vertices
+        fair = self._smooth
+        if fair is not None:    # the move's fairness, measured from the last good net
+            fair.anchor, fair.weight = state.X.copy(), smooth
         soft_steps = solver.soft_steps       # a failed solve must not fade the soft terms
         predicted = False
         if predict and self._last_move is not None and self._free.size:
@@ -255,6 +264,11 @@ class NetEditor:
         start = len(solver.history)
 
         def budget(record: IterationRecord) -> None:
+            if fair is not None and fair.weight:
+                # faded, then gone: a soft term holds the solve off the tolerance
+                fair.weight *= smooth_fade
+                if fair.weight < 1e-3 * smooth:
+                    fair.weight = 0.0
             if max_seconds is not None and time.perf_counter() - t0 > max_seconds:
                 raise _OutOfTime
 
@@ -265,6 +279,8 @@ class NetEditor:
             solved = "time budget"
         except SolverError as exc:
             solved, status, message = "failed", "failed", str(exc)
+        if fair is not None:
+            fair.weight = 0.0
         iterations = len(solver.history) - start
         residual = solver.history[-1].hard_residual if len(solver.history) > start else np.inf
         X = solver.vertices
