@@ -236,7 +236,7 @@ class EditSession:
                 angle=o.angle, radius=o.radius, reference=self.reference,
                 settings=SolverSettings(tolerance=o.tolerance * scale,
                                         max_iterations=o.max_iterations, multilevel=False),
-                smooth=o.smooth > 0)
+                smooth=o.smooth > 0, closeness=False)
         return self._editor
 
     def _solve(self, targets: dict) -> DragResult:

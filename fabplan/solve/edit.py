@@ -39,6 +39,8 @@ __all__ = ["NetEditor", "DragResult", "DRAG_STATUSES", "falloff_move"]
 
 #: what `NetEditor.solve_drag` says of a solve: only "converged" is taken
 DRAG_STATUSES = ("converged", "folded", "crumpled", "not converged", "failed")
+#: iteration records a long session's solver keeps (see `NetEditor.solve_drag`)
+_HISTORY_KEPT = 200
 #: failure places listed at most (vertex ids, worst first)
 _WHERE_LISTED = 50
 
@@ -123,7 +125,12 @@ class NetEditor:
     mesh : the net to edit (normally already optimized).
     net : net type name (see `fabplan.nets.NETS`).
     handles : (h,) int, the vertices the user drags; they are held where they are put.
-    angle, radius, fixed, settings, coherent : as in `fabplan.optimize`.
+    angle, radius, fixed, settings, coherent, reference : as in `fabplan.optimize`.
+    smooth : whether drags may ask for the fairness of their move (`solve_drag`'s
+        `smooth`; it adds a family to the solver).
+    closeness : whether the solver's soft terms include closeness to the reference (a
+        live editor leaves it out: it fades within the first drag anyway, and the net is
+        meant to leave the reference).
 
     Examples
     --------
@@ -142,7 +149,7 @@ class NetEditor:
                  angle: float | None = None, radius: float | None = None,
                  fixed: npt.ArrayLike | None = None, settings: SolverSettings | None = None,
                  coherent: bool = False, reference: ReferenceSurface | None = None,
-                 smooth: bool = False) -> None:
+                 smooth: bool = False, closeness: bool = True) -> None:
         self.handles = np.unique(np.asarray(handles, dtype=np.int64))
         # the fairness of each drag's move (see `solve_drag`), when asked for
         self._smooth = DisplacementFairness() if smooth else None
@@ -151,6 +158,7 @@ class NetEditor:
         self._dual = get_net(net).dual
         self.solver = build_solver(mesh, net, angle=angle, radius=radius, fixed=held,
                                    settings=settings, coherent=coherent, reference=reference,
+                                   closeness=closeness,
                                    extra=() if self._smooth is None else (self._smooth,))
         self._free = np.setdiff1d(np.arange(mesh.vertex_count), held)
         # The solver's first run fixes what its families take from the net they first see
@@ -227,6 +235,13 @@ class NetEditor:
         predict : start from the net extrapolated along the last accepted drag when the
             handles move on the same way (a steady drag): the free vertices move by the
             part of their last move that the handles repeat (instead of `influence`).
+        smooth : the weight at the start of the solve of the fairness of the move from
+            the net before the drag (`fabplan.solve.constraints.DisplacementFairness`; an
+            editor built with ``smooth=True``): the net follows the handles as a thin plate,
+            instead of by the smallest move, which bends the faces around a handle pulled
+            off the surface into a spike. It fades by `smooth_fade` with every step and is
+            gone below a thousandth of its start, so that the solve converges to the
+            tolerance. 0: none.
 
         Returns
         -------
@@ -239,6 +254,12 @@ class NetEditor:
             raise ValueError(f"vertex {unknown[0]} is not a handle of this editor")
         goal = np.array([targets[int(i)] for i in ids], dtype=np.float64).reshape(len(ids), 3)
         solver, state = self.solver, self.solver.state
+        if len(solver.history) > _HISTORY_KEPT:
+            # the solver counts its accepted steps over its history: keep it short in a long
+            # session, the soft terms as faded as they were
+            faded = solver.soft_steps
+            del solver.history[:]
+            solver.restart_soft_terms(faded=faded)
         before_x = state.x.copy()
         before_data = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in state.data.items()}
         before = solver.vertices
