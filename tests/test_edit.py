@@ -149,3 +149,35 @@ def test_the_region_a_drag_moves_holds_every_star_and_face_around_its_moving_ver
         if moving[face].any():
             assert frozenset(np.asarray(face).tolist()) in sub_faces
     assert part.mesh.vertex_count < wein99.vertex_count
+
+
+def test_a_handle_pulled_along_the_normal_keeps_the_faces_around_it_convex():
+    """On a rotational linear Weingarten net (900 vertices), a handle dragged along the
+    surface normal half an edge per drag, out to two edges and back both ways, gives an
+    accepted S-net at every drag: the move spreads over the net instead of bending the
+    faces around the handle (which the plain solve does from one edge on)."""
+    from fabplan.edit.session import EditOptions, EditSession
+    from fabplan.net.generate import rotational_weingarten_snet
+
+    net = rotational_weingarten_snet(30, 30, radius=3.0, angle_deg=80.0)
+    vid = 15 * 30 + 15
+    stars = canonical_stars(net.vertices, net.stars)
+    normal = star_normals(net.vertices, stars)[net.star_of_vertex[vid]]
+    half = 0.5 * net.mean_edge_length
+    session = EditSession(net, EditOptions("snet"))
+    start = net.vertices[vid].copy()
+    for k in [1, 2, 3, 4, 3, 2, 1, 0, -1, -2, -3, -4, -3, -2, -1, 0]:
+        target = start + k * half * normal
+        update = session.drag({vid: target})
+        assert update.result.accepted, (k, update.result.message)
+        X = session.vertices
+        assert np.array_equal(X[vid], target)
+        # every star on its sphere within 1e-6 of a mean edge (a fit of our own)
+        spheres = fit_star_spheres(X, canonical_stars(X, net.stars))
+        assert spheres.residual.max() <= 1e-6 * net.mean_edge_length
+        # every quad convex: its corners turn the same way about its Newell normal
+        quads = X[net.quads]                                          # (f, 4, 3)
+        newell = np.cross(quads, np.roll(quads, -1, axis=1)).sum(axis=1)
+        turns = np.einsum("fcj,fj->fc", np.cross(quads - np.roll(quads, 1, axis=1),
+                                                 np.roll(quads, -1, axis=1) - quads), newell)
+        assert (turns > 0).all()
