@@ -101,8 +101,8 @@ def test_handle_file_and_bad_handles(tmp_path, wein99):
         fabplan.optimize(wein99, "snet", handles={99999: [0, 0, 0]})
 
 
-@pytest.mark.parametrize("edges, budget", [(8.0, 40), (8.0, 3)])
-def test_a_refused_drag_leaves_no_trace_on_the_next(wein99, edges, budget):
+@pytest.mark.parametrize("edges, budget, smooth", [(8.0, 40, 0.0), (8.0, 3, 0.0), (8.0, 3, 3.0)])
+def test_a_refused_drag_leaves_no_trace_on_the_next(wein99, edges, budget, smooth):
     """A drag refused (folded, or out of iterations) and then one the net can follow end
     where the second drag alone ends on a fresh editor: nothing of the refused solve (the
     families' first-run data, soft weights, variables) steers the next one."""
@@ -113,14 +113,16 @@ def test_a_refused_drag_leaves_no_trace_on_the_next(wein99, edges, budget):
     settings = fabplan.SolverSettings(tolerance=1e-6, multilevel=False)
     good = {vid: wein99.vertices[vid] + 0.5 * edge * normal}
 
-    refused = fabplan.NetEditor(wein99, "snet", handles=[vid], settings=settings)
+    refused = fabplan.NetEditor(wein99, "snet", handles=[vid], settings=settings,
+                                smooth=smooth > 0)
     first = refused.solve_drag({vid: wein99.vertices[vid] + edges * edge * normal},
-                               max_iterations=budget)
+                               max_iterations=budget, smooth=smooth)
     assert not first.accepted
     assert np.abs(refused.vertices - wein99.vertices).max() <= 1e-12 * edge
-    after = refused.solve_drag(good)
-    fresh = fabplan.NetEditor(wein99, "snet", handles=[vid], settings=settings)
-    alone = fresh.solve_drag(good)
+    after = refused.solve_drag(good, smooth=smooth)
+    fresh = fabplan.NetEditor(wein99, "snet", handles=[vid], settings=settings,
+                              smooth=smooth > 0)
+    alone = fresh.solve_drag(good, smooth=smooth)
     assert after.accepted and alone.accepted
     assert after.iterations == alone.iterations
     assert np.abs(refused.vertices - fresh.vertices).max() <= 1e-12 * edge
@@ -181,3 +183,24 @@ def test_a_handle_pulled_along_the_normal_keeps_the_faces_around_it_convex():
         turns = np.einsum("fcj,fj->fc", np.cross(quads - np.roll(quads, 1, axis=1),
                                                  np.roll(quads, -1, axis=1) - quads), newell)
         assert (turns > 0).all()
+
+
+def test_a_session_goes_on_after_a_refused_drag_as_if_it_had_not_been_tried(wein99):
+    """The session keeps its solver after a refused drag: the next drag ends where it ends
+    in a session that never tried the refused one."""
+    from fabplan.edit.session import EditOptions, EditSession
+
+    vid = int(np.flatnonzero(wein99.star_of_vertex >= 0)[len(wein99.stars) // 2])
+    stars = canonical_stars(wein99.vertices, wein99.stars)
+    normal = star_normals(wein99.vertices, stars)[wein99.star_of_vertex[vid]]
+    edge = wein99.mean_edge_length
+    good = {vid: wein99.vertices[vid] + 0.5 * edge * normal}
+    tried = EditSession(wein99, EditOptions("snet", max_iterations=3))
+    settled = tried.vertices.copy()         # the net as opened, solved to the tolerance
+    assert not tried.drag({vid: wein99.vertices[vid] + 8 * edge * normal}).result.accepted
+    assert np.array_equal(tried.vertices, settled)
+    tried.options.max_iterations = 40
+    assert tried.drag(good).result.accepted
+    plain = EditSession(wein99, EditOptions("snet"))
+    assert plain.drag(good).result.accepted
+    assert np.abs(tried.vertices - plain.vertices).max() <= 1e-12 * edge
