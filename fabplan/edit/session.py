@@ -31,6 +31,7 @@ from ..solve.edit import DragResult, NetEditor
 from ..solve.net_types import get_net
 from ..solve.optimize import check_net_input, solved_parameters
 from ..solve.reference import ReferenceSurface
+from ..solve.region import RegionNet, region_net
 from ..solve.solver import SolverSettings
 from .record import EDIT_KEY, edit_section
 
@@ -56,6 +57,10 @@ class EditOptions:
         they are while the handles are dragged: the solve works on the region around
         them (on a large net several times faster), the rest of the net stays as it is
         (and stays solved). The region moves with the handles. 0: the whole net.
+    smooth, smooth_fade : the weight of the fairness of each drag's move at its start
+        (`fabplan.solve.constraints.DisplacementFairness`), and the factor it fades by
+        with every step (gone below a thousandth): the net follows a handle as a smooth
+        membrane instead of bending the faces around it. 0: none.
     """
 
     net: str = "snet"
@@ -67,6 +72,8 @@ class EditOptions:
     max_seconds: float | None = 5.0
     influence: float = 12.0
     region: float = 24.0
+    smooth: float = 3.0
+    smooth_fade: float = 0.1
 
     def to_json(self) -> dict:
         return dict(self.__dict__)
@@ -152,6 +159,8 @@ class EditSession:
         self._redo: list[_Snapshot] = []
         self._editor: NetEditor | None = None
         self._region: tuple[list[int], np.ndarray, float] | None = None
+        self._part: RegionNet | None = None          # what the editor solves
+        self._solved = self.vertices                 # the net of the last accepted solve
         self._gesture: _Gesture | None = None
         self.seq = 0                   # drags solved
         self.changes = 0               # changes of the net, handles or pins
@@ -202,24 +211,50 @@ class EditSession:
 
     def _editor_now(self) -> NetEditor:
         """The solver for the current held set, built on the current net when the held set
-        changed (its pattern comes from the cache when this set was held before)."""
+        changed (its pattern comes from the cache when this set was held before). It
+        solves the part of the net that can move (`fabplan.solve.region.region_net`):
+        with a region, the faces near the handles, not the whole net with the rest held."""
         if self._editor is None:
             o = self.options
-            held = sorted(self.pins)
+            n = self.mesh.vertex_count
+            moving = np.ones(n, bool)
+            moving[sorted(self.pins)] = False
             self._region = None
             if self.handles and o.region > 0:
                 centres = np.array([self.vertices[k] for k in sorted(self.handles)])
                 radius = o.region * self.mesh.mean_edge_length
-                outside = np.min(np.linalg.norm(self.vertices[:, None, :] - centres[None], axis=2),
-                                 axis=1) > radius
-                held = sorted(set(held) | set(np.flatnonzero(outside).tolist()) - set(self.handles))
+                moving &= np.min(np.linalg.norm(self.vertices[:, None, :] - centres[None], axis=2),
+                                 axis=1) <= radius
                 self._region = (sorted(self.handles), centres, radius)
+            moving[sorted(self.handles)] = True
+            part = self._part = region_net(self.mesh, self.vertices, moving)
+            # the tolerance is in mean edges of the whole net, the part's solver measures
+            # in its own
+            scale = self.mesh.mean_edge_length / part.mesh.mean_edge_length
             self._editor = NetEditor(
-                self.net, o.net, handles=sorted(self.handles), fixed=held,
+                part.mesh, o.net, handles=part.local(sorted(self.handles)), fixed=part.held,
                 angle=o.angle, radius=o.radius, reference=self.reference,
-                settings=SolverSettings(tolerance=o.tolerance, max_iterations=o.max_iterations,
-                                        multilevel=False))
+                settings=SolverSettings(tolerance=o.tolerance * scale,
+                                        max_iterations=o.max_iterations, multilevel=False),
+                smooth=o.smooth > 0, closeness=False)
         return self._editor
+
+    def _solve(self, targets: dict) -> DragResult:
+        """Solve a drag ({net vertex id: (3,) float}) on the part, in the net's terms."""
+        editor, part, o = self._editor_now(), self._part, self.options
+        assert part is not None
+        local = dict(zip(part.local(list(targets)).tolist(), targets.values(), strict=True))
+        edge = self.mesh.mean_edge_length
+        result = editor.solve_drag(local, max_iterations=o.max_iterations,
+                                   max_seconds=o.max_seconds, influence=o.influence * edge,
+                                   smooth=o.smooth, smooth_fade=o.smooth_fade)
+        result.residual *= editor.solver.length_scale / edge
+        result.where = part.vertices[result.where]
+        if result.accepted:
+            X = self.vertices.copy()
+            X[part.vertices] = editor.vertices
+            self._solved = X
+        return result
 
     def _region_holds(self, targets: dict) -> bool:
         """Whether the solve region still suits the handles going to `targets`: they stay
@@ -235,13 +270,12 @@ class EditSession:
     def _settle(self) -> None:
         """Solve the net as it stands (the net opened, or after undo): the page starts
         from a solved net, or says why the net is not one."""
-        result = self._editor_now().solve_drag({}, max_iterations=self.options.max_iterations)
-        self._take(result)
+        self._take(self._solve({}))
 
     def _take(self, result: DragResult) -> None:
         self.last = result
         if result.accepted:
-            self.vertices = self._editor_now().vertices
+            self.vertices = self._solved
             self.status, self.residual, self.message = "converged", result.residual, ""
             self.where = np.zeros(0, np.int64)
         else:
@@ -271,21 +305,12 @@ class EditSession:
             self._editor = None
         if self._editor is not None and not self._region_holds(targets):
             self._editor = None
-        editor = self._editor_now()
-        o = self.options
-        result = editor.solve_drag(targets, max_iterations=o.max_iterations,
-                                   max_seconds=o.max_seconds,
-                                   influence=o.influence * editor.solver.length_scale)
+        result = self._solve(targets)
         self._take(result)
         if result.accepted:
             for k, v in targets.items():
                 self.handles[k] = v.copy()
             self.changes += 1
-        else:
-            # the next drag starts from a fresh solver on the last good net: one that
-            # failed may have left more than its variables behind (faded terms, the
-            # families' data of the failed iterates)
-            self._editor = None
         self.seq += 1
         g = self._gesture
         g.targets.update(targets)

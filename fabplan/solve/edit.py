@@ -23,6 +23,7 @@ from ..net.buildable import crumpled, measure_buildable
 from ..net.folds import measure_folds
 from ..net.geometry import canonical_stars, fit_star_spheres
 from ..net.mesh import QuadMesh
+from .constraints import DisplacementFairness
 from .net_types import get_net
 from .optimize import (
     build_solver,
@@ -38,6 +39,8 @@ __all__ = ["NetEditor", "DragResult", "DRAG_STATUSES", "falloff_move"]
 
 #: what `NetEditor.solve_drag` says of a solve: only "converged" is taken
 DRAG_STATUSES = ("converged", "folded", "crumpled", "not converged", "failed")
+#: iteration records a long session's solver keeps (see `NetEditor.solve_drag`)
+_HISTORY_KEPT = 200
 #: failure places listed at most (vertex ids, worst first)
 _WHERE_LISTED = 50
 
@@ -122,7 +125,12 @@ class NetEditor:
     mesh : the net to edit (normally already optimized).
     net : net type name (see `fabplan.nets.NETS`).
     handles : (h,) int, the vertices the user drags; they are held where they are put.
-    angle, radius, fixed, settings, coherent : as in `fabplan.optimize`.
+    angle, radius, fixed, settings, coherent, reference : as in `fabplan.optimize`.
+    smooth : whether drags may ask for the fairness of their move (`solve_drag`'s
+        `smooth`; it adds a family to the solver).
+    closeness : whether the solver's soft terms include closeness to the reference (a
+        live editor leaves it out: it fades within the first drag anyway, and the net is
+        meant to leave the reference).
 
     Examples
     --------
@@ -140,14 +148,24 @@ class NetEditor:
     def __init__(self, mesh: QuadMesh, net: str, handles: npt.ArrayLike, *,
                  angle: float | None = None, radius: float | None = None,
                  fixed: npt.ArrayLike | None = None, settings: SolverSettings | None = None,
-                 coherent: bool = False, reference: ReferenceSurface | None = None) -> None:
+                 coherent: bool = False, reference: ReferenceSurface | None = None,
+                 smooth: bool = False, closeness: bool = True) -> None:
         self.handles = np.unique(np.asarray(handles, dtype=np.int64))
+        # the fairness of each drag's move (see `solve_drag`), when asked for
+        self._smooth = DisplacementFairness() if smooth else None
         held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), self.handles)
         self._mesh = mesh
         self._dual = get_net(net).dual
         self.solver = build_solver(mesh, net, angle=angle, radius=radius, fixed=held,
-                                   settings=settings, coherent=coherent, reference=reference)
+                                   settings=settings, coherent=coherent, reference=reference,
+                                   closeness=closeness,
+                                   extra=() if self._smooth is None else (self._smooth,))
         self._free = np.setdiff1d(np.arange(mesh.vertex_count), held)
+        # The solver's first run fixes what its families take from the net they first see
+        # (the edge-collapse bounds, the admissible test's distance from the reference):
+        # on the net as given, not on the start of the first drag, which a refused drag
+        # would leave behind.
+        self.solver.run(0)
         # the last accepted drag: the handles' move (h, 3) and the free vertices' (f, 3)
         self._last_move: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
@@ -193,16 +211,16 @@ class NetEditor:
 
     def solve_drag(self, targets: dict, *, max_iterations: int = 40,
                    max_seconds: float | None = None, influence: float = 0.0,
-                   predict: bool = False) -> DragResult:
+                   predict: bool = False, smooth: float = 0.0,
+                   smooth_fade: float = 0.25) -> DragResult:
         """Put handles at new positions and iterate until the net is converged (the
         solver's tolerance, `SolverSettings.tolerance`, in mean edges) and buildable.
 
         A solve that does not converge within `max_iterations` or `max_seconds`, ends
         folded or crumpled, or breaks down leaves the editor at the net it had before
-        (the last good net, handles included), and the result says why and where. The
-        solver's variables and soft weights are restored, but not every family's data
-        of the failed iterates: a caller that wants the next drag solved as from a fresh
-        start builds a new editor on the last good net (`fabplan edit` does).
+        (the last good net, handles included), and the result says why and where: its
+        variables, the families' data and the soft terms' weights are as before the
+        drag, so the next drag solves as it would have without the refused one.
 
         Parameters
         ----------
@@ -217,6 +235,13 @@ class NetEditor:
         predict : start from the net extrapolated along the last accepted drag when the
             handles move on the same way (a steady drag): the free vertices move by the
             part of their last move that the handles repeat (instead of `influence`).
+        smooth : the weight at the start of the solve of the fairness of the move from
+            the net before the drag (`fabplan.solve.constraints.DisplacementFairness`; an
+            editor built with ``smooth=True``): the net follows the handles as a thin plate,
+            instead of by the smallest move, which bends the faces around a handle pulled
+            off the surface into a spike. It fades by `smooth_fade` with every step and is
+            gone below a thousandth of its start, so that the solve converges to the
+            tolerance. 0: none.
 
         Returns
         -------
@@ -229,9 +254,18 @@ class NetEditor:
             raise ValueError(f"vertex {unknown[0]} is not a handle of this editor")
         goal = np.array([targets[int(i)] for i in ids], dtype=np.float64).reshape(len(ids), 3)
         solver, state = self.solver, self.solver.state
+        if len(solver.history) > _HISTORY_KEPT:
+            # the solver counts its accepted steps over its history: keep it short in a long
+            # session, the soft terms as faded as they were
+            faded = solver.soft_steps
+            del solver.history[:]
+            solver.restart_soft_terms(faded=faded)
         before_x = state.x.copy()
         before_data = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in state.data.items()}
         before = solver.vertices
+        fair = self._smooth
+        if fair is not None:    # the move's fairness, measured from the last good net
+            fair.anchor, fair.weight = state.X.copy(), smooth
         soft_steps = solver.soft_steps       # a failed solve must not fade the soft terms
         predicted = False
         if predict and self._last_move is not None and self._free.size:
@@ -251,6 +285,11 @@ class NetEditor:
         start = len(solver.history)
 
         def budget(record: IterationRecord) -> None:
+            if fair is not None and fair.weight:
+                # faded, then gone: a soft term holds the solve off the tolerance
+                fair.weight *= smooth_fade
+                if fair.weight < 1e-3 * smooth:
+                    fair.weight = 0.0
             if max_seconds is not None and time.perf_counter() - t0 > max_seconds:
                 raise _OutOfTime
 
@@ -261,13 +300,15 @@ class NetEditor:
             solved = "time budget"
         except SolverError as exc:
             solved, status, message = "failed", "failed", str(exc)
+        if fair is not None:
+            fair.weight = 0.0
         iterations = len(solver.history) - start
         residual = solver.history[-1].hard_residual if len(solver.history) > start else np.inf
         X = solver.vertices
         if status != "failed" and solved != "converged":
             status = "not converged"
             unmet = unmet_constraints(solver)
-            why = {"time budget": f"the time budget of {max_seconds:g} s ran out",
+            why = {"time budget": f"the time budget of {max_seconds or 0:g} s ran out",
                    "iteration cap": f"{max_iterations} iterations did not reach the tolerance",
                    }.get(solved, "the solve stagnated")
             message = (f"{why}: {describe_unmet(unmet) or f'residual {residual:.2e}'}; "

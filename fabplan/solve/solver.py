@@ -352,14 +352,15 @@ class GuidedProjection:
     def _weights(self, steps: int) -> list:
         """Row weight of every family, in the order of `constraints`: a number, or (rows,)
         for a soft family that holds some of its rows (``held``, e.g. `Fairness` where
-        lines turn), those rows' weight fading by `SolverSettings.turning_fairness_fade`."""
+        lines turn), those rows' weight fading by `SolverSettings.turning_fairness_fade`;
+        a soft family's own ``weight`` when it has one."""
         s = self.settings
         soft = self.soft_weights(steps)
         slow = s.turning_fairness_weight * s.turning_fairness_fade ** max(steps - self._fade_start, 0)
         weights: list = []
         for c in self.constraints:
             held = None if c.hard else c.held
-            w = 1.0 if c.hard else soft.get(c.name, 1.0)
+            w = 1.0 if c.hard else soft.get(c.name, 1.0) if c.weight is None else c.weight
             weights.append(w if held is None or slow == 0 else w + slow * held)
         return weights
 

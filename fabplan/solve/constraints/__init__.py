@@ -5,7 +5,7 @@ from .base import Constraint, NetState, VariableBlocks
 from .closeness import BoundaryGliding, Closeness
 from .collapse import EdgeCollapseBarrier, EdgeLengthRange
 from .deviation import DeviationBound
-from .fairness import Fairness
+from .fairness import DisplacementFairness, Fairness
 from .guards import ConvexQuads, NormalCone, StarAngleRange
 from .levels import FamilyLevels
 from .mannheim import (
@@ -32,6 +32,7 @@ __all__ = [
     "PlanarFaces",
     "PlaneNormalization",
     "Fairness",
+    "DisplacementFairness",
     "NormalCone",
     "StarAngleRange",
     "ConvexQuads",

@@ -77,12 +77,15 @@ class Constraint:
     are not part of the convergence test; their weight fades as the solve goes on. A soft
     family may hold part of its rows longer: an attribute ``held`` (rows,) in [0, 1],
     set by `prepare`, gives those rows a slowly fading weight of their own on top (see
-    `Fairness`).
+    `Fairness`). A soft family whose ``weight`` is not None is weighted by it instead
+    (its owner fades it: `DisplacementFairness`).
     """
 
     name = "constraint"
     hard = True
     held: np.ndarray | None = None    # (rows,) in [0, 1]: rows a soft family holds longer
+    weight: float | None = None       # a soft family's own row weight (it fades itself),
+                                      # instead of the solver's fading one
 
     def declare(self, state: NetState) -> dict:
         """Variable blocks this family needs: name -> shape."""

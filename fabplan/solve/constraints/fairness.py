@@ -8,7 +8,7 @@ import numpy as np
 from ...net.fairness import line_turns
 from .base import Constraint
 
-__all__ = ["Fairness", "fairness_stencils"]
+__all__ = ["Fairness", "DisplacementFairness", "fairness_stencils"]
 
 
 def fairness_stencils(mesh, stars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -90,3 +90,46 @@ class Fairness(Constraint):
         r = np.einsum("mk,mkj->mj", self._jac[::3], state.X[self._verts]).ravel()
         return r, self._jac
 
+
+
+class DisplacementFairness(Constraint):
+    """Soft fairness of the move from an anchor net: the second differences of the
+    displacement (the `Fairness` stencils) and, `membrane` times, its differences along
+    every edge; 3 rows (x, y, z) per stencil and per edge.
+
+    An editor sets `anchor` to the last solved net and `weight` at the start of a drag,
+    and fades `weight` itself (the solver's fade of the soft terms runs over all drags):
+    the first steps of the solve then move the net as a thin plate that follows the
+    handles, instead of the smallest move that meets the constraints, which stays near
+    the handles and bends the faces around them into a spike. The second differences
+    keep the faces around a handle pulled off the surface as they were (a membrane alone
+    would make a cone there); the edge differences keep the move from growing away from
+    the handles, which second differences alone allow (a move linear across the net
+    costs them nothing). Before an anchor is set the rows are 0.
+    """
+
+    name = "displacement-fairness"
+    hard = False
+    weight: float | None = 0.0
+
+    def __init__(self, membrane: float = 0.3) -> None:
+        self.membrane = float(membrane)
+        self.anchor: np.ndarray | None = None     # (n, 3) float, normalized positions
+
+    def columns(self, state):
+        verts, coef = fairness_stencils(state.mesh, state.stars)
+        k = verts.shape[1]
+        edges = state.mesh.edges
+        # edge rows padded to the stencils' width with their first vertex, coefficient 0
+        self._verts = np.concatenate([verts, np.pad(edges, ((0, 0), (0, k - 2)), mode="edge")])
+        edge_coef = np.zeros((len(edges), k))
+        edge_coef[:, :2] = self.membrane * np.array([1.0, -1.0])
+        self._jac = np.repeat(np.concatenate([coef, edge_coef]), 3, axis=0)
+        V = state.blocks.index("vertices")[self._verts]  # (m, k, 3)
+        return V.transpose(0, 2, 1).reshape(-1, k)
+
+    def evaluate(self, state):
+        if self.anchor is None:
+            return np.zeros(len(self._jac)), self._jac
+        move = state.X - self.anchor
+        return np.einsum("mk,mkj->mj", self._jac[::3], move[self._verts]).ravel(), self._jac
