@@ -1064,16 +1064,23 @@ def material_sentence(molds: dict) -> str:
     >>> text = material_sentence({"material": "tempered glass, 8 mm", "saved": 3, "count": 1,
     ...     "all_curved_molded": 4, "panel_classes": {"flat": 2, "cold_bent": 30,
     ...     "roll_bent": 0, "molded": 5}})
-    >>> text[:72]
-    'In tempered glass, 8 mm its panels are 2 flat, 30 cold-bent, 0 roll-bent'
-    >>> text[72:]
+    >>> text[:73]
+    'In tempered glass, 8 mm, its panels are 2 flat, 30 cold-bent, 0 roll-bent'
+    >>> text[73:]
     ' and 5 molded: 1 mold instead of 4 with every curved panel molded, 3 molds saved by the material.'
+    >>> material_sentence({"material": "steel", "saved": 0, "count": 0, "all_curved_molded": 0,
+    ...     "panel_classes": {"flat": 9, "cold_bent": 0, "roll_bent": 0, "molded": 0}})[-42:]
+    'and 0 molded: no panel is curved, no mold.'
     """
     c = molds["panel_classes"]
-    return (f"In {molds['material']} its panels are {c['flat']} flat, {c['cold_bent']} cold-bent, "
-            f"{c['roll_bent']} roll-bent and {c['molded']} molded: "
-            f"{counted(molds['count'], 'mold')} instead of {molds['all_curved_molded']} with "
-            f"every curved panel molded, {counted(molds['saved'], 'mold')} saved by the material.")
+    head = (f"In {molds['material']}, its panels are {c['flat']} flat, {c['cold_bent']} cold-bent, "
+            f"{c['roll_bent']} roll-bent and {c['molded']} molded: ")
+    if molds["all_curved_molded"] == 0:
+        # nothing to save: "0 molds instead of 0" says nothing
+        return head + "no panel is curved, no mold."
+    return (head + f"{counted(molds['count'], 'mold')} instead of {molds['all_curved_molded']} "
+            f"with every curved panel molded, {counted(molds['saved'], 'mold')} saved by the "
+            "material.")
 
 
 def molds_text(molds: dict) -> str:
