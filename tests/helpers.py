@@ -283,10 +283,10 @@ def dense_panel_samples(mesh: QuadMesh, panel_surface: str, design=None) -> np.n
     return panel_samples(mesh, fit_panel_surfaces(mesh, panel_surface), VERIFY_LEVEL)
 
 
-def own_frame(mesh: QuadMesh, face: int, normal: np.ndarray) -> np.ndarray:
-    """x along the face's first edge in the plane normal to `normal`, y = n x x."""
-    a, b = mesh.faces[face][:2]
-    e = mesh.vertices[b] - mesh.vertices[a]
+def own_frame(corners: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """x along a face's first edge (its corners (k, 3) in order) in the plane normal to
+    `normal`, y = n x x."""
+    e = corners[1] - corners[0]
     e = e - (e @ normal) * normal
     x = e / np.linalg.norm(e)
     return np.array([x, np.cross(normal, x), normal])
@@ -325,11 +325,12 @@ def recheck_panel_classes(mesh: QuadMesh, record: dict, dense=None) -> dict:
         dense = dense_panel_samples(mesh, "shared")
     dense = dense * mm
     counts = dict.fromkeys(PANEL_CLASSES, 0)
+    faces = mesh.faces                     # built on every access: once here
     for p in classes["panels"]:
         i, cls, shape = p["face"], p["class"], p["bent_shape"]
         counts[cls] += 1
         normal = np.array(shape["normal"])
-        frame = own_frame(mesh, i, normal)
+        frame = own_frame(mesh.vertices[faces[i]], normal)
         assert np.allclose(frame[0], shape["x_axis"], atol=1e-9)
         k, gap, radius = own_bent_shape(dense[i], frame)
         stress = own_stress(material, *k, radius)
