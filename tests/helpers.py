@@ -284,3 +284,173 @@ def chromium(width: int, height: int):
                 context.close()
     finally:
         shutil.rmtree(profile, ignore_errors=True)
+
+
+# ----------------------------------------------------------------------------- panel classes
+# The class checks of a material (`fabplan.fabricate.panel_classes`) recomputed from the
+# exported data with the tests' own frames, fits and plate formulas (docs/materials.md).
+# Only the panels' dense samples come from fabplan: the panel surfaces the mold plan
+# verifies (`fabplan.fabricate.panels`), never the classifier.
+
+VERIFY_LEVEL = 12          # the mold plan's dense samples (MoldSettings.verify_level)
+COVER_LEVEL = 4            # the samples a design model's quadrics are fitted to (cover_level)
+PANEL_CLASSES = ("flat", "cold_bent", "roll_bent", "molded")
+
+
+def dense_panel_samples(mesh: QuadMesh, panel_surface: str, design=None) -> np.ndarray:
+    """(f, s, 3) model units: the dense samples of the panel surface a mold plan verified
+    (``panel_surface`` of molds.json; ``design`` needs the design the net was held on)."""
+    from fabplan.fabricate.panels import (
+        design_panel_samples,
+        fit_design_panels,
+        fit_panel_surfaces,
+        panel_samples,
+        shared_panel_samples,
+    )
+
+    if panel_surface == "shared":
+        return shared_panel_samples(mesh, fit_panel_surfaces(mesh, "local_fit"), VERIFY_LEVEL)
+    if panel_surface == "design":
+        assert design is not None, "a design-surface plan needs its design"
+        surfaces, _ = fit_design_panels(mesh, design, COVER_LEVEL)
+        return design_panel_samples(mesh, surfaces, design, VERIFY_LEVEL)
+    return panel_samples(mesh, fit_panel_surfaces(mesh, panel_surface), VERIFY_LEVEL)
+
+
+def own_frame(corners: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """x along a face's first edge (its corners (k, 3) in order) in the plane normal to
+    `normal`, y = n x x."""
+    e = corners[1] - corners[0]
+    e = e - (e @ normal) * normal
+    x = e / np.linalg.norm(e)
+    return np.array([x, np.cross(normal, x), normal])
+
+
+def own_bent_shape(points_mm: np.ndarray, frame: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Least-squares z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2)/2: (a, c, b), its gap
+    once shifted, and the radius of the disk around the centre that holds the points."""
+    q = (points_mm - points_mm.mean(axis=0)) @ frame.T
+    x, y, z = q.T
+    A = np.column_stack([np.ones_like(x), x, y, x * x / 2, x * y, y * y / 2])
+    c, *_ = np.linalg.lstsq(A, z, rcond=None)
+    r = z - A @ c
+    return np.array([c[3], c[5], c[4]]), 0.5 * (r.max() - r.min()), float(np.hypot(x, y).max())
+
+
+def own_stress(material: dict, kxx: float, kyy: float, kxy: float, radius: float) -> float:
+    """Kirchhoff bending of the principal curvatures plus E |K| rho^2 / 8 (docs/materials.md)."""
+    E, nu, t = material["youngs_modulus_mpa"], material["poisson"], material["stress_thickness_mm"]
+    k1, k2 = np.linalg.eigvalsh(np.array([[kxx, kxy], [kxy, kyy]]))
+    bending = E * t / (2 * (1 - nu**2)) * max(abs(k1 + nu * k2), abs(k2 + nu * k1))
+    return bending + E * abs(k1 * k2) * radius**2 / 8
+
+
+def recheck_panel_classes(mesh: QuadMesh, record: dict, dense=None) -> dict:
+    """Recompute every panel's class checks from molds.json (`record`) and the net, on the
+    dense samples (model units; default: those of the ``shared`` surface), with the default
+    class order (flat, cold-bent, roll-bent, molded). Returns the counts per class."""
+    import pytest
+
+    mm = record["mm_per_unit"]
+    tol = record["tolerance_mm"]
+    classes = record["panel_classes"]
+    material = classes["material"]
+    if dense is None:
+        dense = dense_panel_samples(mesh, "shared")
+    dense = dense * mm
+    counts = dict.fromkeys(PANEL_CLASSES, 0)
+    faces = mesh.faces                     # built on every access: once here
+    for p in classes["panels"]:
+        i, cls, shape = p["face"], p["class"], p["bent_shape"]
+        counts[cls] += 1
+        normal = np.array(shape["normal"])
+        frame = own_frame(mesh.vertices[faces[i]], normal)
+        assert np.allclose(frame[0], shape["x_axis"], atol=1e-9)
+        k, gap, radius = own_bent_shape(dense[i], frame)
+        stress = own_stress(material, *k, radius)
+        assert np.allclose(k, shape["curvature_per_mm"], rtol=1e-5, atol=1e-12), i
+        assert shape["twist_per_mm"] == pytest.approx(k[2], rel=1e-5, abs=1e-12)
+        assert shape["stress_mpa"] == pytest.approx(stress, rel=1e-5, abs=1e-9), i
+        assert shape["gap_mm"] == pytest.approx(gap, rel=1e-5, abs=1e-6)
+        cold_ok = gap <= tol and stress <= material["max_bend_stress_mpa"]
+        q = dense[i] @ frame.T
+        A = np.column_stack([np.ones(len(q)), q[:, 0], q[:, 1]])
+        r = q[:, 2] - A @ np.linalg.lstsq(A, q[:, 2], rcond=None)[0]
+        plane_gap = 0.5 * (r.max() - r.min())
+        flat_limit = tol if material["flatness_mm_per_m"] is None else \
+            min(tol, material["flatness_mm_per_m"] * 2 * radius / 1000)
+        flat_ok = plane_gap <= flat_limit
+        if cls == "flat":
+            assert flat_ok and p["figure"] == pytest.approx(plane_gap, rel=1e-5, abs=1e-6)
+        elif cls == "cold_bent":
+            assert cold_ok and not flat_ok
+            assert p["figure"] == pytest.approx(stress, rel=1e-5) and p["unit"] == "MPa"
+            assert p["limit"] == material["max_bend_stress_mpa"]
+        elif cls == "roll_bent":
+            roll = p["roll"]
+            C = np.array(roll["axis_point"]) * mm
+            d = np.array(roll["axis_direction"])
+            v = dense[i] - C
+            s = v @ d
+            rho = np.linalg.norm(v - np.outer(s, d), axis=1)
+            t = roll["taper"]
+            dist = (rho - roll["radius_mm"] - t * s) / np.sqrt(1 + t * t)
+            assert np.abs(dist).max() <= tol + 1e-6, (i, np.abs(dist).max())
+            smallest = ((roll["radius_mm"] + t * s) * np.sqrt(1 + t * t)).min()
+            assert smallest == pytest.approx(roll["min_radius_mm"], rel=1e-6)
+            assert smallest >= material["min_roll_radius_mm"]
+            assert not flat_ok and not cold_ok
+        else:
+            assert not flat_ok and not cold_ok, i
+            if "roll" in p and material["min_roll_radius_mm"] is not None:
+                assert (p["roll"]["gap_mm"] > tol
+                        or p["roll"]["min_radius_mm"] < material["min_roll_radius_mm"])
+    assert counts == classes["counts"]
+    return counts
+
+
+def recheck_made_molds(record: dict) -> None:
+    """Molds are made for molded panels only; the saving is the curved molds left unmade."""
+    classes = {p["face"]: p["class"] for p in record["panel_classes"]["panels"]}
+    molded_on = {p["mold"] for p in record["panels"] if classes[p["face"]] == "molded"}
+    for m in record["molds"]:
+        assert m["made"] == (m["type"] != "plane" and m["id"] in molded_on), m["id"]
+    curved = sum(m["type"] != "plane" for m in record["molds"])
+    made = sum(m["made"] for m in record["molds"])
+    assert record["molds_made"] == made
+    assert record["molds_saved_by_material"] == curved - made
+
+
+def exported_class_counts(molds_json, panels_csv, boundary_csv=None) -> dict:
+    """The four class counts of a net's panels as its files give them: the ``class``
+    column of its panels CSV (``panels.csv`` of `fabplan molds`, ``molds.csv`` of a study
+    candidate) and, with ``boundary-panels.csv``, its boundary panels by the rule of
+    docs/materials.md, read from the files: a boundary panel on a plane mold is flat, one
+    cut from a net mold no molded panel uses takes the class of the net panel it continues
+    (``neighbour_face``), one on a made mold or a mold of its own is molded; extensions
+    (cut with their full panel) are not panels of their own."""
+    import csv
+    import json
+
+    record = json.loads(open(molds_json, encoding="utf-8").read())
+    with open(panels_csv, newline="", encoding="utf-8") as handle:
+        net_class = [row["class"] for row in csv.DictReader(handle)]
+    counts = dict.fromkeys(PANEL_CLASSES, 0)
+    for cls in net_class:
+        counts[cls] += 1
+    if boundary_csv is None:
+        return counts
+    molds = {m["id"]: m for m in record["molds"]}
+    with open(boundary_csv, newline="", encoding="utf-8") as handle:
+        for row in csv.DictReader(handle):
+            if row["kind"] == "extension":
+                continue
+            mold, face = molds.get(int(row["mold"])), int(row["neighbour_face"])
+            if mold is not None and mold["type"] == "plane":
+                cls = "flat"
+            elif mold is not None and not mold["made"]:
+                cls = net_class[face] if face >= 0 else "molded"
+            else:
+                cls = "molded"
+            counts[cls] += 1
+    return counts

@@ -1,134 +1,31 @@
 """Panel materials and classes: every class check recomputed from the exported data.
 
 The figures of molds.json (the bent shape's frame and twist, its stress, the cone of a
-roll-bent panel) are recomputed here with code of the test's own: its own frame from the
-net's corners, its own least-squares fits with numpy, its own plate formulas. The panels'
-dense samples come from the panel surfaces the mold plan verifies
-(`fabplan.fabricate.panels`, the ``shared`` surface of the net), not from the classifier.
+roll-bent panel) are recomputed with code of the tests' own (tests/helpers.py, shared with
+the template studies of tests/test_templates.py): its own frame from the net's corners, its
+own least-squares fits with numpy, its own plate formulas. The panels' dense samples come
+from the panel surfaces the mold plan verifies (`fabplan.fabricate.panels`, the ``shared``
+surface of the net), not from the classifier.
 """
 
 from __future__ import annotations
 
 import csv
-import html
 import json
 
 import numpy as np
 import pytest
+from helpers import exported_class_counts, recheck_made_molds, recheck_panel_classes
 
 import fabplan
 from fabplan.cli import main
 from fabplan.errors import InputError
 from fabplan.fabricate.materials import PRESETS, parse_material
 from fabplan.fabricate.molds import plan_molds
-from fabplan.fabricate.panels import fit_panel_surfaces, shared_panel_samples
 from fabplan.net.generate import height_field_grid
 from fabplan.net.mesh import QuadMesh
 from fabplan.study.run import candidate_cost, verdict
 from fabplan.study.spec import CostWeights, Limits, parse_study
-
-VERIFY_LEVEL = 12          # the mold plan's dense samples (MoldSettings.verify_level)
-
-
-def _dense(mesh: QuadMesh) -> np.ndarray:
-    return shared_panel_samples(mesh, fit_panel_surfaces(mesh, "local_fit"), VERIFY_LEVEL)
-
-
-def _own_frame(mesh: QuadMesh, face: int, normal: np.ndarray) -> np.ndarray:
-    """x along the face's first edge in the plane normal to `normal`, y = n x x."""
-    a, b = mesh.faces[face][:2]
-    e = mesh.vertices[b] - mesh.vertices[a]
-    e = e - (e @ normal) * normal
-    x = e / np.linalg.norm(e)
-    return np.array([x, np.cross(normal, x), normal])
-
-
-def _own_bent_shape(points_mm: np.ndarray, frame: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """Least-squares z = c0 + c1 x + c2 y + (a x^2 + 2 b x y + c y^2)/2: (a, c, b), its gap
-    once shifted, and the radius of the disk around the centre that holds the points."""
-    q = (points_mm - points_mm.mean(axis=0)) @ frame.T
-    x, y, z = q.T
-    A = np.column_stack([np.ones_like(x), x, y, x * x / 2, x * y, y * y / 2])
-    c, *_ = np.linalg.lstsq(A, z, rcond=None)
-    r = z - A @ c
-    return np.array([c[3], c[5], c[4]]), 0.5 * (r.max() - r.min()), float(np.hypot(x, y).max())
-
-
-def _own_stress(material: dict, kxx: float, kyy: float, kxy: float, radius: float) -> float:
-    """Kirchhoff bending of the principal curvatures plus E |K| rho^2 / 8 (docs/materials.md)."""
-    E, nu, t = material["youngs_modulus_mpa"], material["poisson"], material["stress_thickness_mm"]
-    k1, k2 = np.linalg.eigvalsh(np.array([[kxx, kxy], [kxy, kyy]]))
-    bending = E * t / (2 * (1 - nu**2)) * max(abs(k1 + nu * k2), abs(k2 + nu * k1))
-    return bending + E * abs(k1 * k2) * radius**2 / 8
-
-
-def _check_classes(mesh: QuadMesh, record: dict) -> dict:
-    """Recompute every panel's class checks from molds.json and the net; return the counts."""
-    mm = record["mm_per_unit"]
-    tol = record["tolerance_mm"]
-    classes = record["panel_classes"]
-    material = classes["material"]
-    dense = _dense(mesh) * mm
-    counts = dict.fromkeys(("flat", "cold_bent", "roll_bent", "molded"), 0)
-    for p in classes["panels"]:
-        i, cls, shape = p["face"], p["class"], p["bent_shape"]
-        counts[cls] += 1
-        normal = np.array(shape["normal"])
-        frame = _own_frame(mesh, i, normal)
-        assert np.allclose(frame[0], shape["x_axis"], atol=1e-9)
-        k, gap, radius = _own_bent_shape(dense[i], frame)
-        stress = _own_stress(material, *k, radius)
-        assert np.allclose(k, shape["curvature_per_mm"], rtol=1e-5, atol=1e-12), i
-        assert shape["twist_per_mm"] == pytest.approx(k[2], rel=1e-5, abs=1e-12)
-        assert shape["stress_mpa"] == pytest.approx(stress, rel=1e-5, abs=1e-9), i
-        assert shape["gap_mm"] == pytest.approx(gap, rel=1e-5, abs=1e-6)
-        cold_ok = gap <= tol and stress <= material["max_bend_stress_mpa"]
-        q = dense[i] @ frame.T
-        A = np.column_stack([np.ones(len(q)), q[:, 0], q[:, 1]])
-        r = q[:, 2] - A @ np.linalg.lstsq(A, q[:, 2], rcond=None)[0]
-        plane_gap = 0.5 * (r.max() - r.min())
-        flat_limit = tol if material["flatness_mm_per_m"] is None else \
-            min(tol, material["flatness_mm_per_m"] * 2 * radius / 1000)
-        flat_ok = plane_gap <= flat_limit
-        if cls == "flat":
-            assert flat_ok and p["figure"] == pytest.approx(plane_gap, rel=1e-5, abs=1e-6)
-        elif cls == "cold_bent":
-            assert cold_ok and not flat_ok
-            assert p["figure"] == pytest.approx(stress, rel=1e-5) and p["unit"] == "MPa"
-            assert p["limit"] == material["max_bend_stress_mpa"]
-        elif cls == "roll_bent":
-            roll = p["roll"]
-            C = np.array(roll["axis_point"]) * mm
-            d = np.array(roll["axis_direction"])
-            v = dense[i] - C
-            s = v @ d
-            rho = np.linalg.norm(v - np.outer(s, d), axis=1)
-            t = roll["taper"]
-            dist = (rho - roll["radius_mm"] - t * s) / np.sqrt(1 + t * t)
-            assert np.abs(dist).max() <= tol + 1e-6, (i, np.abs(dist).max())
-            smallest = ((roll["radius_mm"] + t * s) * np.sqrt(1 + t * t)).min()
-            assert smallest == pytest.approx(roll["min_radius_mm"], rel=1e-6)
-            assert smallest >= material["min_roll_radius_mm"]
-            assert not flat_ok and not cold_ok
-        else:
-            assert not flat_ok and not cold_ok, i
-            if "roll" in p and material["min_roll_radius_mm"] is not None:
-                assert (p["roll"]["gap_mm"] > tol
-                        or p["roll"]["min_radius_mm"] < material["min_roll_radius_mm"])
-    assert counts == classes["counts"]
-    return counts
-
-
-def _check_molds(record: dict) -> None:
-    """Molds are made for molded panels only; the saving is the curved molds left unmade."""
-    classes = {p["face"]: p["class"] for p in record["panel_classes"]["panels"]}
-    molded_on = {p["mold"] for p in record["panels"] if classes[p["face"]] == "molded"}
-    for m in record["molds"]:
-        assert m["made"] == (m["type"] != "plane" and m["id"] in molded_on), m["id"]
-    curved = sum(m["type"] != "plane" for m in record["molds"])
-    made = sum(m["made"] for m in record["molds"])
-    assert record["molds_made"] == made
-    assert record["molds_saved_by_material"] == curved - made
 
 
 @pytest.fixture(scope="module")
@@ -148,13 +45,14 @@ def wein99_runs(tmp_path_factory):
 def test_wein99_classes_recomputed_from_the_export(wein99_runs, wein99, spec):
     out = wein99_runs[spec]
     record = json.loads((out / "molds.json").read_text(encoding="utf-8"))
-    counts = _check_classes(wein99, record)
-    _check_molds(record)
+    counts = recheck_panel_classes(wein99, record)
+    recheck_made_molds(record)
     # the net is strongly curved at 0.9 m panels: every class but the one glass is not
     # rolled into occurs, and the material saves molds
     assert counts["cold_bent"] > 100 and counts["molded"] > 100
     assert (counts["roll_bent"] > 0) is (spec == "steel:2mm")
     assert record["molds_saved_by_material"] > 0
+    assert exported_class_counts(out / "molds.json", out / "panels.csv") == counts
     rows = list(csv.DictReader((out / "panels.csv").read_text().splitlines()))
     by_face = {p["face"]: p for p in record["panel_classes"]["panels"]}
     for row in rows:
@@ -188,8 +86,8 @@ def test_mildly_twisted_facade_is_cold_bent_glass_without_molds(spec, tmp_path):
                  spec, "--no-3d", "-q", "-o", str(out)]) == 0
     record = json.loads((out / "molds.json").read_text(encoding="utf-8"))
     net = QuadMesh.from_obj(tmp_path / "hypar.obj")
-    counts = _check_classes(net, record)
-    _check_molds(record)
+    counts = recheck_panel_classes(net, record)
+    recheck_made_molds(record)
     assert counts == {"flat": 0, "cold_bent": 64, "roll_bent": 0, "molded": 0}
     assert record["molds_made"] == 0 and record["molds_saved_by_material"] >= 1
     limit = parse_material(spec).max_bend_stress_mpa
@@ -308,37 +206,3 @@ def test_study_cost_and_max_molds_count_molded_panels_only():
     assert "5 saved by glass" in check["text"]
     assert not next(c for c in verdict(base, Limits(30.0, 2.0, max_molds=1))
                     if c["limit"] == "max_molds")["ok"]
-
-
-@pytest.mark.slow          # the canopy template study: about 60 s
-def test_canopy_template_shows_the_molds_its_glass_saves(tmp_path):
-    out = tmp_path / "canopy"
-    assert main(["study", "canopy", "-o", str(out), "-q"]) == 0
-    record = json.loads((out / "study.json").read_text(encoding="utf-8"))
-    assert record["study"]["material"]["spec"] == "glass-laminated:2x8mm"
-    page = (out / "report.html").read_text(encoding="utf-8")
-    assert "molds saved by the material [count]" in page
-    checked = 0
-    for c in record["candidates"]:
-        molds = c["metrics"]["molds"]
-        classes = molds["panel_classes"]
-        assert sum(classes.values()) == c["metrics"]["panels"]
-        assert molds["count"] + molds["saved"] == molds["all_curved_molded"]
-        saved = f"{molds['saved']} mold{'' if molds['saved'] == 1 else 's'} saved by the material"
-        assert saved in " ".join(html.unescape(page).split()), (c["name"], saved)
-        folder = out / "candidates" / c["name"]
-        plan = json.loads((folder / "molds.json").read_text(encoding="utf-8"))
-        _check_molds(plan)
-        assert plan["molds_made"] == molds["net_molds"]
-        # the nets that leave the design (one that ended at an earlier candidate's net has
-        # that net's molds)
-        if plan["panel_surface"] == "shared" and not c["same_net_as"]:
-            _check_classes(QuadMesh.from_obj(folder / "net.obj"), plan)
-            checked += 1
-    assert checked >= 1
-    best = next(c for c in record["candidates"] if c["name"] == record["recommended"])
-    assert "saved by the material" in record["recommendation"]
-    # the saddle's mild twist: its laminated glass bends cold, no mold is made
-    assert best["metrics"]["molds"]["count"] == 0 and best["metrics"]["molds"]["saved"] >= 1
-    check = next(k for k in best["checks"] if k["limit"] == "max_molds")
-    assert check["ok"] and "no panel is molded" in check["text"]

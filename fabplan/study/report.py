@@ -42,6 +42,7 @@ from .run import (
     CandidateResult,
     StudyResult,
     cost_drivers,
+    every_panel_flat,
     material_sentence,
     molds_text,
     vertex_deviation_mm,
@@ -559,7 +560,7 @@ def _comparison_table(result: StudyResult) -> str:
         rows.append([
             c.rank, c.name, c.candidate.describe(), *asked, "yes" if c.feasible else "no",
             m["molds"]["count"] if m["molds"]["count"] else
-            ("none (none molded)" if m["molds"].get("panel_classes") else "none (all flat)"),
+            ("none (all flat)" if every_panel_flat(m["molds"]) else "none (none molded)"),
             m["molds"].get("saved", ""), m["panels"],
             (m.get("boundary_panels") or {}).get("count", 0),
             _rounded(100 * m["coverage"], 1), _rounded(m["largest_deviation_mm"], 1),
@@ -790,8 +791,9 @@ def _candidate_section(c: CandidateResult, pictures: dict, outputs: dict,
                       f"Colour is the distance in mm, measured at every vertex and blended "
                       f"across the panels; the red line on the scale is the limit "
                       f"({limit:g} mm), and the largest distance is circled."),
-        "molds": ("Panels coloured by mold" + (" (all flat: no molds)." if molds["count"] == 0
-                                               else "."),
+        "molds": ("Panels coloured by mold" + (
+            f" ({'all flat' if every_panel_flat(molds) else 'none molded'}: no molds)."
+            if molds["count"] == 0 else "."),
                   "One colour per mold; the number on a panel is its mold id, the row of "
                   "molds.csv (written where the panel is large enough on the picture)."),
         "sheet": ("First strip sheet as cut.",
@@ -1160,7 +1162,8 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
     molds = c.metrics["molds"]
     own = molds["count"] - molds_plan.mold_count         # the boundary panels' own molds
     pictures["molds"] = mold_figure(molds_plan, title=f"{c.name}: {counted(molds_plan.panel_count, 'panel')}"
-                                    + (", all flat: no molds" if molds["count"] == 0 else
+                                    + (f", {'all flat' if every_panel_flat(molds) else 'none molded'}: "
+                                       "no molds" if molds["count"] == 0 else
                                        f", {counted(molds_plan.mold_count, 'mold')} for the "
                                        "curved ones (one colour per mold)"
                                        + (f"; {molds['count']} in all with the {own} the boundary "

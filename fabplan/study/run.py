@@ -63,6 +63,7 @@ __all__ = [
     "vertex_deviation_mm",
     "mold_metrics",
     "molds_text",
+    "every_panel_flat",
     "material_sentence",
     "same_net",
     "twin_of",
@@ -1064,28 +1065,57 @@ def material_sentence(molds: dict) -> str:
     >>> text = material_sentence({"material": "tempered glass, 8 mm", "saved": 3, "count": 1,
     ...     "all_curved_molded": 4, "panel_classes": {"flat": 2, "cold_bent": 30,
     ...     "roll_bent": 0, "molded": 5}})
-    >>> text[:72]
-    'In tempered glass, 8 mm its panels are 2 flat, 30 cold-bent, 0 roll-bent'
-    >>> text[72:]
+    >>> text[:73]
+    'In tempered glass, 8 mm, its panels are 2 flat, 30 cold-bent, 0 roll-bent'
+    >>> text[73:]
     ' and 5 molded: 1 mold instead of 4 with every curved panel molded, 3 molds saved by the material.'
+    >>> material_sentence({"material": "steel", "saved": 0, "count": 0, "all_curved_molded": 0,
+    ...     "panel_classes": {"flat": 9, "cold_bent": 0, "roll_bent": 0, "molded": 0}})[-42:]
+    'and 0 molded: no panel is curved, no mold.'
     """
     c = molds["panel_classes"]
-    return (f"In {molds['material']} its panels are {c['flat']} flat, {c['cold_bent']} cold-bent, "
-            f"{c['roll_bent']} roll-bent and {c['molded']} molded: "
-            f"{counted(molds['count'], 'mold')} instead of {molds['all_curved_molded']} with "
-            f"every curved panel molded, {counted(molds['saved'], 'mold')} saved by the material.")
+    head = (f"In {molds['material']}, its panels are {c['flat']} flat, {c['cold_bent']} cold-bent, "
+            f"{c['roll_bent']} roll-bent and {c['molded']} molded: ")
+    if molds["all_curved_molded"] == 0:
+        # nothing to save: "0 molds instead of 0" says nothing
+        return head + "no panel is curved, no mold."
+    return (head + f"{counted(molds['count'], 'mold')} instead of {molds['all_curved_molded']} "
+            f"with every curved panel molded, {counted(molds['saved'], 'mold')} saved by the "
+            "material.")
 
 
-def molds_text(molds: dict) -> str:
-    """The molds of a candidate in words: ``"no molds: all panels flat"`` or ``"12 molds"``.
+def every_panel_flat(molds: dict) -> bool:
+    """Whether every panel of a candidate is flat (`mold_metrics`): no curved panel, and
+    with a material every panel of the class ``flat`` (a material's flatness tolerance may
+    leave a nearly flat panel to be bent cold).
 
     Examples
     --------
-    >>> molds_text({"count": 0}), molds_text({"count": 1}), molds_text({"count": 12})
-    ('no molds: all panels flat', '1 mold', '12 molds')
+    >>> every_panel_flat({"all_panels_flat": True})
+    True
+    >>> every_panel_flat({"all_panels_flat": True, "panel_classes": {"flat": 3, "cold_bent": 1,
+    ...     "roll_bent": 0, "molded": 0}})
+    False
+    """
+    classes = molds.get("panel_classes")
+    return bool(molds.get("all_panels_flat")) and (
+        classes is None or classes["flat"] == sum(classes.values()))
+
+
+def molds_text(molds: dict) -> str:
+    """The molds of a candidate in words: ``"no molds: all panels flat"``, with a material
+    whose panels are bent ``"no molds: no panel molded"``, or ``"12 molds"``.
+
+    Examples
+    --------
+    >>> molds_text({"count": 0, "all_panels_flat": True}), molds_text({"count": 12})
+    ('no molds: all panels flat', '12 molds')
+    >>> molds_text({"count": 0, "all_panels_flat": False, "panel_classes": {"flat": 0,
+    ...     "cold_bent": 5, "roll_bent": 0, "molded": 0}})
+    'no molds: no panel molded'
     """
     if molds["count"] == 0:
-        return "no molds: no panel molded" if molds.get("panel_classes") else "no molds: all panels flat"
+        return "no molds: all panels flat" if every_panel_flat(molds) else "no molds: no panel molded"
     return counted(molds["count"], "mold")
 
 
@@ -1163,8 +1193,8 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     if limits.max_molds is not None:
         n = molds["count"]
         bent = molds.get("panel_classes") is not None
-        needs = ("it needs no molds: no panel is molded" if bent else
-                 "it needs no molds: all panels are flat") if n == 0 else \
+        needs = ("it needs no molds: all panels are flat" if every_panel_flat(molds) else
+                 "it needs no molds: no panel is molded") if n == 0 else \
             f"its {'molded' if bent else 'curved'} panels need {counted(n, 'mold')}"
         if bent:
             needs += f" ({molds['saved']} saved by {molds['material']})"
@@ -1496,9 +1526,9 @@ def _achievements(best: CandidateResult, base: CandidateResult | None, study: St
     else:
         molds, panels = m["molds"], m["panels"]
         if molds["count"] == 0:
-            text = (f"It needs no molds: none of its {counted(panels, 'panel')} is molded"
-                    if molds.get("panel_classes") else
-                    f"It needs no molds: all its {counted(panels, 'panel')} are flat")
+            text = (f"It needs no molds: all its {counted(panels, 'panel')} are flat"
+                    if every_panel_flat(molds) else
+                    f"It needs no molds: none of its {counted(panels, 'panel')} is molded")
         else:
             text = f"It needs {counted(molds['count'], 'mold')} for its {counted(panels, 'panel')}"
         if limits.max_molds is not None:
