@@ -80,7 +80,7 @@ def _run(name: str, folder) -> dict:
 
 
 #: the panel material each template carries (its `[material]`, docs/study-file.md)
-TEMPLATE_MATERIALS = {"stadium": "aluminium:3mm", "pavilion": "aluminium:2mm",
+TEMPLATE_MATERIALS = {"stadium": "glass-annealed:12mm", "pavilion": "aluminium:2mm",
                       "tower": "glass-laminated:2x8mm", "canopy": "glass-laminated:2x8mm"}
 
 
@@ -115,6 +115,8 @@ def _classes_agree_with_the_export(name: str, folder, record: dict) -> None:
         said = (f"its panels are {classes['flat']} flat, {classes['cold_bent']} cold-bent, "
                 f"{classes['roll_bent']} roll-bent and {classes['molded']} molded: ")
         said += ("no panel is curved, no mold." if molds["all_curved_molded"] == 0 else
+                 f"{molds['count']} mold{'' if molds['count'] == 1 else 's'}, none saved by "
+                 "the material." if molds["saved"] == 0 else
                  f"{molds['count']} mold{'' if molds['count'] == 1 else 's'} instead of "
                  f"{molds['all_curved_molded']} with every curved panel molded, "
                  f"{molds['saved']} mold{'' if molds['saved'] == 1 else 's'} saved by the material.")
@@ -240,11 +242,13 @@ def test_stadium_linear_weingarten_nets_keep_the_design_limit_in_the_solve(tmp_p
                                          and largest <= limits.max_deviation_mm)
         if "solve_status" in m:
             assert m["status"] == "converged" and f"{largest:.1f} mm" in m["status_note"]
-    # a linear Weingarten net meets every limit on few molds even with every curved panel
-    # molded, as the paper's stadium (Fig. 19): the one with the fewest, rechecked from the
-    # exported files by code apart from the planner
-    chosen = min((c for c in lw if c["feasible"]),
-                 key=lambda c: c["metrics"]["molds"]["all_curved_molded"])
+    # the study recommends a linear Weingarten net that meets every limit, as the paper's
+    # stadium (Fig. 19): rechecked from the exported files by code apart from the planner;
+    # its hot-bent glass is molded panel by panel, so the net's molds are the molds made
+    chosen = next(c for c in record["candidates"] if c["recommended"])
+    assert chosen["net"] == "linear-weingarten" and chosen["feasible"]
+    assert record["recommendation"].startswith(f"Recommended: {chosen['name']} ")
+    assert chosen["metrics"]["molds"]["saved"] == 0
     folder = out / "candidates" / chosen["name"]
     plan = json.loads((folder / "molds.json").read_text())
     net = QuadMesh.from_obj(folder / "net.obj")
@@ -257,7 +261,7 @@ def test_stadium_linear_weingarten_nets_keep_the_design_limit_in_the_solve(tmp_p
     assert found["cut_gap_mm"] <= 1e-6
     assert found["panels"] == chosen["metrics"]["panels"]
     # every mold counted, boundary panels' own included: at most 2 sqrt(N) for N panels
-    assert found["molds_in_all"] == chosen["metrics"]["molds"]["all_curved_molded"] \
+    assert found["molds_in_all"] == chosen["metrics"]["molds"]["count"] \
         <= min(2 * np.sqrt(found["panels"]), limits.max_molds)
     steps = np.concatenate([v for v in found["steps"].values() if v.size])
     assert steps.max() <= limits.panel_step_limit_mm
@@ -277,17 +281,6 @@ def test_stadium_linear_weingarten_nets_keep_the_design_limit_in_the_solve(tmp_p
     assert base_plan["panel_surface"] == "design" and base_plan["fits_all"]
     assert edge_midpoint_steps(base_plan, QuadMesh.from_obj(
         out / "candidates" / "baseline" / "net.obj")).max() <= 2 * tol
-    # in 3 mm aluminium sheet nearly every panel bends cold: the baseline, which would need
-    # more molds than the limit with every curved panel molded, meets it, and the cheapest
-    # candidate that meets every limit is recommended with what its material saves
-    base = _baseline(record)["metrics"]["molds"]
-    assert base["all_curved_molded"] > limits.max_molds >= base["count"]
-    best = next(c for c in record["candidates"] if c["recommended"])
-    assert best["feasible"] and best["cost"] == min(c["cost"] for c in record["candidates"]
-                                                    if c["feasible"])
-    assert record["recommendation"].startswith(f"Recommended: {best['name']} ")
-    assert f"{base['saved']} molds saved by the material" in record["recommendation"] \
-        or not best["baseline"]
 
 
 def test_pavilion_constant_radius_strips_are_congruent(tmp_path):

@@ -1072,6 +1072,10 @@ def material_sentence(molds: dict) -> str:
     >>> material_sentence({"material": "steel", "saved": 0, "count": 0, "all_curved_molded": 0,
     ...     "panel_classes": {"flat": 9, "cold_bent": 0, "roll_bent": 0, "molded": 0}})[-42:]
     'and 0 molded: no panel is curved, no mold.'
+    >>> material_sentence({"material": "annealed glass", "saved": 0, "count": 2,
+    ...     "all_curved_molded": 2, "panel_classes": {"flat": 0, "cold_bent": 0,
+    ...     "roll_bent": 0, "molded": 9}})[-50:]
+    'and 9 molded: 2 molds, none saved by the material.'
     """
     c = molds["panel_classes"]
     head = (f"In {molds['material']}, its panels are {c['flat']} flat, {c['cold_bent']} cold-bent, "
@@ -1079,6 +1083,9 @@ def material_sentence(molds: dict) -> str:
     if molds["all_curved_molded"] == 0:
         # nothing to save: "0 molds instead of 0" says nothing
         return head + "no panel is curved, no mold."
+    if molds["saved"] == 0:
+        # nor does "17 molds instead of 17"
+        return head + f"{counted(molds['count'], 'mold')}, none saved by the material."
     return (head + f"{counted(molds['count'], 'mold')} instead of {molds['all_curved_molded']} "
             f"with every curved panel molded, {counted(molds['saved'], 'mold')} saved by the "
             "material.")
