@@ -31,6 +31,7 @@ from ..fabricate.mill_report import MillResult, mill_net
 from ..fabricate.milling import MillSettings, MillTool, parse_tool
 from ..fabricate.molds import MoldPlan, MoldSettings
 from ..fabricate.molds import plan_molds as _plan_molds_impl
+from ..fabricate.panel_meshes import PanelMesh
 from ..fabricate.strip_boundary import StripBoundary
 from ..fabricate.strip_plan import StripPlan, schedule_rows
 from ..fabricate.strip_plan import plan_strips as _plan_strips_impl
@@ -461,6 +462,61 @@ def _boundary_panels(boundary: Any, mm: float, net_type: str | None
     return panels, groups
 
 
+def _slivers_into_their_panels(net: PanelSet, boundary: PanelSet
+                               ) -> tuple[PanelSet, PanelSet | None]:
+    """A boundary sliver is cut in one piece with the full panel it extends: one plate.
+
+    Its triangles join that panel's (`NeighbourFace`) and its area the panel's ``Area``;
+    the other boundary panels stay plates of their own. Returns the net's panels and the
+    boundary panels left (None when none is).
+    """
+    props = {p.name: p for p in boundary.properties}
+    sliver = np.array([k == "boundary sliver" for k in props["PanelKind"].values], bool)
+    if not sliver.any():
+        return net, boundary
+    owner = np.asarray(list(props["NeighbourFace"].values), np.int64)
+    pieces = [[_panel_piece(net, i)] for i in range(net.count)]
+    area = np.array(list({p.name: p for p in net.properties}["Area"].values), np.float64)
+    sliver_area = np.asarray(list(props["Area"].values), np.float64)
+    for k in np.flatnonzero(sliver).tolist():
+        pieces[owner[k]].append(_panel_piece(boundary, k))
+        area[owner[k]] += sliver_area[k]
+    joined = PanelMesh.join([_joined(parts) for parts in pieces])
+    merged = PanelSet(points=joined.points, triangles=joined.triangles, point_ptr=joined.point_ptr,
+                      triangle_ptr=joined.triangle_ptr, names=net.names, tags=net.tags,
+                      mold=net.mold, properties=[
+                          IfcProperty("Area", "IfcAreaMeasure", area.tolist()) if p.name == "Area"
+                          else p for p in net.properties])
+    keep = np.flatnonzero(~sliver).tolist()
+    if not keep:
+        return merged, None
+    rest = PanelMesh.join([_panel_piece(boundary, k) for k in keep])
+    values = {p.name: list(p.values) for p in boundary.properties}
+    return merged, PanelSet(
+        points=rest.points, triangles=rest.triangles, point_ptr=rest.point_ptr,
+        triangle_ptr=rest.triangle_ptr, names=[boundary.names[k] for k in keep],
+        tags=[boundary.tags[k] for k in keep],
+        mold=None if boundary.mold is None else np.asarray(boundary.mold)[keep],
+        properties=[IfcProperty(p.name, p.ifc_type, [values[p.name][k] for k in keep])
+                    for p in boundary.properties])
+
+
+def _panel_piece(panels: PanelSet, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """Panel `i` of `panels`: its points (k, 3) and its triangles (t, 3) into them."""
+    a, b = panels.point_ptr[i], panels.point_ptr[i + 1]
+    return (panels.points[a:b],
+            panels.triangles[panels.triangle_ptr[i]:panels.triangle_ptr[i + 1]] - a)
+
+
+def _joined(parts: list) -> tuple[np.ndarray, np.ndarray]:
+    """One panel's pieces (points, triangles into them) as one mesh."""
+    if len(parts) == 1:
+        return parts[0]
+    offsets = np.cumsum([0] + [len(points) for points, _ in parts[:-1]])
+    return (np.concatenate([points for points, _ in parts]),
+            np.concatenate([triangles + o for (_, triangles), o in zip(parts, offsets, strict=True)]))
+
+
 def _lamellas(mesh: QuadMesh, strips: StripPlan, net_type: str | None) -> IfcStripSet:
     """The strips as lamellas: node polylines, node normals, cross-section, ids."""
     from ..fabricate.molds import UNITS
@@ -529,7 +585,9 @@ def ifc_facade(net: NetLike, *, molds: MoldPlan | None = None, boundary: Any = N
     sets = [panels]
     if boundary is not None:
         more, own = _boundary_panels(boundary, mm, net_type)
-        sets += [] if more is None else [more]
+        if more is not None:
+            panels, more = _slivers_into_their_panels(panels, more)
+            sets = [panels] + ([] if more is None else [more])
         groups.update(own)
     lamellas = None if strips is None or not strips.strips.strips else _lamellas(mesh, strips, net_type)
     material = None if molds is None or molds.classes is None else molds.classes.material.label
