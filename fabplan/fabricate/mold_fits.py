@@ -9,13 +9,20 @@ vertical gaps ``z - (k1 x^2 + k2 y^2) / 2`` of the placed points (an upper bound
 distance from the mold, as in `fabplan.fabricate.molds`). The largest gap is brought down
 by reweighting (Lawson's iteration: every point's weight grows with its gap), so the
 result approaches the minimax fit the step limit asks for. Every fit is batched over
-panels: arrays in, arrays out.
+panels: arrays in, arrays out. The steps run in a small C extension
+(``mold_fit_kernel.c``, compiled at install) one panel at a time, in one pass over its
+points per step; where it could not be built, or with ``FABPLAN_KERNELS=numpy``, the same
+steps run in numpy over all panels at once.
 
 Coordinates: points in model units, placements map them to mold coordinates in mm (the
 upper left block is millimetres per unit times a rotation), curvatures in 1/mm.
 """
 
 from __future__ import annotations
+
+import functools
+import os
+from types import ModuleType
 
 import numpy as np
 
@@ -104,6 +111,15 @@ def fit_mold_placements(points: np.ndarray, weights: np.ndarray, placements: np.
     if must is None:
         must = base >= 0.5 * base.max(axis=1, keepdims=True)
     must = np.asarray(must, bool) & (base > 0)
+    kernel = _kernel()
+    if kernel is not None and p:
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        s = points.shape[1]
+        best_M, best_K, best_gap = np.empty((p, 4, 4)), np.empty((p, 2)), np.empty(p)
+        kernel.fit(points, np.ascontiguousarray(base), np.ascontiguousarray(must, np.uint8),
+                   np.ascontiguousarray(free, np.uint8), M, K, best_M, best_K, best_gap,
+                   p, s, iterations, rounds)
+        return best_M, best_K, best_gap
     lawson = np.ones_like(base)
     w = base.copy()
     unknowns = 8 if free.any() else 6
@@ -182,6 +198,19 @@ def fit_mold_placements(points: np.ndarray, weights: np.ndarray, placements: np.
             np.sum(lawson, axis=1, keepdims=True), 1e-300)
         w = base * np.where(must, lawson, 1.0)
     return best_M, best_K, best_gap
+
+
+@functools.lru_cache(maxsize=1)
+def _kernel() -> ModuleType | None:
+    """The compiled fit (``mold_fit_kernel``), or None: not built, or
+    ``FABPLAN_KERNELS=numpy`` in the environment."""
+    if os.environ.get("FABPLAN_KERNELS", "").lower() == "numpy":
+        return None
+    try:
+        from . import mold_fit_kernel  # type: ignore[attr-defined]
+    except ImportError:
+        return None
+    return mold_fit_kernel
 
 
 def mold_points(points: np.ndarray, placements: np.ndarray, shapes: np.ndarray, *,

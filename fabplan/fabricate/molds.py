@@ -488,69 +488,108 @@ def _greedy_cover(fits: np.ndarray) -> np.ndarray:
     return np.array(chosen, dtype=np.int64)
 
 
-def _refit(U: np.ndarray, Z: np.ndarray, K: np.ndarray, free: int, reach: float) -> np.ndarray:
-    """Mold curvatures minimizing the largest gap of its panels (fixed frames, each panel
-    with its own shift along the mold axis).
+def _refit_molds(U: np.ndarray, Z: np.ndarray, owner: np.ndarray, K: np.ndarray, free: int,
+                 reach: np.ndarray) -> np.ndarray:
+    """Mold curvatures minimizing the largest gap of each mold's panels (fixed frames, each
+    panel with its own shift along the mold axis), for several molds at once.
 
-    A linear program in (K, shifts, gap) over the samples that are highest or lowest for
-    some curvature near `K` (within `reach`), with samples found violating the result added
-    until none does (cutting planes): a few small programs instead of one over all samples.
+    Each mold is a linear program in (K, shifts, gap) over the samples that are highest or
+    lowest for some curvature near its `K` (within its `reach`), with samples found
+    violating the result added until none does (cutting planes): a few small programs
+    instead of one over all samples. The programs of all molds are independent blocks of
+    one program whose cost is the sum of their gaps, so one solve serves every mold (the
+    solver's fixed cost per call is most of a small program's time); a mold leaves it once
+    its samples settle.
 
-    U : (q, s, 2), Z : (q, s) of the mold's panels in their frames; K : (2,) start.
+    Parameters
+    ----------
+    U : (q, s, 2) float, Z : (q, s) float, the squared mold x, y (mm^2) and mold z (mm) of
+        the samples of all molds' panels in their frames, each mold's panels together.
+    owner : (q,) int, the mold of each panel, nondecreasing.
+    K : (g, 2) float, the molds' start curvatures (1/mm).
+    free : how many curvatures are fitted (0: none, 1: ``k1``, 2: both).
+    reach : (g,) float, the curvature distance of each mold's panels (1/mm).
+
+    Returns
+    -------
+    (g, 2) float, the fitted curvatures (1/mm); a mold whose program fails keeps its
+    last fit.
     """
-    if free == 0:
-        return K
-    q = len(Z)
-    scale = max(float(U.max()), 1e-12)
-    steps = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]], float) * 0.25 * reach
+    best = np.array(K, dtype=np.float64)
+    if free == 0 or len(best) == 0:
+        return best
+    g = len(best)
+    size = np.bincount(owner, minlength=g)
+    first = np.cumsum(size) - size
+    local = np.arange(len(owner)) - first[owner]
+    scale = np.full(g, -np.inf)
+    np.maximum.at(scale, owner, U.max(axis=(1, 2)))
+    scale = np.maximum(scale, 1e-12)
+    steps = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]], float) * 0.25
     steps[:, free:] = 0.0
     active = np.zeros(Z.shape, bool)
     for d in steps:
-        _mark_extremes(active, U, Z, K + d)
-    best = K
+        _mark_extremes(active, U, Z, best[owner] + d * reach[owner, None])
+    open_ = np.ones(g, bool)
     for _ in range(20):
-        p, s = np.nonzero(active)
-        u, z = U[p, s, :free] / scale, Z[p, s]
-        A = _refit_constraints(u, p, q)
-        cost = np.zeros(free + q + 1)
-        cost[-1] = 1.0
-        bounds = [(None, None)] * (free + q) + [(0, None)]
-        res = linprog(cost, A_ub=A, b_ub=np.concatenate([-z, z]), bounds=bounds, method="highs")
+        rows = open_[owner]
+        p, j = np.nonzero(active & rows[:, None])
+        # columns of each open mold's block: its curvatures, its panels' shifts, its gap
+        width = np.where(open_, free + size + 1, 0)
+        column = np.cumsum(width) - width
+        b = owner[p]
+        A = _refit_constraints(U[p, j, :free] / scale[b, None], column[b],
+                               column[b] + free + local[p], column[b] + free + size[b],
+                               int(width.sum()))
+        cost = np.zeros(int(width.sum()))
+        cost[(column + free + size)[open_]] = 1.0
+        lower = np.full(len(cost), -np.inf)
+        lower[(column + free + size)[open_]] = 0.0
+        z = Z[p, j]
+        res = linprog(cost, A_ub=A, b_ub=np.concatenate([-z, z]),
+                      bounds=np.column_stack([lower, np.full(len(cost), np.inf)]),
+                      method="highs")
         if res.status != 0:
             return best
-        best = np.zeros(2)
-        best[:free] = res.x[:free] / scale
-        before = active.sum()
-        _mark_extremes(active, U, Z, best)
-        if active.sum() == before:
+        which = np.flatnonzero(open_)
+        best[which, :free] = res.x[column[which, None] + np.arange(free)] / scale[which, None]
+        before = np.bincount(owner, weights=active.sum(axis=1), minlength=g)
+        marked = np.flatnonzero(rows)
+        sub = active[marked]
+        _mark_extremes(sub, U[marked], Z[marked], best[owner[marked]])
+        active[marked] = sub
+        after = np.bincount(owner, weights=active.sum(axis=1), minlength=g)
+        open_ &= after > before
+        if not open_.any():
             break
     return best
 
 
-def _refit_constraints(u: np.ndarray, panel: np.ndarray, q: int) -> sp.csr_matrix:
-    """The constraint matrix of `_refit`'s linear program, (2 m, free + q + 1) CSR.
+def _refit_constraints(u: np.ndarray, k_column: np.ndarray, c_column: np.ndarray,
+                       t_column: np.ndarray, columns: int) -> sp.csr_matrix:
+    """The constraint matrix of `_refit_molds`'s linear program, (2 m, columns) CSR.
 
-    Variables ``[k (free), c (q), t]``; for every active sample (m, with its scaled
-    squared coordinates `u` (m, free) and its panel index `panel` (m,)) the rows of
-    ``z - u.k/2 - c_p <= t`` and ``-(z - u.k/2 - c_p) <= t``. Built entry by entry in the
-    order of the row-wise stacked blocks ``[-u/2, -C, -1; u/2, C, -1]`` (zeros of ``u/2``
-    left out), which it equals.
+    For every active sample (m, with its scaled squared coordinates `u` (m, free)) the rows
+    of ``z - u.k/2 - c <= t`` and ``-(z - u.k/2 - c) <= t``, ``k`` its mold's curvatures
+    (columns ``k_column + 0 .. free - 1``), ``c`` its panel's shift (column `c_column`) and
+    ``t`` its mold's gap (column `t_column`); zeros of ``u/2`` left out.
     """
     m, free = u.shape
     half = 0.5 * u
     row, col = np.nonzero(half)
     rows = np.arange(m)
     minus = -np.ones(m)
+    k = k_column[row] + col
     row_all = np.concatenate([row, rows, rows, row + m, rows + m, rows + m])
-    col_all = np.concatenate([col, free + panel, np.full(m, free + q),
-                              col, free + panel, np.full(m, free + q)])
+    col_all = np.concatenate([k, c_column, t_column, k, c_column, t_column])
     data = np.concatenate([-half[row, col], minus, minus, half[row, col], -minus, minus])
-    return sp.csr_matrix((data, (row_all, col_all)), shape=(2 * m, free + q + 1))
+    return sp.csr_matrix((data, (row_all, col_all)), shape=(2 * m, columns))
 
 
 def _mark_extremes(active: np.ndarray, U: np.ndarray, Z: np.ndarray, K: np.ndarray) -> None:
-    """Mark in `active` (q, s) each panel's highest and lowest sample above the mold K."""
-    r = Z - 0.5 * (U[..., 0] * K[0] + U[..., 1] * K[1])
+    """Mark in `active` (q, s) each panel's highest and lowest sample above its mold, `K`
+    (q, 2) per panel (1/mm)."""
+    r = Z - 0.5 * (U[..., 0] * K[:, 0, None] + U[..., 1] * K[:, 1, None])
     rows = np.arange(len(Z))
     active[rows, r.argmax(axis=1)] = True
     active[rows, r.argmin(axis=1)] = True
@@ -613,16 +652,24 @@ def _assign(data: _Panels, candidates: np.ndarray, free: int, tolerance: float,
         mold = np.where(stay, mold, best)
         mold, molds, dev, var = _remove_molds(mold, molds, dev, var, tolerance)
         variant, deviation = var[rows, mold], dev[rows, mold]
-        for j in range(len(molds)):
-            members = np.flatnonzero(mold == j)
-            key = (molds[j].tobytes(), members.tobytes(), variant[members].tobytes())
-            if key in refitted:
-                continue
+        groups = [np.flatnonzero(mold == j) for j in range(len(molds))]
+        keys = [(molds[j].tobytes(), m.tobytes(), variant[m].tobytes())
+                for j, m in enumerate(groups)]
+        todo = [j for j in range(len(molds)) if keys[j] not in refitted]
+        if todo:
+            members = np.concatenate([groups[j] for j in todo])
+            owner = np.repeat(np.arange(len(todo)), [groups[j].size for j in todo])
             U, Z = data.U[members, variant[members]], data.Z[members, variant[members]]
-            new = _refit(U, Z, molds[j], free, float(np.median(data.reach[members])))
-            if _offset_gap(U, Z, new)[0].max() <= deviation[members].max():
-                molds[j] = new
-            refitted.add((molds[j].tobytes(), members.tobytes(), variant[members].tobytes()))
+            reach = np.array([np.median(data.reach[groups[j]]) for j in todo])
+            new = _refit_molds(U, Z, owner, molds[todo], free, reach)
+            gap = np.zeros(len(todo))
+            np.maximum.at(gap, owner, _offset_gap(U, Z, new[owner])[0])
+            worst = np.zeros(len(todo))
+            np.maximum.at(worst, owner, deviation[members])
+            for i, j in enumerate(todo):
+                if gap[i] <= worst[i]:
+                    molds[j] = new[i]
+                refitted.add((molds[j].tobytes(), keys[j][1], keys[j][2]))
         settled = (len(molds), mold.tobytes())
         if settled == state:
             break
