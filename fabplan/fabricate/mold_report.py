@@ -433,7 +433,7 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
             f"{counted(r['molds_made'], 'mold')}; {r['molds_saved_by_material']} saved by "
             f"the material against every curved panel molded"]]
           if plan.classes is not None else []),
-        ["M / sqrt(N)", f"{r['molds_per_sqrt_panels']:.3g} (ratio)"],
+        ["M / sqrt(N)", f"{r['molds_per_sqrt_panels']:.2f} (ratio)"],
         ["panels per mold (mean / median / max)",
          f"{per_mold['mean']:.1f} / {per_mold['median']:g} / {per_mold['max']} panels"],
         ["panel types", ", ".join(counted(v, k.replace('_', ' ') + " panel")

@@ -519,7 +519,6 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     from ..layout.starts import glide_fairest
     from ..layout.surface_layout import glide, layout_surface
     from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
-    from ..solve.optimize import optimize
     from ..solve.solver import SolverSettings
 
     seconds: dict[str, float] = {}
@@ -585,9 +584,9 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         # inside it, since its boundary panels continue its surface past its edge
         limit = (DEVIATION_HELD * study.limits_of(candidate).max_deviation_mm
                  / study.design.mm_per_unit)
-        net = optimize(starts[key].mesh, candidate.net, angle=candidate.angle,
-                       radius=candidate.radius, reference=design.reference, settings=settings,
-                       settle_free=step, max_deviation=limit, progress=report)
+        net = optimize_held(study, candidate, starts[key].mesh, reference=design.reference,
+                            settings=settings, settle_free=step, max_deviation=limit,
+                            progress=report)
         # its boundary panels continue it where it stands off the design, as `fabplan
         # optimize` cuts them: their molds are fitted to the net's panels beside them
         add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True)
@@ -601,6 +600,48 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     net.properties["units"] = study.design.units     # read back by the commands on net.obj
     return CandidateResult(candidate, metrics={"seconds": seconds}, net=net,
                            singular_points=None if layout is None else layout.singular_points)
+
+
+def planarity_held(study: Study, candidate: Candidate) -> tuple:
+    """The constraint families that hold a candidate's quads planar within the study's
+    tolerance, when the study asks for flat panels and the net type's quads are not
+    planar already; else ().
+
+    The bound holds every quad's corners within `PLANARITY_HELD` of the tolerance of a
+    plane of the quad's own; the study's check measures them from their least-squares
+    plane, which lies up to about a tenth farther from skew quads' corners."""
+    from ..solve.constraints import PlanarityBound, PlaneNormalization
+    from ..solve.net_types import get_net
+
+    limits = study.limits_of(candidate)
+    if not limits.planar_panels or get_net(candidate.net).planar_faces:
+        return ()
+    limit = PLANARITY_HELD * limits.planarity_tolerance_mm / study.design.mm_per_unit
+    return (PlanarityBound(limit), PlaneNormalization())
+
+
+def optimize_held(study: Study, candidate: Candidate, start: QuadMesh, **options: Any
+                  ) -> OptimizationResult:
+    """`fabplan.solve.optimize.optimize` of a candidate's net from `start`, its quads held
+    planar in the solve when the study asks for flat panels (`planarity_held`). A net type
+    that cannot be planar there does not converge: it is solved again without the bound,
+    and the study's planarity check then says how far out of plane its panels are."""
+    from ..solve.optimize import optimize
+
+    held = planarity_held(study, candidate)
+    net = optimize(start, candidate.net, angle=candidate.angle, radius=candidate.radius,
+                   extra=held, **options)
+    if not held:
+        return net
+    record = {"held_mm": PLANARITY_HELD * study.limits_of(candidate).planarity_tolerance_mm,
+              "kept": net.converged}
+    if not net.converged:
+        record["without_it"] = (f"held planar, the solve ended {net.status} after "
+                                f"{net.iterations} iterations: solved without the bound")
+        net = optimize(start, candidate.net, angle=candidate.angle, radius=candidate.radius,
+                       **options)
+    net.parameters["planarity"] = record      # in net.json
+    return net
 
 
 def _on_molds(study: Study, candidate: Candidate) -> bool:
@@ -643,7 +684,7 @@ def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
     from ..layout.starts import glide_fairest
     from ..layout.surface_layout import glide, layout_surface
     from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
-    from ..solve.optimize import kept_faces, optimize
+    from ..solve.optimize import kept_faces
 
     key = (angle, size, "continued")
     where = f"at {angle:g} deg, panel size {size:g}, on the design continued past its edges"
@@ -664,10 +705,9 @@ def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
     limits = study.limits_of(candidate)
     limit = DEVIATION_HELD * limits.max_deviation_mm / study.design.mm_per_unit
     start = starts[key].mesh
-    solved = optimize(start, candidate.net, angle=candidate.angle, radius=candidate.radius,
-                      reference=continued.design.reference, settings=settings,
-                      max_deviation=limit, deviation_vertices=held_vertices(start, continued),
-                      progress=report)
+    solved = optimize_held(study, candidate, start, reference=continued.design.reference,
+                           settings=settings, max_deviation=limit,
+                           deviation_vertices=held_vertices(start, continued), progress=report)
     net = kept_faces(solved, faces_on_design(solved.mesh, continued), design.reference,
                      max_deviation=limit)
     net.parameters["continued"]["starts"] = len(
@@ -784,6 +824,9 @@ def study_class_order(study: Study) -> tuple[str, ...]:
 #: solve: the rest is left to their boundary panels, which continue the net's surface
 #: past its edge and so stand off the design a little further than the net
 DEVIATION_HELD = 0.9
+#: the share of a study's planarity tolerance its nets' quads are held within in the solve
+#: (`planarity_held`)
+PLANARITY_HELD = 0.8
 
 
 def start_angle(candidate: Candidate, design: DesignSurface) -> float:

@@ -16,7 +16,7 @@ from .mannheim import (
     RulingAngle,
 )
 from .orientation import CoherentOrientation
-from .planarity import PlanarFaces, PlaneNormalization
+from .planarity import PlanarFaces, PlanarityBound, PlaneNormalization
 from .radius import ConstantCurvature
 from .sphere import SphereCondition, SphereNormalization
 
@@ -30,6 +30,7 @@ __all__ = [
     "ConstantCurvature",
     "CoherentOrientation",
     "PlanarFaces",
+    "PlanarityBound",
     "PlaneNormalization",
     "Fairness",
     "DisplacementFairness",
