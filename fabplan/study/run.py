@@ -633,8 +633,8 @@ def optimize_held(study: Study, candidate: Candidate, start: QuadMesh, **options
                    extra=held, **options)
     if not held:
         return net
-    record = {"held_mm": PLANARITY_HELD * study.limits_of(candidate).planarity_tolerance_mm,
-              "kept": net.converged}
+    tolerance = study.limits_of(candidate).planarity_tolerance_mm
+    record: dict[str, Any] = {"held_mm": PLANARITY_HELD * tolerance, "kept": net.converged}
     if not net.converged:
         record["without_it"] = (f"held planar, the solve ended {net.status} after "
                                 f"{net.iterations} iterations: solved without the bound")
