@@ -81,7 +81,7 @@ from .parametrization import (
     integrate_directions,
 )
 from .settings import SURFACE_TOLERANCE, LayoutSettings
-from .trim import ParameterChart, add_boundary_panels, net_coverage, trim_to_design
+from .trim import ParameterChart, add_boundary_panels, net_cover, net_coverage, trim_to_design
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
@@ -224,7 +224,8 @@ class SurfaceLayout:
 
 def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 90.0,
                    family: str | None = None, settings: LayoutSettings | None = None,
-                   refuse_broken: bool = True) -> SurfaceLayout:
+                   refuse_broken: bool = True, judged_on: DesignSurface | None = None
+                   ) -> SurfaceLayout:
     """Lay out an initial S-net on a design surface.
 
     Parameters
@@ -238,6 +239,10 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     refuse_broken : refuse a layout whose lattice does not hold together (see
         `LayoutSettings.min_lattice_share` and `max_gap_panels`); False makes such a layout
         anyway (`layout_again` of a net made before).
+    judged_on : for a layout on a design continued past the edges of this one
+        (`fabplan.layout.margin`), of which only the part over this one is kept: the
+        coverage and the gaps that judge it are those of its quads over this design (they
+        reach past its edges, so no boundary panels are cut to judge it).
 
     Returns
     -------
@@ -279,16 +284,20 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
         # judged with the boundary panels the net will get: the staircase along the
         # boundary is theirs to clad; what they cannot reach are the lattice's own holes
         hole = None
-        try:
-            # the lattice as it is: patches would hide the holes a smoother field avoids
-            panels = trim_to_design(layout.mesh, layout, patch_gaps=False)
-            coverage, on_net = panels.coverage, panels.coverage_net
-            # a gap inside the design; one at its boundary the glide partly closes (the
-            # boundary vertices move onto the boundary): judged after it
-            inside = [g for g in panels.gaps if not g["at_design_boundary"]]
-            hole = inside[0] if inside else None
-        except shapely.errors.GEOSException:
-            coverage = on_net = net_coverage(layout.mesh, design, h)
+        if judged_on is not None:
+            coverage, gaps = net_cover(layout.mesh, judged_on, h)
+            on_net, hole = coverage, gaps[0] if gaps else None
+        else:
+            try:
+                # the lattice as it is: patches would hide the holes a smoother field avoids
+                panels = trim_to_design(layout.mesh, layout, patch_gaps=False)
+                coverage, on_net = panels.coverage, panels.coverage_net
+                # a gap inside the design; one at its boundary the glide partly closes (the
+                # boundary vertices move onto the boundary): judged after it
+                inside = [g for g in panels.gaps if not g["at_design_boundary"]]
+                hole = inside[0] if inside else None
+            except shapely.errors.GEOSException:
+                coverage = on_net = net_coverage(layout.mesh, design, h)
         tried.append({"smoothing_panels": length, "used": layout.smoothing,
                       "field": layout.direction_field, "coverage": coverage})
         if coverage > best_coverage:
@@ -304,7 +313,7 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     lengths = [float(t["smoothing_panels"] or 0.0) for t in tried]
     if judged:
         if best_net is None:
-            best_net = net_coverage(best.mesh, design, h)
+            best_net = net_coverage(best.mesh, judged_on or design, h)
         if best_net < s.min_lattice_share:
             raise InputError(_broken_lattice(best, best_net, lengths))
         if best_hole is not None and best_hole["area_relative_to_panel"] > s.max_gap_panels:

@@ -66,7 +66,7 @@ if TYPE_CHECKING:
     from .surface_layout import SurfaceLayout
 
 __all__ = ["BoundaryPanels", "ParameterChart", "Soundness", "trim_to_design",
-           "add_boundary_panels", "read_boundary_panels", "net_coverage", "soundness",
+           "add_boundary_panels", "read_boundary_panels", "net_cover", "net_coverage", "soundness",
            "slide_splits"]
 
 
@@ -820,9 +820,17 @@ def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout, *,
 
 def net_coverage(mesh: QuadMesh, design: DesignSurface, panel_size: float) -> float:
     """The share of the design's area under the faces of `mesh` (`_clad`)."""
+    return net_cover(mesh, design, panel_size, gaps=False)[0]
+
+
+def net_cover(mesh: QuadMesh, design: DesignSurface, panel_size: float, *,
+              gaps: bool = True) -> tuple[float, list[dict]]:
+    """The share of the design's area under the faces of `mesh` (`_clad`) and the largest
+    parts it leaves unclad (`coverage_gaps`; none with ``gaps=False``)."""
     samples, normals, weight = _design_samples(design)
     on = _clad(samples, normals, mesh.vertices, mesh.triangles(), panel_size)
-    return float(weight[on].sum() / weight.sum())
+    share = float(weight[on].sum() / weight.sum())
+    return share, coverage_gaps(design, samples, weight, on, panel_size) if gaps else []
 
 
 #: gaps smaller than this share of a full panel are not listed (measuring noise)

@@ -697,7 +697,7 @@ def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
     if key not in layouts:
         clock = time.perf_counter()
         say(f"    layout {where}")
-        layouts[key] = layout_surface(continued.design, size, angle=angle)
+        layouts[key] = layout_surface(continued.design, size, angle=angle, judged_on=design)
         # counted as layout time (`seconds` is the candidate's record)
         seconds["layout"] += time.perf_counter() - clock
     if key not in starts:
