@@ -190,3 +190,22 @@ def test_bad_arrays_are_refused_not_read(compiled):
         values = np.zeros(4)
         values.flags.writeable = False
         normal_sums.sum_products(weighted, 2, 3, None, slots, 0, values)
+
+
+def test_pattern_arrays_that_do_not_match_are_refused(compiled):
+    from fabplan.solve import normal_sums
+
+    columns = [np.array([[0, 1], [1, 2]], dtype=np.int64)]
+    indptr, rows, repeats = compiled.pattern_rows(columns, 3)
+    assert indptr.tolist() == [0, 2, 4, 5] and repeats == (False,)
+    with pytest.raises(TypeError, match="int64"):           # columns of another type
+        normal_sums.pattern_rows([columns[0].astype(np.int32)], 3, np.empty(4, np.int64))
+    with pytest.raises(ValueError, match="indptr"):         # indptr of the wrong size
+        normal_sums.pattern_rows(columns, 3, np.empty(3, np.int64))
+    with pytest.raises(ValueError, match="match"):          # fewer slots than products
+        normal_sums.pattern_fill(rows, columns, 3, indptr, np.empty(5, np.int32),
+                                 np.empty(5, np.int32))
+    indices, slots = np.empty(5, np.int32), np.empty(6, np.int32)
+    normal_sums.pattern_fill(rows, columns, 3, indptr, indices, slots)
+    assert indices.tolist() == [0, 1, 1, 2, 2]
+    assert slots.tolist() == [0, 2, 1, 3, 2, 4]             # (0,0) (1,1) | (0,1) (1,2) | (1,1) (2,2)

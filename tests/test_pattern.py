@@ -16,6 +16,7 @@ from helpers import noisy
 import fabplan
 import fabplan.solve.solver as solver_module
 from fabplan.net.generate import rotational_weingarten_snet
+from fabplan.solve import kernels
 from fabplan.solve.constraints import VariableBlocks
 from fabplan.solve.edit import NetEditor
 from fabplan.solve.net_types import NETS
@@ -93,11 +94,19 @@ def tetrapod():
     return module.tetrapod_mesh(rings=2)
 
 
-@pytest.fixture(autouse=True)
-def empty_cache():
+@pytest.fixture(autouse=True, params=["compiled", "numpy"])
+def empty_cache(request, monkeypatch):
+    """Every test on both paths that build a pattern: the compiled kernels
+    (`fabplan.solve.kernels`, where built) and numpy."""
+    if request.param == "numpy":
+        monkeypatch.setenv("FABPLAN_KERNELS", "numpy")
+    elif kernels.compiled() is None:
+        pytest.skip("the compiled kernels are not built or switched off")
+    kernels.compiled.cache_clear()
     pattern_cache.clear()
     yield
     pattern_cache.clear()
+    kernels.compiled.cache_clear()
 
 
 @pytest.mark.parametrize("net", sorted(NETS))

@@ -1,4 +1,5 @@
-"""Compiled kernels for the work of an iteration outside the factorization.
+"""Compiled kernels for the work of an iteration outside the factorization, and for the
+pattern of the normal equations that a solve builds first (`fabplan.solve.pattern`).
 
 The normal equations are summed from every Jacobian row's entry products
 (`fabplan.solve.pattern`). In numpy that takes a buffer of all products (12 million at
@@ -46,6 +47,14 @@ def compiled() -> SimpleNamespace | None:
       ``J^T W^2 r``. `jacobian`: (m, k) float, unweighted; `weight`: float or (m,) float;
       `residual`: (m,) float; `columns`: (m, k) int, free column of each entry (``nfree``
       when held); `gradient`: (nfree + 1,) float, added to in place.
+    - ``pattern_rows(columns, nfree) -> (indptr, rows, repeats)``: the rows of the upper
+      triangle of ``J^T J`` (`fabplan.solve.pattern`). `columns`: per family (m, k)
+      int64, the free column of each entry (``nfree`` when held). `indptr`: (nfree + 1,)
+      int64; `repeats`: per family, whether a row names one free variable at two
+      entries; `rows`: the rows' columns, held for
+    - ``pattern_fill(rows, columns, nfree, indptr, indices, slots)``, which writes them
+      into `indices` (nnz,) and every product's position into `slots` (products,), both
+      int32 or both int64.
     """
     if os.environ.get("FABPLAN_KERNELS", "").lower() == "numpy":
         return None
@@ -70,7 +79,18 @@ def compiled() -> SimpleNamespace | None:
                               _contiguous(columns), part)
         gradient += part
 
-    return SimpleNamespace(sum_products=sum_products, sum_gradient=sum_gradient)
+    def pattern_rows(columns: list[np.ndarray], nfree: int
+                     ) -> tuple[np.ndarray, object, tuple[bool, ...]]:
+        indptr = np.empty(nfree + 1, dtype=np.int64)
+        rows, repeats = normal_sums.pattern_rows(columns, nfree, indptr)
+        return indptr, rows, repeats
+
+    def pattern_fill(rows: object, columns: list[np.ndarray], nfree: int, indptr: np.ndarray,
+                     indices: np.ndarray, slots: np.ndarray) -> None:
+        normal_sums.pattern_fill(rows, columns, nfree, indptr, indices, slots)
+
+    return SimpleNamespace(sum_products=sum_products, sum_gradient=sum_gradient,
+                           pattern_rows=pattern_rows, pattern_fill=pattern_fill)
 
 
 def _contiguous(array: np.ndarray | float) -> np.ndarray:

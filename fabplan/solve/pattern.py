@@ -17,6 +17,11 @@ pairs: a sphere row couples its vertex and its sphere, three node pairs for its 
 products. Only these node pairs are ranked. Which variable pairs inside a node pair occur
 is a 64-bit mask (nodes are at most 8 wide), and the upper triangle and every product's
 slot follow from the ranked node pairs and their masks by counting bits.
+
+Where the compiled kernels are built (`fabplan.solve.kernels`), they build the same
+arrays more directly: each row's columns gathered, made distinct and sorted, then every
+product's column looked up in its row, a Jacobian row at a time (its products name few
+rows of the pattern): a third of the numpy construction's time at 10k to 30k vertices.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .constraints import VariableBlocks
+from .kernels import compiled
 
 __all__ = [
     "FamilyPattern",
@@ -290,6 +296,10 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
     nfree = len(free)
     col_map = np.full(blocks.size, nfree, dtype=np.int64)     # nfree: held
     col_map[free] = np.arange(nfree)
+    kernels = compiled()
+    if kernels is not None:
+        return _compiled_pattern(kernels, [col_map[np.asarray(c, dtype=np.int64)] for c in columns],
+                                 nfree, key)
     node, first = variable_nodes(blocks, free)
     nodes = len(first)
     offset = np.arange(nfree) - first[node]
@@ -394,6 +404,45 @@ def normal_pattern(columns: list[np.ndarray], blocks: VariableBlocks, free: np.n
         array.flags.writeable = False
     return NormalPattern(families=tuple(families), indptr=indptr, indices=indices,
                          diagonal=diagonal, slots=slots, key=key)
+
+
+def _compiled_pattern(kernels, columns: list[np.ndarray], nfree: int, key: bytes) -> NormalPattern:
+    """`normal_pattern` by the compiled kernels (`fabplan.solve.kernels`): each row's
+    candidate columns gathered, made distinct and sorted, then every product's column
+    found in its row. The same arrays as the numpy path; `columns` are free columns
+    (``nfree``: held)."""
+    columns = [np.ascontiguousarray(c, dtype=np.int64) for c in columns]
+    indptr64, rows, repeats = kernels.pattern_rows(columns, nfree)
+    nnz = int(indptr64[-1])
+    dtype = index_dtype(nnz)
+    indices: np.ndarray = np.empty(nnz, dtype=dtype)
+    slots = np.empty(sum(c.shape[1] * (c.shape[1] + 1) // 2 * c.shape[0] for c in columns),
+                     dtype=dtype)
+    kernels.pattern_fill(rows, columns, nfree, indptr64, indices, slots)
+    indptr = indptr64.astype(dtype)
+    diagonal = indptr[:-1].copy()           # a row's first column is its own
+    for array in (indptr, indices, diagonal):
+        array.flags.writeable = False
+    families = tuple(FamilyPattern(c, (c.shape[1] * (c.shape[1] + 1) // 2, c.shape[0]),
+                                   _multiplicity(c, nfree) if twice else None)
+                     for c, twice in zip(columns, repeats, strict=True))
+    return NormalPattern(families=families, indptr=indptr, indices=indices,
+                         diagonal=diagonal, slots=slots, key=key)
+
+
+def _multiplicity(cols: np.ndarray, nfree: int) -> np.ndarray | None:
+    """(p, m) float, 2 for the products of two entries of a row on one free variable,
+    else 1; None when there are none (`FamilyPattern.multiplicity`)."""
+    first, second = np.triu_indices(cols.shape[1])
+    repeated = np.flatnonzero(first != second)
+    a, b = cols[:, first[repeated]], cols[:, second[repeated]]
+    twice = (a == b) & (a < nfree)
+    if not twice.any():
+        return None
+    multiplicity = np.ones((len(first), cols.shape[0]))
+    multiplicity[repeated] = np.where(twice.T, 2.0, 1.0)
+    multiplicity.flags.writeable = False
+    return multiplicity
 
 
 @dataclass
