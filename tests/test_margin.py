@@ -43,18 +43,65 @@ def test_a_closed_tower_is_continued_up_and_down_only():
     assert len(more.inside) == len(tower.triangles)
 
 
+def _bezier_roof():
+    """A bicubic Bezier patch over 3 x 3 m: control points (4, 4, 3) and its knots."""
+    grid = np.stack(np.meshgrid(np.linspace(0, 3, 4), np.linspace(0, 3, 4), indexing="ij"), -1)
+    P = np.concatenate([grid, 0.1 * (grid[..., :1] - 1.5) ** 2 - 0.05 * grid[..., 1:]], axis=-1)
+    return P, np.r_[0.0, 0, 0, 0, 1, 1, 1, 1]
+
+
+def test_an_untrimmed_nurbs_surface_is_continued_with_its_edge_curvature():
+    from math import comb
+
+    from fabplan.design.nurbs import NurbsSurface
+
+    P, knots = _bezier_roof()
+    patch = NurbsSurface(P, None, knots, knots, 3, 3).triangulate(8)
+    more = continued_design(patch, 1.0)
+    assert more is not None and len(more.inside) == len(patch.triangles)
+    surface = more.design.parametric
+    (u0, u1), (v0, v1) = surface.domain
+    assert u0 < 0 and u1 > 1 and v0 < 0 and v1 > 1
+
+    def bezier(u, v):
+        # the patch written here on its own, with Bernstein polynomials
+        def bernstein(t):
+            return np.stack([comb(3, i) * t ** i * (1 - t) ** (3 - i) for i in range(4)], -1)
+        return np.einsum("ni,nj,ijc->nc", bernstein(np.atleast_1d(u)), bernstein(np.atleast_1d(v)), P)
+
+    # on the design it is the patch
+    u, v = np.array([0.0, 0.3, 1.0]), np.array([0.7, 0.0, 1.0])
+    np.testing.assert_allclose(surface.points(u, v), bezier(u, v), atol=1e-12)
+    # past an edge, the second-order expansion about the edge with the second
+    # derivative's normal part (derivatives by differences)
+    h, t = 1e-4, 0.15
+    du = (bezier(1 + h, 0.4) - bezier(1 - h, 0.4)) / (2 * h)
+    dv = (bezier(1.0, 0.4 + h) - bezier(1.0, 0.4 - h)) / (2 * h)
+    duu = (bezier(1 + h, 0.4) - 2 * bezier(1.0, 0.4) + bezier(1 - h, 0.4)) / h ** 2
+    normal = np.cross(du, dv)
+    normal /= np.linalg.norm(normal)
+    expected = bezier(1.0, 0.4) + t * du + 0.5 * t * t * np.sum(duu * normal) * normal
+    np.testing.assert_allclose(surface.points(np.array([1 + t]), np.array([0.4])), expected,
+                               atol=1e-6)
+    # the continuation reaches a metre past every edge of the 3 x 3 m roof, and no farther
+    # than its cells need
+    lo, hi = more.design.vertices.min(axis=0), more.design.vertices.max(axis=0)
+    assert lo[0] <= -1.0 + 1e-9 and hi[0] >= 4.0 - 1e-9
+    assert lo[1] <= -1.0 + 1e-9 and hi[1] >= 4.0 - 1e-9
+    assert lo[0] > -2.0 and hi[0] < 5.0
+
+
 def test_a_design_without_a_formula_or_one_that_breaks_down_is_not_continued():
     saddle = hyperbolic_paraboloid(width=2.0, depth=2.0).triangulate(6)
     as_mesh = DesignSurface(saddle.vertices, saddle.triangles, name="mesh")
     assert continued_design(as_mesh, 1.0) is None
-    # a NURBS surface is evaluated on its own domain only
+    # a trimmed NURBS face: its design is the region its trims bound
     from fabplan.design.nurbs import NurbsSurface
 
-    grid = np.stack(np.meshgrid(np.linspace(0, 3, 4), np.linspace(0, 3, 4), indexing="ij"), -1)
-    P = np.concatenate([grid, 0.1 * (grid[..., :1] - 1.5) ** 2], axis=-1)
-    knots = np.r_[0.0, 0, 0, 0, 1, 1, 1, 1]
-    patch = NurbsSurface(P, np.ones((4, 4)), knots, knots, 3, 3).triangulate(8)
-    assert continued_design(patch, 1.0) is None
+    P, knots = _bezier_roof()
+    loop = np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9], [0.1, 0.1]])
+    trimmed = NurbsSurface(P, None, knots, knots, 3, 3, trims=[loop]).triangulate(8)
+    assert continued_design(trimmed, 1.0) is None
     # a profile whose radius reaches zero just below the design: the cells collapse
     cone = revolution(np.array([[0.5, 0.0], [3.0, 2.5], [5.5, 5.0]])).triangulate((16, 8))
     assert continued_design(cone, 3.0) is None

@@ -16,6 +16,7 @@ end: `fabplan.io.rhino_read` adds them).
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -216,6 +217,26 @@ class NurbsSurface(ParametricSurface):
                       "rational": self.rational, "knots_u": ku.tolist(), "knots_v": kv.tolist(),
                       "trimmed": self.trims is not None}
         super().__init__(name, self._function, domain, parameters, periodic_u)
+        self._own_domain: tuple | None = None       # set on an `extended` copy
+
+    def extended(self, domain: tuple) -> "NurbsSurface":
+        """The surface continued on a wider parameter `domain` ``((u0, u1), (v0, v1))``,
+        as a design continued past its edges needs (`fabplan.layout.margin`).
+
+        Past its own domain a point is the second-order expansion about the nearest
+        point of the domain, with the normal parts of the second derivatives only: the
+        continuation meets the surface with its tangent plane and normal curvatures, and
+        keeps the edge's parameter speed. (The end spans' polynomials would continue it
+        too, but a rational patch's weight may vanish close past its edge, and a
+        cubic's turns soon fold the continuation.) Its second derivatives are those at
+        the edge. The trims, which bound the design, are not carried."""
+        wider = copy.copy(self)
+        # the domain and the function are fields of the frozen base class
+        object.__setattr__(wider, "domain", tuple(tuple(map(float, d)) for d in domain))
+        object.__setattr__(wider, "function", wider._function)
+        wider.trims = None
+        wider._own_domain = self._own_domain or self.domain
+        return wider
 
     # ------------------------------------------------------------------ evaluation
     def _function(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -226,13 +247,36 @@ class NurbsSurface(ParametricSurface):
 
         Parameters
         ----------
-        u, v : (m,) float parameters (clipped to the domain).
+        u, v : (m,) float parameters (clipped to the domain; an `extended` surface is
+            continued past its own).
 
         Returns
         -------
         ``[S]``, ``[S, Su, Sv]`` or ``[S, Su, Sv, Suu, Suv, Svv]``, each (m, 3) float.
         """
+        if self._own_domain is None:
+            return self._evaluate(u, v, order)
         (u0, u1), (v0, v1) = self.domain
+        u = np.clip(np.asarray(u, dtype=np.float64).ravel(), u0, u1)
+        v = np.clip(np.asarray(v, dtype=np.float64).ravel(), v0, v1)
+        (a0, a1), (b0, b1) = self._own_domain
+        at_u, at_v = np.clip(u, a0, a1), np.clip(v, b0, b1)
+        du, dv = (u - at_u)[:, None], (v - at_v)[:, None]
+        if not (du.any() or dv.any()):
+            return self._evaluate(at_u, at_v, order)
+        S, Su, Sv, Suu, Suv, Svv = self._evaluate(at_u, at_v, 2)
+        # the second derivatives' normal parts only (the second fundamental form): the
+        # continuation bends as the surface does across its edge, at the edge's speed
+        n = np.cross(Su, Sv)
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        L, M, N = (np.sum(D * n, axis=1, keepdims=True) * n for D in (Suu, Suv, Svv))
+        P = S + du * Su + dv * Sv + 0.5 * (du * du * L + 2.0 * du * dv * M + dv * dv * N)
+        first = [P, Su + du * L + dv * M, Sv + du * M + dv * N]
+        return [P] if order == 0 else first if order == 1 else first + [L, M, N]
+
+    def _evaluate(self, u: npt.ArrayLike, v: npt.ArrayLike, order: int) -> list[np.ndarray]:
+        """`evaluate` on the surface's own domain (the parameters clipped to it)."""
+        (u0, u1), (v0, v1) = self._own_domain or self.domain
         u = np.clip(np.asarray(u, dtype=np.float64).ravel(), u0, u1)
         v = np.clip(np.asarray(v, dtype=np.float64).ravel(), v0, v1)
         p, q = self.degree_u, self.degree_v

@@ -14,8 +14,9 @@ every open edge, its vertices there held to the continuation with the same limit
 rows solved with the net). The net kept is made of the faces on the design itself; its
 boundary panels follow the whole solved net, ghost rows included (`follow`), and so
 continue it to the design's edge within the limit. This needs a continuation: a built-in
-design (a parametric surface, continued by its own formula); a design given as a mesh or
-NURBS keeps the solve on the design alone.
+design (a parametric surface, continued by its own formula) or an untrimmed NURBS
+surface (its end spans' polynomials continued past its knots); a design given as a mesh
+or a trimmed NURBS face keeps the solve on the design alone.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
+from ..design.nurbs import NurbsSurface
 from ..design.parametric import ParametricSurface
 from ..net.mesh import QuadMesh
 
@@ -86,14 +88,25 @@ def continued_design(design: DesignSurface, margin: float) -> ContinuedDesign | 
     if nu < 1 or nv < 1:
         return None
     du, dv = (u1 - u0) / nu, (v1 - v0) / nv
+
+    def widened(ku: float, kv: float) -> ParametricSurface:
+        domain = ((u0 - ku * du, u1 + ku * du), (v0 - kv * dv, v1 + kv * dv))
+        if isinstance(surface, NurbsSurface):
+            return surface.extended(domain)       # its end spans' polynomials continued
+        return replace(surface, domain=domain)
+
+    if isinstance(surface, NurbsSurface) and surface.trims is not None:
+        return None             # a trimmed face's design is the region its trims bound
+    if type(surface) is not ParametricSurface and not isinstance(surface, NurbsSurface):
+        return None
+    # a NURBS surface is evaluated on its domain only: probed on one twice as wide
+    probe = widened(nu, nv) if isinstance(surface, NurbsSurface) else surface
     # cells added on each side: an even count keeps the alternating diagonals of the grid
-    ku = 0 if surface.periodic_u else _cells(surface, margin, du, along_u=True)
-    kv = _cells(surface, margin, dv, along_u=False)
+    ku = 0 if surface.periodic_u else _cells(probe, surface.domain, margin, du, along_u=True)
+    kv = _cells(probe, surface.domain, margin, dv, along_u=False)
     if ku is None or kv is None:
         return None
-    if type(surface) is not ParametricSurface:
-        return None             # a NURBS surface is evaluated on its own domain only
-    wider = replace(surface, domain=((u0 - ku * du, u1 + ku * du), (v0 - kv * dv, v1 + kv * dv)))
+    wider = widened(ku, kv)
     with np.errstate(all="ignore"):
         try:
             continued = wider.triangulate((nu + 2 * ku, nv + 2 * kv))
@@ -106,11 +119,11 @@ def continued_design(design: DesignSurface, margin: float) -> ContinuedDesign | 
     return ContinuedDesign(continued, inside)
 
 
-def _cells(surface, margin: float, step: float, *, along_u: bool) -> int | None:
+def _cells(surface, domain: tuple, margin: float, step: float, *, along_u: bool) -> int | None:
     """The even number of grid cells of `step` (parameter units) that spans at least
-    `margin` (model units) at both edges of the domain in that direction, or None where
+    `margin` (model units) at both edges of `domain` in that direction, or None where
     the surface does not grow there (a formula that stalls)."""
-    (u0, u1), (v0, v1) = surface.domain
+    (u0, u1), (v0, v1) = domain
     across = np.linspace(v0, v1, 17) if along_u else np.linspace(u0, u1, 17)
     shortest = math.inf
     for edge, out in (((u0, -step) if along_u else (v0, -step)),
