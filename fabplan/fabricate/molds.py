@@ -554,10 +554,10 @@ def _refit_molds(U: np.ndarray, Z: np.ndarray, owner: np.ndarray, K: np.ndarray,
                 return best
             # the joint program may run into numerical trouble where the blocks' scales
             # differ; each open mold is then fitted on its own, from where it stands
-            for j in np.flatnonzero(open_):
-                mine = owner == j
-                best[j] = _refit_molds(U[mine], Z[mine], np.zeros(int(mine.sum()), np.int64),
-                                       best[j:j + 1], free, reach[j:j + 1])[0]
+            for m in np.flatnonzero(open_):
+                mine = owner == m
+                best[m] = _refit_molds(U[mine], Z[mine], np.zeros(int(mine.sum()), np.int64),
+                                       best[m:m + 1], free, reach[m:m + 1])[0]
             return best
         which = np.flatnonzero(open_)
         best[which, :free] = res.x[column[which, None] + np.arange(free)] / scale[which, None]

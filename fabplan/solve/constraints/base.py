@@ -65,6 +65,22 @@ class NetState:
         """(n, 3) vertex positions (normalized), a view into ``x``."""
         return self.blocks.view(self.x, "vertices")
 
+    def footpoints(self, reference, ids: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``reference.closest_points`` of the vertices `ids` (None: all) in model units:
+        footpoints (k, 3), normals (k, 3), triangles (k,). Found once for all vertices
+        per position of the net and reference, and shared: the closeness to a surface and
+        a deviation limit from it ask for the same points every iteration."""
+        cached = self.data.get("footpoints")
+        if cached is None or cached[0] is not reference or not np.array_equal(cached[1], self.X):
+            model = self.X * self.length_scale + self.origin
+            cached = (reference, self.X.copy(), reference.closest_points(model))
+            self.data["footpoints"] = cached
+        foot, normal, triangle = cached[2]
+        if ids is None:
+            return foot, normal, triangle
+        return foot[ids], normal[ids], triangle[ids]
+
 
 class Constraint:
     """A family of residuals ``r(x) = 0`` with a fixed sparsity pattern.

@@ -58,7 +58,7 @@ class Closeness(Constraint):
 
     def prepare(self, state):
         model = state.X[self._ids(state)] * state.length_scale + state.origin
-        foot, normal, triangle = self.reference.closest_points(model)
+        foot, normal, triangle = state.footpoints(self.reference, self.vertices)
         self._foot = (foot - state.origin) / state.length_scale
         self._normal = normal
         # beyond the boundary: the direction from the footpoint along the surface

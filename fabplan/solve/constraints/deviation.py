@@ -55,8 +55,7 @@ class DeviationBound(Constraint):
         return {f"{self.name}-band": (len(self._held(state)),)}
 
     def prepare(self, state):
-        model = state.X[self._held(state)] * state.length_scale + state.origin
-        foot, self._normal, _ = self.reference.closest_points(model)
+        foot, self._normal, _ = state.footpoints(self.reference, self._held(state))
         self._foot = (foot - state.origin) / state.length_scale
 
     def distances(self, state) -> np.ndarray:
