@@ -21,8 +21,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-# public name -> the module that owns it; imported on first use, so that a module of this
-# package (its materials, say) can be imported without the whole plan
+# public name -> the module that owns it; imported on first use, so that one module of this
+# package can be imported without the others
 _EXPORTS = {
     "UNITS": "fabplan.fabricate.molds.mold_shapes",
     "TOLERANCE_RANGE_MM": "fabplan.fabricate.molds.mold_shapes",

@@ -20,9 +20,7 @@ from ...io.units import MM_PER_UNIT, check_units
 from ...net.mesh import QuadMesh
 from .materials import Material
 from .panel_classes import DEFAULT_ORDER
-from .panels import (
-    SURFACE_MODELS,
-)
+from .panels import SURFACE_MODELS
 
 __all__ = [
     "UNITS",
