@@ -1,7 +1,7 @@
 """The compiled kernels: the solver's sums (fabplan/solve/normal_sums.c) and the fit of
-mold placements (fabplan/fabricate/mold_fit_kernel.c); the rest of the build is
+mold placements (fabplan/fabricate/molds/mold_fit_kernel.c); the rest of the build is
 declared in pyproject.toml. The extensions are optional: without a C compiler fabplan
-installs and runs on its numpy paths (fabplan.solve.kernels, fabplan.fabricate.mold_fits)."""
+installs and runs on its numpy paths (fabplan.solve.kernels, fabplan.fabricate.molds.mold_fits)."""
 
 import sys
 
@@ -13,7 +13,7 @@ flags = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off"]
 setup(ext_modules=[
     Extension("fabplan.solve.normal_sums", ["fabplan/solve/normal_sums.c"],
               extra_compile_args=flags, optional=True),
-    # the fit of mold placements (fabplan.fabricate.mold_fits)
-    Extension("fabplan.fabricate.mold_fit_kernel", ["fabplan/fabricate/mold_fit_kernel.c"],
+    # the fit of mold placements (fabplan.fabricate.molds.mold_fits)
+    Extension("fabplan.fabricate.molds.mold_fit_kernel", ["fabplan/fabricate/molds/mold_fit_kernel.c"],
               extra_compile_args=flags, optional=True),
 ])

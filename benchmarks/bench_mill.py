@@ -40,8 +40,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from fabplan.fabricate.mill_report import mill_net  # noqa: E402
 from fabplan.fabricate.milling import MillSettings, parse_tool  # noqa: E402
+from fabplan.fabricate.milling.mill_report import mill_net  # noqa: E402
 from fabplan.net.mesh import QuadMesh  # noqa: E402
 
 

@@ -212,7 +212,7 @@ def sphere_consistency(mesh) -> dict:
     n at v has ``2 (w - v) . n / L^2`` (all four edges share it on an S-net). A tilt of n
     changes the sagitta only to second order.
     """
-    from fabplan.fabricate.panels import fit_panel_surfaces, shared_edge_points
+    from fabplan.fabricate.molds.panels import fit_panel_surfaces, shared_edge_points
     from fabplan.net.geometry import star_normals
 
     X, stars = mesh.vertices, mesh.stars

@@ -8,11 +8,11 @@ elements whose five tangent planes per star touch one Mannheim sphere, here 32 .
 in radius on the hollow side. A cone of 45 deg half angle (a 45 deg chamfer or lead-angle
 cutter: 24 mm at the tip, 44 mm where the 10 mm flank ends) then cuts with its flank
 along the first family, circumscribed to safety spheres inside the Mannheim spheres
-(`fabplan.fabricate.flank_milling`), and the cut is simulated
-(`fabplan.fabricate.mill_simulation`). The S*-net leaves the saddle by up to 0.05 mm as it
+(`fabplan.fabricate.milling.flank_milling`), and the cut is simulated
+(`fabplan.fabricate.milling.mill_simulation`). The S*-net leaves the saddle by up to 0.05 mm as it
 is optimized: the passes are placed on the saddle itself (`DESIGN`, the same surface as a
 built-in spec) and the cut is measured against it, the net's own distance from it reported
-beside (`fabplan.fabricate.mill_design`).
+beside (`fabplan.fabricate.milling.mill_design`).
 
 Run ``python examples/mill_cone_saddle.py -o out/cone``: writes ``start.obj``, ``net.obj``
 (with its ``vn`` normals) and the files of `fabplan mill` (``path.cl``, ``path.csv``,
@@ -29,9 +29,9 @@ import numpy as np
 
 import fabplan
 from fabplan.design.load import load_design
-from fabplan.fabricate.mill_report import MillResult, mill_net, write_mill_report
-from fabplan.fabricate.mill_simulation import SimulationSettings
 from fabplan.fabricate.milling import MillSettings, parse_tool
+from fabplan.fabricate.milling.mill_report import MillResult, mill_net, write_mill_report
+from fabplan.fabricate.milling.mill_simulation import SimulationSettings
 from fabplan.net.mesh import QuadMesh
 
 RADIUS_X_MM = 250.0    # domed along x

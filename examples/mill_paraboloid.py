@@ -7,10 +7,10 @@ with panels of 9 mm is laid out on it and optimized gliding on the surface
 (`fabplan.layout`); its Meusnier radii are the harmonic means of the principal radii
 (paper section 3.2.4). A 50 mm face mill then finishes it along the first family
 (`fabplan.fabricate.milling`), and the cut is simulated and compared with a ball end of the
-same diameter along the same passes (`fabplan.fabricate.mill_simulation`). The passes are
+same diameter along the same passes (`fabplan.fabricate.milling.mill_simulation`). The passes are
 placed on the paraboloid itself and the cut is measured against it; the net's own distance
 from it, and the cut measured against the net's surface, are reported beside
-(`fabplan.fabricate.mill_design`).
+(`fabplan.fabricate.milling.mill_design`).
 
 Run ``python examples/mill_paraboloid.py -o out/mill``: writes ``net.obj`` and the files of
 `fabplan mill` (``path.cl``, ``path.csv``, ``mill.json``, ``report.html``).
@@ -23,9 +23,9 @@ import sys
 from pathlib import Path
 
 from fabplan.design.load import load_design
-from fabplan.fabricate.mill_report import MillResult, mill_net, write_mill_report
-from fabplan.fabricate.mill_simulation import SimulationSettings
 from fabplan.fabricate.milling import MillSettings, parse_tool
+from fabplan.fabricate.milling.mill_report import MillResult, mill_net, write_mill_report
+from fabplan.fabricate.milling.mill_simulation import SimulationSettings
 from fabplan.layout.surface_layout import glide, layout_surface
 
 DESIGN = "paraboloid:radius_x=500,radius_y=520,width=75,depth=75"

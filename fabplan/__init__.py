@@ -43,12 +43,12 @@ _EXPORTS = {
     "layout_surface": "fabplan.layout.surface_layout",
     "glide": "fabplan.layout.surface_layout",
     "plan_molds": "fabplan.study.api",
-    "MoldSettings": "fabplan.fabricate.molds",
-    "MoldPlan": "fabplan.fabricate.molds",
-    "StripSettings": "fabplan.fabricate.strips",
-    "build_strips": "fabplan.fabricate.strips",
+    "MoldSettings": "fabplan.fabricate.molds.mold_shapes",
+    "MoldPlan": "fabplan.fabricate.molds.mold_plan",
+    "StripSettings": "fabplan.fabricate.strips.strip_set",
+    "build_strips": "fabplan.fabricate.strips.strip_set",
     "plan_strips": "fabplan.study.api",
-    "StripPlan": "fabplan.fabricate.strip_plan",
+    "StripPlan": "fabplan.fabricate.strips.strip_plan",
     "read_study": "fabplan.study.spec",
     "run_study": "fabplan.study.api",
     # the pipeline for scripts: (V, F) or a QuadMesh in, typed results with .to_json() out
@@ -119,9 +119,10 @@ if TYPE_CHECKING:  # what a type checker and an IDE see; at run time `__getattr_
     from .design.load import load_design
     from .design.mesh_surface import DesignSurface
     from .fabricate.arcs import ArcStructure
-    from .fabricate.molds import MoldPlan, MoldSettings
-    from .fabricate.strip_plan import StripPlan
-    from .fabricate.strips import StripSettings, build_strips
+    from .fabricate.molds.mold_plan import MoldPlan
+    from .fabricate.molds.mold_shapes import MoldSettings
+    from .fabricate.strips.strip_plan import StripPlan
+    from .fabricate.strips.strip_set import StripSettings, build_strips
     from .layout.surface_layout import glide, layout_surface
     from .net.measure import measure_net
     from .net.mesh import QuadMesh, load_mesh

@@ -474,11 +474,11 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
 def _cmd_molds(args) -> int:
     import numpy as np
 
-    from .fabricate.boundary_molds import boundary_molds, boundary_molds_text
-    from .fabricate.materials import parse_material
-    from .fabricate.mold_report import MOLD_FILES, write_mold_report
     from .fabricate.molds import MoldSettings, plan_molds
-    from .fabricate.panels import check_panels
+    from .fabricate.molds.boundary_molds import boundary_molds, boundary_molds_text
+    from .fabricate.molds.materials import parse_material
+    from .fabricate.molds.mold_report import MOLD_FILES, write_mold_report
+    from .fabricate.molds.panels import check_panels
     from .layout.trim import read_boundary_panels
 
     settings = MoldSettings(tolerance_mm=args.tolerance_mm, units=_net_units(args, args.net),
@@ -573,9 +573,9 @@ def _cmd_molds(args) -> int:
 
 
 def _cmd_mill(args) -> int:
-    from .fabricate.mill_report import MILL_FILES, mill_net, write_mill_report
-    from .fabricate.mill_simulation import SimulationSettings
     from .fabricate.milling import MillSettings, parse_tool
+    from .fabricate.milling.mill_report import MILL_FILES, mill_net, write_mill_report
+    from .fabricate.milling.mill_simulation import SimulationSettings
 
     tool = parse_tool(args.tool)
     settings = MillSettings(along=args.along, units=_net_units(args, args.net, default="mm"),
@@ -902,7 +902,7 @@ def _check_simulation_memory(mesh: Any, mm_per_unit: float, step_mm: float) -> N
     """Refuse a milling simulation whose grid at ``--sim-step`` would need more memory than
     is left beside the plan, naming the smallest step that fits (a grid over the cap of
     `height_target` is refused there, before it is made)."""
-    from .fabricate.mill_simulation import MAX_SIMULATION_CELLS, simulation_cells
+    from .fabricate.milling.mill_simulation import MAX_SIMULATION_CELLS, simulation_cells
     from .io.resources import MILL_MEMORY, SIMULATION_MEMORY, check_memory, memory_limit
 
     cells = simulation_cells(mesh.vertices * mm_per_unit, mesh.triangles(), step_mm)
@@ -1114,9 +1114,9 @@ def _parse_layers(specs: list | None) -> dict:
 
 
 def _cmd_strips(args) -> int:
-    from .fabricate.nesting import make_parts, nest_parts
-    from .fabricate.strip_plan import STRIP_FILES, StripPlan, strip_limit_checks
     from .fabricate.strips import StripSettings, build_strips
+    from .fabricate.strips.nesting import make_parts, nest_parts
+    from .fabricate.strips.strip_plan import STRIP_FILES, StripPlan, strip_limit_checks
     from .io.resources import check_panel_count, worker_count
 
     worker_count(args.workers)  # a bad value fails before any work
@@ -1201,7 +1201,7 @@ def _cmd_strips(args) -> int:
     print(f"wrote {len(files)} files to {out} in {time.perf_counter() - started:.1f} s "
           f"(planning {s['seconds']:.1f} s, every sheet audited and checked before writing)")
     if boundary is not None:
-        from .fabricate.strip_boundary import MAX_TURN_DEG
+        from .fabricate.strips.strip_boundary import MAX_TURN_DEG
 
         angle = s["member_angle_min_deg"]
         print(f"{counted(s['ends_at_boundary_member'], 'strip end')} reach the edge of the "
@@ -1259,7 +1259,7 @@ def _limits_exit(checks: list, record: Path, claim: str | None = None) -> int:
 
 def _free_ends_text(summary: dict) -> str:
     """``N ends are free: a inside the net (...), b along the edge, c not continued``."""
-    from .fabricate.strip_boundary import MIN_MEMBER_ANGLE_DEG
+    from .fabricate.strips.strip_boundary import MIN_MEMBER_ANGLE_DEG
 
     kinds = summary["ends_free_by_kind"]
     why = {"inside": "inside the net, where a line stops at an irregular vertex",
@@ -1300,7 +1300,7 @@ def _has_faces(path: Path) -> bool:
 def _strip_boundary(args, mesh):
     """``(file, StripBoundary)`` of the boundary panels strips run through, or
     ``(None, None)`` (`_boundary_file`)."""
-    from .fabricate.strip_boundary import StripBoundary
+    from .fabricate.strips.strip_boundary import StripBoundary
 
     path = _boundary_file(args)
     if path is None:

@@ -287,10 +287,10 @@ def chromium(width: int, height: int):
 
 
 # ----------------------------------------------------------------------------- panel classes
-# The class checks of a material (`fabplan.fabricate.panel_classes`) recomputed from the
+# The class checks of a material (`fabplan.fabricate.molds.panel_classes`) recomputed from the
 # exported data with the tests' own frames, fits and plate formulas (docs/materials.md).
 # Only the panels' dense samples come from fabplan: the panel surfaces the mold plan
-# verifies (`fabplan.fabricate.panels`), never the classifier.
+# verifies (`fabplan.fabricate.molds.panels`), never the classifier.
 
 VERIFY_LEVEL = 12          # the mold plan's dense samples (MoldSettings.verify_level)
 COVER_LEVEL = 4            # the samples a design model's quadrics are fitted to (cover_level)
@@ -300,7 +300,7 @@ PANEL_CLASSES = ("flat", "cold_bent", "roll_bent", "molded")
 def dense_panel_samples(mesh: QuadMesh, panel_surface: str, design=None) -> np.ndarray:
     """(f, s, 3) model units: the dense samples of the panel surface a mold plan verified
     (``panel_surface`` of molds.json; ``design`` needs the design the net was held on)."""
-    from fabplan.fabricate.panels import (
+    from fabplan.fabricate.molds.panels import (
         design_panel_samples,
         fit_design_panels,
         fit_panel_surfaces,

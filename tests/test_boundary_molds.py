@@ -15,8 +15,8 @@ from helpers import chord_steps, exported_molds, mold_gaps
 from fabplan.cli import main
 from fabplan.design.load import load_design
 from fabplan.design.mesh_surface import DesignSurface
-from fabplan.fabricate.boundary_molds import boundary_molds, boundary_sides
 from fabplan.fabricate.molds import MoldSettings, plan_molds
+from fabplan.fabricate.molds.boundary_molds import boundary_molds, boundary_sides
 from fabplan.io.obj import read_obj
 from fabplan.layout.surface_layout import glide, layout_surface
 from fabplan.layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels

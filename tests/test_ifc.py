@@ -318,7 +318,7 @@ def test_unit_assignment_follows_the_net(tmp_path, units, scale, name):
 
 
 def test_a_failed_run_leaves_no_ifc(tmp_path, monkeypatch):
-    import fabplan.fabricate.mold_report as report
+    import fabplan.fabricate.molds.mold_report as report
 
     def broken(*args, **kwargs):
         raise OSError(28, "No space left on device")

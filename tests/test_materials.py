@@ -4,7 +4,7 @@ The figures of molds.json (the bent shape's frame and twist, its stress, the con
 roll-bent panel) are recomputed with code of the tests' own (tests/helpers.py, shared with
 the template studies of tests/test_templates.py): its own frame from the net's corners, its
 own least-squares fits with numpy, its own plate formulas. The panels' dense samples come
-from the panel surfaces the mold plan verifies (`fabplan.fabricate.panels`, the ``shared``
+from the panel surfaces the mold plan verifies (`fabplan.fabricate.molds.panels`, the ``shared``
 surface of the net), not from the classifier.
 """
 
@@ -20,8 +20,8 @@ from helpers import exported_class_counts, recheck_made_molds, recheck_panel_cla
 import fabplan
 from fabplan.cli import main
 from fabplan.errors import InputError
-from fabplan.fabricate.materials import PRESETS, parse_material
 from fabplan.fabricate.molds import plan_molds
+from fabplan.fabricate.molds.materials import PRESETS, parse_material
 from fabplan.net.generate import height_field_grid
 from fabplan.net.mesh import QuadMesh
 from fabplan.study.run import candidate_cost, verdict

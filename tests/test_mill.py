@@ -18,7 +18,8 @@ import pytest
 
 from fabplan.cli import main
 from fabplan.errors import InputError
-from fabplan.fabricate.mill_simulation import (
+from fabplan.fabricate.milling import MillSettings, parse_tool, plan_face_milling
+from fabplan.fabricate.milling.mill_simulation import (
     Cutter,
     HeightTarget,
     SimulationSettings,
@@ -26,7 +27,6 @@ from fabplan.fabricate.mill_simulation import (
     mill_frame,
     simulate_milling,
 )
-from fabplan.fabricate.milling import MillSettings, parse_tool, plan_face_milling
 from fabplan.io.cldata import cldata_text, read_cldata
 from fabplan.net.mesh import QuadMesh
 
@@ -467,7 +467,7 @@ def test_a_net_off_its_design_is_milled_on_the_design():
     vertices gouge the design by those 0.02 mm where the net's own surface sees none;
     placed on the design they cut it within the tolerance, and the net's distance is
     reported apart."""
-    from fabplan.fabricate.mill_report import mill_net
+    from fabplan.fabricate.milling.mill_report import mill_net
 
     design = cap_design(offset=-0.02)
     sim = SimulationSettings(step_mm=1.0)
@@ -569,7 +569,7 @@ def test_a_design_that_misses_part_of_the_net_is_said_in_a_note():
     """A design covering half the net (its x > 0 half): the rest of the cut is not
     measured against anything, and the plan's notes say how much the design reaches."""
     from fabplan.design.parametric import ParametricSurface
-    from fabplan.fabricate.mill_report import mill_net
+    from fabplan.fabricate.milling.mill_report import mill_net
 
     def half_cap(u, v):
         return np.stack([u, v, 300.0 - np.sqrt(300.0**2 - u * u - v * v)], axis=-1)

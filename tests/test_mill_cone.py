@@ -19,8 +19,8 @@ import pytest
 
 from fabplan.cli import main
 from fabplan.errors import InputError
-from fabplan.fabricate.mill_simulation import Cutter, entry_heights
 from fabplan.fabricate.milling import MillSettings, parse_tool
+from fabplan.fabricate.milling.mill_simulation import Cutter, entry_heights
 from fabplan.net.mesh import QuadMesh
 
 GOTO = re.compile(r"^GOTO/(.*)$")

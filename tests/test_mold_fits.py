@@ -1,4 +1,4 @@
-"""The fit of mold placements (`fabplan.fabricate.mold_fits`): its compiled steps and its
+"""The fit of mold placements (`fabplan.fabricate.molds.mold_fits`): its compiled steps and its
 numpy steps find the same placements, and both find a mold that the points lie on.
 
 Points are sampled on a known placed mold and the fit starts from a disturbed placement;
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabplan.fabricate import mold_fits
+from fabplan.fabricate.molds import mold_fits
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:

@@ -21,8 +21,8 @@ from helpers import edge_midpoint_steps, measured_saddle_candidate
 import fabplan
 from fabplan.cli import main
 from fabplan.errors import InputError
-from fabplan.fabricate.mold_report import explain_mold_count, mold_report_files
 from fabplan.fabricate.molds import MoldSettings, plan_molds
+from fabplan.fabricate.molds.mold_report import explain_mold_count, mold_report_files
 from fabplan.net.generate import height_field_grid
 from fabplan.net.mesh import QuadMesh
 from fabplan.net.weingarten import weingarten_fit
@@ -632,7 +632,7 @@ def test_shared_panels_are_pieces_of_one_surface():
     # a mixed net (quads and triangles) on a wavy surface: both panels of every interior edge
     # have the same points on it, the corners are the net's vertices, and the edges are
     # curves, not the chords
-    from fabplan.fabricate.panels import fit_panel_surfaces, shared_panel_samples
+    from fabplan.fabricate.molds.panels import fit_panel_surfaces, shared_panel_samples
 
     grid = height_field_grid(6, 5, lambda x, y: 0.2 * np.sin(x) + 0.05 * x * y)
     faces = [f for f in grid.faces[:-4]]

@@ -470,7 +470,9 @@ def sandbox(tmp_path_factory, monkeypatch):
 
     from fabplan import cli
     from fabplan.edit import server
-    from fabplan.fabricate import mill_report, mold_report, strip_plan
+    from fabplan.fabricate.milling import mill_report
+    from fabplan.fabricate.molds import mold_report
+    from fabplan.fabricate.strips import strip_plan
     from fabplan.io import resources
     from fabplan.layout import starts
     from fabplan.study import parallel, run

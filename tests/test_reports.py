@@ -12,8 +12,8 @@ import pytest
 from conftest import PipedRun
 
 import fabplan
-from fabplan.fabricate.mold_report import mold_report_html
 from fabplan.fabricate.molds import plan_molds
+from fabplan.fabricate.molds.mold_report import mold_report_html
 from fabplan.net.mesh import QuadMesh
 from fabplan.report.html import html_page, html_section, html_table
 from fabplan.report.progress import Progress
@@ -235,7 +235,7 @@ def test_the_stadium_report_pdf_has_contents_and_numbered_pages(stadium_study):
 @pytest.mark.slow
 def test_the_molds_report_pdf_opens_with_contents_and_numbered_pages(cmc1_plan, tmp_path):
     pypdf = pytest.importorskip("pypdf")
-    from fabplan.fabricate.mold_report import write_mold_report
+    from fabplan.fabricate.molds.mold_report import write_mold_report
 
     files = write_mold_report(cmc1_plan, tmp_path / "molds", view_3d=False)
     assert [f.name for f in files] == ["report.html", "report.pdf", "molds.json", "panels.csv"]

@@ -222,8 +222,8 @@ def _ringed_grid(n: int = 4, radius: float = 300.0, open_side: bool = False):
 
 
 def _strips(net, V, panels, **settings):
-    from fabplan.fabricate.strip_boundary import StripBoundary
     from fabplan.fabricate.strips import StripSettings, build_strips
+    from fabplan.fabricate.strips.strip_boundary import StripBoundary
 
     options = dict(height_mm=60.0, thickness_mm=THICKNESS)
     options.update(settings)
@@ -254,7 +254,7 @@ def test_a_panel_wrapping_a_net_corner_leaves_the_corner_inside():
     union = shapely.union_all([shapely.Polygon(V[p][:, :2]) for p in at])
     ring = np.asarray(union.exterior.coords)[:-1]
     wrap = np.array([int(np.argmin(np.linalg.norm(V[:, :2] - xy, axis=1))) for xy in ring])
-    from fabplan.fabricate.strip_boundary import StripBoundary
+    from fabplan.fabricate.strips.strip_boundary import StripBoundary
 
     assert not StripBoundary(net, V, rest + [wrap]).on_edge[0]
     assert StripBoundary(net, V, rest + [wrap]).on_edge[wrap[wrap >= net.vertex_count]].sum() >= 4

@@ -33,8 +33,8 @@ from ezdxf.math import bulge_to_arc
 import fabplan
 from fabplan.cli import main
 from fabplan.errors import FabplanError, InputError
-from fabplan.fabricate import strip_plan
-from fabplan.fabricate.dxf import (
+from fabplan.fabricate.strips import StripSettings, build_strips, fit_arc_runs, strip_plan, strip_polylines
+from fabplan.fabricate.strips.dxf import (
     SheetGeometry,
     check_sheet,
     geometry_document,
@@ -45,16 +45,8 @@ from fabplan.fabricate.dxf import (
     sheet_geometry,
     write_sheet_file,
 )
-from fabplan.fabricate.nesting import (
-    Nesting,
-    Placement,
-    Sheet,
-    _Candidate,
-    _lowest_fit,
-    check_nesting,
-)
-from fabplan.fabricate.strip_plan import plan_strips
-from fabplan.fabricate.strips import StripSettings, build_strips, fit_arc_runs, strip_polylines
+from fabplan.fabricate.strips.nesting import Nesting, Placement, Sheet, _Candidate, _lowest_fit, check_nesting
+from fabplan.fabricate.strips.strip_plan import plan_strips
 from fabplan.net.generate import rotational_snet, rotational_weingarten_snet
 from fabplan.net.geometry import fit_star_spheres
 from fabplan.net.mesh import QuadMesh

@@ -16,6 +16,12 @@ PACKAGE = Path(__file__).resolve().parents[1] / "fabplan"
 # top of the flow first: a stage may import the stages after it, never one before it
 STAGES = ["cli", "edit", "study", "fabricate", "layout", "design", "solve", "net", "report", "io", "errors"]
 
+# the products of the fabricate stage, each a room of its own: a product imports the shared
+# modules of fabricate/ (`limits`) and the stages below, never another product
+PRODUCTS = ["molds", "strips", "milling", "arcs"]
+#: the longest module of fabricate/ (lines): a longer one is split where it has a seam
+MAX_FABRICATE_LINES = 900
+
 
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
@@ -33,15 +39,15 @@ def _in_type_checking(node: ast.AST, parents: dict) -> bool:
 
 
 @functools.cache
-def _imports(path: Path) -> list[tuple[str, list[str], int]]:
+def _imports(path: Path, typing_too: bool = False) -> list[tuple[str, list[str], int]]:
     """(module, names, line) of every fabplan import in a file, lazy ones included, those
-    only for type checkers left out."""
+    only for type checkers left out (unless `typing_too`)."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
     package = _module_name(path) if path.name == "__init__.py" else _module_name(path).rsplit(".", 1)[0]
     found = []
     for node in ast.walk(tree):
-        if _in_type_checking(node, parents):
+        if not typing_too and _in_type_checking(node, parents):
             continue
         if isinstance(node, ast.ImportFrom):
             if node.level:
@@ -127,6 +133,58 @@ def test_every_stage_is_a_folder_with_its_rules():
                 f"{stage}/__init__.py says what it may import"
     loose = sorted(p.name for p in PACKAGE.glob("*.py"))
     assert loose == ["__init__.py", "cli.py", "errors.py"]
+
+
+def _product(module: str) -> str | None:
+    """The product of fabricate/ a module belongs to (`molds` for
+    ``fabplan.fabricate.molds.panels``), None outside them."""
+    parts = module.split(".")
+    if len(parts) > 2 and parts[1] == "fabricate" and parts[2] in PRODUCTS:
+        return parts[2]
+    return None
+
+
+def test_products_of_fabricate_never_import_one_another():
+    """molds, strips, milling and arcs share only what lives in fabricate/ itself (and the
+    stages below); type-checking imports count too."""
+    sideways = []
+    for module, path in MODULES.items():
+        here = _product(module)
+        if here is None:
+            continue
+        for target, names, line in _imports(path, typing_too=True):
+            for t in {_target(target, n) for n in names} or {target}:
+                there = _product(t)
+                if there is not None and there != here:
+                    sideways.append(f"{module}:{line} imports {t}")
+    assert not sideways, "\n".join(sorted(sideways))
+
+
+def test_every_product_is_a_room_with_its_rules():
+    """Each product subpackage says what it owns and what it may import, and re-exports
+    the names of the module it replaced."""
+    import importlib
+
+    for product in PRODUCTS:
+        folder = PACKAGE / "fabricate" / product
+        if not folder.is_dir():
+            assert (PACKAGE / "fabricate" / f"{product}.py").is_file(), product
+            continue
+        doc = ast.get_docstring(ast.parse((folder / "__init__.py").read_text()))
+        assert doc and "Owns" in doc and "May import" in doc, f"fabricate/{product}/__init__.py"
+        package = importlib.import_module(f"fabplan.fabricate.{product}")
+        assert set(package.__all__) <= set(package._EXPORTS)
+        for name, owner in package._EXPORTS.items():
+            assert owner.startswith(f"fabplan.fabricate.{product}.")
+            value = getattr(package, name)
+            assert value is getattr(importlib.import_module(owner), name)
+            assert value is not None
+
+
+def test_no_module_of_fabricate_is_too_long():
+    long = [f"{_module_name(p)}: {n} lines" for p in (PACKAGE / "fabricate").rglob("*.py")
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_FABRICATE_LINES]
+    assert not long, f"over {MAX_FABRICATE_LINES} lines: " + ", ".join(long)
 
 
 @pytest.mark.parametrize("statement", ["import fabplan", "import fabplan.cli",

@@ -1,7 +1,15 @@
-"""From a net to parts: panels and molds, lamella strips, nesting and DXF cutting files.
+"""From a net to parts: one subpackage per product, and what the products share.
 
-Owns: panel surfaces (`panels`), the mold plan (`molds`) and its report (`mold_report`),
-lamella strips (`strips`), parts on sheets (`nesting`), DXF sheets (`dxf`) and the whole
-strip job with its files (`strip_plan`), and circular arc structures (`arcs`).
-May import: `fabplan.solve`, `fabplan.net`, `fabplan.report`, `fabplan.io`, `fabplan.errors`.
+Owns, one room per product:
+- `molds`: panels and molds (panel surfaces, materials and panel classes, the mold plan,
+  boundary panels, the molds' report);
+- `strips`: lamella strips (unrolling, the strips, parts on sheets, DXF sheets, the strip
+  job with its files);
+- `milling`: CNC milling paths (face and flank milling, the simulation of the cut, the
+  report);
+- `arcs`: circular arc structures (one module);
+and what several products share: `limits`, the fabrication limits and their checks.
+May import: `fabplan.layout`, `fabplan.design`, `fabplan.solve`, `fabplan.net`,
+`fabplan.report`, `fabplan.io`, `fabplan.errors`. A product imports the shared modules of
+this package, never another product (`molds`, `strips`, `milling` and `arcs` stay apart).
 """

@@ -12,7 +12,7 @@ code 3 when a part exceeds one. The defaults and where they come from are in
 - ``max_arc_angle_deg``: the largest central angle of an arc of a circular arc structure
   (`fabplan.fabricate.arcs.ArcStructure.angle`), ``arcs --max-arc-angle``.
 - ``congruence_tolerance_mm``: on a net that claims a constant radius (or an infinite one),
-  the largest difference of a strip part from the common arc (`fabplan.fabricate.nesting.
+  the largest difference of a strip part from the common arc (`fabplan.fabricate.strips.nesting.
   congruence`), ``strips --tolerance`` (the cutting tolerance, as in a study).
 - ``max_deviation_mm``: the largest distance of a net vertex from its design or reference,
   ``optimize --max-deviation`` (model units, also held in the solve), ``molds

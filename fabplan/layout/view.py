@@ -52,7 +52,7 @@ def boundary_layer(panels: BoundaryPanels, *, units: str = "",
     units : model units (the areas are shown in units squared).
     info : more numbers per panel (p,), shown after the panel's kind, the full panel it
         continues, its area and corners (e.g. the mold it is cut from:
-        `fabplan.fabricate.boundary_molds.boundary_mold_info`).
+        `fabplan.fabricate.molds.boundary_molds.boundary_mold_info`).
 
     Returns
     -------

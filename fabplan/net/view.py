@@ -4,7 +4,7 @@
 design or reference surface, the Meusnier radius, the intersection angle, the kink
 between neighbouring panels, the turn of the net's lines and the design's uncovered
 parts. Reports that know more add to it: the molds report its molds
-(`fabplan.fabricate.mold_report.net_viewer_scene`), a layout its boundary panels
+(`fabplan.fabricate.molds.mold_report.net_viewer_scene`), a layout its boundary panels
 (`fabplan.layout.view`).
 """
 

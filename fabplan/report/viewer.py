@@ -14,7 +14,7 @@ family (the two strip families) on request; a second set of panels in a colour o
 own (`PanelLayer`: the boundary panels between a net and the design boundary), shown or
 hidden by a check box and picked like the net's.
 
-This module knows nothing of nets or molds: `fabplan.fabricate.mold_report` builds the
+This module knows nothing of nets or molds: `fabplan.fabricate.molds.mold_report` builds the
 scenes of a net.
 """
 

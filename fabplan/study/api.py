@@ -27,15 +27,16 @@ import numpy as np
 
 from ..errors import InputError
 from ..fabricate.arcs import ArcStructure, arc_structure
-from ..fabricate.mill_report import MillResult, mill_net
-from ..fabricate.milling import MillSettings, MillTool, parse_tool
-from ..fabricate.molds import MoldPlan, MoldSettings
-from ..fabricate.molds import plan_molds as _plan_molds_impl
-from ..fabricate.panel_meshes import PanelMesh
-from ..fabricate.strip_boundary import StripBoundary
-from ..fabricate.strip_plan import StripPlan, schedule_rows
-from ..fabricate.strip_plan import plan_strips as _plan_strips_impl
-from ..fabricate.strips import StripSettings
+from ..fabricate.milling.mill_plan import MillSettings, MillTool, parse_tool
+from ..fabricate.milling.mill_report import MillResult, mill_net
+from ..fabricate.molds.mold_assignment import plan_molds as _plan_molds_impl
+from ..fabricate.molds.mold_plan import MoldPlan
+from ..fabricate.molds.mold_shapes import MoldSettings
+from ..fabricate.molds.panel_meshes import PanelMesh
+from ..fabricate.strips.strip_boundary import StripBoundary
+from ..fabricate.strips.strip_plan import StripPlan, schedule_rows
+from ..fabricate.strips.strip_plan import plan_strips as _plan_strips_impl
+from ..fabricate.strips.strip_set import StripSettings
 from ..io.gltf import write_glb as _write_glb_file
 from ..io.ifc import FacadeModel, IfcProperty, PanelSet
 from ..io.ifc import StripSet as IfcStripSet
@@ -374,7 +375,7 @@ def write_glb(net: NetLike, path: str | os.PathLike, *, molds: MoldPlan | None =
 
 def _panel_set(panels: Any, names: list[str], tags: list[str], mold: np.ndarray | None,
                properties: list[IfcProperty]) -> PanelSet:
-    """A `PanelSet` of the triangle meshes `panels` (`fabplan.fabricate.panel_meshes.PanelMesh`)."""
+    """A `PanelSet` of the triangle meshes `panels` (`fabplan.fabricate.molds.panel_meshes.PanelMesh`)."""
     return PanelSet(points=panels.points, triangles=panels.triangles, point_ptr=panels.point_ptr,
                     triangle_ptr=panels.triangle_ptr, names=names, tags=tags, mold=mold,
                     properties=properties)
@@ -389,8 +390,8 @@ def _net_panels(mesh: QuadMesh, molds: MoldPlan | None, mm: float, net_type: str
                 ) -> tuple[PanelSet, dict[int, tuple[str, str]]]:
     """The net's panels (with `molds` their triangulated surfaces, else the faces) and the
     molds' groups."""
-    from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
-    from ..fabricate.panel_meshes import face_fan_mesh
+    from ..fabricate.molds.mold_shapes import MOLD_TYPES, PANEL_TYPES
+    from ..fabricate.molds.panel_meshes import face_fan_mesh
 
     f = len(mesh.face_sizes)
     surface = face_fan_mesh(mesh) if molds is None or molds.surface is None else molds.surface
@@ -409,7 +410,7 @@ def _net_panels(mesh: QuadMesh, molds: MoldPlan | None, mm: float, net_type: str
         if molds.classes is not None:
             # with a material, how each panel is made (panels.csv's `class`) and whether
             # its mold is made at all
-            from ..fabricate.panel_classes import CLASSES
+            from ..fabricate.molds.panel_classes import CLASSES
 
             props += [IfcProperty("MaterialClass", "IfcLabel",
                                   [CLASSES[c] for c in molds.classes.panel_class]),
@@ -425,9 +426,9 @@ def _boundary_panels(boundary: Any, mm: float, net_type: str | None
                      ) -> tuple[PanelSet | None, dict[int, tuple[str, str]]]:
     """The boundary panels: as cut from their molds (a `BoundaryMolds`) or trimmed (a
     `BoundaryPanels`), and the groups of the molds of their own."""
-    from ..fabricate.boundary_molds import BoundaryMolds
-    from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
-    from ..fabricate.panel_meshes import boundary_cut_mesh
+    from ..fabricate.molds.boundary_molds import BoundaryMolds
+    from ..fabricate.molds.mold_shapes import MOLD_TYPES, PANEL_TYPES
+    from ..fabricate.molds.panel_meshes import boundary_cut_mesh
 
     cut_molds = boundary if isinstance(boundary, BoundaryMolds) else None
     made = boundary.panels if cut_molds is not None else boundary
@@ -519,7 +520,7 @@ def _joined(parts: list) -> tuple[np.ndarray, np.ndarray]:
 
 def _lamellas(mesh: QuadMesh, strips: StripPlan, net_type: str | None) -> IfcStripSet:
     """The strips as lamellas: node polylines, node normals, cross-section, ids."""
-    from ..fabricate.molds import UNITS
+    from ..fabricate.molds.mold_shapes import UNITS
 
     lamellas = strips.strips
     scale = UNITS[lamellas.settings.units]
@@ -527,7 +528,7 @@ def _lamellas(mesh: QuadMesh, strips: StripPlan, net_type: str | None) -> IfcStr
     if normals is None:        # a plan made before the normals were kept: the net's nearest
         from scipy.spatial import cKDTree
 
-        from ..fabricate.strips import node_normals
+        from ..fabricate.strips.unrolling import node_normals
 
         normals = node_normals(mesh)[cKDTree(mesh.vertices).query(lamellas.positions)[1]]
     chosen = lamellas.strips
@@ -575,7 +576,7 @@ def ifc_facade(net: NetLike, *, molds: MoldPlan | None = None, boundary: Any = N
     name : the project's name (default: the net's file name).
     nodes : write the net as a structural analysis model (vertices and edges).
     """
-    from ..fabricate.molds import UNITS
+    from ..fabricate.molds.mold_shapes import UNITS
 
     mesh = as_mesh(net)
     mm = UNITS[units]

@@ -51,10 +51,12 @@ def background_processes(processes: int | None = None) -> int:
 def _warm_up(files: bool) -> None:
     """Import here what every forked process needs, and draw a text (loading the font),
     so that the processes inherit them instead of loading them each."""
-    from ..fabricate import boundary_molds, molds, strip_plan  # noqa: F401
+    from ..fabricate.molds import boundary_molds, mold_assignment, mold_plan  # noqa: F401
+    from ..fabricate.strips import strip_plan  # noqa: F401
 
     if files:
-        from ..fabricate import dxf, mold_report  # noqa: F401
+        from ..fabricate.molds import mold_report  # noqa: F401
+        from ..fabricate.strips import dxf  # noqa: F401
         from ..report import figures
         from . import report  # noqa: F401
 

@@ -54,14 +54,16 @@ _NPY_HEADER = 4096
 
 def cached_types() -> dict[str, type]:
     """The only classes a kept candidate may hold: a study candidate's results."""
-    from ..fabricate.boundary_molds import BoundaryMolds, BoundarySides
-    from ..fabricate.materials import Material
-    from ..fabricate.molds import MoldPlan, MoldSettings
-    from ..fabricate.nesting import Label, Nesting, Part, Placement, Sheet
-    from ..fabricate.panel_classes import PanelClasses
-    from ..fabricate.panel_meshes import PanelMesh
-    from ..fabricate.strip_plan import StripPlan
-    from ..fabricate.strips import ArcRun, Crossing, ReferenceCurve, Strip, StripSet, StripSettings
+    from ..fabricate.molds.boundary_molds import BoundaryMolds, BoundarySides
+    from ..fabricate.molds.materials import Material
+    from ..fabricate.molds.mold_plan import MoldPlan
+    from ..fabricate.molds.mold_shapes import MoldSettings
+    from ..fabricate.molds.panel_classes import PanelClasses
+    from ..fabricate.molds.panel_meshes import PanelMesh
+    from ..fabricate.strips.nesting import Label, Nesting, Part, Placement, Sheet
+    from ..fabricate.strips.strip_plan import StripPlan
+    from ..fabricate.strips.strip_set import Crossing, ReferenceCurve, Strip, StripSet, StripSettings
+    from ..fabricate.strips.unrolling import ArcRun
     from ..layout.trim import BoundaryPanels
     from ..net.mesh import QuadMesh
     from ..solve.optimize import OptimizationResult

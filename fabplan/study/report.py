@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import InputError
-from ..fabricate.mold_report import net_viewer_scene
+from ..fabricate.molds.mold_report import net_viewer_scene
 from ..io import output
 from ..io.forked import ForkedFile
 from ..io.records import json_text
@@ -179,7 +179,7 @@ def candidates_csv(result: StudyResult) -> str:
 
 # ---------------------------------------------------------------------------- pictures
 def _view(mesh):
-    from ..fabricate.mold_report import facade_view
+    from ..fabricate.molds.mold_report import facade_view
 
     return facade_view(mesh)
 
@@ -836,7 +836,7 @@ def study_viewer_scenes(result: StudyResult) -> tuple[list[viewer.ViewerScene], 
 
     A net with boundary panels shows them green, each with the full panel and the mold it
     is cut from; its coverage gaps are the design's parts neither covers."""
-    from ..fabricate.boundary_molds import boundary_mold_info
+    from ..fabricate.molds.boundary_molds import boundary_mold_info
     from ..layout.view import boundary_layer, uncovered_triangles
 
     scenes: list[viewer.ViewerScene] = []
@@ -1121,8 +1121,8 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
     """Write one candidate's files into `folder`; `twin_strips` are the strip files
     (``strips/NAME``: bytes) of the earlier candidate whose net and strip plan this one
     shares, if any: they are copied rather than made and read back a second time."""
-    from ..fabricate.boundary_molds import boundary_panels_csv
-    from ..fabricate.dxf import preview_png, sheet_document
+    from ..fabricate.molds.boundary_molds import boundary_panels_csv
+    from ..fabricate.strips.dxf import preview_png, sheet_document
 
     net, molds_plan = c.net, c.molds
     if net is None or molds_plan is None:
@@ -1157,7 +1157,7 @@ def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: Des
     pictures = {"net": _png_uri(folder / "net.png"),
                 "deviation": deviation_figure(c, design, study.limits.max_deviation_mm,
                                               study.design.mm_per_unit)}
-    from ..fabricate.mold_report import mold_figure
+    from ..fabricate.molds.mold_report import mold_figure
 
     molds = c.metrics["molds"]
     own = molds["count"] - molds_plan.mold_count         # the boundary panels' own molds

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from ..errors import FabplanError
-from ..fabricate.molds import MOLD_TYPES, PANEL_TYPES
+from ..fabricate.molds.mold_shapes import MOLD_TYPES, PANEL_TYPES
 from ..net.free_vertices import free_vertices
 from ..net.geometry import face_planarity, kink_angles
 from ..report.html import counted
@@ -38,9 +38,9 @@ from .spec import Candidate, CostWeights, Limits, Study
 
 if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs
     from ..design.mesh_surface import DesignSurface
-    from ..fabricate.boundary_molds import BoundaryMolds
-    from ..fabricate.molds import MoldPlan
-    from ..fabricate.strip_plan import StripPlan
+    from ..fabricate.molds.boundary_molds import BoundaryMolds
+    from ..fabricate.molds.mold_plan import MoldPlan
+    from ..fabricate.strips.strip_plan import StripPlan
     from ..layout.margin import ContinuedDesign
     from ..layout.surface_layout import SurfaceLayout
     from ..net.mesh import QuadMesh
@@ -647,7 +647,7 @@ def optimize_held(study: Study, candidate: Candidate, start: QuadMesh, **options
 def _on_molds(study: Study, candidate: Candidate) -> bool:
     """The candidate's panels are curved panels on molds: not a lamella study's strips
     (they end on the net's own settled tips) nor flat panels (their boundary panels are
-    cut flat in the planes of the net's sides: `fabplan.fabricate.flat_boundary`)."""
+    cut flat in the planes of the net's sides: `fabplan.fabricate.molds.flat_boundary`)."""
     from ..solve.net_types import get_net
 
     return not is_lamella_study(study) and not get_net(candidate.net).planar_faces
@@ -729,10 +729,11 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     its molds when they were planned at this candidate's mold tolerance; only then is the
     candidate the twin's net (`same_net_as`) rather than an option of its own.
     """
-    from ..fabricate.boundary_molds import boundary_molds
-    from ..fabricate.molds import MoldSettings, plan_molds
-    from ..fabricate.strip_plan import plan_strips
-    from ..fabricate.strips import StripSettings
+    from ..fabricate.molds.boundary_molds import boundary_molds
+    from ..fabricate.molds.mold_assignment import plan_molds
+    from ..fabricate.molds.mold_shapes import MoldSettings
+    from ..fabricate.strips.strip_plan import plan_strips
+    from ..fabricate.strips.strip_set import StripSettings
 
     net, candidate = solved.net, solved.candidate
     assert net is not None
@@ -813,9 +814,9 @@ def _within_study_limit(metrics: dict, limit_mm: float) -> None:
 
 
 def study_class_order(study: Study) -> tuple[str, ...]:
-    """The order a study's panels try the classes in (`fabplan.fabricate.panel_classes.
+    """The order a study's panels try the classes in (`fabplan.fabricate.molds.panel_classes.
     class_order`): cold or roll bending first by the study's ``[cost]``."""
-    from ..fabricate.panel_classes import class_order
+    from ..fabricate.molds.panel_classes import class_order
 
     return class_order(study.cost.cold_bent_panel, study.cost.roll_bent_panel)
 
@@ -1074,7 +1075,7 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
         "boundary_own_molds": own,
     }
     if classes is not None:
-        from ..fabricate.panel_classes import CLASSES
+        from ..fabricate.molds.panel_classes import CLASSES
 
         molded = classes == CLASSES.index("molded")
         out["panel_classes"] = {c: int(np.sum(classes == i)) for i, c in enumerate(CLASSES)}
@@ -1088,7 +1089,7 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
 
 def _boundary_classes(plan: MoldPlan, boundary: BoundaryMolds) -> np.ndarray:
     """(b,) the class of every boundary panel (`mold_metrics`)."""
-    from ..fabricate.panel_classes import CLASSES
+    from ..fabricate.molds.panel_classes import CLASSES
 
     assert plan.classes is not None
     molded = CLASSES.index("molded")

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any, Iterable, Literal, NoReturn, Sequence, overload
 
 from ..errors import InputError
-from ..fabricate.materials import Material, material_from_table
+from ..fabricate.molds.materials import Material, material_from_table
 from ..io.inputs import check_input_file, check_text
 from ..io.parameters import OPTIONS
 from ..io.units import MM_PER_UNIT
@@ -816,7 +816,7 @@ def _limits(t: _Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits,
 
 
 def _strips(t: _Table) -> StripOptions:
-    from ..fabricate.strips import MAX_SHEET_MM
+    from ..fabricate.strips.strip_set import MAX_SHEET_MM
 
     sheet = t.get("sheet_mm", [2500.0, 1250.0])
     if (not isinstance(sheet, list) or len(sheet) != 2

@@ -28,10 +28,11 @@ from scipy.ndimage import maximum_filter1d
 from shapely import affinity
 from shapely.geometry import Polygon
 
-from ..errors import FabplanError, InputError
+from ...errors import FabplanError, InputError
+from .bulges import bulge_polygon
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .strips import StripSet, StripSettings
+    from .strip_set import StripSet, StripSettings
 
 __all__ = [
     "NESTING_RESOLUTION_MM",
@@ -42,19 +43,14 @@ __all__ = [
     "Nesting",
     "make_parts",
     "nest_parts",
-    "bulge_polygon",
     "congruence",
     "part_congruence_mm",
     "check_nesting",
-    "bulge_points",
     "placed_footprints",
 ]
 
 NESTING_RESOLUTION_MM = 2.0
 """Cell width of the skyline grid; envelopes are taken conservatively per cell."""
-
-ARC_FLATTENING_MM = 0.02
-"""Largest distance between an arc and the polygon that stands for it in geometry tests."""
 
 
 @dataclass(frozen=True)
@@ -122,56 +118,6 @@ class Part:
         """Material area: outline minus slits."""
         slits = shapely.union_all([Polygon(s) for s in self.slits]) if self.slits else None
         return float(self.polygon.area - (self.polygon.intersection(slits).area if slits else 0.0))
-
-
-def bulge_points(outline: np.ndarray, *, closed: bool = True,
-                 tolerance_mm: float = ARC_FLATTENING_MM) -> np.ndarray:
-    """Points along a bulged polyline, arcs flattened within `tolerance_mm`.
-
-    Parameters
-    ----------
-    outline : (m, 3) float rows ``x, y, bulge``.
-    closed : whether the last row connects back to the first.
-
-    Returns
-    -------
-    (p, 2) float, the first point not repeated at the end.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> half = bulge_points(np.array([[1.0, 0, 1], [-1.0, 0, 0]]), closed=False)
-    >>> bool(np.allclose(np.linalg.norm(half, axis=1), 1))
-    True
-    """
-    P = outline[:, :2]
-    m = len(P)
-    stop = m if closed else m - 1
-    out = []
-    for i in range(stop):
-        a, b, bulge = P[i], P[(i + 1) % m], outline[i, 2]
-        out.append(a[None])
-        if abs(bulge) < 1e-12:
-            continue
-        theta = 4 * math.atan(bulge)
-        chord = float(np.linalg.norm(b - a))
-        radius = chord / (2 * abs(math.sin(theta / 2)))
-        step = 2 * math.acos(max(-1.0, 1 - tolerance_mm / radius)) if radius > tolerance_mm else 0.5
-        n = max(2, int(math.ceil(abs(theta) / max(step, 1e-9))))
-        d = b - a
-        left = np.array([-d[1], d[0]]) / chord
-        centre = (a + b) / 2 + left * (chord / 2 / math.tan(theta / 2))
-        a0 = math.atan2(a[1] - centre[1], a[0] - centre[0])
-        t = a0 + theta * np.arange(1, n) / n
-        out.append(centre + radius * np.column_stack([np.cos(t), np.sin(t)]))
-    if not closed:
-        out.append(P[-1][None])
-    return np.concatenate(out)
-
-
-def bulge_polygon(outline: np.ndarray) -> Polygon:
-    """Shapely polygon of a closed bulged outline."""
-    return Polygon(bulge_points(outline, closed=True))
 
 
 # ---------------------------------------------------------------------- splitting
@@ -762,7 +708,7 @@ def _all_orientations(parts: list[Part], spacing: float, res: float, workers: in
     count = min(workers, len(parts) // PARTS_PER_PROCESS)
     if count <= 1:
         return _orientations_of(parts, spacing, res)
-    from ..io.forked import map_in_processes
+    from ...io.forked import map_in_processes
 
     batches = map_in_processes(_orientations_batch,
                                [(parts[k::count], spacing, res) for k in range(count)], count)

@@ -1,7 +1,7 @@
 """Panel classes: flat, cold-bent, roll-bent or molded, each checked on the dense samples.
 
 A mold is the dear way to make a curved panel. Every panel goes to the cheapest class whose
-check it passes (`classify_panels`), for a sheet `fabplan.fabricate.materials.Material`,
+check it passes (`classify_panels`), for a sheet `fabplan.fabricate.molds.materials.Material`,
 on the same densely sampled panel surfaces the mold plan verifies (`fabplan.fabricate.molds`):
 
 ``flat``
@@ -430,7 +430,7 @@ def classify_panels(mesh, dense: np.ndarray, normal: np.ndarray, material: Mater
     ----------
     mesh : the net (`fabplan.net.mesh.QuadMesh`): its faces' first edges orient the frames.
     dense : (p, s, 3) float, the panels' dense samples (model units), as the mold plan
-        verifies them (`fabplan.fabricate.panels.panel_samples` and its kin).
+        verifies them (`fabplan.fabricate.molds.panels.panel_samples` and its kin).
     normal : (p, 3) float, the unit normal of every panel surface at its centre.
     material : the sheet; tolerance_mm : the mold tolerance; mm_per_unit : mm per model unit.
     order : the classes in the order they are tried (`class_order`); flat first, molded last.

@@ -1,6 +1,6 @@
 """Panels as triangle meshes: the panel surfaces of a mold plan, and the boundary panels as cut.
 
-A mold plan measures every panel on samples of its surface (`fabplan.fabricate.panels`): a
+A mold plan measures every panel on samples of its surface (`fabplan.fabricate.molds.panels`): a
 fan of triangles from the mean of the face's corners, each with a triangular grid of
 ``level`` steps per side, lifted onto the panel surface. Those samples, joined into
 triangles, are the panel as a triangle mesh: what the IFC export writes as a panel's
@@ -9,10 +9,10 @@ geometry and what its area is measured on (``panel_area`` in ``molds.json``).
 Per panel the mesh is closed up: the samples on a spoke of the fan (shared by two fan
 triangles) and the centre are kept once, and the corners are the net's vertices exactly
 (the surface passes through them with a least-squares weight of
-`fabplan.fabricate.panels.CORNER_WEIGHT`, so this moves them by about a millionth of the
+`fabplan.fabricate.molds.panels.CORNER_WEIGHT`, so this moves them by about a millionth of the
 panel's size), so that a panel's outline starts and ends where the OBJ's face does.
 
-A boundary panel as cut (`fabplan.fabricate.boundary_molds.BoundaryMolds.cut_outlines`) is
+A boundary panel as cut (`fabplan.fabricate.molds.boundary_molds.BoundaryMolds.cut_outlines`) is
 its trimmed outline moved onto its mold; its mesh is the trimming's triangles over those
 points (`fabplan.layout.trim.BoundaryPanels.panel_triangles`).
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = ["PANEL_MESH_LEVEL", "PanelMesh", "fan_grid", "fan_grid_triangles",
            "panel_surface_mesh", "boundary_cut_mesh", "face_fan_mesh"]
@@ -92,7 +92,7 @@ class PanelMesh:
 def fan_grid(level: int) -> np.ndarray:
     """(t, 2) int, the grid of a fan triangle (centre, corner j, corner j+1): steps ``(i, m)``
     towards corner j and corner j+1, ``i + m <= level``, in the order of the samples of
-    `fabplan.fabricate.panels.panel_samples` (their corner weights are this over `level`).
+    `fabplan.fabricate.molds.panels.panel_samples` (their corner weights are this over `level`).
 
     Examples
     --------
@@ -132,7 +132,7 @@ def panel_surface_mesh(mesh, samples: np.ndarray, level: int) -> PanelMesh:
     ----------
     mesh : the net (`fabplan.net.mesh.QuadMesh`).
     samples : (f, s, 3) float, the panel surface samples at `level`, as
-        `fabplan.fabricate.panels.panel_samples` (or the ``shared`` and ``design``
+        `fabplan.fabricate.molds.panels.panel_samples` (or the ``shared`` and ``design``
         samplers) give them: ``k_max`` fan triangles of ``len(fan_grid(level))`` points each.
     level : grid steps per side of a fan triangle.
 
@@ -145,7 +145,7 @@ def panel_surface_mesh(mesh, samples: np.ndarray, level: int) -> PanelMesh:
     --------
     >>> import numpy as np
     >>> from fabplan.net.mesh import QuadMesh
-    >>> from fabplan.fabricate.panels import fit_panel_surfaces, panel_samples
+    >>> from fabplan.fabricate.molds.panels import fit_panel_surfaces, panel_samples
     >>> square = QuadMesh([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0]], [[0, 1, 2, 3]])
     >>> samples = panel_samples(square, fit_panel_surfaces(square, "corners"), 2)
     >>> panels = panel_surface_mesh(square, samples, 2)

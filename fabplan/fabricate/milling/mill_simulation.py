@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import CannotMakeError, InputError
+from ...errors import CannotMakeError, InputError
 
 __all__ = [
     "Cutter",

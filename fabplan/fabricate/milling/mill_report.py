@@ -3,8 +3,8 @@
 `mill_net` plans the curvature-adaptive passes (`fabplan.fabricate.milling`), builds the
 target height map, simulates the planned cut and the conventional one (a ball end of the
 same diameter normal to the surface through the same contact points) with
-`fabplan.fabricate.mill_simulation`, and keeps the evidence side by side. The target is the
-design the net was made for when one is given (`fabplan.fabricate.mill_design`): the cut
+`fabplan.fabricate.milling.mill_simulation`, and keeps the evidence side by side. The target is the
+design the net was made for when one is given (`fabplan.fabricate.milling.mill_design`): the cut
 is measured against it, and against the net's own surface apart, with the net's distance
 from the design; without one it is the net's surface.
 """
@@ -19,14 +19,16 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..io.cldata import cldata_text
-from ..io.output import output_folder, write_texts
-from ..io.records import json_text
-from ..io.rhino_write import Rhino3dmWriter
-from ..net.mesh import QuadMesh
-from ..report import figures, html
+from ...io.cldata import cldata_text
+from ...io.output import output_folder, write_texts
+from ...io.records import json_text
+from ...io.rhino_write import Rhino3dmWriter
+from ...net.mesh import QuadMesh
+from ...report import figures, html
+from .face_milling import plan_face_milling
 from .flank_milling import plan_flank_milling
 from .mill_design import NetDistance, design_heights, net_distance_from_design
+from .mill_plan import MillPlan, MillSettings, MillTool
 from .mill_simulation import (
     Cutter,
     HeightTarget,
@@ -37,7 +39,6 @@ from .mill_simulation import (
     measure_cut,
     simulate_milling,
 )
-from .milling import MillPlan, MillSettings, MillTool, plan_face_milling
 
 __all__ = ["MillResult", "mill_net", "mill_report_html", "mill_report_files", "write_mill_report",
            "MILL_FILES"]
@@ -243,7 +244,7 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
 def design_label(design: Any) -> str:
     """The design as the record names it: its built-in surface spec with its parameters,
     else its file (or Rhino source)."""
-    from ..design.parametric import spec_of_surface
+    from ...design.parametric import spec_of_surface
 
     parametric = getattr(design, "parametric", None)
     spec = spec_of_surface(parametric) if parametric is not None else None

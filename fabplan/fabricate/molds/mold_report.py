@@ -16,17 +16,18 @@ from typing import Mapping
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..io.output import output_folder, write_texts
-from ..io.records import json_text
-from ..layout.trim import BoundaryPanels
-from ..net.geometry import face_normals
-from ..net.view import net_edges, net_scene
-from ..report import figures, html, viewer
-from ..report.html import counted
-from ..report.pdf import PdfDocument
+from ...io.output import output_folder, write_texts
+from ...io.records import json_text
+from ...layout.trim import BoundaryPanels
+from ...net.geometry import face_normals
+from ...net.view import net_edges, net_scene
+from ...report import figures, html, viewer
+from ...report.html import counted
+from ...report.pdf import PdfDocument
+from ..limits import LimitCheck, limit_row_text, limits_record
 from .boundary_molds import BoundaryMolds, boundary_molds_text, boundary_panels_csv
-from .limits import LimitCheck, limit_row_text, limits_record
-from .molds import MOLD_TYPES, PANEL_TYPES, MoldPlan
+from .mold_plan import MoldPlan
+from .mold_shapes import MOLD_TYPES, PANEL_TYPES
 from .panel_classes import CLASS_WORDS, CLASSES
 
 __all__ = ["explain_mold_count", "facade_view", "mold_figure", "step_figure", "class_figure",
@@ -42,7 +43,7 @@ PANEL_SURFACE_TEXT = {
     "corners": "the least curved surface through each face's corners",
     "design": "the patches of the exact design the net lies on",
 }
-"""What each panel surface model (`fabplan.fabricate.panels`) means, for the report."""
+"""What each panel surface model (`fabplan.fabricate.molds.panels`) means, for the report."""
 
 _PER_M = 1000.0  # curvatures are stored per mm; the pictures and tables show them per m
 

@@ -18,7 +18,7 @@ outlines as made are written to ``NET.boundary.obj``, and `flat_boundary_panels`
 leaves them as they are.
 
 A panel whose net sides no plane holds within the step limit (or beside curved panels)
-is left to `fabplan.fabricate.boundary_molds`, which fits it to the flat panels beside it
+is left to `fabplan.fabricate.molds.boundary_molds`, which fits it to the flat panels beside it
 as to any other neighbour.
 """
 
@@ -28,9 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..layout.trim import BoundaryPanels, slide_splits
+from ...layout.trim import BoundaryPanels, slide_splits
 from .boundary_sides import BoundarySides, boundary_sides
-from .molds import MOLD_TYPES, MoldPlan, chord_steps
+from .mold_plan import MoldPlan
+from .mold_shapes import MOLD_TYPES, chord_steps
 
 __all__ = ["FlatBoundary", "boundary_planes", "flat_boundary_panels", "plane_placements"]
 

@@ -20,15 +20,15 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..io.forked import map_in_processes
-from ..io.output import check_apart, output_folder
-from ..io.records import json_text
-from ..net.mesh import QuadMesh
+from ...io.forked import map_in_processes
+from ...io.output import check_apart, output_folder
+from ...io.records import json_text
+from ...net.mesh import QuadMesh
+from ..limits import LimitCheck, limit_check, limits_record
 from .dxf import SheetGeometry, check_sheet, geometry_preview_png, sheet_geometry, write_sheet_file
-from .limits import LimitCheck, limit_check, limits_record
 from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts, part_congruence_mm
 from .strip_boundary import StripBoundary
-from .strips import Strip, StripSet, StripSettings, build_strips
+from .strip_set import Strip, StripSet, StripSettings, build_strips
 
 __all__ = ["StripPlan", "plan_strips", "strip_limit_checks", "schedule_rows", "write_plan",
            "SHEETS_PER_PROCESS", "STRIP_FILES"]
@@ -44,7 +44,7 @@ class StripPlan:
     Attributes
     ----------
     strips : the StripSet.
-    parts : list of `fabplan.fabricate.nesting.Part`.
+    parts : list of `fabplan.fabricate.strips.nesting.Part`.
     nesting : the `Nesting` of the parts on sheets.
     seconds : wall time of the planning.
     limits : the fabrication limits the strips were measured against
@@ -123,7 +123,7 @@ def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None
     mesh : the net.
     settings : strip, sheet and file options.
     boundary : the net's boundary panels (`fabplan.layout.trim.BoundaryPanels`, or a
-        `fabplan.fabricate.strip_boundary.StripBoundary`): the strips run through them to
+        `fabplan.fabricate.strips.strip_boundary.StripBoundary`): the strips run through them to
         the edge of the cladding and end at a boundary member there. None: they end at
         the net's last vertices.
     constant_radius : the net claims a constant (or infinite) Meusnier radius: its strip
@@ -258,7 +258,7 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
     """Write the DXF sheets, schedule (CSV and JSON) and preview PNGs of a plan.
 
     Every sheet's entities are checked before they are written, the bytes on disk are
-    compared with those written (`fabplan.fabricate.dxf.write_sheet_file`), and the first
+    compared with those written (`fabplan.fabricate.strips.dxf.write_sheet_file`), and the first
     sheet file is read back with ezdxf, audited and checked again.
     All files are built in a staging folder first, then moved into `out_dir`
     (`fabplan.io.output.output_folder`); on any failure nothing is left behind. Files of an

@@ -1,7 +1,7 @@
 """Panel materials: what a sheet takes without a mold, with the published source of every number.
 
 A `Material` is a sheet of a given thickness with three limits that decide how its panels
-are made (`fabplan.fabricate.panel_classes`):
+are made (`fabplan.fabricate.molds.panel_classes`):
 
 - the **cold-bend limit** ``max_bend_stress_mpa``: the largest permanent surface stress the
   sheet takes when it is bent flat-to-shape onto its supports on site;
@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 
 __all__ = [
     "Material",

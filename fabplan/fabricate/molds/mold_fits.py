@@ -26,7 +26,7 @@ from types import ModuleType
 
 import numpy as np
 
-from .molds import closest_mold_points
+from .mold_shapes import closest_mold_points
 
 __all__ = ["mold_gaps", "mold_points", "rotation_matrices", "fit_mold_placements",
            "polish_mold_placements"]
@@ -207,7 +207,7 @@ def _kernel() -> ModuleType | None:
     if os.environ.get("FABPLAN_KERNELS", "").lower() == "numpy":
         return None
     try:
-        from . import mold_fit_kernel  # type: ignore[attr-defined]
+        from . import mold_fit_kernel  # compiled: Any to mypy (the package has a __getattr__)
     except ImportError:
         return None
     return mold_fit_kernel

@@ -145,7 +145,7 @@ def design_heights(design: Any, target: HeightTarget, mm_per_unit: float, *,
     ----------
     design : a `fabplan.design.DesignSurface` (``vertices`` (n, 3), ``triangles`` (t, 3)
         in model units, ``exact``, ``parametric``, ``triangle_uv``).
-    target : the net's height map (`fabplan.fabricate.mill_simulation.height_target`):
+    target : the net's height map (`fabplan.fabricate.milling.mill_simulation.height_target`):
         its grid, frame and part; the design is sought where ``target.z`` is finite.
     mm_per_unit : millimetres per model unit.
     chunk : (triangle, grid point) pairs examined at once.
@@ -158,7 +158,7 @@ def design_heights(design: Any, target: HeightTarget, mm_per_unit: float, *,
     Examples
     --------
     >>> from fabplan.design.parametric import paraboloid
-    >>> from fabplan.fabricate.mill_simulation import height_target
+    >>> from fabplan.fabricate.milling.mill_simulation import height_target
     >>> design = paraboloid(radius_x=50.0, radius_y=50.0, width=10.0, depth=10.0).triangulate(20)
     >>> x, y = np.meshgrid(np.linspace(-8, 8, 5), np.linspace(-8, 8, 5))
     >>> net = np.column_stack([x.ravel(), y.ravel(), (x * x + y * y).ravel() / 100 + 0.1])

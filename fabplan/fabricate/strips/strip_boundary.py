@@ -32,7 +32,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..net.mesh import QuadMesh
+from ...net.mesh import QuadMesh
 
 __all__ = ["END_KINDS", "MAX_TURN_DEG", "MIN_MEMBER_ANGLE_DEG", "StripBoundary", "StripEnds",
            "member_setback_mm", "tip_setback_mm"]
@@ -182,7 +182,7 @@ class StripBoundary:
         InputError
             When the file does not continue `mesh` (`fabplan.layout.trim.read_boundary_panels`).
         """
-        from ..layout.trim import read_boundary_panels
+        from ...layout.trim import read_boundary_panels
 
         return cls.from_panels(mesh, read_boundary_panels(mesh, path, record))
 

@@ -41,19 +41,16 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from ..net.geometry import (
+from ...errors import InputError
+from ...net.geometry import (
     fit_mannheim_spheres,
     normal_curvatures,
     osculating_tangents,
     ruling_directions,
     vertex_contact_normals,
 )
-from ..net.mesh import QuadMesh
-from .milling import (
-    MillPlan,
-    MillSettings,
-    MillTool,
+from ...net.mesh import QuadMesh
+from .face_milling import (
     beyond_design_notes,
     choose_stride,
     describe_region,
@@ -62,6 +59,7 @@ from .milling import (
     trace_passes,
     walk_across_lines,
 )
+from .mill_plan import MillPlan, MillSettings, MillTool
 
 __all__ = ["ConePlan", "cone_tool_pose", "plan_flank_milling", "default_cone_margin_mm",
            "safety_radii"]

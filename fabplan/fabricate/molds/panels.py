@@ -51,10 +51,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import InputError
-from ..net.free_vertices import free_vertices
-from ..net.geometry import face_planarity
-from ..net.quadrics import (
+from ...errors import InputError
+from ...net.free_vertices import free_vertices
+from ...net.geometry import face_planarity
+from ...net.quadrics import (
     CORNER_WEIGHT,
     edge_steps,
     face_frames,

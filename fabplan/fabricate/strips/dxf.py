@@ -35,12 +35,13 @@ from ezdxf.entities import LWPolyline
 from ezdxf.enums import TextEntityAlignment
 from ezdxf.layouts import BaseLayout
 
-from ..errors import FabplanError, InputError
-from .nesting import Label, bulge_points, bulge_polygon
+from ...errors import FabplanError, InputError
+from .bulges import bulge_points, bulge_polygon
+from .nesting import Label
 
 if TYPE_CHECKING:  # pragma: no cover
     from .nesting import Nesting
-    from .strips import StripSettings
+    from .strip_set import StripSettings
 
 __all__ = [
     "STROKE_FONT",
@@ -140,7 +141,7 @@ def stroke_text(label: Label) -> list:
 
     Examples
     --------
-    >>> from fabplan.fabricate.nesting import Label
+    >>> from fabplan.fabricate.strips.nesting import Label
     >>> lines = stroke_text(Label("A1", (0.0, 0.0), 0.0, 6.0, "strip"))
     >>> len(lines), lines[0].shape
     (4, (5, 2))
@@ -493,7 +494,7 @@ def write_sheet_file(geom: SheetGeometry, settings: "StripSettings",
     outlines inside the sheet and apart, no zero-length or duplicate segments), then the
     text (`sheet_dxf_text`) is written, and the bytes on disk are hashed again and
     compared with those written, which stands in for reading the whole file back
-    (`fabplan.fabricate.strip_plan.write_plan` reads one sheet back with ezdxf and audits it).
+    (`fabplan.fabricate.strips.strip_plan.write_plan` reads one sheet back with ezdxf and audits it).
 
     Raises
     ------

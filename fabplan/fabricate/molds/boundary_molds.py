@@ -9,7 +9,7 @@ Weingarten net the panels along a curve of constant curvature share a mold, and 
 surface goes on past the net's last row with the curvatures of the rows before it: the
 boundary panels find their molds among the net's. Beside flat panels (on the plan's plane
 molds) a boundary panel is cut flat where a plane holds its net sides, and two such
-panels part along the line where their planes cross (`fabplan.fabricate.flat_boundary`):
+panels part along the line where their planes cross (`fabplan.fabricate.molds.flat_boundary`):
 these are placed, not fitted. Every other boundary panel is fitted:
 
 1. Its sides (`boundary_sides`): shared with a net face (or a sliver cut as part of one),
@@ -17,7 +17,7 @@ these are placed, not fitted. Every other boundary panel is fitted:
 2. Targets: points along every side it shares with a net face, put on that face's mold.
 3. Candidates: the molds of the net faces about its corners (two rings of faces). For
    each, the rigid placement that brings the mold closest to the targets
-   (`fabplan.fabricate.mold_fits`, the largest gap brought down), started from the
+   (`fabplan.fabricate.molds.mold_fits`, the largest gap brought down), started from the
    placement of a face on that mold; the panel's trimmed outline steadies the fit lightly
    (a panel with one shared side could turn about it). Where the steps leave room the
    outline then weighs more, as long as the gaps to the targets stay within half the step
@@ -53,12 +53,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..layout.trim import BoundaryPanels
-from ..report.viewer import PanelInfo
+from ...layout.trim import BoundaryPanels
+from ...report.viewer import PanelInfo
 from .boundary_sides import BoundarySides, boundary_sides
 from .flat_boundary import flat_boundary_panels
 from .mold_fits import fit_mold_placements, mold_gaps, mold_points, polish_mold_placements
-from .molds import MOLD_TYPES, MoldPlan, chord_steps
+from .mold_plan import MoldPlan
+from .mold_shapes import MOLD_TYPES, chord_steps
 from .panel_meshes import PanelMesh, boundary_cut_mesh
 
 __all__ = ["BoundarySides", "BoundaryMolds", "BoundaryFitSettings", "boundary_sides",
@@ -86,7 +87,7 @@ class BoundaryFitSettings:
         last round.
     flat : panels beside the net's flat panels cut flat where a plane holds their net
         sides, the sides two such panels share put on the line where their planes cross
-        (`fabplan.fabricate.flat_boundary`).
+        (`fabplan.fabricate.molds.flat_boundary`).
     split_reach : how far that line may pass from the design boundary for such a side to
         end on it (the net's mean edge lengths).
     """
@@ -133,7 +134,7 @@ class BoundaryMolds:
     sides : the panels' `BoundarySides`; side_step_mm : (s,) float, the step along every
         side (mm; NaN for a side along the design boundary).
     panels : the `BoundaryPanels` as made: those given, with the sides two flat panels
-        share put on the line where their planes cross (`fabplan.fabricate.flat_boundary`);
+        share put on the line where their planes cross (`fabplan.fabricate.molds.flat_boundary`);
         None where not known.
     """
 
@@ -239,7 +240,7 @@ class BoundaryMolds:
     def cut_obj_text(self, header: str = "") -> str:
         """OBJ text of the panels as cut: one face per panel (in the order of
         ``NET.boundary.obj``), each with points of its own on its mold."""
-        from ..io.obj import format_obj
+        from ...io.obj import format_obj
 
         sizes = [len(c) for c in self.cut_outlines]
         points = np.concatenate(self.cut_outlines) if sizes else np.zeros((0, 3))

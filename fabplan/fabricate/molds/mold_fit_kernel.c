@@ -308,7 +308,7 @@ static PyObject *fit(PyObject *self, PyObject *args)
 }
 
 static PyMethodDef methods[] = {
-    {"fit", fit, METH_VARARGS, "Fit mold placements (see fabplan.fabricate.mold_fits)."},
+    {"fit", fit, METH_VARARGS, "Fit mold placements (see fabplan.fabricate.molds.mold_fits)."},
     {NULL, NULL, 0, NULL},
 };
 
