@@ -468,7 +468,7 @@ def sandbox(tmp_path_factory, monkeypatch):
     available."""
     import shutil
 
-    from fabplan import cli
+    from fabplan.cli import optimize as optimize_command
     from fabplan.edit import server
     from fabplan.fabricate.milling import mill_report
     from fabplan.fabricate.molds import mold_report
@@ -482,7 +482,7 @@ def sandbox(tmp_path_factory, monkeypatch):
 
     # the solves and the study's candidates; the reports of molds, strips and mill (their
     # figures take seconds: the plans before them run); the editor's server
-    for module, name in [(cli, "optimize"), (starts, "glide_fairest"), (run, "run_study"),
+    for module, name in [(optimize_command, "optimize"), (starts, "glide_fairest"), (run, "run_study"),
                          (parallel, "run_study_parallel"), (parallel, "dask_client"),
                          (mold_report, "write_mold_report"), (mill_report, "write_mill_report"),
                          (strip_plan.StripPlan, "write"), (server, "run_editor")]:

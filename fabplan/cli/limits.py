@@ -1,0 +1,51 @@
+"""The fabrication limits a command checks its parts against (`fabplan.fabricate.limits`),
+and how it ends when a part goes past one."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..io.units import MM_PER_UNIT
+from .running import EXIT_NOT_CONVERGED
+
+__all__ = ["deviation_check", "limits_exit"]
+
+
+def deviation_check(distances: Any, *, units: str, max_deviation: float | None = None,
+                    option: str = "--max-deviation-mm") -> Any:
+    """The net's vertices against the deviation limit (`fabplan.fabricate.limits`).
+
+    Parameters
+    ----------
+    distances : (n,) float, each vertex's distance from the design or reference (model
+        units).
+    units : the model units (`MM_PER_UNIT` key).
+    max_deviation : the limit in model units (``optimize --max-deviation``); None for the
+        default in mm.
+    option : the option that changes the limit.
+    """
+    import numpy as np
+
+    from ..fabricate.limits import DEFAULT_MAX_DEVIATION_MM, limit_check
+
+    mm = MM_PER_UNIT[units]
+    bound = DEFAULT_MAX_DEVIATION_MM if max_deviation is None else max_deviation * mm
+    return limit_check("max_deviation_mm", np.asarray(distances, dtype=np.float64) * mm, bound,
+                       parts="vertices", option=option)
+
+
+def limits_exit(checks: list, record: Path, claim: str | None = None) -> int:
+    """Exit 3, with a warning naming each limit exceeded and by how much, when a part
+    exceeds a fabrication limit (`fabplan.fabricate.limits`); else 0."""
+    from ..fabricate.limits import exceeded_text
+
+    text = exceeded_text(checks)
+    if text is None:
+        return 0
+    why = (f" (the net's record names it a {claim} net, whose strips are pieces of one arc)"
+           if claim is not None and any(c.exceeded and c.limit == "congruence_tolerance_mm"
+                                        for c in checks) else "")
+    print(f"fabplan: warning: {text}{why}; counted in {record} (limits)", file=sys.stderr)
+    return EXIT_NOT_CONVERGED
