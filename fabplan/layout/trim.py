@@ -45,7 +45,7 @@ import os
 import time
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import igl
 import numpy as np
@@ -63,12 +63,33 @@ from .overlaps import edge_clashes, overlapping_pairs, self_crossing
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
-    from .surface_layout import SurfaceLayout
 
-__all__ = ["BoundaryPanels", "ParameterChart", "Soundness", "trim_to_design",
+__all__ = ["BoundaryPanels", "ChartedLayout", "ParameterChart", "Soundness", "trim_to_design",
            "add_boundary_panels", "read_boundary_panels", "net_cover", "net_coverage", "soundness",
            "slide_splits"]
 
+
+
+class ChartedLayout(Protocol):
+    """What trimming asks of a layout: its design and panel size, its parameter chart
+    and the transitions across its cuts (`fabplan.layout.surface_layout.SurfaceLayout`
+    is one). Declared here, so that trimming does not import the layout that calls it."""
+
+    @property
+    def design(self) -> DesignSurface:
+        """The design the layout lies on."""
+
+    @property
+    def panel_size(self) -> float:
+        """Target edge length (model units)."""
+
+    @property
+    def chart(self) -> ParameterChart:
+        """The design in the plane of the layout's parameters."""
+
+    @property
+    def cuts(self) -> list:
+        """Transitions ``(sign, jump_phi, jump_psi)`` across the layout's cuts."""
 
 @dataclass
 class BoundaryPanels:
@@ -238,7 +259,7 @@ TOUCH = 1e-3
 OFF_DESIGN_TOUCH = 1e-2
 
 
-def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05,
+def trim_to_design(mesh: QuadMesh, layout: ChartedLayout, *, min_panel: float = 0.05,
                    touch: float = TOUCH, patch_gaps: bool = True,
                    follow_net: bool = False, follow: tuple | None = None) -> BoundaryPanels:
     """The boundary panels of a net laid out on a design (see the module's text).
@@ -247,7 +268,8 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     ----------
     mesh : the net (a layout's mesh, or the net solved from it: same faces, vertices
         within a small distance of the design).
-    layout : the `SurfaceLayout` the net comes from (design, parametrization, cuts).
+    layout : the layout the net comes from (`ChartedLayout`: design, chart, cuts; a
+        `fabplan.layout.surface_layout.SurfaceLayout`).
     min_panel : pieces smaller than this share of a full panel's area join a neighbour.
     touch : net vertices this close to the design boundary (panel sizes) are on it.
     patch_gaps : close the small gaps left with patches cut in their tangent planes
@@ -791,7 +813,7 @@ def _ids(values, count: int) -> np.ndarray:
     return ids[(ids >= 0) & (ids < count)]
 
 
-def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout, *,
+def add_boundary_panels(result: OptimizationResult, layout: ChartedLayout, *,
                         touch: float = TOUCH, follow_net: bool = False,
                         follow: tuple | None = None) -> BoundaryPanels | None:
     """Trim a net solved from `layout` to the design (`trim_to_design`), attach the panels
