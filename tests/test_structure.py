@@ -1,5 +1,6 @@
-"""The package reads as its data flow: imports run down the stages, with no circles (not even through imports inside functions or for type checkers), no
-underscored names taken from another module, and no side effects at import time."""
+"""The package reads as its data flow: imports run down the stages, with no circles (not
+even through imports inside functions or for type checkers), no underscored names taken
+from another module, and no side effects at import time."""
 
 from __future__ import annotations
 
