@@ -29,22 +29,7 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     # check fails for it (and says to what the limit would have to be relaxed)
     met = metrics["converged"] or metrics["status"] == "off-design"
     res_ok = res is not None and res <= limits.max_sphere_residual and met
-    state = "converged" if metrics["converged"] else f"stopped ({metrics['status']})"
-    folds = metrics.get("folds")
-    if folds and metrics["status"] in ("folded", "degenerate"):
-        state = (f"met its constraints on a net that folds ({folds['flipped_faces']} flipped "
-                 f"faces, {folds['fold_edges']} fold edges)" if folds["folded"] else
-                 f"met its constraints on a degenerate net ({folds['degenerate_stars']} stars "
-                 f"with their lines run together, {folds['collapsed_edges']} collapsed edges)")
-    build = metrics.get("buildable")
-    if build and metrics["status"] in ("crumpled", "off-design"):
-        state = (f"met its constraints on a crumpled net ({build['nonconvex_faces']} non-convex "
-                 f"faces, {build['sharp_line_turns']} vertices where a line turns too much)"
-                 if metrics["status"] == "crumpled" else
-                 "met its constraints only off the design (held within the limit it cannot "
-                 "be this net type; the nearest it came is below)")
-    if metrics.get("status_note"):
-        state += f" ({metrics['status_note']})"
+    state = _solve_state(metrics)
     checks.append(_check(
         "max_sphere_residual", limits.max_sphere_residual, res, res_ok,
         f"the solve {state} after {metrics['iterations']} iterations; largest sphere residual "
@@ -63,32 +48,7 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
            + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
            if edge is not None else "")
         + f" (limit {limits.max_deviation_mm:g} mm)"))
-    molds = metrics["molds"]
-    panels_fit = molds["failures"] == 0
-    checks.append(_check(
-        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"], panels_fit,
-        f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
-        f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
-        f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
-    step = molds.get("max_panel_step_mm")
-    if step is not None:
-        step_limit = limits.panel_step_limit_mm
-        checks.append(_check(
-            "max_panel_step_mm", step_limit, step, step <= step_limit,
-            f"neighbouring panels meet: the largest step between their molds is {step:.2f} mm "
-            f"(limit {step_limit:g} mm)" if step <= step_limit else
-            f"the molds of neighbouring panels step up to {step:.2f} mm apart at "
-            f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
-    if limits.max_molds is not None:
-        n = molds["count"]
-        bent = molds.get("panel_classes") is not None
-        needs = ("it needs no molds: all panels are flat" if every_panel_flat(molds) else
-                 "it needs no molds: no panel is molded") if n == 0 else \
-            f"its {'molded' if bent else 'curved'} panels need {counted(n, 'mold')}"
-        if bent:
-            needs += f" ({molds['saved']} saved by {molds['material']})"
-        checks.append(_check("max_molds", limits.max_molds, n, n <= limits.max_molds,
-                             f"{needs} (limit {limits.max_molds})"))
+    checks += _mold_checks(metrics["molds"], limits)
     if limits.planar_panels:
         p = metrics["planarity_mm"]["max"]
         checks.append(_check(
@@ -115,33 +75,95 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
                              f"vertex (limit {limits.max_line_turn_deg:g} deg)"))
     strips = metrics.get("strips")
     if strips is not None:
-        if limits.min_strip_radius_mm is not None:
-            r = strips["min_radius_mm"]
-            checks.append(_check(
-                "min_strip_radius_mm", limits.min_strip_radius_mm, r,
-                r >= limits.min_strip_radius_mm,
-                f"the smallest strip radius is {_mm(r)} (limit at least "
-                f"{limits.min_strip_radius_mm:g} mm)"))
-        if limits.max_strip_radius_mm is not None:
-            r = strips["max_radius_mm"]
-            checks.append(_check(
-                "max_strip_radius_mm", limits.max_strip_radius_mm, r,
-                r <= limits.max_strip_radius_mm,
-                f"the largest strip radius is {_mm(r)} (limit at most "
-                f"{limits.max_strip_radius_mm:g} mm)"))
-        if limits.congruent_strips:
-            d, tol = strips["congruence_deviation_mm"], limits.congruence_tolerance_mm
-            ok = d <= tol
-            checks.append(_check(
-                "congruent_strips", tol, d, ok,
-                ("all strip parts are congruent" if ok else "the strip parts are not congruent")
-                + f" (they differ from one common arc {differ_by(d)}; congruence "
-                f"tolerance {tol:g} mm)"))
-        if limits.max_sheets is not None:
-            n = strips["sheets"]
-            checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,
-                                 f"the strips nest on {counted(n, 'sheet')} (limit "
-                                 f"{limits.max_sheets})"))
+        checks += _strip_checks(strips, limits)
+    return checks
+
+
+def _solve_state(metrics: dict) -> str:
+    """How the solve ended, in words: converged, stopped, or met its constraints on a net
+    that folds, is degenerate, crumpled or only off the design."""
+    state = "converged" if metrics["converged"] else f"stopped ({metrics['status']})"
+    folds = metrics.get("folds")
+    if folds and metrics["status"] in ("folded", "degenerate"):
+        state = (f"met its constraints on a net that folds ({folds['flipped_faces']} flipped "
+                 f"faces, {folds['fold_edges']} fold edges)" if folds["folded"] else
+                 f"met its constraints on a degenerate net ({folds['degenerate_stars']} stars "
+                 f"with their lines run together, {folds['collapsed_edges']} collapsed edges)")
+    build = metrics.get("buildable")
+    if build and metrics["status"] in ("crumpled", "off-design"):
+        state = (f"met its constraints on a crumpled net ({build['nonconvex_faces']} non-convex "
+                 f"faces, {build['sharp_line_turns']} vertices where a line turns too much)"
+                 if metrics["status"] == "crumpled" else
+                 "met its constraints only off the design (held within the limit it cannot "
+                 "be this net type; the nearest it came is below)")
+    if metrics.get("status_note"):
+        state += f" ({metrics['status_note']})"
+    return state
+
+
+def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
+    """The checks of a candidate's molds (``metrics["molds"]``, `mold_metrics`): every
+    panel fits a mold, neighbouring molds meet, and (when limited) how many molds."""
+    checks = []
+    panels_fit = molds["failures"] == 0
+    checks.append(_check(
+        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"], panels_fit,
+        f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
+        f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
+        f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
+    step = molds.get("max_panel_step_mm")
+    if step is not None:
+        step_limit = limits.panel_step_limit_mm
+        checks.append(_check(
+            "max_panel_step_mm", step_limit, step, step <= step_limit,
+            f"neighbouring panels meet: the largest step between their molds is {step:.2f} mm "
+            f"(limit {step_limit:g} mm)" if step <= step_limit else
+            f"the molds of neighbouring panels step up to {step:.2f} mm apart at "
+            f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
+    if limits.max_molds is not None:
+        n = molds["count"]
+        bent = molds.get("panel_classes") is not None
+        needs = ("it needs no molds: all panels are flat" if every_panel_flat(molds) else
+                 "it needs no molds: no panel is molded") if n == 0 else \
+            f"its {'molded' if bent else 'curved'} panels need {counted(n, 'mold')}"
+        if bent:
+            needs += f" ({molds['saved']} saved by {molds['material']})"
+        checks.append(_check("max_molds", limits.max_molds, n, n <= limits.max_molds,
+                             f"{needs} (limit {limits.max_molds})"))
+    return checks
+
+
+def _strip_checks(strips: dict, limits: Limits) -> list[dict]:
+    """The checks of a candidate's strips (``metrics["strips"]``) against the strip limits
+    that are set: radii, congruence, sheets."""
+    checks = []
+    if limits.min_strip_radius_mm is not None:
+        r = strips["min_radius_mm"]
+        checks.append(_check(
+            "min_strip_radius_mm", limits.min_strip_radius_mm, r,
+            r >= limits.min_strip_radius_mm,
+            f"the smallest strip radius is {_mm(r)} (limit at least "
+            f"{limits.min_strip_radius_mm:g} mm)"))
+    if limits.max_strip_radius_mm is not None:
+        r = strips["max_radius_mm"]
+        checks.append(_check(
+            "max_strip_radius_mm", limits.max_strip_radius_mm, r,
+            r <= limits.max_strip_radius_mm,
+            f"the largest strip radius is {_mm(r)} (limit at most "
+            f"{limits.max_strip_radius_mm:g} mm)"))
+    if limits.congruent_strips:
+        d, tol = strips["congruence_deviation_mm"], limits.congruence_tolerance_mm
+        ok = d <= tol
+        checks.append(_check(
+            "congruent_strips", tol, d, ok,
+            ("all strip parts are congruent" if ok else "the strip parts are not congruent")
+            + f" (they differ from one common arc {differ_by(d)}; congruence "
+            f"tolerance {tol:g} mm)"))
+    if limits.max_sheets is not None:
+        n = strips["sheets"]
+        checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,
+                             f"the strips nest on {counted(n, 'sheet')} (limit "
+                             f"{limits.max_sheets})"))
     return checks
 
 
