@@ -814,18 +814,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
                          else None},
         "panels": int(len(mesh.face_sizes)) + (boundary.count if boundary is not None else 0),
         "full_panels": int(len(mesh.face_sizes)),
-        "boundary_panels": None if boundary is None else {
-            "count": boundary.count,
-            "on_net_molds": boundary.on_net_molds,
-            "flat": boundary.flat,
-            "own_molds": boundary.own_molds,
-            # as cut from their molds: their largest distance from the design, and step
-            # against a neighbour
-            "deviation_max_mm": boundary.deviation_max_mm,
-            "step_max_mm": boundary.step_max_mm,
-            "flipped": len(trimmed.get("flipped") or []),
-            "patches": len(trimmed.get("patches") or []),
-        },
+        "boundary_panels": None if boundary is None else _boundary_panel_metrics(boundary, trimmed),
         "quads": int(np.sum(mesh.face_sizes == 4)),
         "other_faces": int(np.sum(mesh.face_sizes != 4)),
         "vertices": int(mesh.vertex_count),
@@ -843,37 +832,58 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "line_turn_deg": (props.get("fairness") or {}).get("line_turn_deg"),
         "free_vertices": _free_vertex_record(net, mm_per_unit),
         "molds": mold_metrics(molds, boundary),
-        "strips": None,
+        "strips": None if strips is None else _strip_metrics(strips),
     }
-    if strips is not None:
-        s = strips.summary()
-        radius = s["radius_mm"]
-        metrics["strips"] = {
-            "strips": s["strips"],
-            "parts": s["parts"],
-            "sheets": s["sheets"],
-            "material_use": s["material_use"],
-            "total_length_mm": s["total_length_mm"],
-            "straight": s["straight"],
-            "congruent": s["congruent"],
-            "congruence_deviation_mm": s["congruence_deviation_mm"],
-            "radius_mm": None if radius is None else
-            {"min": radius["min"], "max": radius["max"], "median": radius["median"]},
-            "min_radius_mm": math.inf if radius is None else radius["min"],
-            "max_radius_mm": math.inf if s["straight"] or radius is None or
-            any(math.isinf(st.radius_mm) for st in strips.strips.strips) else radius["max"],
-            "unrolled_length_error_mm": s["unrolled_length_error_mm"],
-            "ends_at_boundary_member": s["ends_at_boundary_member"],
-            "ends_free": s["ends_free"],
-            "ends_free_by_kind": s["ends_free_by_kind"],
-            "ends_not_continued": s["ends_not_continued"],
-            "boundary_member_mm": strips.strips.settings.member_mm,
-        }
     # the facade as built: the net's vertices and the boundary panels on their molds
     edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
     metrics["largest_deviation_mm"] = (max(metrics["deviation_mm"]["max"], edge)
                                        if edge is not None else metrics["deviation_mm"]["max"])
     return metrics
+
+
+def _boundary_panel_metrics(boundary: BoundaryMolds, trimmed: dict) -> dict:
+    """The ``boundary_panels`` part of a candidate's metrics: their molds (`BoundaryMolds`)
+    and what the trimming recorded (`trimmed`: flipped panels, patches)."""
+    return {
+        "count": boundary.count,
+        "on_net_molds": boundary.on_net_molds,
+        "flat": boundary.flat,
+        "own_molds": boundary.own_molds,
+        # as cut from their molds: their largest distance from the design, and step
+        # against a neighbour
+        "deviation_max_mm": boundary.deviation_max_mm,
+        "step_max_mm": boundary.step_max_mm,
+        "flipped": len(trimmed.get("flipped") or []),
+        "patches": len(trimmed.get("patches") or []),
+    }
+
+
+def _strip_metrics(strips: StripPlan) -> dict:
+    """The ``strips`` part of a candidate's metrics (`measure_candidate`): counts, sheets,
+    lengths, radii (mm) and how the strips end, from `StripPlan.summary`."""
+    s = strips.summary()
+    radius = s["radius_mm"]
+    return {
+        "strips": s["strips"],
+        "parts": s["parts"],
+        "sheets": s["sheets"],
+        "material_use": s["material_use"],
+        "total_length_mm": s["total_length_mm"],
+        "straight": s["straight"],
+        "congruent": s["congruent"],
+        "congruence_deviation_mm": s["congruence_deviation_mm"],
+        "radius_mm": None if radius is None else
+        {"min": radius["min"], "max": radius["max"], "median": radius["median"]},
+        "min_radius_mm": math.inf if radius is None else radius["min"],
+        "max_radius_mm": math.inf if s["straight"] or radius is None or
+        any(math.isinf(st.radius_mm) for st in strips.strips.strips) else radius["max"],
+        "unrolled_length_error_mm": s["unrolled_length_error_mm"],
+        "ends_at_boundary_member": s["ends_at_boundary_member"],
+        "ends_free": s["ends_free"],
+        "ends_free_by_kind": s["ends_free_by_kind"],
+        "ends_not_continued": s["ends_not_continued"],
+        "boundary_member_mm": strips.strips.settings.member_mm,
+    }
 
 
 def _buildable_counts(build: dict | None) -> dict | None:
