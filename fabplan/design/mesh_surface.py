@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import igl
 import numpy as np
@@ -22,10 +22,38 @@ from ..net.forest import tree_parity
 from ..solve.reference import ReferenceSurface
 from .topology import triangle_components, triangle_pairs, vertex_fan_count
 
-if TYPE_CHECKING:
-    from .parametric import ParametricSurface
+__all__ = ["DesignSurface", "ExactSurface"]
 
-__all__ = ["DesignSurface"]
+
+class ExactSurface(Protocol):
+    """What a design asks of the exact surface its triangles sample: a map ``(u, v) ->
+    xyz`` on a rectangular domain (`fabplan.design.parametric.ParametricSurface` is one).
+    Declared here, so that the design mesh does not import the surfaces that make it."""
+
+    @property
+    def name(self) -> str:
+        """Label used in messages."""
+
+    @property
+    def domain(self) -> tuple:
+        """``((u0, u1), (v0, v1))``."""
+
+    @property
+    def periodic_u(self) -> bool:
+        """The surface closes up in ``u``."""
+
+    def points(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(..., 3) float, points at broadcastable parameters."""
+
+    def derivatives(self, u: np.ndarray, v: np.ndarray) -> tuple:
+        """fu, fv, fuu, fuv, fvv : (m, 3) float each, for (m,) parameters."""
+
+    def principal_frames(self, u: np.ndarray, v: np.ndarray) -> tuple:
+        """k1, k2 (m,), e1, e2, n (m, 3): principal curvatures and frames."""
+
+    def closest_parameters(self, points: np.ndarray, start: np.ndarray, *,
+                           iterations: int = 8) -> np.ndarray:
+        """(m, 2) float, parameters of the surface points closest to `points` (m, 3)."""
 
 
 class DesignSurface:
@@ -37,7 +65,8 @@ class DesignSurface:
     triangles : (t, 3) int.
     name : label for messages (the file name or the parametric surface's name).
     uv : (n, 2) float, parameters of the vertices when triangulated from `parametric`.
-    parametric : the `ParametricSurface` the mesh samples, if any.
+    parametric : the exact surface the mesh samples (`ExactSurface`, a
+        `ParametricSurface`), if any.
     units : the model units of the coordinates when the source says (a .3dm file's unit
         system), else None.
     source : what the design was read from, JSON-ready (a .3dm file's object, layer and
@@ -58,7 +87,7 @@ class DesignSurface:
     """
 
     def __init__(self, vertices: npt.ArrayLike, triangles: npt.ArrayLike, *, name: str = "surface",
-                 uv: npt.ArrayLike | None = None, parametric: ParametricSurface | None = None,
+                 uv: npt.ArrayLike | None = None, parametric: ExactSurface | None = None,
                  units: str | None = None, source: dict | None = None) -> None:
         self.name = name
         self.parametric = parametric

@@ -9,14 +9,12 @@ pinned vertices and the history of the edits.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..errors import InputError
-
-if TYPE_CHECKING:
-    from .session import EditSession
 
 __all__ = ["EDIT_KEY", "SavedEdit", "edit_section", "read_saved"]
 
@@ -25,14 +23,24 @@ _OPTIONS = ("net", "angle", "radius", "units", "tolerance", "max_iterations", "m
             "influence")
 
 
-def edit_section(session: EditSession) -> dict:
-    """The ``edit`` part of the record of `session`'s current net."""
+def edit_section(source: str | Path, options: dict, handles: dict, pins: Iterable[int],
+                 history: list) -> dict:
+    """The ``edit`` part of the record of an edit session's current net.
+
+    Parameters
+    ----------
+    source : the net the session opened.
+    options : the session's options as JSON (`EditOptions.to_json`).
+    handles : vertex id -> (3,) float, where each handle holds its vertex.
+    pins : ids of the pinned vertices.
+    history : the session's edits, oldest first.
+    """
     return {
-        "source": str(session.source),
-        "options": session.options.to_json(),
-        "handles": [{"vertex": k, "position": v.tolist()} for k, v in sorted(session.handles.items())],
-        "pins": sorted(session.pins),
-        "history": session.history,
+        "source": str(source),
+        "options": options,
+        "handles": [{"vertex": k, "position": v.tolist()} for k, v in sorted(handles.items())],
+        "pins": sorted(pins),
+        "history": history,
     }
 
 

@@ -406,7 +406,8 @@ class EditSession:
             "status": self.status if self.status != "not solved" else "stagnated",
             "message": self.message,
             "properties": properties,
-            EDIT_KEY: edit_section(self),
+            EDIT_KEY: edit_section(self.source, self.options.to_json(), self.handles, self.pins,
+                                   self.history),
         }
 
     def save(self, path: str | Path) -> tuple[Path, Path]:

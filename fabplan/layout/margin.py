@@ -80,7 +80,8 @@ def continued_design(design: DesignSurface, margin: float) -> ContinuedDesign | 
     (((-6.0, 6.0), (-6.0, 6.0)), True)
     """
     surface, uv = design.parametric, design.uv
-    if surface is None or uv is None or not (np.isfinite(margin) and margin > 0):
+    if not isinstance(surface, ParametricSurface) or uv is None \
+            or not (np.isfinite(margin) and margin > 0):
         return None
     (u0, u1), (v0, v1) = surface.domain
     nu = len(np.unique(uv[:, 0])) - (0 if surface.periodic_u else 1)

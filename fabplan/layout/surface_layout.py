@@ -419,9 +419,9 @@ def _design_spec(design: DesignSurface) -> str:
     """What `fabplan.design.load.load_design` loads `design` from again: a built-in
     surface's spec with its parameters, else its file or Rhino source (a built-in surface
     made from a file of values gives its name, which does not load it again)."""
-    from ..design.parametric import spec_of_surface
+    from ..design.parametric import ParametricSurface, spec_of_surface
 
-    if design.parametric is not None and (spec := spec_of_surface(design.parametric)):
+    if isinstance(design.parametric, ParametricSurface) and (spec := spec_of_surface(design.parametric)):
         return spec
     # a file, found again from another working folder
     path = Path(design.name.split("#")[0])

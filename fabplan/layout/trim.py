@@ -45,7 +45,7 @@ import os
 import time
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import igl
 import numpy as np
@@ -63,12 +63,33 @@ from .overlaps import edge_clashes, overlapping_pairs, self_crossing
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
-    from .surface_layout import SurfaceLayout
 
-__all__ = ["BoundaryPanels", "ParameterChart", "Soundness", "trim_to_design",
+__all__ = ["BoundaryPanels", "ChartedLayout", "ParameterChart", "Soundness", "trim_to_design",
            "add_boundary_panels", "read_boundary_panels", "net_cover", "net_coverage", "soundness",
            "slide_splits"]
 
+
+
+class ChartedLayout(Protocol):
+    """What trimming asks of a layout: its design and panel size, its parameter chart
+    and the transitions across its cuts (`fabplan.layout.surface_layout.SurfaceLayout`
+    is one). Declared here, so that trimming does not import the layout that calls it."""
+
+    @property
+    def design(self) -> DesignSurface:
+        """The design the layout lies on."""
+
+    @property
+    def panel_size(self) -> float:
+        """Target edge length (model units)."""
+
+    @property
+    def chart(self) -> ParameterChart:
+        """The design in the plane of the layout's parameters."""
+
+    @property
+    def cuts(self) -> list:
+        """Transitions ``(sign, jump_phi, jump_psi)`` across the layout's cuts."""
 
 @dataclass
 class BoundaryPanels:
@@ -238,7 +259,7 @@ TOUCH = 1e-3
 OFF_DESIGN_TOUCH = 1e-2
 
 
-def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 0.05,
+def trim_to_design(mesh: QuadMesh, layout: ChartedLayout, *, min_panel: float = 0.05,
                    touch: float = TOUCH, patch_gaps: bool = True,
                    follow_net: bool = False, follow: tuple | None = None) -> BoundaryPanels:
     """The boundary panels of a net laid out on a design (see the module's text).
@@ -247,7 +268,8 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     ----------
     mesh : the net (a layout's mesh, or the net solved from it: same faces, vertices
         within a small distance of the design).
-    layout : the `SurfaceLayout` the net comes from (design, parametrization, cuts).
+    layout : the layout the net comes from (`ChartedLayout`: design, chart, cuts; a
+        `fabplan.layout.surface_layout.SurfaceLayout`).
     min_panel : pieces smaller than this share of a full panel's area join a neighbour.
     touch : net vertices this close to the design boundary (panel sizes) are on it.
     patch_gaps : close the small gaps left with patches cut in their tangent planes
@@ -267,82 +289,13 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
     clock = time.perf_counter()
     design, h = layout.design, layout.panel_size
     chart = layout.chart
-    p_net = chart.parameters_of(mesh.vertices)
-    # a full panel in the plane: about one unit square of the lattice
-    cell = float(np.median(np.abs(chart.param_area))) * h * h / float(np.median(design.face_areas))
-    cell = cell if np.isfinite(cell) and cell > 0 else 1.0
-    # every overlay is snap-rounded to this grid (a ten-millionth of a panel), so that a
-    # vertex on a boundary segment to rounding is noded there
-    grid = 1e-7 * cell ** 0.5
-    p_net = np.round(p_net / grid) * grid
-    boundary = chart.boundary_lines
-    # a vertex on the boundary (to `touch` of a panel: gliding, or added on it)
-    # ends its lines there; a line continued from it would run along the boundary. It is
-    # joined to the boundary by the shortest way instead, which parts the slivers beside it
-    points = shapely.points(p_net)
-    touching = shapely.distance(points, boundary) <= touch * cell ** 0.5
-    if touch > TOUCH and touching.any():
-        # a net that left the design: its vertices that near the boundary stand on it in
-        # the plane, so that no strip a few millimetres wide is cut beside them
-        foot = shapely.get_coordinates(
-            shapely.shortest_line(points[touching], boundary)).reshape(-1, 2, 2)[:, 1]
-        p_net[touching] = np.round(foot / grid) * grid
-    faces = _face_polygons(mesh, p_net, _transition_maps(layout.cuts))
+    p_net, cell, grid, touching = _net_in_plane(mesh, chart, design, h, touch)
     by_sheet = bool(layout.cuts) and chart.overlapping
-    if by_sheet:
-        # across a seam the plane holds several sheets of the design: each triangle loses
-        # only the net faces on its own sheet
-        rest, rest_triangle, rest_region, regions = _unclad_by_sheet(
-            chart, faces, mesh, h, grid, 1e-6 * cell)
-    else:
-        net = shapely.union_all(_polygonal(shapely.make_valid(faces)), grid_size=grid)
-        domain = shapely.union_all(_polygonal([shapely.set_precision(chart.domain, grid)]),
-                                   grid_size=grid)
-        regions = [shapely.union_all(_polygonal([shapely.difference(domain, net, grid_size=grid)]),
-                                     grid_size=grid)]
-    tol = 4 * grid
-    # regions of different sheets may overlap in the plane: each is cut on its own
-    cut = [_cut_region(unclad, mesh, p_net, boundary, touching, cell, grid, min_panel)
-           for unclad in regions]
-    pieces = np.concatenate([c[0] for c in cut] + [np.zeros(0, dtype=object)])
-    rays = np.concatenate([c[1] for c in cut] + [np.zeros(0, dtype=object)])
-    patch = np.concatenate([c[2] for c in cut] + [np.zeros(0, bool)])
-    sheets = None
-    if by_sheet:
-        piece_region = np.repeat(np.arange(len(cut)), [len(c[0]) for c in cut])
-        sheets = (rest, rest_triangle, rest_region, piece_region)
-    vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
-        pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
-    # a piece over a seam of the parametrization, where the plane holds several sheets
-    # of the design, may map to points of different sheets: its sides then stretch far
-    # beyond their length in the plane (about a panel per unit). Such pieces are left
-    # out and their area counted as unclad
-    sane = _sane_on_surface(pieces, vertices, polygons, h)
-    if not sane.all():
-        pieces = pieces[sane]
-        if sheets is not None:
-            sheets = (*sheets[:3], sheets[3][sane])
-        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
-            pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
-    patch = patch[sane]
-    triangles, owner = _triangles_on_surface(pieces, ring_ids)
-    # near a singular point the plane's sheets overlap, and a "hole" there may lie under
-    # net faces on the surface: such a patch would clad the design twice. Cut by sheet,
-    # any piece may: along a seam a face whose corners lie on both sides is folded in the
-    # plane and leaves part of the triangles under it unclad there
-    double = (patch | by_sheet) & \
-        (_share_under(vertices, triangles, owner, len(pieces), mesh, h) > 0.5)
-    if by_sheet:
-        # a piece of a hole at a singular point, where the sheets meet, may map across
-        # the fold there: it faces against the design and overlaps its neighbours
-        double[_flipped(vertices, polygons, design, 1e-3 * h * h)] = True
-    if double.any():
-        pieces, patch = pieces[~double], patch[~double]
-        if sheets is not None:
-            sheets = (*sheets[:3], sheets[3][~double])
-        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
-            pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
-        triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    pieces, rays, patch, sheets = _pieces_in_plane(mesh, layout.cuts, chart, p_net, touching,
+                                                   by_sheet, cell, grid, min_panel, h)
+    vertices, polygons, on_boundary, corner, on_side, triangles, owner, patch = \
+        _pieces_on_surface(pieces, rays, patch, sheets, mesh, p_net, chart, touching, by_sheet,
+                           4 * grid, h)
     offset = np.zeros((0, 3))
     # where the panels stand over the design: their points before the lift (which is
     # along the design's normals)
@@ -430,6 +383,130 @@ def trim_to_design(mesh: QuadMesh, layout: SurfaceLayout, *, min_panel: float = 
         follows_net=follow_net,
         offset_max=float(np.linalg.norm(offset, axis=1).max()) if len(offset) else 0.0,
         soundness=sound.record(h, recut))
+
+
+def _net_in_plane(mesh: QuadMesh, chart: ParameterChart, design: DesignSurface, h: float,
+                  touch: float) -> tuple[np.ndarray, float, float, np.ndarray]:
+    """The net's vertices in the parameter plane, snap-rounded, and which stand on the
+    design boundary (`trim_to_design`).
+
+    Returns
+    -------
+    p_net : (n, 2) float, the vertices' parameters, rounded to `grid`.
+    cell : area of a full panel in the plane.
+    grid : the snap-rounding grid of every overlay.
+    touching : (n,) bool, vertices within `touch` (panel sizes) of the boundary.
+    """
+    p_net = chart.parameters_of(mesh.vertices)
+    # a full panel in the plane: about one unit square of the lattice
+    cell = float(np.median(np.abs(chart.param_area))) * h * h / float(np.median(design.face_areas))
+    cell = cell if np.isfinite(cell) and cell > 0 else 1.0
+    # every overlay is snap-rounded to this grid (a ten-millionth of a panel), so that a
+    # vertex on a boundary segment to rounding is noded there
+    grid = 1e-7 * cell ** 0.5
+    p_net = np.round(p_net / grid) * grid
+    boundary = chart.boundary_lines
+    # a vertex on the boundary (to `touch` of a panel: gliding, or added on it)
+    # ends its lines there; a line continued from it would run along the boundary. It is
+    # joined to the boundary by the shortest way instead, which parts the slivers beside it
+    points = shapely.points(p_net)
+    touching = shapely.distance(points, boundary) <= touch * cell ** 0.5
+    if touch > TOUCH and touching.any():
+        # a net that left the design: its vertices that near the boundary stand on it in
+        # the plane, so that no strip a few millimetres wide is cut beside them
+        foot = shapely.get_coordinates(
+            shapely.shortest_line(points[touching], boundary)).reshape(-1, 2, 2)[:, 1]
+        p_net[touching] = np.round(foot / grid) * grid
+    return p_net, cell, grid, touching
+
+
+def _pieces_in_plane(mesh: QuadMesh, cuts: list, chart: ParameterChart, p_net: np.ndarray,
+                     touching: np.ndarray, by_sheet: bool, cell: float, grid: float,
+                     min_panel: float, h: float) -> tuple:
+    """The unclad strip of the plane cut into pieces by the net's lines (`trim_to_design`,
+    steps 1 and 2 of the module's text).
+
+    Returns
+    -------
+    pieces, rays : (k,) object arrays of shapely geometry, the pieces and the rays that
+        cut them.
+    patch : (k,) bool, pieces of holes (not on the design boundary).
+    sheets : None, or with `by_sheet` ``(rest, rest_triangle, rest_region, piece_region)``
+        (`_unclad_by_sheet`, and the region (k,) each piece was cut from).
+    """
+    boundary = chart.boundary_lines
+    faces = _face_polygons(mesh, p_net, _transition_maps(cuts))
+    if by_sheet:
+        # across a seam the plane holds several sheets of the design: each triangle loses
+        # only the net faces on its own sheet
+        rest, rest_triangle, rest_region, regions = _unclad_by_sheet(
+            chart, faces, mesh, h, grid, 1e-6 * cell)
+    else:
+        net = shapely.union_all(_polygonal(shapely.make_valid(faces)), grid_size=grid)
+        domain = shapely.union_all(_polygonal([shapely.set_precision(chart.domain, grid)]),
+                                   grid_size=grid)
+        regions = [shapely.union_all(_polygonal([shapely.difference(domain, net, grid_size=grid)]),
+                                     grid_size=grid)]
+    # regions of different sheets may overlap in the plane: each is cut on its own
+    cut = [_cut_region(unclad, mesh, p_net, boundary, touching, cell, grid, min_panel)
+           for unclad in regions]
+    pieces = np.concatenate([c[0] for c in cut] + [np.zeros(0, dtype=object)])
+    rays = np.concatenate([c[1] for c in cut] + [np.zeros(0, dtype=object)])
+    patch = np.concatenate([c[2] for c in cut] + [np.zeros(0, bool)])
+    sheets = None
+    if by_sheet:
+        piece_region = np.repeat(np.arange(len(cut)), [len(c[0]) for c in cut])
+        sheets = (rest, rest_triangle, rest_region, piece_region)
+    return pieces, rays, patch, sheets
+
+
+def _pieces_on_surface(pieces: np.ndarray, rays: np.ndarray, patch: np.ndarray,
+                       sheets: tuple | None, mesh: QuadMesh, p_net: np.ndarray,
+                       chart: ParameterChart, touching: np.ndarray, by_sheet: bool,
+                       tol: float, h: float) -> tuple:
+    """The pieces of the plane mapped to the surface (`_to_surface`, step 3 of the
+    module's text), less those that map across a seam or clad the design twice.
+
+    Returns
+    -------
+    vertices, polygons, on_boundary, corner, on_side : as `_to_surface` gives them.
+    triangles, owner : the pieces' triangles (m, 3) int and the piece (m,) of each.
+    patch : (k',) bool, `patch` of the pieces kept.
+    """
+    design, boundary = chart.design, chart.boundary_lines
+    vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
+        pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
+    # a piece over a seam of the parametrization, where the plane holds several sheets
+    # of the design, may map to points of different sheets: its sides then stretch far
+    # beyond their length in the plane (about a panel per unit). Such pieces are left
+    # out and their area counted as unclad
+    sane = _sane_on_surface(pieces, vertices, polygons, h)
+    if not sane.all():
+        pieces = pieces[sane]
+        if sheets is not None:
+            sheets = (*sheets[:3], sheets[3][sane])
+        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
+            pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
+    patch = patch[sane]
+    triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    # near a singular point the plane's sheets overlap, and a "hole" there may lie under
+    # net faces on the surface: such a patch would clad the design twice. Cut by sheet,
+    # any piece may: along a seam a face whose corners lie on both sides is folded in the
+    # plane and leaves part of the triangles under it unclad there
+    double = (patch | by_sheet) & \
+        (_share_under(vertices, triangles, owner, len(pieces), mesh, h) > 0.5)
+    if by_sheet:
+        # a piece of a hole at a singular point, where the sheets meet, may map across
+        # the fold there: it faces against the design and overlaps its neighbours
+        double[_flipped(vertices, polygons, design, 1e-3 * h * h)] = True
+    if double.any():
+        pieces, patch = pieces[~double], patch[~double]
+        if sheets is not None:
+            sheets = (*sheets[:3], sheets[3][~double])
+        vertices, polygons, on_boundary, corner, ring_ids, on_side = _to_surface(
+            pieces, mesh, p_net, chart, boundary, rays, tol, touching, sheets)
+        triangles, owner = _triangles_on_surface(pieces, ring_ids)
+    return vertices, polygons, on_boundary, corner, on_side, triangles, owner, patch
 
 
 @dataclass
@@ -791,7 +868,7 @@ def _ids(values, count: int) -> np.ndarray:
     return ids[(ids >= 0) & (ids < count)]
 
 
-def add_boundary_panels(result: OptimizationResult, layout: SurfaceLayout, *,
+def add_boundary_panels(result: OptimizationResult, layout: ChartedLayout, *,
                         touch: float = TOUCH, follow_net: bool = False,
                         follow: tuple | None = None) -> BoundaryPanels | None:
     """Trim a net solved from `layout` to the design (`trim_to_design`), attach the panels

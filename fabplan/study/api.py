@@ -51,7 +51,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..design.mesh_surface import DesignSurface  # noqa: F811 - imported again where used
     from ..layout.surface_layout import SurfaceLayout
     from ..solve.reference import ReferenceSurface
-    from .run import StudyResult
+    from .result import StudyResult
     from .spec import Study
 
 __all__ = [

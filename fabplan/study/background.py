@@ -36,7 +36,7 @@ from ..io.forked import die_with_parent, forked_processes
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
-    from .run import CandidateResult
+    from .result import CandidateResult
     from .spec import Study
 
 __all__ = ["BackgroundCandidates", "background_processes"]
@@ -187,7 +187,8 @@ class BackgroundCandidates:
 
     def _reap(self, *, wait: bool) -> None:
         """Take in the finished processes (with `wait`, at least the oldest)."""
-        from .run import CandidateResult, fabricate_candidate, failure_reason
+        from .result import CandidateResult
+        from .run import fabricate_candidate, failure_reason
 
         for k, job in enumerate(list(self._running)):
             pid, status = os.waitpid(job.pid, 0 if wait and k == 0 else os.WNOHANG)

@@ -38,7 +38,7 @@ from ..io.output import remove_stale_staging, temporary_path
 from ..io.typed_data import decode, encode, packed_bytes
 
 if TYPE_CHECKING:
-    from .run import CandidateResult
+    from .result import CandidateResult
     from .spec import Candidate, Study
 
 __all__ = ["CACHE_FOLDER", "CACHE_FORMAT", "CandidateCache", "cached_types"]
@@ -67,7 +67,7 @@ def cached_types() -> dict[str, type]:
     from ..layout.trim import BoundaryPanels
     from ..net.mesh import QuadMesh
     from ..solve.optimize import OptimizationResult
-    from .run import CandidateResult
+    from .result import CandidateResult
     from .spec import Candidate
 
     classes: list[type] = [
@@ -200,7 +200,7 @@ class CandidateCache:
         """Raise unless a kept result holds together: its arrays sized to its net, and its
         metrics judged and written as a fresh candidate's are."""
         from ..io.records import json_text
-        from .run import candidate_cost, verdict
+        from .verdict import candidate_cost, verdict
 
         net, molds, deviation = result.net, result.molds, result.deviation_mm
         if net is None or molds is None or not isinstance(result.metrics, dict):

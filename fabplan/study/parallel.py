@@ -36,9 +36,8 @@ from ..errors import FabplanError, InputError
 from ..io.forked import quiet_interrupts
 from ..io.resources import worker_count
 from .inputs import shared_inputs
+from .result import CandidateResult, StudyResult
 from .run import (
-    CandidateResult,
-    StudyResult,
     fabricate_candidate,
     judge_study,
     load_study_design,

@@ -38,16 +38,10 @@ from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
 from .checks import LIMIT_NAMES, binding_check, relaxation_text
-from .run import (
-    CandidateResult,
-    StudyResult,
-    cost_drivers,
-    every_panel_flat,
-    material_sentence,
-    molds_text,
-    vertex_deviation_mm,
-)
+from .result import CandidateResult, StudyResult
+from .run import cost_drivers, material_sentence, molds_text, vertex_deviation_mm
 from .search import search_record
+from .verdict import every_panel_flat
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import time
 import traceback
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
@@ -32,9 +32,10 @@ from ..net.free_vertices import free_vertices
 from ..net.geometry import face_planarity, kink_angles
 from ..report.html import counted
 from .checks import LIMIT_NAMES, binding_check, relaxation_text, violation
-from .checks import check as _check
+from .result import CandidateResult, StudyResult, by_rank
 from .search import first_points, next_points
-from .spec import Candidate, CostWeights, Limits, Study
+from .spec import Candidate, Study
+from .verdict import candidate_cost, differ_by, every_panel_flat, verdict
 
 if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs
     from ..design.mesh_surface import DesignSurface
@@ -85,108 +86,6 @@ __all__ = [
 
 # the limits a lamella study does not speak of: its strips are bent, not molded
 _MOLD_LIMITS = ("mold_tolerance_mm", "max_molds", "max_panel_step_mm")
-
-
-@dataclass
-class CandidateResult:
-    """What one candidate produced and how it was judged.
-
-    Attributes
-    ----------
-    candidate : the `Candidate`.
-    error : why the candidate failed to produce a net (None when it did).
-    metrics : measured numbers (see ``docs/study-schema.md``).
-    checks : one dict per limit: ``limit, bound, measured, ok, text``.
-    feasible : every check passed.
-    reasons : the verdict in plain words (the failed checks, or what was met).
-    cost, cost_terms : the ranking cost and its parts (None for a failed candidate).
-    rank : 1 for the best candidate.
-    pareto : no other measured candidate is at least as good in every cost driver (molds,
-        strip sheets, largest deviation) and better in one (`cost_drivers`).
-    same_net_as : name of an earlier candidate that ended at the same net (see
-        `same_net`) and planned its molds at this one's mold tolerance, or None.
-    twin : name of an earlier candidate that ended at the same net, at any mold
-        tolerance (its strips are this one's), or None.
-    notes : remarks beside the verdict (that it is the same net as another candidate).
-    net, molds, strips : the objects behind the metrics (for the files).
-    singular_points : (k, 3) float, the singular points of the direction field of the
-        layout the net was made from (marked on its pictures), or None.
-    boundary_molds : the molds of the net's boundary panels (`BoundaryMolds`), or None.
-    deviation_mm : (n,) float, distance of every net vertex from the design (mm), which
-        the deviation metrics and the heat map are made of.
-    """
-
-    candidate: Candidate
-    error: str | None = None
-    metrics: dict = field(default_factory=dict)
-    checks: list[dict] = field(default_factory=list)
-    feasible: bool = False
-    reasons: list[str] = field(default_factory=list)
-    cost: float | None = None
-    cost_terms: dict = field(default_factory=dict)
-    rank: int | None = None
-    pareto: bool = False
-    same_net_as: str | None = None
-    twin: str | None = None
-    deviation_mm: np.ndarray | None = None
-    notes: list[str] = field(default_factory=list)
-    net: OptimizationResult | None = None
-    molds: MoldPlan | None = None
-    strips: StripPlan | None = None
-    singular_points: np.ndarray | None = None
-    boundary_molds: BoundaryMolds | None = None
-
-    @property
-    def name(self) -> str:
-        return self.candidate.name
-
-    @property
-    def failed(self) -> bool:
-        return self.error is not None
-
-
-@dataclass
-class StudyResult:
-    """All candidates of a study, ranked, with the recommendation.
-
-    Attributes
-    ----------
-    study : the `Study`.
-    design : the `fabplan.surfaces.DesignSurface`.
-    candidates : `CandidateResult` in the order of the study file (baseline first).
-    recommended : name of the recommended candidate, or None when none is feasible.
-    recommendation : the recommendation in plain words.
-    sheets_charged : whether strip sheets enter the cost (only when every measured
-        candidate has strips, see `judge_study`).
-    made_files : the candidates' files made beside the computation, by a parallel run's
-        workers or a serial run's forked processes (name -> what
-        `fabplan.study.report.candidate_file_bytes` returns), for `write_study` to write;
-        empty otherwise.
-    seconds_run : wall time from loading the design to the last verdict (writing the
-        files is not included: `fabplan.study_report.write_study` adds it).
-    """
-
-    study: Study
-    design: DesignSurface
-    candidates: list[CandidateResult]
-    recommended: str | None
-    recommendation: str
-    sheets_charged: bool = False
-    seconds_run: float = 0.0
-    made_files: dict = field(default_factory=dict)
-
-    @property
-    def baseline(self) -> CandidateResult:
-        return next(c for c in self.candidates if c.candidate.baseline)
-
-    @property
-    def design_size(self) -> float:
-        """Diagonal of the design's bounding box (model units)."""
-        return self.design.extent
-
-    def ranked(self) -> list[CandidateResult]:
-        """Measured candidates in rank order, then the failed ones."""
-        return sorted(self.candidates, key=_by_rank)
 
 
 # ---------------------------------------------------------------------------- running
@@ -915,18 +814,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
                          else None},
         "panels": int(len(mesh.face_sizes)) + (boundary.count if boundary is not None else 0),
         "full_panels": int(len(mesh.face_sizes)),
-        "boundary_panels": None if boundary is None else {
-            "count": boundary.count,
-            "on_net_molds": boundary.on_net_molds,
-            "flat": boundary.flat,
-            "own_molds": boundary.own_molds,
-            # as cut from their molds: their largest distance from the design, and step
-            # against a neighbour
-            "deviation_max_mm": boundary.deviation_max_mm,
-            "step_max_mm": boundary.step_max_mm,
-            "flipped": len(trimmed.get("flipped") or []),
-            "patches": len(trimmed.get("patches") or []),
-        },
+        "boundary_panels": None if boundary is None else _boundary_panel_metrics(boundary, trimmed),
         "quads": int(np.sum(mesh.face_sizes == 4)),
         "other_faces": int(np.sum(mesh.face_sizes != 4)),
         "vertices": int(mesh.vertex_count),
@@ -944,37 +832,58 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "line_turn_deg": (props.get("fairness") or {}).get("line_turn_deg"),
         "free_vertices": _free_vertex_record(net, mm_per_unit),
         "molds": mold_metrics(molds, boundary),
-        "strips": None,
+        "strips": None if strips is None else _strip_metrics(strips),
     }
-    if strips is not None:
-        s = strips.summary()
-        radius = s["radius_mm"]
-        metrics["strips"] = {
-            "strips": s["strips"],
-            "parts": s["parts"],
-            "sheets": s["sheets"],
-            "material_use": s["material_use"],
-            "total_length_mm": s["total_length_mm"],
-            "straight": s["straight"],
-            "congruent": s["congruent"],
-            "congruence_deviation_mm": s["congruence_deviation_mm"],
-            "radius_mm": None if radius is None else
-            {"min": radius["min"], "max": radius["max"], "median": radius["median"]},
-            "min_radius_mm": math.inf if radius is None else radius["min"],
-            "max_radius_mm": math.inf if s["straight"] or radius is None or
-            any(math.isinf(st.radius_mm) for st in strips.strips.strips) else radius["max"],
-            "unrolled_length_error_mm": s["unrolled_length_error_mm"],
-            "ends_at_boundary_member": s["ends_at_boundary_member"],
-            "ends_free": s["ends_free"],
-            "ends_free_by_kind": s["ends_free_by_kind"],
-            "ends_not_continued": s["ends_not_continued"],
-            "boundary_member_mm": strips.strips.settings.member_mm,
-        }
     # the facade as built: the net's vertices and the boundary panels on their molds
     edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
     metrics["largest_deviation_mm"] = (max(metrics["deviation_mm"]["max"], edge)
                                        if edge is not None else metrics["deviation_mm"]["max"])
     return metrics
+
+
+def _boundary_panel_metrics(boundary: BoundaryMolds, trimmed: dict) -> dict:
+    """The ``boundary_panels`` part of a candidate's metrics: their molds (`BoundaryMolds`)
+    and what the trimming recorded (`trimmed`: flipped panels, patches)."""
+    return {
+        "count": boundary.count,
+        "on_net_molds": boundary.on_net_molds,
+        "flat": boundary.flat,
+        "own_molds": boundary.own_molds,
+        # as cut from their molds: their largest distance from the design, and step
+        # against a neighbour
+        "deviation_max_mm": boundary.deviation_max_mm,
+        "step_max_mm": boundary.step_max_mm,
+        "flipped": len(trimmed.get("flipped") or []),
+        "patches": len(trimmed.get("patches") or []),
+    }
+
+
+def _strip_metrics(strips: StripPlan) -> dict:
+    """The ``strips`` part of a candidate's metrics (`measure_candidate`): counts, sheets,
+    lengths, radii (mm) and how the strips end, from `StripPlan.summary`."""
+    s = strips.summary()
+    radius = s["radius_mm"]
+    return {
+        "strips": s["strips"],
+        "parts": s["parts"],
+        "sheets": s["sheets"],
+        "material_use": s["material_use"],
+        "total_length_mm": s["total_length_mm"],
+        "straight": s["straight"],
+        "congruent": s["congruent"],
+        "congruence_deviation_mm": s["congruence_deviation_mm"],
+        "radius_mm": None if radius is None else
+        {"min": radius["min"], "max": radius["max"], "median": radius["median"]},
+        "min_radius_mm": math.inf if radius is None else radius["min"],
+        "max_radius_mm": math.inf if s["straight"] or radius is None or
+        any(math.isinf(st.radius_mm) for st in strips.strips.strips) else radius["max"],
+        "unrolled_length_error_mm": s["unrolled_length_error_mm"],
+        "ends_at_boundary_member": s["ends_at_boundary_member"],
+        "ends_free": s["ends_free"],
+        "ends_free_by_kind": s["ends_free_by_kind"],
+        "ends_not_continued": s["ends_not_continued"],
+        "boundary_member_mm": strips.strips.settings.member_mm,
+    }
 
 
 def _buildable_counts(build: dict | None) -> dict | None:
@@ -1135,24 +1044,6 @@ def material_sentence(molds: dict) -> str:
             "material.")
 
 
-def every_panel_flat(molds: dict) -> bool:
-    """Whether every panel of a candidate is flat (`mold_metrics`): no curved panel, and
-    with a material every panel of the class ``flat`` (a material's flatness tolerance may
-    leave a nearly flat panel to be bent cold).
-
-    Examples
-    --------
-    >>> every_panel_flat({"all_panels_flat": True})
-    True
-    >>> every_panel_flat({"all_panels_flat": True, "panel_classes": {"flat": 3, "cold_bent": 1,
-    ...     "roll_bent": 0, "molded": 0}})
-    False
-    """
-    classes = molds.get("panel_classes")
-    return bool(molds.get("all_panels_flat")) and (
-        classes is None or classes["flat"] == sum(classes.values()))
-
-
 def molds_text(molds: dict) -> str:
     """The molds of a candidate in words: ``"no molds: all panels flat"``, with a material
     whose panels are bent ``"no molds: no panel molded"``, or ``"12 molds"``.
@@ -1177,205 +1068,10 @@ def _pick(stats: dict | None) -> dict | None:
 
 
 # ---------------------------------------------------------------------------- judging
-def verdict(metrics: dict, limits: Limits) -> list[dict]:
-    """The checks of one candidate's measured `metrics` against the `limits`.
-
-    Returns
-    -------
-    list of dicts ``{limit, bound, measured, ok, text}``, one per limit that applies;
-    `text` says in plain words what was measured against what.
-    """
-    checks = []
-    res = metrics["sphere_residual_relative_max"]
-    # a net that met its constraints beyond the deviation limit is a net: the deviation
-    # check fails for it (and says to what the limit would have to be relaxed)
-    met = metrics["converged"] or metrics["status"] == "off-design"
-    res_ok = res is not None and res <= limits.max_sphere_residual and met
-    state = "converged" if metrics["converged"] else f"stopped ({metrics['status']})"
-    folds = metrics.get("folds")
-    if folds and metrics["status"] in ("folded", "degenerate"):
-        state = (f"met its constraints on a net that folds ({folds['flipped_faces']} flipped "
-                 f"faces, {folds['fold_edges']} fold edges)" if folds["folded"] else
-                 f"met its constraints on a degenerate net ({folds['degenerate_stars']} stars "
-                 f"with their lines run together, {folds['collapsed_edges']} collapsed edges)")
-    build = metrics.get("buildable")
-    if build and metrics["status"] in ("crumpled", "off-design"):
-        state = (f"met its constraints on a crumpled net ({build['nonconvex_faces']} non-convex "
-                 f"faces, {build['sharp_line_turns']} vertices where a line turns too much)"
-                 if metrics["status"] == "crumpled" else
-                 "met its constraints only off the design (held within the limit it cannot "
-                 "be this net type; the nearest it came is below)")
-    if metrics.get("status_note"):
-        state += f" ({metrics['status_note']})"
-    checks.append(_check(
-        "max_sphere_residual", limits.max_sphere_residual, res, res_ok,
-        f"the solve {state} after {metrics['iterations']} iterations; largest sphere residual "
-        f"{_g(res)} of an edge (limit {limits.max_sphere_residual:g})"))
-    dev = metrics["deviation_mm"]["max"]
-    edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
-    both = metrics["largest_deviation_mm"]
-    own = (metrics.get("boundary_panels") or {}).get("own_molds", 0)
-    checks.append(_check(
-        "max_deviation_mm", limits.max_deviation_mm, both, both <= limits.max_deviation_mm,
-        f"the net deviates up to {dev:.1f} mm from the design"
-        + (f" at its free tips (its other vertices within {held:.1f} mm)"
-           if (held := metrics["deviation_mm"].get("held_max")) is not None
-           and held < 0.9 * dev else "")
-        + (f", its boundary panels as cut from their molds up to {edge:.1f} mm"
-           + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
-           if edge is not None else "")
-        + f" (limit {limits.max_deviation_mm:g} mm)"))
-    molds = metrics["molds"]
-    panels_fit = molds["failures"] == 0
-    checks.append(_check(
-        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"], panels_fit,
-        f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
-        f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
-        f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
-    step = molds.get("max_panel_step_mm")
-    if step is not None:
-        step_limit = limits.panel_step_limit_mm
-        checks.append(_check(
-            "max_panel_step_mm", step_limit, step, step <= step_limit,
-            f"neighbouring panels meet: the largest step between their molds is {step:.2f} mm "
-            f"(limit {step_limit:g} mm)" if step <= step_limit else
-            f"the molds of neighbouring panels step up to {step:.2f} mm apart at "
-            f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
-    if limits.max_molds is not None:
-        n = molds["count"]
-        bent = molds.get("panel_classes") is not None
-        needs = ("it needs no molds: all panels are flat" if every_panel_flat(molds) else
-                 "it needs no molds: no panel is molded") if n == 0 else \
-            f"its {'molded' if bent else 'curved'} panels need {counted(n, 'mold')}"
-        if bent:
-            needs += f" ({molds['saved']} saved by {molds['material']})"
-        checks.append(_check("max_molds", limits.max_molds, n, n <= limits.max_molds,
-                             f"{needs} (limit {limits.max_molds})"))
-    if limits.planar_panels:
-        p = metrics["planarity_mm"]["max"]
-        checks.append(_check(
-            "planarity_tolerance_mm", limits.planarity_tolerance_mm, p,
-            p <= limits.planarity_tolerance_mm,
-            (f"the panels are planar within {p:.2f} mm" if p <= limits.planarity_tolerance_mm
-             else f"the panels are up to {p:.2f} mm out of plane")
-            + f" (planar panels required: tolerance {limits.planarity_tolerance_mm:g} mm)"))
-    if limits.min_coverage is not None:
-        cov = metrics["coverage"]
-        checks.append(_check("min_coverage", limits.min_coverage, cov, cov >= limits.min_coverage,
-                             f"the panels cover {100 * cov:.1f} % of the design (limit at least "
-                             f"{100 * limits.min_coverage:g} %)"))
-    if limits.max_kink_deg is not None:
-        k = metrics["kink_deg"]["max"]
-        checks.append(_check("max_kink_deg", limits.max_kink_deg, k, k <= limits.max_kink_deg,
-                             f"the largest kink between neighbouring panels is {k:.2f} deg (limit "
-                             f"{limits.max_kink_deg:g} deg)"))
-    turn = (metrics.get("line_turn_deg") or {}).get("max")
-    if limits.max_line_turn_deg is not None and turn is not None:
-        checks.append(_check("max_line_turn_deg", limits.max_line_turn_deg, turn,
-                             turn <= limits.max_line_turn_deg,
-                             f"the net's lines turn in the surface by up to {turn:.2f} deg at a "
-                             f"vertex (limit {limits.max_line_turn_deg:g} deg)"))
-    strips = metrics.get("strips")
-    if strips is not None:
-        if limits.min_strip_radius_mm is not None:
-            r = strips["min_radius_mm"]
-            checks.append(_check(
-                "min_strip_radius_mm", limits.min_strip_radius_mm, r,
-                r >= limits.min_strip_radius_mm,
-                f"the smallest strip radius is {_mm(r)} (limit at least "
-                f"{limits.min_strip_radius_mm:g} mm)"))
-        if limits.max_strip_radius_mm is not None:
-            r = strips["max_radius_mm"]
-            checks.append(_check(
-                "max_strip_radius_mm", limits.max_strip_radius_mm, r,
-                r <= limits.max_strip_radius_mm,
-                f"the largest strip radius is {_mm(r)} (limit at most "
-                f"{limits.max_strip_radius_mm:g} mm)"))
-        if limits.congruent_strips:
-            d, tol = strips["congruence_deviation_mm"], limits.congruence_tolerance_mm
-            ok = d <= tol
-            checks.append(_check(
-                "congruent_strips", tol, d, ok,
-                ("all strip parts are congruent" if ok else "the strip parts are not congruent")
-                + f" (they differ from one common arc {_differ_by(d)}; congruence "
-                f"tolerance {tol:g} mm)"))
-        if limits.max_sheets is not None:
-            n = strips["sheets"]
-            checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,
-                                 f"the strips nest on {counted(n, 'sheet')} (limit "
-                                 f"{limits.max_sheets})"))
-    return checks
-
-
-def _g(value: float | None) -> str:
-    return "n/a" if value is None else f"{value:.2g}"
-
-
-def _mm(value: float) -> str:
-    return "infinite (straight)" if math.isinf(value) else f"{value:.0f} mm"
-
-
-def _differ_by(value: float) -> str:
-    """How much strip parts differ (mm), in words with the digits it needs.
-
-    Examples
-    --------
-    >>> [_differ_by(v) for v in (0.0, 3e-12, 0.0123, 4.5)]
-    ['by 0 mm', 'by less than 0.001 mm', 'by up to 0.012 mm', 'by up to 4.50 mm']
-    """
-    if value == 0:
-        return "by 0 mm"
-    if value < 0.001:
-        return "by less than 0.001 mm"
-    return f"by up to {value:.2g} mm" if value < 0.1 else f"by up to {value:.2f} mm"
-
-
 def _reasons(checks: list[dict], feasible: bool) -> list[str]:
     if feasible:
         return [f"meets all {len(checks)} limits: " + "; ".join(c["text"] for c in checks)]
     return [c["text"] for c in checks if not c["ok"]]
-
-
-def candidate_cost(metrics: dict, weights: CostWeights, *,
-                   charge_sheets: bool = True) -> tuple[float, dict]:
-    """The ranking cost of a candidate and its terms (see `CostWeights`).
-
-    Molds are counted for the curved panels only (`mold_metrics`). With `charge_sheets`
-    false the sheets term is 0: strip sheets are then reported, not charged (see
-    `judge_study`).
-
-    Examples
-    --------
-    >>> m = {"molds": {"count": 2, "panel_types": {"planar": 10}}, "coverage": 1.0,
-    ...      "strips": {"sheets": 3}, "deviation_mm": {"max": 5.0}, "largest_deviation_mm": 5.0}
-    >>> candidate_cost(m, CostWeights())[0], candidate_cost(m, CostWeights(), charge_sheets=False)[0]
-    (230.0, 215.0)
-    """
-    types = metrics["molds"]["panel_types"]
-    classes = metrics["molds"].get("panel_classes")
-    strips = metrics.get("strips")
-    # panels are counted for the whole design: a net with gaps must not look cheaper
-    whole = 1.0 / max(min(metrics["coverage"], 1.0), 1e-6)
-    bent = {}
-    if classes is not None:
-        # with a material: flat, cold-bent and roll-bent panels by class, the molded ones by
-        # their type (a molded panel within the tolerance of a plane is priced flat)
-        molded = metrics["molds"]["molded_types"]
-        types = {PANEL_TYPES[0]: classes["flat"] + molded.get(PANEL_TYPES[0], 0),
-                 PANEL_TYPES[1]: molded.get(PANEL_TYPES[1], 0),
-                 PANEL_TYPES[2]: molded.get(PANEL_TYPES[2], 0)}
-        bent = {"cold-bent panels": weights.cold_bent_panel * classes["cold_bent"] * whole,
-                "roll-bent panels": weights.roll_bent_panel * classes["roll_bent"] * whole}
-    terms = {
-        "molds": weights.mold * metrics["molds"]["count"],
-        "flat panels": weights.flat_panel * types.get(PANEL_TYPES[0], 0) * whole,
-        **bent,
-        "single curved panels": weights.single_curved_panel * types.get(PANEL_TYPES[1], 0) * whole,
-        "double curved panels": weights.double_curved_panel * types.get(PANEL_TYPES[2], 0) * whole,
-        "sheets": weights.sheet * strips["sheets"] if strips and charge_sheets else 0.0,
-        "deviation": weights.deviation_mm * metrics["largest_deviation_mm"],
-    }
-    return float(sum(terms.values())), terms
 
 
 def cost_drivers(results: list[CandidateResult]) -> np.ndarray:
@@ -1418,12 +1114,6 @@ def rank_candidates(results: list[CandidateResult]) -> None:
         r.rank = i
 
 
-def _by_rank(result: CandidateResult) -> tuple[bool, int]:
-    """Sort key: ranked candidates in rank order, then the unranked (failed) ones in their
-    order (sorting is stable)."""
-    return (result.rank is None, 0 if result.rank is None else result.rank)
-
-
 def is_lamella_study(study: Study) -> bool:
     """Whether a study is about lamella strips rather than panels: every candidate gets
     strips (``[strips] nets = "all"``) or a strip limit is set."""
@@ -1444,10 +1134,10 @@ def recommend(results: list[CandidateResult], study: Study, *,
     baseline's. A candidate that ended at the same net as an earlier one is named as that
     net, not as another option.
     """
-    feasible = sorted((r for r in results if r.feasible), key=_by_rank)
+    feasible = sorted((r for r in results if r.feasible), key=by_rank)
     if not feasible:
         measured = sorted((r for r in results if not r.failed),
-                          key=lambda r: (violation(r.checks), _by_rank(r)))
+                          key=lambda r: (violation(r.checks), by_rank(r)))
         if not measured:
             return None, "No candidate produced a net; see the reasons of each below."
         best = measured[0]
@@ -1561,11 +1251,11 @@ def _achievements(best: CandidateResult, base: CandidateResult | None, study: St
         elif s["congruence_deviation_mm"] <= tol:
             radius = s["radius_mm"]
             shape = (f"all congruent: pieces of one arc of radius {radius['median']:.0f} mm, "
-                     f"differing from it {_differ_by(s['congruence_deviation_mm'])} "
+                     f"differing from it {differ_by(s['congruence_deviation_mm'])} "
                      f"(tolerance {tol:g} mm)")
         else:
             shape = (f"not congruent (they differ from one common arc "
-                     f"{_differ_by(s['congruence_deviation_mm'])})")
+                     f"{differ_by(s['congruence_deviation_mm'])})")
         sheets = counted(s["sheets"], "sheet")
         if b is not None and b.get("strips"):
             sheets += f" (the baseline: {b['strips']['sheets']})"

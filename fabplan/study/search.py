@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 from .checks import violation
 
 if TYPE_CHECKING:
-    from .run import CandidateResult
+    from .result import CandidateResult
     from .spec import Candidate, Search
 
 __all__ = ["first_points", "next_points", "SearchPoint", "search_points", "search_record",

@@ -1,0 +1,250 @@
+"""The verdict on a study candidate and its cost: pure functions of its measured metrics,
+the limits and the cost weights, so that a changed limit or weight changes the verdict
+and the ranking without a new run (and a kept candidate is judged again as a fresh one
+is: `fabplan.study.cache`)."""
+
+from __future__ import annotations
+
+import math
+
+from ..fabricate.molds.mold_shapes import PANEL_TYPES
+from ..report.html import counted
+from .checks import check as _check
+from .spec import CostWeights, Limits
+
+__all__ = ["verdict", "candidate_cost", "every_panel_flat", "differ_by"]
+
+
+def verdict(metrics: dict, limits: Limits) -> list[dict]:
+    """The checks of one candidate's measured `metrics` against the `limits`.
+
+    Returns
+    -------
+    list of dicts ``{limit, bound, measured, ok, text}``, one per limit that applies;
+    `text` says in plain words what was measured against what.
+    """
+    checks = []
+    res = metrics["sphere_residual_relative_max"]
+    # a net that met its constraints beyond the deviation limit is a net: the deviation
+    # check fails for it (and says to what the limit would have to be relaxed)
+    met = metrics["converged"] or metrics["status"] == "off-design"
+    res_ok = res is not None and res <= limits.max_sphere_residual and met
+    state = _solve_state(metrics)
+    checks.append(_check(
+        "max_sphere_residual", limits.max_sphere_residual, res, res_ok,
+        f"the solve {state} after {metrics['iterations']} iterations; largest sphere residual "
+        f"{_g(res)} of an edge (limit {limits.max_sphere_residual:g})"))
+    dev = metrics["deviation_mm"]["max"]
+    edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
+    both = metrics["largest_deviation_mm"]
+    own = (metrics.get("boundary_panels") or {}).get("own_molds", 0)
+    checks.append(_check(
+        "max_deviation_mm", limits.max_deviation_mm, both, both <= limits.max_deviation_mm,
+        f"the net deviates up to {dev:.1f} mm from the design"
+        + (f" at its free tips (its other vertices within {held:.1f} mm)"
+           if (held := metrics["deviation_mm"].get("held_max")) is not None
+           and held < 0.9 * dev else "")
+        + (f", its boundary panels as cut from their molds up to {edge:.1f} mm"
+           + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
+           if edge is not None else "")
+        + f" (limit {limits.max_deviation_mm:g} mm)"))
+    checks += _mold_checks(metrics["molds"], limits)
+    if limits.planar_panels:
+        p = metrics["planarity_mm"]["max"]
+        checks.append(_check(
+            "planarity_tolerance_mm", limits.planarity_tolerance_mm, p,
+            p <= limits.planarity_tolerance_mm,
+            (f"the panels are planar within {p:.2f} mm" if p <= limits.planarity_tolerance_mm
+             else f"the panels are up to {p:.2f} mm out of plane")
+            + f" (planar panels required: tolerance {limits.planarity_tolerance_mm:g} mm)"))
+    if limits.min_coverage is not None:
+        cov = metrics["coverage"]
+        checks.append(_check("min_coverage", limits.min_coverage, cov, cov >= limits.min_coverage,
+                             f"the panels cover {100 * cov:.1f} % of the design (limit at least "
+                             f"{100 * limits.min_coverage:g} %)"))
+    if limits.max_kink_deg is not None:
+        k = metrics["kink_deg"]["max"]
+        checks.append(_check("max_kink_deg", limits.max_kink_deg, k, k <= limits.max_kink_deg,
+                             f"the largest kink between neighbouring panels is {k:.2f} deg (limit "
+                             f"{limits.max_kink_deg:g} deg)"))
+    turn = (metrics.get("line_turn_deg") or {}).get("max")
+    if limits.max_line_turn_deg is not None and turn is not None:
+        checks.append(_check("max_line_turn_deg", limits.max_line_turn_deg, turn,
+                             turn <= limits.max_line_turn_deg,
+                             f"the net's lines turn in the surface by up to {turn:.2f} deg at a "
+                             f"vertex (limit {limits.max_line_turn_deg:g} deg)"))
+    strips = metrics.get("strips")
+    if strips is not None:
+        checks += _strip_checks(strips, limits)
+    return checks
+
+
+def _solve_state(metrics: dict) -> str:
+    """How the solve ended, in words: converged, stopped, or met its constraints on a net
+    that folds, is degenerate, crumpled or only off the design."""
+    state = "converged" if metrics["converged"] else f"stopped ({metrics['status']})"
+    folds = metrics.get("folds")
+    if folds and metrics["status"] in ("folded", "degenerate"):
+        state = (f"met its constraints on a net that folds ({folds['flipped_faces']} flipped "
+                 f"faces, {folds['fold_edges']} fold edges)" if folds["folded"] else
+                 f"met its constraints on a degenerate net ({folds['degenerate_stars']} stars "
+                 f"with their lines run together, {folds['collapsed_edges']} collapsed edges)")
+    build = metrics.get("buildable")
+    if build and metrics["status"] in ("crumpled", "off-design"):
+        state = (f"met its constraints on a crumpled net ({build['nonconvex_faces']} non-convex "
+                 f"faces, {build['sharp_line_turns']} vertices where a line turns too much)"
+                 if metrics["status"] == "crumpled" else
+                 "met its constraints only off the design (held within the limit it cannot "
+                 "be this net type; the nearest it came is below)")
+    if metrics.get("status_note"):
+        state += f" ({metrics['status_note']})"
+    return state
+
+
+def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
+    """The checks of a candidate's molds (``metrics["molds"]``, `mold_metrics`): every
+    panel fits a mold, neighbouring molds meet, and (when limited) how many molds."""
+    checks = []
+    panels_fit = molds["failures"] == 0
+    checks.append(_check(
+        "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"], panels_fit,
+        f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
+        f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
+        f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
+    step = molds.get("max_panel_step_mm")
+    if step is not None:
+        step_limit = limits.panel_step_limit_mm
+        checks.append(_check(
+            "max_panel_step_mm", step_limit, step, step <= step_limit,
+            f"neighbouring panels meet: the largest step between their molds is {step:.2f} mm "
+            f"(limit {step_limit:g} mm)" if step <= step_limit else
+            f"the molds of neighbouring panels step up to {step:.2f} mm apart at "
+            f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
+    if limits.max_molds is not None:
+        n = molds["count"]
+        bent = molds.get("panel_classes") is not None
+        needs = ("it needs no molds: all panels are flat" if every_panel_flat(molds) else
+                 "it needs no molds: no panel is molded") if n == 0 else \
+            f"its {'molded' if bent else 'curved'} panels need {counted(n, 'mold')}"
+        if bent:
+            needs += f" ({molds['saved']} saved by {molds['material']})"
+        checks.append(_check("max_molds", limits.max_molds, n, n <= limits.max_molds,
+                             f"{needs} (limit {limits.max_molds})"))
+    return checks
+
+
+def _strip_checks(strips: dict, limits: Limits) -> list[dict]:
+    """The checks of a candidate's strips (``metrics["strips"]``) against the strip limits
+    that are set: radii, congruence, sheets."""
+    checks = []
+    if limits.min_strip_radius_mm is not None:
+        r = strips["min_radius_mm"]
+        checks.append(_check(
+            "min_strip_radius_mm", limits.min_strip_radius_mm, r,
+            r >= limits.min_strip_radius_mm,
+            f"the smallest strip radius is {_mm(r)} (limit at least "
+            f"{limits.min_strip_radius_mm:g} mm)"))
+    if limits.max_strip_radius_mm is not None:
+        r = strips["max_radius_mm"]
+        checks.append(_check(
+            "max_strip_radius_mm", limits.max_strip_radius_mm, r,
+            r <= limits.max_strip_radius_mm,
+            f"the largest strip radius is {_mm(r)} (limit at most "
+            f"{limits.max_strip_radius_mm:g} mm)"))
+    if limits.congruent_strips:
+        d, tol = strips["congruence_deviation_mm"], limits.congruence_tolerance_mm
+        ok = d <= tol
+        checks.append(_check(
+            "congruent_strips", tol, d, ok,
+            ("all strip parts are congruent" if ok else "the strip parts are not congruent")
+            + f" (they differ from one common arc {differ_by(d)}; congruence "
+            f"tolerance {tol:g} mm)"))
+    if limits.max_sheets is not None:
+        n = strips["sheets"]
+        checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,
+                             f"the strips nest on {counted(n, 'sheet')} (limit "
+                             f"{limits.max_sheets})"))
+    return checks
+
+
+def candidate_cost(metrics: dict, weights: CostWeights, *,
+                   charge_sheets: bool = True) -> tuple[float, dict]:
+    """The ranking cost of a candidate and its terms (see `CostWeights`).
+
+    Molds are counted for the curved panels only (`mold_metrics`). With `charge_sheets`
+    false the sheets term is 0: strip sheets are then reported, not charged (see
+    `judge_study`).
+
+    Examples
+    --------
+    >>> m = {"molds": {"count": 2, "panel_types": {"planar": 10}}, "coverage": 1.0,
+    ...      "strips": {"sheets": 3}, "deviation_mm": {"max": 5.0}, "largest_deviation_mm": 5.0}
+    >>> candidate_cost(m, CostWeights())[0], candidate_cost(m, CostWeights(), charge_sheets=False)[0]
+    (230.0, 215.0)
+    """
+    types = metrics["molds"]["panel_types"]
+    classes = metrics["molds"].get("panel_classes")
+    strips = metrics.get("strips")
+    # panels are counted for the whole design: a net with gaps must not look cheaper
+    whole = 1.0 / max(min(metrics["coverage"], 1.0), 1e-6)
+    bent = {}
+    if classes is not None:
+        # with a material: flat, cold-bent and roll-bent panels by class, the molded ones by
+        # their type (a molded panel within the tolerance of a plane is priced flat)
+        molded = metrics["molds"]["molded_types"]
+        types = {PANEL_TYPES[0]: classes["flat"] + molded.get(PANEL_TYPES[0], 0),
+                 PANEL_TYPES[1]: molded.get(PANEL_TYPES[1], 0),
+                 PANEL_TYPES[2]: molded.get(PANEL_TYPES[2], 0)}
+        bent = {"cold-bent panels": weights.cold_bent_panel * classes["cold_bent"] * whole,
+                "roll-bent panels": weights.roll_bent_panel * classes["roll_bent"] * whole}
+    terms = {
+        "molds": weights.mold * metrics["molds"]["count"],
+        "flat panels": weights.flat_panel * types.get(PANEL_TYPES[0], 0) * whole,
+        **bent,
+        "single curved panels": weights.single_curved_panel * types.get(PANEL_TYPES[1], 0) * whole,
+        "double curved panels": weights.double_curved_panel * types.get(PANEL_TYPES[2], 0) * whole,
+        "sheets": weights.sheet * strips["sheets"] if strips and charge_sheets else 0.0,
+        "deviation": weights.deviation_mm * metrics["largest_deviation_mm"],
+    }
+    return float(sum(terms.values())), terms
+
+
+def every_panel_flat(molds: dict) -> bool:
+    """Whether every panel of a candidate is flat (`mold_metrics`): no curved panel, and
+    with a material every panel of the class ``flat`` (a material's flatness tolerance may
+    leave a nearly flat panel to be bent cold).
+
+    Examples
+    --------
+    >>> every_panel_flat({"all_panels_flat": True})
+    True
+    >>> every_panel_flat({"all_panels_flat": True, "panel_classes": {"flat": 3, "cold_bent": 1,
+    ...     "roll_bent": 0, "molded": 0}})
+    False
+    """
+    classes = molds.get("panel_classes")
+    return bool(molds.get("all_panels_flat")) and (
+        classes is None or classes["flat"] == sum(classes.values()))
+
+
+def _g(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2g}"
+
+
+def _mm(value: float) -> str:
+    return "infinite (straight)" if math.isinf(value) else f"{value:.0f} mm"
+
+
+def differ_by(value: float) -> str:
+    """How much strip parts differ (mm), in words with the digits it needs.
+
+    Examples
+    --------
+    >>> [differ_by(v) for v in (0.0, 3e-12, 0.0123, 4.5)]
+    ['by 0 mm', 'by less than 0.001 mm', 'by up to 0.012 mm', 'by up to 4.50 mm']
+    """
+    if value == 0:
+        return "by 0 mm"
+    if value < 0.001:
+        return "by less than 0.001 mm"
+    return f"by up to {value:.2g} mm" if value < 0.1 else f"by up to {value:.2f} mm"
