@@ -47,11 +47,46 @@ class PipedRun:
         return max(b - a for a, b in zip(times[:-1], times[1:], strict=True))
 
 
+#: the session's template studies: every test that reads one runs in the same process
+#: (`--dist loadgroup` of pytest-xdist), so that each study runs once per test run
+STUDY_FIXTURES = ("stadium_study", "canopy_study", "tower_study")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    # before pytest-xdist turns the group into the node id's suffix
+    for item in items:
+        for name in STUDY_FIXTURES:
+            if name in getattr(item, "fixturenames", ()):
+                item.add_marker(pytest.mark.xdist_group(name))
+
+
 @pytest.fixture(scope="session")
 def stadium_study(tmp_path_factory):
     """The stadium template's study, run once per session with its output piped
-    (about 45-60 s): (output folder, PipedRun)."""
+    (about 80 s): (output folder, PipedRun). Read only: a test that writes beside its
+    files copies the folder first."""
     folder = tmp_path_factory.mktemp("stadium")
     out = folder / "study"
     run = PipedRun(["study", "stadium", "-o", str(out)], cwd=str(folder))
+    return out, run
+
+
+@pytest.fixture(scope="session")
+def canopy_study(tmp_path_factory):
+    """The canopy template's study, run once per session with its output piped
+    (about 40 s): (output folder, PipedRun). Read only, as `stadium_study`."""
+    folder = tmp_path_factory.mktemp("canopy")
+    out = folder / "study"
+    run = PipedRun(["study", "canopy", "-o", str(out)], cwd=str(folder))
+    return out, run
+
+
+@pytest.fixture(scope="session")
+def tower_study(tmp_path_factory):
+    """The tower template's study run quietly (`-q`) once per session with its output
+    piped (about 30 s): (output folder, PipedRun). Read only, as `stadium_study`."""
+    folder = tmp_path_factory.mktemp("tower")
+    out = folder / "study"
+    run = PipedRun(["study", "tower", "-q", "-o", str(out)], cwd=str(folder))
     return out, run
