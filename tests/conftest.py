@@ -47,9 +47,9 @@ class PipedRun:
         return max(b - a for a, b in zip(times[:-1], times[1:], strict=True))
 
 
-#: the session's template studies: every test that reads one runs in the same process
-#: (`--dist loadgroup` of pytest-xdist), so that each study runs once per test run
-STUDY_FIXTURES = ("stadium_study", "canopy_study", "tower_study")
+#: the session's shared runs: every test that reads one runs in the same process
+#: (`--dist loadgroup` of pytest-xdist), so that each runs once per test run
+STUDY_FIXTURES = ("stadium_study", "canopy_study", "tower_study", "wein99_molds")
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -90,3 +90,16 @@ def tower_study(tmp_path_factory):
     out = folder / "study"
     run = PipedRun(["study", "tower", "-q", "-o", str(out)], cwd=str(folder))
     return out, run
+
+
+@pytest.fixture(scope="session")
+def wein99_molds(tmp_path_factory):
+    """`fabplan molds wein99.obj --tolerance-mm 5 -q`, run once per session (the molds
+    report's figures and its 3D view are checked on it): (exit code, output folder).
+    Read only."""
+    from fabplan.cli import main
+
+    out = tmp_path_factory.mktemp("molds") / "wein99"
+    code = main(["molds", str(fabplan.data_path("wein99.obj")), "--tolerance-mm", "5", "-q",
+                 "-o", str(out)])
+    return code, out
