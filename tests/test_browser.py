@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from helpers import chromium
 
-import fabplan
 from fabplan.cli import main
 
 ARTIFACTS = Path(__file__).parent / "artifacts"
@@ -117,10 +116,10 @@ def _check_view(context, report: Path, molds_json_of, name: str) -> Report:
 
 
 @pytest.fixture(scope="module")
-def molds_report(tmp_path_factory):
-    out = tmp_path_factory.mktemp("molds") / "wein99"
-    assert main(["molds", str(fabplan.data_path("wein99.obj")), "--tolerance-mm", "5", "-q",
-                 "-o", str(out)]) == 0
+def molds_report(wein99_molds):
+    """The session's `fabplan molds wein99.obj --tolerance-mm 5 -q` (tests/conftest.py)."""
+    code, out = wein99_molds
+    assert code == 0
     return out
 
 

@@ -184,6 +184,7 @@ def _wavy_facade() -> tuple:
     return QuadMesh(points.reshape(-1, 3), faces, name="wavy"), DESIGNS["door-facade"]().reference
 
 
+@pytest.mark.slow
 def test_a_deviation_limit_is_held_in_the_solve_or_its_smallest_reach_is_said():
     """A constant-radius net drifts half a metre off a wavy facade; asked to stay within
     5 cm it ends within 5 cm, or off-design with the smallest limit it reached, and the
@@ -215,6 +216,7 @@ def test_a_deviation_limit_is_held_in_the_solve_or_its_smallest_reach_is_said():
     assert loose.converged and reference.distances(loose.mesh.vertices).max() <= 1.0
 
 
+@pytest.mark.slow
 def test_optimize_max_deviation_on_the_command_line(tmp_path, capsys):
     net, reference = _wavy_facade()
     start, wave = tmp_path / "wavy.obj", tmp_path / "wave.obj"

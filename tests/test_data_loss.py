@@ -126,6 +126,7 @@ def test_every_file_a_study_writes_is_one_a_later_study_may_replace(resumed_stud
     assert study_files(resumed_study / "out") == written
 
 
+@pytest.mark.slow
 def test_a_crafted_cache_runs_nothing_and_a_fifo_does_not_hang(resumed_study, tmp_path):
     out = tmp_path / "out"
     shutil.copytree(resumed_study / "out", out)
@@ -192,6 +193,7 @@ def test_a_study_never_removes_its_own_study_file(tmp_path, capsys):
     assert hashes(tmp_path) == before
 
 
+@pytest.mark.slow
 def test_a_study_replaces_only_what_an_earlier_study_wrote(resumed_study, tmp_path):
     out = tmp_path / "out"
     shutil.copytree(resumed_study / "out", out)
@@ -215,6 +217,7 @@ def test_a_study_replaces_only_what_an_earlier_study_wrote(resumed_study, tmp_pa
     assert "notes.txt" not in listed and "candidates/other/net.obj" in listed
 
 
+@pytest.mark.slow
 def test_a_study_refuses_to_replace_a_file_it_did_not_write(resumed_study, tmp_path, capsys):
     out = tmp_path / "out"
     shutil.copytree(resumed_study / "out", out)
@@ -419,6 +422,7 @@ def test_kept_entries_that_do_not_hold_together_are_ignored(resumed_study, tmp_p
     assert cache.load(study.candidates[0]) is None and "unpacks to" in notes[-1]
 
 
+@pytest.mark.slow
 def test_a_study_never_removes_its_inputs_or_files_it_does_not_name(resumed_study, tmp_path):
     out = tmp_path / "out"
     shutil.copytree(resumed_study / "out", out)
@@ -491,6 +495,7 @@ def test_a_run_started_with_sighup_ignored_keeps_it_ignored(tmp_path):
     assert run.returncode == 0 and run.stdout.strip() == "alive", run.stderr
 
 
+@pytest.mark.slow
 def test_strips_remove_only_their_own_earlier_files(tmp_path):
     """A strips run removes the sheets of an earlier run it no longer writes, but only
     files still as that run wrote them: a user's file named like a sheet, listed in a

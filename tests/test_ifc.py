@@ -136,6 +136,7 @@ def test_one_plate_per_panel_with_the_mold_of_panels_csv(wein):
     assert len(groups) == len({r["mold"] for r in rows})
 
 
+@pytest.mark.slow
 def test_a_material_gives_each_plate_its_class_and_the_plates_their_material(tmp_path):
     """`molds --material ... --ifc`: every plate carries its class as panels.csv has it and
     whether its mold is made (molds.json), and the plates are of the material."""
@@ -317,6 +318,7 @@ def test_unit_assignment_follows_the_net(tmp_path, units, scale, name):
     assert np.abs(np.array(point) - X[v]).max() <= 0.5 * 10.0 ** -{"mm": 3, "ft": 6}[units] * (1 + 1e-9)
 
 
+@pytest.mark.slow
 def test_a_failed_run_leaves_no_ifc(tmp_path, monkeypatch):
     import fabplan.fabricate.molds.mold_report as report
 

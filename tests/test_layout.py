@@ -140,6 +140,7 @@ def test_freeform_facade_mesh_through_the_cli(facade_stl, tmp_path, capsys):
     assert picture.ndim == 3 and min(picture.shape[:2]) > 300 and picture.std() > 0.01
 
 
+@pytest.mark.slow
 def test_freeform_facade_mesh_isogonal(facade_stl):
     design = load_design(facade_stl)
     layout = layout_surface(design, 1.0, angle=75.0)
@@ -501,6 +502,7 @@ def test_floors_of_a_surface_of_revolution_have_no_partner_family(tmp_path, caps
     _assert_refused(code, capsys, tmp_path, "follow a principal direction")
 
 
+@pytest.mark.slow
 def test_a_net_type_that_changes_the_surface_is_pointed_to_optimize(tmp_path, capsys):
     """Held near a dome, a linear Weingarten net cannot form (exit 3, with the way out);
     optimized with the dome as a reference surface (a built-in spec) it does."""
@@ -527,6 +529,7 @@ def _wavy_height(x, y):
     return 0.02 * u * w + 0.6 * np.sin(0.25 * x) * np.cos(0.2 * y) + 0.003 * u * u
 
 
+@pytest.mark.slow
 def test_fast_turning_principal_directions_are_found_and_reported():
     """At 70 degrees the net's directions are the principal ones turned by 35 degrees. As
     a line field (here forced: no cross field is tried) they turn fast around the
@@ -728,6 +731,7 @@ def _bumps(seed: int):
     return surface.triangulate(surface.resolution_for(12000))
 
 
+@pytest.mark.slow
 def test_a_lattice_broken_by_umbilics_is_refused_with_the_reason(tmp_path, capsys):
     """Regression: on six bumps and dents the layout's quads covered 3 % of the design
     and boundary panels the size of the gaps the rest; the net was written as converged.

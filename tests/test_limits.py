@@ -139,6 +139,7 @@ def test_a_search_without_a_feasible_point_refines_beside_the_least_infeasible()
     assert sorted(c.radius for c in next_points(search, results)) == [25.0, 35.0]
 
 
+@pytest.mark.slow
 def test_a_study_searches_an_angle_and_reports_it(tmp_path):
     import json
 

@@ -75,6 +75,7 @@ def _translational(r1_m: float, r2_m: float) -> QuadMesh:
                              spacing=1.5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spec", ["glass-heat-strengthened:8mm", "glass-tempered:10mm",
                                   "glass-laminated:2x8mm"])
 def test_mildly_twisted_facade_is_cold_bent_glass_without_molds(spec, tmp_path):

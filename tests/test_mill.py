@@ -507,6 +507,7 @@ def _report_rows(html: str) -> dict:
     return {unescape(key): unescape(value) for key, value in rows}
 
 
+@pytest.mark.slow
 def test_mill_measures_against_the_design_its_record_names_and_files_agree(tmp_path, capsys):
     """A layout's net (its NET.json names the design, here a mesh file): `fabplan mill`
     measures against the design without being told, and every design figure of the

@@ -9,7 +9,6 @@ import re
 
 import pytest
 
-import fabplan
 from fabplan.cli import main
 
 
@@ -27,10 +26,9 @@ def _g(value: float, digits: int) -> str:
 
 
 @pytest.fixture(scope="module")
-def wein99_report(tmp_path_factory):
-    out = tmp_path_factory.mktemp("molds") / "wein99"
-    code = main(["molds", str(fabplan.data_path("wein99.obj")), "--tolerance-mm", "5",
-                 "-o", str(out), "-q"])
+def wein99_report(wein99_molds):
+    """The session's `fabplan molds wein99.obj --tolerance-mm 5 -q` (tests/conftest.py)."""
+    code, out = wein99_molds
     assert code in (0, 3)
     return out, json.loads((out / "molds.json").read_text(encoding="utf-8"))
 

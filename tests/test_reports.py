@@ -181,11 +181,11 @@ def test_layout_piped_prints_its_stages_at_least_every_5_seconds(tmp_path):
 
 
 @pytest.mark.slow
-def test_quiet_runs_print_at_most_two_lines(tmp_path):
+def test_quiet_runs_print_at_most_two_lines(tmp_path, tower_study):
     strips = PipedRun(["strips", CMC1, "--height", "100", "--thickness", "6", "--no-previews",
                        "-q", "-o", str(tmp_path / "strips")], cwd=str(tmp_path))
     assert strips.code == 0 and 1 <= len(strips.lines) <= 2, strips.lines
-    study = PipedRun(["study", "tower", "-q", "-o", str(tmp_path / "tower")], cwd=str(tmp_path))
+    _, study = tower_study              # `fabplan study tower -q`, piped (tests/conftest.py)
     assert study.code == 0 and 1 <= len(study.lines) <= 2, study.lines
     assert "report.html" in study.lines[-1][1]
 
@@ -249,6 +249,7 @@ def test_the_molds_report_pdf_opens_with_contents_and_numbered_pages(cmc1_plan, 
     assert f"{cmc1_plan.mold_count} molds" in pages[0] or "1 mold" in pages[0]
 
 
+@pytest.mark.slow
 def test_the_study_says_where_the_design_makes_lines_kink(tmp_path):
     """A paraboloid of revolution has an umbilic at its pole: the map of |k1 - k2| says
     so, and the report places the sharpest turn of the lines on it and says whether the

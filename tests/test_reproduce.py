@@ -71,6 +71,7 @@ def _same_molds(study_folder: Path, made: Path) -> None:
                 assert float(a[key]) == pytest.approx(float(b[key]), rel=1e-6, abs=1e-2), key
 
 
+@pytest.mark.slow
 def test_a_gliding_candidate_is_planned_on_the_design_by_its_reproduce_commands(
         tmp_path, monkeypatch):
     (tmp_path / "s.toml").write_text(STUDY, encoding="utf-8")
@@ -98,10 +99,16 @@ def test_molds_on_the_design_needs_the_design(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_every_canopy_candidate_is_reproduced_by_its_commands(tmp_path, monkeypatch):
+def test_every_canopy_candidate_is_reproduced_by_its_commands(canopy_study, tmp_path, monkeypatch):
+    import shutil
+
     from fabplan.study.report import study_files
 
-    assert main(["study", "canopy", "-o", str(tmp_path / "out"), "-q"]) == 0
+    # the session's `fabplan study canopy` (tests/conftest.py), copied: the commands write
+    # beside the candidates' files
+    shared, run = canopy_study
+    assert run.code == 0, run.lines[-5:]
+    shutil.copytree(shared, tmp_path / "out")
     record = json.loads((tmp_path / "out" / "study.json").read_text())
     # every file it wrote (strip sheets included) is one a later study replaces
     written = {p.relative_to(tmp_path / "out").as_posix() for p in (tmp_path / "out").rglob("*")

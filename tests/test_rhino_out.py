@@ -258,6 +258,7 @@ def test_a_3dm_that_cannot_be_written_leaves_nothing(tmp_path, patch_file, capsy
     assert sorted(p.name for p in tmp_path.iterdir()) == ["net.3dm"]
 
 
+@pytest.mark.slow
 def test_molds_without_3dm_write_no_rhino_files(tmp_path, patch_file):
     out = tmp_path / "molds"
     assert main(["molds", str(patch_file), "--tolerance-mm", "5", "-o", str(out)]) == 0

@@ -83,6 +83,7 @@ def test_the_kept_start_is_the_fairest_whose_panels_are_as_even(tower):
     assert layout.smoothing == kept["smoothing_panels"]
 
 
+@pytest.mark.slow
 def test_an_isogonal_net_on_a_torus_is_fairer_from_another_start():
     """The torus's isogonal 60 deg net from one start turns its lines by 28 deg at the 95th
     percentile (measured when this was written); bisected by the other principal direction
@@ -134,6 +135,7 @@ def test_a_start_whose_solve_breaks_down_leaves_the_others(tower, monkeypatch):
     assert "singular" in records[1]["message"] and result.converged
 
 
+@pytest.mark.slow
 def test_an_isogonal_net_tries_the_other_bisector_and_its_layout_is_made_again():
     surface = surface_from_spec("hyperbolic-paraboloid:width=5,depth=5,rise=3")
     design = surface.triangulate((60, 60))
@@ -245,6 +247,7 @@ net = "const-radius"
 """
 
 
+@pytest.mark.slow
 def test_a_study_with_starts_solves_its_gliding_nets_and_their_start_from_them():
     from fabplan.study.run import run_study
 

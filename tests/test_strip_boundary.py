@@ -178,6 +178,7 @@ def test_a_boundary_file_of_another_net_is_refused(laid_out, tmp_path, capsys):
     assert len(err) == 1 and "other.boundary.obj" in err[0] and "not the net" in err[0]
 
 
+@pytest.mark.slow
 def test_the_api_runs_a_glide_results_strips_to_its_edge():
     import fabplan
 

@@ -336,6 +336,7 @@ def test_candidate_files_are_real(study_run):
         assert [len(f) for f in cut] == [len(f) for f in faces]
 
 
+@pytest.mark.slow
 def test_fabplan_molds_on_a_candidates_files_finds_its_boundary_molds(study_run, tmp_path):
     """The study's boundary panel molds are reproduced by `fabplan molds` on the files it
     wrote for a net that leaves the design: the same mold for every panel, the same steps
@@ -824,6 +825,7 @@ net = "cmc"
 """
 
 
+@pytest.mark.slow
 def test_forked_candidates_write_the_same_files_as_the_serial_run(tmp_path):
     """Candidates measured in forked processes (their files made there too, a twin's
     copying its twin's strips) and the PDF drawn in one: the same files as the serial run

@@ -105,6 +105,7 @@ def swept(tmp_path_factory):
     return folder, study, result
 
 
+@pytest.mark.slow
 def test_candidates_of_one_net_share_the_solve_and_get_their_own_molds(swept):
     _, study, result = swept
     by_name = {c.name: c for c in result.candidates}
@@ -134,6 +135,7 @@ def test_candidates_of_one_net_share_the_solve_and_get_their_own_molds(swept):
             assert cmc.molds is by_name[f"minimal-p{size}-t{tol}"].molds
 
 
+@pytest.mark.slow
 def test_the_pareto_front_and_the_baseline_of_each_candidate(swept):
     _, study, result = swept
     done = [c for c in result.candidates if not c.failed]
@@ -149,6 +151,7 @@ def test_the_pareto_front_and_the_baseline_of_each_candidate(swept):
             c.candidate.panel_size, c.candidate.mold_tolerance_mm)
 
 
+@pytest.mark.slow
 def test_the_report_compares_the_sweep(swept):
     folder, study, result = swept
     out = folder / "out"

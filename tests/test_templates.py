@@ -58,6 +58,11 @@ pytestmark = pytest.mark.slow
 
 def _run(name: str, folder) -> dict:
     assert main(["study", name, "-o", str(folder), "-q"]) == 0
+    return _checked(name, folder)
+
+
+def _checked(name: str, folder) -> dict:
+    """The checks every template's study passes, read from its output folder."""
     record = json.loads((folder / "study.json").read_text(encoding="utf-8"))
     assert (folder / "report.html").stat().st_size > 100_000          # pictures embedded
     assert all(c["error"] is None for c in record["candidates"]), \
@@ -207,9 +212,11 @@ def _baseline_failure_comes_first(record: dict) -> None:
         assert (check["text"] in second) is (not check["ok"])
 
 
-def test_stadium_linear_weingarten_nets_keep_the_design_limit_in_the_solve(tmp_path):
-    out = tmp_path / "stadium"
-    record = _run("stadium", out)
+def test_stadium_linear_weingarten_nets_keep_the_design_limit_in_the_solve(stadium_study):
+    # the session's run of `fabplan study stadium` (tests/conftest.py), read only
+    out, run = stadium_study
+    assert run.code == 0, run.lines[-5:]
+    record = _checked("stadium", out)
     limits = read_study(template_path("stadium")).limits
     tol = limits.mold_tolerance_mm
     lw = _by_net(record, "linear-weingarten")
@@ -309,9 +316,10 @@ def test_pavilion_constant_radius_strips_are_congruent(tmp_path):
     assert record["sheets_charged"] is True          # every candidate has strips
 
 
-def test_tower_characteristic_conjugate_panels_are_planar(tmp_path):
-    out = tmp_path / "tower"
-    record = _run("tower", out)
+def test_tower_characteristic_conjugate_panels_are_planar(tower_study):
+    out, run = tower_study
+    assert run.code == 0, run.lines[-5:]
+    record = _checked("tower", out)
     limits = read_study(template_path("tower")).limits
     c = _by_net(record, "char-conjugate")[0]
     assert c["feasible"]
@@ -356,9 +364,10 @@ def test_tower_characteristic_conjugate_panels_are_planar(tmp_path):
     assert "<td>none (all flat)</td>" in page
 
 
-def test_canopy_minimal_surface_within_the_limit(tmp_path):
-    out = tmp_path / "canopy"
-    record = _run("canopy", out)
+def test_canopy_minimal_surface_within_the_limit(canopy_study):
+    out, run = canopy_study
+    assert run.code == 0, run.lines[-5:]
+    record = _checked("canopy", out)
     c = _by_net(record, "minimal")[0]
     assert c["feasible"] and c["metrics"]["converged"]
     assert c["metrics"]["strips"]["straight"]               # A-net lamellas unroll straight

@@ -150,6 +150,7 @@ def test_corners_lie_on_the_exact_boundary_of_a_built_in_surface():
     assert panels.coverage >= 0.999
 
 
+@pytest.mark.slow
 def test_layout_writes_the_boundary_panels_beside_the_net(tmp_path):
     out = tmp_path / "hp.obj"
     # one start: the fairest start's lines run straight to this design's edges (its full
@@ -167,6 +168,7 @@ def test_layout_writes_the_boundary_panels_beside_the_net(tmp_path):
     assert all(len(f) >= 3 for f in faces)
 
 
+@pytest.mark.slow
 def test_a_net_optimized_after_its_layout_is_trimmed_again(tmp_path, capsys):
     """`fabplan optimize` of a layout's net, off the design, cuts its boundary panels again
     from the layout its JSON records; a net whose faces changed gets a note instead."""
@@ -359,6 +361,7 @@ def _monkey_saddle(cells: int = 48) -> DesignSurface:
     return DesignSurface(V, T, name="monkey-saddle")
 
 
+@pytest.mark.slow
 def test_boundary_panels_reach_the_edges_where_the_sheets_of_a_seam_overlap():
     """Regression: around the monkey saddle's seam the parameter plane holds two sheets of
     the design, and the net faces of one were cut from the unclad strip of the other: a
@@ -496,6 +499,7 @@ def test_the_boundary_panels_of_a_net_off_its_design_continue_the_net():
         pytest.approx(lift(under).max() / h, rel=0.1)
 
 
+@pytest.mark.slow
 def test_a_net_off_its_design_clads_a_corner_once():
     """Regression: a minimal net optimized off a saddle canopy (44 mm at its corners) had
     its boundary panels lifted with it before its gaps were judged; tilted against the

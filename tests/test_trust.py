@@ -158,6 +158,7 @@ def test_a_folding_noisy_start_converges_fold_free_from_a_smoothed_start(seed):
     assert _distance_to(start, result) <= 0.5
 
 
+@pytest.mark.slow
 def test_when_no_retry_gives_a_fold_free_net_the_message_names_every_solve():
     start = _noisy_saddle(noise=0.25, seed=5)
     assert not measure_folds(start).folded

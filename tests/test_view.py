@@ -106,6 +106,7 @@ def test_layout_html_holds_the_net_its_boundary_panels_and_its_numbers(dome_layo
     assert numbers["boundary panels"] == (str(props["boundary_panels"]["count"]), "count")
 
 
+@pytest.mark.slow
 def test_a_layout_whose_page_fails_writes_nothing(tmp_path, monkeypatch, capsys):
     """The page is written with the net: when building it fails, neither it nor the net,
     its record, picture or boundary panels land, and no temporary file is left."""
@@ -168,6 +169,7 @@ def test_net_numbers_say_a_fold_and_leave_out_what_is_not_measured():
     assert not any(r[0].startswith("distance") for r in rows)
 
 
+@pytest.mark.slow
 def test_a_net_from_the_api_writes_its_page(tmp_path):
     from fabplan.study.api import layout_net
 
