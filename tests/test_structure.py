@@ -412,3 +412,14 @@ def test_designs_and_reference_surfaces_travel_to_other_processes():
     points = np.array([[0.3, -0.2, 1.0], [1.0, 1.0, -2.0]])
     assert np.array_equal(copy.reference.closest_points(points)[0],
                           reference.closest_points(points)[0])
+
+
+def test_every_package_is_installed():
+    """`pip install .` installs the packages pyproject.toml lists: a package missing there
+    works from a checkout and breaks on a user's machine."""
+    import tomllib
+
+    root = Path(__file__).resolve().parent.parent
+    listed = set(tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(root).parts) for p in (root / "fabplan").rglob("__init__.py")}
+    assert found <= listed, sorted(found - listed)
