@@ -14,8 +14,9 @@ The names of the former module ``fabplan.fabricate.milling`` are here, imported 
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING, Any
+
+from .. import exported
 
 # public name -> the module that owns it; imported on first use, so that one module of this
 # package can be imported without the others
@@ -87,11 +88,7 @@ if TYPE_CHECKING:  # what a type checker sees; at run time `__getattr__` imports
 
 
 def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return exported(__name__, _EXPORTS, name)
 
 
 def __dir__() -> list[str]:
