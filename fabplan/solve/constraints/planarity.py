@@ -67,10 +67,11 @@ class PlaneNormalization(Constraint):
         return np.sum(n * n, axis=1) - 1, 2 * n
 
 
-class PlanarityBound(Constraint):
+class PlanarityBound(PlanarFaces):
     """Every quad's corners within `limit` (model units) of its plane: ``n_f . v + d_f =
     limit sin(s)`` with one auxiliary angle per corner, so that inside the band the net is
-    free. Solved with `PlaneNormalization` (the plane residuals are then distances).
+    free. `PlanarFaces` with a band: solved with `PlaneNormalization` (the plane residuals
+    are then distances).
 
     Parameters
     ----------
@@ -85,31 +86,20 @@ class PlanarityBound(Constraint):
         self.limit = float(limit)
 
     def declare(self, state):
-        q = len(state.mesh.quads)
-        return {"face-plane": (q, 4), "planarity-band": (q, 4)}
+        return {**super().declare(state), "planarity-band": (len(state.mesh.quads), 4)}
 
     def initialize(self, state):
-        P = state.X[state.mesh.quads]
-        plane = best_fit_planes(P)
-        state.blocks.view(state.x, "face-plane")[:] = plane
-        r = np.sum(P * plane[:, None, :3], axis=2) + plane[:, 3:]
+        super().initialize(state)
+        r, _ = super().evaluate(state)
         state.blocks.view(state.x, "planarity-band")[:] = slack_start(
-            r, 0.0, self.limit / state.length_scale)
+            r.reshape(-1, 4), 0.0, self.limit / state.length_scale)
 
     def columns(self, state):
-        V = state.blocks.index("vertices")[state.mesh.quads]            # (q, 4, 3)
-        F = state.blocks.index("face-plane")                            # (q, 4)
-        F = np.broadcast_to(F[:, None, :], (len(F), 4, 4))
-        S = state.blocks.index("planarity-band")[..., None]             # (q, 4, 1)
-        return np.concatenate([V, F, S], axis=2).reshape(-1, 8)
+        band = state.blocks.index("planarity-band").reshape(-1, 1)
+        return np.concatenate([super().columns(state), band], axis=1)
 
     def evaluate(self, state):
-        plane = state.blocks.view(state.x, "face-plane")
-        s = state.blocks.view(state.x, "planarity-band")
-        n, d = plane[:, None, :3], plane[:, None, 3:]
+        r, J = super().evaluate(state)
+        s = state.blocks.view(state.x, "planarity-band").ravel()
         limit = self.limit / state.length_scale
-        P = state.X[state.mesh.quads]
-        r = np.sum(P * n, axis=2) + d[..., 0] - limit * np.sin(s)
-        J = np.concatenate([np.broadcast_to(n, P.shape), P, np.ones_like(P[..., :1]),
-                            -limit * np.cos(s)[..., None]], axis=2)
-        return r.ravel(), J.reshape(-1, 8)
+        return r - limit * np.sin(s), np.concatenate([J, -limit * np.cos(s)[:, None]], axis=1)
