@@ -15,7 +15,7 @@ rows solved with the net). The net kept is made of the faces on the design itsel
 boundary panels follow the whole solved net, ghost rows included (`follow`), and so
 continue it to the design's edge within the limit. This needs a continuation: a built-in
 design (a parametric surface, continued by its own formula) or an untrimmed NURBS
-surface (its end spans' polynomials continued past its knots); a design given as a mesh
+surface (expanded about its edge to second order: `NurbsSurface.extended`); a design given as a mesh
 or a trimmed NURBS face keeps the solve on the design alone.
 """
 
@@ -93,7 +93,7 @@ def continued_design(design: DesignSurface, margin: float) -> ContinuedDesign | 
     def widened(ku: float, kv: float) -> ParametricSurface:
         domain = ((u0 - ku * du, u1 + ku * du), (v0 - kv * dv, v1 + kv * dv))
         if isinstance(surface, NurbsSurface):
-            return surface.extended(domain)       # its end spans' polynomials continued
+            return surface.extended(domain)       # expanded about its edge
         return replace(surface, domain=domain)
 
     if isinstance(surface, NurbsSurface) and surface.trims is not None:
