@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -245,22 +245,8 @@ def _refit_molds(U: np.ndarray, Z: np.ndarray, owner: np.ndarray, K: np.ndarray,
     open_ = np.ones(g, bool)
     for _ in range(20):
         rows = open_[owner]
-        p, j = np.nonzero(active & rows[:, None])
-        # columns of each open mold's block: its curvatures, its panels' shifts, its gap
-        width = np.where(open_, free + size + 1, 0)
-        column = np.cumsum(width) - width
-        b = owner[p]
-        A = _refit_constraints(U[p, j, :free] / scale[b, None], column[b],
-                               column[b] + free + local[p], column[b] + free + size[b],
-                               int(width.sum()))
-        cost = np.zeros(int(width.sum()))
-        cost[(column + free + size)[open_]] = 1.0
-        lower = np.full(len(cost), -np.inf)
-        lower[(column + free + size)[open_]] = 0.0
-        z = Z[p, j]
-        res = linprog(cost, A_ub=A, b_ub=np.concatenate([-z, z]),
-                      bounds=np.column_stack([lower, np.full(len(cost), np.inf)]),
-                      method="highs")
+        res, column = _refit_program(U, Z, owner, active & rows[:, None], open_, size, local,
+                                     scale, free)
         if res.status != 0:
             if g == 1:
                 return best
@@ -283,6 +269,31 @@ def _refit_molds(U: np.ndarray, Z: np.ndarray, owner: np.ndarray, K: np.ndarray,
         if not open_.any():
             break
     return best
+
+
+def _refit_program(U: np.ndarray, Z: np.ndarray, owner: np.ndarray, active: np.ndarray,
+                   open_: np.ndarray, size: np.ndarray, local: np.ndarray, scale: np.ndarray,
+                   free: int) -> tuple[Any, np.ndarray]:
+    """Solve the joint linear program of the open molds of `_refit_molds` over their
+    `active` (q, s) samples: the result of `scipy.optimize.linprog` (the open molds'
+    curvatures scaled by `scale`) and the first column of every mold's block, (g,) int."""
+    p, j = np.nonzero(active)
+    # columns of each open mold's block: its curvatures, its panels' shifts, its gap
+    width = np.where(open_, free + size + 1, 0)
+    column = np.cumsum(width) - width
+    b = owner[p]
+    A = _refit_constraints(U[p, j, :free] / scale[b, None], column[b],
+                           column[b] + free + local[p], column[b] + free + size[b],
+                           int(width.sum()))
+    cost = np.zeros(int(width.sum()))
+    cost[(column + free + size)[open_]] = 1.0
+    lower = np.full(len(cost), -np.inf)
+    lower[(column + free + size)[open_]] = 0.0
+    z = Z[p, j]
+    res = linprog(cost, A_ub=A, b_ub=np.concatenate([-z, z]),
+                  bounds=np.column_stack([lower, np.full(len(cost), np.inf)]),
+                  method="highs")
+    return res, column
 
 
 def _refit_constraints(u: np.ndarray, k_column: np.ndarray, c_column: np.ndarray,
@@ -442,131 +453,229 @@ def plan_molds(mesh: QuadMesh, settings: MoldSettings | None = None, *, design: 
         For impossible settings, a net without faces or with a degenerate face.
     """
     start = time.perf_counter()
-    if settings is None:
-        settings = MoldSettings(**options)
-    elif options:
-        raise InputError("give either settings or keyword options, not both")
-    settings.check()
+    settings = _checked_settings(settings, options)
     check_panels(mesh)
     mm = settings.mm_per_unit
     tol = settings.tolerance_mm
     work = settings.working_tolerance_mm
     clock: dict[str, float] = {}
 
-    model = surface_model(mesh, tol / mm, settings.panel_surface, design)
-
-    def samples(level: int) -> np.ndarray:
-        if model == "design":
-            return design_panel_samples(mesh, surfaces, design, level)
-        if model == "shared":
-            return shared_panel_samples(mesh, local, level)
-        return panel_samples(mesh, surfaces, level)
-
-    # the points the quadrics of the design and shared models are fitted to serve the
-    # assignment too
-    if model == "design":
-        surfaces, points = fit_design_panels(mesh, design, settings.cover_level)
-    elif model == "shared":
-        local = fit_panel_surfaces(mesh, "local_fit")
-        surfaces, points = fit_shared_panels(mesh, local, settings.cover_level)
-    else:
-        surfaces = fit_panel_surfaces(mesh, model)
-        points = panel_samples(mesh, surfaces, settings.cover_level)
-    shapes = panel_shapes(surfaces)
+    model = _PanelModel.fit(mesh, surface_model(mesh, tol / mm, settings.panel_surface, design),
+                            design, settings.cover_level)
+    shapes = panel_shapes(model.surfaces)
     frames, kk = placement_frames(shapes)
     kk = kk / mm
-    data = _panel_data(points, shapes.point, frames, kk, mm, work)
+    data = _panel_data(model.points, shapes.point, frames, kk, mm, work)
     clock["panel model"] = time.perf_counter() - start
 
     panel_type, cylinder = _classify(data, work)
     # the dense samples verify the molds below; with a material they decide every panel's
     # class first (the classes do not change the molds' assignment: the molds the curved
     # panels would need are planned in full, and only those of molded panels are made)
-    dense = samples(settings.verify_level)
+    dense = model.samples(mesh, settings.verify_level)
     classes = None if settings.material is None else classify_panels(
         mesh, dense, shapes.normal, settings.material, tol, mm, settings.class_order)
     clock["classification"] = time.perf_counter() - start - sum(clock.values())
-    mold, variant, mold_shape, mold_type = _assign_by_type(data, panel_type, cylinder, work,
-                                                           settings.rounds)
+    cast = _Casting(dense, shapes.point, frames, kk, mm, work, settings.rounds, panel_type,
+                    *_assign_by_type(data, panel_type, cylinder, work, settings.rounds))
     clock["assignment"] = time.perf_counter() - start - sum(clock.values())
 
     # verification on dense samples; a panel found above the tolerance is classified again
     # on them (it may be more curved than the assignment samples showed) and gets a new mold
-    placement, deviation = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
+    cast.placement, deviation = _place(dense, shapes.point, frames, cast.variant,
+                                       cast.mold_shape[cast.mold], mm)
     over = np.flatnonzero(deviation > tol)
-
-    def recast(faces: np.ndarray, tolerance: float) -> None:
-        """Classify `faces` again on the dense samples (at the working tolerance) and give
-        them new molds of their own at `tolerance` (mm)."""
-        nonlocal mold, mold_shape, mold_type, placement
-        data = _panel_data(dense[faces], shapes.point[faces], frames[faces], kk[faces], mm,
-                           tolerance)
-        dense_type, cylinder = _classify(data, work)
-        panel_type[faces] = np.maximum(panel_type[faces], dense_type)
-        new = _assign_by_type(data, panel_type[faces], cylinder, tolerance, settings.rounds)
-        mold[faces] = new[0] + len(mold_shape)
-        variant[faces] = new[1]
-        mold, mold_shape, mold_type = _drop_empty(mold, np.concatenate([mold_shape, new[2]]),
-                                                  np.concatenate([mold_type, new[3]]))
-        placement, _ = _place(dense, shapes.point, frames, variant, mold_shape[mold], mm)
-
     if over.size:
-        recast(over, work)
-    # neighbours whose molds step apart by more than twice the tolerance: the panels of those
-    # edges are cast on molds of their own that fit them closer, halving the gap each round
-    # (a step is at most the two gaps plus what the panel surfaces differ by: where these
-    # alone take up the limit, closer molds cannot help and would only add molds)
-    fractions = np.asarray(settings.step_fractions, float)
-    step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
-    # pieces of one surface share their edges; the other panels' surfaces may differ there
-    surface_step = (np.zeros(len(mesh.interior_edge_faces)) if model in ("design", "shared")
-                    else surface_steps(mesh, surfaces, fractions) * mm)
-    step_limit = 2.0 * tol if settings.step_limit_mm is None else float(settings.step_limit_mm)
-    closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= step_limit
-    stepped = np.zeros(0, np.int64)
-    for k in range(1, STEP_ROUNDS + 1):
-        faces = np.unique(mesh.interior_edge_faces[(step > step_limit) & closable])
-        if faces.size == 0:
-            break
-        stepped = np.union1d(stepped, faces)
-        recast(faces, work * 0.5**k)
-        step, kink = panel_steps(mesh, placement, mold_shape[mold], mm, fractions=fractions)
-    # a panel classified single curved on the assignment samples but cast on a doubly
-    # curved mold (`_merge_curved_molds`) was never checked against a cylinder on the
-    # dense ones: classify it there
-    moved = np.flatnonzero((panel_type == 1) & (mold_type[mold] != 1))
-    if moved.size:
-        data = _panel_data(dense[moved], shapes.point[moved], frames[moved], kk[moved], mm, work)
-        panel_type[moved] = np.maximum(panel_type[moved], _classify(data, work)[0])
+        cast.recast(over, work)
+    step, kink, surface_step, stepped = cast.close_steps(mesh, model, settings)
+    cast.classify_moved()
     clock["steps"] = time.perf_counter() - start - sum(clock.values())
-    q = np.einsum("pij,psj->psi", placement[:, :3, :3], dense) + placement[:, None, :3, 3]
-    footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
-    deviation = placement_deviations(dense, placement, mold_shape[mold])
+    footprint, deviation = cast.measure()
     clock["verification"] = time.perf_counter() - start - sum(clock.values())
 
     n = len(panel_type)
-    problem: list[str | None] = [None] * n
-    for i in np.flatnonzero(deviation > tol):
-        problem[i] = f"deviates {deviation[i]:.3f} mm from its mold (tolerance {tol:g} mm)"
-    if settings.max_mold_size_mm is not None:
-        limit = settings.max_mold_size_mm
-        for i in np.flatnonzero(footprint.max(axis=1) > limit):
-            problem[i] = (f"needs a mold of {footprint[i, 0]:.0f} x {footprint[i, 1]:.0f} mm, "
-                          f"larger than the largest mold ({limit:g} mm)")
+    problem = _problems(deviation, footprint, tol, settings.max_mold_size_mm)
     curvature = np.column_stack([shapes.k1, shapes.k2]) / mm
     weingarten = weingarten_fit(curvature[:, 0], curvature[:, 1])
     # the panels as triangle meshes: the assignment's samples when they are at that level
-    surface = panel_surface_mesh(mesh, points if settings.cover_level == PANEL_MESH_LEVEL
-                                 else samples(PANEL_MESH_LEVEL), PANEL_MESH_LEVEL)
+    surface = panel_surface_mesh(mesh, model.points if settings.cover_level == PANEL_MESH_LEVEL
+                                 else model.samples(mesh, PANEL_MESH_LEVEL), PANEL_MESH_LEVEL)
     clock["panel meshes"] = time.perf_counter() - start - sum(clock.values())
-    return MoldPlan(mesh=mesh, settings=settings, panel_surface=model, panel_type=panel_type,
-                    curvature=curvature, mold_type=mold_type, mold_shape=mold_shape,
-                    panel_shape=kk[np.arange(n), variant], mold=mold,
-                    placement=placement, deviation_mm=deviation, footprint_mm=footprint,
+    return MoldPlan(mesh=mesh, settings=settings, panel_surface=model.kind, panel_type=panel_type,
+                    curvature=curvature, mold_type=cast.mold_type, mold_shape=cast.mold_shape,
+                    panel_shape=kk[np.arange(n), cast.variant], mold=cast.mold,
+                    placement=cast.placement, deviation_mm=deviation, footprint_mm=footprint,
                     problem=problem, weingarten=weingarten, reassigned=over,
                     step_mm=step, kink_deg=kink, surface_step_mm=surface_step,
                     recast_for_steps=stepped, classes=classes, surface=surface,
                     seconds=time.perf_counter() - start, stage_seconds=clock)
+
+
+def _checked_settings(settings: MoldSettings | None, options: dict[str, Any]) -> MoldSettings:
+    """The settings given, or made of the keyword `options`, checked."""
+    if settings is None:
+        settings = MoldSettings(**options)
+    elif options:
+        raise InputError("give either settings or keyword options, not both")
+    settings.check()
+    return settings
+
+
+@dataclass
+class _PanelModel:
+    """The panels' surfaces of one model (``kind``: a name of
+    `fabplan.fabricate.panels.PANEL_SURFACES`) and their assignment samples.
+
+    Attributes
+    ----------
+    kind : the panel surface model.
+    surfaces : the fitted panel surfaces.
+    points : (p, s, 3) float, the samples the assignment fits molds to (model units): those
+        the quadrics of the design and shared models were fitted to, else a cover of the
+        surfaces.
+    local : the panels' own local fits the shared model starts from (None for the others).
+    design : the design surface of the ``design`` model (None for the others).
+    """
+
+    kind: str
+    surfaces: Any
+    points: np.ndarray
+    local: Any = None
+    design: Any = None
+
+    @classmethod
+    def fit(cls, mesh: QuadMesh, kind: str, design: Any, level: int) -> _PanelModel:
+        """Fit the panel surfaces of `kind` and sample them at the cover `level`."""
+        if kind == "design":
+            surfaces, points = fit_design_panels(mesh, design, level)
+            return cls(kind, surfaces, points, design=design)
+        if kind == "shared":
+            local = fit_panel_surfaces(mesh, "local_fit")
+            surfaces, points = fit_shared_panels(mesh, local, level)
+            return cls(kind, surfaces, points, local=local)
+        surfaces = fit_panel_surfaces(mesh, kind)
+        return cls(kind, surfaces, panel_samples(mesh, surfaces, level))
+
+    def samples(self, mesh: QuadMesh, level: int) -> np.ndarray:
+        """(p, s, 3) float, the panels sampled at `level` (model units)."""
+        if self.kind == "design":
+            return design_panel_samples(mesh, self.surfaces, self.design, level)
+        if self.kind == "shared":
+            return shared_panel_samples(mesh, self.local, level)
+        return panel_samples(mesh, self.surfaces, level)
+
+
+@dataclass
+class _Casting:
+    """The panels on their molds while the plan verifies them and casts some anew.
+
+    Attributes
+    ----------
+    dense : (p, s, 3) float, the dense verification samples (model units).
+    point : (p, 3) float, frames : (p, 4, 3, 3) float, kk : (p, 4, 2) float, every panel's
+        centre, placement frames and shapes per frame (1/mm), as `placement_frames` gives.
+    mm : millimetres per model unit; work : the working tolerance (mm); rounds : the
+        assignment's refit rounds.
+    panel_type : (p,) int, the panel types (raised where the dense samples show more curve).
+    mold, variant : (p,) int, every panel's mold and placement frame.
+    mold_shape : (m, 2) float, mold_type : (m,) int, the molds.
+    placement : (p, 4, 4) float, the panels' placements on their molds (set once verified).
+    """
+
+    dense: np.ndarray
+    point: np.ndarray
+    frames: np.ndarray
+    kk: np.ndarray
+    mm: float
+    work: float
+    rounds: int
+    panel_type: np.ndarray
+    mold: np.ndarray
+    variant: np.ndarray
+    mold_shape: np.ndarray
+    mold_type: np.ndarray
+    placement: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+
+    def recast(self, faces: np.ndarray, tolerance: float) -> None:
+        """Classify `faces` again on the dense samples (at the working tolerance) and give
+        them new molds of their own at `tolerance` (mm)."""
+        mm, work = self.mm, self.work
+        data = _panel_data(self.dense[faces], self.point[faces], self.frames[faces],
+                           self.kk[faces], mm, tolerance)
+        dense_type, cylinder = _classify(data, work)
+        self.panel_type[faces] = np.maximum(self.panel_type[faces], dense_type)
+        new = _assign_by_type(data, self.panel_type[faces], cylinder, tolerance, self.rounds)
+        self.mold[faces] = new[0] + len(self.mold_shape)
+        self.variant[faces] = new[1]
+        self.mold, self.mold_shape, self.mold_type = _drop_empty(
+            self.mold, np.concatenate([self.mold_shape, new[2]]),
+            np.concatenate([self.mold_type, new[3]]))
+        self.placement, _ = _place(self.dense, self.point, self.frames, self.variant,
+                                   self.mold_shape[self.mold], mm)
+
+    def close_steps(self, mesh: QuadMesh, model: _PanelModel, settings: MoldSettings
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Cast the panels of edges whose molds step apart by more than the limit on closer
+        molds, round by round; the steps (mm) and kinks (deg) of the interior edges, the
+        steps of the panel surfaces alone (mm) and the panels recast."""
+        mm, work, tol = self.mm, self.work, settings.tolerance_mm
+        # neighbours whose molds step apart by more than twice the tolerance: the panels of
+        # those edges are cast on molds of their own that fit them closer, halving the gap
+        # each round (a step is at most the two gaps plus what the panel surfaces differ by:
+        # where these alone take up the limit, closer molds cannot help and would only add
+        # molds)
+        fractions = np.asarray(settings.step_fractions, float)
+        step, kink = panel_steps(mesh, self.placement, self.mold_shape[self.mold], mm,
+                                 fractions=fractions)
+        # pieces of one surface share their edges; the other panels' surfaces may differ there
+        surface_step = (np.zeros(len(mesh.interior_edge_faces)) if model.kind in ("design", "shared")
+                        else surface_steps(mesh, model.surfaces, fractions) * mm)
+        step_limit = 2.0 * tol if settings.step_limit_mm is None else float(settings.step_limit_mm)
+        closable = surface_step + 2.0 * work * 0.5**STEP_ROUNDS <= step_limit
+        stepped = np.zeros(0, np.int64)
+        for k in range(1, STEP_ROUNDS + 1):
+            faces = np.unique(mesh.interior_edge_faces[(step > step_limit) & closable])
+            if faces.size == 0:
+                break
+            stepped = np.union1d(stepped, faces)
+            self.recast(faces, work * 0.5**k)
+            step, kink = panel_steps(mesh, self.placement, self.mold_shape[self.mold], mm,
+                                     fractions=fractions)
+        return step, kink, surface_step, stepped
+
+    def measure(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every panel's footprint on its mold, (p, 2) float (mm), and its gap to the mold
+        measured on the dense samples, (p,) float (mm)."""
+        placement = self.placement
+        q = np.einsum("pij,psj->psi", placement[:, :3, :3], self.dense) + placement[:, None, :3, 3]
+        footprint = 2.0 * np.abs(q[..., :2]).max(axis=1)
+        return footprint, placement_deviations(self.dense, placement, self.mold_shape[self.mold])
+
+    def classify_moved(self) -> None:
+        """Classify on the dense samples the panels classified single curved on the
+        assignment samples but cast on a doubly curved mold (`_merge_curved_molds`): they
+        were never checked against a cylinder there."""
+        moved = np.flatnonzero((self.panel_type == 1) & (self.mold_type[self.mold] != 1))
+        if moved.size:
+            data = _panel_data(self.dense[moved], self.point[moved], self.frames[moved],
+                               self.kk[moved], self.mm, self.work)
+            self.panel_type[moved] = np.maximum(self.panel_type[moved],
+                                                _classify(data, self.work)[0])
+
+
+def _problems(deviation: np.ndarray, footprint: np.ndarray, tol: float,
+              max_mold_size_mm: float | None) -> list[str | None]:
+    """Every panel's problem in words (None where it fits): a gap over the tolerance `tol`
+    (mm), or a footprint (p, 2) larger than the largest mold."""
+    problem: list[str | None] = [None] * len(deviation)
+    for i in np.flatnonzero(deviation > tol):
+        problem[i] = f"deviates {deviation[i]:.3f} mm from its mold (tolerance {tol:g} mm)"
+    if max_mold_size_mm is not None:
+        limit = max_mold_size_mm
+        for i in np.flatnonzero(footprint.max(axis=1) > limit):
+            problem[i] = (f"needs a mold of {footprint[i, 0]:.0f} x {footprint[i, 1]:.0f} mm, "
+                          f"larger than the largest mold ({limit:g} mm)")
+    return problem
 
 
 def _classify(data: _Panels, tolerance: float) -> tuple[np.ndarray, np.ndarray]:

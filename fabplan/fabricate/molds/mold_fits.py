@@ -120,61 +120,84 @@ def fit_mold_placements(points: np.ndarray, weights: np.ndarray, placements: np.
                    np.ascontiguousarray(free, np.uint8), M, K, best_M, best_K, best_gap,
                    p, s, iterations, rounds)
         return best_M, best_K, best_gap
+    return _fit_placements_numpy(points, base, must, free, M, K, iterations, rounds)
+
+
+def _placed(points: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """(p, s, 3) float, the points in mold coordinates, as `mold_gaps` places them."""
+    return points @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]
+
+
+def _placed_gaps(q: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(p, s) float, `mold_gaps` of placed points `q` on molds `K` (p, 2)."""
+    return q[..., 2] - 0.5 * (K[:, None, 0] * q[..., 0] ** 2 + K[:, None, 1] * q[..., 1] ** 2)
+
+
+def _gap_jacobian(q: np.ndarray, K: np.ndarray, free: np.ndarray, unknowns: int) -> np.ndarray:
+    """(p, s, unknowns) float, the gaps' derivatives by a rotation and shift of every mold
+    (and its curvatures, with 8 unknowns, where `free`)."""
+    x, y, z = q[..., 0], q[..., 1], q[..., 2]
+    # a rotation w and shift t in mold coordinates move q by w x q + t: the gap by
+    # w . (q x g) + t . g with g = (-k1 x, -k2 y, 1); the curvatures enter with
+    # -x^2 / 2, -y^2 / 2. The columns are written in place: the terms of q x g
+    # are those of np.cross (its products by g's 1 left out: the same numbers)
+    J = np.empty(q.shape[:2] + (unknowns,))
+    gx, gy = J[..., 3], J[..., 4]
+    np.multiply(-K[:, None, 0], x, out=gx)
+    np.multiply(-K[:, None, 1], y, out=gy)
+    J[..., 5] = 1.0
+    np.subtract(y, z * gy, out=J[..., 0])
+    np.subtract(z * gx, x, out=J[..., 1])
+    np.subtract(x * gy, y * gx, out=J[..., 2])
+    if unknowns == 8:
+        J[..., 6:] = -0.5 * q[..., :2] ** 2 * free[:, None, None]
+    return J
+
+
+def _damped_step(J: np.ndarray, w: np.ndarray, r: np.ndarray, damping: np.ndarray) -> np.ndarray:
+    """(p, u) float, the damped weighted Gauss-Newton step of every mold for the Jacobian
+    `J` (p, s, u), weights `w` and gaps `r` (p, s)."""
+    unknowns = J.shape[2]
+    # columns scaled to unit size: the curvature columns are a million times the
+    # shift's, the rotation's a thousand
+    Jw = J * w[..., None]
+    scale = np.sqrt(np.sum(Jw * J, axis=1)) + 1e-300
+    Js = J / scale[:, None, :]
+    Jw /= scale[:, None, :]
+    A = Jw.transpose(0, 2, 1) @ Js
+    b = -np.sum(Jw * r[..., None], axis=1)
+    A[:, np.arange(unknowns), np.arange(unknowns)] += damping[:, None]
+    return np.linalg.solve(A, b[..., None])[..., 0] / scale
+
+
+def _fit_placements_numpy(points: np.ndarray, base: np.ndarray, must: np.ndarray,
+                          free: np.ndarray, M: np.ndarray, K: np.ndarray, iterations: int,
+                          rounds: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`fit_mold_placements` in numpy, where the compiled kernel is missing: the same
+    steps, weights and result."""
+    p = len(M)
     lawson = np.ones_like(base)
     w = base.copy()
     unknowns = 8 if free.any() else 6
     damping = np.full(p, 1e-4)
-
-    def placed(M: np.ndarray) -> np.ndarray:
-        # the points in mold coordinates, as `mold_gaps` places them
-        return points @ M[:, :3, :3].transpose(0, 2, 1) + M[:, None, :3, 3]
-
-    def gaps(q: np.ndarray, K: np.ndarray) -> np.ndarray:
-        # `mold_gaps` of placed points
-        return q[..., 2] - 0.5 * (K[:, None, 0] * q[..., 0] ** 2 + K[:, None, 1] * q[..., 1] ** 2)
-
     # the placed points and their gaps follow the placements as steps are taken
-    q = placed(M)
-    r = gaps(q, K)
+    q = _placed(points, M)
+    r = _placed_gaps(q, K)
     # the reweighting may overshoot: the round with the smallest largest gap is kept
     best_M, best_K = M.copy(), K.copy()
     best_gap = np.max(np.where(must, np.abs(r), 0.0), axis=1)
     for _ in range(max(rounds, 1)):
         current = np.sum(w * r ** 2, axis=1)
         for _ in range(iterations):
-            x, y, z = q[..., 0], q[..., 1], q[..., 2]
-            # a rotation w and shift t in mold coordinates move q by w x q + t: the gap by
-            # w . (q x g) + t . g with g = (-k1 x, -k2 y, 1); the curvatures enter with
-            # -x^2 / 2, -y^2 / 2. The columns are written in place: the terms of q x g
-            # are those of np.cross (its products by g's 1 left out: the same numbers)
-            J = np.empty(q.shape[:2] + (unknowns,))
-            gx, gy = J[..., 3], J[..., 4]
-            np.multiply(-K[:, None, 0], x, out=gx)
-            np.multiply(-K[:, None, 1], y, out=gy)
-            J[..., 5] = 1.0
-            np.subtract(y, z * gy, out=J[..., 0])
-            np.subtract(z * gx, x, out=J[..., 1])
-            np.subtract(x * gy, y * gx, out=J[..., 2])
-            if unknowns == 8:
-                J[..., 6:] = -0.5 * q[..., :2] ** 2 * free[:, None, None]
-            # columns scaled to unit size: the curvature columns are a million times the
-            # shift's, the rotation's a thousand
-            Jw = J * w[..., None]
-            scale = np.sqrt(np.sum(Jw * J, axis=1)) + 1e-300
-            Js = J / scale[:, None, :]
-            Jw /= scale[:, None, :]
-            A = Jw.transpose(0, 2, 1) @ Js
-            b = -np.sum(Jw * r[..., None], axis=1)
-            A[:, np.arange(unknowns), np.arange(unknowns)] += damping[:, None]
-            step = np.linalg.solve(A, b[..., None])[..., 0] / scale
+            step = _damped_step(_gap_jacobian(q, K, free, unknowns), w, r, damping)
             D = np.zeros((p, 4, 4))
             D[:, :3, :3] = rotation_matrices(step[:, :3])
             D[:, :3, 3] = step[:, 3:6]
             D[:, 3, 3] = 1.0
             trial_M = D @ M
             trial_K = K + step[:, 6:8] * free[:, None] if unknowns == 8 else K
-            trial_q = placed(trial_M)
-            trial_r = gaps(trial_q, trial_K)
+            trial_q = _placed(points, trial_M)
+            trial_r = _placed_gaps(trial_q, trial_K)
             trial = np.sum(w * trial_r ** 2, axis=1)
             # Levenberg-Marquardt: a step that lowers the cost is taken and the damping
             # eased; one that does not is refused and the damping raised

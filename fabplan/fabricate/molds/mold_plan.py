@@ -199,41 +199,7 @@ class MoldPlan:
         mm = self.settings.mm_per_unit
         types, counts = np.unique(self.panel_type, return_counts=True)
         per = self.panels_per_mold
-        ext, mdev = self.mold_extent_mm(), self.mold_deviation_mm()
-        made = self.mold_made
-        molds = []
-        for j in range(self.mold_count):
-            k1, k2 = (float(v) for v in self.mold_shape[j])
-            molds.append({
-                "id": j,
-                "type": MOLD_TYPES[self.mold_type[j]],
-                "k1": k1,
-                "k2": k2,
-                "radius1_mm": 1.0 / k1 if k1 else None,
-                "radius2_mm": 1.0 / k2 if k2 else None,
-                "size_mm": [float(ext[j, 0]), float(ext[j, 1])],
-                "panel_count": int(per[j]),
-                "max_deviation_mm": float(mdev[j]),
-                "made": bool(made[j]),
-            })
         area = self.panel_area
-        panels = []
-        for i in range(self.panel_count):
-            panels.append({
-                **({} if area is None else {"area": float(area[i])}),
-                "face": i,
-                "mold": int(self.mold[i]),
-                "type": PANEL_TYPES[self.panel_type[i]],
-                "k1": float(self.curvature[i, 0]),
-                "k2": float(self.curvature[i, 1]),
-                "placement": self.placement[i].tolist(),
-                "deviation_mm": float(self.deviation_mm[i]),
-                "footprint_mm": [float(v) for v in self.footprint_mm[i]],
-                "fits": self.problem[i] is None,
-                "problem": self.problem[i],
-                **({} if self.classes is None else
-                   {"class": CLASSES[self.classes.panel_class[i]]}),
-            })
         n = self.panel_count
         length, bound = self.mold_count_bound()
         return {
@@ -272,9 +238,52 @@ class MoldPlan:
             "curvature_reach_per_mm": {"median_panel": self.curvature_reach(0.5),
                                        "large_panels": self.curvature_reach(0.9)},
             "seconds": self.seconds,
-            "molds": molds,
-            "panels": panels,
+            "molds": self._mold_records(),
+            "panels": self._panel_records(area),
         }
+
+    def _mold_records(self) -> list[dict]:
+        """Every mold's entry of `record` (``molds``)."""
+        per = self.panels_per_mold
+        ext, mdev = self.mold_extent_mm(), self.mold_deviation_mm()
+        made = self.mold_made
+        molds = []
+        for j in range(self.mold_count):
+            k1, k2 = (float(v) for v in self.mold_shape[j])
+            molds.append({
+                "id": j,
+                "type": MOLD_TYPES[self.mold_type[j]],
+                "k1": k1,
+                "k2": k2,
+                "radius1_mm": 1.0 / k1 if k1 else None,
+                "radius2_mm": 1.0 / k2 if k2 else None,
+                "size_mm": [float(ext[j, 0]), float(ext[j, 1])],
+                "panel_count": int(per[j]),
+                "max_deviation_mm": float(mdev[j]),
+                "made": bool(made[j]),
+            })
+        return molds
+
+    def _panel_records(self, area: np.ndarray | None) -> list[dict]:
+        """Every panel's entry of `record` (``panels``), with its `area` (`panel_area`)."""
+        panels = []
+        for i in range(self.panel_count):
+            panels.append({
+                **({} if area is None else {"area": float(area[i])}),
+                "face": i,
+                "mold": int(self.mold[i]),
+                "type": PANEL_TYPES[self.panel_type[i]],
+                "k1": float(self.curvature[i, 0]),
+                "k2": float(self.curvature[i, 1]),
+                "placement": self.placement[i].tolist(),
+                "deviation_mm": float(self.deviation_mm[i]),
+                "footprint_mm": [float(v) for v in self.footprint_mm[i]],
+                "fits": self.problem[i] is None,
+                "problem": self.problem[i],
+                **({} if self.classes is None else
+                   {"class": CLASSES[self.classes.panel_class[i]]}),
+            })
+        return panels
 
     def _steps_record(self) -> dict:
         pairs, edges = self.mesh.interior_edge_faces, self.mesh.interior_edges

@@ -420,6 +420,60 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
     the fabrication limits checked, as ``molds.json`` holds them, `limits_record`)."""
     r = plan.record()
     tol = r["tolerance_mm"]
+    summary_rows = _summary_rows(plan, r, boundary, limits)
+    verdict = _verdict(plan, r)
+    pictures = pictures or mold_pictures(plan)
+    mold_rows, panel_rows = _mold_rows(plan), _panel_rows(plan)
+    parts = [
+        html.html_section("Summary", verdict, html.html_table(["quantity", "value"], summary_rows)),
+        html.html_section("Why this many molds", html.html_paragraph(explain_mold_count(plan))),
+    ]
+    if plan.classes is not None:
+        parts.append(classes_section(plan))
+    if view_3d:
+        scene = net_viewer_scene(plan, title=Path(str(r["net"])).name)
+        parts.append(html.html_section("3D view", viewer.viewer_block([scene])))
+    parts += [
+        _pictures_section(plan, pictures, tol),
+        html.html_section(
+            "Molds",
+            html.html_paragraph("Mold surface z = (k1 x^2 + k2 y^2) / 2 in mold coordinates "
+                                  "(mm), centred on its apex; size is the rectangle centred on "
+                                  "the apex that holds all its panels. An empty radius is "
+                                  "infinite (a straight direction)."),
+            html.html_table(["mold id", "type", "k1 [1/m]", "k2 [1/m]", "R1 [mm]", "R2 [mm]",
+                               "size x [mm]", "size y [mm]", "panels [count]",
+                               "largest gap [mm]"], mold_rows)),
+        html.html_section(
+            "Panels",
+            html.html_paragraph("Placement: the rigid motion taking the panel from model "
+                                  "coordinates onto its mold, p_mold = s R p + t with s the mm "
+                                  "per model unit, R the rotation given by its rotation vector "
+                                  "(axis times angle) and t the translation; the full 4 x 4 "
+                                  "matrices are in molds.json and panels.csv."),
+            html.html_details(f"{counted(plan.panel_count, 'panel')} (click to open)", html.html_table(
+                ["face id", "mold id", "type", "k1 [1/m]", "k2 [1/m]", "rotation vector [deg]",
+                 "translation [mm]", "footprint x [mm]", "footprint y [mm]", "gap to mold [mm]",
+                 "status"], panel_rows,
+                bad_rows=plan.failures.tolist()))),
+        html.html_section(
+            "Files",
+            html.html_paragraph("molds.json: the counts, every mold and every panel with its "
+                                  "placement (schema: docs/molds-schema.md). panels.csv: one row "
+                                  "per panel. Curvatures there are in 1/mm, lengths in mm. Both "
+                                  "sit beside this report in its folder.")),
+    ]
+    return html.html_page(f"Mold report: {Path(str(r['net'])).name}", parts,
+                            subtitle=f"{counted(r['panel_count'], 'panel')}, {_molds_headline(r)} "
+                                     f"at {tol:g} mm, made by fabplan",
+                            scripts=viewer.viewer_assets() if view_3d else "")
+
+
+def _summary_rows(plan: MoldPlan, r: dict, boundary: BoundaryMolds | None,
+                  limits: dict | None) -> list[list]:
+    """The rows (quantity, value) of the report's summary table, from the plan's
+    record `r`."""
+    tol = r["tolerance_mm"]
     w = plan.weingarten
     per_mold = r["panels_per_mold"]
     summary_rows = [
@@ -466,6 +520,13 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
     if boundary is not None:
         summary_rows.insert(6, ["boundary panels (boundary-panels.csv)",
                                 boundary_molds_text(boundary, plan.mold_count)])
+    return summary_rows
+
+
+def _verdict(plan: MoldPlan, r: dict) -> str:
+    """The report's verdict in a paragraph: every panel fits and meets its neighbours, or
+    which do not."""
+    tol = r["tolerance_mm"]
     steps = r["panel_steps"]
     if plan.fits_all:
         verdict = html.html_paragraph(
@@ -483,8 +544,11 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
             f"Every panel fits its mold, but {counted(len(steps['over_limit']), 'shared edge')} "
             f"have a step over {steps['limit_mm']:g} mm between the two panels' molds (largest "
             f"{steps['max_mm']:.2f} mm); see the step map.", cls="fail")
-    pictures = pictures or mold_pictures(plan)
-    by_mold, isolines = pictures["molds"], pictures["isolines"]
+    return verdict
+
+
+def _mold_rows(plan: MoldPlan) -> list[list]:
+    """One row of the molds table per mold."""
     ext, mdev, per = plan.mold_extent_mm(), plan.mold_deviation_mm(), plan.panels_per_mold
     mold_rows = [[j, MOLD_TYPES[plan.mold_type[j]], plan.mold_shape[j, 0] * _PER_M,
                   plan.mold_shape[j, 1] * _PER_M,
@@ -492,6 +556,11 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
                   None if plan.mold_shape[j, 1] == 0 else 1 / plan.mold_shape[j, 1],
                   round(float(ext[j, 0])), round(float(ext[j, 1])), int(per[j]), float(mdev[j])]
                  for j in range(plan.mold_count)]
+    return mold_rows
+
+
+def _panel_rows(plan: MoldPlan) -> list[list]:
+    """One row of the panels table per panel."""
     rotation = Rotation.from_matrix(plan.placement[:, :3, :3] / plan.settings.mm_per_unit)
     turn = np.degrees(rotation.as_rotvec())
     panel_rows = [[i, int(plan.mold[i]), PANEL_TYPES[plan.panel_type[i]].replace("_", " "),
@@ -501,16 +570,13 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
                    round(float(plan.footprint_mm[i, 0])), round(float(plan.footprint_mm[i, 1])),
                    float(plan.deviation_mm[i]), plan.problem[i] or "fits"]
                   for i in range(plan.panel_count)]
-    parts = [
-        html.html_section("Summary", verdict, html.html_table(["quantity", "value"], summary_rows)),
-        html.html_section("Why this many molds", html.html_paragraph(explain_mold_count(plan))),
-    ]
-    if plan.classes is not None:
-        parts.append(classes_section(plan))
-    if view_3d:
-        scene = net_viewer_scene(plan, title=Path(str(r["net"])).name)
-        parts.append(html.html_section("3D view", viewer.viewer_block([scene])))
-    parts += [
+    return panel_rows
+
+
+def _pictures_section(plan: MoldPlan, pictures: dict[str, str], tol: float) -> str:
+    """The report's section of pictures (`mold_pictures`), each with how to read it."""
+    by_mold, isolines = pictures["molds"], pictures["isolines"]
+    return (
         html.html_section(
             "Pictures",
             html.html_figure(by_mold, "Panels coloured by mold (as in Fig. 1a of the paper), "
@@ -547,39 +613,8 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
                                "edges over twice the tolerance in red.",
                              how="A fabricator sees the step where two finished panels meet; "
                                  "yellow panels reach the limit of twice the tolerance."),
-        ),
-        html.html_section(
-            "Molds",
-            html.html_paragraph("Mold surface z = (k1 x^2 + k2 y^2) / 2 in mold coordinates "
-                                  "(mm), centred on its apex; size is the rectangle centred on "
-                                  "the apex that holds all its panels. An empty radius is "
-                                  "infinite (a straight direction)."),
-            html.html_table(["mold id", "type", "k1 [1/m]", "k2 [1/m]", "R1 [mm]", "R2 [mm]",
-                               "size x [mm]", "size y [mm]", "panels [count]",
-                               "largest gap [mm]"], mold_rows)),
-        html.html_section(
-            "Panels",
-            html.html_paragraph("Placement: the rigid motion taking the panel from model "
-                                  "coordinates onto its mold, p_mold = s R p + t with s the mm "
-                                  "per model unit, R the rotation given by its rotation vector "
-                                  "(axis times angle) and t the translation; the full 4 x 4 "
-                                  "matrices are in molds.json and panels.csv."),
-            html.html_details(f"{counted(plan.panel_count, 'panel')} (click to open)", html.html_table(
-                ["face id", "mold id", "type", "k1 [1/m]", "k2 [1/m]", "rotation vector [deg]",
-                 "translation [mm]", "footprint x [mm]", "footprint y [mm]", "gap to mold [mm]",
-                 "status"], panel_rows,
-                bad_rows=plan.failures.tolist()))),
-        html.html_section(
-            "Files",
-            html.html_paragraph("molds.json: the counts, every mold and every panel with its "
-                                  "placement (schema: docs/molds-schema.md). panels.csv: one row "
-                                  "per panel. Curvatures there are in 1/mm, lengths in mm. Both "
-                                  "sit beside this report in its folder.")),
-    ]
-    return html.html_page(f"Mold report: {Path(str(r['net'])).name}", parts,
-                            subtitle=f"{counted(r['panel_count'], 'panel')}, {_molds_headline(r)} "
-                                     f"at {tol:g} mm, made by fabplan",
-                            scripts=viewer.viewer_assets() if view_3d else "")
+        )
+    )
 
 
 def _molds_headline(record: dict) -> str:

@@ -24,10 +24,10 @@ from ...errors import InputError
 from ...io.units import MM_PER_UNIT as UNITS
 from ...io.units import check_units
 from ...net.geometry import fit_star_spheres
-from ...net.mesh import QuadMesh
+from ...net.mesh import Polylines, QuadMesh
 from ..limits import DEFAULT_MAX_TWIST_DEG_PER_M
 from .strip_boundary import StripBoundary, StripEnds, member_setback_mm, tip_setback_mm
-from .unrolling import ArcRun, fit_arc_runs, node_normals, strip_polylines, unroll_polylines
+from .unrolling import ArcRun, Unrolled, fit_arc_runs, node_normals, strip_polylines, unroll_polylines
 
 __all__ = [
     "StripSettings",
@@ -46,6 +46,18 @@ MAX_SHEET_MM = 20_000.0
 
 FAMILY_LETTERS = "AB"
 _LAYER_KINDS = ("cut", "slit", "engrave")
+
+
+def _check_positive_mm(name: str, value: object) -> None:
+    """Raise InputError unless `value` is a positive finite number (the setting `name`, mm)."""
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise InputError(f"{name} must be a positive number of millimetres, got {value}")
+
+
+def _check_non_negative_mm(name: str, value: object) -> None:
+    """Raise InputError unless `value` is a finite number >= 0 (the setting `name`, mm)."""
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+        raise InputError(f"{name} must be zero or more millimetres, got {value}")
 
 
 @dataclass
@@ -145,26 +157,18 @@ class StripSettings:
         InputError
             Naming the first bad setting and what it must be.
         """
-        def positive(name: str, value: object) -> None:
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InputError(f"{name} must be a positive number of millimetres, got {value}")
-
-        def non_negative(name: str, value: object) -> None:
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise InputError(f"{name} must be zero or more millimetres, got {value}")
-
-        positive("--height", self.height_mm)
-        positive("--thickness", self.thickness_mm)
-        non_negative("--clearance", self.clearance_mm)
-        positive("--tolerance", self.tolerance_mm)
-        non_negative("--spacing", self.spacing_mm)
-        non_negative("--margin", self.margin_mm)
-        non_negative("--kerf", self.kerf_mm)
-        non_negative("--slit-overcut", self.slit_overcut_mm)
-        non_negative("--extension", self.extension_mm)
-        non_negative("--boundary-member", self.member_mm)
-        positive("--splice-length", self.splice_mm)
-        positive("--label-height", self.text_height_mm)
+        _check_positive_mm("--height", self.height_mm)
+        _check_positive_mm("--thickness", self.thickness_mm)
+        _check_non_negative_mm("--clearance", self.clearance_mm)
+        _check_positive_mm("--tolerance", self.tolerance_mm)
+        _check_non_negative_mm("--spacing", self.spacing_mm)
+        _check_non_negative_mm("--margin", self.margin_mm)
+        _check_non_negative_mm("--kerf", self.kerf_mm)
+        _check_non_negative_mm("--slit-overcut", self.slit_overcut_mm)
+        _check_non_negative_mm("--extension", self.extension_mm)
+        _check_non_negative_mm("--boundary-member", self.member_mm)
+        _check_positive_mm("--splice-length", self.splice_mm)
+        _check_positive_mm("--label-height", self.text_height_mm)
         if not (isinstance(self.max_twist_deg_per_m, (int, float))
                 and math.isfinite(self.max_twist_deg_per_m) and self.max_twist_deg_per_m > 0):
             raise InputError(f"--max-twist must be a positive number of degrees per metre, got "
@@ -173,7 +177,7 @@ class StripSettings:
         if len(self.sheet_mm) != 2:
             raise InputError(f"--sheet must be WIDTHxHEIGHT, got {self.sheet_mm}")
         for value in self.sheet_mm:
-            positive("--sheet", value)
+            _check_positive_mm("--sheet", value)
         if self.end not in ("square", "round"):
             raise InputError(f"--end must be 'square' or 'round', got {self.end!r}")
         if self.splice not in ("overlap", "lap"):
@@ -594,23 +598,8 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
     """
     settings.check()
     lines = strip_polylines(mesh, join_boundary=settings.join_boundary)
-    if len(lines) == 0:
-        raise InputError(f"{mesh.name}: no parameter polylines (the net has no quads)")
-    verts = [np.r_[v, v[:1]] if c else np.asarray(v) for v, c in
-             zip(lines.vertices, lines.closed, strict=True)]
-    keep = [i for i, v in enumerate(verts) if len(v) >= 2]
-    if not keep:
-        raise InputError(f"{mesh.name}: no parameter polyline has an edge")
+    verts, family, closed = _ordered_polylines(mesh, lines)
     X = mesh.vertices
-    mid = np.array([X[verts[i]].mean(axis=0) for i in keep])
-    fam = lines.family[keep]
-    order = []
-    for f in (0, 1):
-        idx = np.flatnonzero(fam == f)
-        order += [keep[i] for i in idx[_order_across(mid[idx])]]
-    verts = [verts[i] for i in order]
-    family = lines.family[order]
-    closed = lines.closed[order]
     N = node_normals(mesh, lines)
     bad = ~np.isfinite(N).all(axis=1)
     used = np.unique(np.concatenate(verts))
@@ -642,40 +631,86 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
     counters = [0, 0]
     strips = []
     for k, v in enumerate(verts):
-        a, b = u.ptr[k], u.ptr[k + 1]
-        nodes = u.nodes[a:b]
-        runs = fit_arc_runs(nodes, settings.tolerance_mm)
-        if len(v) == 2:
-            runs = [_one_edge_run(mesh, N, v, settings.scale)]
-        bulges = np.zeros(len(v) - 1)
-        for r in runs:
-            if r.fitted and math.isfinite(r.radius_mm):
-                chord = np.linalg.norm(np.diff(nodes[r.start:r.stop + 1], axis=0), axis=1)
-                half = np.arcsin(np.clip(chord / (2 * abs(r.radius_mm)), 0, 1))
-                bulges[r.start:r.stop] = np.sign(r.radius_mm) * np.tan(half / 2)
-        edge = u.edge_mm[a:b - 1]
-        twist = np.abs(u.twist[a:b - 1])
         f = int(family[k])
         counters[f] += 1
-        member = [None if math.isnan(x) else float(x) for x in setback[k]]
-        angle, added, kind = (math.nan, math.nan), (0, 0), ("free", "free")
-        if ends is not None:
-            angle = (float(ends.angle_deg[k, 0]), float(ends.angle_deg[k, 1]))
-            added = (int(ends.added[k, 0]), int(ends.added[k, 1]))
-            kind = (str(ends.kind[k, 0]), str(ends.kind[k, 1]))
-        strips.append(Strip(
-            id=f"{FAMILY_LETTERS[f]}{counters[f]:02d}", family=f, vertices=np.asarray(v),
-            closed=bool(closed[k]), curve=ReferenceCurve(nodes, bulges), axis=u.axis[a:b],
-            edge_mm=edge, runs=runs,
-            # per metre over at least a quarter of the strip's median edge: a sliver's
-            # millimetre edge at a boundary panel corner would make any turn a huge rate
-            twist_deg_per_m=float(np.degrees(
-                twist / (np.maximum(edge, 0.25 * np.median(edge)) / 1000.0)).max()),
-            max_twist_deg=float(np.degrees(twist).max()),
-            off_orthogonal_deg=float(np.degrees(u.off_orthogonal[a:b]).max()),
-            lean_deg=float(np.degrees(u.lean[a:b]).max()),
-            end_setback_mm=(member[0], member[1]), end_angle_deg=angle, boundary_nodes=added,
-            end_kind=kind))
+        strips.append(_strip(mesh, N, u, k, v, settings, f"{FAMILY_LETTERS[f]}{counters[f]:02d}",
+                             f, bool(closed[k]), setback[k], ends))
+    _check_strip_lengths(strips, settings)
+    crossings, junctions = _find_crossings(X, strips)
+    # where two strips end against the boundary member at one node (a zigzag boundary's
+    # tip), they meet at the member, not in slits; a slit cut off by a member end neither
+    slit = [c for c in crossings if all(_slit_inside(strips[c.strips[k]], c.nodes[k], settings)
+                                        for k in (0, 1))]
+    at_member = len(crossings) - len(slit)
+    slit = [replace(c, id=i + 1) for i, c in enumerate(slit)]
+    return StripSet(strips=strips, crossings=slit, junctions=junctions, settings=settings,
+                    positions=X, ends_not_continued=0 if ends is None else ends.not_continued,
+                    crossings_at_member=at_member, along_edge=along_edge, normals=N)
+
+
+def _ordered_polylines(mesh: QuadMesh, lines: Polylines) -> tuple[list, np.ndarray, np.ndarray]:
+    """The parameter polylines of `lines` (`strip_polylines`) with an edge, the closed ones
+    ending where they start, family by family in order across the net: their vertices (a
+    list of (k,) int), families and closedness (int and bool arrays)."""
+    if len(lines) == 0:
+        raise InputError(f"{mesh.name}: no parameter polylines (the net has no quads)")
+    verts = [np.r_[v, v[:1]] if c else np.asarray(v) for v, c in
+             zip(lines.vertices, lines.closed, strict=True)]
+    keep = [i for i, v in enumerate(verts) if len(v) >= 2]
+    if not keep:
+        raise InputError(f"{mesh.name}: no parameter polyline has an edge")
+    X = mesh.vertices
+    mid = np.array([X[verts[i]].mean(axis=0) for i in keep])
+    fam = lines.family[keep]
+    order = []
+    for f in (0, 1):
+        idx = np.flatnonzero(fam == f)
+        order += [keep[i] for i in idx[_order_across(mid[idx])]]
+    return [verts[i] for i in order], lines.family[order], lines.closed[order]
+
+
+def _strip(mesh: QuadMesh, N: np.ndarray, u: Unrolled, k: int, v: np.ndarray,
+           settings: StripSettings, name: str, f: int, closed: bool, setback: np.ndarray,
+           ends: StripEnds | None) -> Strip:
+    """The strip `name` of family `f` along polyline `k` (vertices `v`) of the unrolling `u`:
+    its reference curve fitted with arcs, its twist and lean, and its ends."""
+    a, b = u.ptr[k], u.ptr[k + 1]
+    nodes = u.nodes[a:b]
+    runs = fit_arc_runs(nodes, settings.tolerance_mm)
+    if len(v) == 2:
+        runs = [_one_edge_run(mesh, N, v, settings.scale)]
+    bulges = np.zeros(len(v) - 1)
+    for r in runs:
+        if r.fitted and math.isfinite(r.radius_mm):
+            chord = np.linalg.norm(np.diff(nodes[r.start:r.stop + 1], axis=0), axis=1)
+            half = np.arcsin(np.clip(chord / (2 * abs(r.radius_mm)), 0, 1))
+            bulges[r.start:r.stop] = np.sign(r.radius_mm) * np.tan(half / 2)
+    edge = u.edge_mm[a:b - 1]
+    twist = np.abs(u.twist[a:b - 1])
+    member = [None if math.isnan(x) else float(x) for x in setback]
+    angle, added, kind = (math.nan, math.nan), (0, 0), ("free", "free")
+    if ends is not None:
+        angle = (float(ends.angle_deg[k, 0]), float(ends.angle_deg[k, 1]))
+        added = (int(ends.added[k, 0]), int(ends.added[k, 1]))
+        kind = (str(ends.kind[k, 0]), str(ends.kind[k, 1]))
+    return Strip(
+        id=name, family=f, vertices=np.asarray(v),
+        closed=closed, curve=ReferenceCurve(nodes, bulges), axis=u.axis[a:b],
+        edge_mm=edge, runs=runs,
+        # per metre over at least a quarter of the strip's median edge: a sliver's
+        # millimetre edge at a boundary panel corner would make any turn a huge rate
+        twist_deg_per_m=float(np.degrees(
+            twist / (np.maximum(edge, 0.25 * np.median(edge)) / 1000.0)).max()),
+        max_twist_deg=float(np.degrees(twist).max()),
+        off_orthogonal_deg=float(np.degrees(u.off_orthogonal[a:b]).max()),
+        lean_deg=float(np.degrees(u.lean[a:b]).max()),
+        end_setback_mm=(member[0], member[1]), end_angle_deg=angle, boundary_nodes=added,
+        end_kind=kind)
+
+
+def _check_strip_lengths(strips: list[Strip], settings: StripSettings) -> None:
+    """Raise InputError for a strip its boundary members leave too short for a slit, or
+    bent tighter than half its height."""
     half = settings.height_mm / 2 + settings.kerf_mm / 2
     for s in strips:
         e0, e1 = s.end_extensions_mm(settings)
@@ -689,16 +724,6 @@ def build_strips(mesh: QuadMesh, settings: StripSettings,
             raise InputError(f"strip {s.id} bends with a radius of {radii.min():.1f} mm, less than "
                              f"half the height ({half:g} mm): its inner edge would fold over; "
                              f"lower --height or check --units ({settings.units})")
-    crossings, junctions = _find_crossings(X, strips)
-    # where two strips end against the boundary member at one node (a zigzag boundary's
-    # tip), they meet at the member, not in slits; a slit cut off by a member end neither
-    slit = [c for c in crossings if all(_slit_inside(strips[c.strips[k]], c.nodes[k], settings)
-                                        for k in (0, 1))]
-    at_member = len(crossings) - len(slit)
-    slit = [replace(c, id=i + 1) for i, c in enumerate(slit)]
-    return StripSet(strips=strips, crossings=slit, junctions=junctions, settings=settings,
-                    positions=X, ends_not_continued=0 if ends is None else ends.not_continued,
-                    crossings_at_member=at_member, along_edge=along_edge, normals=N)
 
 
 def _member_setbacks(X: np.ndarray, ends: StripEnds, settings: StripSettings) -> np.ndarray:
