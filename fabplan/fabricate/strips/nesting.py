@@ -19,6 +19,7 @@ margin, no two closer than the spacing.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -206,32 +207,7 @@ def _split_strip(strip, node_s: np.ndarray, settings: "StripSettings") -> list:
             "shorter --splice-length")
     splits: list[float] = []
     while not fits(a, length + e1, cap1 + (0 if splits else cap0)):
-        caps = cap0 if not splits else 0.0
-        # intervals beyond the part's start; the part grows with the split point, so the
-        # last interval whose start still fits is found by bisection
-        usable = [(max(lo, a + splice / 2 + 1.0), hi) for lo, hi in allowed]
-        usable = [(lo, hi) for lo, hi in usable if lo <= hi]
-        first, last = 0, len(usable)
-        while first < last:
-            mid = (first + last) // 2
-            if fits(a, usable[mid][0] + splice / 2, caps):
-                first = mid + 1
-            else:
-                last = mid
-        best = None
-        if first > 0:
-            lo, hi = usable[first - 1]
-            if fits(a, hi + splice / 2, caps):
-                best = hi
-            else:
-                good, bad = lo, hi
-                while bad - good > 0.5:
-                    mid = (good + bad) / 2
-                    if fits(a, mid + splice / 2, caps):
-                        good = mid
-                    else:
-                        bad = mid
-                best = good
+        best = _farthest_split(fits, a, allowed, splice, cap0 if not splits else 0.0)
         if best is None:
             raise InputError(
                 f"the sheet {settings.sheet_mm[0]:g}x{settings.sheet_mm[1]:g} mm is too small for "
@@ -240,6 +216,37 @@ def _split_strip(strip, node_s: np.ndarray, settings: "StripSettings") -> list:
         splits.append(best)
         a = best - splice / 2
     return splits
+
+
+def _farthest_split(fits: Callable[[float, float, float], bool], a: float, allowed: list,
+                    splice: float, caps: float) -> float | None:
+    """The farthest splice centre (arc length, mm) of the `allowed` intervals at which the
+    part starting at `a` still `fits` the sheet (with `caps` mm of end caps), within half a
+    millimetre; None when no part beyond `a` fits."""
+    # intervals beyond the part's start; the part grows with the split point, so the
+    # last interval whose start still fits is found by bisection
+    usable = [(max(lo, a + splice / 2 + 1.0), hi) for lo, hi in allowed]
+    usable = [(lo, hi) for lo, hi in usable if lo <= hi]
+    first, last = 0, len(usable)
+    while first < last:
+        mid = (first + last) // 2
+        if fits(a, usable[mid][0] + splice / 2, caps):
+            first = mid + 1
+        else:
+            last = mid
+    if first == 0:
+        return None
+    lo, hi = usable[first - 1]
+    if fits(a, hi + splice / 2, caps):
+        return hi
+    good, bad = lo, hi
+    while bad - good > 0.5:
+        mid = (good + bad) / 2
+        if fits(a, mid + splice / 2, caps):
+            good = mid
+        else:
+            bad = mid
+    return good
 
 
 # ---------------------------------------------------------------------- part geometry
@@ -304,15 +311,48 @@ def _part_geometry(strip, strip_crossings, settings, a: float, b: float,
     curve = strip.curve
     h = settings.height_mm
     k2 = settings.kerf_mm / 2
-    splice = settings.splice_mm
     top, bottom = h / 2 + k2, -h / 2 - k2
     s0, s1 = a - k2, b + k2
     bottom_segments = [[s0, s1, bottom]]
     top_segments = [[s0, s1, top]]
+    marks, labels, splices = _splice_zones(curve, settings, a, b, (start_kind, end_kind),
+                                           splice_ids, bottom_segments, top_segments)
+    cap = 1.0 if settings.end == "round" else 0.0
+    rows = _side_rows(curve, bottom_segments, reverse=False)
+    rows[-1][2] = cap if end_kind == "end" else 0.0
+    rows += _side_rows(curve, top_segments, reverse=True)
+    rows[-1][2] = cap if start_kind == "end" else 0.0
+    outline = _clean_outline(rows)
+    slits, slit_info, feature_s = _part_slits(strip, strip_crossings, settings, a, b, labels)
+    for _, z0, z1 in splices:
+        feature_s.append((z0, z1))
+    # the part label in the widest free stretch along the mid-line, with an up arrow
+    feature_s.sort()
+    free, cursor = [], a + (h / 2 if settings.end == "round" and start_kind == "end" else 0.0)
+    for lo, hi in feature_s:
+        if lo > cursor:
+            free.append((cursor, lo))
+        cursor = max(cursor, hi)
+    end_limit = b - (h / 2 if settings.end == "round" and end_kind == "end" else 0.0)
+    if end_limit > cursor:
+        free.append((cursor, end_limit))
+    lo, hi = max(free, key=lambda f: f[1] - f[0]) if free else (a, b)
+    return dict(outline=outline, slits=slits, slit_info=slit_info, marks=marks, labels=labels,
+                splices=splices, label_span=(lo, hi), label_size=min(settings.text_height_mm, 0.4 * h))
+
+
+def _splice_zones(curve, settings, a: float, b: float, kinds: tuple[str, str], splice_ids: tuple,
+                  bottom_segments: list, top_segments: list) -> tuple[list, list, list]:
+    """The splice zones at the ends of the part between arc lengths a and b whose `kinds`
+    (start, end) are splices: their engraved marks, labels and ``(id, s0, s1)`` zones; a
+    step lap steps the part's `bottom_segments` or `top_segments` ``[s0, s1, offset]``."""
+    h = settings.height_mm
+    k2 = settings.kerf_mm / 2
+    splice = settings.splice_mm
+    s0, s1 = a - k2, b + k2
     marks, labels, splices = [], [], []
     th = settings.text_height_mm
-    # splice zones at the ends
-    for where, kind, sid in (("start", start_kind, splice_ids[0]), ("end", end_kind, splice_ids[1])):
+    for where, kind, sid in (("start", kinds[0], splice_ids[0]), ("end", kinds[1], splice_ids[1])):
         if kind in ("end", "member"):
             continue
         zone = (a, a + splice) if where == "start" else (b - splice, b)
@@ -350,13 +390,18 @@ def _part_geometry(strip, strip_crossings, settings, a: float, b: float,
         p, t = curve.point(mid, level)
         labels.append(Label(text, (float(p[0]), float(p[1])),
                             math.degrees(math.atan2(t[1], t[0])), size, "splice"))
-    cap = 1.0 if settings.end == "round" else 0.0
-    rows = _side_rows(curve, bottom_segments, reverse=False)
-    rows[-1][2] = cap if end_kind == "end" else 0.0
-    rows += _side_rows(curve, top_segments, reverse=True)
-    rows[-1][2] = cap if start_kind == "end" else 0.0
-    outline = _clean_outline(rows)
-    # slits at the crossings inside the part
+    return marks, labels, splices
+
+
+def _part_slits(strip, strip_crossings, settings, a: float, b: float,
+                labels: list) -> tuple[list, list, list]:
+    """The slits at the crossings of `strip` between arc lengths a and b: their (4, 2)
+    rectangles (mm), ``(crossing, s, side)`` and the spans ``(s0, s1)`` they and their
+    numbers take along the part; the numbers are added to `labels`."""
+    curve = strip.curve
+    h = settings.height_mm
+    k2 = settings.kerf_mm / 2
+    th = settings.text_height_mm
     w = settings.slit_width_mm - settings.kerf_mm
     slits, slit_info = [], []
     feature_s = []
@@ -390,21 +435,7 @@ def _part_geometry(strip, strip_crossings, settings, a: float, b: float,
                             math.degrees(math.atan2(t[1], t[0])), size, "crossing"))
         feature_s.append((s - offset_s - _text_width(text, size) / 2 - w,
                           s + offset_s + _text_width(text, size) / 2 + w))
-    for _, z0, z1 in splices:
-        feature_s.append((z0, z1))
-    # the part label in the widest free stretch along the mid-line, with an up arrow
-    feature_s.sort()
-    free, cursor = [], a + (h / 2 if settings.end == "round" and start_kind == "end" else 0.0)
-    for lo, hi in feature_s:
-        if lo > cursor:
-            free.append((cursor, lo))
-        cursor = max(cursor, hi)
-    end_limit = b - (h / 2 if settings.end == "round" and end_kind == "end" else 0.0)
-    if end_limit > cursor:
-        free.append((cursor, end_limit))
-    lo, hi = max(free, key=lambda f: f[1] - f[0]) if free else (a, b)
-    return dict(outline=outline, slits=slits, slit_info=slit_info, marks=marks, labels=labels,
-                splices=splices, label_span=(lo, hi), label_size=min(th, 0.4 * h))
+    return slits, slit_info, feature_s
 
 
 def _signed_area(P: np.ndarray) -> float:
@@ -751,29 +782,7 @@ def nest_parts(parts: list[Part], settings: "StripSettings", *, workers: int = 1
     for i in order:
         candidates = oriented[i]
         size = (min(len(c.lower) for c in candidates), min(c.height for c in candidates))
-        best = None
-        for sheet, S in enumerate(skylines):
-            if S.min() + size[1] > short_side:
-                continue
-            # a part at least as long and high as one that did not fit will not fit either
-            if any(size[0] >= n and size[1] >= hgt for n, hgt in refused[sheet]):
-                continue
-            for c in candidates:
-                nx = len(c.lower)
-                if nx > nx_sheet:
-                    continue
-                fit = _lowest_fit(S, c, short_side)
-                if fit is None:
-                    continue
-                x0, y0 = fit
-                score = (y0 + c.height, x0)
-                if best is None or score < best[0]:
-                    best = (score, sheet, c, x0, y0)
-            if best is not None:
-                break
-            # keep only the minimal refusals: they decide for all larger parts
-            refused[sheet] = [r for r in refused[sheet] if not (r[0] >= size[0] and r[1] >= size[1])]
-            refused[sheet].append(size)
+        best = _first_sheet_fit(skylines, refused, candidates, size, short_side, nx_sheet)
         if best is None:
             skylines.append(np.zeros(nx_sheet))
             placed.append([])
@@ -792,6 +801,46 @@ def nest_parts(parts: list[Part], settings: "StripSettings", *, workers: int = 1
         seg = c.upper[max(0, -lo):len(c.upper) - max(0, hi - len(S))]
         S[max(lo, 0):min(hi, len(S))] = np.maximum(S[max(lo, 0):min(hi, len(S))], y0 + seg)
         placed[sheet].append((i, c.angle, c.shift + np.array([x0 * res, y0])))
+    nesting = Nesting(sheets=_placed_sheets(placed, settings, portrait), parts=parts,
+                      settings=settings)
+    check_nesting(nesting)
+    return nesting
+
+
+def _first_sheet_fit(skylines: list[np.ndarray], refused: list[list], candidates: list,
+                     size: tuple, short_side: float, nx_sheet: int) -> tuple | None:
+    """The lowest fit of a part's oriented `candidates` on the first open sheet that takes
+    it: ``((top, x0), sheet, candidate, x0, y0)`` (cells and mm), or None. A sheet that
+    refuses the part of `size` (cells, height) notes it in `refused`."""
+    best = None
+    for sheet, S in enumerate(skylines):
+        if S.min() + size[1] > short_side:
+            continue
+        # a part at least as long and high as one that did not fit will not fit either
+        if any(size[0] >= n and size[1] >= hgt for n, hgt in refused[sheet]):
+            continue
+        for c in candidates:
+            nx = len(c.lower)
+            if nx > nx_sheet:
+                continue
+            fit = _lowest_fit(S, c, short_side)
+            if fit is None:
+                continue
+            x0, y0 = fit
+            score = (y0 + c.height, x0)
+            if best is None or score < best[0]:
+                best = (score, sheet, c, x0, y0)
+        if best is not None:
+            break
+        # keep only the minimal refusals: they decide for all larger parts
+        refused[sheet] = [r for r in refused[sheet] if not (r[0] >= size[0] and r[1] >= size[1])]
+        refused[sheet].append(size)
+    return best
+
+
+def _placed_sheets(placed: list[list], settings: "StripSettings", portrait: bool) -> list[Sheet]:
+    """The sheets of the parts placed on each, ``(part, angle, shift)`` in the skyline's
+    frame, turned a quarter where the sheet stands `portrait`."""
     sheets = []
     m = settings.margin_mm
     W, H = settings.sheet_mm
@@ -805,9 +854,7 @@ def nest_parts(parts: list[Part], settings: "StripSettings", *, workers: int = 1
             placements.append(Placement(part=i, angle_deg=float(angle),
                                         offset=(float(offset[0]), float(offset[1]))))
         sheets.append(Sheet(index=k + 1, size=(W, H), placements=placements))
-    nesting = Nesting(sheets=sheets, parts=parts, settings=settings)
-    check_nesting(nesting)
-    return nesting
+    return sheets
 
 
 def placed_footprints(nesting: Nesting, sheet: Sheet) -> list:

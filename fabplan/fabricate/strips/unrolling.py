@@ -438,6 +438,45 @@ def _line_deviation(P: np.ndarray) -> float:
     return float(np.abs(C @ vt[-1]).max())
 
 
+def _fit_run(P: np.ndarray, tolerance_mm: float) -> tuple[float, float] | None:
+    """The signed radius (mm; ``inf`` for a line) and deviation of the line or circle that
+    holds the nodes `P` (k, 2) within `tolerance_mm`, or None."""
+    dev_line = _line_deviation(P)
+    if dev_line <= tolerance_mm:
+        return math.inf, dev_line
+    R, centre, dev = _fit_circle(P)
+    if dev > tolerance_mm:
+        return None
+    # centre on the top (left) side of the first edge gives a positive radius (a chord
+    # test would fail for runs turning by more than half a turn)
+    edge = P[1] - P[0]
+    side = edge[0] * (centre[1] - P[0, 1]) - edge[1] * (centre[0] - P[0, 0])
+    return (R if side > 0 else -R), dev
+
+
+def _longest_run(nodes: np.ndarray, i: int, min_edges: int,
+                 tolerance_mm: float) -> tuple[int, tuple[float, float]] | None:
+    """Largest j such that nodes i..j fit (`_fit_run`), with its fit, or None."""
+    k = len(nodes)
+    j = i + min_edges
+    if j > k - 1 or (res := _fit_run(nodes[i:j + 1], tolerance_mm)) is None:
+        return None
+    best, step = (j, res), 1
+    while True:  # exponential, then binary search (a subset of a fitting run fits)
+        hi = min(j + step, k - 1)
+        if hi == j or (res := _fit_run(nodes[i:hi + 1], tolerance_mm)) is None:
+            break
+        best, j, step = (hi, res), hi, step * 2
+    lo, hi = j, min(j + step, k - 1)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if (res := _fit_run(nodes[i:mid + 1], tolerance_mm)) is not None:
+            best, lo = (mid, res), mid
+        else:
+            hi = mid
+    return best
+
+
 def fit_arc_runs(nodes: np.ndarray, tolerance_mm: float) -> list[ArcRun]:
     """Split a developed polyline into runs of nodes on one circle or line.
 
@@ -466,45 +505,10 @@ def fit_arc_runs(nodes: np.ndarray, tolerance_mm: float) -> list[ArcRun]:
     """
     k = len(nodes)
     min_edges = 2 if k == 3 else 3
-
-    def fit(i: int, j: int) -> tuple[float, float] | None:
-        P = nodes[i:j + 1]
-        dev_line = _line_deviation(P)
-        if dev_line <= tolerance_mm:
-            return math.inf, dev_line
-        R, centre, dev = _fit_circle(P)
-        if dev > tolerance_mm:
-            return None
-        # centre on the top (left) side of the first edge gives a positive radius (a chord
-        # test would fail for runs turning by more than half a turn)
-        edge = P[1] - P[0]
-        side = edge[0] * (centre[1] - P[0, 1]) - edge[1] * (centre[0] - P[0, 0])
-        return (R if side > 0 else -R), dev
-
-    def longest(i: int) -> tuple[int, tuple[float, float]] | None:
-        """Largest j such that nodes i..j fit, with its fit, or None."""
-        j = i + min_edges
-        if j > k - 1 or (res := fit(i, j)) is None:
-            return None
-        best, step = (j, res), 1
-        while True:  # exponential, then binary search (a subset of a fitting run fits)
-            hi = min(j + step, k - 1)
-            if hi == j or (res := fit(i, hi)) is None:
-                break
-            best, j, step = (hi, res), hi, step * 2
-        lo, hi = j, min(j + step, k - 1)
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if (res := fit(i, mid)) is not None:
-                best, lo = (mid, res), mid
-            else:
-                hi = mid
-        return best
-
     runs: list[ArcRun] = []
     i = 0
     while i < k - 1:
-        best = longest(i)
+        best = _longest_run(nodes, i, min_edges, tolerance_mm)
         if best is None:
             runs.append(ArcRun(i, i + 1, math.inf, 0.0, False))
             i += 1
@@ -513,8 +517,8 @@ def fit_arc_runs(nodes: np.ndarray, tolerance_mm: float) -> list[ArcRun]:
         if 0 < k - 1 - stop < min_edges:
             # leave the tail enough edges for a run of its own when it fits
             cut = k - 1 - min_edges
-            if (cut - i >= min_edges and fit(cut, k - 1) is not None
-                    and (head := fit(i, cut)) is not None):
+            if (cut - i >= min_edges and _fit_run(nodes[cut:k], tolerance_mm) is not None
+                    and (head := _fit_run(nodes[i:cut + 1], tolerance_mm)) is not None):
                 stop, res = cut, head
         runs.append(ArcRun(i, stop, float(res[0]), float(res[1]), True))
         i = stop
