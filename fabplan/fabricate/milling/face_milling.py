@@ -681,6 +681,51 @@ before them): they stay on the net
             "straight beneath them (the design ends before them): they stay on the net"]
 
 
+def _face_margin(nodes: _Nodes, tool: MillTool, settings: MillSettings) -> tuple[float, str]:
+    """The margin (mm) between Meusnier and safety radii and the rule it follows, in words."""
+    if settings.margin_mm is None:
+        margin = default_margin_mm(nodes.point, nodes.radius, nodes.largest_curvature,
+                                   tool.circle_radius_mm, settings.discretization_share)
+        rule = (f"max over nodes of (R - 1 / k_max within r) + {settings.discretization_share:g}"
+                " x max R (R: Meusnier radius, k_max: larger principal curvature, r: cutting "
+                "circle radius)")
+    else:
+        margin = float(settings.margin_mm)
+        rule = "given (--margin)"
+    return margin, rule
+
+
+def _safety_radii(mesh: QuadMesh, nodes: _Nodes, tool: MillTool, margin: float) -> np.ndarray:
+    """(n,) float, the nodes' safety sphere radii (mm); InputError where the tool's cutting
+    circle does not fit inside them (the nodes named, with the largest diameter that fits)."""
+    r = tool.circle_radius_mm
+    safety = nodes.radius - margin
+    too_small = np.flatnonzero(safety - tool.corner_mm < r * (1 + 1e-9))
+    if too_small.size:
+        largest = 2 * (float(np.min(safety)) - tool.corner_mm) + 2 * tool.corner_mm
+        raise InputError(
+            f"{mesh.name}: tool {tool.spec()} is larger than the safety spheres allow at "
+            f"{describe_region(mesh, nodes.vertex[too_small])}: the safety "
+            f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
+            f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
+    return safety
+
+
+def _trailing_directions(nodes: _Nodes, lines: PassLines) -> np.ndarray:
+    """(s, n, 3) float, the unit direction behind every node's pass at every stride 1..s:
+    the passes of a stride run back and forth, each node's run oriented alike."""
+    # each node's forward direction along its run (the runs are oriented alike)
+    forward = np.zeros_like(nodes.point)
+    for run in lines.runs:
+        forward[run] = _unit(np.gradient(nodes.point[run], axis=0))
+    max_stride = lines.max_stride
+    trailing = np.empty((max_stride, len(nodes.vertex), 3))
+    for k in range(1, max_stride + 1):
+        pass_number = (lines.node_line - lines.first_line(k)) // k
+        trailing[k - 1] = np.where((pass_number % 2 == 0)[:, None], -forward, forward)
+    return trailing
+
+
 def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
                       design: Any = None) -> MillPlan:
     """Plan curvature-adaptive face milling passes along one family of an S-net.
@@ -716,37 +761,13 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
     nodes, side = _net_nodes(mesh, settings)
     family = 0 if settings.along == "A" else 1
     r = tool.circle_radius_mm
-    if settings.margin_mm is None:
-        margin = default_margin_mm(nodes.point, nodes.radius, nodes.largest_curvature,
-                                   tool.circle_radius_mm, settings.discretization_share)
-        rule = (f"max over nodes of (R - 1 / k_max within r) + {settings.discretization_share:g}"
-                " x max R (R: Meusnier radius, k_max: larger principal curvature, r: cutting "
-                "circle radius)")
-    else:
-        margin = float(settings.margin_mm)
-        rule = "given (--margin)"
-    safety = nodes.radius - margin
-    too_small = np.flatnonzero(safety - tool.corner_mm < r * (1 + 1e-9))
-    if too_small.size:
-        largest = 2 * (float(np.min(safety)) - tool.corner_mm) + 2 * tool.corner_mm
-        raise InputError(
-            f"{mesh.name}: tool {tool.spec()} is larger than the safety spheres allow at "
-            f"{describe_region(mesh, nodes.vertex[too_small])}: the safety "
-            f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
-            f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
+    margin, rule = _face_margin(nodes, tool, settings)
+    safety = _safety_radii(mesh, nodes, tool, margin)
     lines = pass_lines(mesh, nodes.point, nodes.vertex, nodes.cross_neighbour, family)
-    # each node's forward direction along its run (the runs are oriented alike)
-    forward = np.zeros_like(nodes.point)
-    for run in lines.runs:
-        forward[run] = _unit(np.gradient(nodes.point[run], axis=0))
     X = mesh.vertices * settings.mm_per_unit
-    max_stride = lines.max_stride
-    trailing = np.empty((max_stride, len(nodes.vertex), 3))
-    for k in range(1, max_stride + 1):
-        pass_number = (lines.node_line - lines.first_line(k)) // k
-        trailing[k - 1] = np.where((pass_number % 2 == 0)[:, None], -forward, forward)
-    per_node = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, max_stride,
-                                   mesh.star_of_vertex, lines.towards, trailing)
+    per_node = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, lines.max_stride,
+                                   mesh.star_of_vertex, lines.towards,
+                                   _trailing_directions(nodes, lines))
     predicted, stride = choose_stride(per_node, lines, settings.scallop_mm)
     notes = []
     residual = float(nodes.sphere_residual.max())

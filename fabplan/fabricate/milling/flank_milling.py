@@ -485,6 +485,35 @@ def _predicted_scallops(nodes: _ConeNodes, safety: np.ndarray, tool: MillTool,
 
 
 # ---------------------------------------------------------------------------- the plan
+def _tip_to_the_mean_normal(nodes: _ConeNodes, a: float) -> None:
+    """Turn the rulings of `nodes` (`_cone_nodes`) so that the cone of half angle `a` (rad)
+    has its tip towards the side that keeps the axes closest to the mean normal."""
+    up = _unit(nodes.normal.mean(axis=0))
+    lean = [np.min(np.sin(a) * nodes.normal @ up - np.cos(a) * s * nodes.ruling @ up)
+            for s in (1.0, -1.0)]
+    if lean[1] > lean[0]:
+        nodes.ruling = -nodes.ruling
+
+
+def _cone_margin(nodes: _ConeNodes, tool: MillTool,
+                 settings: MillSettings) -> tuple[float, str, float]:
+    """The margin (mm) between Mannheim and safety radii, the rule it follows in words, and
+    the discretization share (mm) the cone's check allows for (0 with a given margin)."""
+    share = settings.discretization_share * float(nodes.radius.max())
+    if settings.margin_mm is None:
+        margin = default_cone_margin_mm(nodes.point, nodes.normal, nodes.ruling, nodes.radius,
+                                        tool, share)
+        rule = (f"max over nodes and flank points of (rho - rho(p + t u) - t tan a) + "
+                f"{settings.discretization_share:g} x max rho (rho: Mannheim radius, t: position "
+                "along the ruling towards the tip, a: the cone's half angle); safety radius "
+                "min(rho - margin, r_end / cos a)")
+    else:
+        margin = float(settings.margin_mm)
+        rule = "given (--margin)"
+        share = 0.0   # a given margin is checked on the geometry alone, as for face mills
+    return margin, rule, share
+
+
 def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
                        design: Any = None) -> ConePlan:
     """Plan flank milling passes with a cone along one family of an S*-net.
@@ -516,26 +545,10 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *
         raise InputError(f"{mesh.name}: tool {tool.spec()} is not a cone")
     nodes, side = _cone_nodes(mesh, settings)
     family = 0 if settings.along == "A" else 1
-    share = settings.discretization_share * float(nodes.radius.max())
-    # the tip towards the side that keeps the axes closest to the mean normal
-    up = _unit(nodes.normal.mean(axis=0))
     a = np.radians(tool.angle_deg)
-    lean = [np.min(np.sin(a) * nodes.normal @ up - np.cos(a) * s * nodes.ruling @ up)
-            for s in (1.0, -1.0)]
-    if lean[1] > lean[0]:
-        nodes.ruling = -nodes.ruling
+    _tip_to_the_mean_normal(nodes, a)
     field = _radius_field(nodes.point, nodes.normal, nodes.radius)
-    if settings.margin_mm is None:
-        margin = default_cone_margin_mm(nodes.point, nodes.normal, nodes.ruling, nodes.radius,
-                                        tool, share)
-        rule = (f"max over nodes and flank points of (rho - rho(p + t u) - t tan a) + "
-                f"{settings.discretization_share:g} x max rho (rho: Mannheim radius, t: position "
-                "along the ruling towards the tip, a: the cone's half angle); safety radius "
-                "min(rho - margin, r_end / cos a)")
-    else:
-        margin = float(settings.margin_mm)
-        rule = "given (--margin)"
-        share = 0.0   # a given margin is checked on the geometry alone, as for face mills
+    margin, rule, share = _cone_margin(nodes, tool, settings)
     safety = _check_cone(mesh, nodes, field, margin, tool, settings, share)
     lines = pass_lines(mesh, nodes.point, nodes.vertex, nodes.cross_neighbour, family,
                        nodes.node_of_vertex)
