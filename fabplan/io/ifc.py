@@ -378,6 +378,30 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
     if model.units not in IFC_UNITS:
         raise InputError(f"unknown units {model.units!r} for an IFC file: use " + ", ".join(IFC_UNITS))
     w = _Writer(model)
+    context, body, axis, building, facade, facade_place = _spatial_structure(w, model)
+    # every part sits at the facade's placement: the coordinates are the net's
+    part_place = w.placement(facade_place)
+    # a list of its own: the plates' list went into their material's relation
+    parts = list(_panel_plates(w, model, body, part_place))
+    if model.strips is not None and model.strips.curves:
+        parts += _strip_members(w, model.strips, model.strip_material, axis, body, part_place)
+    if parts:
+        w.create("IfcRelAggregates", GlobalId=w.guid("facade/parts"), RelatingObject=facade,
+                 RelatedObjects=parts)
+
+    if model.nodes is not None and len(model.nodes):
+        _analytical_model(w, model, facade_place, context, building)
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        w.file.write(str(tmp), format=".ifc")
+    return path
+
+
+def _spatial_structure(w: _Writer, model: FacadeModel) -> tuple[Any, Any, Any, Any, Any, Any]:
+    """The file's contexts and spatial structure (project, site, building, the facade
+    assembly): the model context, its body and axis subcontexts, the building, the facade
+    and the facade's placement."""
     create = w.create
     origin = create("IfcAxis2Placement3D", Location=create("IfcCartesianPoint", Coordinates=(0.0, 0.0, 0.0)))
     context = create("IfcGeometricRepresentationContext", ContextType="Model",
@@ -405,10 +429,13 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
                     PredefinedType="USERDEFINED")
     create("IfcRelContainedInSpatialStructure", GlobalId=w.guid("building/facade"),
            RelatedElements=[facade], RelatingStructure=building)
-    # every part sits at the facade's placement: the coordinates are the net's
-    part_place = w.placement(facade_place)
-    parts: list = []
+    return context, body, axis, building, facade, facade_place
 
+
+def _panel_plates(w: _Writer, model: FacadeModel, body: Any, part_place: Any) -> list:
+    """The panels as plates (one triangulated surface each, coloured by mold), grouped by
+    mold, with their properties and material; returns the plates."""
+    create = w.create
     mold_styles: dict[int, Any] = {}
     mold_ids = sorted({int(m) for s in model.panels if s.mold is not None for m in s.mold if m >= 0})
     colours = category_colours(max(mold_ids, default=-1) + 1)
@@ -440,7 +467,6 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
                 members_of[mold].append(plate)
         w.properties(f"panels{k}", made, panels.properties, PANEL_PSET)
         plates += made
-    parts += plates
     for m in mold_ids:
         name, text = model.molds.get(m, (f"mold {m}", ""))
         group = create("IfcGroup", GlobalId=w.guid(f"mold/{m}"), Name=name, Description=text or None,
@@ -449,50 +475,44 @@ def write_ifc(path: str | os.PathLike, model: FacadeModel) -> Path:
                RelatedObjects=members_of[m], RelatingGroup=group)
     if model.panel_material:
         w.material(model.panel_material, plates, "panels")
+    return plates
 
+
+def _strip_members(w: _Writer, strips: StripSet, strip_material: str | None, axis: Any,
+                   body: Any, part_place: Any) -> list:
+    """The strips as members (centre line and lamella solid each) with their profile,
+    material and properties; returns the members."""
+    create = w.create
     members: list = []
-    if model.strips is not None and model.strips.curves:
-        strips = model.strips
-        profile = create("IfcRectangleProfileDef", ProfileType="AREA",
-                         ProfileName=f"lamella {strips.thickness:.6g} x {strips.height:.6g}",
-                         XDim=float(strips.thickness), YDim=float(strips.height))
-        # IFC lets a profile go without a material; readers such as web-ifc expect one
-        material = create("IfcMaterial", Name=model.strip_material or "lamella",
-                          Category=None if model.strip_material else "not given")
-        usage = create("IfcMaterialProfileSetUsage", ForProfileSet=create(
-            "IfcMaterialProfileSet", Name="lamella", MaterialProfiles=[create(
-                "IfcMaterialProfile", Name="lamella", Material=material, Profile=profile)]),
-            CardinalPoint=5)
-        for i, (curve, normal) in enumerate(zip(strips.curves, strips.normals, strict=True)):
-            curve = np.asarray(curve, np.float64)
-            points, triangles = _lamella_body(curve, np.asarray(normal, np.float64),
-                                              strips.height, strips.thickness)
-            centre = create("IfcPolyline", Points=[create("IfcCartesianPoint", Coordinates=p)
-                                                   for p in _fixed(curve, w.decimals)])
-            solid = create("IfcTriangulatedFaceSet", Coordinates=create(
-                "IfcCartesianPointList3D", CoordList=_fixed(points, w.decimals)), Closed=True,
-                CoordIndex=(triangles + 1).tolist())
-            shape = create("IfcProductDefinitionShape", Representations=[
-                create("IfcShapeRepresentation", ContextOfItems=axis, RepresentationIdentifier="Axis",
-                       RepresentationType="Curve3D", Items=[centre]),
-                create("IfcShapeRepresentation", ContextOfItems=body, RepresentationIdentifier="Body",
-                       RepresentationType="Tessellation", Items=[solid])])
-            members.append(create("IfcMember", GlobalId=w.guid(f"strip/{i}"), Name=strips.names[i],
-                                  ObjectType="lamella", ObjectPlacement=part_place,
-                                  Representation=shape, Tag=strips.names[i],
-                                  PredefinedType="USERDEFINED"))
-        create("IfcRelAssociatesMaterial", GlobalId=w.guid("material/strips"), RelatedObjects=members,
-               RelatingMaterial=usage)
-        w.properties("strip", members, strips.properties, STRIP_PSET)
-        parts += members
-    if parts:
-        create("IfcRelAggregates", GlobalId=w.guid("facade/parts"), RelatingObject=facade,
-               RelatedObjects=parts)
-
-    if model.nodes is not None and len(model.nodes):
-        _analytical_model(w, model, facade_place, context, building)
-
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        w.file.write(str(tmp), format=".ifc")
-    return path
+    profile = create("IfcRectangleProfileDef", ProfileType="AREA",
+                     ProfileName=f"lamella {strips.thickness:.6g} x {strips.height:.6g}",
+                     XDim=float(strips.thickness), YDim=float(strips.height))
+    # IFC lets a profile go without a material; readers such as web-ifc expect one
+    material = create("IfcMaterial", Name=strip_material or "lamella",
+                      Category=None if strip_material else "not given")
+    usage = create("IfcMaterialProfileSetUsage", ForProfileSet=create(
+        "IfcMaterialProfileSet", Name="lamella", MaterialProfiles=[create(
+            "IfcMaterialProfile", Name="lamella", Material=material, Profile=profile)]),
+        CardinalPoint=5)
+    for i, (curve, normal) in enumerate(zip(strips.curves, strips.normals, strict=True)):
+        curve = np.asarray(curve, np.float64)
+        points, triangles = _lamella_body(curve, np.asarray(normal, np.float64),
+                                          strips.height, strips.thickness)
+        centre = create("IfcPolyline", Points=[create("IfcCartesianPoint", Coordinates=p)
+                                               for p in _fixed(curve, w.decimals)])
+        solid = create("IfcTriangulatedFaceSet", Coordinates=create(
+            "IfcCartesianPointList3D", CoordList=_fixed(points, w.decimals)), Closed=True,
+            CoordIndex=(triangles + 1).tolist())
+        shape = create("IfcProductDefinitionShape", Representations=[
+            create("IfcShapeRepresentation", ContextOfItems=axis, RepresentationIdentifier="Axis",
+                   RepresentationType="Curve3D", Items=[centre]),
+            create("IfcShapeRepresentation", ContextOfItems=body, RepresentationIdentifier="Body",
+                   RepresentationType="Tessellation", Items=[solid])])
+        members.append(create("IfcMember", GlobalId=w.guid(f"strip/{i}"), Name=strips.names[i],
+                              ObjectType="lamella", ObjectPlacement=part_place,
+                              Representation=shape, Tag=strips.names[i],
+                              PredefinedType="USERDEFINED"))
+    create("IfcRelAssociatesMaterial", GlobalId=w.guid("material/strips"), RelatedObjects=members,
+           RelatingMaterial=usage)
+    w.properties("strip", members, strips.properties, STRIP_PSET)
+    return members

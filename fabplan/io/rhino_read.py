@@ -302,6 +302,27 @@ def read_3dm(path: str | os.PathLike, *, layer: str | None = None, object_name: 
     choice = {k: v for k, v in (("layer", layer), ("object", object_name)) if v is not None}
     if face is not None:
         choice["face"] = str(face)
+    entry = _chosen_entry(path, entries, holds, layer, object_name, choice)
+    file_units, rhino_units = _unit_system(model, path)
+    if units is not None and units not in MM_PER_UNIT:
+        raise InputError(f"{path}: units must be one of {', '.join(MM_PER_UNIT)}, got {units!r}")
+    if units is not None and file_units is None:
+        raise InputError(f"{path}: the file has no unit system, so it cannot be converted to "
+                         f"{units}; set the units in Rhino (Document Properties > Units)")
+    scale = 1.0 if units is None or file_units is None else MM_PER_UNIT[file_units] / MM_PER_UNIT[units]
+    out_units = units or file_units
+    label = entry.describe()
+    design = RhinoDesign(path, entry.kind, label, out_units, file_units, rhino_units, scale,
+                         holds=holds, choice=choice)
+    _read_geometry(design, entry, face, path)
+    return design
+
+
+def _chosen_entry(path: Path, entries: list[_Entry], holds: str, layer: str | None,
+                  object_name: str | None, choice: dict[str, str]) -> _Entry:
+    """The one surface, polysurface or mesh of `entries` on `layer` and of `object_name`
+    (None: any); InputError when there is none or more than one, saying what the file
+    `holds`."""
     picked = [e for e in entries
               if (layer is None or layer in (e.layer, e.layer_path))
               and (object_name is None or e.name == object_name)]
@@ -320,19 +341,13 @@ def read_3dm(path: str | os.PathLike, *, layer: str | None = None, object_name: 
               "in a study)"
         raise InputError(f"{path}: {len(usable)} surfaces or meshes{' match ' + said if said else ''}"
                          f" and no choice singles one out: {how}; {holds}")
-    entry = usable[0]
-    file_units, rhino_units = _unit_system(model, path)
-    if units is not None and units not in MM_PER_UNIT:
-        raise InputError(f"{path}: units must be one of {', '.join(MM_PER_UNIT)}, got {units!r}")
-    if units is not None and file_units is None:
-        raise InputError(f"{path}: the file has no unit system, so it cannot be converted to "
-                         f"{units}; set the units in Rhino (Document Properties > Units)")
-    scale = 1.0 if units is None or file_units is None else MM_PER_UNIT[file_units] / MM_PER_UNIT[units]
-    out_units = units or file_units
-    label = entry.describe()
-    design = RhinoDesign(path, entry.kind, label, out_units, file_units, rhino_units, scale,
-                         holds=holds, choice=choice)
-    geometry = entry.geometry
+    return usable[0]
+
+
+def _read_geometry(design: RhinoDesign, entry: _Entry, face: int | None, path: Path) -> None:
+    """Read the mesh, or the surface (a polysurface's `face`), of `entry` into `design`,
+    scaled to its units, and check its coordinates."""
+    geometry, label, scale = entry.geometry, design.label, design.scale
     if face is not None and entry.kind != "polysurface":
         raise InputError(f"{path}: face={face} picks a face of a polysurface; {label} is a "
                          f"{entry.kind}")
@@ -340,7 +355,7 @@ def read_3dm(path: str | os.PathLike, *, layer: str | None = None, object_name: 
         design.vertices, design.triangles = _mesh_arrays(geometry, path)
         design.vertices = design.vertices * scale
         check_coordinates(design.vertices, f"{path} ({label})")
-        return design
+        return
     if entry.kind == "polysurface":
         count = len(geometry.Faces)
         if face is None and count > 1:
@@ -358,7 +373,6 @@ def read_3dm(path: str | os.PathLike, *, layer: str | None = None, object_name: 
     s.control_points = s.control_points * scale
     s.trims = None if s.trims is None else [t * scale for t in s.trims]
     check_coordinates(s.control_points.reshape(-1, 3), f"{path} ({label})", element="control point")
-    return design
 
 
 def _unit_system(model: Any, path: Path) -> tuple[str | None, str]:

@@ -102,62 +102,13 @@ def net_scene(mesh: QuadMesh, *, title: str, units: str, mm_per_unit: float,
     modes: list[viewer.ColourMode] = []
     info: list[viewer.PanelInfo] = []
     if deviation_mm is not None:
-        # the scale reaches past the limit, so that the limit's mark sits inside it
-        top = max(float(np.max(deviation_mm)), 1.15 * (deviation_limit_mm or 0.0))
-        modes.append(viewer.ColourMode(
-            "deviation", f"deviation from {deviation_from} [mm]",
-            f"Distance of the net from {deviation_from}, measured at the vertices and blended "
-            "across each panel" + ("; red is above the limit." if deviation_limit_mm is not None
-                                   else "."),
-            values=deviation_mm, where="vertex", unit="mm", value_range=(0.0, top),
-            limit=deviation_limit_mm))
-        info.append(viewer.PanelInfo(f"deviation from {deviation_from} (largest corner)",
-                                     face_max(mesh, deviation_mm), "mm", 3))
+        _deviation_mode(mesh, deviation_mm, deviation_limit_mm, deviation_from, modes, info)
     stars = canonical_stars(X, mesh.stars)
     if len(stars):
-        radius = np.full(mesh.vertex_count, np.nan)
-        radius[stars[:, 0]] = fit_star_spheres(X, stars).radius
-        if infinite_radius is not None:
-            radius[radius > infinite_radius] = np.nan
-        finite = radius[np.isfinite(radius)]
-        if finite.size:
-            modes.append(viewer.ColourMode(
-                "radius", f"Meusnier radius [{units}]",
-                "Radius of the sphere through each vertex and its four neighbours (blended "
-                "across the panels); one colour everywhere is a constant radius. Grey: "
-                "planar stars, boundary.", values=radius, where="vertex", unit=units,
-                value_range=(float(np.quantile(finite, 0.02)), float(np.quantile(finite, 0.98)))))
-            info.append(viewer.PanelInfo("Meusnier radius (mean of corners)",
-                                         face_mean(mesh, radius), units))
-        angle = np.full(mesh.vertex_count, np.nan)
-        angle[stars[:, 0]] = np.degrees(intersection_angles(X, stars))
-        modes.append(viewer.ColourMode(
-            "angle", "angle between the families [deg]",
-            "Angle at which the net's two families of lines cross at each vertex; one colour "
-            "everywhere is a constant angle. Grey: boundary and irregular vertices.",
-            values=angle, where="vertex", unit="deg"))
-    pairs = mesh.interior_edge_faces
-    kink = np.zeros(len(mesh.face_sizes))
-    if len(pairs):
-        k = np.degrees(kink_angles(X, mesh))
-        np.maximum.at(kink, pairs[:, 0], k)
-        np.maximum.at(kink, pairs[:, 1], k)
-    modes.append(viewer.ColourMode(
-        "kink", "kink to the neighbours [deg]",
-        "Largest angle between a panel and its neighbours across an edge: 0 where the "
-        "panels continue each other smoothly.", values=kink, unit="deg"))
-    info.append(viewer.PanelInfo("kink", kink, "deg", 3))
+        _star_modes(mesh, stars, units, infinite_radius, modes, info)
+    _kink_mode(mesh, modes, info)
     if line_turn and len(stars):
-        turn = np.full(mesh.vertex_count, np.nan)
-        turn[stars[:, 0]] = np.degrees(line_turns(X, stars)[0].max(axis=1))
-        modes.append(viewer.ColourMode(
-            "turn", "line turn in the surface [deg]",
-            "How much the net's lines turn within the surface at each vertex (the larger of "
-            "the two families): 0 for lines as straight as the surface lets them be; fair "
-            "lines turn little and evenly. Grey: boundary and irregular vertices.",
-            values=turn, where="vertex", unit="deg"))
-        info.append(viewer.PanelInfo("line turn (largest corner)",
-                                     face_max(mesh, np.nan_to_num(turn)), "deg", 3))
+        _line_turn_mode(mesh, stars, modes, info)
     if gaps is not None:
         modes.append(viewer.ColourMode(
             "gaps", "coverage gaps (red)",
@@ -170,3 +121,78 @@ def net_scene(mesh: QuadMesh, *, title: str, units: str, mm_per_unit: float,
                               face_indices=mesh.face_indices, modes=modes, info=info,
                               edges=edges, edge_family=family, gaps=gaps, front=front,
                               initial=initial, eye_height=1700.0 / mm_per_unit)
+
+
+def _deviation_mode(mesh: QuadMesh, deviation_mm: np.ndarray, deviation_limit_mm: float | None,
+                    deviation_from: str, modes: list[viewer.ColourMode],
+                    info: list[viewer.PanelInfo]) -> None:
+    """Add the deviation mode of `net_scene` and its panel number to `modes` and `info`."""
+    # the scale reaches past the limit, so that the limit's mark sits inside it
+    top = max(float(np.max(deviation_mm)), 1.15 * (deviation_limit_mm or 0.0))
+    modes.append(viewer.ColourMode(
+        "deviation", f"deviation from {deviation_from} [mm]",
+        f"Distance of the net from {deviation_from}, measured at the vertices and blended "
+        "across each panel" + ("; red is above the limit." if deviation_limit_mm is not None
+                               else "."),
+        values=deviation_mm, where="vertex", unit="mm", value_range=(0.0, top),
+        limit=deviation_limit_mm))
+    info.append(viewer.PanelInfo(f"deviation from {deviation_from} (largest corner)",
+                                 face_max(mesh, deviation_mm), "mm", 3))
+
+
+def _star_modes(mesh: QuadMesh, stars: np.ndarray, units: str, infinite_radius: float | None,
+                modes: list[viewer.ColourMode], info: list[viewer.PanelInfo]) -> None:
+    """Add the Meusnier radius (where finite) and angle modes of `net_scene`, for the
+    regular `stars`, to `modes` and `info`."""
+    X = mesh.vertices
+    radius = np.full(mesh.vertex_count, np.nan)
+    radius[stars[:, 0]] = fit_star_spheres(X, stars).radius
+    if infinite_radius is not None:
+        radius[radius > infinite_radius] = np.nan
+    finite = radius[np.isfinite(radius)]
+    if finite.size:
+        modes.append(viewer.ColourMode(
+            "radius", f"Meusnier radius [{units}]",
+            "Radius of the sphere through each vertex and its four neighbours (blended "
+            "across the panels); one colour everywhere is a constant radius. Grey: "
+            "planar stars, boundary.", values=radius, where="vertex", unit=units,
+            value_range=(float(np.quantile(finite, 0.02)), float(np.quantile(finite, 0.98)))))
+        info.append(viewer.PanelInfo("Meusnier radius (mean of corners)",
+                                     face_mean(mesh, radius), units))
+    angle = np.full(mesh.vertex_count, np.nan)
+    angle[stars[:, 0]] = np.degrees(intersection_angles(X, stars))
+    modes.append(viewer.ColourMode(
+        "angle", "angle between the families [deg]",
+        "Angle at which the net's two families of lines cross at each vertex; one colour "
+        "everywhere is a constant angle. Grey: boundary and irregular vertices.",
+        values=angle, where="vertex", unit="deg"))
+
+
+def _kink_mode(mesh: QuadMesh, modes: list[viewer.ColourMode], info: list[viewer.PanelInfo]) -> None:
+    """Add the kink mode of `net_scene` and its panel number to `modes` and `info`."""
+    pairs = mesh.interior_edge_faces
+    kink = np.zeros(len(mesh.face_sizes))
+    if len(pairs):
+        k = np.degrees(kink_angles(mesh.vertices, mesh))
+        np.maximum.at(kink, pairs[:, 0], k)
+        np.maximum.at(kink, pairs[:, 1], k)
+    modes.append(viewer.ColourMode(
+        "kink", "kink to the neighbours [deg]",
+        "Largest angle between a panel and its neighbours across an edge: 0 where the "
+        "panels continue each other smoothly.", values=kink, unit="deg"))
+    info.append(viewer.PanelInfo("kink", kink, "deg", 3))
+
+
+def _line_turn_mode(mesh: QuadMesh, stars: np.ndarray, modes: list[viewer.ColourMode],
+                    info: list[viewer.PanelInfo]) -> None:
+    """Add the line turn mode of `net_scene` and its panel number to `modes` and `info`."""
+    turn = np.full(mesh.vertex_count, np.nan)
+    turn[stars[:, 0]] = np.degrees(line_turns(mesh.vertices, stars)[0].max(axis=1))
+    modes.append(viewer.ColourMode(
+        "turn", "line turn in the surface [deg]",
+        "How much the net's lines turn within the surface at each vertex (the larger of "
+        "the two families): 0 for lines as straight as the surface lets them be; fair "
+        "lines turn little and evenly. Grey: boundary and irregular vertices.",
+        values=turn, where="vertex", unit="deg"))
+    info.append(viewer.PanelInfo("line turn (largest corner)",
+                                 face_max(mesh, np.nan_to_num(turn)), "deg", 3))
