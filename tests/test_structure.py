@@ -269,60 +269,38 @@ MAX_FUNCTION_LINES = 80
 LONG_FUNCTIONS = {
     "fabplan.solve.optimize:optimize": "a 73-line docstring of its options; the body is the "
                                        "one solve setup, each step a call",
-    "fabplan.fabricate.molds.mold_report:mold_report_html": "one HTML page written top to "
-                                                            "bottom in page order",
-    "fabplan.edit.server:EditServer.app": "the route table of the edit server, its handlers nested "
-                               "to share the session",
-    "fabplan.fabricate.molds.mold_assignment:plan_molds": "to split: fitting, merging and "
-                                                          "refitting molds share its arrays",
+    "fabplan.edit.server:EditServer.app": "the route table of the edit server: its handlers are "
+                                          "closures over the session and the starlette classes "
+                                          "it imports when first served",
     "fabplan.solve.pattern:normal_pattern": "one computation in four numbered steps "
                                             "sharing their index arrays",
-    "fabplan.io.ifc:write_ifc": "the IFC entities written in file order",
-    "fabplan.solve.edit:NetEditor.solve_drag": "to split: one drag solve with its fallbacks in order",
-    "fabplan.fabricate.strips.strip_set:build_strips": "to split: strips traced, crossed and "
-                                                       "settled share their arrays",
-    "fabplan.fabricate.molds.mold_fits:fit_mold_placements": "one fit: placements, "
-                                                             "residuals and their refinement",
     "fabplan.layout.trim:trim_to_design": "to split further: the lift, recut and gap patches "
                                           "share a dozen arrays (needs a state object)",
     "fabplan.layout.trim:slide_splits": "a 46-line docstring; one sweep over the split points",
     "fabplan.layout.surface_layout:glide": "to split: one glide with its retries in order",
-    "fabplan.fabricate.strips.nesting:_part_geometry": "one part's outline, slits, labels "
-                                                       "and marks, drawn in order",
-    "fabplan.fabricate.arcs:_edge_tangents": "one computation in three numbered steps "
-                                             "sharing their arrays",
+    "fabplan.fabricate.arcs:_edge_tangents": "one computation in four numbered steps sharing "
+                                             "the tangent, normal and decided arrays; step 3 is "
+                                             "one front loop over them",
     "fabplan.layout.extraction:fill_boundary_cells": "one pass over the boundary cells",
     "fabplan.layout.view:net_numbers": "one table of a record's numbers, row by row",
-    "fabplan.net.view:net_scene": "one scene with its colour modes, mode by mode",
     "fabplan.layout.surface_layout:layout_surface": "the layout pipeline, each stage a call, "
                                                     "with its retries",
     "fabplan.layout.starts:glide_fairest": "one search over start points",
-    "fabplan.fabricate.strips.unrolling:unroll_polylines": "a 30-line docstring; one "
-                                                           "vectorized unrolling",
-    "fabplan.fabricate.milling.face_milling:plan_face_milling": "one milling plan, pass by pass",
+    "fabplan.fabricate.strips.unrolling:unroll_polylines": "a 30-line docstring with its doctest; "
+                                                           "one vectorized unrolling, each line "
+                                                           "an array of all nodes",
     "fabplan.study.run:solve_candidate": "to split: layout, glide and its retries in order",
     "fabplan.study.parallel:_run_on": "the task graph of a parallel study, built in order",
-    "fabplan.fabricate.milling.flank_milling:plan_flank_milling": "one milling plan, pass "
-                                                                  "by pass",
-    "fabplan.fabricate.molds.panel_classes:cone_fits": "one vectorized fit with its "
-                                                       "local functions",
-    "fabplan.fabricate.strips.nesting:nest_parts": "one nesting loop over sheets",
-    "fabplan.io.rhino_read:read_3dm": "one pass over a file's objects, by kind",
+    "fabplan.fabricate.molds.panel_classes:cone_fits": "one Levenberg-Marquardt fit, its "
+                                                       "parameter steps and costs local "
+                                                       "functions of the same arrays",
     "fabplan.solve.solver:GuidedProjection.run": "the iteration loop of the solver",
     "fabplan.layout.trim:_to_surface": "one mapping of the pieces to the surface",
     "fabplan.study.run:mold_metrics": "a 37-line docstring of the record; one computation",
     "fabplan.layout.extraction:extract_quads": "one extraction, step by step",
     "fabplan.study.report:_candidate_files": "one candidate's files written in order",
-    "fabplan.fabricate.strips.nesting:_split_strip": "one split of a strip at its ends "
-                                                     "and splices",
-    "fabplan.io.obj:parse_obj": "one pass over the lines of a file, by record kind",
     "fabplan.layout.trim:_unclad_by_sheet": "a 27-line docstring; one overlay by sheet",
-    "fabplan.fabricate.molds.mold_assignment:_refit_molds": "one refit loop",
-    "fabplan.fabricate.strips.strip_set:StripSettings.check": "every field validated in turn",
     "fabplan.study.spec:_candidates": "every candidate key of a study file read in turn",
-    "fabplan.fabricate.strips.unrolling:fit_arc_runs": "a 25-line docstring; one fit of "
-                                                       "arc runs",
-    "fabplan.fabricate.molds.mold_plan:MoldPlan.record": "one JSON record, key by key",
 }
 
 

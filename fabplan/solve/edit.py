@@ -248,11 +248,7 @@ class NetEditor:
         DragResult
         """
         t0 = time.perf_counter()
-        ids = np.array(sorted(targets), dtype=np.int64)
-        unknown = np.setdiff1d(ids, self.handles)
-        if unknown.size:
-            raise ValueError(f"vertex {unknown[0]} is not a handle of this editor")
-        goal = np.array([targets[int(i)] for i in ids], dtype=np.float64).reshape(len(ids), 3)
+        ids, goal = self._handle_targets(targets)
         solver, state = self.solver, self.solver.state
         if len(solver.history) > _HISTORY_KEPT:
             # the solver counts its accepted steps over its history: keep it short in a long
@@ -267,22 +263,36 @@ class NetEditor:
         if fair is not None:    # the move's fairness, measured from the last good net
             fair.anchor, fair.weight = state.X.copy(), smooth
         soft_steps = solver.soft_steps       # a failed solve must not fade the soft terms
-        predicted = False
-        if predict and self._last_move is not None and self._free.size:
-            moved, handle_move, free_move = self._last_move
-            if np.array_equal(moved, ids):
-                move = goal - before[ids]
-                scale = float(np.sum(move * handle_move)) / max(float(np.sum(handle_move ** 2)), 1e-300)
-                # only a drag going on the way it went: a reversal or a jump starts afresh
-                if 0.0 < scale <= 2.0:
-                    solver.set_vertices(self._free, before[self._free] + scale * free_move)
-                    predicted = True
-        if not predicted and influence > 0 and ids.size and self._free.size:
-            solver.set_vertices(self._free, before[self._free] + falloff_move(
-                before[self._free], before[ids], goal - before[ids], influence))
-            predicted = True
+        predicted = self._start_free_vertices(ids, goal, before, predict, influence)
         solver.set_vertices(ids, goal)
         start = len(solver.history)
+        where = np.zeros(0, np.int64)
+        solved, status, message = self._run_within(max_iterations, max_seconds, t0, smooth,
+                                                   smooth_fade)
+        iterations = len(solver.history) - start
+        residual = solver.history[-1].hard_residual if len(solver.history) > start else np.inf
+        X = solver.vertices
+        if status != "failed" and solved != "converged":
+            status = "not converged"
+            message = self._not_converged_message(solved, residual, max_iterations, max_seconds)
+            where = self._missed_stars(X)
+        elif status == "converged":
+            status, message, where = self._buildable(X)
+        if status == "converged":
+            self._last_move = (ids, goal - before[ids], (X - before)[self._free])
+        else:
+            self._roll_back(before_x, before_data, ids, before[ids], soft_steps)
+        where = np.asarray(where, dtype=np.int64)
+        _, first = np.unique(where, return_index=True)
+        return DragResult(status, float(residual), iterations, time.perf_counter() - t0, message,
+                          where[np.sort(first)][:_WHERE_LISTED], predicted)
+
+    def _run_within(self, max_iterations: int, max_seconds: float | None, t0: float,
+                    smooth: float, smooth_fade: float) -> tuple[str, str, str]:
+        """Run the solver within the budget of `solve_drag` (started at `t0`), fading the
+        move's fairness as it goes: how the run ended (`GuidedProjection.run`, ``"time
+        budget"`` or ``"failed"``), the status so far and the solver's message."""
+        fair = self._smooth
 
         def budget(record: IterationRecord) -> None:
             if fair is not None and fair.weight:
@@ -293,50 +303,83 @@ class NetEditor:
             if max_seconds is not None and time.perf_counter() - t0 > max_seconds:
                 raise _OutOfTime
 
-        status, where, message = "converged", np.zeros(0, np.int64), ""
+        status, message = "converged", ""
         try:
-            solved = solver.run(max_iterations, callback=budget)
+            solved = self.solver.run(max_iterations, callback=budget)
         except _OutOfTime:
             solved = "time budget"
         except SolverError as exc:
             solved, status, message = "failed", "failed", str(exc)
         if fair is not None:
             fair.weight = 0.0
-        iterations = len(solver.history) - start
-        residual = solver.history[-1].hard_residual if len(solver.history) > start else np.inf
-        X = solver.vertices
-        if status != "failed" and solved != "converged":
-            status = "not converged"
-            unmet = unmet_constraints(solver)
-            why = {"time budget": f"the time budget of {max_seconds or 0:g} s ran out",
-                   "iteration cap": f"{max_iterations} iterations did not reach the tolerance",
-                   }.get(solved, "the solve stagnated")
-            message = (f"{why}: {describe_unmet(unmet) or f'residual {residual:.2e}'}; "
-                       "the handles ask for more than the net can follow")
-            where = self._missed_stars(X)
-        elif status == "converged":
-            folds = measure_folds(self._mesh, X)
-            if folds.folded:
-                status, message = "folded", folds.describe()
-                where = np.concatenate([self._face_vertices(folds.flipped_faces),
-                                        folds.fold_edges.ravel()])
-            elif crumpled(self._mesh, X, canonical_stars(X, self._mesh.stars)):
-                report = measure_buildable(self._mesh, X, folds=folds)
-                status, message = "crumpled", report.describe()
-                where = np.concatenate([report.sharp_turns,
-                                        self._face_vertices(report.nonconvex_faces)])
-        if status == "converged":
-            self._last_move = (ids, goal - before[ids], (X - before)[self._free])
-        else:
-            state.x[:] = before_x
-            state.data = before_data
-            solver.set_vertices(ids, before[ids])
-            solver.restart_soft_terms(faded=soft_steps)
-            self._last_move = None
-        where = np.asarray(where, dtype=np.int64)
-        _, first = np.unique(where, return_index=True)
-        return DragResult(status, float(residual), iterations, time.perf_counter() - t0, message,
-                          where[np.sort(first)][:_WHERE_LISTED], predicted)
+        return solved, status, message
+
+    def _roll_back(self, x: np.ndarray, data: dict, ids: np.ndarray, at: np.ndarray,
+                   soft_steps: int) -> None:
+        """Put the solver back where a refused drag found it: its variables `x`, the
+        families' `data`, the handles `ids` at `at` (k, 3) and the soft terms faded by
+        `soft_steps`; no move to repeat."""
+        state = self.solver.state
+        state.x[:] = x
+        state.data = data
+        self.solver.set_vertices(ids, at)
+        self.solver.restart_soft_terms(faded=soft_steps)
+        self._last_move = None
+
+    def _handle_targets(self, targets: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The handles of `targets`, (k,) int in increasing order, and where they go,
+        (k, 3) float; ValueError for a vertex that is no handle."""
+        ids = np.array(sorted(targets), dtype=np.int64)
+        unknown = np.setdiff1d(ids, self.handles)
+        if unknown.size:
+            raise ValueError(f"vertex {unknown[0]} is not a handle of this editor")
+        goal = np.array([targets[int(i)] for i in ids], dtype=np.float64).reshape(len(ids), 3)
+        return ids, goal
+
+    def _start_free_vertices(self, ids: np.ndarray, goal: np.ndarray, before: np.ndarray,
+                             predict: bool, influence: float) -> bool:
+        """Move the free vertices to the start of the solve of `solve_drag` (the last move
+        repeated, when `predict`, or the handles' move faded over `influence`); whether
+        they moved."""
+        solver = self.solver
+        if predict and self._last_move is not None and self._free.size:
+            moved, handle_move, free_move = self._last_move
+            if np.array_equal(moved, ids):
+                move = goal - before[ids]
+                scale = float(np.sum(move * handle_move)) / max(float(np.sum(handle_move ** 2)), 1e-300)
+                # only a drag going on the way it went: a reversal or a jump starts afresh
+                if 0.0 < scale <= 2.0:
+                    solver.set_vertices(self._free, before[self._free] + scale * free_move)
+                    return True
+        if influence > 0 and ids.size and self._free.size:
+            solver.set_vertices(self._free, before[self._free] + falloff_move(
+                before[self._free], before[ids], goal - before[ids], influence))
+            return True
+        return False
+
+    def _not_converged_message(self, solved: str, residual: float, max_iterations: int,
+                               max_seconds: float | None) -> str:
+        """Why a solve that ended `solved` (`GuidedProjection.run`, or ``"time budget"``)
+        did not converge, and which constraints it left unmet."""
+        unmet = unmet_constraints(self.solver)
+        why = {"time budget": f"the time budget of {max_seconds or 0:g} s ran out",
+               "iteration cap": f"{max_iterations} iterations did not reach the tolerance",
+               }.get(solved, "the solve stagnated")
+        return (f"{why}: {describe_unmet(unmet) or f'residual {residual:.2e}'}; "
+                "the handles ask for more than the net can follow")
+
+    def _buildable(self, X: np.ndarray) -> tuple[str, str, np.ndarray]:
+        """The status of a converged net `X` (``"converged"``, or ``"folded"`` or
+        ``"crumpled"`` with why in words), and the vertices to show (empty when it holds)."""
+        folds = measure_folds(self._mesh, X)
+        if folds.folded:
+            return "folded", folds.describe(), np.concatenate(
+                [self._face_vertices(folds.flipped_faces), folds.fold_edges.ravel()])
+        if crumpled(self._mesh, X, canonical_stars(X, self._mesh.stars)):
+            report = measure_buildable(self._mesh, X, folds=folds)
+            return "crumpled", report.describe(), np.concatenate(
+                [report.sharp_turns, self._face_vertices(report.nonconvex_faces)])
+        return "converged", "", np.zeros(0, np.int64)
 
     def _face_vertices(self, faces: np.ndarray) -> np.ndarray:
         """The vertex ids of the first listed `faces` (in their order)."""
