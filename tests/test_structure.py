@@ -319,7 +319,6 @@ LONG_FUNCTIONS = {
     "fabplan.layout.trim:_unclad_by_sheet": "a 27-line docstring; one overlay by sheet",
     "fabplan.fabricate.molds.mold_assignment:_refit_molds": "one refit loop",
     "fabplan.fabricate.strips.strip_set:StripSettings.check": "every field validated in turn",
-    "fabplan.study.spec:_candidates": "every candidate key of a study file read in turn",
     "fabplan.fabricate.strips.unrolling:fit_arc_runs": "a 25-line docstring; one fit of "
                                                        "arc runs",
     "fabplan.fabricate.molds.mold_plan:MoldPlan.record": "one JSON record, key by key",

@@ -30,7 +30,8 @@ from fabplan.net.geometry import canonical_stars, fit_star_spheres
 from fabplan.net.mesh import QuadMesh, load_mesh
 from fabplan.study.report import check_output_folder, study_html, study_record
 from fabplan.study.run import candidate_cost, judge_study, mold_metrics, run_study, same_net, verdict
-from fabplan.study.spec import CostWeights, parse_study, read_study, template_names, template_path
+from fabplan.study.spec import CostWeights, parse_study, read_study
+from fabplan.study.templates import template_names, template_path
 
 STUDY = """\
 [study]
@@ -787,7 +788,7 @@ def test_a_candidate_that_is_another_net_ranks_right_after_it():
 def test_an_output_folder_named_like_a_template_does_not_hide_it(tmp_path, monkeypatch):
     """`fabplan study canopy -o canopy` twice: the second run read the folder as the
     study file and said "no such study file"."""
-    from fabplan.study.spec import resolve_study, template_path
+    from fabplan.study.templates import resolve_study, template_path
 
     monkeypatch.chdir(tmp_path)
     (tmp_path / "canopy").mkdir()

@@ -36,8 +36,8 @@ from ..io.forked import die_with_parent, forked_processes
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
+    from .definition import Study
     from .result import CandidateResult
-    from .spec import Study
 
 __all__ = ["BackgroundCandidates", "background_processes"]
 

@@ -55,7 +55,7 @@ if TYPE_CHECKING:
     from ..layout.surface_layout import SurfaceLayout
     from ..net.mesh import QuadMesh
     from .cache import CandidateCache
-    from .spec import Candidate, Study
+    from .definition import Candidate, Study
 
 __all__ = ["run_study_parallel", "RETRIES", "worker_count", "dask_client"]
 

@@ -45,7 +45,7 @@ from .verdict import every_panel_flat
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
-    from .spec import Study
+    from .definition import Study
 
 __all__ = ["write_study", "study_record", "check_output_folder", "STUDY_SCHEMA", "LIMIT_NAMES",
            "coverage_gap_triangles", "study_viewer_scenes", "candidate_file_bytes",

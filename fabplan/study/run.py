@@ -32,9 +32,9 @@ from ..net.free_vertices import free_vertices
 from ..net.geometry import face_planarity, kink_angles
 from ..report.html import counted
 from .checks import LIMIT_NAMES, binding_check, relaxation_text, violation
+from .definition import Candidate, Study
 from .result import CandidateResult, StudyResult, by_rank
 from .search import first_points, next_points
-from .spec import Candidate, Study
 from .verdict import candidate_cost, differ_by, every_panel_flat, verdict
 
 if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs

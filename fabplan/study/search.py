@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING
 from .checks import violation
 
 if TYPE_CHECKING:
+    from .definition import Candidate, Search
     from .result import CandidateResult
-    from .spec import Candidate, Search
 
 __all__ = ["first_points", "next_points", "SearchPoint", "search_points", "search_record",
            "FIRST_ROUND", "RESOLUTION"]
@@ -47,7 +47,7 @@ def first_points(search: Search) -> list[Candidate]:
 
     Examples
     --------
-    >>> from fabplan.study.spec import Search
+    >>> from fabplan.study.definition import Search
     >>> [c.name for c in first_points(Search("lw", "linear-weingarten", "angle", 30, 60))]
     ['lw-30', 'lw-40', 'lw-50', 'lw-60']
     """
