@@ -300,7 +300,6 @@ LONG_FUNCTIONS = {
     "fabplan.fabricate.strips.unrolling:unroll_polylines": "a 30-line docstring; one "
                                                            "vectorized unrolling",
     "fabplan.fabricate.milling.face_milling:plan_face_milling": "one milling plan, pass by pass",
-    "fabplan.study.run:solve_candidate": "to split: layout, glide and its retries in order",
     "fabplan.study.parallel:_run_on": "the task graph of a parallel study, built in order",
     "fabplan.fabricate.milling.flank_milling:plan_flank_milling": "one milling plan, pass "
                                                                   "by pass",
@@ -310,7 +309,6 @@ LONG_FUNCTIONS = {
     "fabplan.io.rhino_read:read_3dm": "one pass over a file's objects, by kind",
     "fabplan.solve.solver:GuidedProjection.run": "the iteration loop of the solver",
     "fabplan.layout.trim:_to_surface": "one mapping of the pieces to the surface",
-    "fabplan.study.run:mold_metrics": "a 37-line docstring of the record; one computation",
     "fabplan.layout.extraction:extract_quads": "one extraction, step by step",
     "fabplan.study.report:_candidate_files": "one candidate's files written in order",
     "fabplan.fabricate.strips.nesting:_split_strip": "one split of a strip at its ends "

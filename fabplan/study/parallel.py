@@ -35,20 +35,14 @@ import numpy as np
 from ..errors import FabplanError, InputError
 from ..io.forked import quiet_interrupts
 from ..io.resources import worker_count
+from .candidate_measure import fabricate_candidate
+from .candidate_solve import solve_candidate, start_angle
 from .inputs import shared_inputs
+from .ranking import judge_study
 from .result import CandidateResult, StudyResult
-from .run import (
-    fabricate_candidate,
-    judge_study,
-    load_study_design,
-    searched_study,
-    shared_solve,
-    solve_candidate,
-    start_angle,
-    twin_of,
-    with_first_points,
-)
+from .run import load_study_design, searched_study, with_first_points
 from .search import next_points
+from .twins import shared_solve, twin_of
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface

@@ -37,9 +37,11 @@ from ..report.figures import agreeing_normal
 from ..report.html import counted, format_range
 from ..report.pdf import PdfDocument
 from .cache import CACHE_FOLDER
+from .candidate_measure import vertex_deviation_mm
 from .checks import LIMIT_NAMES, binding_check, relaxation_text
+from .mold_counts import material_sentence, molds_text
+from .ranking import cost_drivers
 from .result import CandidateResult, StudyResult
-from .run import cost_drivers, material_sentence, molds_text, vertex_deviation_mm
 from .search import search_record
 from .verdict import every_panel_flat
 
@@ -358,7 +360,7 @@ PARETO_MIN_CANDIDATES = 3
 def pareto_figure(result: StudyResult) -> str:
     """Data URI: the cost drivers of every measured candidate (molds and, with strips,
     sheets against the largest deviation), feasible ones filled, the Pareto-optimal ones
-    (`fabplan.study.run.pareto_optimal`) ringed and named, the recommended one starred."""
+    (`fabplan.study.ranking.pareto_optimal`) ringed and named, the recommended one starred."""
     done = [c for c in result.ranked() if not c.failed]
     drivers = cost_drivers(done)
     limits = result.study.limits
@@ -466,7 +468,7 @@ def _strip_radius_text(result: StudyResult, r) -> str:
     return radius_text(r, "mm", beyond, "infinite (straight)")
 
 
-#: How the comparison table is ordered (`fabplan.study.run.rank_candidates`).
+#: How the comparison table is ordered (`fabplan.study.ranking.rank_candidates`).
 _RANK_RULE = ("Rank: the candidates that meet every limit (feasible) come first, cheapest "
               "first; then those that break a limit (red rows), those breaking fewer limits "
               "first, cheapest first among equals. So a cheaper candidate that breaks a limit "

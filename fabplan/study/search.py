@@ -8,7 +8,7 @@ sweep's, ``linear-weingarten-41.25``), judged like the others:
 
 1. the first round: up to four points spread evenly over the range, ends included;
 2. every further round: the best point so far (feasible and cheapest; without a feasible
-   one the least infeasible, `fabplan.study.run.violation`) and the midpoints between it
+   one the least infeasible, `fabplan.study.checks.violation`) and the midpoints between it
    and its evaluated neighbours, as long as the budget and the resolution (a 64th of the
    range) allow. A midpoint starts from its nearer neighbour's layout (a warm start), so
    that no new layout is made for it.
