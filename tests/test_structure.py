@@ -310,7 +310,6 @@ LONG_FUNCTIONS = {
     "fabplan.solve.solver:GuidedProjection.run": "the iteration loop of the solver",
     "fabplan.layout.trim:_to_surface": "one mapping of the pieces to the surface",
     "fabplan.layout.extraction:extract_quads": "one extraction, step by step",
-    "fabplan.study.report:_candidate_files": "one candidate's files written in order",
     "fabplan.fabricate.strips.nesting:_split_strip": "one split of a strip at its ends "
                                                      "and splices",
     "fabplan.io.obj:parse_obj": "one pass over the lines of a file, by record kind",

@@ -71,7 +71,7 @@ def judge_study(study: Study, design: DesignSurface, results: list[CandidateResu
                        seconds_run=seconds_run)
 
 
-# ---------------------------------------------------------------------------- judging
+# ---------------------------------------------------------------------------- recommending
 def _reasons(checks: list[dict], feasible: bool) -> list[str]:
     if feasible:
         return [f"meets all {len(checks)} limits: " + "; ".join(c["text"] for c in checks)]

@@ -92,7 +92,6 @@ __all__ = [
 ]
 
 
-# ---------------------------------------------------------------------------- running
 def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
               max_panels: int | None = None, cache: CandidateCache | None = None,
               resume: bool = False, background: Callable[..., Any] | None = None,
