@@ -300,7 +300,6 @@ LONG_FUNCTIONS = {
     "fabplan.fabricate.strips.unrolling:unroll_polylines": "a 30-line docstring; one "
                                                            "vectorized unrolling",
     "fabplan.fabricate.milling.face_milling:plan_face_milling": "one milling plan, pass by pass",
-    "fabplan.study.parallel:_run_on": "the task graph of a parallel study, built in order",
     "fabplan.fabricate.milling.flank_milling:plan_flank_milling": "one milling plan, pass "
                                                                   "by pass",
     "fabplan.fabricate.molds.panel_classes:cone_fits": "one vectorized fit with its "
