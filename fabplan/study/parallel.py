@@ -242,7 +242,7 @@ class _TaskGraph:
     client: Any
     study: Study
     design: DesignSurface
-    shared: tuple
+    shared: list[Any]
     candidates: list[Candidate]
     kept: list[CandidateResult | None]
     files: bool = False
