@@ -48,7 +48,8 @@ sys.path.insert(0, str(ROOT))
 from fabplan.study.parallel import run_study_parallel  # noqa: E402
 from fabplan.study.report import study_record, write_study  # noqa: E402
 from fabplan.study.run import run_study  # noqa: E402
-from fabplan.study.spec import copy_template, read_study  # noqa: E402
+from fabplan.study.spec import read_study  # noqa: E402
+from fabplan.study.templates import copy_template  # noqa: E402
 
 STADIUM_SWEEP = """
 [panels]

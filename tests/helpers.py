@@ -126,9 +126,9 @@ def edge_midpoint_steps(record: dict, mesh: QuadMesh, *, with_faces: bool = Fals
 def measured_saddle_candidate(tolerance_mm: float):
     """A gliding S-net on an 8 x 8 m hyperbolic paraboloid as a study measures a candidate:
     ``(result, plan, metrics)`` with its molds at `tolerance_mm`
-    (`fabplan.study.run.measure_candidate`), for tests of a study's limits."""
+    (`fabplan.study.candidate_measure.measure_candidate`), for tests of a study's limits."""
     import fabplan
-    from fabplan.study.run import measure_candidate
+    from fabplan.study.candidate_measure import measure_candidate
 
     design = fabplan.load_design("hyperbolic-paraboloid:width=8,depth=8,rise=2.5", triangles=4000)
     result = fabplan.glide(fabplan.layout_surface(design, 1.5), "snet")

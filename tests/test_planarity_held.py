@@ -9,7 +9,8 @@ import pytest
 
 from fabplan.net.mesh import QuadMesh
 from fabplan.solve.constraints import PlanarityBound, PlaneNormalization
-from fabplan.study.run import PLANARITY_HELD, run_study
+from fabplan.study.candidate_solve import PLANARITY_HELD
+from fabplan.study.run import run_study
 from fabplan.study.spec import parse_study
 
 STUDY = """

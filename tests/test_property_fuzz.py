@@ -253,21 +253,21 @@ def surface_specs(draw) -> str:
 # ---------------------------------------------------------------------------- studies
 def _study_keys() -> dict[str, set[str]]:
     """Table -> the keys `fabplan.study.spec` asks for while reading the templates."""
-    from fabplan.study import spec
+    from fabplan.study import spec, table, templates
 
     keys: dict[str, set[str]] = {}
-    get = spec._Table.get
+    get = table.Table.get
 
     def recording(self, key, default=None):
         keys.setdefault(re.sub(r"\[\d+\]", "", self.where), set()).add(key)
         return get(self, key, default)
 
-    spec._Table.get = recording
+    table.Table.get = recording
     try:
-        for name in spec.template_names():
-            spec.read_study(spec.template_path(name))
+        for name in templates.template_names():
+            spec.read_study(templates.template_path(name))
     finally:
-        spec._Table.get = get
+        table.Table.get = get
     return keys
 
 

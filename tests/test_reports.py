@@ -257,9 +257,10 @@ def test_the_study_says_where_the_design_makes_lines_kink(tmp_path):
     import numpy as np
 
     from fabplan.layout.picture import curvature_difference_at
-    from fabplan.study.report import kink_text, write_study
+    from fabplan.study.report import write_study
     from fabplan.study.run import run_study
     from fabplan.study.spec import parse_study
+    from fabplan.study.tables import kink_text
 
     study = parse_study("""
 [design]

@@ -54,7 +54,7 @@ def _same_molds(study_folder: Path, made: Path) -> None:
     """The molds the command gave are the study's: count, every panel's mold, type and fit,
     and its gap and placement within 0.01 mm (a candidate that is the same net as an
     earlier one takes that one's plan: its vertices agree to 1e-5 of the panel size,
-    `fabplan.study.run.SAME_NET_TOLERANCE`, 0.01 mm on a 1 m panel)."""
+    `fabplan.study.twins.SAME_NET_TOLERANCE`, 0.01 mm on a 1 m panel)."""
     ours = json.loads((made / "molds.json").read_text())
     theirs = json.loads((study_folder / "molds.json").read_text())
     for key in ("mold_count", "panel_count", "panel_surface", "tolerance_mm", "units",

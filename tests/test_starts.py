@@ -20,7 +20,8 @@ from fabplan.errors import InputError
 from fabplan.layout.settings import LayoutSettings
 from fabplan.layout.starts import glide_fairest, layout_starts
 from fabplan.layout.surface_layout import glide, layout_again, layout_surface
-from fabplan.study.spec import parse_study, template_path
+from fabplan.study.spec import parse_study
+from fabplan.study.templates import template_path
 
 
 def line_turns_p95(X: np.ndarray, stars: np.ndarray) -> float:

@@ -289,18 +289,13 @@ LONG_FUNCTIONS = {
     "fabplan.fabricate.strips.unrolling:unroll_polylines": "a 30-line docstring with its doctest; "
                                                            "one vectorized unrolling, each line "
                                                            "an array of all nodes",
-    "fabplan.study.run:solve_candidate": "to split: layout, glide and its retries in order",
-    "fabplan.study.parallel:_run_on": "the task graph of a parallel study, built in order",
     "fabplan.fabricate.molds.panel_classes:cone_fits": "one Levenberg-Marquardt fit, its "
                                                        "parameter steps and costs local "
                                                        "functions of the same arrays",
     "fabplan.solve.solver:GuidedProjection.run": "the iteration loop of the solver",
     "fabplan.layout.trim:_to_surface": "one mapping of the pieces to the surface",
-    "fabplan.study.run:mold_metrics": "a 37-line docstring of the record; one computation",
     "fabplan.layout.extraction:extract_quads": "one extraction, step by step",
-    "fabplan.study.report:_candidate_files": "one candidate's files written in order",
     "fabplan.layout.trim:_unclad_by_sheet": "a 27-line docstring; one overlay by sheet",
-    "fabplan.study.spec:_candidates": "every candidate key of a study file read in turn",
 }
 
 

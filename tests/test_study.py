@@ -28,9 +28,12 @@ from fabplan.fabricate.molds import plan_molds
 from fabplan.io.obj import read_obj
 from fabplan.net.geometry import canonical_stars, fit_star_spheres
 from fabplan.net.mesh import QuadMesh, load_mesh
-from fabplan.study.report import check_output_folder, study_html, study_record
+from fabplan.study.pages import study_html
+from fabplan.study.records import study_record
+from fabplan.study.report import check_output_folder
 from fabplan.study.run import candidate_cost, judge_study, mold_metrics, run_study, same_net, verdict
-from fabplan.study.spec import CostWeights, parse_study, read_study, template_names, template_path
+from fabplan.study.spec import CostWeights, parse_study, read_study
+from fabplan.study.templates import template_names, template_path
 
 STUDY = """\
 [study]
@@ -529,7 +532,7 @@ def test_the_heat_map_shows_the_peak_deviation_at_its_vertex(study_result):
     import matplotlib.image as mpimg
     from matplotlib import colormaps
 
-    from fabplan.study.report import deviation_figure
+    from fabplan.study.pictures import deviation_figure
 
 
     result = study_result[3]
@@ -754,7 +757,7 @@ def test_a_design_file_records_its_own_triangle_count(tmp_path):
 def test_heat_map_and_metrics_measure_the_same_deviation(study_result):
     """The heat map measured to the design's triangulation, the metrics to the exact
     surface: the circled maximum (331.3 mm) differed from the table's (328.6 mm)."""
-    from fabplan.study.report import deviation_figure
+    from fabplan.study.pictures import deviation_figure
     from fabplan.study.run import vertex_deviation_mm
 
     result = study_result[3]
@@ -787,7 +790,7 @@ def test_a_candidate_that_is_another_net_ranks_right_after_it():
 def test_an_output_folder_named_like_a_template_does_not_hide_it(tmp_path, monkeypatch):
     """`fabplan study canopy -o canopy` twice: the second run read the folder as the
     study file and said "no such study file"."""
-    from fabplan.study.spec import resolve_study, template_path
+    from fabplan.study.templates import resolve_study, template_path
 
     monkeypatch.chdir(tmp_path)
     (tmp_path / "canopy").mkdir()

@@ -49,8 +49,10 @@ from fabplan.cli import main
 from fabplan.design.load import load_design
 from fabplan.io.obj import read_obj
 from fabplan.net.mesh import QuadMesh
-from fabplan.study.run import DEVIATION_HELD
-from fabplan.study.spec import GLIDING_NETS, read_study, template_names, template_path
+from fabplan.study.candidate_solve import DEVIATION_HELD
+from fabplan.study.definition import GLIDING_NETS
+from fabplan.study.spec import read_study
+from fabplan.study.templates import template_names, template_path
 
 # every template study runs for 10 to 90 s: the full suite runs them, `-m "not slow"` does not
 pytestmark = pytest.mark.slow

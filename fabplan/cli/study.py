@@ -19,7 +19,8 @@ __all__ = ["COMMAND", "add_arguments", "run"]
 def run(args: argparse.Namespace) -> int:
     from ..study.report import check_output_folder, write_study
     from ..study.run import run_study
-    from ..study.spec import read_study, resolve_study
+    from ..study.spec import read_study
+    from ..study.templates import resolve_study
 
     progress = command_progress(args)
     say = progress.say()

@@ -11,7 +11,7 @@ __all__ = ["COMMAND", "add_arguments", "run"]
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..study.spec import copy_template, template_names, template_summary
+    from ..study.templates import copy_template, template_names, template_summary
 
     if args.name is None:
         names = template_names()
@@ -22,7 +22,7 @@ def run(args: argparse.Namespace) -> int:
               "`fabplan templates NAME -o my-study.toml`")
         return 0
     if args.output is None:
-        from ..study.spec import template_path
+        from ..study.templates import template_path
 
         print(template_path(args.name).read_text(encoding="utf-8"), end="")
         return 0

@@ -51,8 +51,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..design.mesh_surface import DesignSurface  # noqa: F811 - imported again where used
     from ..layout.surface_layout import SurfaceLayout
     from ..solve.reference import ReferenceSurface
+    from .definition import Study
     from .result import StudyResult
-    from .spec import Study
 
 __all__ = [
     "NetLike",
@@ -309,7 +309,8 @@ def run_study(study: Study | str | os.PathLike, **options: Any) -> StudyResult:
     """Run a facade study (``fabplan study``): a `Study`, a study file or a template name;
     `options` are those of `fabplan.study.run.run_study` (``progress``, ``max_panels``)."""
     from .run import run_study as run
-    from .spec import read_study, resolve_study
+    from .spec import read_study
+    from .templates import resolve_study
 
     if isinstance(study, (str, os.PathLike)):
         study = read_study(resolve_study(str(study)))

@@ -36,8 +36,8 @@ from ..io.forked import die_with_parent, forked_processes
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
+    from .definition import Study
     from .result import CandidateResult
-    from .spec import Study
 
 __all__ = ["BackgroundCandidates", "background_processes"]
 
@@ -80,8 +80,9 @@ def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
     """What the forked process sends back: (measured candidate without net and layout or
     None, why it failed or None, progress lines, files or None, seconds). `twin_files`:
     the files made for `twin`, whose strip files a candidate sharing its strips copies."""
+    from .candidate_measure import fabricate_candidate
     from .report import candidate_file_bytes
-    from .run import fabricate_candidate, failure_reason
+    from .run import failure_reason
 
     clock = time.perf_counter()
     lines: list[str] = []
@@ -187,8 +188,9 @@ class BackgroundCandidates:
 
     def _reap(self, *, wait: bool) -> None:
         """Take in the finished processes (with `wait`, at least the oldest)."""
+        from .candidate_measure import fabricate_candidate
         from .result import CandidateResult
-        from .run import fabricate_candidate, failure_reason
+        from .run import failure_reason
 
         for k, job in enumerate(list(self._running)):
             pid, status = os.waitpid(job.pid, 0 if wait and k == 0 else os.WNOHANG)

@@ -38,8 +38,8 @@ from ..io.output import remove_stale_staging, temporary_path
 from ..io.typed_data import decode, encode, packed_bytes
 
 if TYPE_CHECKING:
+    from .definition import Candidate, Study
     from .result import CandidateResult
-    from .spec import Candidate, Study
 
 __all__ = ["CACHE_FOLDER", "CACHE_FORMAT", "CandidateCache", "cached_types"]
 
@@ -67,8 +67,8 @@ def cached_types() -> dict[str, type]:
     from ..layout.trim import BoundaryPanels
     from ..net.mesh import QuadMesh
     from ..solve.optimize import OptimizationResult
+    from .definition import Candidate
     from .result import CandidateResult
-    from .spec import Candidate
 
     classes: list[type] = [
         CandidateResult, Candidate, OptimizationResult, QuadMesh, BoundaryPanels, MoldPlan,

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
@@ -35,27 +35,21 @@ import numpy as np
 from ..errors import FabplanError, InputError
 from ..io.forked import quiet_interrupts
 from ..io.resources import worker_count
+from .candidate_measure import fabricate_candidate
+from .candidate_solve import solve_candidate, start_angle
 from .inputs import shared_inputs
+from .ranking import judge_study
 from .result import CandidateResult, StudyResult
-from .run import (
-    fabricate_candidate,
-    judge_study,
-    load_study_design,
-    searched_study,
-    shared_solve,
-    solve_candidate,
-    start_angle,
-    twin_of,
-    with_first_points,
-)
+from .run import load_study_design, searched_study, with_first_points
 from .search import next_points
+from .twins import shared_solve, twin_of
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface
     from ..layout.surface_layout import SurfaceLayout
     from ..net.mesh import QuadMesh
     from .cache import CandidateCache
-    from .spec import Candidate, Study
+    from .definition import Candidate, Study
 
 __all__ = ["run_study_parallel", "RETRIES", "worker_count", "dask_client"]
 
@@ -211,8 +205,6 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
     of them (with `files`) by name; `tag` ends the task keys (a search's later rounds)."""
     from distributed import as_completed
 
-    from .report import candidate_files_task
-
     candidates = list(study.candidates)
     kept = [cache.load(c) if cache is not None and resume else None for c in candidates]
     if any(k is not None for k in kept):
@@ -220,84 +212,133 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
             "the cache")
     todo = [i for i, k in enumerate(kept) if k is None]
     shared = shared_inputs(client, study, design)
+    graph = _TaskGraph(client, study, design, shared, candidates, kept, files=files,
+                       rhino=rhino, ifc=ifc, tag=tag)
     baseline = client.submit(_baseline_task, *shared, key=f"baseline-layout{tag}", pure=False,
                              retries=RETRIES)
-    layouts = {(90.0, study.panel_size): baseline}
-    # one solve per solve key (a sweep of mold tolerances shares its nets); a kept
-    # candidate lends its net to the others of its key
-    keys = [c.solve_key for c in candidates]
-    solves: dict[tuple, Any] = {keys[i]: k for i, k in enumerate(kept) if k is not None}
-    meshes: dict[tuple, QuadMesh | None] = {
-        keys[i]: k.net.mesh if k.net is not None else None for i, k in enumerate(kept)
-        if k is not None}
     clock = time.perf_counter()
-    waiting: dict[Any, tuple] = {}
-    for i in todo:
-        if keys[i] in solves:
-            continue
-        # only the candidates that start from the baseline layout wait for it
-        starts_there = (start_angle(candidates[i], design) == 90.0
-                        and study.panel_size_of(candidates[i]) == study.panel_size)
-        solves[keys[i]] = client.submit(_solve_task_with, *shared,
-                                        layouts if starts_there else {}, candidates[i],
-                                        key=f"solve-{i}-{candidates[i].name}{tag}", pure=False,
-                                        retries=RETRIES)
-        waiting[client.submit(_solved_mesh, solves[keys[i]], key=f"net-{i}{tag}", pure=False)] = \
-            keys[i]
+    waiting = graph.submit_solves({(90.0, study.panel_size): baseline}, todo)
     refused = baseline.result()
     if isinstance(refused, FabplanError):     # no baseline layout: nothing can be compared
-        client.cancel([*waiting, *(solves[key] for key in waiting.values())])
+        client.cancel([*waiting, *(graph.solves[key] for key in waiting.values())])
         raise refused
-    made: list[Any] = list(kept)
-    making: list[Any] = [None] * len(candidates)      # the files' futures
-    twins: list[int | None] = []
+    graph.submit_ready()
+    graph.wait_for_nets(waiting, clock, say, as_completed)
+    done = iter(_gather([graph.made[i] for i in todo], [candidates[i] for i in todo], "measured",
+                        say, clock, as_completed, cache))
+    results = [k if k is not None else next(done) for k in kept]
+    return results, graph.made_files()
 
-    def submit_ready() -> None:
+
+@dataclass
+class _TaskGraph:
+    """The tasks of one round of a parallel study (`_run_on`), submitted as what they need
+    becomes known: a solve per solve key (a sweep of mold tolerances shares its nets; a
+    candidate kept in the cache lends its net to the others of its key), then, in the
+    order of the study, each candidate's molds and strips (`made`) and its files
+    (`making`, with `files`) once its own and every earlier net is known (`meshes`) and
+    its twin is found (`twins`)."""
+
+    client: Any
+    study: Study
+    design: DesignSurface
+    shared: list[Any]
+    candidates: list[Candidate]
+    kept: list[CandidateResult | None]
+    files: bool = False
+    rhino: bool = False
+    ifc: bool = False
+    tag: str = ""
+    keys: list[tuple] = field(init=False)
+    solves: dict[tuple, Any] = field(init=False)
+    meshes: dict[tuple, QuadMesh | None] = field(init=False)
+    made: list[Any] = field(init=False)
+    making: list[Any] = field(init=False)
+    twins: list[int | None] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        kept = self.kept
+        self.keys = keys = [c.solve_key for c in self.candidates]
+        self.solves = {keys[i]: k for i, k in enumerate(kept) if k is not None}
+        self.meshes = {keys[i]: k.net.mesh if k.net is not None else None
+                       for i, k in enumerate(kept) if k is not None}
+        self.made = list(kept)
+        self.making = [None] * len(self.candidates)      # the files' futures
+
+    def submit_solves(self, layouts: dict, todo: list[int]) -> dict[Any, tuple]:
+        """A solve task for every solve key of the candidates `todo` not solved yet, and a
+        task that takes its mesh: the latter's futures -> their solve key. `layouts` holds
+        the baseline layout's future."""
+        client, study, candidates, keys, tag = (self.client, self.study, self.candidates,
+                                                self.keys, self.tag)
+        waiting: dict[Any, tuple] = {}
+        for i in todo:
+            if keys[i] in self.solves:
+                continue
+            # only the candidates that start from the baseline layout wait for it
+            starts_there = (start_angle(candidates[i], self.design) == 90.0
+                            and study.panel_size_of(candidates[i]) == study.panel_size)
+            self.solves[keys[i]] = client.submit(
+                _solve_task_with, *self.shared, layouts if starts_there else {}, candidates[i],
+                key=f"solve-{i}-{candidates[i].name}{tag}", pure=False, retries=RETRIES)
+            waiting[client.submit(_solved_mesh, self.solves[keys[i]], key=f"net-{i}{tag}",
+                                  pure=False)] = keys[i]
+        return waiting
+
+    def submit_ready(self) -> None:
         """Molds and strips of every candidate whose net and earlier ones' are known."""
-        while len(twins) < len(candidates) and keys[len(twins)] in meshes:
+        from .report import candidate_files_task
+
+        client, candidates, keys, twins, tag = (self.client, self.candidates, self.keys,
+                                                self.twins, self.tag)
+        while len(twins) < len(candidates) and keys[len(twins)] in self.meshes:
             i = len(twins)
-            twins.append(twin_of(i, candidates, [meshes[k] for k in keys[:i + 1]], twins, study))
-            if kept[i] is None:
+            twins.append(twin_of(i, candidates, [self.meshes[k] for k in keys[:i + 1]], twins,
+                                 self.study))
+            if self.kept[i] is None:
                 original = twins[i]
-                made[i] = client.submit(
-                    _fabricate_task, *shared, solves[keys[i]], candidates[i],
-                    None if original is None else made[original],
+                self.made[i] = client.submit(
+                    _fabricate_task, *self.shared, self.solves[keys[i]], candidates[i],
+                    None if original is None else self.made[original],
                     key=f"fabricate-{i}-{candidates[i].name}{tag}", pure=False, retries=RETRIES)
-            if files:
+            if self.files:
                 # made beside the others' solves: a worker that waits for the order of
                 # the study has something to do
                 twin = twins[i]
-                making[i] = client.submit(
-                    candidate_files_task, made[i], *shared,
-                    None if twin is None else making[twin], rhino, ifc,
+                self.making[i] = client.submit(
+                    candidate_files_task, self.made[i], *self.shared,
+                    None if twin is None else self.making[twin], self.rhino, self.ifc,
                     key=f"files-{i}-{candidates[i].name}{tag}", pure=False, retries=RETRIES)
 
-    submit_ready()
-    failed = 0
-    for n, future in enumerate(as_completed(list(waiting)), 1):
-        key = waiting[future]
-        try:
-            meshes[key] = future.result()
-        except Exception:   # a lost worker after its retries: its candidates fail below
-            meshes[key] = None
-        failed += meshes[key] is None
-        left = len(waiting) - n
-        eta = (time.perf_counter() - clock) / n * left
-        say(f"  {n} of {len(waiting)} solved, {left} to go, {failed} failed"
-            + (f", about {eta:.0f} s left" if left else ""))
-        submit_ready()
-    done = iter(_gather([made[i] for i in todo], [candidates[i] for i in todo], "measured", say,
-                        clock, as_completed, cache))
-    results = [k if k is not None else next(done) for k in kept]
-    made_files: dict[str, tuple] = {}
-    for c, future in zip(candidates, making, strict=True):
-        try:
-            made_one = None if future is None else future.result()
-        except Exception:   # a lost worker after its retries: `write_study` makes them
-            made_one = None
-        if made_one is not None:
-            made_files[c.name] = made_one
-    return results, made_files
+    def wait_for_nets(self, waiting: dict[Any, tuple], clock: float, say: Callable[[str], None],
+                      as_completed: Any) -> None:
+        """Take the solved meshes as they come, saying how far the solves are, and submit
+        what each makes ready."""
+        failed = 0
+        for n, future in enumerate(as_completed(list(waiting)), 1):
+            key = waiting[future]
+            try:
+                self.meshes[key] = future.result()
+            except Exception:   # a lost worker after its retries: its candidates fail below
+                self.meshes[key] = None
+            failed += self.meshes[key] is None
+            left = len(waiting) - n
+            eta = (time.perf_counter() - clock) / n * left
+            say(f"  {n} of {len(waiting)} solved, {left} to go, {failed} failed"
+                + (f", about {eta:.0f} s left" if left else ""))
+            self.submit_ready()
+
+    def made_files(self) -> dict[str, tuple]:
+        """The files the workers made, by candidate name (none for a task that failed)."""
+        made_files: dict[str, tuple] = {}
+        for c, future in zip(self.candidates, self.making, strict=True):
+            try:
+                made_one = None if future is None else future.result()
+            except Exception:   # a lost worker after its retries: `write_study` makes them
+                made_one = None
+            if made_one is not None:
+                made_files[c.name] = made_one
+        return made_files
 
 
 def _solve_task_with(study: Study, design: DesignSurface, layouts: dict,

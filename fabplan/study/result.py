@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .spec import Candidate, Study
+from .definition import Candidate, Study
 
 if TYPE_CHECKING:
     from ..design.mesh_surface import DesignSurface

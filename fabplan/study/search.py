@@ -8,7 +8,7 @@ sweep's, ``linear-weingarten-41.25``), judged like the others:
 
 1. the first round: up to four points spread evenly over the range, ends included;
 2. every further round: the best point so far (feasible and cheapest; without a feasible
-   one the least infeasible, `fabplan.study.run.violation`) and the midpoints between it
+   one the least infeasible, `fabplan.study.checks.violation`) and the midpoints between it
    and its evaluated neighbours, as long as the budget and the resolution (a 64th of the
    range) allow. A midpoint starts from its nearer neighbour's layout (a warm start), so
    that no new layout is made for it.
@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING
 from .checks import violation
 
 if TYPE_CHECKING:
+    from .definition import Candidate, Search
     from .result import CandidateResult
-    from .spec import Candidate, Search
 
 __all__ = ["first_points", "next_points", "SearchPoint", "search_points", "search_record",
            "FIRST_ROUND", "RESOLUTION"]
@@ -47,7 +47,7 @@ def first_points(search: Search) -> list[Candidate]:
 
     Examples
     --------
-    >>> from fabplan.study.spec import Search
+    >>> from fabplan.study.definition import Search
     >>> [c.name for c in first_points(Search("lw", "linear-weingarten", "angle", 30, 60))]
     ['lw-30', 'lw-40', 'lw-50', 'lw-60']
     """

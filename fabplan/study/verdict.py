@@ -10,7 +10,7 @@ import math
 from ..fabricate.molds.mold_shapes import PANEL_TYPES
 from ..report.html import counted
 from .checks import check as _check
-from .spec import CostWeights, Limits
+from .definition import CostWeights, Limits
 
 __all__ = ["verdict", "candidate_cost", "every_panel_flat", "differ_by"]
 
