@@ -9,7 +9,7 @@ import pytest
 import fabplan
 from fabplan.cli import main
 from fabplan.net.geometry import canonical_stars, fit_star_spheres, intersection_angles, star_normals
-from fabplan.solve.optimize import read_handles
+from fabplan.solve.handles import read_handles
 
 
 def _check_linear_weingarten(mesh):
@@ -79,7 +79,7 @@ def test_impossible_handles_are_reported(wein99, tmp_path, capsys):
 def test_an_unreachable_handle_gives_up_after_its_first_stage(wein99):
     """Before: every stage and both phases ran, 63 iterations (2-10 s); now the stage that
     cannot be solved ends the continuation."""
-    from fabplan.solve.optimize import STAGE_ITERATIONS
+    from fabplan.solve.stages import STAGE_ITERATIONS
 
     vid = int(np.flatnonzero(~wein99.is_boundary_vertex)[600])
     target = wein99.vertices[vid] + [0.0, 0.0, 8 * wein99.mean_edge_length]

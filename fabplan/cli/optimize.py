@@ -12,14 +12,13 @@ from ..fabricate.limits import DEFAULT_MAX_DEVIATION_MM, limits_record
 from ..net.measure import format_summary
 from ..net.validate import load_net
 from ..report.html import counted
+from ..solve.handles import read_fixed, read_handles
 from ..solve.net_types import NETS, check_angle, check_radius
 from ..solve.optimize import (
     boundary_path,
     check_limits,
     check_net_input,
     optimize,
-    read_fixed,
-    read_handles,
 )
 from .arguments import add_3dm, add_html, add_max_line_turn, add_number, add_units, add_verbosity
 from .cladding import boundary_warnings

@@ -23,15 +23,10 @@ from ..net.buildable import crumpled, measure_buildable
 from ..net.folds import measure_folds
 from ..net.geometry import canonical_stars, fit_star_spheres
 from ..net.mesh import QuadMesh
+from .attempts import describe_unmet, unmet_constraints
 from .constraints import DisplacementFairness
 from .net_types import get_net
-from .optimize import (
-    build_solver,
-    describe_unmet,
-    solved_parameters,
-    solver_normals,
-    unmet_constraints,
-)
+from .optimize import build_solver, solved_parameters, solver_normals
 from .reference import ReferenceSurface
 from .solver import IterationRecord, SolverSettings
 

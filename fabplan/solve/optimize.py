@@ -16,18 +16,25 @@ from ..io.output import write_texts
 from ..io.parameters import OPTIONS
 from ..io.records import json_text
 from ..net.buildable import BuildLimits, BuildReport, crumpled, measure_buildable
-from ..net.folds import FoldReport, fold_edge_mask, measure_folds
+from ..net.folds import fold_edge_mask
 from ..net.free_vertices import free_vertices, settle_free_vertices
 from ..net.geometry import (
     canonical_stars,
     face_normals,
     fit_mannheim_spheres,
     fit_star_spheres,
-    intersection_angles,
     vertex_contact_normals,
 )
 from ..net.measure import measure_net
 from ..net.mesh import QuadMesh
+from .attempts import (
+    Attempt,
+    describe_unmet,
+    deviation_continuation,
+    explain_result,
+    result_status,
+    unmet_constraints,
+)
 from .constraints import (
     BoundaryGliding,
     Closeness,
@@ -44,6 +51,7 @@ from .constraints import (
     RulingAngle,
     StarAngleRange,
 )
+from .handles import handle_arrays
 from .multilevel import (
     MAX_FINE_ROUGHNESS,
     MIN_COARSE_LINES,
@@ -61,6 +69,7 @@ from .pattern import pattern_cache
 from .reference import ReferenceSurface
 from .smoothing import smoothed_vertices
 from .solver import GuidedProjection, IterationRecord, SolverSettings
+from .stages import Stage, solve_in_stages, stopped_at
 
 __all__ = [
     "optimize",
@@ -69,10 +78,7 @@ __all__ = [
     "boundary_path",
     "check_net_input",
     "kept_faces",
-    "read_fixed",
-    "read_handles",
     "solved_parameters",
-    "unmet_constraints",
 ]
 
 
@@ -143,42 +149,6 @@ def check_net_input(mesh: QuadMesh) -> None:
     if len(mesh.stars) == 0:
         raise InputError(f"{mesh.name}: no regular vertex star (no interior vertex of valence 4 "
                          "surrounded by four faces)")
-
-
-def read_fixed(spec: str | None, mesh: QuadMesh) -> np.ndarray:
-    """Vertices to hold: ``"boundary"``, or a file of vertex ids (0-based, any separators)."""
-    if spec is None:
-        return np.zeros(0, dtype=np.int64)
-    if spec == "boundary":
-        return np.flatnonzero(mesh.is_boundary_vertex)
-    path = Path(spec)
-    if not path.is_file():
-        raise InputError(f"{spec}: no such file (--fix takes 'boundary' or a file of vertex ids)")
-    try:
-        tokens = path.read_text(encoding="utf-8").replace(",", " ").split()
-    except (UnicodeDecodeError, OSError):
-        raise InputError(f"{spec}: not a text file of vertex ids") from None
-    try:
-        values = [int(t) for t in tokens]
-    except ValueError:
-        raise InputError(f"{spec}: vertex ids must be integers") from None
-    return _vertex_ids(values, mesh, spec)
-
-
-def _vertex_ids(values: list[int], mesh: QuadMesh, where: str) -> np.ndarray:
-    """(k,) int64, vertex ids read from a file or an option, each checked to exist; an id
-    too large for any integer array (2**64) is named as the others are."""
-    try:
-        ids = np.array(values, dtype=np.int64)
-    except OverflowError:
-        first = next(v for v in values if abs(v) >= 2**62)
-        raise InputError(f"{where}: vertex {first} does not exist (the mesh has "
-                         f"{mesh.vertex_count} vertices, numbered from 0)") from None
-    bad = ids[(ids < 0) | (ids >= mesh.vertex_count)]
-    if bad.size:
-        raise InputError(f"{where}: vertex {bad[0]} does not exist (the mesh has "
-                         f"{mesh.vertex_count} vertices, numbered from 0)")
-    return ids
 
 
 def build_solver(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
@@ -335,22 +305,6 @@ def solver_normals(solver: GuidedProjection) -> np.ndarray | None:
     return N / np.linalg.norm(N, axis=1, keepdims=True)
 
 
-def unmet_constraints(solver: GuidedProjection) -> dict:
-    """Hard constraint families whose residual on the net the solve ends with is above
-    the tolerance: name -> max |residual| (mean edges for distances, cosines for angles)."""
-    last = solver.history[-1].residuals if solver.history else {}
-    if solver.status != "converged" and solver.best is not None:
-        last = solver.best.residuals       # a solve that stops short ends at its best
-    hard = {c.name for c in solver.constraints if c.hard}
-    tol = solver.settings.tolerance
-    return {name: r for name, r in last.items() if name in hard and r > tol}
-
-
-def describe_unmet(unmet: dict) -> str:
-    """One line naming the constraint families that could not be met and their residuals."""
-    return ", ".join(f"{name} residual {r:.2e}" for name, r in sorted(unmet.items()))
-
-
 def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
              radius: float | None = None, reference: ReferenceSurface | None = None,
              fixed: np.ndarray | None = None, handles: dict | None = None,
@@ -439,61 +393,26 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     check_limits(max_deviation, max_line_turn)
     limits = BuildLimits(max_line_turn_deg=max_line_turn, max_deviation=max_deviation,
                          deviation_vertices=deviation_vertices)
-    handle_ids, targets = _handle_arrays(handles, mesh)
+    handle_ids, targets = handle_arrays(handles, mesh)
     held = np.union1d(np.asarray([] if fixed is None else fixed, dtype=np.int64), handle_ids)
     start = time.perf_counter()
     if reference is None and max_deviation is not None:
         reference = ReferenceSurface.from_mesh(mesh)
-
-    def make(with_guards: bool, start_mesh: QuadMesh = mesh,
-             start_reference: ReferenceSurface | None = reference,
-             deviation: float | None = max_deviation) -> GuidedProjection:
-        return build_solver(start_mesh, net, angle=angle, radius=radius, reference=start_reference,
-                            fixed=held, settings=settings, fairness=fairness, coherent=coherent,
-                            closeness=closeness, glide=glide, glide_boundary=glide_boundary,
-                            surface_tolerance=surface_tolerance, extra=extra, guards=with_guards,
-                            max_deviation=deviation, limits=limits)
-
-    def judge(name: str, solver: GuidedProjection, deviation: float | None = max_deviation,
-              stop: Stage | None = None) -> Attempt:
-        return Attempt(name, solver, measure_buildable(
-            mesh, solver.vertices, reference=solver.reference,
-            limits=replace(limits, max_deviation=deviation)), stop)
-
-    def attempt(name: str, solver: GuidedProjection) -> Attempt:
-        return judge(name, solver, stop=_solve(solver, handle_ids, targets, progress))
-
-    levels: list[dict] = []
+    solves = _Solves(mesh, net, dict(angle=angle, radius=radius, fixed=held, settings=settings,
+                                     fairness=fairness, coherent=coherent, closeness=closeness,
+                                     glide=glide, glide_boundary=glide_boundary,
+                                     surface_tolerance=surface_tolerance, extra=extra,
+                                     limits=limits),
+                     reference, max_deviation, handle_ids, targets, progress)
     grid = _multilevel_grid(mesh, net, settings, plain=not (held.size or glide or extra or guards
                                                             or max_deviation is not None))
-    attempts: list[Attempt] = []
-    if grid is not None:
-        if reference is None and (closeness or guards):
-            reference = ReferenceSurface.from_mesh(mesh)
-        fine = make(False, mesh, reference)
-        levels = _solve_coarse_levels(fine, mesh, grid, lambda m: make(False, m, reference),
-                                      progress)
-        attempts.append(attempt("multilevel", fine))
-    if not attempts or not attempts[0].succeeded:
-        attempts.append(attempt("guards" if guards else "plain", make(bool(guards))))
-    first = attempts[-1]
-    unreachable = handle_ids.size and first.solver.status != "converged"
-    if guards is None and first.needs_guards and not unreachable:
-        # a start far from every net of the type: first the guards against folding and
-        # crumpling, then the same two solves from a smoothed start, still pulled towards
-        # the original
-        attempts.append(attempt("guards", make(True)))
-        if not attempts[-1].succeeded:
-            base = first.solver.reference
-            smooth = mesh.with_vertices(smoothed_vertices(mesh, held=held))
-            attempts.append(attempt("smoothed start", make(False, smooth, base)))
-            if not attempts[-1].succeeded:
-                attempts.append(attempt("smoothed start with guards", make(True, smooth, base)))
+    attempts, levels, unreachable = _solve_with_retries(solves, grid, guards,
+                                                        closeness or bool(guards))
     deviation = None
     if max_deviation is not None and not min(attempts, key=Attempt.rank).succeeded \
             and not unreachable:
-        found, deviation = _deviation_continuation(
-            lambda limit: make(bool(guards), deviation=limit), judge, max_deviation,
+        found, deviation = deviation_continuation(
+            lambda limit: solves.make(bool(guards), deviation=limit), solves.judge, max_deviation,
             float(np.max(reference.distances(mesh.vertices), initial=0.0)) if reference is not None
             else 0.0, progress)
         attempts += found
@@ -501,22 +420,12 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     if deviation is not None and deviation["smallest_converged"] is not None:
         # a net of the type within a looser limit: the one to write, off the design
         chosen = found[0]
-    solver, build, stop = chosen.solver, chosen.build, chosen.stop
+    solver, stop = chosen.solver, chosen.stop
     if handle_ids.size and solver.status != "converged":
         raise SolverError(f"the handles ask for a net that cannot be reached ({solver.status} after "
-                          f"{len(solver.history) - 1} iterations{_stopped_at(stop)}): "
+                          f"{len(solver.history) - 1} iterations{stopped_at(stop)}): "
                           f"{describe_unmet(unmet_constraints(solver))}")
-    result_mesh = mesh.with_vertices(solver.vertices, normals=solver_normals(solver))
-    free = free_vertices(result_mesh)
-    moved = np.zeros(result_mesh.vertex_count)
-    # planar faces hold every corner, tips included: nothing is free to settle
-    # (and a gliding net holds every vertex on the design)
-    faces_held = any(c.name == "planar-faces" for c in solver.constraints)
-    if settle_free is not None and free.any() and not faces_held and not glide:
-        result_mesh, moved = settle_free_vertices(result_mesh, keep=held, step=settle_free)
-        if moved.any():
-            build = measure_buildable(mesh, result_mesh.vertices, reference=solver.reference,
-                                      limits=limits)
+    result_mesh, build, free, moved = _settled(chosen, mesh, held, limits, settle_free, glide)
     seconds = time.perf_counter() - start
     parameters = {"angle_deg": angle, "radius": radius, **solved_parameters(solver),
                   "coherent": coherent, "fixed_vertices": int(len(solver.fixed)),
@@ -529,7 +438,7 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
                   if chosen.name == "multilevel" else None,
                   "max_line_turn_deg": max_line_turn, "max_deviation": max_deviation,
                   "deviation": deviation}
-    status = _status(solver.status, build)
+    status = result_status(solver.status, build)
     return OptimizationResult(
         mesh=result_mesh,
         net=solver.net,
@@ -540,9 +449,124 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
         linear_solver=solver.linear_solver,
         history=[h.as_dict() for h in solver.history],
         properties=measure_net(result_mesh, reference=solver.reference, limits=limits),
-        message=_explain(solver, status, build, mesh, angle, attempts if len(attempts) > 1 else [],
-                         glide=glide, deviation=deviation),
+        message=explain_result(solver, status, build, mesh, angle,
+                               attempts if len(attempts) > 1 else [], glide=glide,
+                               deviation=deviation),
     )
+
+
+@dataclass
+class _Solves:
+    """How `optimize` builds, runs and judges each of its solves (they differ in their
+    start, their guards and their deviation limit).
+
+    Attributes
+    ----------
+    mesh : the user's start; every solve is judged against its combinatorics.
+    net : the net type's name.
+    options : the `build_solver` keywords all solves share.
+    reference : the reference as given (or made for a deviation limit), else None.
+    max_deviation : the deviation limit asked (model units), else None.
+    handle_ids, targets : (h,) int and (h, 3) float, the handles and where they go.
+    progress : called after every iteration with its record.
+    """
+
+    mesh: QuadMesh
+    net: str
+    options: dict
+    reference: ReferenceSurface | None
+    max_deviation: float | None
+    handle_ids: np.ndarray
+    targets: np.ndarray
+    progress: Callable[[IterationRecord], None] | None
+
+    def make(self, with_guards: bool,
+             start: tuple[QuadMesh, ReferenceSurface | None] | None = None,
+             deviation: float | None = None) -> GuidedProjection:
+        """A solver from `start`, a start net and the reference it is pulled to (default:
+        the user's start and the reference given), held within `deviation` (default: the
+        limit asked)."""
+        start_mesh, start_reference = (self.mesh, self.reference) if start is None else start
+        return build_solver(start_mesh, self.net, reference=start_reference, guards=with_guards,
+                            max_deviation=self.max_deviation if deviation is None else deviation,
+                            **self.options)
+
+    def judge(self, name: str, solver: GuidedProjection, deviation: float | None = None,
+              stop: Stage | None = None) -> Attempt:
+        """The attempt `name` of `solver`, its net measured against `deviation` (default:
+        the limit asked)."""
+        limit = self.max_deviation if deviation is None else deviation
+        return Attempt(name, solver, measure_buildable(
+            self.mesh, solver.vertices, reference=solver.reference,
+            limits=replace(self.options["limits"], max_deviation=limit)), stop)
+
+    def attempt(self, name: str, solver: GuidedProjection) -> Attempt:
+        """Run `solver` in stages towards its targets and handles, and judge it."""
+        return self.judge(name, solver, stop=solve_in_stages(solver, self.handle_ids, self.targets,
+                                                             self.progress))
+
+
+def _solve_with_retries(solves: _Solves, grid: np.ndarray | None, guards: bool | None,
+                        needs_reference: bool) -> tuple[list[Attempt], list[dict], bool]:
+    """The solves of `optimize` before any deviation continuation: from coarse levels when
+    `grid` is given, then plainly (or with `guards`); a start that folds or crumples is
+    solved again with the guards, then from a smoothed start without and with them.
+
+    Returns the attempts in order, the coarse levels' records, and whether the handles
+    were out of reach (no retry is tried then).
+    """
+    mesh, held = solves.mesh, solves.options["fixed"]
+    levels: list[dict] = []
+    attempts: list[Attempt] = []
+    if grid is not None:
+        reference = solves.reference
+        if reference is None and needs_reference:
+            reference = ReferenceSurface.from_mesh(mesh)
+        fine = solves.make(False, (mesh, reference))
+        levels = _solve_coarse_levels(fine, mesh, grid,
+                                      lambda m: solves.make(False, (m, reference)), solves.progress)
+        attempts.append(solves.attempt("multilevel", fine))
+    if not attempts or not attempts[0].succeeded:
+        attempts.append(solves.attempt("guards" if guards else "plain", solves.make(bool(guards))))
+    first = attempts[-1]
+    unreachable = bool(solves.handle_ids.size) and first.solver.status != "converged"
+    if guards is None and first.needs_guards and not unreachable:
+        # a start far from every net of the type: first the guards against folding and
+        # crumpling, then the same two solves from a smoothed start, still pulled towards
+        # the original
+        attempts.append(solves.attempt("guards", solves.make(True)))
+        if not attempts[-1].succeeded:
+            base = first.solver.reference
+            smooth = mesh.with_vertices(smoothed_vertices(mesh, held=held))
+            attempts.append(solves.attempt("smoothed start", solves.make(False, (smooth, base))))
+            if not attempts[-1].succeeded:
+                attempts.append(solves.attempt("smoothed start with guards",
+                                               solves.make(True, (smooth, base))))
+    return attempts, levels, unreachable
+
+
+def _settled(chosen: Attempt, mesh: QuadMesh, held: np.ndarray, limits: BuildLimits,
+             settle_free: float | None, glide: bool
+             ) -> tuple[QuadMesh, BuildReport, np.ndarray, np.ndarray]:
+    """The net of the chosen solve with its free vertices settled (`optimize`'s
+    `settle_free`), measured again when any moved.
+
+    Returns the net, its build report, (n,) bool the free vertices and (n,) their moves
+    (model units).
+    """
+    solver, build = chosen.solver, chosen.build
+    result_mesh = mesh.with_vertices(solver.vertices, normals=solver_normals(solver))
+    free = free_vertices(result_mesh)
+    moved = np.zeros(result_mesh.vertex_count)
+    # planar faces hold every corner, tips included: nothing is free to settle
+    # (and a gliding net holds every vertex on the design)
+    faces_held = any(c.name == "planar-faces" for c in solver.constraints)
+    if settle_free is not None and free.any() and not faces_held and not glide:
+        result_mesh, moved = settle_free_vertices(result_mesh, keep=held, step=settle_free)
+        if moved.any():
+            build = measure_buildable(mesh, result_mesh.vertices, reference=solver.reference,
+                                      limits=limits)
+    return result_mesh, build, free, moved
 
 
 # the statuses of a solve whose residuals are within tolerance: judged again on a part
@@ -572,7 +596,7 @@ def kept_faces(result: OptimizationResult, keep: np.ndarray, reference: Referenc
     part = QuadMesh(mesh.vertices[used], [new_id[f] for f in faces], name=mesh.name)
     limits = BuildLimits(max_line_turn_deg=max_line_turn, max_deviation=max_deviation)
     build = measure_buildable(part, reference=reference, limits=limits)
-    status = _status("converged", build) if result.status in _SOLVED else result.status
+    status = result_status("converged", build) if result.status in _SOLVED else result.status
     free = free_vertices(part)
     parameters = {**result.parameters,
                   "free_vertices": {"count": int(free.sum()), "settled": False,
@@ -636,7 +660,7 @@ def _solve_coarse_levels(fine: GuidedProjection, mesh: QuadMesh, grid: np.ndarra
         if progress is not None:
             progress(record)
 
-    _solve(coarse, np.zeros(0, dtype=np.int64), np.zeros((0, 3)), tell)
+    solve_in_stages(coarse, np.zeros(0, dtype=np.int64), np.zeros((0, 3)), tell)
     pattern_cache.discard(coarse.pattern.key)     # room for the full net's
     start_from_coarse(fine, coarse, prolong_vertices(coarse.vertices, grid, rows, cols, params))
     levels.append({"vertices": coarse_mesh.vertex_count, "iterations": coarse.accepted_steps,
@@ -644,387 +668,8 @@ def _solve_coarse_levels(fine: GuidedProjection, mesh: QuadMesh, grid: np.ndarra
     return levels
 
 
-@dataclass
-class Attempt:
-    """One solve of `optimize`: the plain one, or a retry after it folded."""
-
-    name: str                   # "plain", "guards", "smoothed start", ...
-    solver: GuidedProjection
-    build: BuildReport          # measured on the net it ends with (its folds too)
-    stop: Stage | None          # the handle stage its continuation gave up at, if it did
-
-    @property
-    def folds(self) -> FoldReport:
-        return self.build.folds
-
-    @property
-    def succeeded(self) -> bool:
-        """Converged, buildable and without degenerate stars or collapsed edges."""
-        return self.solver.status == "converged" and self.build.buildable \
-            and not self.folds.degenerate
-
-    @property
-    def needs_guards(self) -> bool:
-        """Folded, crumpled or degenerate: what the guards and a smoothed start are for."""
-        return self.folds.folded or self.build.crumpled or self.folds.degenerate
-
-    def rank(self) -> tuple:
-        """Sort key: buildable first (no fold, then no dart or sharp turn, then within the
-        deviation limit), then without degenerate stars, then converged, then by hard
-        residual."""
-        history = self.solver.history
-        hard = history[-1].hard_residual if history else np.inf
-        return (self.folds.folded, self.build.crumpled, self.build.off_design,
-                self.folds.degenerate, self.solver.status != "converged", hard)
-
-    def outcome(self) -> str:
-        """A few words: how this solve ended."""
-        return _status(self.solver.status, self.build)
-
-
-def _status(solver_status: str, build: BuildReport) -> str:
-    """The status of a result: the solver's, or for a net within tolerance what keeps it
-    from being built."""
-    if solver_status != "converged":
-        return solver_status
-    if build.folds.folded:
-        return "folded"
-    if build.crumpled:
-        return "crumpled"
-    if build.folds.degenerate:
-        return "degenerate"
-    if build.off_design:
-        return "off-design"
-    return "converged"
-
-
 def check_limits(max_deviation: float | None, max_line_turn: float) -> None:
     """Refuse a deviation limit or a line-turn limit no net can keep to."""
     if max_deviation is not None:
         OPTIONS["--max-deviation"].check(max_deviation)
     OPTIONS["--max-line-turn"].check(max_line_turn)
-
-
-# a deviation limit the net type cannot keep to is approached from a loose one: limits
-# shrinking by this factor, from the first at least this many times the asked one (and
-# the start's own distance), in at most this many stages; then the smallest limit met is
-# narrowed down by this many bisections between it and the first one missed
-DEVIATION_FACTOR, DEVIATION_START, DEVIATION_STAGES, DEVIATION_BISECTIONS = 2.0, 32.0, 8, 2
-
-
-def _deviation_continuation(make: Callable[[float], GuidedProjection],
-                            judge: Callable[[str, GuidedProjection, float], Attempt],
-                            limit: float, start_distance: float,
-                            progress: Callable[[IterationRecord], None] | None
-                            ) -> tuple[list[Attempt], dict]:
-    """Tighten a deviation limit from a loose one towards `limit` (model units), each
-    stage continuing from the net of the one before, until a stage does not converge
-    buildable within its limit.
-
-    Returns the attempt at the smallest limit the net converged buildable to (or, when
-    none did, the first stage's), judged by `judge(name, solver, limit)`, and a record:
-    the limits tried, and the smallest at which the net converged (None when none did).
-    """
-    loosest = max(limit * DEVIATION_START, 1.5 * start_distance)
-    stages = int(min(DEVIATION_STAGES, np.ceil(np.log(loosest / limit) / np.log(DEVIATION_FACTOR))))
-    limits = [limit * (loosest / limit) ** (k / stages) for k in range(stages, -1, -1)]
-    solver = make(limits[0])
-    bound = next(c for c in solver.constraints if isinstance(c, DeviationBound))
-    tried: list[float] = []
-    met: tuple[float, np.ndarray] | None = None
-    missed: float | None = None
-    for k, value in enumerate(limits):
-        bound.limit = value
-        if k:
-            solver.restart_soft_terms()
-        solver.run(callback=progress)
-        tried.append(value)
-        if not judge("", solver, value).succeeded:
-            missed = value
-            break
-        met = (value, solver.state.x.copy())
-    for _ in range(DEVIATION_BISECTIONS if met is not None and missed is not None else 0):
-        assert met is not None and missed is not None
-        # halfway (in the log) between the smallest limit met and the first missed, from
-        # the net that met it
-        value = float(np.sqrt(met[0] * missed))
-        solver.state.x[:] = met[1]
-        bound.limit = value
-        solver.restart_soft_terms()
-        solver.run(callback=progress)
-        tried.append(value)
-        if judge("", solver, value).succeeded:
-            met = (value, solver.state.x.copy())
-        else:
-            missed = value
-    if met is not None and met[0] != tried[-1]:
-        # back to the net that met the smallest limit (the next stage moved the solver on)
-        bound.limit = met[0]
-        solver.state.x[:] = met[1]
-        solver.status = "converged"
-    smallest = None if met is None else met[0]
-    name = f"continuation to {smallest:.4g}" if smallest is not None else "continuation"
-    record = {"limit": limit, "tried": tried, "smallest_converged": smallest}
-    return [judge(name, solver, limit)], record
-
-
-# a prescribed angle this far (degrees) from the start's is reached in stages
-CONTINUATION_STEP_DEG = 10.0
-# a prescribed Meusnier radius more than this factor from the start's (or less than its
-# inverse) is reached in stages, each this factor at most from the one before
-CONTINUATION_RADIUS_FACTOR = 1.5
-# at most this many stages for the angle and radius together (and 10 for the handles)
-MAX_STAGES = 12
-# each stage but the last is solved to this tolerance, in at most this many iterations
-STAGE_TOLERANCE, STAGE_ITERATIONS = 1e-4, 25
-
-
-@dataclass
-class Stage:
-    """One stage of a continuation: what it sets, and how far along the way it is.
-
-    Attributes
-    ----------
-    apply : sets the stage's targets on the solver.
-    kind : "targets" (the prescribed angle and radius), "handles" or "" (a plain solve).
-    step, steps : the stage's number (from 1) among the stages of its kind.
-    """
-
-    apply: Callable[[], None]
-    kind: str = ""
-    step: int = 1
-    steps: int = 1
-
-
-def _solve(solver: GuidedProjection, handle_ids: np.ndarray, targets: np.ndarray,
-           progress: Callable[[IterationRecord], None] | None) -> Stage | None:
-    """Run the solver; a far target (an angle, a radius or handles far from the start) is
-    moved there in stages, each solved to a loose tolerance, the last to the full one.
-
-    Returns None when every stage ran, or the handle stage that could not be solved: the
-    stages after it move the handles farther still, so solving them would only spend the
-    time of a longer give-up.
-    """
-    stages = _continuation_stages(solver, handle_ids, targets)
-    final = solver.settings
-    k, stop = 0, None
-    while k < len(stages):
-        stages[k].apply()
-        last = k == len(stages) - 1
-        solver.settings = final if last else replace(
-            final, tolerance=max(final.tolerance, STAGE_TOLERANCE),
-            max_iterations=min(final.max_iterations, STAGE_ITERATIONS))
-        if k:
-            solver.restart_soft_terms()
-        status = solver.run(callback=progress)
-        if status == "converged" or last:
-            k += 1
-        elif stages[k].kind == "handles":
-            stop = stages[k]
-            break
-        else:
-            # a target stage out of reach: the ones between it and the last are farther
-            # still, so the last (the real targets) is solved right away
-            k = len(stages) - 1
-    solver.settings = final
-    return stop
-
-
-def _continuation_stages(solver: GuidedProjection, handle_ids: np.ndarray,
-                        targets: np.ndarray) -> list[Stage]:
-    """The stages of a solve: the prescribed angle moved from the start's in steps of at
-    most `CONTINUATION_STEP_DEG` and the prescribed Meusnier radius in factors of at most
-    `CONTINUATION_RADIUS_FACTOR`, together; then the handles moved in steps of at most
-    one mean edge."""
-    moves: list[tuple[Callable[[float], None], int]] = []   # (set at fraction t, steps)
-    angle = next((c for c in solver.constraints
-                  if isinstance(c, ConstantAngle) and c.cosine is not None), None)
-    if angle is not None and angle.cosine is not None:
-        goal = float(np.degrees(np.arccos(np.clip(angle.cosine, -1.0, 1.0))))
-        here = float(np.degrees(np.median(intersection_angles(solver.state.X, solver.state.stars))))
-
-        def set_angle(t: float, family: ConstantAngle = angle) -> None:
-            family.cosine = float(np.cos(np.radians(here + (goal - here) * t)))
-
-        moves.append((set_angle, int(np.ceil(abs(goal - here) / CONTINUATION_STEP_DEG))))
-    radius = next((c for c in solver.constraints if isinstance(c, ConstantCurvature)
-                   and c.curvature is not None and c.curvature != 0.0), None)
-    if radius is not None and radius.curvature is not None and "sphere" in solver.state.blocks:
-        moves.append(_curvature_move(radius, radius.curvature,
-                                     float(np.median(2 * solver.variable("sphere")[:, 0]))))
-    stages: list[Stage] = []
-    count = min(MAX_STAGES, max([1] + [steps for _, steps in moves]))
-    if moves and count > 1:
-        for i in range(1, count + 1):
-            def apply(t: float = i / count) -> None:
-                for move, _ in moves:
-                    move(t)
-            stages.append(Stage(apply, "targets", i, count))
-    if handle_ids.size:
-        begin = solver.vertices[handle_ids]
-        far = float(np.linalg.norm(targets - begin, axis=1).max()) / solver.length_scale
-        count = int(min(10, max(1, np.ceil(far))))
-        for i in range(1, count + 1):
-            def place(t: float = i / count) -> None:
-                solver.set_vertices(handle_ids, begin + t * (targets - begin))
-            stages.append(Stage(place, "handles", i, count))
-    return stages or [Stage(lambda: None)]
-
-
-def _curvature_move(family: ConstantCurvature, goal: float,
-                    here: float) -> tuple[Callable[[float], None], int]:
-    """Set the prescribed normal curvature (normalized units) at a fraction of the way from
-    the start's median to the goal, and the number of steps the way needs: geometric steps
-    (the radius changes by the same factor in each) when both have one sign, else equal
-    steps, each at most what a factor `CONTINUATION_RADIUS_FACTOR` takes near the goal."""
-    log_factor = np.log(CONTINUATION_RADIUS_FACTOR)
-    if here * goal > 0:
-        ratio = goal / here
-        steps = int(np.ceil(abs(np.log(ratio)) / log_factor - 1e-9))
-
-        def move(t: float) -> None:
-            family.curvature = goal if t >= 1 else float(here * ratio ** t)
-    else:     # flat, or curved the other way: no geometric path
-        steps = int(np.ceil(abs(goal - here) / (abs(goal) * (1 - 1 / CONTINUATION_RADIUS_FACTOR))))
-
-        def move(t: float) -> None:
-            family.curvature = goal if t >= 1 else float(here + (goal - here) * t)
-    return move, steps
-
-
-def _stopped_at(stage: Stage | None) -> str:
-    """Where a handle continuation gave up, for the message (empty when it had one step)."""
-    if stage is None or stage.steps < 2:
-        return ""
-    return (f", at step {stage.step} of {stage.steps} towards them; the steps beyond it "
-            "were not tried")
-
-
-def _explain(solver: GuidedProjection, status: str, build: BuildReport, start: QuadMesh,
-             angle: float | None, attempts: list[Attempt], *, glide: bool = False,
-             deviation: dict | None = None) -> str:
-    """One line: what stood in the way of a converged net, where, and what to try;
-    `attempts` are the solves tried when there were more than one; with `glide` the start
-    is a layout's lattice on its design, not the user's net; `deviation` the record of a
-    deviation limit's continuation."""
-    if status == "converged":
-        return ""
-    folds = build.folds
-    parts = []
-    if status in ("folded", "degenerate", "crumpled", "off-design"):
-        parts.append(f"the constraints are met but {_obstacles(build)}")
-    else:
-        unmet = describe_unmet(unmet_constraints(solver))
-        parts.append(f"stopped ({status}) with {unmet or 'residuals above the tolerance'}")
-        best = solver.best
-        if best is not None and best.admissible and build.buildable and not folds.degenerate:
-            parts.append("the net written is the best iterate, buildable (no fold, dart or line "
-                         "doubling back)")
-        if best is not None and best.iteration <= solver.run_start:
-            parts.append("no step improved on the start: it may be far from any net of this "
-                         "type, or the type may not exist on this surface")
-        if not build.buildable or folds.degenerate:
-            parts.append(f"on the net written {_obstacles(build)}")
-    if deviation is not None and build.off_design:
-        smallest = deviation["smallest_converged"]
-        loosest = deviation["tried"][0] if deviation["tried"] else None
-        if smallest is not None:
-            parts.append(f"tightening the limit from {loosest:.4g} step by step, the net converged "
-                         f"buildable down to a limit of {smallest:.4g} (the smallest found): give "
-                         f"--max-deviation {smallest:.4g} or more, or another net type")
-        elif loosest is not None:
-            parts.append(f"tightening the limit from {loosest:.4g} step by step, no limit gave a "
-                         "converged buildable net (none found): this net type may not fit the "
-                         "reference; try another net type or a finer net")
-    if attempts:
-        tried = ", ".join(f"{a.name} {a.outcome()}" for a in attempts)
-        written = next(a.name for a in attempts if a.solver is solver)
-        parts.append(f"tried {len(attempts)} solves ({tried}); the net written is the {written} one")
-        start_folds = measure_folds(start, reference=solver.reference)
-        if start_folds.folded and glide:
-            parts.append(f"the layout's lattice folds there ({start_folds.describe()}): "
-                         "another panel size or net type may avoid it")
-        elif glide:
-            parts.append("the layout is too far from any net of this type on this design for "
-                         "a buildable one near it: try another panel size or net type")
-        elif start_folds.folded:
-            parts.append(f"the input itself folds ({start_folds.describe()}): repair or smooth it")
-        elif not build.off_design or build.crumpled or folds.folded:
-            parts.append("the input is too far from any net of this type for a buildable one "
-                         "near it: smooth it, or lay a net out on its design with `fabplan layout`")
-    if build.crumpled and not attempts:
-        parts.append("try the guards from the start (--guards), a smoother input, or "
-                     "`fabplan layout` on the design")
-    if angle is not None and len(start.stars):
-        here = float(np.degrees(np.median(intersection_angles(start.vertices,
-                                                              canonical_stars(start.vertices,
-                                                                              start.stars)))))
-        gap = min(abs(here - angle), abs(180.0 - here - angle))
-        if gap > 15.0:
-            parts.append(f"the requested angle is {gap:.0f} deg from the start's ({here:.0f} deg); "
-                         "try `fabplan layout` on the design, which starts from the right "
-                         "directions")
-    return "; ".join(parts)
-
-
-def _obstacles(build: BuildReport) -> str:
-    """What keeps a net from being built, with its degenerate stars and collapsed edges."""
-    said = [build.describe()]
-    if build.folds.degenerate and not build.folds.folded:
-        said.append(build.folds.describe())
-    return "; ".join(p for p in said if p)
-
-
-#: how far a handle may move a vertex from the net's bounding box, in net extents
-HANDLE_REACH = 10.0
-
-
-def _handle_arrays(handles: dict | None, mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray]:
-    if not handles:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    ids = _vertex_ids(list(handles), mesh, "--handle")
-    targets = np.array([np.asarray(handles[i], dtype=np.float64) for i in handles]).reshape(-1, 3)
-    if not np.isfinite(targets).all():
-        k = int(np.flatnonzero(~np.isfinite(targets).all(axis=1))[0])
-        raise InputError(f"--handle {ids[k]}:{','.join(f'{c:g}' for c in targets[k])}: the target "
-                         "must be finite coordinates")
-    # a handle moves a vertex within the net's reach: farther than this many times the
-    # net's extent from its bounding box is a typing or unit mistake
-    low, high = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-    extent = float(np.linalg.norm(high - low))
-    # along the farthest axis: a norm of 1e300 would overflow
-    away = np.maximum(np.maximum(low - targets, targets - high), 0.0).max(axis=1)
-    far = np.flatnonzero(away > HANDLE_REACH * extent)
-    if far.size:
-        k = far[0]
-        raise InputError(f"--handle {ids[k]}:{','.join(f'{c:g}' for c in targets[k])}: the target "
-                         f"lies {away[k]:.3g} from the net, more than {HANDLE_REACH:g} times its "
-                         f"extent ({extent:.4g} model units, the diagonal of its bounding box)")
-    return ids, targets
-
-
-def read_handles(specs: list[str] | None) -> dict:
-    """Handles from ``ID:X,Y,Z`` strings or files of ``ID X Y Z`` lines."""
-    handles: dict = {}
-    for spec in specs or []:
-        path = Path(spec)
-        lines = [spec]
-        if ":" not in spec and path.is_file():
-            try:
-                lines = path.read_text(encoding="utf-8").splitlines()
-            except (UnicodeDecodeError, OSError):
-                raise InputError(f"{spec}: not a text file of handles") from None
-        for line in lines:
-            line = line.split("#")[0].strip()
-            if not line:
-                continue
-            parts = line.replace(":", " ").replace(",", " ").split()
-            try:
-                vid, xyz = int(parts[0]), [float(p) for p in parts[1:]]
-            except (ValueError, IndexError):
-                xyz = []
-            if len(xyz) != 3:
-                where = f"{spec}" if lines == [spec] else f"{spec}: line {line!r}"
-                raise InputError(f"{where}: a handle is ID:X,Y,Z (or a file of 'ID X Y Z' lines)")
-            handles[vid] = xyz
-    return handles

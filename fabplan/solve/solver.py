@@ -428,11 +428,7 @@ class GuidedProjection:
         cap = s.max_iterations if max_iterations is None else max_iterations
         hard_index = [i for i, c in enumerate(self.constraints) if c.hard]
         if self._pattern is None:
-            for c in self.constraints:
-                c.prepare(self.state)
-            self._pattern = self._build_pattern()
-            self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free),
-                                           shared=self._pattern.shared)
+            self._prepare()
         first = self.run_start = len(self.history)
         self.status = "iteration cap"
         self.best, self._damping_scale, self.monotone = None, 1.0, False
@@ -447,17 +443,7 @@ class GuidedProjection:
             t0 = time.perf_counter()
             hard = max([current.measured[self.constraints[i].name] for i in hard_index], default=0.0)
             if not self.monotone:
-                hard_merit = current.hard_merit(hard_index)
-                if hard_merit < watch[1]:
-                    watch = (self._snapshot(), hard_merit, 0)
-                elif watch[2] >= s.watchdog or (hard > s.tolerance and self._stagnant(hard)):
-                    # the free steps climbed, or crawled, for too long: back to their best
-                    # point, and from there only steps that lower the merit function
-                    self._restore(watch[0])
-                    current, self.monotone = self._evaluate(), True
-                    self._phase_start = len(self.history)
-                    hard = max([current.measured[self.constraints[i].name] for i in hard_index],
-                               default=0.0)
+                current, hard, watch = self._watch(current, hard, watch, hard_index)
             steps = self.accepted_steps
             weights = self._weights(steps)
             self._remember(hard, current.measured)
@@ -496,6 +482,37 @@ class GuidedProjection:
         if self.status != "converged":
             self.return_to_best()
         return self.status
+
+    def _prepare(self) -> None:
+        """The set-up of a first run: the families' fixed data, the pattern of the normal
+        equations and the linear solver with its symbolic analysis."""
+        for c in self.constraints:
+            c.prepare(self.state)
+        self._pattern = self._build_pattern()
+        self._linear = SparseSPDSolver(self.settings.backend, unknowns=len(self.free),
+                                       shared=self._pattern.shared)
+
+    def _watch(self, current: _Evaluation, hard: float, watch: tuple, hard_index: list
+               ) -> tuple[_Evaluation, float, tuple]:
+        """The watchdog of the free steps: remember a new best point of the hard merit, or,
+        when the steps climbed or crawled for too long, go back to the best and switch to
+        monotone steps. `watch` is (snapshot, its hard merit, steps since).
+
+        Returns the evaluation and largest hard residual to go on from, and the watch.
+        """
+        hard_merit = current.hard_merit(hard_index)
+        if hard_merit < watch[1]:
+            watch = (self._snapshot(), hard_merit, 0)
+        elif watch[2] >= self.settings.watchdog or (hard > self.settings.tolerance
+                                                    and self._stagnant(hard)):
+            # the free steps climbed, or crawled, for too long: back to their best
+            # point, and from there only steps that lower the merit function
+            self._restore(watch[0])
+            current, self.monotone = self._evaluate(), True
+            self._phase_start = len(self.history)
+            hard = max([current.measured[self.constraints[i].name] for i in hard_index],
+                       default=0.0)
+        return current, hard, watch
 
     def _step(self, current: _Evaluation, weights: list, merit: float, base: float,
               hard_index: list[int], ceiling: float | None
