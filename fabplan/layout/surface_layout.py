@@ -56,6 +56,7 @@ from ..design.mesh_surface import DesignSurface
 from ..errors import InputError
 from ..net.mesh import QuadMesh
 from ..solve.constraints import Constraint, EdgeLengthRange, FamilyLevels
+from .coverage import net_cover, net_coverage
 from .directions import (
     comb_cross_field,
     comb_line_field,
@@ -71,6 +72,7 @@ from .directions import (
 )
 from .extraction import clean_quads, extract_quads, fill_boundary_cells, fill_holes, sound_quads
 from .off_design import MIN_OFF_PANELS, degenerate_faces, faces_off_design
+from .parameter_chart import ParameterChart
 from .parametrization import (
     CutMesh,
     boundary_circulation,
@@ -81,7 +83,7 @@ from .parametrization import (
     integrate_directions,
 )
 from .settings import SURFACE_TOLERANCE, LayoutSettings
-from .trim import ParameterChart, add_boundary_panels, net_cover, net_coverage, trim_to_design
+from .trim import add_boundary_panels, trim_to_design
 
 if TYPE_CHECKING:
     from ..solve.optimize import OptimizationResult
