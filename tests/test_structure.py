@@ -283,20 +283,18 @@ LONG_FUNCTIONS = {
                                                        "settled share their arrays",
     "fabplan.fabricate.molds.mold_fits:fit_mold_placements": "one fit: placements, "
                                                              "residuals and their refinement",
-    "fabplan.layout.trim:trim_to_design": "to split further: the lift, recut and gap patches "
-                                          "share a dozen arrays (needs a state object)",
-    "fabplan.layout.trim:slide_splits": "a 46-line docstring; one sweep over the split points",
-    "fabplan.layout.surface_layout:glide": "to split: one glide with its retries in order",
     "fabplan.fabricate.strips.nesting:_part_geometry": "one part's outline, slits, labels "
                                                        "and marks, drawn in order",
     "fabplan.fabricate.arcs:_edge_tangents": "one computation in three numbered steps "
                                              "sharing their arrays",
-    "fabplan.layout.extraction:fill_boundary_cells": "one pass over the boundary cells",
+    "fabplan.layout.extraction:fill_boundary_cells": "a 24-line docstring; one loop of passes "
+                                                     "over the boundary cells, each predicting, "
+                                                     "snapping and accepting corners on key "
+                                                     "tables it rebuilds",
     "fabplan.layout.view:net_numbers": "one table of a record's numbers, row by row",
     "fabplan.net.view:net_scene": "one scene with its colour modes, mode by mode",
-    "fabplan.layout.surface_layout:layout_surface": "the layout pipeline, each stage a call, "
-                                                    "with its retries",
-    "fabplan.layout.starts:glide_fairest": "one search over start points",
+    "fabplan.layout.starts:glide_fairest": "a 28-line docstring; one loop over the starts, "
+                                           "each laid out, glided and judged in turn",
     "fabplan.fabricate.strips.unrolling:unroll_polylines": "a 30-line docstring; one "
                                                            "vectorized unrolling",
     "fabplan.fabricate.milling.face_milling:plan_face_milling": "one milling plan, pass by pass",
@@ -309,14 +307,11 @@ LONG_FUNCTIONS = {
     "fabplan.fabricate.strips.nesting:nest_parts": "one nesting loop over sheets",
     "fabplan.io.rhino_read:read_3dm": "one pass over a file's objects, by kind",
     "fabplan.solve.solver:GuidedProjection.run": "the iteration loop of the solver",
-    "fabplan.layout.trim:_to_surface": "one mapping of the pieces to the surface",
     "fabplan.study.run:mold_metrics": "a 37-line docstring of the record; one computation",
-    "fabplan.layout.extraction:extract_quads": "one extraction, step by step",
     "fabplan.study.report:_candidate_files": "one candidate's files written in order",
     "fabplan.fabricate.strips.nesting:_split_strip": "one split of a strip at its ends "
                                                      "and splices",
     "fabplan.io.obj:parse_obj": "one pass over the lines of a file, by record kind",
-    "fabplan.layout.trim:_unclad_by_sheet": "a 27-line docstring; one overlay by sheet",
     "fabplan.fabricate.molds.mold_assignment:_refit_molds": "one refit loop",
     "fabplan.fabricate.strips.strip_set:StripSettings.check": "every field validated in turn",
     "fabplan.study.spec:_candidates": "every candidate key of a study file read in turn",

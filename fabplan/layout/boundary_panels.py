@@ -334,43 +334,61 @@ def slide_splits(panels: BoundaryPanels, ids: np.ndarray, origins: np.ndarray,
         holders = np.unique(owner[flat == r])
         if len(holders) != 2 or not on[r]:
             continue
-        ends = _rim_chains(polygons, holders, r, on, corner)
-        if ends is None:
-            continue
-        (fwd, at_f, chain_f), (bwd, at_b, chain_b) = ends
-        C = np.r_[chain_b[::-1], chain_f]               # corner .. corner, through r
-        if len(C) < 2:
-            continue
-        S0, E = V[C[:-1]], V[C[1:]] - V[C[:-1]]
-        # the line's closest approach to every segment of the boundary between the corners
-        w = origins[i] - S0
-        b, c = E @ d[i], np.sum(E * E, axis=1)
-        denom = np.maximum(c - b * b, 1e-300)
-        u = np.clip((np.sum(E * w, axis=1) - b * (w @ d[i])) / denom, 0.0, 1.0)
-        s = u * b - w @ d[i]
-        gap = np.linalg.norm(origins[i] + s[:, None] * d[i] - S0 - u[:, None] * E, axis=1)
-        j = int(np.argmin(gap))
-        foot = S0[j] + u[j] * E[j]
-        eps = 1e-2 * reach
-        if (gap[j] > reach or np.linalg.norm(foot - V[C[0]]) <= eps
-                or np.linalg.norm(foot - V[C[-1]]) <= eps):
-            continue
-        # points within a thousandth of a panel of the new place go (no side of no length)
-        length = np.sqrt(c[j])
-        keep_b = C[:j + 1] if (u[j] * length > eps or j == 0) else C[:j]
-        keep_f = C[j + 1:] if ((1 - u[j]) * length > eps or j + 1 == len(C) - 1) else C[j + 2:]
-        for k, ring in ((bwd, np.r_[np.roll(polygons[bwd], -at_b)[:len(polygons[bwd]) - len(chain_b)],
-                                    keep_b]),
-                        (fwd, np.r_[r, keep_f, np.roll(polygons[fwd], -at_f)[1 + len(chain_f):]])):
-            # each outline starts where it did, where that point is still in it
-            start = np.flatnonzero(ring == polygons[k][0])
-            polygons[k] = np.roll(ring, -int(start[0])) if len(start) else ring
-        V[r] = origins[i] + s[j] * d[i]
-        moved[i] = True
-        changed.update((int(fwd), int(bwd)))
+        pair = _slide_point(V, polygons, holders, r, on, corner, origins[i], d[i], reach)
+        if pair is not None:
+            moved[i] = True
+            changed.update(pair)
     if not changed:
         return panels, moved
-    which = np.array(sorted(changed), np.int64)
+    return _remeasured(panels, V, polygons, np.array(sorted(changed), np.int64)), moved
+
+
+def _slide_point(V: np.ndarray, polygons: list, holders: np.ndarray, r: int, on: np.ndarray,
+                 corner: np.ndarray, origin: np.ndarray, direction: np.ndarray, reach: float
+                 ) -> tuple[int, int] | None:
+    """Slide the point `r` the two panels `holders` part at along the design boundary
+    to where the line through `origin` (3,) along the unit `direction` (3,) passes
+    closest to it (`slide_splits`), changing `V` (m, 3) and the two outlines of
+    `polygons` in place; the two panels, or None where it stays."""
+    ends = _rim_chains(polygons, holders, r, on, corner)
+    if ends is None:
+        return None
+    (fwd, at_f, chain_f), (bwd, at_b, chain_b) = ends
+    C = np.r_[chain_b[::-1], chain_f]               # corner .. corner, through r
+    if len(C) < 2:
+        return None
+    S0, E = V[C[:-1]], V[C[1:]] - V[C[:-1]]
+    # the line's closest approach to every segment of the boundary between the corners
+    w = origin - S0
+    b, c = E @ direction, np.sum(E * E, axis=1)
+    denom = np.maximum(c - b * b, 1e-300)
+    u = np.clip((np.sum(E * w, axis=1) - b * (w @ direction)) / denom, 0.0, 1.0)
+    s = u * b - w @ direction
+    gap = np.linalg.norm(origin + s[:, None] * direction - S0 - u[:, None] * E, axis=1)
+    j = int(np.argmin(gap))
+    foot = S0[j] + u[j] * E[j]
+    eps = 1e-2 * reach
+    if (gap[j] > reach or np.linalg.norm(foot - V[C[0]]) <= eps
+            or np.linalg.norm(foot - V[C[-1]]) <= eps):
+        return None
+    # points within a thousandth of a panel of the new place go (no side of no length)
+    length = np.sqrt(c[j])
+    keep_b = C[:j + 1] if (u[j] * length > eps or j == 0) else C[:j]
+    keep_f = C[j + 1:] if ((1 - u[j]) * length > eps or j + 1 == len(C) - 1) else C[j + 2:]
+    for k, ring in ((bwd, np.r_[np.roll(polygons[bwd], -at_b)[:len(polygons[bwd]) - len(chain_b)],
+                                keep_b]),
+                    (fwd, np.r_[r, keep_f, np.roll(polygons[fwd], -at_f)[1 + len(chain_f):]])):
+        # each outline starts where it did, where that point is still in it
+        start = np.flatnonzero(ring == polygons[k][0])
+        polygons[k] = np.roll(ring, -int(start[0])) if len(start) else ring
+    V[r] = origin + s[j] * direction
+    return int(fwd), int(bwd)
+
+
+def _remeasured(panels: BoundaryPanels, V: np.ndarray, polygons: list, which: np.ndarray
+                ) -> BoundaryPanels:
+    """A copy of `panels` with the points `V` (m, 3) and outlines `polygons`, the panels
+    `which` (k,) int cut into triangles again and their areas measured again."""
     triangles, triangle_panel = panels.triangles, panels.triangle_panel
     if triangles is not None and triangle_panel is not None:
         triangles, triangle_panel = retriangulated(V, polygons, np.asarray(triangles, np.int64),
@@ -382,7 +400,7 @@ def slide_splits(panels: BoundaryPanels, ids: np.ndarray, origins: np.ndarray,
     area = np.bincount(panel, 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]),
                                                    axis=1), minlength=len(polygons))
     out.area = np.where(np.isin(np.arange(len(polygons)), which), area, panels.area)
-    return out, moved
+    return out
 
 
 def _rim_chains(polygons: list, holders: np.ndarray, r: int, on: np.ndarray,

@@ -180,25 +180,7 @@ def _unclad_by_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh, h
     regions : list of polygonal geometries, the unclad region in parts that hang
         together on the surface (each on one sheet; two may overlap in the plane).
     """
-    f = len(mesh.face_sizes)
-    valid = shapely.make_valid(faces)
-    parts, row = shapely.get_parts(valid, return_index=True)
-    polygon = shapely.get_type_id(parts) == 3
-    parts, face = parts[polygon], row[polygon] % f
-    sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
-    centre3 = np.stack([np.add.reduceat(mesh.vertices[idx, k], ptr[:-1]) for k in range(3)],
-                       axis=1) / sizes[:, None]
-    corner_face = np.repeat(np.arange(f), sizes)
-    radius = np.zeros(f)
-    np.maximum.at(radius, corner_face, np.linalg.norm(mesh.vertices[idx] - centre3[corner_face], axis=1))
-    part, tri = chart.tree.query(parts, predicate="intersects")
-    keep = chart.usable[tri]
-    part, tri = part[keep], tri[keep]
-    design = chart.design
-    gap = np.linalg.norm(design.vertices[design.triangles[tri]].mean(axis=1) - centre3[face[part]],
-                         axis=1)
-    own = gap <= radius[face[part]] + 0.5 * h
-    part, tri = part[own], tri[own]
+    parts, part, tri = _faces_on_own_sheet(chart, faces, mesh, h)
     # most triangles lie inside one face of their sheet: nothing of them is left
     covered = np.zeros(len(chart.P), bool)
     covered[tri[shapely.covers(parts[part], chart.triangles[tri])]] = True
@@ -220,6 +202,43 @@ def _unclad_by_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh, h
     rest, at = shapely.get_parts(rest[left], return_index=True)
     polygon = shapely.get_type_id(rest) == 3
     rest, left = rest[polygon], left[at[polygon]]
+    region, regions, number = _sheet_regions(chart, rest, left, grid, min_area)
+    return rest, left, number[region], regions
+
+
+def _faces_on_own_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh, h: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The net's faces in the plane (`faces`, as `_unclad_by_sheet` takes them) as
+    polygons, `parts` (g,), and the pairs of a part (c,) int and a design triangle (c,)
+    int it overlaps in the plane that lies under its face on the surface (its own sheet,
+    `_unclad_by_sheet`)."""
+    f = len(mesh.face_sizes)
+    valid = shapely.make_valid(faces)
+    parts, row = shapely.get_parts(valid, return_index=True)
+    polygon = shapely.get_type_id(parts) == 3
+    parts, face = parts[polygon], row[polygon] % f
+    sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
+    centre3 = np.stack([np.add.reduceat(mesh.vertices[idx, k], ptr[:-1]) for k in range(3)],
+                       axis=1) / sizes[:, None]
+    corner_face = np.repeat(np.arange(f), sizes)
+    radius = np.zeros(f)
+    np.maximum.at(radius, corner_face, np.linalg.norm(mesh.vertices[idx] - centre3[corner_face], axis=1))
+    part, tri = chart.tree.query(parts, predicate="intersects")
+    keep = chart.usable[tri]
+    part, tri = part[keep], tri[keep]
+    design = chart.design
+    gap = np.linalg.norm(design.vertices[design.triangles[tri]].mean(axis=1) - centre3[face[part]],
+                         axis=1)
+    own = gap <= radius[face[part]] + 0.5 * h
+    return parts, part[own], tri[own]
+
+
+def _sheet_regions(chart: ParameterChart, rest: np.ndarray, left: np.ndarray, grid: float,
+                   min_area: float) -> tuple[np.ndarray, list, np.ndarray]:
+    """The unclad parts `rest` (u,) of the design triangles `left` (u,) int grouped into
+    regions that hang together on the surface: the region (u,) int of each part, the
+    regions larger than `min_area` united (list of polygonal geometries), and (r,) int
+    the number of each region among those (-1: left out)."""
     # parts hang together where their triangles share a corner on the design and they
     # meet in the plane; parts of other sheets over them in the plane share no corner
     a, b = shapely.STRtree(rest).query(rest, predicate="intersects")
@@ -234,7 +253,7 @@ def _unclad_by_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh, h
                                  grid_size=grid) for k in large]
     number = np.full(count, -1)
     number[large] = np.arange(len(large))
-    return rest, left, number[region], regions
+    return region, regions, number
 
 
 def _cut_region(unclad, mesh: QuadMesh, p_net: np.ndarray, boundary, touching: np.ndarray,

@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
@@ -262,23 +262,7 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
             tried.append({"smoothing_panels": length, "used": layout.smoothing,
                           "field": layout.direction_field, "coverage": None})
             break
-        # judged with the boundary panels the net will get: the staircase along the
-        # boundary is theirs to clad; what they cannot reach are the lattice's own holes
-        hole = None
-        if judged_on is not None:
-            coverage, gaps = net_cover(layout.mesh, judged_on, h)
-            on_net, hole = coverage, gaps[0] if gaps else None
-        else:
-            try:
-                # the lattice as it is: patches would hide the holes a smoother field avoids
-                panels = trim_to_design(layout.mesh, layout, patch_gaps=False)
-                coverage, on_net = panels.coverage, panels.coverage_net
-                # a gap inside the design; one at its boundary the glide partly closes (the
-                # boundary vertices move onto the boundary): judged after it
-                inside = [g for g in panels.gaps if not g["at_design_boundary"]]
-                hole = inside[0] if inside else None
-            except shapely.errors.GEOSException:
-                coverage = on_net = net_coverage(layout.mesh, design, h)
+        coverage, on_net, hole = _lattice_cover(layout, judged_on)
         tried.append({"smoothing_panels": length, "used": layout.smoothing,
                       "field": layout.direction_field, "coverage": coverage})
         if coverage > best_coverage:
@@ -291,19 +275,61 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     # a few panels' raw lattice stops a panel short of the boundary all round: only
     # larger designs are judged by the share their quads cover and the gaps they leave
     judged = refuse_broken and design.area / (h * h) >= s.min_panels_judged
-    lengths = [float(t["smoothing_panels"] or 0.0) for t in tried]
     if judged:
-        if best_net is None:
-            best_net = net_coverage(best.mesh, judged_on or design, h)
-        if best_net < s.min_lattice_share:
-            raise InputError(_broken_lattice(best, best_net, lengths))
-        if best_hole is not None and best_hole["area_relative_to_panel"] > s.max_gap_panels:
-            raise InputError(_broken_lattice(best, best_net, lengths, best_hole))
+        _refuse_broken(best, best_net, best_hole, tried, judged_on or design, s)
     best.smoothing_tried = tried
     best.max_gap_panels = s.max_gap_panels if judged else None
     # the other smoothing lengths tried, and judging them, took time too
     best.seconds["other_tries"] = max(time.perf_counter() - clock - sum(best.seconds.values()), 0.0)
     return best
+
+
+def _lattice_cover(layout: SurfaceLayout, judged_on: DesignSurface | None
+                   ) -> tuple[float, float, dict | None]:
+    """What a layout's lattice clads, as `layout_surface` judges it: the share of the
+    design covered with its boundary panels, by its quads alone, and the largest gap
+    inside the design (`fabplan.layout.coverage.coverage_gaps`; None where there is none).
+    With `judged_on` (the design a continued one is kept over), its quads over that."""
+    design, h = layout.design, layout.panel_size
+    # judged with the boundary panels the net will get: the staircase along the
+    # boundary is theirs to clad; what they cannot reach are the lattice's own holes
+    hole = None
+    if judged_on is not None:
+        coverage, gaps = net_cover(layout.mesh, judged_on, h)
+        on_net, hole = coverage, gaps[0] if gaps else None
+    else:
+        try:
+            # the lattice as it is: patches would hide the holes a smoother field avoids
+            panels = trim_to_design(layout.mesh, layout, patch_gaps=False)
+            coverage, on_net = panels.coverage, panels.coverage_net
+            # a gap inside the design; one at its boundary the glide partly closes (the
+            # boundary vertices move onto the boundary): judged after it
+            inside = [g for g in panels.gaps if not g["at_design_boundary"]]
+            hole = inside[0] if inside else None
+        except shapely.errors.GEOSException:
+            coverage = on_net = net_coverage(layout.mesh, design, h)
+    return coverage, on_net, hole
+
+
+def _refuse_broken(best: SurfaceLayout, best_net: float | None, best_hole: dict | None,
+                   tried: list, judged_on: DesignSurface, s: LayoutSettings) -> None:
+    """Refuse the layout kept (`layout_surface`) where its quads clad less than
+    `LayoutSettings.min_lattice_share` of `judged_on` (`best_net`, measured here when
+    None) or leave a gap inside it larger than `LayoutSettings.max_gap_panels`
+    (`best_hole`), naming the smoothing lengths `tried`.
+
+    Raises
+    ------
+    InputError
+        Saying why the lattice does not hold together (`_broken_lattice`).
+    """
+    lengths = [float(t["smoothing_panels"] or 0.0) for t in tried]
+    if best_net is None:
+        best_net = net_coverage(best.mesh, judged_on, best.panel_size)
+    if best_net < s.min_lattice_share:
+        raise InputError(_broken_lattice(best, best_net, lengths))
+    if best_hole is not None and best_hole["area_relative_to_panel"] > s.max_gap_panels:
+        raise InputError(_broken_lattice(best, best_net, lengths, best_hole))
 
 
 def _doubled_past(tried: dict, length: float) -> bool:
@@ -559,31 +585,59 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         `max_gap_panels` (its lattice broke there).
     """
     from ..solve.net_types import get_net
-    from ..solve.optimize import optimize
 
-    design = layout.design
     if get_net(net).dual:
         raise InputError(f"net type {net!r}: layouts are computed for S-nets; optimize the "
                          "S-net first and then the S*-net with `fabplan optimize`")
+    solve = partial(_solve_gliding, net=net, angle=angle, radius=radius, settings=settings,
+                    surface_tolerance=surface_tolerance, progress=progress,
+                    edge_range=edge_range, max_line_turn=max_line_turn)
+    layout, result = _without_unsound_faces(layout, fixed, solve(layout, fixed), solve)
+    _measure_on_design(result, layout)
+    if boundary_panels:
+        panels = add_boundary_panels(result, layout)
+        if panels is not None and panels.gaps and layout.max_gap_panels is not None and \
+                panels.gaps[0]["area_relative_to_panel"] > layout.max_gap_panels:
+            raise InputError(_broken_lattice(layout, panels.coverage_net, None, panels.gaps[0]))
+    result.properties["layout"] = layout.record()
+    result.parameters["panel_size"] = layout.panel_size
+    return result
 
-    def solve(layout: SurfaceLayout, fixed: np.ndarray | None) -> OptimizationResult:
-        extra: tuple[Constraint, ...] = ()
-        # a prescribed family's levels are read on the surface: its nets are held on it
-        tolerance = 0.0 if layout.prescribed is not None else surface_tolerance
-        if layout.prescribed is not None:
-            on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
-            extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
-                                  layout.vertex_keys[on_level, 0]),)
-        # edges within their range (the shorter ones at their start length)
-        extra += (EdgeLengthRange(edge_range[0] * layout.panel_size,
-                                  edge_range[1] * layout.panel_size),)
-        return optimize(layout.mesh, net, angle=angle, radius=radius, reference=design.reference,
-                        fixed=fixed, settings=settings, glide=True,
-                        glide_boundary=layout.gliding_boundary,
-                        surface_tolerance=tolerance * layout.panel_size, extra=extra,
-                        max_line_turn=max_line_turn, progress=progress)
 
-    result = solve(layout, fixed)
+def _solve_gliding(layout: SurfaceLayout, fixed: np.ndarray | None, *, net: str,
+                   angle: float | None, radius: float | None, settings: SolverSettings | None,
+                   surface_tolerance: float, progress: Callable[[IterationRecord], None] | None,
+                   edge_range: tuple[float, float], max_line_turn: float) -> OptimizationResult:
+    """One solve of `glide`: the layout's mesh optimized into a net of type `net` on its
+    design, its vertices `fixed` held (the options as `glide` takes them)."""
+    from ..solve.optimize import optimize
+
+    design = layout.design
+    extra: tuple[Constraint, ...] = ()
+    # a prescribed family's levels are read on the surface: its nets are held on it
+    tolerance = 0.0 if layout.prescribed is not None else surface_tolerance
+    if layout.prescribed is not None:
+        on_level = np.flatnonzero(np.isfinite(layout.vertex_keys[:, 0]))
+        extra = (FamilyLevels(design.reference, layout.prescribed, on_level,
+                              layout.vertex_keys[on_level, 0]),)
+    # edges within their range (the shorter ones at their start length)
+    extra += (EdgeLengthRange(edge_range[0] * layout.panel_size,
+                              edge_range[1] * layout.panel_size),)
+    return optimize(layout.mesh, net, angle=angle, radius=radius, reference=design.reference,
+                    fixed=fixed, settings=settings, glide=True,
+                    glide_boundary=layout.gliding_boundary,
+                    surface_tolerance=tolerance * layout.panel_size, extra=extra,
+                    max_line_turn=max_line_turn, progress=progress)
+
+
+def _without_unsound_faces(layout: SurfaceLayout, fixed: np.ndarray | None,
+                           result: OptimizationResult,
+                           solve: Callable[[SurfaceLayout, np.ndarray | None], OptimizationResult]
+                           ) -> tuple[SurfaceLayout, OptimizationResult]:
+    """The layout and its glided net `result` less the faces that are no panels
+    (`sound_faces`): dropped from the layout and the net solved again (`solve`), up to
+    `RECUTS` times, while the net solved again converges."""
+    design = layout.design
     for _ in range(RECUTS):
         # gliding on the boundary, a face may come to span a corner of it (a door's) or
         # line up three corners along it: it is no panel, and its place is cut as
@@ -606,6 +660,13 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
             # trimming reports its faces off the design
             break
         layout, fixed, result = kept, kept_fixed, again
+    return layout, result
+
+
+def _measure_on_design(result: OptimizationResult, layout: SurfaceLayout) -> None:
+    """Record in `result`'s properties how far its net lies from the design and how long
+    its edges are, in model units and panel sizes (`glide`)."""
+    design = layout.design
     X = result.mesh.vertices
     d = design.distances(X)
     length = np.linalg.norm(X[result.mesh.edges[:, 0]] - X[result.mesh.edges[:, 1]], axis=1)
@@ -623,14 +684,6 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     # a closest-point search per triangle, so it is measured only when that matters
     off = d.max() > 0.01 * layout.panel_size and design.parametric is not None
     result.properties["design_chord_error"] = design.chord_error if off else None
-    if boundary_panels:
-        panels = add_boundary_panels(result, layout)
-        if panels is not None and panels.gaps and layout.max_gap_panels is not None and \
-                panels.gaps[0]["area_relative_to_panel"] > layout.max_gap_panels:
-            raise InputError(_broken_lattice(layout, panels.coverage_net, None, panels.gaps[0]))
-    result.properties["layout"] = layout.record()
-    result.parameters["panel_size"] = layout.panel_size
-    return result
 
 
 #: a glided net is checked this many times for faces that are no panels (`sound_faces`);

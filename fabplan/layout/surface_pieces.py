@@ -113,16 +113,7 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     # the net vertices of its panel
     sizes = np.array([len(r) for r in rings])
     piece = np.repeat(np.arange(len(rings)), sizes)
-    weight = is_net.astype(np.float64)
-    count = np.bincount(piece, weight, minlength=len(rings))
-    anchor = np.stack([np.bincount(piece, weight * mesh.vertices[nearest, k], minlength=len(rings))
-                       for k in range(3)], axis=1) / np.maximum(count, 1)[:, None]
-    # a panel without a net vertex has no sheet to prefer (NaN); the others keep theirs
-    anchor[count == 0] = np.nan
-    if sheets is not None:
-        # where the plane holds several sheets, the piece is on that of the design
-        # triangles it was cut from (the net vertices in its ring may be another's)
-        anchor = _piece_anchors(pieces, *sheets, chart, anchor)
+    anchor = _sheet_anchors(pieces, piece, is_net, mesh.vertices[nearest], sheets, chart)
     near = anchor[piece[other[first]]] if other.size else np.zeros((0, 3))
     # over a seam a point on one sheet's boundary may be inside another sheet's triangle
     # only, to rounding: the triangles within `tol` are candidates too
@@ -146,6 +137,38 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     # drop repeated consecutive ids (two points of one ring mapped to one net vertex)
     polygons = [q[np.r_[True, q[1:] != q[:-1]] & ~((np.arange(len(q)) == len(q) - 1) & (q == q[0]))]
                 for q in polygons]
+    corner = _corner_points(polygons, on_boundary, touching, on_ray)
+    return vertices, polygons, on_boundary, corner, ring_ids, on_side
+
+
+def _sheet_anchors(pieces: np.ndarray, piece: np.ndarray, is_net: np.ndarray,
+                   nearest: np.ndarray,
+                   sheets: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
+                   chart: ParameterChart) -> np.ndarray:
+    """(p, 3) float, a point on the sheet of the design each of the `pieces` (p,) maps
+    to, where the plane holds several: the centroid of the net vertices in its ring (its
+    ring's points `piece` (r,) int, `is_net` (r,) bool, and `nearest` (r, 3) the net
+    vertex nearest each), NaN where it has none; with `sheets`, that of the design
+    triangles it was cut from (`_piece_anchors`)."""
+    weight = is_net.astype(np.float64)
+    count = np.bincount(piece, weight, minlength=len(pieces))
+    anchor = np.stack([np.bincount(piece, weight * nearest[:, k], minlength=len(pieces))
+                       for k in range(3)], axis=1) / np.maximum(count, 1)[:, None]
+    # a panel without a net vertex has no sheet to prefer (NaN); the others keep theirs
+    anchor[count == 0] = np.nan
+    if sheets is not None:
+        # where the plane holds several sheets, the piece is on that of the design
+        # triangles it was cut from (the net vertices in its ring may be another's)
+        anchor = _piece_anchors(pieces, *sheets, chart, anchor)
+    return anchor
+
+
+def _corner_points(polygons: list, on_boundary: np.ndarray, touching: np.ndarray,
+                   on_ray: np.ndarray) -> np.ndarray:
+    """(m,) bool, the panels' corners: the net's vertices, points off the design
+    boundary, ends of the rays (`on_ray` (m,) bool) and where an outline meets or leaves
+    the boundary (`on_boundary` (m,) bool; the net's vertices by `touching` (n,) bool)."""
+    n = len(touching)
     # a corner is off the boundary, ends a line, or is where the outline meets or leaves
     # the boundary; the points between follow the boundary curve
     ring = np.concatenate(polygons)
@@ -153,9 +176,9 @@ def _to_surface(pieces: np.ndarray, mesh: QuadMesh, p_net: np.ndarray, chart: Pa
     after = np.concatenate([np.roll(q, -1) for q in polygons])
     ob = on_boundary.copy()
     ob[:n] = touching
-    corner = np.zeros(len(vertices), bool)
+    corner = np.zeros(len(on_ray), bool)
     corner[ring[(ring < n) | ~ob[ring] | ~ob[before] | ~ob[after] | on_ray[ring]]] = True
-    return vertices, polygons, on_boundary, corner, ring_ids, on_side
+    return corner
 
 
 def _net_side_points(points: np.ndarray, p_net: np.ndarray, mesh: QuadMesh, tol: float

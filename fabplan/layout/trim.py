@@ -43,6 +43,7 @@ their zigzags (`fabplan.layout.outlines`). What is still wrong is measured and r
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
 import igl
@@ -133,81 +134,29 @@ def trim_to_design(mesh: QuadMesh, layout: ChartedLayout, *, min_panel: float = 
     """
     clock = time.perf_counter()
     design, h = layout.design, layout.panel_size
-    chart = layout.chart
-    p_net, cell, grid, touching = net_in_plane(mesh, chart, design, h, touch,
-                                               onto_boundary=touch > TOUCH)
-    by_sheet = bool(layout.cuts) and chart.overlapping
-    pieces, rays, patch, sheets = pieces_in_plane(mesh, layout.cuts, chart, p_net, touching,
-                                                  by_sheet, cell, grid, min_panel, h)
-    vertices, polygons, on_boundary, corner, on_side, triangles, owner, patch = \
-        pieces_on_surface(pieces, rays, patch, sheets, mesh, p_net, chart, touching, by_sheet,
-                          4 * grid, h)
-    offset = np.zeros((0, 3))
-    # where the panels stand over the design: their points before the lift (which is
-    # along the design's normals)
-    footprint = vertices
+    cut, touching = _cut(mesh, layout, min_panel, touch)
     followed = (mesh.vertices, design) if follow is None else follow
-    if follow_net and len(vertices) > mesh.vertex_count:
+    if follow_net and len(cut.vertices) > mesh.vertex_count:
         # lifted before the outlines are checked: what crosses is judged where it is cut
-        offset = _follow_net(vertices[mesh.vertex_count:], *followed)
-        # the points on the net's sides are where the net is already
-        offset[on_side[mesh.vertex_count:]] = 0.0
-        vertices = vertices.copy()
-        vertices[mesh.vertex_count:] += offset
-    polygons, changed, crossed = untangled(vertices, polygons, corner)
-    triangles, owner = retriangulated(vertices, polygons, triangles, owner, changed)
+        cut.lift(mesh.vertex_count, followed)
+    cut.untangle()
     recut, recut_area = 0, 0.0
     if patch_gaps:
         # checked on the surface: what the plane cut wrongly (off the design, over a hole;
         # crossing itself; facing against the design; over the net or another panel) is
         # left out, and its place is cut again in its tangent plane with the gaps below
-        unsound = unsound_pieces(footprint, polygons, triangles, owner, mesh, design, h)
-        recut = int(unsound.sum())
-        T = footprint[triangles[unsound[owner]]]
-        recut_area = float(0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]),
-                                                axis=1).sum())
-        polygons, triangles, owner, patch = without_pieces(polygons, triangles, owner, patch,
-                                                           unsound)
-    # coverage is measured on the surface, independently of the plane (`_under`), by the
-    # panels' footprints: lifted with a net that leaves the design, a panel tilts against
-    # it where the lift changes fast (a corner), and would seem to leave a gap beside it
+        recut, recut_area = cut.leave_out_unsound(mesh, design, h)
+    # coverage is measured on the surface, independently of the plane
+    # (`fabplan.layout.coverage`), by the panels' footprints: lifted with a net that leaves
+    # the design, a panel tilts against it where the lift changes fast (a corner), and
+    # would seem to leave a gap beside it
     samples, normals, weight = design_samples(design)
     on_net = clad_points(samples, normals, mesh.vertices, mesh.triangles(), h)
-    on_any = on_net | clad_points(samples, normals, footprint,
-                                  np.vstack([mesh.triangles(), triangles]), h)
-    # the small gaps left (pieces around singular points the plane could not cut) are
-    # cut in their own tangent planes
-    # a gap where pieces were left out is no failure of the layout: it is patched however
-    # large those pieces were
-    extra = gap_patches(design, footprint, np.vstack([mesh.triangles(), triangles]), on_any, h,
-                        max_panels=MAX_GAP_PANELS + recut_area / (h * h)) if patch_gaps else None
-    if extra is not None and extra.count:
-        owner = np.r_[owner, len(polygons) + extra.owner]
-        lifted = np.zeros((len(extra.points), 3))
-        if follow_net and len(extra.points):
-            # the patches' new points are on the design: they stand off it with the net too
-            lifted = _follow_net(extra.points, *followed)
-            offset = np.vstack([offset, lifted])
-        vertices = np.vstack([vertices, extra.points + lifted])
-        footprint = np.vstack([footprint, extra.points])
-        polygons = polygons + extra.polygons
-        triangles = np.vstack([triangles, extra.triangles])
-        patch = np.r_[patch, np.ones(extra.count, bool)]
-        on_boundary = np.r_[on_boundary, extra.on_boundary]
-        corner = np.r_[corner, ~extra.on_boundary]
-        on_any |= clad_points(samples, normals, footprint, np.vstack([mesh.triangles(), triangles]), h)
-    if extra is not None and extra.count:
-        # a patch's outline may run out along the boundary past a neighbour's corner and
-        # back (a sliver of no width between the two): the spike goes
-        polygons, changed, _ = untangled(vertices, polygons, corner)
-        triangles, owner = retriangulated(vertices, polygons, triangles, owner, changed)
-        # a patch cut in its plane that still clashes (rare) is left out: a gap, reported
-        unsound = unsound_pieces(footprint, polygons, triangles, owner, mesh, design, h)
-        if unsound.any():
-            polygons, triangles, owner, patch = without_pieces(polygons, triangles, owner,
-                                                               patch, unsound)
-            on_any = on_net | clad_points(samples, normals, footprint,
-                                          np.vstack([mesh.triangles(), triangles]), h)
+    on_any = on_net | cut.clad(samples, normals, mesh, h)
+    if patch_gaps:
+        on_any = _patch_gaps(cut, mesh, design, h, (samples, normals, on_net, on_any),
+                             recut_area, followed if follow_net else None)
+    vertices, polygons, triangles, owner = cut.vertices, cut.polygons, cut.triangles, cut.owner
     T = vertices[triangles]
     tri_area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     area = np.bincount(owner, tri_area, minlength=len(polygons))
@@ -218,17 +167,151 @@ def trim_to_design(mesh: QuadMesh, layout: ChartedLayout, *, min_panel: float = 
     sound = soundness(vertices, polygons, triangles, owner, mesh, design, h)
     return BoundaryPanels(
         vertices=vertices, polygons=polygons, net_vertex_count=mesh.vertex_count,
-        on_boundary=on_boundary, corner=corner, neighbour_face=neighbour,
+        on_boundary=cut.on_boundary, corner=cut.corner, neighbour_face=neighbour,
         area=area, panel_size=h, extension=extension,
         coverage_net=float(weight[on_net].sum() / weight.sum()),
         coverage=float(weight[on_any].sum() / weight.sum()),
-        flipped=flipped[~extension[flipped]], crossed=crossed, patch=patch,
-        boundary_distance_max=_boundary_distance(design, vertices[on_boundary]) / h,
+        flipped=flipped[~extension[flipped]], crossed=crossed, patch=cut.patch,
+        boundary_distance_max=_boundary_distance(design, vertices[cut.on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
         net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h),
         follows_net=follow_net,
-        offset_max=float(np.linalg.norm(offset, axis=1).max()) if len(offset) else 0.0,
+        offset_max=float(np.linalg.norm(cut.offset, axis=1).max()) if len(cut.offset) else 0.0,
         soundness=sound.record(h, recut))
+
+
+@dataclass
+class _Trimming:
+    """The boundary panels while `trim_to_design` cuts them: the arrays its steps share.
+
+    Attributes
+    ----------
+    vertices : (m, 3) float, the net's vertices, then the panels' points (lifted off the
+        design with a net that left it, `lift`).
+    footprint : (m, 3) float, the same points before the lift: where the panels stand
+        over the design (the lift is along the design's normals).
+    polygons : list of (k,) int arrays, the panels' outlines into `vertices`.
+    on_boundary, corner : (m,) bool, points on the design's boundary curve; panel corners.
+    on_side : (m,) bool, points put on a boundary side of the net.
+    triangles : (t, 3) int, the panels' triangles; owner : (t,) int, the panel of each.
+    patch : (p,) bool, the panels that close a hole inside the net.
+    offset : (k, 3) float, the lift of each point after the net's (none without one).
+    """
+
+    vertices: np.ndarray
+    footprint: np.ndarray
+    polygons: list
+    on_boundary: np.ndarray
+    corner: np.ndarray
+    on_side: np.ndarray
+    triangles: np.ndarray
+    owner: np.ndarray
+    patch: np.ndarray
+    offset: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def lift(self, n: int, followed: tuple) -> None:
+        """The points after the net's `n` vertices stand off the design as the net does
+        near them (`_follow_net` of `followed`, ``(points, surface)``)."""
+        self.offset = _follow_net(self.vertices[n:], *followed)
+        # the points on the net's sides are where the net is already
+        self.offset[self.on_side[n:]] = 0.0
+        self.vertices = self.vertices.copy()
+        self.vertices[n:] += self.offset
+
+    def untangle(self) -> None:
+        """The outlines without their zigzags, and the panels that changed cut into
+        triangles again (`fabplan.layout.outlines`)."""
+        self.polygons, changed, _ = untangled(self.vertices, self.polygons, self.corner)
+        self.triangles, self.owner = retriangulated(self.vertices, self.polygons, self.triangles,
+                                                    self.owner, changed)
+
+    def unsound(self, mesh: QuadMesh, design: DesignSurface, h: float) -> np.ndarray:
+        """(p,) bool, the panels to leave out (`fabplan.layout.soundness.unsound_pieces`),
+        judged where they stand over the design."""
+        return unsound_pieces(self.footprint, self.polygons, self.triangles, self.owner, mesh,
+                              design, h)
+
+    def drop(self, unsound: np.ndarray) -> None:
+        """The panels less those marked in `unsound` (p,) bool."""
+        self.polygons, self.triangles, self.owner, self.patch = without_pieces(
+            self.polygons, self.triangles, self.owner, self.patch, unsound)
+
+    def leave_out_unsound(self, mesh: QuadMesh, design: DesignSurface, h: float
+                          ) -> tuple[int, float]:
+        """Leave out the panels the plane cut wrongly (`unsound`): how many, and their area
+        over the design (model units squared), which the gap patches cut again."""
+        unsound = self.unsound(mesh, design, h)
+        recut = int(unsound.sum())
+        T = self.footprint[self.triangles[unsound[self.owner]]]
+        recut_area = float(0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]),
+                                                axis=1).sum())
+        self.drop(unsound)
+        return recut, recut_area
+
+    def clad(self, samples: np.ndarray, normals: np.ndarray, mesh: QuadMesh, h: float
+             ) -> np.ndarray:
+        """(s,) bool, the design's `samples` the net and the panels' footprints clad."""
+        return clad_points(samples, normals, self.footprint,
+                           np.vstack([mesh.triangles(), self.triangles]), h)
+
+
+def _cut(mesh: QuadMesh, layout: ChartedLayout, min_panel: float, touch: float
+         ) -> tuple[_Trimming, np.ndarray]:
+    """The panels cut in the plane of the layout's parameters and mapped to the surface
+    (steps 1 to 3 of the module's text), and (n,) bool, the net's vertices on the design
+    boundary (to `touch` of a panel)."""
+    design, h = layout.design, layout.panel_size
+    chart = layout.chart
+    p_net, cell, grid, touching = net_in_plane(mesh, chart, design, h, touch,
+                                               onto_boundary=touch > TOUCH)
+    by_sheet = bool(layout.cuts) and chart.overlapping
+    pieces, rays, patch, sheets = pieces_in_plane(mesh, layout.cuts, chart, p_net, touching,
+                                                  by_sheet, cell, grid, min_panel, h)
+    vertices, polygons, on_boundary, corner, on_side, triangles, owner, patch = \
+        pieces_on_surface(pieces, rays, patch, sheets, mesh, p_net, chart, touching, by_sheet,
+                          4 * grid, h)
+    return _Trimming(vertices, vertices, polygons, on_boundary, corner, on_side, triangles,
+                     owner, patch), touching
+
+
+def _patch_gaps(cut: _Trimming, mesh: QuadMesh, design: DesignSurface, h: float,
+                coverage: tuple, recut_area: float, followed: tuple | None) -> np.ndarray:
+    """The small gaps left (pieces around singular points the plane could not cut, the
+    place of those left out) closed with patches cut in their own tangent planes
+    (`fabplan.layout.gap_patches`), added to `cut`; `coverage` ``(samples, normals,
+    on_net, on_any)`` as `trim_to_design` measures it; `followed` as in
+    `_Trimming.lift`, None where the net stays on the design. Returns `on_any` (s,) bool
+    with the patches."""
+    samples, normals, on_net, on_any = coverage
+    # a gap where pieces were left out is no failure of the layout: it is patched however
+    # large those pieces were
+    extra = gap_patches(design, cut.footprint, np.vstack([mesh.triangles(), cut.triangles]),
+                        on_any, h, max_panels=MAX_GAP_PANELS + recut_area / (h * h))
+    if not extra.count:
+        return on_any
+    cut.owner = np.r_[cut.owner, len(cut.polygons) + extra.owner]
+    lifted = np.zeros((len(extra.points), 3))
+    if followed is not None and len(extra.points):
+        # the patches' new points are on the design: they stand off it with the net too
+        lifted = _follow_net(extra.points, *followed)
+        cut.offset = np.vstack([cut.offset, lifted])
+    cut.vertices = np.vstack([cut.vertices, extra.points + lifted])
+    cut.footprint = np.vstack([cut.footprint, extra.points])
+    cut.polygons = cut.polygons + extra.polygons
+    cut.triangles = np.vstack([cut.triangles, extra.triangles])
+    cut.patch = np.r_[cut.patch, np.ones(extra.count, bool)]
+    cut.on_boundary = np.r_[cut.on_boundary, extra.on_boundary]
+    cut.corner = np.r_[cut.corner, ~extra.on_boundary]
+    on_any |= cut.clad(samples, normals, mesh, h)
+    # a patch's outline may run out along the boundary past a neighbour's corner and
+    # back (a sliver of no width between the two): the spike goes
+    cut.untangle()
+    # a patch cut in its plane that still clashes (rare) is left out: a gap, reported
+    unsound = cut.unsound(mesh, design, h)
+    if unsound.any():
+        cut.drop(unsound)
+        on_any = on_net | cut.clad(samples, normals, mesh, h)
+    return on_any
 
 
 def _follow_net(points: np.ndarray, net: np.ndarray, design: DesignSurface,
