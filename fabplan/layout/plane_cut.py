@@ -58,8 +58,8 @@ def net_in_plane(mesh: QuadMesh, chart: ParameterChart, design: DesignSurface, h
 def pieces_in_plane(mesh: QuadMesh, cuts: list, chart: ParameterChart, p_net: np.ndarray,
                     touching: np.ndarray, by_sheet: bool, cell: float, grid: float,
                     min_panel: float, h: float) -> tuple:
-    """The unclad strip of the plane cut into pieces by the net's lines (`trim_to_design`,
-    steps 1 and 2 of the module's text).
+    """The unclad strip of the plane cut into pieces by the net's lines (steps 1 and 2 of
+    `fabplan.layout.trim`).
 
     Returns
     -------

@@ -22,8 +22,8 @@ def pieces_on_surface(pieces: np.ndarray, rays: np.ndarray, patch: np.ndarray,
                       sheets: tuple | None, mesh: QuadMesh, p_net: np.ndarray,
                       chart: ParameterChart, touching: np.ndarray, by_sheet: bool,
                       tol: float, h: float) -> tuple:
-    """The pieces of the plane mapped to the surface (`_to_surface`, step 3 of the
-    module's text), less those that map across a seam or clad the design twice.
+    """The pieces of the plane mapped to the surface (`_to_surface`, step 3 of
+    `fabplan.layout.trim`), less those that map across a seam or clad the design twice.
 
     Returns
     -------
