@@ -197,7 +197,7 @@ def test_a_net_off_its_design_gets_few_molds_of_its_own(off_design):
     assert bp["panels"] >= 12          # enough boundary panels for the count to mean something
     assert bp["own_molds"] <= record["mold_count"]
     assert bp["on_molds_full_panels_use"] >= bp["panels"] - bp["own_molds"]
-    from fabplan.layout.trim import read_boundary_panels
+    from fabplan.layout.boundary_panels import read_boundary_panels
     from fabplan.net.mesh import load_mesh
 
     mesh = load_mesh(folder / "net.obj")
@@ -265,7 +265,7 @@ def test_flat_boundary_panels_are_found_again_from_their_file(flat_glass):
     """Read back from NET.boundary.obj (the panels as made), the flat panels slide no
     further and sit where they did; `fabplan molds` on the files writes the same, rechecked
     from its files alone: every step within the limit and no mold in all."""
-    from fabplan.layout.trim import read_boundary_panels
+    from fabplan.layout.boundary_panels import read_boundary_panels
 
     net, _, plan, molds, folder = flat_glass
     panels = read_boundary_panels(net.mesh, folder / "net.boundary.obj",

@@ -274,27 +274,22 @@ LONG_FUNCTIONS = {
                                           "it imports when first served",
     "fabplan.solve.pattern:normal_pattern": "one computation in four numbered steps "
                                             "sharing their index arrays",
-    "fabplan.layout.trim:trim_to_design": "to split further: the lift, recut and gap patches "
-                                          "share a dozen arrays (needs a state object)",
-    "fabplan.layout.trim:slide_splits": "a 46-line docstring; one sweep over the split points",
-    "fabplan.layout.surface_layout:glide": "to split: one glide with its retries in order",
     "fabplan.fabricate.arcs:_edge_tangents": "one computation in four numbered steps sharing "
                                              "the tangent, normal and decided arrays; step 3 is "
                                              "one front loop over them",
-    "fabplan.layout.extraction:fill_boundary_cells": "one pass over the boundary cells",
-    "fabplan.layout.view:net_numbers": "one table of a record's numbers, row by row",
-    "fabplan.layout.surface_layout:layout_surface": "the layout pipeline, each stage a call, "
-                                                    "with its retries",
-    "fabplan.layout.starts:glide_fairest": "one search over start points",
     "fabplan.fabricate.strips.unrolling:unroll_polylines": "a 30-line docstring with its doctest; "
                                                            "one vectorized unrolling, each line "
                                                            "an array of all nodes",
     "fabplan.fabricate.molds.panel_classes:cone_fits": "one Levenberg-Marquardt fit, its "
                                                        "parameter steps and costs local "
                                                        "functions of the same arrays",
-    "fabplan.layout.trim:_to_surface": "one mapping of the pieces to the surface",
-    "fabplan.layout.extraction:extract_quads": "one extraction, step by step",
-    "fabplan.layout.trim:_unclad_by_sheet": "a 27-line docstring; one overlay by sheet",
+    "fabplan.layout.extraction:fill_boundary_cells": "a 24-line docstring; one loop of passes "
+                                                     "over the boundary cells, each predicting, "
+                                                     "snapping and accepting corners on key "
+                                                     "tables it rebuilds",
+    "fabplan.layout.view:net_numbers": "one table of a record's numbers, row by row",
+    "fabplan.layout.starts:glide_fairest": "a 28-line docstring; one loop over the starts, "
+                                           "each laid out, glided and judged in turn",
 }
 
 

@@ -226,7 +226,7 @@ def test_outlines_that_turn_back_at_a_vertex_off_the_boundary_are_untangled():
     """A net vertex past the design boundary, followed by boundary points behind it: the
     outline runs out and back (a zigzag). Its points that only follow the boundary go;
     a crossing of corners stays and is reported."""
-    from fabplan.layout.trim import _untangled
+    from fabplan.layout.outlines import untangled
 
     # a panel: net vertices 0, 1 (1 is 4 cm past the edge x = 1), then edge points 2..4
     V = np.array([[0.0, 0.0, 0], [1.04, 0.0, 0], [1.0, -0.03, 0], [1.0, 0.5, 0], [1.0, 1.0, 0],
@@ -234,17 +234,17 @@ def test_outlines_that_turn_back_at_a_vertex_off_the_boundary_are_untangled():
     corner = np.array([True, True, False, False, True, True])
     ring = np.array([0, 1, 2, 3, 4, 5])
     assert _crossing_outlines(V, [ring]) == [0]
-    polygons, changed, crossed = _untangled(V, [ring], corner)
+    polygons, changed, crossed = untangled(V, [ring], corner)
     assert polygons[0].tolist() == [0, 1, 3, 4, 5] and changed.tolist() == [0] and len(crossed) == 0
     assert _crossing_outlines(V, polygons) == []
     # an outline that runs along the edge past a point and back over itself (a spike)
     spike = np.array([[0.0, 0, 0], [1, 0, 0], [1.5, 0, 0], [1.2, 0, 0], [1.2, 1, 0], [0, 1, 0]])
-    polygons, changed, crossed = _untangled(spike, [np.arange(6)],
+    polygons, changed, crossed = untangled(spike, [np.arange(6)],
                                             np.array([True, False, False, False, True, True]))
     assert polygons[0].tolist() == [0, 1, 3, 4, 5] and len(crossed) == 0
     # a bow tie of corners only cannot be untangled: reported
     bow = np.array([[0.0, 0, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0]])
-    polygons, _, crossed = _untangled(bow, [np.arange(4)], np.ones(4, bool))
+    polygons, _, crossed = untangled(bow, [np.arange(4)], np.ones(4, bool))
     assert crossed.tolist() == [0] and polygons[0].tolist() == [0, 1, 2, 3]
 
 
@@ -301,7 +301,7 @@ def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
     """A net solved away from the design stands off it and tilts against it: a design
     point under it sees its closest net point off its own normal. It is clad; a point
     under a missing face is not (the rim of the gap is the net's free edge)."""
-    from fabplan.layout.trim import net_coverage
+    from fabplan.layout.coverage import net_coverage
     from fabplan.net.mesh import QuadMesh
 
     # the design: the flat square [0, 1.5]^2, finely triangulated
@@ -345,10 +345,10 @@ def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
 
 
 def _gaps(net, design: DesignSurface, h: float) -> list:
-    from fabplan.layout.trim import _clad, _design_samples, coverage_gaps
+    from fabplan.layout.coverage import clad_points, coverage_gaps, design_samples
 
-    samples, normals, weight = _design_samples(design)
-    clad = _clad(samples, normals, net.vertices, net.triangles(), h)
+    samples, normals, weight = design_samples(design)
+    clad = clad_points(samples, normals, net.vertices, net.triangles(), h)
     return coverage_gaps(design, samples, weight, clad, h)
 
 
@@ -390,16 +390,16 @@ def test_small_gaps_are_patched_in_their_tangent_plane():
     """A gap of a panel inside the cladding is closed by a patch whose corners are the
     cladding's own; one at the design's edge by a patch whose new corners lie on the
     design boundary; the design is then clad whole (measured by the samples)."""
+    from fabplan.layout.coverage import clad_points, design_samples
     from fabplan.layout.gap_patches import gap_patches
-    from fabplan.layout.trim import _clad, _design_samples
 
     # the cladding: a 6 x 6 grid over [-0.25, 1.75]^2 on the surface, less two faces
     design, whole = _gently_curved(1.5, 30, 6, 0.25, 0.05)
     net, _ = _net_without(whole, [[0.75, 0.75], [1.58, 0.75]])      # the second over x = 1.5
     inside = _net_without(whole, [[0.75, 0.75]])[1].pop()
     h = 2.0 / 6
-    samples, normals, weight = _design_samples(design)
-    clad = _clad(samples, normals, net.vertices, net.triangles(), h)
+    samples, normals, weight = design_samples(design)
+    clad = clad_points(samples, normals, net.vertices, net.triangles(), h)
     assert weight[~clad].sum() > 0.9 * h * h                  # a panel and more are unclad
     patches = gap_patches(design, net.vertices, net.triangles(), clad, h)
     assert patches.count == 2
@@ -411,7 +411,7 @@ def test_small_gaps_are_patched_in_their_tangent_plane():
     assert np.abs(patches.points[:, 0] - 1.5).max() < 1e-9   # new corners on the edge x = 1.5
     points = np.vstack([net.vertices, patches.points])
     everything = np.vstack([net.triangles(), patches.triangles])
-    assert weight[_clad(samples, normals, points, everything, h)].sum() == pytest.approx(
+    assert weight[clad_points(samples, normals, points, everything, h)].sum() == pytest.approx(
         weight.sum(), rel=1e-6)
 
 
@@ -440,15 +440,15 @@ def test_a_net_left_the_design_is_trimmed_without_strips_along_its_edge(tmp_path
 def test_a_gap_of_several_panels_is_patched_in_pieces_of_about_one():
     """A hole of three panels is cut into pieces of about a panel that share their new
     corners (no point twice) and clad it whole."""
+    from fabplan.layout.coverage import clad_points, design_samples
     from fabplan.layout.gap_patches import gap_patches
-    from fabplan.layout.trim import _clad, _design_samples
 
     design, whole = _gently_curved(3.0, 40, 8, 0.5, 0.04)
     # a bent hole of three faces in the middle
     net, _ = _net_without(whole, [[1.25, 1.25], [1.75, 1.25], [1.75, 1.75]])
     h = 0.5
-    samples, normals, weight = _design_samples(design)
-    clad = _clad(samples, normals, net.vertices, net.triangles(), h)
+    samples, normals, weight = design_samples(design)
+    clad = clad_points(samples, normals, net.vertices, net.triangles(), h)
     patches = gap_patches(design, net.vertices, net.triangles(), clad, h)
     assert 2 <= patches.count <= 8
     P = np.vstack([net.vertices, patches.points])
@@ -458,7 +458,8 @@ def test_a_gap_of_several_panels_is_patched_in_pieces_of_about_one():
     assert sum(area) == pytest.approx(3 * h * h, rel=0.02)
     assert max(np.bincount(patches.owner, area)) <= 1.5 * h * h
     everything = np.vstack([net.triangles(), patches.triangles])
-    assert weight[_clad(samples, normals, P, everything, h)].sum() == pytest.approx(weight.sum(), rel=1e-6)
+    assert weight[clad_points(samples, normals, P, everything, h)].sum() == pytest.approx(
+        weight.sum(), rel=1e-6)
 
 
 def test_the_boundary_panels_of_a_net_off_its_design_continue_the_net():

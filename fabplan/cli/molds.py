@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from ..fabricate.molds.boundary_molds import boundary_molds
     from ..fabricate.molds.mold_report import MOLD_FILES, write_mold_report
     from ..fabricate.molds.panels import check_panels
-    from ..layout.trim import read_boundary_panels
+    from ..layout.boundary_panels import read_boundary_panels
 
     settings = _mold_settings(args)
     if args.design is None and args.panel_surface == "design":

@@ -140,29 +140,14 @@ def extract_quads(P2: np.ndarray, X3: np.ndarray, normals: np.ndarray, panel_siz
     centres = _lattice_points(P2[keep], X3[keep], 0.5)
     if len(nodes.key) == 0:
         return np.zeros((0, 3)), np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64)
-    # one vertex per distinct point (points on shared edges and on the cuts coincide)
-    tree = cKDTree(nodes.position)
-    pairs = tree.query_pairs(1e-6 * h, output_type="ndarray")
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
-                          shape=(len(nodes.key),) * 2)
-    _, vertex_of = csgraph.connected_components(graph, directed=False)
-    first = np.full(vertex_of.max() + 1, len(vertex_of))
-    np.minimum.at(first, vertex_of, np.arange(len(vertex_of)))
-    vertices = nodes.position[first]
+    vertices, first, entries, keys = _distinct_vertices(nodes, h)
     normal_of = normals[keep][nodes.triangle[first]]
-    entries = np.unique(np.c_[nodes.key, vertex_of], axis=0)
-    keys = np.zeros((len(vertices), 2), np.int64)
-    keys[entries[::-1, 2]] = entries[::-1, :2]
     table = _KeyTable(entries[:, :2], vertices[entries[:, 2]], entries[:, 2])
     centre_table = _KeyTable(np.floor(centres.key).astype(np.int64), centres.position,
                              np.arange(len(centres.key)))
     base, v0 = entries[:, :2], entries[:, 2]
     steps = np.array([[1, 0], [1, 1], [0, 1]])
-    maps = [(1, np.zeros(2))]
-    for sign, shift in transitions:
-        shift = np.asarray(shift, dtype=np.float64)
-        maps += [(1, shift), (1, -shift)] if sign > 0 else [(-1, shift)]
-    maps = [(sign, np.round(shift).astype(np.int64)) for sign, shift in maps]
+    maps = _integer_maps(transitions)
     corners = [v0]
     reach = 2.5 * h
     for step in steps:
@@ -194,6 +179,36 @@ def extract_quads(P2: np.ndarray, X3: np.ndarray, normals: np.ndarray, panel_siz
     # the same quad found from both sides of a cut
     _, first_q = np.unique(np.sort(quads, axis=1), axis=0, return_index=True)
     return vertices, quads[np.sort(first_q)], keys
+
+
+def _distinct_vertices(nodes: _Points, h: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One vertex per distinct lattice point of `nodes` (points on shared edges and on
+    the cuts coincide, to a millionth of the panel size `h`): vertices (n, 3), the first
+    node (n,) int of each, the distinct rows ``(key, vertex)`` (e, 3) int, and keys (n, 2)
+    int, one lattice key of each vertex."""
+    tree = cKDTree(nodes.position)
+    pairs = tree.query_pairs(1e-6 * h, output_type="ndarray")
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                          shape=(len(nodes.key),) * 2)
+    _, vertex_of = csgraph.connected_components(graph, directed=False)
+    first = np.full(vertex_of.max() + 1, len(vertex_of))
+    np.minimum.at(first, vertex_of, np.arange(len(vertex_of)))
+    vertices = nodes.position[first]
+    entries = np.unique(np.c_[nodes.key, vertex_of], axis=0)
+    keys = np.zeros((len(vertices), 2), np.int64)
+    keys[entries[::-1, 2]] = entries[::-1, :2]
+    return vertices, first, entries, keys
+
+
+def _integer_maps(transitions: list) -> list[tuple[int, np.ndarray]]:
+    """The maps ``p -> sign p + shift`` (integer shifts) between the sides of the cuts
+    and seams of `transitions` (`extract_quads`), the identity first."""
+    maps = [(1, np.zeros(2))]
+    for sign, shift in transitions:
+        shift = np.asarray(shift, dtype=np.float64)
+        maps += [(1, shift), (1, -shift)] if sign > 0 else [(-1, shift)]
+    return [(sign, np.round(shift).astype(np.int64)) for sign, shift in maps]
 
 
 def clean_quads(vertices: np.ndarray, quads: np.ndarray, *, min_piece: int = 12

@@ -68,7 +68,7 @@ def unclad_components(design: DesignSurface, clad: np.ndarray
     Parameters
     ----------
     clad : (4 t,) bool, which of the design's samples are clad (four per triangle in the
-        triangle order, `fabplan.layout.trim._design_samples`).
+        triangle order, `fabplan.layout.coverage.design_samples`).
 
     Returns
     -------

@@ -13,7 +13,7 @@ from ..io.output import atomic_path
 from ..net.mesh import QuadMesh
 from ..report.figures import net_view_angles, new_figure
 from ..report.html import counted, panel_areas
-from .trim import BoundaryPanels
+from .boundary_panels import BoundaryPanels
 
 __all__ = ["write_layout_picture", "fairness_marks", "curvature_difference_figure",
            "curvature_difference_at", "kink_text", "NEAR_UMBILIC"]

@@ -33,7 +33,7 @@ class LayoutSettings:
     good_coverage : share of the design's area whose covering ends the tries.
     max_smoothing : orthogonal nets smooth the directions as a cross field, over
         `smoothing` doubled up to this length until the field has no quarter-turn
-        singularity (see `_smoothed_directions`).
+        singularity (see `fabplan.layout.lattice`).
     scale_weight : weight of uniform spacing against alignment with the directions in
         the integration (alignment has weight 1): smaller values follow the directions
         more closely and let the spacing vary.

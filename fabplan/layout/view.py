@@ -21,7 +21,7 @@ from ..net.mesh import QuadMesh
 from ..net.view import net_scene
 from ..report import figures, html, viewer
 from ..report.html import counted
-from .trim import BoundaryPanels
+from .boundary_panels import BoundaryPanels
 
 __all__ = ["boundary_layer", "uncovered_triangles", "net_numbers", "net_picture_uri",
            "net_view_html", "BOUNDARY_KINDS"]

@@ -64,7 +64,7 @@ def cached_types() -> dict[str, type]:
     from ..fabricate.strips.strip_plan import StripPlan
     from ..fabricate.strips.strip_set import Crossing, ReferenceCurve, Strip, StripSet, StripSettings
     from ..fabricate.strips.unrolling import ArcRun
-    from ..layout.trim import BoundaryPanels
+    from ..layout.boundary_panels import BoundaryPanels
     from ..net.mesh import QuadMesh
     from ..solve.optimize import OptimizationResult
     from .definition import Candidate

@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ...layout.trim import BoundaryPanels
+from ...layout.boundary_panels import BoundaryPanels
 from ...report.viewer import PanelInfo
 from .boundary_sides import BoundarySides, boundary_sides
 from .flat_boundary import flat_boundary_panels

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...layout.trim import BoundaryPanels
+from ...layout.boundary_panels import BoundaryPanels
 
 __all__ = ["BoundarySides", "boundary_sides"]
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...layout.trim import BoundaryPanels, slide_splits
+from ...layout.boundary_panels import BoundaryPanels, slide_splits
 from .boundary_sides import BoundarySides, boundary_sides
 from .mold_plan import MoldPlan
 from .mold_shapes import MOLD_TYPES, chord_steps

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from ...io.output import output_folder, write_texts
 from ...io.records import json_text
-from ...layout.trim import BoundaryPanels
+from ...layout.boundary_panels import BoundaryPanels
 from ...net.geometry import face_normals
 from ...net.view import net_edges, net_scene
 from ...report import figures, html, viewer

@@ -182,7 +182,7 @@ class StripBoundary:
         InputError
             When the file does not continue `mesh` (`fabplan.layout.trim.read_boundary_panels`).
         """
-        from ...layout.trim import read_boundary_panels
+        from ...layout.boundary_panels import read_boundary_panels
 
         return cls.from_panels(mesh, read_boundary_panels(mesh, path, record))
 
