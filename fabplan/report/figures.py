@@ -181,11 +181,40 @@ def label_faces(ax, X: np.ndarray, face_indices: np.ndarray, face_sizes: np.ndar
     first[1:] = key[order][1:] != key[order][:-1]
     chosen = order[first]
     chosen = chosen[fits[chosen]]
-    where = ax.transData.inverted().transform(centre[chosen]) if len(chosen) else np.zeros((0, 2))
-    for f, (x, y) in zip(chosen, where, strict=True):
-        ax.text(x, y, str(labels[f]), fontsize=fontsize, ha="center", va="center", zorder=1000, color="black",
-                bbox={"boxstyle": "round,pad=0.1", "fc": (1, 1, 1, 0.6), "ec": "none"})
+    if len(chosen):
+        where = ax.transData.inverted().transform(centre[chosen])
+        _draw_labels(ax, [str(labels[f]) for f in chosen], where, fontsize)
     return int(len(chosen))
+
+
+def _draw_labels(ax, texts: list[str], where: np.ndarray, fontsize: float) -> None:
+    """Write `texts` centred at `where` (k, 2) data coordinates, each on a rounded white
+    box: as two collections of outlines (a label's outline made once per distinct text),
+    since a thousand text artists take seconds to lay out and draw."""
+    from matplotlib.collections import PathCollection
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.patches import BoxStyle
+    from matplotlib.textpath import TextPath
+    from matplotlib.transforms import Affine2D
+
+    prop = FontProperties(size=fontsize)
+    pad = 0.1 * fontsize
+    glyphs, boxes = {}, {}
+    for text in set(texts):
+        path = TextPath((0.0, 0.0), text, prop=prop)           # in points
+        box = path.get_extents()
+        glyphs[text] = path.transformed(Affine2D().translate(-0.5 * (box.x0 + box.x1),
+                                                             -0.5 * (box.y0 + box.y1)))
+        # the box of a text line (ascent and descent), not of the glyphs' ink
+        width, height = box.width + 0.25 * fontsize, 1.1 * fontsize
+        boxes[text] = BoxStyle.Round(pad=pad)(-0.5 * width, -0.5 * height, width, height, 1.0)
+    points = Affine2D().scale(1.0 / 72.0) + ax.figure.dpi_scale_trans   # points to pixels
+    for paths, color, order in (([boxes[t] for t in texts], (1.0, 1.0, 1.0, 0.6), 1000),
+                                ([glyphs[t] for t in texts], (0.0, 0.0, 0.0, 1.0), 1001)):
+        ax.add_collection(PathCollection(paths, offsets=where, offset_transform=ax.transData,
+                                         transform=points, facecolors=[color],
+                                         edgecolors="none", linewidths=0.0, zorder=order),
+                          autolim=False)
 
 
 def draw_mesh(ax, X: np.ndarray, faces: list, face_colors: np.ndarray, view: np.ndarray, *,
