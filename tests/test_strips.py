@@ -525,7 +525,9 @@ def test_a_sheet_failing_in_a_worker_process_leaves_no_files(stroke_run, tmp_pat
     plan, _, _ = stroke_run
     assert len(plan.nesting.sheets) >= 2
     (tmp_path / "keep.txt").write_text("earlier")
-    real = strip_plan.write_sheet_file
+    from fabplan.fabricate.strips import dxf
+
+    real = dxf.write_sheet_file
 
     def failing(geom, settings, path):
         if path.name.endswith("-002.dxf"):
@@ -533,7 +535,7 @@ def test_a_sheet_failing_in_a_worker_process_leaves_no_files(stroke_run, tmp_pat
         return real(geom, settings, path)
 
     # the worker processes are forked from this one and see the patched function
-    monkeypatch.setattr(strip_plan, "write_sheet_file", failing)
+    monkeypatch.setattr(dxf, "write_sheet_file", failing)
     monkeypatch.setattr(strip_plan, "SHEETS_PER_PROCESS", 1)
     with pytest.raises(FabplanError, match="-002.dxf: refused"):
         plan.write(tmp_path, workers=2)

@@ -26,9 +26,6 @@ from typing import TYPE_CHECKING, Any, Callable, Union
 import numpy as np
 
 from ..errors import InputError
-from ..fabricate.arcs import ArcStructure, arc_structure
-from ..fabricate.milling.mill_plan import MillSettings, MillTool, parse_tool
-from ..fabricate.milling.mill_report import MillResult, mill_net
 from ..fabricate.molds.mold_assignment import plan_molds as _plan_molds_impl
 from ..fabricate.molds.mold_plan import MoldPlan
 from ..fabricate.molds.mold_shapes import MoldSettings
@@ -49,6 +46,9 @@ from ..solve.optimize import optimize as _optimize_impl
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..design.mesh_surface import DesignSurface  # noqa: F811 - imported again where used
+    from ..fabricate.arcs import ArcStructure
+    from ..fabricate.milling.mill_plan import MillSettings, MillTool
+    from ..fabricate.milling.mill_report import MillResult
     from ..layout.surface_layout import SurfaceLayout
     from ..solve.reference import ReferenceSurface
     from .definition import Study
@@ -293,6 +293,11 @@ def mill(net: NetLike, tool: MillTool | str, settings: MillSettings | None = Non
     reads, in the net's units), which the passes are placed on and the cut is measured
     against (``fabplan mill --design``). The result's ``record()`` is what ``mill.json``
     holds."""
+    # the milling and arc modules (scipy's interpolation) load with their calls: the
+    # rest of the API (an optimize in a notebook) does without them
+    from ..fabricate.milling.mill_plan import MillSettings, parse_tool
+    from ..fabricate.milling.mill_report import mill_net
+
     if settings is None:
         settings = MillSettings(**options)
     elif options:
@@ -319,6 +324,8 @@ def run_study(study: Study | str | os.PathLike, **options: Any) -> StudyResult:
 
 def arcs(net: NetLike) -> ArcStructure:
     """The circular arc structure of a net (``fabplan arcs``)."""
+    from ..fabricate.arcs import arc_structure
+
     return arc_structure(as_mesh(net))
 
 

@@ -16,7 +16,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
@@ -25,10 +25,12 @@ from ...io.output import check_apart, output_folder
 from ...io.records import json_text
 from ...net.mesh import QuadMesh
 from ..limits import LimitCheck, limit_check, limits_record
-from .dxf import SheetGeometry, check_sheet, geometry_preview_png, sheet_geometry, write_sheet_file
 from .nesting import Nesting, Part, Placement, congruence, make_parts, nest_parts, part_congruence_mm
 from .strip_boundary import StripBoundary
 from .strip_set import Strip, StripSet, StripSettings, build_strips
+
+if TYPE_CHECKING:
+    from .dxf import SheetGeometry
 
 __all__ = ["StripPlan", "plan_strips", "strip_limit_checks", "schedule_rows", "write_plan",
            "SHEETS_PER_PROCESS", "STRIP_FILES"]
@@ -278,6 +280,9 @@ def write_plan(plan: StripPlan, out_dir: str | os.PathLike, *, name: str = "stri
     -------
     list of Path, the files written.
     """
+    # ezdxf is imported when sheets are written, not with the strips' plan
+    from .dxf import check_sheet, sheet_geometry, write_sheet_file
+
     out_dir = Path(out_dir)
     settings = plan.strips.settings
     layout = plan.nesting
@@ -342,6 +347,9 @@ class _SheetJob:
 
 def _write_sheet_jobs(jobs: list[_SheetJob], settings: StripSettings, folder: Path) -> None:
     """Write the DXF (checked) and the preview of each job into `folder`."""
+    # ezdxf is imported when sheets are written, not with the strips' plan
+    from .dxf import geometry_preview_png, write_sheet_file
+
     for job in jobs:
         if job.dxf is not None:
             write_sheet_file(job.geometry, settings, folder / job.dxf)
