@@ -196,41 +196,17 @@ def _off_boundary(design: DesignSurface, samples: np.ndarray, curves: list,
     more than `OFF_TOLERANCE` of a panel, with the point on the design boundary."""
     from ..solve.constraints.closeness import closest_points_on_polylines
 
-    sideways = np.zeros(len(samples))
-    off = np.zeros(len(samples), bool)
-    # a sample's closest design point lies within its distance from the design (at most
-    # that from the nearest triangle corner) of it, so a sample farther than that from the
-    # boundary has its foot inside the design, and it is not off: no closest point needed
-    to_edge = _boundary_distance_bound(samples, curves)
-    reach = design.reference.corner_distances(samples)
-    near = np.flatnonzero(to_edge - reach <= BOUNDARY_FOOT * panel_size + 1e-9 * (to_edge + reach))
-    if len(near) == 0:
-        return sideways, off
-    foot, _, tri = design.reference.closest_points(samples[near])
-    offset = samples[near] - foot
+    foot, _, tri = design.reference.closest_points(samples)
+    offset = samples - foot
     normal = design.face_normals[tri]
-    sideways[near] = np.linalg.norm(offset - np.sum(offset * normal, axis=1, keepdims=True)
-                                    * normal, axis=1)
-    beside = sideways[near] > OFF_TOLERANCE * panel_size
-    if beside.any():
+    sideways = np.linalg.norm(offset - np.sum(offset * normal, axis=1, keepdims=True) * normal,
+                              axis=1)
+    off = sideways > OFF_TOLERANCE * panel_size
+    if off.any():
         # beside a foot inside the design is a fold of the design mesh, not its edge
-        edge_foot, _ = closest_points_on_polylines(foot[beside], curves)
-        beside[beside] = (np.linalg.norm(edge_foot - foot[beside], axis=1)
-                          <= BOUNDARY_FOOT * panel_size)
-    off[near] = beside
+        edge_foot, _ = closest_points_on_polylines(foot[off], curves)
+        off[off] = np.linalg.norm(edge_foot - foot[off], axis=1) <= BOUNDARY_FOOT * panel_size
     return sideways, off
-
-
-def _boundary_distance_bound(points: np.ndarray, curves: list) -> np.ndarray:
-    """(m,) float, at most each point's distance from the boundary `curves` (closed
-    polylines): its distance from their nearest vertex less half their longest side (the
-    closest point of a side is within half its length of one of its ends)."""
-    from scipy.spatial import cKDTree
-
-    corners = np.concatenate(curves)
-    longest = max(float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).max()) for c in curves)
-    to_corner, _ = cKDTree(corners).query(points)
-    return np.asarray(to_corner, np.float64) - 0.5 * longest
 
 
 def may_leave_design(design: DesignSurface, centre: np.ndarray, radius: np.ndarray,
@@ -266,22 +242,11 @@ def may_leave_design(design: DesignSurface, centre: np.ndarray, radius: np.ndarr
     longest = max(float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).max()) for c in curves)
     to_corner, _ = cKDTree(corners).query(centre)
     to_edge = to_corner - 0.5 * longest
-    radius = np.broadcast_to(np.asarray(radius, np.float64), to_edge.shape)
-
-    def within(to_design: np.ndarray, ids: slice | np.ndarray) -> np.ndarray:
-        # the margin covers the tolerance and the rounding of the distances many times over
-        margin = (BOUNDARY_FOOT + 1e-3) * panel_size + 1e-9 * (to_corner[ids] + to_design
-                                                               + longest)
-        return to_edge[ids] <= to_design + 2.0 * radius[ids] + margin
-
-    # the nearest triangle corner is at least as far as the design: a ball that cannot
-    # reach the boundary even at that distance needs no closest point (most of them)
-    result = within(design.reference.corner_distances(centre), slice(None))
-    maybe = np.flatnonzero(result)
-    if len(maybe):
-        foot, _, _ = design.reference.closest_points(centre[maybe])
-        result[maybe] = within(np.linalg.norm(centre[maybe] - foot, axis=1), maybe)
-    return result
+    foot, _, _ = design.reference.closest_points(centre)
+    to_design = np.linalg.norm(centre - foot, axis=1)
+    # the margin covers the tolerance and the rounding of the distances many times over
+    margin = (BOUNDARY_FOOT + 1e-3) * panel_size + 1e-9 * (to_corner + to_design + longest)
+    return to_edge <= to_design + 2.0 * np.asarray(radius, np.float64) + margin
 
 
 #: samples along every side of a piece's outline

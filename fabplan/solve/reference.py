@@ -50,7 +50,7 @@ class ReferenceSurface:
     def __getstate__(self) -> dict:
         # libigl's tree does not pickle: it is rebuilt on arrival (studies send designs to
         # other processes)
-        return {k: v for k, v in self.__dict__.items() if k not in ("_tree", "_corner_tree")}
+        return {k: v for k, v in self.__dict__.items() if k != "_tree"}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -87,20 +87,6 @@ class ReferenceSurface:
         _, triangle, foot = self._tree.squared_distance(self.vertices, self.triangles, P)
         triangle = np.asarray(triangle, dtype=np.int64)
         return np.asarray(foot), self.face_normals[triangle], triangle
-
-    def corner_distances(self, points: np.ndarray) -> np.ndarray:
-        """(m,) float, the distance of each point (m, 3) from the nearest corner of a
-        triangle: at least its distance from the surface, and a k-d tree query, several
-        times cheaper than a closest point. Where a bound will do (`fabplan.layout.
-        off_design` leaves out points far from the design boundary) it spares one.
-        """
-        if not hasattr(self, "_corner_tree"):
-            from scipy.spatial import cKDTree
-
-            # the corners of triangles only: a vertex of no triangle is not on the surface
-            self._corner_tree = cKDTree(self.vertices[np.unique(self.triangles)])
-        distance, _ = self._corner_tree.query(np.asarray(points, np.float64).reshape(-1, 3))
-        return np.asarray(distance, np.float64)
 
     def on_boundary(self, foot: np.ndarray, triangle: np.ndarray, *,
                     tolerance: float = 1e-9) -> np.ndarray:
