@@ -469,6 +469,19 @@ def mold_report_html(plan: MoldPlan, *, view_3d: bool = True,
                             scripts=viewer.viewer_assets() if view_3d else "")
 
 
+def _verification_rows(r: dict) -> list[list]:
+    """The rows of the verification (gaps, failures, steps) that report.html and report.pdf
+    both give, from the plan's record `r`."""
+    return [
+        ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
+        ["panels that do not fit", counted(len(r["failures"]), "panel")],
+        ["largest step between neighbouring panels' molds",
+         f"{r['panel_steps']['max_mm']:.3f} mm (limit {r['panel_steps']['limit_mm']:g} mm)"],
+        ["shared edges with a step over the limit",
+         f"{len(r['panel_steps']['over_limit'])} of {r['panel_steps']['edge_count']}"],
+    ]
+
+
 def _summary_rows(plan: MoldPlan, r: dict, boundary: BoundaryMolds | None,
                   limits: dict | None) -> list[list]:
     """The rows (quantity, value) of the report's summary table, from the plan's
@@ -494,12 +507,7 @@ def _summary_rows(plan: MoldPlan, r: dict, boundary: BoundaryMolds | None,
         ["panel types", ", ".join(counted(v, k.replace('_', ' ') + " panel")
                                   for k, v in r["panel_types"].items())],
         ["mold types", ", ".join(counted(v, k) for k, v in r["mold_types"].items())],
-        ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
-        ["panels that do not fit", counted(len(r["failures"]), "panel")],
-        ["largest step between neighbouring panels' molds",
-         f"{r['panel_steps']['max_mm']:.3f} mm (limit {r['panel_steps']['limit_mm']:g} mm)"],
-        ["shared edges with a step over the limit",
-         f"{len(r['panel_steps']['over_limit'])} of {r['panel_steps']['edge_count']}"],
+        *_verification_rows(r),
         ["largest angle between neighbouring molds at shared edges",
          f"{r['panel_steps']['max_kink_deg']:.2f} deg"],
         ["fewest molds, estimated (curvature set length / reach of one mold)",
@@ -657,12 +665,7 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None, *,
             f"{counted(r['molds_made'], 'mold')} ({r['molds_saved_by_material']} saved by the "
             "material)"]] if plan.classes is not None else []),
         ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
-        ["largest measured gap to a mold", f"{r['max_deviation_mm']:.3f} mm"],
-        ["panels that do not fit", counted(len(r["failures"]), "panel")],
-        ["largest step between neighbouring panels' molds",
-         f"{r['panel_steps']['max_mm']:.3f} mm (limit {r['panel_steps']['limit_mm']:g} mm)"],
-        ["shared edges with a step over the limit",
-         f"{len(r['panel_steps']['over_limit'])} of {r['panel_steps']['edge_count']}"],
+        *_verification_rows(r),
         *([["boundary panels (boundary-panels.csv)",
             boundary_molds_text(boundary, plan.mold_count)]] if boundary is not None else []),
         *[[f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})",
