@@ -63,11 +63,10 @@ def parse_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray], np
         if not parts or parts[0].startswith("#"):
             continue
         tag = parts[0]
-        where = f"{path}:{lineno}"
         if tag == "v":
-            vertices.append(_vertex_line(where, line, parts, len(vertices)))
+            vertices.append(_vertex_line(path, lineno, line, parts, len(vertices)))
         elif tag == "f":
-            faces.append(_face_line(where, line, parts, len(vertices), len(faces)))
+            faces.append(_face_line(path, lineno, line, parts, len(vertices), len(faces)))
         elif tag == "vn":
             try:
                 normals.append([float(p) for p in parts[1:4]])
@@ -95,40 +94,41 @@ def parse_obj(path: str | os.PathLike) -> tuple[np.ndarray, list[np.ndarray], np
     return np.asarray(vertices, dtype=np.float64), face_arrays, per_vertex
 
 
-def _vertex_line(where: str, line: str, parts: list[str], index: int) -> list[float]:
-    """The coordinates of the ``v`` line (vertex `index`, at `where`: file and line)."""
+def _vertex_line(path: Path, lineno: int, line: str, parts: list[str], index: int
+                 ) -> list[float]:
+    """The coordinates of the ``v`` line `lineno` of `path` (vertex `index`)."""
     try:
         xyz = [float(p) for p in parts[1:4]]
     except ValueError:
-        raise InputError(f"{where}: malformed vertex line {line.strip()!r}") from None
+        raise InputError(f"{path}:{lineno}: malformed vertex line {line.strip()!r}") from None
     if len(xyz) != 3:
-        raise InputError(f"{where}: vertex needs 3 coordinates")
+        raise InputError(f"{path}:{lineno}: vertex needs 3 coordinates")
     if not all(math.isfinite(c) for c in xyz):
         raise InputError(
-            f"{where}: vertex {index} has a non-finite coordinate"
+            f"{path}:{lineno}: vertex {index} has a non-finite coordinate"
         )
     return xyz
 
 
-def _face_line(where: str, line: str, parts: list[str], vertex_count: int,
+def _face_line(path: Path, lineno: int, line: str, parts: list[str], vertex_count: int,
                index: int) -> list[int]:
-    """The 0-based vertex indices of the ``f`` line (face `index`, at `where`: file and
-    line), `vertex_count` vertices read before it."""
+    """The 0-based vertex indices of the ``f`` line `lineno` of `path` (face `index`),
+    `vertex_count` vertices read before it."""
     face = []
     for token in parts[1:]:
         try:
             number = int(token.split("/")[0])
         except ValueError:
-            raise InputError(f"{where}: malformed face line {line.strip()!r}") from None
+            raise InputError(f"{path}:{lineno}: malformed face line {line.strip()!r}") from None
         if number == 0:
-            raise InputError(f"{where}: OBJ vertex indices start at 1, not 0")
+            raise InputError(f"{path}:{lineno}: OBJ vertex indices start at 1, not 0")
         if abs(number) > 2**62:
-            raise InputError(f"{where}: face {index} refers to vertex "
+            raise InputError(f"{path}:{lineno}: face {index} refers to vertex "
                              f"{number}, which cannot exist")
         # OBJ indices are 1-based; negative ones count back from the last vertex.
         face.append(number - 1 if number > 0 else vertex_count + number)
     if len(face) < 3:
-        raise InputError(f"{where}: face {index} has fewer than 3 vertices")
+        raise InputError(f"{path}:{lineno}: face {index} has fewer than 3 vertices")
     return face
 
 
