@@ -106,11 +106,11 @@ def clad_points(points: np.ndarray, normals: np.ndarray, V: np.ndarray, F: np.nd
     A net solved away from the design stands off it and tilts against it, so a point under
     it may see its closest point well off its normal; a point in a gap always has it on
     the gap's rim."""
-    under = _under(points, normals, V, F, h)
     if len(F) == 0:
-        return under
+        return np.zeros(len(points), bool)
     F = np.asarray(F, dtype=np.int64)
     d2, tri, closest = igl.point_mesh_squared_distance(points, V, F)
+    under = _under_closest(points, normals, d2, closest, h)
     T = V[F[tri]]
     bary = igl.barycentric_coordinates(closest, T[:, 0].copy(), T[:, 1].copy(), T[:, 2].copy())
     # free edges: sides of one triangle only
@@ -143,6 +143,13 @@ def _under(points: np.ndarray, normals: np.ndarray, V: np.ndarray, F: np.ndarray
     if len(F) == 0:
         return np.zeros(len(points), bool)
     d2, _, closest = igl.point_mesh_squared_distance(points, V, np.asarray(F, dtype=np.int64))
+    return _under_closest(points, normals, d2, closest, h)
+
+
+def _under_closest(points: np.ndarray, normals: np.ndarray, d2: np.ndarray, closest: np.ndarray,
+                   h: float) -> np.ndarray:
+    """`_under`, from the squared distances (m,) and closest panel points (m, 3) of
+    `points` (m, 3) found already."""
     offset = closest - points
     distance = np.sqrt(d2)
     along = np.abs(np.sum(offset * normals, axis=1))

@@ -57,7 +57,6 @@ from .boundary_panels import BoundaryPanels, neighbour_faces, read_boundary_pane
 from .coverage import clad_points, coverage_gaps, design_samples, net_cover, net_coverage
 from .gap_patches import MAX_GAP_PANELS, gap_patches
 from .outlines import retriangulated, untangled
-from .overlaps import self_crossing
 from .parameter_chart import ParameterChart
 from .plane_cut import net_in_plane, pieces_in_plane
 from .soundness import Soundness, flipped_panels, soundness, unsound_pieces, without_pieces
@@ -163,7 +162,6 @@ def trim_to_design(mesh: QuadMesh, layout: ChartedLayout, *, min_panel: float = 
     neighbour = neighbour_faces(polygons, mesh, vertices)
     extension = area < min_panel * h * h
     flipped = flipped_panels(vertices, polygons, design, 1e-3 * h * h)
-    crossed = np.flatnonzero(self_crossing(vertices, polygons))
     sound = soundness(vertices, polygons, triangles, owner, mesh, design, h)
     return BoundaryPanels(
         vertices=vertices, polygons=polygons, net_vertex_count=mesh.vertex_count,
@@ -171,7 +169,7 @@ def trim_to_design(mesh: QuadMesh, layout: ChartedLayout, *, min_panel: float = 
         area=area, panel_size=h, extension=extension,
         coverage_net=float(weight[on_net].sum() / weight.sum()),
         coverage=float(weight[on_any].sum() / weight.sum()),
-        flipped=flipped[~extension[flipped]], crossed=crossed, patch=cut.patch,
+        flipped=flipped[~extension[flipped]], crossed=sound.crossing, patch=cut.patch,
         boundary_distance_max=_boundary_distance(design, vertices[cut.on_boundary]) / h,
         seconds=time.perf_counter() - clock, triangles=triangles, triangle_panel=owner,
         net_on_boundary=touching, gaps=coverage_gaps(design, samples, weight, on_any, h),
