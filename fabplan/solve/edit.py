@@ -262,8 +262,8 @@ class NetEditor:
         solver.set_vertices(ids, goal)
         start = len(solver.history)
         where = np.zeros(0, np.int64)
-        solved, status, message = self._run_within(max_iterations, max_seconds, t0, smooth,
-                                                   smooth_fade)
+        solved, message = self._run_within(max_iterations, max_seconds, t0, smooth, smooth_fade)
+        status = "failed" if solved == "failed" else "converged"
         iterations = len(solver.history) - start
         residual = solver.history[-1].hard_residual if len(solver.history) > start else np.inf
         X = solver.vertices
@@ -283,10 +283,10 @@ class NetEditor:
                           where[np.sort(first)][:_WHERE_LISTED], predicted)
 
     def _run_within(self, max_iterations: int, max_seconds: float | None, t0: float,
-                    smooth: float, smooth_fade: float) -> tuple[str, str, str]:
+                    smooth: float, smooth_fade: float) -> tuple[str, str]:
         """Run the solver within the budget of `solve_drag` (started at `t0`), fading the
         move's fairness as it goes: how the run ended (`GuidedProjection.run`, ``"time
-        budget"`` or ``"failed"``), the status so far and the solver's message."""
+        budget"`` or ``"failed"``) and the solver's message."""
         fair = self._smooth
 
         def budget(record: IterationRecord) -> None:
@@ -298,16 +298,16 @@ class NetEditor:
             if max_seconds is not None and time.perf_counter() - t0 > max_seconds:
                 raise _OutOfTime
 
-        status, message = "converged", ""
+        message = ""
         try:
             solved = self.solver.run(max_iterations, callback=budget)
         except _OutOfTime:
             solved = "time budget"
         except SolverError as exc:
-            solved, status, message = "failed", "failed", str(exc)
+            solved, message = "failed", str(exc)
         if fair is not None:
             fair.weight = 0.0
-        return solved, status, message
+        return solved, message
 
     def _roll_back(self, x: np.ndarray, data: dict, ids: np.ndarray, at: np.ndarray,
                    soft_steps: int) -> None:

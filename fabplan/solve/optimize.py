@@ -398,12 +398,11 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
     start = time.perf_counter()
     if reference is None and max_deviation is not None:
         reference = ReferenceSurface.from_mesh(mesh)
-    solves = _Solves(mesh, net, dict(angle=angle, radius=radius, fixed=held, settings=settings,
+    solves = _Solves(mesh, net, dict(angle=angle, radius=radius, settings=settings,
                                      fairness=fairness, coherent=coherent, closeness=closeness,
                                      glide=glide, glide_boundary=glide_boundary,
-                                     surface_tolerance=surface_tolerance, extra=extra,
-                                     limits=limits),
-                     reference, max_deviation, handle_ids, targets, progress)
+                                     surface_tolerance=surface_tolerance, extra=extra),
+                     held, limits, reference, max_deviation, handle_ids, targets, progress)
     grid = _multilevel_grid(mesh, net, settings, plain=not (held.size or glide or extra or guards
                                                             or max_deviation is not None))
     attempts, levels, unreachable = _solve_with_retries(solves, grid, guards,
@@ -464,7 +463,9 @@ class _Solves:
     ----------
     mesh : the user's start; every solve is judged against its combinatorics.
     net : the net type's name.
-    options : the `build_solver` keywords all solves share.
+    options : the other `build_solver` keywords all solves share.
+    held : (k,) int, the vertices held in place (fixed ones and handles).
+    limits : what a buildable net keeps to.
     reference : the reference as given (or made for a deviation limit), else None.
     max_deviation : the deviation limit asked (model units), else None.
     handle_ids, targets : (h,) int and (h, 3) float, the handles and where they go.
@@ -474,6 +475,8 @@ class _Solves:
     mesh: QuadMesh
     net: str
     options: dict
+    held: np.ndarray
+    limits: BuildLimits
     reference: ReferenceSurface | None
     max_deviation: float | None
     handle_ids: np.ndarray
@@ -489,7 +492,7 @@ class _Solves:
         start_mesh, start_reference = (self.mesh, self.reference) if start is None else start
         return build_solver(start_mesh, self.net, reference=start_reference, guards=with_guards,
                             max_deviation=self.max_deviation if deviation is None else deviation,
-                            **self.options)
+                            fixed=self.held, limits=self.limits, **self.options)
 
     def judge(self, name: str, solver: GuidedProjection, deviation: float | None = None,
               stop: Stage | None = None) -> Attempt:
@@ -498,7 +501,7 @@ class _Solves:
         limit = self.max_deviation if deviation is None else deviation
         return Attempt(name, solver, measure_buildable(
             self.mesh, solver.vertices, reference=solver.reference,
-            limits=replace(self.options["limits"], max_deviation=limit)), stop)
+            limits=replace(self.limits, max_deviation=limit)), stop)
 
     def attempt(self, name: str, solver: GuidedProjection) -> Attempt:
         """Run `solver` in stages towards its targets and handles, and judge it."""
@@ -515,7 +518,7 @@ def _solve_with_retries(solves: _Solves, grid: np.ndarray | None, guards: bool |
     Returns the attempts in order, the coarse levels' records, and whether the handles
     were out of reach (no retry is tried then).
     """
-    mesh, held = solves.mesh, solves.options["fixed"]
+    mesh, held = solves.mesh, solves.held
     levels: list[dict] = []
     attempts: list[Attempt] = []
     if grid is not None:
