@@ -486,8 +486,8 @@ def test_a_second_signal_does_not_hang_the_cleanup(tmp_path):
 
 def test_a_run_started_with_sighup_ignored_keeps_it_ignored(tmp_path):
     code = ("import signal, sys\nsignal.signal(signal.SIGHUP, signal.SIG_IGN)\n"
-            "from fabplan.cli import _stopped_by_signals\n"
-            "with _stopped_by_signals():\n"
+            "from fabplan.cli import stopped_by_signals\n"
+            "with stopped_by_signals():\n"
             "    assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN\n"
             "    signal.raise_signal(signal.SIGHUP)\n"
             "print('alive')\n")

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabplan.cli import _InRange, build_parser, main
+from fabplan.cli import InRange, build_parser, main
 from fabplan.design.parametric import FILE_PARAMETERS, SURFACES, surface_from_spec
 from fabplan.errors import InputError
 from fabplan.io.parameters import SURFACE_PARAMETERS, Parameter
@@ -57,7 +57,7 @@ def _numeric_actions(command: argparse.ArgumentParser) -> list[argparse.Action]:
     """The options of a command that take a number: checked ones, and any added with a
     plain ``type=float`` or ``type=int``."""
     return [a for a in command._actions if a.option_strings and
-            (isinstance(a, _InRange) or a.type in (int, float))]
+            (isinstance(a, InRange) or a.type in (int, float))]
 
 
 COMMANDS = _commands()
@@ -73,7 +73,7 @@ SURFACE_CASES = [(surface, key, value) for surface, key in SURFACE_KEYS for valu
 
 def _parameter(command: str, option: str) -> Parameter:
     action = next(a for a in COMMANDS[command]._actions if option in a.option_strings)
-    assert isinstance(action, _InRange), f"fabplan {command} {option} has no range"
+    assert isinstance(action, InRange), f"fabplan {command} {option} has no range"
     return action.parameter
 
 
@@ -118,7 +118,7 @@ def test_every_numeric_option_has_a_range():
     """A numeric option added with a plain type=float or type=int has no range."""
     plain = [f"{name} {option}" for name, option in OPTIONS
              if not isinstance(next(a for a in COMMANDS[name]._actions
-                                    if option in a.option_strings), _InRange)]
+                                    if option in a.option_strings), InRange)]
     assert not plain, f"numeric options without a range in fabplan.io.parameters: {plain}"
     assert set(BASE) >= {name for name, _ in OPTIONS}, "a command without a BASE run"
     assert len(OPTIONS) >= 30

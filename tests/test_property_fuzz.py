@@ -59,7 +59,7 @@ from helpers import memory_cap
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from fabplan.cli import _InRange, build_parser, main
+from fabplan.cli import InRange, build_parser, main
 from fabplan.design.parametric import FILE_PARAMETERS, SURFACES
 from fabplan.errors import InputError
 from fabplan.io.parameters import SURFACE_PARAMETERS, Parameter
@@ -175,7 +175,7 @@ def _options(name: str) -> list[Option]:
         if not action.option_strings or action.dest == "help":
             continue
         flag = action.option_strings[-1]
-        found.append(Option(name, flag, action.parameter if isinstance(action, _InRange) else None,
+        found.append(Option(name, flag, action.parameter if isinstance(action, InRange) else None,
                             tuple(action.choices) if action.choices else None,
                             action.nargs != 0))
     return found

@@ -23,10 +23,6 @@ from .limits import deviation_check, limits_exit
 from .registry import COMMANDS, Command, register
 from .running import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, stopped_by_signals
 
-# the names of the single module `fabplan/cli.py` that tests and scripts import
-_InRange = InRange
-_stopped_by_signals = stopped_by_signals
-
 __all__ = ["COMMANDS", "Command", "EXIT_BAD_INPUT", "EXIT_NOT_CONVERGED", "InRange",
            "LINE_TURN_WARNING_DEG", "boundary_text", "boundary_warnings", "build_parser",
            "deviation_check", "layout_warnings", "limits_exit", "main", "register",
