@@ -35,7 +35,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 RUN = "import sys; from fabplan.cli import main; sys.exit(main())"
 
 
-def _checkout(commit: str, folder: Path) -> Path:
+def checkout(commit: str, folder: Path) -> Path:
     """A detached worktree of `commit` in `folder`, its C extensions built in place."""
     subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(folder), commit],
                    check=True, capture_output=True)
@@ -69,13 +69,6 @@ def _run(code: Path, template: str, out: Path, neutral: Path) -> dict:
     return record
 
 
-def _uptime() -> str:
-    try:
-        return Path("/proc/loadavg").read_text().split()[0]
-    except OSError:
-        return "?"
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--against", required=True, help="the earlier commit")
@@ -85,10 +78,10 @@ def main(argv: list[str] | None = None) -> int:
     runs: dict[str, list[dict]] = {"before": [], "now": []}
     with tempfile.TemporaryDirectory(prefix="fabplan-bench-study-") as tmp:
         folder = Path(tmp)
-        earlier = _checkout(args.against, folder / "earlier")
+        earlier = checkout(args.against, folder / "earlier")
         neutral = folder / "run"
         neutral.mkdir()
-        load_before = _uptime()
+        load_before = f"{os.getloadavg()[0]:.2f}"
         try:
             for k in range(args.rounds):
                 for name, code in (("before", earlier), ("now", ROOT)):
@@ -99,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(earlier)],
                            check=False, capture_output=True)
-    load_after = _uptime()
+    load_after = f"{os.getloadavg()[0]:.2f}"
     medians = {name: statistics.median(r["wall_s"] for r in rs) for name, rs in runs.items()}
     print(f"\n1-minute load before {load_before}, after {load_after}\n")
     print("| code | wall time [s] | median [s] | user CPU [s] | recommended |")

@@ -31,7 +31,7 @@ import tempfile
 import zlib
 from pathlib import Path
 
-from bench_study import ROOT, RUN, _checkout
+from bench_study import ROOT, RUN, checkout
 
 TEMPLATES = ("canopy", "pavilion", "stadium", "tower")
 
@@ -176,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     work = Path(tempfile.mkdtemp(prefix="fabplan-same-"))
     try:
-        old_code = _checkout(args.against, work / "code")
+        old_code = checkout(args.against, work / "code")
         run_examples(old_code, work / "same-outputs-old")
         run_examples(ROOT, work / "same-outputs-new")
         found = compare(work / "same-outputs-old", work / "same-outputs-new", old_code, ROOT)
