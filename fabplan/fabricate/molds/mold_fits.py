@@ -52,8 +52,7 @@ def mold_gaps(points: np.ndarray, placements: np.ndarray, shapes: np.ndarray) ->
     >>> mold_gaps(np.array([[[1.0, 2.0, 3.0]]]), flat, np.zeros((1, 2)))
     array([[3.]])
     """
-    q = points @ placements[:, :3, :3].transpose(0, 2, 1) + placements[:, None, :3, 3]
-    return q[..., 2] - 0.5 * (shapes[:, None, 0] * q[..., 0] ** 2 + shapes[:, None, 1] * q[..., 1] ** 2)
+    return _placed_gaps(_placed(points, placements), shapes)
 
 
 def rotation_matrices(w: np.ndarray) -> np.ndarray:
@@ -259,7 +258,7 @@ def mold_points(points: np.ndarray, placements: np.ndarray, shapes: np.ndarray, 
     >>> mold_points(np.array([[[0.5, 0.2, 0.3]]]), flat[None], np.zeros((1, 2)))
     array([[[0.5, 0.2, 0. ]]])
     """
-    q = points @ placements[:, :3, :3].transpose(0, 2, 1) + placements[:, None, :3, 3]
+    q = _placed(points, placements)
     if closest:
         c = closest_mold_points(q, shapes[:, None, :])
     else:

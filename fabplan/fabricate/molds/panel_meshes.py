@@ -71,11 +71,6 @@ class PanelMesh:
         area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
         return np.bincount(self.panel, area, minlength=self.panel_count)
 
-    def panel_mesh(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """Panel `i` alone: its points (k, 3) and its triangles (t, 3) into them."""
-        a, b = self.point_ptr[i], self.point_ptr[i + 1]
-        return self.points[a:b], self.triangles[self.triangle_ptr[i]:self.triangle_ptr[i + 1]] - a
-
     @staticmethod
     def join(meshes: list[tuple[np.ndarray, np.ndarray]]) -> "PanelMesh":
         """Panels given one by one as (points, triangles into them)."""

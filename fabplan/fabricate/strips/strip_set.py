@@ -676,9 +676,10 @@ def _strip(mesh: QuadMesh, N: np.ndarray, u: Unrolled, k: int, v: np.ndarray,
     its reference curve fitted with arcs, its twist and lean, and its ends."""
     a, b = u.ptr[k], u.ptr[k + 1]
     nodes = u.nodes[a:b]
-    runs = fit_arc_runs(nodes, settings.tolerance_mm)
     if len(v) == 2:
         runs = [_one_edge_run(mesh, N, v, settings.scale)]
+    else:
+        runs = fit_arc_runs(nodes, settings.tolerance_mm)
     bulges = np.zeros(len(v) - 1)
     for r in runs:
         if r.fitted and math.isfinite(r.radius_mm):
