@@ -52,7 +52,7 @@ __all__ = ["Lattice", "layout_lattice"]
 @dataclass
 class Lattice:
     """A layout's lattice of quads on the design and what was found on the way to it
-    (`layout_lattice`; `fabplan.layout.surface_layout.SurfaceLayout` holds it).
+    (`layout_lattice`; `fabplan.layout.surface_layout.SurfaceLayout` takes its fields).
 
     Attributes
     ----------
@@ -314,7 +314,7 @@ def _smoothed_directions(design: DesignSurface, e1: np.ndarray, weight: np.ndarr
     are a cross field: across a near-umbilic the principal directions may turn by a
     quarter turn without the net's lines turning at all. An S-net at another angle is
     symmetric about either principal direction, so the combed cross field serves as its
-    bisector as well (`_layout_once` turns it to the `bisector` setting). The cross field
+    bisector as well (`layout_lattice` turns it to the `bisector` setting). The cross field
     is smoothed over `LayoutSettings.smoothing` panels, doubled up to `max_smoothing`,
     until it has no quarter-turn singularity (which the lattice cannot follow; four of them
     surround a dome's apex); failing that, and for a prescribed family, the line field is
