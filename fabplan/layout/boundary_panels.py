@@ -17,8 +17,7 @@ from ..net.mesh import QuadMesh
 from .outlines import retriangulated
 from .overlaps import edge_clashes
 
-__all__ = ["BoundaryPanels", "read_boundary_panels", "slide_splits", "neighbour_faces",
-           "corner_table"]
+__all__ = ["BoundaryPanels", "read_boundary_panels", "slide_splits", "neighbour_faces"]
 
 
 @dataclass
@@ -461,7 +460,7 @@ def _side_faces(polygons: list, mesh: QuadMesh) -> np.ndarray:
     if not polygons:
         return out
     n = mesh.vertex_count
-    face, vert, nxt, _ = corner_table(mesh)
+    face, vert, nxt = mesh.corner_faces, mesh.face_indices, mesh.corner_next_vertices
     a = np.concatenate(polygons)
     b = np.concatenate([np.roll(q, -1) for q in polygons])
     panel = np.repeat(np.arange(len(polygons)), [len(q) for q in polygons])
@@ -480,13 +479,3 @@ def _side_faces(polygons: list, mesh: QuadMesh) -> np.ndarray:
     first = best[np.r_[True, panel[best][1:] != panel[best][:-1]]]
     out[panel[first]] = face[corner[first]]
     return out
-
-
-def corner_table(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per face corner: its face, vertex, next and previous vertex (each (c,) int)."""
-    sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
-    face = np.repeat(np.arange(len(sizes)), sizes)
-    local = np.arange(len(idx)) - ptr[face]
-    nxt = idx[np.where(local == sizes[face] - 1, ptr[face], np.arange(len(idx)) + 1)]
-    prv = idx[np.where(local == 0, ptr[face] + sizes[face] - 1, np.arange(len(idx)) - 1)]
-    return face, idx, nxt, prv

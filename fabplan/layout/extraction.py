@@ -28,7 +28,7 @@ from .off_design import MIN_OFF_PANELS, degenerate_faces, faces_off_design
 if TYPE_CHECKING:
     from .settings import LayoutSettings
 
-__all__ = ["extract_quads", "fill_boundary_cells", "sound_quads"]
+__all__ = ["extract_quads", "fill_boundary_cells", "sound_quads", "transition_maps"]
 
 
 @dataclass
@@ -147,7 +147,8 @@ def extract_quads(P2: np.ndarray, X3: np.ndarray, normals: np.ndarray, panel_siz
                              np.arange(len(centres.key)))
     base, v0 = entries[:, :2], entries[:, 2]
     steps = np.array([[1, 0], [1, 1], [0, 1]])
-    maps = _integer_maps(transitions)
+    maps = [(sign, np.round(shift).astype(np.int64))
+            for sign, shift in transition_maps(transitions)]
     corners = [v0]
     reach = 2.5 * h
     for step in steps:
@@ -201,14 +202,15 @@ def _distinct_vertices(nodes: _Points, h: float
     return vertices, first, entries, keys
 
 
-def _integer_maps(transitions: list) -> list[tuple[int, np.ndarray]]:
-    """The maps ``p -> sign p + shift`` (integer shifts) between the sides of the cuts
-    and seams of `transitions` (`extract_quads`), the identity first."""
+def transition_maps(transitions: list) -> list[tuple[int, np.ndarray]]:
+    """The maps ``p -> sign p + shift`` (shifts (2,) float) between the sides of the cuts
+    and seams of `transitions`, ``(sign, shift)`` each, the identity first: a loop cut
+    open shifts by its jump both ways, a seam turns a half turn about its centre."""
     maps = [(1, np.zeros(2))]
     for sign, shift in transitions:
         shift = np.asarray(shift, dtype=np.float64)
         maps += [(1, shift), (1, -shift)] if sign > 0 else [(-1, shift)]
-    return [(sign, np.round(shift).astype(np.int64)) for sign, shift in maps]
+    return maps
 
 
 def clean_quads(vertices: np.ndarray, quads: np.ndarray, *, min_piece: int = 12

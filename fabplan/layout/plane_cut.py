@@ -12,7 +12,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..design.mesh_surface import DesignSurface
 from ..net.mesh import QuadMesh
-from .boundary_panels import corner_table
+from .extraction import transition_maps
 from .parameter_chart import ParameterChart
 
 __all__ = ["net_in_plane", "pieces_in_plane"]
@@ -70,7 +70,7 @@ def pieces_in_plane(mesh: QuadMesh, cuts: list, chart: ParameterChart, p_net: np
         (`_unclad_by_sheet`, and the region (k,) each piece was cut from).
     """
     boundary = chart.boundary_lines
-    faces = _face_polygons(mesh, p_net, _transition_maps(cuts))
+    faces = _face_polygons(mesh, p_net, transition_maps([(sign, (jp, js)) for sign, jp, js in cuts]))
     if by_sheet:
         # across a seam the plane holds several sheets of the design: each triangle loses
         # only the net faces on its own sheet
@@ -119,23 +119,12 @@ def _areas_only(geometries: np.ndarray) -> np.ndarray:
     return out
 
 
-def _transition_maps(cuts: list) -> list[tuple[int, np.ndarray]]:
-    """The maps ``p -> sign p + shift`` between the sides of the layout's cuts (the
-    identity first): a loop cut open shifts by its jump both ways, a seam turns a half
-    turn about its centre."""
-    maps = [(1, np.zeros(2))]
-    for sign, jp, js in cuts:
-        shift = np.array([jp, js], dtype=np.float64)
-        maps += [(1, shift), (1, -shift)] if sign > 0 else [(-1, shift)]
-    return maps
-
-
 def _face_polygons(mesh: QuadMesh, p: np.ndarray, maps: list) -> np.ndarray:
     """The net's faces in the parameter plane. Across a cut a face's corners are taken to
     the side of its first corner, and every face also enters in its images under the
     cuts' maps, so that it covers the plane on both sides of the cut."""
     sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
-    face = np.repeat(np.arange(len(sizes)), sizes)
+    face = mesh.corner_faces
     corner_p = p[idx]
     if len(maps) > 1:
         anchor = p[idx[ptr[face]]]
@@ -220,7 +209,7 @@ def _faces_on_own_sheet(chart: ParameterChart, faces: np.ndarray, mesh: QuadMesh
     sizes, idx, ptr = mesh.face_sizes, mesh.face_indices, mesh.face_indptr
     centre3 = np.stack([np.add.reduceat(mesh.vertices[idx, k], ptr[:-1]) for k in range(3)],
                        axis=1) / sizes[:, None]
-    corner_face = np.repeat(np.arange(f), sizes)
+    corner_face = mesh.corner_faces
     radius = np.zeros(f)
     np.maximum.at(radius, corner_face, np.linalg.norm(mesh.vertices[idx] - centre3[corner_face], axis=1))
     part, tri = chart.tree.query(parts, predicate="intersects")
@@ -302,7 +291,7 @@ def _clipped_rays(mesh: QuadMesh, p: np.ndarray, unclad, free: np.ndarray, grid:
     faces_at = np.bincount(mesh.face_indices, minlength=mesh.vertex_count)
     boundary = mesh.is_boundary_vertex & free
     starts, throughs = [], []
-    _, idx, nxt, prv = corner_table(mesh)
+    idx, nxt, prv = mesh.face_indices, mesh.corner_next_vertices, mesh.corner_previous_vertices
     lone = boundary[idx] & (faces_at[idx] == 1)
     starts += [idx[lone], idx[lone]]
     throughs += [nxt[lone], prv[lone]]
