@@ -56,30 +56,27 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
 
     seconds: dict[str, float] = {}
     clock = time.perf_counter()
-    angle = start_angle(candidate, design)
-    size = study.panel_size_of(candidate)
-    key = (angle, size)
-    several = study.layout_starts > 1
+    solve = _CandidateSolve(study, design, candidate, layouts, starts, say,
+                            start_angle(candidate, design), study.panel_size_of(candidate),
+                            SolverSettings(max_iterations=study.max_iterations))
+    angle, size = solve.angle, solve.size
     # curved panels on molds of a net that leaves a built-in design: solved past its edges
     continued = None if candidate.glides or not _on_molds(study, candidate) \
         else _continued(study, design, size)
-    if key not in layouts and not several and continued is None:
+    if solve.key not in layouts and not solve.several and continued is None:
         say(f"    layout at {angle:g} deg, panel size {size:g}")
-        layouts[key] = layout_surface(design, size, angle=angle)
-    layout = layouts.get(key)
+        layouts[solve.key] = layout_surface(design, size, angle=angle)
+    layout = layouts.get(solve.key)
     seconds["layout"] = time.perf_counter() - clock
-    solve = _CandidateSolve(study, design, candidate, layouts, starts, say, angle, size,
-                            SolverSettings(max_iterations=study.max_iterations))
     clock, laid_before = time.perf_counter(), seconds["layout"]
     if candidate.glides:
         net, layout = solve.gliding(layout)
     elif continued is not None:
         # its boundary panels then continue it within the deviation limit
-        net, layout = _solve_continued(study, design, candidate, continued, angle, size,
-                                       layouts, starts, solve.settings, solve.report, say, seconds)
+        net, layout = solve.past_edges(continued, seconds)
     else:
         net, layout = solve.off_design(layout)
-    _count_solve_seconds(seconds, net, clock, laid_before, several)
+    _count_solve_seconds(seconds, net, clock, laid_before, solve.several)
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
     net.properties["units"] = study.design.units     # read back by the commands on net.obj
     return CandidateResult(candidate, metrics={"seconds": seconds}, net=net,
@@ -150,7 +147,7 @@ class _CandidateSolve:
         return net, layout
 
     def off_design(self, layout: SurfaceLayout | None
-                   ) -> tuple[OptimizationResult, SurfaceLayout]:
+                    ) -> tuple[OptimizationResult, SurfaceLayout]:
         """A net that leaves the design, solved from the gliding S-net of its key (made
         now if no candidate made it before), held to the deviation limit, with boundary
         panels that continue it."""
@@ -183,6 +180,69 @@ class _CandidateSolve:
         # optimize` cuts them: their molds are fitted to the net's panels beside them
         add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True)
         return net, layout
+
+    def past_edges(self, continued: ContinuedDesign, seconds: dict[str, float]
+                   ) -> tuple[OptimizationResult, SurfaceLayout]:
+        """A net that leaves the design, solved on the design continued past its edges: laid
+        out there, started from the S-net glided there (the fairest of several with
+        `Study.layout_starts`), held to the deviation limit at its vertices in stars over the
+        design and one edge beyond; the faces over the design are kept, and its boundary
+        panels follow the whole net solved (`fabplan.layout.margin`).
+
+        Returns
+        -------
+        net : OptimizationResult, the faces kept, with their boundary panels.
+        layout : the layout read on the design itself.
+        """
+        from ..layout.margin import design_layout, faces_on_design, held_vertices
+        from ..layout.starts import glide_fairest
+        from ..layout.surface_layout import glide, layout_surface
+        from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
+        from ..solve.optimize import kept_faces
+
+        study, design, candidate = self.study, self.design, self.candidate
+        angle, size, layouts, starts = self.angle, self.size, self.layouts, self.starts
+        settings, report, say = self.settings, self.report, self.say
+        key = (angle, size, "continued")
+        where = f"at {angle:g} deg, panel size {size:g}, on the design continued past its edges"
+        if key not in starts and study.layout_starts > 1:
+            # the fairest S-net of several starts starts it (`fabplan.layout.starts`)
+            say(f"    S-nets from {study.layout_starts} starts {where}")
+            layouts[key], starts[key] = glide_fairest(
+                continued.design, size, "snet", angle=angle, solver=settings,
+                starts=study.layout_starts, progress=report)
+        if key not in layouts:
+            clock = time.perf_counter()
+            say(f"    layout {where}")
+            layouts[key] = layout_surface(continued.design, size, angle=angle, judged_on=design)
+            # counted as layout time (`seconds` is the candidate's record)
+            seconds["layout"] += time.perf_counter() - clock
+        if key not in starts:
+            starts[key] = glide(layouts[key], "snet", settings=settings, boundary_panels=False)
+        limits = study.limits_of(candidate)
+        limit = DEVIATION_HELD * limits.max_deviation_mm / study.design.mm_per_unit
+        start = starts[key].mesh
+        solved = optimize_held(study, candidate, start, reference=continued.design.reference,
+                               settings=settings, max_deviation=limit,
+                               deviation_vertices=held_vertices(start, continued), progress=report)
+        net = kept_faces(solved, faces_on_design(solved.mesh, continued), design.reference,
+                         max_deviation=limit)
+        net.parameters["continued"]["starts"] = len(
+            starts[key].properties.get("layout_starts") or [None])
+        layout = design_layout(layouts[key], continued, design)
+        held = np.unique(np.asarray(solved.mesh.stars).ravel())
+        add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True,
+                            follow=(solved.mesh.vertices[held], continued.design))
+        return net, layout
+
+
+#: the share of a study's deviation limit its nets off the design are held within in the
+#: solve: the rest is left to their boundary panels, which continue the net's surface
+#: past its edge and so stand off the design a little further than the net
+DEVIATION_HELD = 0.9
+#: the share of a study's planarity tolerance its nets' quads are held within in the solve
+#: (`planarity_held`)
+PLANARITY_HELD = 0.8
 
 
 def _count_solve_seconds(seconds: dict[str, float], net: OptimizationResult, clock: float,
@@ -257,70 +317,6 @@ def _continued(study: Study, design: DesignSurface, size: float) -> ContinuedDes
     if size not in cache:
         cache[size] = continued_design(design, MARGIN_PANELS * size)
     return cache[size]
-
-
-def _solve_continued(study: Study, design: DesignSurface, candidate: Candidate,
-                     continued: ContinuedDesign, angle: float, size: float, layouts: Layouts,
-                     starts: Starts, settings: SolverSettings, report: Callable,
-                     say: Callable[[str], None], seconds: dict[str, float]
-                     ) -> tuple[OptimizationResult, SurfaceLayout]:
-    """A net that leaves the design, solved on the design continued past its edges: laid
-    out there, started from the S-net glided there (the fairest of several with
-    `Study.layout_starts`), held to the deviation limit at its vertices in stars over the
-    design and one edge beyond; the faces over the design are kept, and its boundary
-    panels follow the whole net solved (`fabplan.layout.margin`).
-
-    Returns
-    -------
-    net : OptimizationResult, the faces kept, with their boundary panels.
-    layout : the layout read on the design itself.
-    """
-    from ..layout.margin import design_layout, faces_on_design, held_vertices
-    from ..layout.starts import glide_fairest
-    from ..layout.surface_layout import glide, layout_surface
-    from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
-    from ..solve.optimize import kept_faces
-
-    key = (angle, size, "continued")
-    where = f"at {angle:g} deg, panel size {size:g}, on the design continued past its edges"
-    if key not in starts and study.layout_starts > 1:
-        # the fairest S-net of several starts starts it (`fabplan.layout.starts`)
-        say(f"    S-nets from {study.layout_starts} starts {where}")
-        layouts[key], starts[key] = glide_fairest(
-            continued.design, size, "snet", angle=angle, solver=settings,
-            starts=study.layout_starts, progress=report)
-    if key not in layouts:
-        clock = time.perf_counter()
-        say(f"    layout {where}")
-        layouts[key] = layout_surface(continued.design, size, angle=angle, judged_on=design)
-        # counted as layout time (`seconds` is the candidate's record)
-        seconds["layout"] += time.perf_counter() - clock
-    if key not in starts:
-        starts[key] = glide(layouts[key], "snet", settings=settings, boundary_panels=False)
-    limits = study.limits_of(candidate)
-    limit = DEVIATION_HELD * limits.max_deviation_mm / study.design.mm_per_unit
-    start = starts[key].mesh
-    solved = optimize_held(study, candidate, start, reference=continued.design.reference,
-                           settings=settings, max_deviation=limit,
-                           deviation_vertices=held_vertices(start, continued), progress=report)
-    net = kept_faces(solved, faces_on_design(solved.mesh, continued), design.reference,
-                     max_deviation=limit)
-    net.parameters["continued"]["starts"] = len(
-        starts[key].properties.get("layout_starts") or [None])
-    layout = design_layout(layouts[key], continued, design)
-    held = np.unique(np.asarray(solved.mesh.stars).ravel())
-    add_boundary_panels(net, layout, touch=OFF_DESIGN_TOUCH, follow_net=True,
-                        follow=(solved.mesh.vertices[held], continued.design))
-    return net, layout
-
-
-#: the share of a study's deviation limit its nets off the design are held within in the
-#: solve: the rest is left to their boundary panels, which continue the net's surface
-#: past its edge and so stand off the design a little further than the net
-DEVIATION_HELD = 0.9
-#: the share of a study's planarity tolerance its nets' quads are held within in the solve
-#: (`planarity_held`)
-PLANARITY_HELD = 0.8
 
 
 def start_angle(candidate: Candidate, design: DesignSurface) -> float:

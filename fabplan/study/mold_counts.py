@@ -64,12 +64,13 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
     made = plan.mold_made
     n = _with_boundary_panels(plan, boundary)
     count = int(made.sum()) + n.own
+    curved_molds = int(curved.sum()) + n.own     # every curved panel molded
     panels = len(n.panel_type)
     out: dict[str, Any] = {
         "count": count,
         "net_molds": int(made.sum()),
         # no curved panel at all (with a material a curved panel may need no mold either)
-        "all_panels_flat": int(curved.sum()) + n.own == 0,
+        "all_panels_flat": curved_molds == 0,
         "fits_all": bool(plan.fits_all) and n.over == int(plan.steps_over.size),
         "failures": int(plan.failures.size),
         "max_panel_step_mm": n.step,
@@ -84,7 +85,7 @@ def mold_metrics(plan: MoldPlan, boundary: BoundaryMolds | None = None) -> dict:
         "boundary_own_molds": n.own,
     }
     if n.classes is not None:
-        out.update(_class_counts(plan, n, int(curved.sum()) + n.own, count))
+        out.update(_class_counts(plan, n, curved_molds, count))
     return out
 
 
@@ -131,16 +132,14 @@ def _class_counts(plan: MoldPlan, n: _PanelCounts, all_curved_molded: int, count
     from ..fabricate.molds.panel_classes import CLASSES
 
     classes, panel_type = n.classes, n.panel_type
-    assert classes is not None
+    assert classes is not None and plan.classes is not None
     molded = classes == CLASSES.index("molded")
-    out: dict[str, Any] = {}
-    out["panel_classes"] = {c: int(np.sum(classes == i)) for i, c in enumerate(CLASSES)}
-    out["molded_types"] = {t: int(np.sum(molded & (panel_type == i)))
-                           for i, t in enumerate(PANEL_TYPES)}
-    out["all_curved_molded"] = all_curved_molded
-    out["saved"] = out["all_curved_molded"] - count
-    out["material"] = plan.classes.material.label if plan.classes is not None else None
-    return out
+    return {"panel_classes": {c: int(np.sum(classes == i)) for i, c in enumerate(CLASSES)},
+            "molded_types": {t: int(np.sum(molded & (panel_type == i)))
+                             for i, t in enumerate(PANEL_TYPES)},
+            "all_curved_molded": all_curved_molded,
+            "saved": all_curved_molded - count,
+            "material": plan.classes.material.label}
 
 
 def _boundary_classes(plan: MoldPlan, boundary: BoundaryMolds) -> np.ndarray:
