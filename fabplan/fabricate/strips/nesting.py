@@ -310,20 +310,16 @@ def _part_geometry(strip, strip_crossings, settings, a: float, b: float,
     """
     curve = strip.curve
     h = settings.height_mm
-    k2 = settings.kerf_mm / 2
-    top, bottom = h / 2 + k2, -h / 2 - k2
-    s0, s1 = a - k2, b + k2
-    bottom_segments = [[s0, s1, bottom]]
-    top_segments = [[s0, s1, top]]
-    marks, labels, splices = _splice_zones(curve, settings, a, b, (start_kind, end_kind),
-                                           splice_ids, bottom_segments, top_segments)
+    bottom_segments, top_segments, marks, labels, splices = _splice_zones(
+        curve, settings, a, b, (start_kind, end_kind), splice_ids)
     cap = 1.0 if settings.end == "round" else 0.0
     rows = _side_rows(curve, bottom_segments, reverse=False)
     rows[-1][2] = cap if end_kind == "end" else 0.0
     rows += _side_rows(curve, top_segments, reverse=True)
     rows[-1][2] = cap if start_kind == "end" else 0.0
     outline = _clean_outline(rows)
-    slits, slit_info, feature_s = _part_slits(strip, strip_crossings, settings, a, b, labels)
+    slits, slit_info, feature_s, numbers = _part_slits(strip, strip_crossings, settings, a, b)
+    labels += numbers
     for _, z0, z1 in splices:
         feature_s.append((z0, z1))
     # the part label in the widest free stretch along the mid-line, with an up arrow
@@ -341,15 +337,18 @@ def _part_geometry(strip, strip_crossings, settings, a: float, b: float,
                 splices=splices, label_span=(lo, hi), label_size=min(settings.text_height_mm, 0.4 * h))
 
 
-def _splice_zones(curve, settings, a: float, b: float, kinds: tuple[str, str], splice_ids: tuple,
-                  bottom_segments: list, top_segments: list) -> tuple[list, list, list]:
-    """The splice zones at the ends of the part between arc lengths a and b whose `kinds`
-    (start, end) are splices: their engraved marks, labels and ``(id, s0, s1)`` zones; a
-    step lap steps the part's `bottom_segments` or `top_segments` ``[s0, s1, offset]``."""
+def _splice_zones(curve, settings, a: float, b: float, kinds: tuple[str, str], splice_ids: tuple
+                  ) -> tuple[list, list, list, list, list]:
+    """The bottom and top sides ``[s0, s1, offset]`` of the part between arc lengths a and b
+    (kerf included; a step lap steps one of them at a splice), and the splice zones at its
+    ends whose `kinds` (start, end) are splices: their engraved marks, labels and
+    ``(id, s0, s1)`` zones."""
     h = settings.height_mm
     k2 = settings.kerf_mm / 2
     splice = settings.splice_mm
     s0, s1 = a - k2, b + k2
+    bottom_segments = [[s0, s1, -h / 2 - k2]]
+    top_segments = [[s0, s1, h / 2 + k2]]
     marks, labels, splices = [], [], []
     th = settings.text_height_mm
     for where, kind, sid in (("start", kinds[0], splice_ids[0]), ("end", kinds[1], splice_ids[1])):
@@ -390,20 +389,20 @@ def _splice_zones(curve, settings, a: float, b: float, kinds: tuple[str, str], s
         p, t = curve.point(mid, level)
         labels.append(Label(text, (float(p[0]), float(p[1])),
                             math.degrees(math.atan2(t[1], t[0])), size, "splice"))
-    return marks, labels, splices
+    return bottom_segments, top_segments, marks, labels, splices
 
 
-def _part_slits(strip, strip_crossings, settings, a: float, b: float,
-                labels: list) -> tuple[list, list, list]:
+def _part_slits(strip, strip_crossings, settings, a: float, b: float
+                ) -> tuple[list, list, list, list]:
     """The slits at the crossings of `strip` between arc lengths a and b: their (4, 2)
     rectangles (mm), ``(crossing, s, side)`` and the spans ``(s0, s1)`` they and their
-    numbers take along the part; the numbers are added to `labels`."""
+    numbers take along the part, and the numbers' labels."""
     curve = strip.curve
     h = settings.height_mm
     k2 = settings.kerf_mm / 2
     th = settings.text_height_mm
     w = settings.slit_width_mm - settings.kerf_mm
-    slits, slit_info = [], []
+    slits, slit_info, labels = [], [], []
     feature_s = []
     for crossing, side in strip_crossings:
         i = crossing.nodes[side]
@@ -435,7 +434,7 @@ def _part_slits(strip, strip_crossings, settings, a: float, b: float,
                             math.degrees(math.atan2(t[1], t[0])), size, "crossing"))
         feature_s.append((s - offset_s - _text_width(text, size) / 2 - w,
                           s + offset_s + _text_width(text, size) / 2 + w))
-    return slits, slit_info, feature_s
+    return slits, slit_info, feature_s, labels
 
 
 def _signed_area(P: np.ndarray) -> float:
