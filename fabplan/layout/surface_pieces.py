@@ -20,8 +20,8 @@ __all__ = ["pieces_on_surface"]
 
 def pieces_on_surface(pieces: np.ndarray, rays: np.ndarray, patch: np.ndarray,
                       sheets: tuple | None, mesh: QuadMesh, p_net: np.ndarray,
-                      chart: ParameterChart, touching: np.ndarray, by_sheet: bool,
-                      tol: float, h: float) -> tuple:
+                      chart: ParameterChart, touching: np.ndarray, tol: float, h: float
+                      ) -> tuple:
     """The pieces of the plane mapped to the surface (`_to_surface`, step 3 of
     `fabplan.layout.trim`), less those that map across a seam or clad the design twice.
 
@@ -51,6 +51,7 @@ def pieces_on_surface(pieces: np.ndarray, rays: np.ndarray, patch: np.ndarray,
     # net faces on the surface: such a patch would clad the design twice. Cut by sheet,
     # any piece may: along a seam a face whose corners lie on both sides is folded in the
     # plane and leaves part of the triangles under it unclad there
+    by_sheet = sheets is not None
     double = (patch | by_sheet) & \
         (share_under_net(vertices, triangles, owner, len(pieces), mesh, h) > 0.5)
     if by_sheet:

@@ -266,8 +266,7 @@ def _cut(mesh: QuadMesh, layout: ChartedLayout, min_panel: float, touch: float
     pieces, rays, patch, sheets = pieces_in_plane(mesh, layout.cuts, chart, p_net, touching,
                                                   by_sheet, cell, grid, min_panel, h)
     vertices, polygons, on_boundary, corner, on_side, triangles, owner, patch = \
-        pieces_on_surface(pieces, rays, patch, sheets, mesh, p_net, chart, touching, by_sheet,
-                          4 * grid, h)
+        pieces_on_surface(pieces, rays, patch, sheets, mesh, p_net, chart, touching, 4 * grid, h)
     return _Trimming(vertices, vertices, polygons, on_boundary, corner, on_side, triangles,
                      owner, patch), touching
 
