@@ -57,14 +57,14 @@ def _gaps(P: np.ndarray, M: np.ndarray, K: np.ndarray) -> np.ndarray:
 
 def _fit(monkeypatch, kernels: str, *args, **kwargs):
     monkeypatch.setenv("FABPLAN_KERNELS", kernels)
-    mold_fits._kernel.cache_clear()
+    mold_fits.compiled_kernel.cache_clear()
     try:
         return mold_fits.fit_mold_placements(*args, **kwargs)
     finally:
-        mold_fits._kernel.cache_clear()
+        mold_fits.compiled_kernel.cache_clear()
 
 
-@pytest.mark.skipif(mold_fits._kernel() is None, reason="the compiled fit was not built")
+@pytest.mark.skipif(mold_fits.compiled_kernel() is None, reason="the compiled fit was not built")
 @pytest.mark.parametrize("free", [False, True])
 def test_compiled_and_numpy_fits_find_the_same_placements(monkeypatch, free):
     P, W, start, shapes, truth = _panels(40, seed=3)
@@ -84,7 +84,7 @@ def test_compiled_and_numpy_fits_find_the_same_placements(monkeypatch, free):
         assert measured.max() < 1e-3
 
 
-@pytest.mark.skipif(mold_fits._kernel() is None, reason="the compiled fit was not built")
+@pytest.mark.skipif(mold_fits.compiled_kernel() is None, reason="the compiled fit was not built")
 def test_a_flat_mold_does_not_poison_the_compiled_fit(monkeypatch):
     # a cylinder mold (k2 = 0 exactly) has a Jacobian column of zeros: its scale underflows
     # when squared, which once turned every step into NaN and refused it
@@ -110,3 +110,39 @@ def test_an_empty_batch_gives_empty_arrays():
     M, K, gap = mold_fits.fit_mold_placements(np.zeros((0, 4, 3)), np.zeros((0, 4)),
                                               np.zeros((0, 4, 4)), np.zeros((0, 2)))
     assert M.shape == (0, 4, 4) and K.shape == (0, 2) and gap.shape == (0,)
+
+
+def _gap_matrix(monkeypatch, kernels: str, data, molds):
+    from fabplan.fabricate.molds import mold_assignment
+
+    monkeypatch.setenv("FABPLAN_KERNELS", kernels)
+    mold_fits.compiled_kernel.cache_clear()
+    try:
+        return mold_assignment._gap_matrix(data, molds)
+    finally:
+        mold_fits.compiled_kernel.cache_clear()
+
+
+@pytest.mark.skipif(mold_fits.compiled_kernel() is None, reason="the compiled fit was not built")
+def test_compiled_and_numpy_gap_matrices_are_the_same_numbers(monkeypatch):
+    from fabplan.fabricate.molds.mold_assignment import _Panels
+
+    rng = np.random.default_rng(8)
+    p, s = 150, 23
+    xy = rng.uniform(-1500.0, 1500.0, (p, 4, s, 2))
+    shapes = rng.normal(size=(p, 4, 2)) * 1e-5
+    Z = 0.5 * np.einsum("pvsk,pvk->pvs", xy ** 2, shapes) + rng.normal(size=(p, 4, s))
+    Z[7, 2, 5] = np.nan          # a NaN gap replaces nothing, on both paths
+    data = _Panels(shapes=shapes, U=xy ** 2, Z=Z, reach=np.full(p, 4e-6))
+    molds = np.concatenate([shapes[::3, 0], rng.normal(size=(40, 2)) * 1e-5])
+    dev_c, var_c = _gap_matrix(monkeypatch, "", data, molds)
+    dev_n, var_n = _gap_matrix(monkeypatch, "numpy", data, molds)
+    np.testing.assert_array_equal(dev_c, dev_n)
+    np.testing.assert_array_equal(var_c, var_n)
+    # the gaps recomputed here for the pairs within reach, in the frame chosen
+    rows, cols = np.nonzero(np.isfinite(dev_c))
+    assert 0 < len(rows) < dev_c.size
+    v = var_c[rows, cols]
+    r = Z[rows, v] - 0.5 * np.einsum("ask,ak->as", xy[rows, v] ** 2, molds[cols])
+    np.testing.assert_allclose(dev_c[rows, cols], 0.5 * (r.max(axis=1) - r.min(axis=1)),
+                               rtol=1e-12, atol=1e-12)

@@ -47,6 +47,7 @@ from scipy.optimize import linprog
 from ...errors import InputError
 from ...net.mesh import QuadMesh
 from ...net.weingarten import weingarten_fit
+from .mold_fits import compiled_kernel
 from .mold_plan import MoldPlan
 from .mold_shapes import MOLD_TYPES, MoldSettings, panel_steps, placement_deviations
 from .panel_classes import classify_panels
@@ -148,6 +149,8 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
     Molds are taken in blocks of nearby curvatures; a block is only evaluated for the
     panels whose shape in a placement lies within their reach (see `_panel_data`) of the
     block's bounding box: farther pairs are left at infinity (treated as not fitting).
+    The gaps of a block are computed by the compiled kernel (``mold_fit_kernel.gap_block``)
+    where it is built, else in numpy: the same numbers.
 
     Returns
     -------
@@ -159,9 +162,11 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
     deviation = np.full((p, m), np.inf)
     variant = np.zeros((p, m), np.int64)
     order = np.lexsort((molds[:, 1], molds[:, 0]))
+    kernel = compiled_kernel() if p and m else None
+    U, Z = np.ascontiguousarray(data.U, np.float64), np.ascontiguousarray(data.Z, np.float64)
     for start in range(0, m, chunk):
         cols = order[start:start + chunk]
-        K = molds[cols]
+        K = np.ascontiguousarray(molds[cols], np.float64)
         lo, hi = K.min(axis=0), K.max(axis=0)
         for v in range(4):
             shape = data.shapes[:, v]
@@ -169,17 +174,29 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
             rows = np.flatnonzero(gap <= data.reach)
             if rows.size == 0:
                 continue
-            dev = np.empty((rows.size, len(cols)))                  # (rows, chunk)
-            # rows in blocks: the (rows, samples, chunk) temporaries stay in the cache
-            for b in range(0, rows.size, _GAP_ROWS):
-                U, Z = data.U[rows[b:b + _GAP_ROWS], v], data.Z[rows[b:b + _GAP_ROWS], v]
-                r = Z[..., None] - 0.5 * (U[..., 0, None] * K[:, 0] + U[..., 1, None] * K[:, 1])
-                dev[b:b + _GAP_ROWS] = 0.5 * (r.max(axis=1) - r.min(axis=1))
-            block = deviation[np.ix_(rows, cols)]
-            better = dev < block
-            deviation[np.ix_(rows, cols)] = np.where(better, dev, block)
-            variant[np.ix_(rows, cols)] = np.where(better, v, variant[np.ix_(rows, cols)])
+            if kernel is not None:
+                kernel.gap_block(U, Z, rows.astype(np.int64), cols.astype(np.int64), v, K,
+                                 deviation, variant, p, Z.shape[2], m)
+            else:
+                _gap_block(data, rows, cols, v, K, deviation, variant)
     return deviation, variant
+
+
+def _gap_block(data: _Panels, rows: np.ndarray, cols: np.ndarray, v: int, K: np.ndarray,
+               deviation: np.ndarray, variant: np.ndarray) -> None:
+    """The numpy path of ``mold_fit_kernel.gap_block``: the gaps of panels `rows` in frame
+    `v` on molds `cols` (curvatures `K`), written into `deviation` and `variant` (p, m)
+    where smaller than what they hold."""
+    dev = np.empty((rows.size, len(cols)))                  # (rows, chunk)
+    # rows in blocks: the (rows, samples, chunk) temporaries stay in the cache
+    for b in range(0, rows.size, _GAP_ROWS):
+        U, Z = data.U[rows[b:b + _GAP_ROWS], v], data.Z[rows[b:b + _GAP_ROWS], v]
+        r = Z[..., None] - 0.5 * (U[..., 0, None] * K[:, 0] + U[..., 1, None] * K[:, 1])
+        dev[b:b + _GAP_ROWS] = 0.5 * (r.max(axis=1) - r.min(axis=1))
+    block = deviation[np.ix_(rows, cols)]
+    better = dev < block
+    deviation[np.ix_(rows, cols)] = np.where(better, dev, block)
+    variant[np.ix_(rows, cols)] = np.where(better, v, variant[np.ix_(rows, cols)])
 
 
 def _greedy_cover(fits: np.ndarray) -> np.ndarray:

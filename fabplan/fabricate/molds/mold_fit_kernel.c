@@ -16,8 +16,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* A C-contiguous buffer of `count` items of `itemsize` bytes, its format one of the
+ * characters of `formats` (int64 says 'l' on some platforms, 'q' on others). */
 static int get_buffer(PyObject *obj, Py_buffer *view, int writable, const char *name,
-                      char format, Py_ssize_t itemsize, Py_ssize_t count)
+                      const char *formats, Py_ssize_t itemsize, Py_ssize_t count)
 {
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(obj, view, flags) < 0)
@@ -25,9 +27,10 @@ static int get_buffer(PyObject *obj, Py_buffer *view, int writable, const char *
     const char *f = view->format ? view->format : "B";
     if (f[0] == '<' || f[0] == '=' || f[0] == '@')
         f++;
-    if (f[0] != format || view->itemsize != itemsize || view->len != count * itemsize) {
-        PyErr_Format(PyExc_TypeError, "%s: expected %zd items of format '%c', got %zd bytes "
-                     "of format '%s'", name, count, format, view->len, view->format);
+    if (f[0] == '\0' || !strchr(formats, f[0]) || view->itemsize != itemsize
+            || view->len != count * itemsize) {
+        PyErr_Format(PyExc_TypeError, "%s: expected %zd items of format '%s', got %zd bytes "
+                     "of format '%s'", name, count, formats, view->len, view->format);
         PyBuffer_Release(view);
         return -1;
     }
@@ -210,13 +213,13 @@ static PyObject *fit(PyObject *self, PyObject *args)
         return NULL;
     static const char *names[9] = {"points", "base", "must", "free", "M", "K", "best_M",
                                    "best_K", "best_gap"};
-    const char formats[9] = {'d', 'd', 'B', 'B', 'd', 'd', 'd', 'd', 'd'};
+    static const char *formats[9] = {"d", "d", "B", "B", "d", "d", "d", "d", "d"};
     Py_ssize_t counts[9] = {p * s * 3, p * s, p * s, p, p * 16, p * 2, p * 16, p * 2, p};
     Py_buffer views[9];
     int got = 0;
     for (; got < 9; got++)
         if (get_buffer(objs[got], &views[got], got >= 4, names[got], formats[got],
-                       formats[got] == 'd' ? 8 : 1, counts[got]) < 0)
+                       formats[got][0] == 'd' ? 8 : 1, counts[got]) < 0)
             break;
     int failed = got < 9;
     double *work = NULL;
@@ -307,8 +310,87 @@ static PyObject *fit(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* gap_block(U, Z, rows, cols, v, K, deviation, variant, p, s, m): for every panel of `rows`
+ * (n,) and mold of `cols` (c,) with curvatures K (c, 2), the gap of the panel's samples in
+ * placement frame v on the mold, half the spread of z - (u0 k1 + u1 k2) / 2 (U (p, 4, s, 2),
+ * Z (p, 4, s)); where it is smaller than deviation[row, col] (p, m) it is written there and
+ * v in variant[row, col]. The products and sums are those of `_gap_matrix`'s numpy path,
+ * in its order: the same numbers. A NaN gap replaces nothing, as there. */
+static PyObject *gap_block(PyObject *self, PyObject *args)
+{
+    PyObject *objs[8];
+    Py_ssize_t v, p, s, m;
+    if (!PyArg_ParseTuple(args, "OOOOnOOOnnn", &objs[0], &objs[1], &objs[2], &objs[3], &v,
+                          &objs[4], &objs[5], &objs[6], &p, &s, &m))
+        return NULL;
+    if (v < 0 || v > 3) {
+        PyErr_SetString(PyExc_ValueError, "v: a placement frame 0 .. 3");
+        return NULL;
+    }
+    if (s <= 0) {
+        PyErr_SetString(PyExc_ValueError, "s: a panel has at least one sample");
+        return NULL;
+    }
+    Py_ssize_t n = PyObject_Length(objs[2]), c = PyObject_Length(objs[3]);
+    if (n < 0 || c < 0)
+        return NULL;
+    static const char *names[7] = {"U", "Z", "rows", "cols", "K", "deviation", "variant"};
+    static const char *formats[7] = {"d", "d", "lq", "lq", "d", "d", "lq"};
+    Py_ssize_t counts[7] = {p * 4 * s * 2, p * 4 * s, n, c, c * 2, p * m, p * m};
+    Py_buffer views[7];
+    int got = 0;
+    for (; got < 7; got++)
+        if (get_buffer(objs[got], &views[got], got >= 5, names[got], formats[got], 8,
+                       counts[got]) < 0)
+            break;
+    int failed = got < 7;
+    if (!failed) {
+        const double *U = views[0].buf, *Z = views[1].buf, *K = views[4].buf;
+        const int64_t *row = views[2].buf, *col = views[3].buf;
+        double *deviation = views[5].buf;
+        int64_t *variant = views[6].buf;
+        for (Py_ssize_t i = 0; i < n && !failed; i++)
+            failed = row[i] < 0 || row[i] >= p;
+        for (Py_ssize_t j = 0; j < c && !failed; j++)
+            failed = col[j] < 0 || col[j] >= m;
+        if (failed)
+            PyErr_SetString(PyExc_IndexError, "gap_block: a row or column out of range");
+        else {
+            Py_BEGIN_ALLOW_THREADS
+            for (Py_ssize_t i = 0; i < n; i++) {
+                const double *u = U + ((row[i] * 4 + v) * s) * 2, *z = Z + (row[i] * 4 + v) * s;
+                for (Py_ssize_t j = 0; j < c; j++) {
+                    const double k0 = K[2 * j], k1 = K[2 * j + 1];
+                    double hi = -INFINITY, lo = INFINITY;
+                    int nan = 0;
+                    for (Py_ssize_t t = 0; t < s; t++) {
+                        double r = z[t] - 0.5 * (u[2 * t] * k0 + u[2 * t + 1] * k1);
+                        nan |= r != r;
+                        hi = r > hi ? r : hi;
+                        lo = r < lo ? r : lo;
+                    }
+                    double gap = nan ? NAN : 0.5 * (hi - lo);
+                    double *slot = deviation + row[i] * m + col[j];
+                    if (gap < *slot) {
+                        *slot = gap;
+                        variant[row[i] * m + col[j]] = v;
+                    }
+                }
+            }
+            Py_END_ALLOW_THREADS
+        }
+    }
+    for (int i = 0; i < got; i++)
+        PyBuffer_Release(&views[i]);
+    if (failed)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"fit", fit, METH_VARARGS, "Fit mold placements (see fabplan.fabricate.molds.mold_fits)."},
+    {"gap_block", gap_block, METH_VARARGS,
+     "Gaps of panels on molds (see fabplan.fabricate.molds.mold_assignment._gap_matrix)."},
     {NULL, NULL, 0, NULL},
 };
 

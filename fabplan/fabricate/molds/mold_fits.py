@@ -29,7 +29,7 @@ import numpy as np
 from .mold_shapes import closest_mold_points
 
 __all__ = ["mold_gaps", "mold_points", "rotation_matrices", "fit_mold_placements",
-           "polish_mold_placements"]
+           "polish_mold_placements", "compiled_kernel"]
 
 
 def mold_gaps(points: np.ndarray, placements: np.ndarray, shapes: np.ndarray) -> np.ndarray:
@@ -110,7 +110,7 @@ def fit_mold_placements(points: np.ndarray, weights: np.ndarray, placements: np.
     if must is None:
         must = base >= 0.5 * base.max(axis=1, keepdims=True)
     must = np.asarray(must, bool) & (base > 0)
-    kernel = _kernel()
+    kernel = compiled_kernel()
     if kernel is not None and p:
         points = np.ascontiguousarray(points, dtype=np.float64)
         s = points.shape[1]
@@ -223,8 +223,8 @@ def _fit_placements_numpy(points: np.ndarray, base: np.ndarray, must: np.ndarray
 
 
 @functools.lru_cache(maxsize=1)
-def _kernel() -> ModuleType | None:
-    """The compiled fit (``mold_fit_kernel``), or None: not built, or
+def compiled_kernel() -> ModuleType | None:
+    """The compiled fit and gaps (``mold_fit_kernel``), or None: not built, or
     ``FABPLAN_KERNELS=numpy`` in the environment."""
     if os.environ.get("FABPLAN_KERNELS", "").lower() == "numpy":
         return None
