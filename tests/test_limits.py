@@ -128,6 +128,75 @@ def test_a_search_refines_beside_its_best_point_within_its_budget():
     assert record["feasible_range"] == [30.0, 60.0]
 
 
+def test_a_search_guesses_its_next_round_from_the_points_measured_so_far():
+    from fabplan.study.search import first_points, next_points
+    from fabplan.study.spec import Search
+
+    search = Search("lw", "linear-weingarten", "angle", 30.0, 60.0, budget=6)
+    first = first_points(search)
+    costs = {30.0: 9.0, 40.0: 5.0}
+    measured = [_point(search, c.angle, feasible=True, cost=costs[c.angle]) for c in first[:2]]
+    # 50 and 60 solved, not measured: 40 is the best so far, 50 its neighbour
+    guess = next_points(search, measured, pending=(50.0, 60.0))
+    assert [c.angle for c in guess] == [35.0, 45.0]
+    # once measured, the round takes the same points where 40 stays the best
+    every = measured + [_point(search, 50.0, feasible=True, cost=7.0),
+                        _point(search, 60.0, feasible=False, cost=1.0)]
+    assert next_points(search, every) == guess
+    # pending points count against the budget
+    assert next_points(Search("lw", "linear-weingarten", "angle", 30.0, 60.0, budget=4),
+                       measured, pending=(50.0, 60.0)) == []
+
+
+@pytest.mark.slow
+def test_a_search_solved_ahead_of_its_round_gives_the_serial_run(monkeypatch):
+    """The next round's points solved while the last round is measured (here always, as
+    if the measuring never ended first): the same candidates and nets as a serial run.
+    Where the guess is wrong nothing changes either: `next_points` is tested for that."""
+    import numpy as np
+
+    from fabplan.study import run as run_module
+    from fabplan.study.background import BackgroundCandidates, background_processes
+
+    if background_processes() == 0:
+        pytest.skip("nothing is forked on this machine")
+    study = parse_study(STUDY.replace('net = "linear-weingarten"\nangle = 80',
+                                      'net = "isogonal"\nangle = { search = [60, 90], budget = 5 }'))
+    serial = run_study(study)
+
+    class AlwaysBusy(BackgroundCandidates):
+        """Busy whenever asked, with every candidate submitted measured: the guesses
+        are the next round's points, whichever process ends first."""
+
+        @property
+        def busy(self) -> bool:
+            return True
+
+        @property
+        def measured(self) -> dict:
+            while self._running:
+                self._reap(wait=True)
+            return dict(self._done)
+
+    ahead = []
+    solve_ahead = run_module._solve_ahead
+
+    def spy(*args):
+        solve_ahead(*args)
+        ahead.extend(c.name for c in args[-1])
+
+    monkeypatch.setattr(run_module, "_solve_ahead", spy)
+    forked = run_study(study, background=AlwaysBusy)
+    later = [c.name for c in forked.candidates][5:]
+    assert later and set(later) <= set(ahead)        # the last round was solved ahead
+    assert [c.name for c in forked.candidates] == [c.name for c in serial.candidates]
+    for a, b in zip(serial.candidates, forked.candidates, strict=True):
+        assert np.array_equal(a.net.mesh.vertices, b.net.mesh.vertices), a.name
+        assert a.metrics["molds"] == b.metrics["molds"], a.name
+        assert (a.feasible, a.cost) == (b.feasible, b.cost), a.name
+    assert forked.recommended == serial.recommended
+
+
 def test_a_search_without_a_feasible_point_refines_beside_the_least_infeasible():
     from fabplan.study.search import first_points, next_points
     from fabplan.study.spec import Search

@@ -39,7 +39,10 @@ if TYPE_CHECKING:
     from .definition import Study
     from .result import CandidateResult
 
-__all__ = ["BackgroundCandidates", "background_processes"]
+__all__ = ["BackgroundCandidates", "background_processes", "BACKGROUND_NICENESS"]
+
+#: how much lower the measuring processes run than the run's own solves (`os.nice`)
+BACKGROUND_NICENESS = 10
 
 
 def background_processes(processes: int | None = None) -> int:
@@ -145,6 +148,9 @@ class BackgroundCandidates:
             code = 1
             try:
                 die_with_parent(parent)
+                # the run's solves are the path every later candidate waits on: they
+                # keep a core, and the measuring takes what is left of the machine
+                os.nice(BACKGROUND_NICENESS)
                 sys.stdout = sys.stderr = open(os.devnull, "w")
                 made = _measure(self.study, self.design, solved, twin, self.files, self.rhino,
                                 None if twin_made is None else twin_made[0], ifc=self.ifc)
@@ -156,6 +162,18 @@ class BackgroundCandidates:
                 os._exit(code)
         self._running.append(_Job(solved, twin, pid, path, seconds))
         self._reap(wait=False)
+
+    @property
+    def busy(self) -> bool:
+        """Whether a candidate is still being measured."""
+        self._reap(wait=False)
+        return bool(self._running)
+
+    @property
+    def measured(self) -> dict[str, CandidateResult]:
+        """The candidates measured so far, by name."""
+        self._reap(wait=False)
+        return dict(self._done)
 
     def complete(self, name: str) -> CandidateResult | None:
         """The measured candidate `name`, waiting for its process; None when it was not

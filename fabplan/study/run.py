@@ -47,7 +47,7 @@ from .ranking import (
     recommend,
 )
 from .result import CandidateResult, StudyResult
-from .search import first_points, next_points
+from .search import first_points, next_points, search_points
 from .twins import SAME_NET_TOLERANCE, same_net, shared_solve, twin_of
 from .verdict import candidate_cost, every_panel_flat, verdict
 
@@ -134,14 +134,16 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     layouts: Layouts = {(90.0, study.panel_size): baseline}
     starts: Starts = {}
     solves: dict[tuple, CandidateResult] = {}
+    ahead: Ahead = {}
     results: list[CandidateResult] = []
 
     def run(candidates: list[Candidate], title: str = "") -> None:
         """Run `candidates` after the ones in `results`, measured before it returns."""
         nonlocal results
         _run_candidates(study, design, helper, cache, resume, layouts, starts, solves, say,
-                        candidates, results, title)
+                        candidates, results, title, ahead)
         if helper is not None:
+            _solve_ahead(study, design, helper, results, layouts, starts, solves, ahead)
             measured = helper.collect()
             results = [measured.get(r.name, r) for r in results]
 
@@ -178,14 +180,54 @@ def searched_study(study: Study, results: list[CandidateResult]) -> Study:
     return replace(study, candidates=tuple(r.candidate for r in results))
 
 
+#: Candidates solved ahead of their round (`_solve_ahead`): the solved candidate, its
+#: progress lines and its solve's seconds.
+Ahead = dict[Candidate, tuple[CandidateResult, list[str], float]]
+
+
+def _solve_ahead(study: Study, design: DesignSurface, helper: Any, results: list[CandidateResult],
+                 layouts: Layouts, starts: Starts, solves: dict[tuple, CandidateResult],
+                 ahead: Ahead) -> None:
+    """While the last candidates of a round are measured, solve the points the searches'
+    next round will likely take: the midpoints beside the best point measured so far
+    (`next_points` with the points not measured yet pending). The next round takes a
+    point solved here instead of solving it; a guess it does not take cost only time the
+    run would have spent waiting. A solve is deterministic, so the results are those of a
+    run that solves every point in its round."""
+    if not study.searches:
+        return
+    measured = helper.measured
+    known = [measured[r.name] for r in results if r.name in measured]
+    pending = {r.name for r in results if r.name not in measured}
+    judged = judge_study(searched_study(study, known), design, known).candidates
+    guesses = []
+    for search in study.searches:
+        waiting = tuple(p.value for p in search_points(search, [r for r in results
+                                                                if r.name in pending]))
+        guesses += next_points(search, judged, pending=waiting)
+    for candidate in guesses:
+        if not helper.busy:
+            return
+        if candidate in ahead or candidate.solve_key in solves:
+            continue
+        lines: list[str] = []
+        clock = time.perf_counter()
+        try:
+            solved = solve_candidate(study, design, candidate, layouts, starts, lines.append)
+        except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError):
+            continue      # solved again in its round, which records why it fails
+        ahead[candidate] = (solved, lines, time.perf_counter() - clock)
+
+
 def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: CandidateCache | None,
                     resume: bool, layouts: Layouts, starts: Starts,
                     solves: dict[tuple, CandidateResult], say: Callable[[str], None],
                     candidates: list[Candidate], results: list[CandidateResult],
-                    title: str = "") -> None:
+                    title: str = "", ahead: Ahead | None = None) -> None:
     """Each of `candidates` in turn, appended to `results` (the candidates before them,
-    whose nets later ones may share: see `run_study`): solved here, measured here or by
-    `helper` (`fabplan.study.background.BackgroundCandidates`)."""
+    whose nets later ones may share: see `run_study`): solved here (or taken from those
+    solved `ahead`), measured here or by `helper`
+    (`fabplan.study.background.BackgroundCandidates`)."""
     count = len(candidates)
     for i, candidate in enumerate(candidates, 1):
         kept = cache.load(candidate) if cache is not None and resume else None
@@ -196,9 +238,14 @@ def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: Can
             continue
         say(f"{title}[{i}/{count}] {candidate.name}: {candidate.describe()}")
         clock = time.perf_counter()
+        early = None if ahead is None else ahead.pop(candidate, None)
+        if early is not None:
+            for line in early[1]:
+                say(line)
+            clock -= early[2]         # its solve, while the round before was measured
         try:
             solved, twin = _solve_with_twin(study, design, candidate, layouts, starts, solves,
-                                            results, say)
+                                            results, say, None if early is None else early[0])
             if helper is not None:
                 twin = None if twin is None else helper.complete(twin.name) or twin
                 helper.submit(solved, twin, time.perf_counter() - clock)
@@ -279,16 +326,19 @@ def _where(exc: BaseException) -> str:
 
 def _solve_with_twin(study: Study, design: DesignSurface, candidate: Candidate,
                      layouts: Layouts, starts: Starts, solves: dict[tuple, CandidateResult],
-                     earlier: list[CandidateResult], say: Callable[[str], None]
+                     earlier: list[CandidateResult], say: Callable[[str], None],
+                     solved: CandidateResult | None = None
                      ) -> tuple[CandidateResult, CandidateResult | None]:
-    """Solve one candidate (the serial path) and find the earlier candidate it ended at
-    the same net as (`twin_of`), if any. Candidates that differ only in their mold
-    tolerance share the solve kept in `solves`."""
-    if candidate.solve_key in solves:
+    """Solve one candidate (the serial path; `solved`: solved already, ahead of its
+    round) and find the earlier candidate it ended at the same net as (`twin_of`), if
+    any. Candidates that differ only in their mold tolerance share the solve kept in
+    `solves`."""
+    if solved is None and candidate.solve_key in solves:
         say("    its net is that of an earlier candidate of the sweep")
         solved = shared_solve(solves[candidate.solve_key], candidate)
     else:
-        solved = solve_candidate(study, design, candidate, layouts, starts, say)
+        if solved is None:
+            solved = solve_candidate(study, design, candidate, layouts, starts, say)
         solves[candidate.solve_key] = solved
     position = {r.name: k for k, r in enumerate(earlier)}
     twins = [None if r.twin is None else position[r.twin] for r in earlier]

@@ -85,26 +85,42 @@ def search_points(search: Search, results: list[CandidateResult]) -> list[Search
     return sorted(names.values(), key=lambda p: p.value)
 
 
-def next_points(search: Search, results: list[CandidateResult]) -> list[Candidate]:
+def next_points(search: Search, results: list[CandidateResult],
+                pending: tuple[float, ...] = ()) -> list[Candidate]:
     """The next round's candidates (empty when the search is done): the midpoints
     between the best point so far and its neighbours, each warm-started from the layout
-    of the nearer of the two."""
+    of the nearer of the two.
+
+    `pending`: values solved but not measured yet. They count against the budget and
+    may be a neighbour, never the best: with them, the points the next round will likely
+    take, guessed before this round is measured (`fabplan.study.run` solves them while
+    it waits).
+
+    Examples
+    --------
+    >>> from fabplan.study.definition import Search
+    >>> search = Search("lw", "linear-weingarten", "angle", 30, 60, budget=5)
+    >>> next_points(search, [], pending=(30.0, 40.0))
+    []
+    """
     points = search_points(search, results)
-    left = search.budget - len(points)
+    values = sorted({p.value for p in points} | set(pending))
+    left = search.budget - len(values)
     if left <= 0 or not points:
         return []
-    best = min(range(len(points)), key=lambda k: points[k].rank_key)
+    best = min(points, key=lambda p: p.rank_key)
+    at = values.index(best.value)
     gap = RESOLUTION * (search.high - search.low)
     new: list[Candidate] = []
-    taken = {p.value for p in points}
-    for k in (best - 1, best + 1):
-        if not 0 <= k < len(points) or len(new) >= left:
+    taken = set(values)
+    for k in (at - 1, at + 1):
+        if not 0 <= k < len(values) or len(new) >= left:
             continue
-        a, b = points[best], points[k]
-        value = _rounded((a.value + b.value) / 2)
-        if abs(b.value - a.value) / 2 < gap or value in taken:
+        a, b = best.value, values[k]
+        value = _rounded((a + b) / 2)
+        if abs(b - a) / 2 < gap or value in taken:
             continue
-        warm = a.result.candidate
+        warm = best.result.candidate
         start = warm.start_angle if warm.start_angle is not None else warm.angle
         new.append(search.candidate(value, start_angle=start if search.parameter == "angle"
                                     else None))
