@@ -71,24 +71,91 @@ def worker_start(parent: int) -> None:
 
 
 def map_in_processes(function: Callable, batches: list, processes: int) -> list:
-    """``[function(b) for b in batches]`` in `processes` worker processes, in order.
+    """``[function(b) for b in batches]`` in at most `processes` forked processes, in order.
 
-    The workers end with this process (`worker_start`); when a batch fails, or this
-    process is interrupted, they are stopped at once (not after their running batches).
+    Each batch runs in a process forked for it: it inherits the batch (nothing is pickled
+    on the way in) and sends back its result, or the error it raised, pickled in a file.
+    The first error is raised here as soon as its batch ends, the other processes stopped;
+    when this process is interrupted (Ctrl-C, or SIGTERM as `fabplan.cli` turns it into
+    an error) they are stopped at once with SIGKILL. A batch whose process died is run
+    here. No pool and no lock is shared with the processes, so stopping them never waits
+    on one (``multiprocessing.Pool.terminate`` can: for a lock a stopped worker held).
     """
-    import multiprocessing
+    import pickle
+    import select
+    import tempfile
 
-    pool = multiprocessing.get_context().Pool(processes, initializer=worker_start,
-                                              initargs=(os.getpid(),))
-    try:
-        results = pool.map(function, batches, chunksize=1)
-        pool.close()
-    except BaseException:
-        pool.terminate()
-        raise
-    finally:
-        pool.join()
+    results: list = [None] * len(batches)
+    running: dict[int, tuple[int, int]] = {}        # read end of its pipe -> (pid, batch)
+    parent = os.getpid()
+    with tempfile.TemporaryDirectory(prefix="fabplan-batches-") as folder:
+        def path(k: int) -> Path:
+            return Path(folder) / f"{k}.pickle"
+
+        def reap_one() -> None:
+            # a process's end of its pipe closes when it ends: the first to end is reaped
+            ready, _, _ = select.select(list(running), [], [])
+            pid, k = running.pop(ready[0])
+            os.close(ready[0])
+            _, status = os.waitpid(pid, 0)
+            if os.waitstatus_to_exitcode(status) == 0 and path(k).is_file():
+                failed, value = pickle.loads(path(k).read_bytes())
+                if failed:
+                    raise value
+                results[k] = value
+            else:        # the process died (killed, out of memory): the batch runs here
+                results[k] = function(batches[k])
+
+        try:
+            for k, batch in enumerate(batches):
+                while len(running) >= max(processes, 1):
+                    reap_one()
+                ends, end = os.pipe()
+                pid = os.fork()
+                if pid == 0:
+                    code = 1
+                    try:
+                        os.close(ends)
+                        worker_start(parent)
+                        _send(function, batch, path(k))
+                        code = 0
+                    finally:
+                        os._exit(code)
+                os.close(end)
+                running[ends] = (pid, k)
+            while running:
+                reap_one()
+        except BaseException:
+            for ends, (pid, _) in running.items():
+                os.close(ends)
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                    os.waitpid(pid, 0)
+                except (ProcessLookupError, ChildProcessError):
+                    pass
+            raise
     return results
+
+
+def _send(function: Callable, batch: object, path: Path) -> None:
+    """What a process of `map_in_processes` does: ``function(batch)``, or the error it
+    raised (as a plain one when it does not pickle), written to `path` whole."""
+    import pickle
+
+    try:
+        message = (False, function(batch))
+    except Exception as exc:          # noqa: BLE001 - sent back to be raised by the parent
+        message = (True, exc)
+    try:
+        data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+        pickle.loads(data)            # an error class may pickle and not unpickle
+    except Exception as exc:          # noqa: BLE001 - sent back as a plain error
+        data = pickle.dumps((True, RuntimeError(f"{type(message[1]).__name__}: {message[1]}"
+                                                if message[0] else
+                                                f"a result that does not pickle: {exc}")))
+    part = path.with_suffix(".part")
+    part.write_bytes(data)
+    os.replace(part, path)
 
 
 @contextmanager
