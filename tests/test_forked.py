@@ -1,6 +1,6 @@
 """`fabplan.io.forked.map_in_processes`: batches in forked processes give the results in
 order, an error of one batch is raised here with every other process stopped, a batch
-whose process died is run here, and an interrupted caller leaves no process running."""
+whose process died is an error, and an interrupted caller leaves no process running."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from fabplan.errors import CannotMakeError
 from fabplan.io.forked import map_in_processes
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
@@ -71,8 +72,15 @@ def _dies_in_a_process(x: int) -> int:
     return 10 * x
 
 
-def test_a_batch_whose_process_died_is_run_here():
-    assert map_in_processes(_dies_in_a_process, [0, 1, 2], 2) == [0, 10, 20]
+def test_a_batch_whose_process_died_is_an_error_naming_the_signal():
+    # killed from outside or by the kernel for memory: run here, it might take this
+    # process with it
+    with pytest.raises(CannotMakeError, match="killed by signal 9"):
+        map_in_processes(_dies_in_a_process, [0, 1, 2], 2)
+
+
+def test_one_process_runs_the_batches_here():
+    assert map_in_processes(_square_and_pid, [1, 2], 1) == [(1, PARENT), (4, PARENT)]
 
 
 def _sleep_and_note(folder: str) -> None:

@@ -1,6 +1,6 @@
 """Work done in a forked copy of the process, on another core, while the caller goes on.
 
-May import: nothing of fabplan. A bare `os.fork` that leaves by `os._exit`: the child runs
+May import: `fabplan.errors` only. A bare `os.fork` that leaves by `os._exit`: the child runs
 none of the parent's exit handlers and writes nothing to the parent's streams. Elsewhere
 than on Linux, or on one core, nothing is forked.
 """
@@ -14,6 +14,8 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from ..errors import CannotMakeError
 
 __all__ = ["ForkedFile", "forked_processes", "die_with_parent", "map_in_processes",
            "worker_start", "quiet_interrupts"]
@@ -75,71 +77,132 @@ def map_in_processes(function: Callable, batches: list, processes: int) -> list:
 
     Each batch runs in a process forked for it: it inherits the batch (nothing is pickled
     on the way in) and sends back its result, or the error it raised, pickled in a file.
-    The first error is raised here as soon as its batch ends, the other processes stopped;
-    when this process is interrupted (Ctrl-C, or SIGTERM as `fabplan.cli` turns it into
-    an error) they are stopped at once with SIGKILL. A batch whose process died is run
-    here. No pool and no lock is shared with the processes, so stopping them never waits
-    on one (``multiprocessing.Pool.terminate`` can: for a lock a stopped worker held).
+    No pool and no lock is shared with the processes, so stopping them never waits on
+    one (``multiprocessing.Pool.terminate`` can: for a lock a stopped worker held).
+    Elsewhere than on Linux (see `forked_processes`) the batches run here, in turn.
+
+    Parameters
+    ----------
+    function : called with each batch; its result must pickle.
+    batches : the batches (anything: they are inherited, not pickled).
+    processes : how many processes may run at once.
+
+    Returns
+    -------
+    list, ``function(batch)`` of every batch, in the order of `batches`.
+
+    Raises
+    ------
+    Exception
+        The first error a batch raised, as soon as its batch ends, the other processes
+        killed (an error that does not unpickle comes back as a RuntimeError with its
+        text). When this process is interrupted (Ctrl-C, or SIGTERM as `fabplan.cli`
+        turns it into an error), the processes are killed at once and the interrupt
+        goes on.
+    CannotMakeError
+        A process ended without its result: killed (out of memory, say) or crashed.
     """
-    import pickle
-    import select
     import tempfile
 
-    results: list = [None] * len(batches)
-    running: dict[int, tuple[int, int]] = {}        # read end of its pipe -> (pid, batch)
-    parent = os.getpid()
+    if not forked_processes(processes):
+        return [function(b) for b in batches]
     with tempfile.TemporaryDirectory(prefix="fabplan-batches-") as folder:
-        def path(k: int) -> Path:
-            return Path(folder) / f"{k}.pickle"
-
-        def reap_one() -> None:
-            # a process's end of its pipe closes when it ends: the first to end is reaped
-            ready, _, _ = select.select(list(running), [], [])
-            pid, k = running.pop(ready[0])
-            os.close(ready[0])
-            _, status = os.waitpid(pid, 0)
-            if os.waitstatus_to_exitcode(status) == 0 and path(k).is_file():
-                failed, value = pickle.loads(path(k).read_bytes())
-                if failed:
-                    raise value
-                results[k] = value
-            else:        # the process died (killed, out of memory): the batch runs here
-                results[k] = function(batches[k])
-
+        batch_run = _ForkedBatches(function, batches, Path(folder))
         try:
-            for k, batch in enumerate(batches):
-                while len(running) >= max(processes, 1):
-                    reap_one()
-                ends, end = os.pipe()
-                pid = os.fork()
-                if pid == 0:
-                    code = 1
-                    try:
-                        os.close(ends)
-                        worker_start(parent)
-                        _send(function, batch, path(k))
-                        code = 0
-                    finally:
-                        os._exit(code)
-                os.close(end)
-                running[ends] = (pid, k)
-            while running:
-                reap_one()
+            for k in range(len(batches)):
+                while len(batch_run.running) >= processes:
+                    batch_run.reap_one()
+                batch_run.start(k)
+            while batch_run.running:
+                batch_run.reap_one()
         except BaseException:
-            for ends, (pid, _) in running.items():
-                os.close(ends)
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                    os.waitpid(pid, 0)
-                except (ProcessLookupError, ChildProcessError):
-                    pass
+            batch_run.kill()
             raise
-    return results
+        return batch_run.results
+
+
+class _ForkedBatches:
+    """The processes of one `map_in_processes` call: started, reaped as they end, killed."""
+
+    def __init__(self, function: Callable, batches: list, folder: Path) -> None:
+        import select
+
+        self.function, self.batches, self.folder = function, batches, folder
+        self.results: list = [None] * len(batches)
+        self.running: dict[int, tuple[int, int]] = {}   # read end of its pipe -> (pid, batch)
+        self.ends = select.poll()
+        self.parent = os.getpid()
+        # an interrupt between a fork and the child's entry in `running` would leave the
+        # child unstopped: the signals wait until it is entered
+        self.interrupts = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
+                           if hasattr(signal, n)}
+
+    def path(self, k: int) -> Path:
+        return self.folder / f"{k}.pickle"
+
+    def start(self, k: int) -> None:
+        """Fork the process of batch `k` (or run it here when no process can be forked)."""
+        import select
+
+        ends, end = os.pipe()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, self.interrupts)
+        try:
+            pid = os.fork()
+            if pid == 0:
+                code = 1
+                try:
+                    os.close(ends)
+                    worker_start(self.parent)
+                    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+                    _send(self.function, self.batches[k], self.path(k))
+                    code = 0
+                finally:
+                    os._exit(code)
+            self.running[ends] = (pid, k)
+            self.ends.register(ends, select.POLLIN | select.POLLHUP)
+        except OSError:                        # no process to spare: the batch runs here
+            os.close(ends)
+            self.results[k] = self.function(self.batches[k])
+        finally:
+            if os.getpid() == self.parent:
+                os.close(end)
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+    def reap_one(self) -> None:
+        """Take in the first process to end (a process's end of its pipe closes when it
+        ends); raise its error, or `CannotMakeError` when it ended without a result."""
+        import pickle
+
+        ends = self.ends.poll()[0][0]
+        self.ends.unregister(ends)
+        pid, k = self.running.pop(ends)
+        os.close(ends)
+        _, status = os.waitpid(pid, 0)
+        code = os.waitstatus_to_exitcode(status)
+        if code != 0 or not self.path(k).is_file():
+            how = f"was killed by signal {-code}" if code < 0 else f"ended with code {code}"
+            raise CannotMakeError(f"a worker process {how} before its batch was done (out of "
+                                  "memory?); run again with fewer workers")
+        failed, value = pickle.loads(self.path(k).read_bytes())
+        if failed:
+            raise value
+        self.results[k] = value
+
+    def kill(self) -> None:
+        """Kill every process still running, at once."""
+        for ends, (pid, _) in self.running.items():
+            os.close(ends)
+            try:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+        self.running = {}
 
 
 def _send(function: Callable, batch: object, path: Path) -> None:
     """What a process of `map_in_processes` does: ``function(batch)``, or the error it
-    raised (as a plain one when it does not pickle), written to `path` whole."""
+    raised (as a plain one when it does not unpickle), written to `path` whole."""
     import pickle
 
     try:
@@ -148,7 +211,8 @@ def _send(function: Callable, batch: object, path: Path) -> None:
         message = (True, exc)
     try:
         data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-        pickle.loads(data)            # an error class may pickle and not unpickle
+        if message[0]:
+            pickle.loads(data)        # an error class may pickle and not unpickle
     except Exception as exc:          # noqa: BLE001 - sent back as a plain error
         data = pickle.dumps((True, RuntimeError(f"{type(message[1]).__name__}: {message[1]}"
                                                 if message[0] else
