@@ -168,15 +168,13 @@ def test_a_search_solved_ahead_of_its_round_gives_the_serial_run(monkeypatch):
         """Busy whenever asked, with every candidate submitted measured: the guesses
         are the next round's points, whichever process ends first."""
 
-        @property
-        def busy(self) -> bool:
+        def is_busy(self) -> bool:
             return True
 
-        @property
-        def measured(self) -> dict:
+        def measuring(self) -> set:
             while self._running:
                 self._reap(wait=True)
-            return dict(self._done)
+            return set()
 
     ahead = []
     solve_ahead = run_module._solve_ahead

@@ -19,6 +19,7 @@ report, while the HTML report is written).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import signal
@@ -150,7 +151,8 @@ class BackgroundCandidates:
                 die_with_parent(parent)
                 # the run's solves are the path every later candidate waits on: they
                 # keep a core, and the measuring takes what is left of the machine
-                os.nice(BACKGROUND_NICENESS)
+                with contextlib.suppress(OSError):
+                    os.nice(BACKGROUND_NICENESS)
                 sys.stdout = sys.stderr = open(os.devnull, "w")
                 made = _measure(self.study, self.design, solved, twin, self.files, self.rhino,
                                 None if twin_made is None else twin_made[0], ifc=self.ifc)
@@ -163,15 +165,18 @@ class BackgroundCandidates:
         self._running.append(_Job(solved, twin, pid, path, seconds))
         self._reap(wait=False)
 
-    @property
-    def busy(self) -> bool:
-        """Whether a candidate is still being measured."""
+    def is_busy(self) -> bool:
+        """Whether a candidate is still being measured (the finished ones taken in)."""
         self._reap(wait=False)
         return bool(self._running)
 
-    @property
+    def measuring(self) -> set[str]:
+        """The names of the candidates still being measured (the finished ones taken in)."""
+        self._reap(wait=False)
+        return {job.solved.name for job in self._running}
+
     def measured(self) -> dict[str, CandidateResult]:
-        """The candidates measured so far, by name."""
+        """The candidates measured so far, by name (the finished ones taken in)."""
         self._reap(wait=False)
         return dict(self._done)
 

@@ -189,33 +189,34 @@ def _solve_ahead(study: Study, design: DesignSurface, helper: Any, results: list
                  layouts: Layouts, starts: Starts, solves: dict[tuple, CandidateResult],
                  ahead: Ahead) -> None:
     """While the last candidates of a round are measured, solve the points the searches'
-    next round will likely take: the midpoints beside the best point measured so far
-    (`next_points` with the points not measured yet pending). The next round takes a
-    point solved here instead of solving it; a guess it does not take cost only time the
-    run would have spent waiting. A solve is deterministic, so the results are those of a
-    run that solves every point in its round."""
-    if not study.searches:
+    next round will likely take: the midpoints beside the best point known so far
+    (`next_points`, with the points still being measured pending). The next round takes
+    a point solved here instead of solving it. A guess it does not take costs the time
+    the run waited, and at most one solve more: a solve is not stopped when the
+    measuring ends. Solves are deterministic, so the results are those of a run that
+    solves every point in its round."""
+    if not study.searches or not helper.is_busy():
         return
-    measured = helper.measured
-    known = [measured[r.name] for r in results if r.name in measured]
-    pending = {r.name for r in results if r.name not in measured}
+    measuring = helper.measuring()
+    measured = helper.measured()
+    known = [measured.get(r.name, r) for r in results if r.name not in measuring]
     judged = judge_study(searched_study(study, known), design, known).candidates
-    guesses = []
-    for search in study.searches:
-        waiting = tuple(p.value for p in search_points(search, [r for r in results
-                                                                if r.name in pending]))
-        guesses += next_points(search, judged, pending=waiting)
+    waiting = [r for r in results if r.name in measuring]
+    guesses = [c for s in study.searches
+               for c in next_points(s, judged, pending=tuple(p.value for p in
+                                                             search_points(s, waiting)))]
     for candidate in guesses:
-        if not helper.busy:
+        if not helper.is_busy():
             return
-        if candidate in ahead or candidate.solve_key in solves:
+        if candidate.solve_key in solves or any(c.solve_key == candidate.solve_key
+                                                for c in ahead):
             continue
         lines: list[str] = []
         clock = time.perf_counter()
         try:
             solved = solve_candidate(study, design, candidate, layouts, starts, lines.append)
-        except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError):
-            continue      # solved again in its round, which records why it fails
+        except Exception:     # noqa: BLE001 - solved again in its round, which records why
+            continue
         ahead[candidate] = (solved, lines, time.perf_counter() - clock)
 
 
@@ -333,7 +334,7 @@ def _solve_with_twin(study: Study, design: DesignSurface, candidate: Candidate,
     round) and find the earlier candidate it ended at the same net as (`twin_of`), if
     any. Candidates that differ only in their mold tolerance share the solve kept in
     `solves`."""
-    if solved is None and candidate.solve_key in solves:
+    if candidate.solve_key in solves:
         say("    its net is that of an earlier candidate of the sweep")
         solved = shared_solve(solves[candidate.solve_key], candidate)
     else:

@@ -91,17 +91,29 @@ def next_points(search: Search, results: list[CandidateResult],
     between the best point so far and its neighbours, each warm-started from the layout
     of the nearer of the two.
 
-    `pending`: values solved but not measured yet. They count against the budget and
-    may be a neighbour, never the best: with them, the points the next round will likely
-    take, guessed before this round is measured (`fabplan.study.run` solves them while
-    it waits).
+    Parameters
+    ----------
+    search : the search.
+    results : the judged candidates (those of other searches and candidates too).
+    pending : values solved but not measured yet. They count against the budget and may
+        be a neighbour, never the best: with them, the points the next round will likely
+        take, guessed before this round is measured (`fabplan.study.run` solves them
+        while it waits).
+
+    Returns
+    -------
+    list of Candidate, at most two.
 
     Examples
     --------
+    Nothing measured, nothing to refine; the points pending do not change that:
+
     >>> from fabplan.study.definition import Search
     >>> search = Search("lw", "linear-weingarten", "angle", 30, 60, budget=5)
     >>> next_points(search, [], pending=(30.0, 40.0))
     []
+
+    (``tests/test_limits.py`` shows a guess with points pending beside the best.)
     """
     points = search_points(search, results)
     values = sorted({p.value for p in points} | set(pending))
