@@ -162,8 +162,10 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
     deviation = np.full((p, m), np.inf)
     variant = np.zeros((p, m), np.int64)
     order = np.lexsort((molds[:, 1], molds[:, 0]))
-    kernel = compiled_kernel() if p and m else None
-    U, Z = np.ascontiguousarray(data.U, np.float64), np.ascontiguousarray(data.Z, np.float64)
+    # a build of the kernel from before it had gap_block: the numpy path
+    gap_block = getattr(compiled_kernel(), "gap_block", None) if p and m else None
+    if gap_block is not None:
+        U, Z = np.ascontiguousarray(data.U, np.float64), np.ascontiguousarray(data.Z, np.float64)
     for start in range(0, m, chunk):
         cols = order[start:start + chunk]
         K = np.ascontiguousarray(molds[cols], np.float64)
@@ -174,9 +176,10 @@ def _gap_matrix(data: _Panels, molds: np.ndarray, chunk: int = 32) -> tuple[np.n
             rows = np.flatnonzero(gap <= data.reach)
             if rows.size == 0:
                 continue
-            if kernel is not None:
-                kernel.gap_block(U, Z, rows.astype(np.int64), cols.astype(np.int64), v, K,
-                                 deviation, variant, p, Z.shape[2], m)
+            if gap_block is not None:
+                gap_block(U, Z, np.ascontiguousarray(rows, np.int64),
+                          np.ascontiguousarray(cols, np.int64), v, K, deviation, variant, p,
+                          Z.shape[2], m)
             else:
                 _gap_block(data, rows, cols, v, K, deviation, variant)
     return deviation, variant
