@@ -18,12 +18,13 @@ from __future__ import annotations
 import os
 import re
 import time
+from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 from ..errors import InputError
 from ..io import output
-from ..io.forked import ForkedFile
+from ..io.forked import ForkedFile, forked_processes, map_in_processes
 from ..io.records import json_text
 from ..layout.picture import (
     curvature_difference_figure,
@@ -387,6 +388,38 @@ def _write_candidates(result: StudyResult, tmp: Path, say, rhino: bool, client,
     return outputs, pictures
 
 
+def _study_pictures(result: StudyResult, *, fork: bool = False) -> dict[str, str]:
+    """The study's own pictures, data URIs by name: the candidates compared, their Pareto
+    front, every search, the design's curvature where lines turn most. With `fork` they
+    are drawn in forked processes, one per core (`fabplan.io.forked.map_in_processes`):
+    each is its own figure."""
+    drawers: dict[str, Callable[[], str]] = {}
+    if any(not c.failed for c in result.candidates):
+        drawers["comparison"] = lambda: comparison_figure(result)
+    if sum(not c.failed for c in result.candidates) >= PARETO_MIN_CANDIDATES:
+        drawers["pareto"] = lambda: pareto_figure(result)
+    for k, s in enumerate(result.study.searches):
+        drawers[f"search-{k}"] = partial(search_figure, result,
+                                         search_record(s, result.candidates))
+    c = sharpest_turn(result)
+    if c is not None and c.net is not None:
+        turn = c.net.properties["fairness"]["line_turn_deg"]
+        drawers["curvature"] = lambda: curvature_difference_figure(
+            result.design, result.study.panel_size_of(c.candidate),
+            marks={f"{c.name}: lines turn most ({turn['max']:.0f} deg)": turn["point"]},
+            singular_points=c.singular_points,
+            title="The design's curvature: where its principal directions are weak")
+    processes = forked_processes() if fork else 0
+    if processes > 1 and len(drawers) > 1:
+        return dict(zip(drawers, map_in_processes(_drawn, list(drawers.values()), processes),
+                        strict=True))
+    return {name: draw() for name, draw in drawers.items()}
+
+
+def _drawn(draw: Callable[[], str]) -> str:
+    return draw()
+
+
 def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = False, ifc: bool = False,
                 view_3d: bool = True, pdf: bool = True, client: Any = None,
                 fork: bool = False) -> list[Path]:
@@ -421,20 +454,7 @@ def write_study(result: StudyResult, out_dir, *, progress=None, rhino: bool = Fa
     with output.output_folder(out_dir, replace=True, owned=study_files,
                               protect=result.study.input_files()) as tmp:
         outputs, pictures = _write_candidates(result, tmp, say, rhino, client, ifc)
-        if any(not c.failed for c in result.candidates):
-            pictures["comparison"] = comparison_figure(result)
-        if sum(not c.failed for c in result.candidates) >= PARETO_MIN_CANDIDATES:
-            pictures["pareto"] = pareto_figure(result)
-        for k, s in enumerate(result.study.searches):
-            pictures[f"search-{k}"] = search_figure(result, search_record(s, result.candidates))
-        c = sharpest_turn(result)
-        if c is not None and c.net is not None:
-            turn = c.net.properties["fairness"]["line_turn_deg"]
-            pictures["curvature"] = curvature_difference_figure(
-                result.design, result.study.panel_size_of(c.candidate),
-                marks={f"{c.name}: lines turn most ({turn['max']:.0f} deg)": turn["point"]},
-                singular_points=c.singular_points,
-                title="The design's curvature: where its principal directions are weak")
+        pictures.update(_study_pictures(result, fork=fork))
         total = result.seconds_run + time.perf_counter() - clock
         record = study_record(result, outputs, seconds_total=total)
         def print_pdf(path: Path) -> None:
