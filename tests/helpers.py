@@ -454,3 +454,12 @@ def exported_class_counts(molds_json, panels_csv, boundary_csv=None) -> dict:
                 cls = "molded"
             counts[cls] += 1
     return counts
+
+
+def process_alive(pid: int) -> bool:
+    """Whether process `pid` runs (Linux /proc; a zombie is not running)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import process_alive
 
 import fabplan
 from fabplan.cli import main
@@ -338,14 +339,6 @@ def _children(pid: int) -> list[int]:
     return found
 
 
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
@@ -369,9 +362,9 @@ def test_killed_strips_leave_no_worker_running(tmp_path, sig):
     run.send_signal(sig)
     run.communicate(timeout=60)
     deadline = time.monotonic() + 10
-    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+    while any(process_alive(w) for w in workers) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not any(_alive(w) for w in workers)
+    assert not any(process_alive(w) for w in workers)
     if sig == signal.SIGTERM:
         assert run.returncode == 128 + signal.SIGTERM
         assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["net.obj"]

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import process_alive
 
 from fabplan.errors import CannotMakeError
 from fabplan.io.forked import map_in_processes
@@ -26,20 +27,12 @@ def _square_and_pid(x: int) -> tuple[int, int]:
     return x * x, os.getpid()
 
 
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 def test_batches_come_back_in_order_from_processes_of_their_own():
     results = map_in_processes(_square_and_pid, list(range(7)), 2)
     assert [r[0] for r in results] == [x * x for x in range(7)]
     pids = {r[1] for r in results}
     assert len(pids) == 7 and os.getpid() not in pids
-    assert not any(_alive(p) for p in pids)
+    assert not any(process_alive(p) for p in pids)
 
 
 class _BatchError(Exception):
@@ -102,4 +95,4 @@ def test_an_interrupted_caller_leaves_no_process_running(tmp_path):
         timer.cancel()
     assert time.monotonic() - clock < 20.0
     pids = [int(p.name) for p in tmp_path.iterdir()]
-    assert len(pids) == 2 and not any(_alive(p) for p in pids)
+    assert len(pids) == 2 and not any(process_alive(p) for p in pids)
