@@ -260,8 +260,9 @@ class Search:
     start_angle: float | None = None
 
     def candidate(self, value: float, start_angle: float | None = None) -> Candidate:
-        """The candidate at `value` of the searched parameter; `start_angle` (a warm start
-        from a neighbouring point's layout) when given, else the search's."""
+        """The candidate at `value` of the searched parameter; `start_angle` (the angle
+        of the layout it starts from, where its own angle is free) when given, else the
+        search's."""
         angle = value if self.parameter == "angle" else self.angle
         radius = value if self.parameter == "radius" else self.radius
         name = self.name + candidate_name(self.net, angle, radius)[len(self.net):]

@@ -10,8 +10,9 @@ sweep's, ``linear-weingarten-41.25``), judged like the others:
 2. every further round: the best point so far (feasible and cheapest; without a feasible
    one the least infeasible, `fabplan.study.checks.violation`) and the midpoints between it
    and its evaluated neighbours, as long as the budget and the resolution (a 64th of the
-   range) allow. A midpoint starts from its nearer neighbour's layout (a warm start), so
-   that no new layout is made for it.
+   range) allow. A midpoint carries the start angle of the best point: the points of a
+   radius search share its layout; a point of an angle search keeps its own angle, and
+   so is laid out at it (`fabplan.study.candidate_solve.start_angle`).
 
 The search is deterministic: the same study gives the same points in the same order.
 """
@@ -88,8 +89,8 @@ def search_points(search: Search, results: list[CandidateResult]) -> list[Search
 def next_points(search: Search, results: list[CandidateResult],
                 pending: tuple[float, ...] = ()) -> list[Candidate]:
     """The next round's candidates (empty when the search is done): the midpoints
-    between the best point so far and its neighbours, each warm-started from the layout
-    of the nearer of the two.
+    between the best point so far and its neighbours, each with the best point's start
+    angle (see the module).
 
     Parameters
     ----------
