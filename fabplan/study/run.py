@@ -239,7 +239,9 @@ def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: Can
             continue
         say(f"{title}[{i}/{count}] {candidate.name}: {candidate.describe()}")
         clock = time.perf_counter()
-        early = None if ahead is None else ahead.pop(candidate, None)
+        # a point solved ahead whose net an earlier candidate of the round has shares it
+        early = None if ahead is None or candidate.solve_key in solves \
+            else ahead.pop(candidate, None)
         if early is not None:
             for line in early[1]:
                 say(line)
