@@ -8,8 +8,11 @@ than on Linux, or on one core, nothing is forked.
 from __future__ import annotations
 
 import os
+import pickle
+import select
 import signal
 import sys
+import tempfile
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -39,7 +42,6 @@ def die_with_parent(parent: int) -> None:
         except (OSError, AttributeError):
             pass
     else:
-        import threading
         import time
 
         def watch() -> None:
@@ -102,8 +104,6 @@ def map_in_processes(function: Callable, batches: list, processes: int) -> list:
     CannotMakeError
         A process ended without its result: killed (out of memory, say) or crashed.
     """
-    import tempfile
-
     if not forked_processes(processes):
         return [function(b) for b in batches]
     with tempfile.TemporaryDirectory(prefix="fabplan-batches-") as folder:
@@ -125,8 +125,6 @@ class _ForkedBatches:
     """The processes of one `map_in_processes` call: started, reaped as they end, killed."""
 
     def __init__(self, function: Callable, batches: list, folder: Path) -> None:
-        import select
-
         self.function, self.batches, self.folder = function, batches, folder
         self.results: list = [None] * len(batches)
         self.running: dict[int, tuple[int, int]] = {}   # read end of its pipe -> (pid, batch)
@@ -142,8 +140,6 @@ class _ForkedBatches:
 
     def start(self, k: int) -> None:
         """Fork the process of batch `k` (or run it here when no process can be forked)."""
-        import select
-
         ends, end = os.pipe()
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, self.interrupts)
         try:
@@ -171,8 +167,6 @@ class _ForkedBatches:
     def reap_one(self) -> None:
         """Take in the first process to end (a process's end of its pipe closes when it
         ends); raise its error, or `CannotMakeError` when it ended without a result."""
-        import pickle
-
         ends = self.ends.poll()[0][0]
         self.ends.unregister(ends)
         pid, k = self.running.pop(ends)
@@ -203,8 +197,6 @@ class _ForkedBatches:
 def _send(function: Callable, batch: object, path: Path) -> None:
     """What a process of `map_in_processes` does: ``function(batch)``, or the error it
     raised (as a plain one when it does not unpickle), written to `path` whole."""
-    import pickle
-
     try:
         message = (False, function(batch))
     except Exception as exc:          # noqa: BLE001 - sent back to be raised by the parent
