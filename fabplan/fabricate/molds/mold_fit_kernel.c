@@ -132,13 +132,13 @@ static double largest_gap(const double *r, const uint8_t *must, Py_ssize_t s)
     return top;
 }
 
-/* One damped Gauss-Newton step of one panel; returns whether it was taken and moved the
- * panel by more than 1e-9 mm. */
-static int panel_step(const double *P, const double *w, Py_ssize_t s, int n, double *M,
-                      double *K, double *q, double *r, double *trial_q, double *trial_r,
-                      double *damping, double *current)
+/* The normal equations of one panel's step at its placed points q and gaps r, columns
+ * scaled to unit size: normal = (A (n x n, row-major in 64), b (8), scale (8)). */
+static void normal_equations(const double *w, Py_ssize_t s, int n, const double *K,
+                             const double *q, const double *r, double *normal)
 {
-    double A[64] = {0.0}, b[8] = {0.0}, scale[8], J[8];
+    double *A = normal, *b = normal + 64, *scale = normal + 72, J[8];
+    memset(normal, 0, 80 * sizeof(double));
     for (Py_ssize_t j = 0; j < s; j++) {
         const double *o = q + 3 * j;
         double gx = -K[0] * o[0], gy = -K[1] * o[1];
@@ -168,9 +168,26 @@ static int panel_step(const double *P, const double *w, Py_ssize_t s, int n, dou
             A[a * n + c] = A[a * n + c] / scale[a] / scale[c];
             A[c * n + a] = A[a * n + c];
         }
-        A[a * n + a] += *damping;
         b[a] = -b[a] / scale[a];
     }
+}
+
+/* One damped Gauss-Newton step of one panel; returns whether it was taken and moved the
+ * panel by more than 1e-9 mm. `normal` holds the panel's normal equations where `known`
+ * (a step not taken leaves them as they were: only the damping changes). */
+static int panel_step(const double *P, const double *w, Py_ssize_t s, int n, double *M,
+                      double *K, double *q, double *r, double *trial_q, double *trial_r,
+                      double *damping, double *current, double *normal, uint8_t *known)
+{
+    if (!*known)
+        normal_equations(w, s, n, K, q, r, normal);
+    *known = 1;
+    double A[64], b[8];
+    const double *scale = normal + 72;
+    memcpy(A, normal, sizeof A);
+    memcpy(b, normal + 64, sizeof b);
+    for (int a = 0; a < n; a++)
+        A[a * n + a] += *damping;
     double step[8] = {0.0};
     if (solve_small(A, b, n) == 0)
         for (int a = 0; a < n; a++)
@@ -187,6 +204,7 @@ static int panel_step(const double *P, const double *w, Py_ssize_t s, int n, dou
     // Levenberg-Marquardt: a step that lowers the cost is taken and the damping eased
     int better = trial < *current;
     if (better) {
+        *known = 0;
         memcpy(M, trial_M, sizeof trial_M);
         K[0] = trial_K[0];
         K[1] = trial_K[1];
@@ -224,16 +242,19 @@ static PyObject *fit(PyObject *self, PyObject *args)
     int failed = got < 9;
     double *work = NULL;
     if (!failed) {
-        // per panel: q, trial q (3 s each), r, trial r, w, lawson (s each)
-        work = malloc((size_t)(p * s * 10 + 1) * sizeof(double));
+        // per panel: q, trial q (3 s each), r, trial r, w, lawson (s each), its normal
+        // equations (80)
+        work = malloc((size_t)(p * s * 10 + 80 * p + 1) * sizeof(double));
         failed = work == NULL;
         if (failed)
             PyErr_NoMemory();
     }
     double *damping = NULL, *current = NULL;
+    uint8_t *known = NULL;
     if (!failed) {
         damping = malloc((size_t)(2 * p + 1) * sizeof(double));
-        failed = damping == NULL;
+        known = malloc((size_t)p + 1);
+        failed = damping == NULL || known == NULL;
         if (failed)
             PyErr_NoMemory();
         else
@@ -245,7 +266,7 @@ static PyObject *fit(PyObject *self, PyObject *args)
         double *M = views[4].buf, *K = views[5].buf, *best_M = views[6].buf;
         double *best_K = views[7].buf, *best_gap = views[8].buf;
         double *Q = work, *TQ = work + 3 * p * s, *R = work + 6 * p * s;
-        double *TR = R + p * s, *W = TR + p * s, *L = W + p * s;
+        double *TR = R + p * s, *W = TR + p * s, *L = W + p * s, *N = L + p * s;
         Py_BEGIN_ALLOW_THREADS
         int any_free = 0;
         for (Py_ssize_t i = 0; i < p; i++) {
@@ -261,15 +282,18 @@ static PyObject *fit(PyObject *self, PyObject *args)
         for (Py_ssize_t j = 0; j < p * s; j++)
             L[j] = 1.0;
         for (int round = 0; round < (rounds > 1 ? rounds : 1); round++) {
-            for (Py_ssize_t i = 0; i < p; i++)
+            for (Py_ssize_t i = 0; i < p; i++) {
                 current[i] = weighted_squares(W + s * i, R + s * i, s);
+                known[i] = 0;       // the weights changed
+            }
             for (int it = 0; it < iterations; it++) {
                 int moved = 0;
                 for (Py_ssize_t i = 0; i < p; i++)
                     moved |= panel_step(P + 3 * s * i, W + s * i, s,
                                         any_free && free_shape[i] ? 8 : 6, M + 16 * i,
                                         K + 2 * i, Q + 3 * s * i, R + s * i, TQ + 3 * s * i,
-                                        TR + s * i, damping + i, current + i);
+                                        TR + s * i, damping + i, current + i, N + 80 * i,
+                                        known + i);
                 // a round ends when no panel moves any more, as on the numpy path
                 if (!moved)
                     break;
@@ -303,6 +327,7 @@ static PyObject *fit(PyObject *self, PyObject *args)
     }
     free(work);
     free(damping);
+    free(known);
     for (int i = 0; i < got; i++)
         PyBuffer_Release(&views[i]);
     if (failed)
