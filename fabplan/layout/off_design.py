@@ -147,11 +147,21 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
     points = np.asarray(points, np.float64)
     triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
     owner = np.asarray(owner, np.int64)
-    area = np.zeros(count)
-    where = np.full((count, 3), np.nan)
     curves = design.boundary_curves()
     if len(triangles) == 0 or not curves:
-        return OffDesign(area, where)
+        return OffDesign(np.zeros(count), np.full((count, 3), np.nan))
+    rim = _rim_sides(triangles, owner, count, len(points))
+    sides = _sides_off_design(design, points, *rim, count, panel_size, curves)
+    return _with_inside(design, points, triangles, owner, count, panel_size, level, curves,
+                        sides)
+
+
+def _with_inside(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
+                 owner: np.ndarray, count: int, panel_size: float, level: int, curves: list,
+                 sides: tuple[np.ndarray, np.ndarray, np.ndarray]) -> OffDesign:
+    """`area_off_design` of the (t, 3) `triangles` given what `_sides_off_design` measured
+    along their pieces' outlines (`sides`): the samples inside the triangles added."""
+    where = np.full((count, 3), np.nan)
     pattern = _sample_pattern(level)
     T = points[triangles]                                              # (t, 3, 3)
     samples = np.einsum("sk,tkj->tsj", pattern, T).reshape(-1, 3)
@@ -174,8 +184,7 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
     # from the boundary to the boundary along a curved stretch of it (a chord) sags off
     # it by its nature: what lies within that sag (and half again, the samples' error)
     # is no panel over a hole
-    side_area, side_where, sag = _sides_off_design(design, points, triangles, owner, count,
-                                                   panel_size, curves)
+    side_area, side_where, sag = sides
     area = np.maximum(area - 1.5 * sag, 0.0)
     take = (area == 0) & (side_area > 0)
     area = np.where(take, side_area, area)
@@ -253,27 +262,15 @@ def may_leave_design(design: DesignSurface, centre: np.ndarray, radius: np.ndarr
 SIDE_SAMPLES = 32
 
 
-def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
-                      owner: np.ndarray, count: int, panel_size: float, curves: list
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(count,) float, the area between each piece's outline and the design boundary
-    where the outline leaves the design (its distance off the design integrated along
-    it, `SIDE_SAMPLES` samples a side), less its chords of the boundary; (count, 3)
-    float, the point farthest off (NaN where none); (count,) float, the area between
-    each piece's chords and the boundary (the sag it may have). The outline is the
-    triangles' sides that no other triangle of the same piece shares; a chord is a side
-    from the boundary to the boundary that stays within `CHORD_SAG` of its length of it,
-    where the boundary turns between its ends as an arc of that sag would (not at a
-    corner, nor not at all: `boundary_turning`).
-    """
-    from ..solve.constraints.closeness import closest_points_on_polylines
-
-    area, where = np.zeros(count), np.full((count, 3), np.nan)
-    sag = np.zeros(count)
+def _rim_sides(triangles: np.ndarray, owner: np.ndarray, count: int, span: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The outline of each piece: (k, 2) int, the sides of `triangles` (t, 3) int (into
+    `span` points) that no other triangle of the same piece shares, as the triangles run;
+    (k,) int, the piece of each (`owner` (t,) int, in ``0 .. count - 1``)."""
     sides = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     piece = np.tile(owner, 3)
     lo_hi = np.sort(sides, axis=1)
-    span = max(len(points), 1)
+    span = max(span, 1)
     if span * span * max(count, 1) < 2**62:
         # one integer per (side, piece): a sort of numbers instead of rows
         key = (lo_hi[:, 0] * span + lo_hi[:, 1]) * max(count, 1) + piece
@@ -282,7 +279,26 @@ def _sides_off_design(design: DesignSurface, points: np.ndarray, triangles: np.n
         _, inverse, counts = np.unique(np.column_stack([lo_hi, piece]), axis=0,
                                        return_inverse=True, return_counts=True)
     rim = counts[inverse.ravel()] == 1
-    sides, piece = sides[rim], piece[rim]
+    return sides[rim], piece[rim]
+
+
+def _sides_off_design(design: DesignSurface, points: np.ndarray, sides: np.ndarray,
+                      piece: np.ndarray, count: int, panel_size: float, curves: list
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(count,) float, the area between each piece's outline (its `sides` (k, 2) int into
+    `points`, of `piece` (k,) int each: `_rim_sides`) and the design boundary where the
+    outline leaves the design (its distance off the design integrated along it,
+    `SIDE_SAMPLES` samples a side), less its chords of the boundary; (count, 3) float,
+    the point farthest off (NaN where none); (count,) float, the area between each
+    piece's chords and the boundary (the sag it may have). A chord is a side from the
+    boundary to the boundary that stays within `CHORD_SAG` of its length of it, where
+    the boundary turns between its ends as an arc of that sag would (not at a corner, nor
+    not at all: `boundary_turning`).
+    """
+    from ..solve.constraints.closeness import closest_points_on_polylines
+
+    area, where = np.zeros(count), np.full((count, 3), np.nan)
+    sag = np.zeros(count)
     if len(sides) == 0:
         return area, where, sag
     # sides that cannot reach the design boundary have no sample off it: left out
@@ -406,6 +422,7 @@ def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | 
     count = len(faces)
     if count == 0:
         return OffDesign(np.zeros(0), np.zeros((0, 3)))
+    vertices = np.asarray(vertices, np.float64)
     sizes = np.array([len(f) for f in faces])
     ring = np.concatenate(faces)
     start = np.r_[0, np.cumsum(sizes)[:-1]]
@@ -413,10 +430,24 @@ def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | 
     face = np.repeat(np.arange(count), fans)
     j = np.arange(len(face)) - np.repeat(np.r_[0, np.cumsum(fans)[:-1]], fans) + 1
     area, point = np.zeros(count), np.full((count, 3), np.nan)
+    curves = design.boundary_curves()
+    if len(face) == 0 or not curves:
+        return OffDesign(area, point)
+    measured: tuple | None = None
+    outline = np.zeros((0, 3), np.int64)
     for first in (0, 1):          # the fan from corner 0, then from corner 1
         corner = [ring[start[face] + (first + k) % sizes[face]] for k in (0 * j, j, j + 1)]
         fan = np.stack(corner, axis=1)
-        off = area_off_design(design, vertices, fan, face, count, panel_size)
+        rim = _rim_sides(fan, face, count, len(vertices))
+        rows = np.column_stack([rim[1], rim[0]])
+        rows = rows[np.lexsort(rows.T[::-1])]
+        # both fans of a face have its sides for outline (but for a face that runs over a
+        # corner twice): measured once
+        if measured is None or not np.array_equal(rows, outline):
+            measured = _sides_off_design(design, vertices, *rim, count, panel_size, curves)
+            outline = rows
+        off = _with_inside(design, vertices, fan, face, count, panel_size, SAMPLE_LEVEL,
+                           curves, measured)
         area += 0.5 * off.area
         point = np.where(np.isnan(point), off.point, point)
     return OffDesign(area, point)
