@@ -164,12 +164,18 @@ def test_a_search_solved_ahead_of_its_round_gives_the_serial_run(monkeypatch):
                                       'net = "isogonal"\nangle = { search = [60, 90], budget = 5 }'))
     serial = run_study(study)
 
+    forks: list[tuple[str, bool]] = []
+
     class AlwaysBusy(BackgroundCandidates):
         """Busy whenever asked, with every candidate submitted measured: the guesses
         are the next round's points, whichever process ends first."""
 
         def is_busy(self) -> bool:
             return True
+
+        def _fork(self, solved, twin, seconds, ahead=False):
+            forks.append((solved.name, ahead))
+            super()._fork(solved, twin, seconds, ahead)
 
         def measuring(self) -> set:
             while self._running:
@@ -187,12 +193,52 @@ def test_a_search_solved_ahead_of_its_round_gives_the_serial_run(monkeypatch):
     forked = run_study(study, background=AlwaysBusy)
     later = [c.name for c in forked.candidates][5:]
     assert later and set(later) <= set(ahead)        # the last round was solved ahead
+    # ... and measured ahead, once: its round took those measurings
+    assert all((name, True) in forks for name in later)
+    assert sorted(name for name, _ in forks) == sorted(c.name for c in forked.candidates)
     assert [c.name for c in forked.candidates] == [c.name for c in serial.candidates]
     for a, b in zip(serial.candidates, forked.candidates, strict=True):
         assert np.array_equal(a.net.mesh.vertices, b.net.mesh.vertices), a.name
         assert a.metrics["molds"] == b.metrics["molds"], a.name
         assert (a.feasible, a.cost) == (b.feasible, b.cost), a.name
     assert forked.recommended == serial.recommended
+
+
+def test_a_solve_measured_ahead_is_taken_once_or_dropped_without_a_trace():
+    """A solve measured ahead of its round: not counted as busy; dropped, it leaves no
+    candidate and no files; submitted, its process is taken instead of a new one, with
+    the measurements the run makes here."""
+    import time
+
+    from fabplan.study.background import BackgroundCandidates, background_processes
+    from fabplan.study.run import fabricate_candidate, prepare_design, solve_candidate
+
+    if background_processes() == 0:
+        pytest.skip("nothing is forked on this machine")
+    study = parse_study(STUDY)
+    quiet = lambda message: None                                     # noqa: E731
+    design, baseline = prepare_design(study, quiet)
+    candidate = study.candidates[0]
+    solved = solve_candidate(study, design, candidate, {(90.0, study.panel_size): baseline}, {},
+                             quiet)
+    helper = BackgroundCandidates(study, design, quiet, files=True)
+    helper.measure_ahead(solved, 1.0)
+    assert not helper.is_busy() and helper.measuring() == set()
+    while helper._running:                    # measured to the end, then dropped
+        time.sleep(0.05)
+        helper.is_busy()
+    helper.drop_ahead()
+    assert helper.collect() == {} and helper.made_files == {}
+
+    helper.measure_ahead(solved, 1.0)
+    started = [job.pid for job in helper._running]
+    helper.submit(solved, None, 2.0)
+    assert [job.pid for job in helper._running] == started and helper.is_busy()
+    measured = helper.collect()[candidate.name]
+    here = fabricate_candidate(study, design, solved, None, quiet)
+    assert measured.metrics["molds"] == here.metrics["molds"]
+    assert measured.metrics["seconds"]["total"] >= 2.0
+    assert set(helper.made_files) == {candidate.name}
 
 
 def test_a_search_without_a_feasible_point_refines_beside_the_least_infeasible():

@@ -28,7 +28,7 @@ import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Iterable
 
 import numpy as np
 
@@ -44,6 +44,10 @@ __all__ = ["BackgroundCandidates", "background_processes", "BACKGROUND_NICENESS"
 
 #: how much lower the measuring processes run than the run's own solves (`os.nice`)
 BACKGROUND_NICENESS = 10
+
+#: how often a run waiting for its round's candidates looks for a free process to measure
+#: a solve ahead (seconds)
+POLL_SECONDS = 0.02
 
 
 def background_processes(processes: int | None = None) -> int:
@@ -76,6 +80,7 @@ class _Job:
     pid: int
     path: Path
     seconds: float          # the candidate's solve
+    ahead: bool = False     # measured ahead of its round, not taken by it (yet)
 
 
 def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
@@ -110,6 +115,12 @@ class BackgroundCandidates:
     `submit` a solved candidate (with its twin, complete: `complete`); `collect` waits for
     the last ones. The files of the candidates (with `files`) come back in `made_files`;
     `done` is called with every candidate as it is measured.
+
+    A candidate solved ahead of its round (`fabplan.study.run`) may be measured ahead too
+    (`measure_ahead`), in a process that is free while the round before ends: its result
+    is kept apart, and taken when its round submits that very solve; `drop_ahead` stops
+    those no round took. Measuring is deterministic, so a result taken is the one the
+    round would have made.
     """
 
     def __init__(self, study: Study, design: DesignSurface, say: Callable[[str], None], *,
@@ -121,6 +132,8 @@ class BackgroundCandidates:
         self.processes = background_processes(processes)
         self.made_files: dict[str, tuple] = {}
         self._running: list[_Job] = []
+        self._queued: list[tuple[CandidateResult, float]] = []   # to measure ahead
+        self._finished_ahead: list[tuple[_Job, int]] = []        # (job, exit status)
         self._done: dict[str, CandidateResult] = {}
         self._folder: tempfile.TemporaryDirectory | None = None
         self._count = 0
@@ -135,9 +148,61 @@ class BackgroundCandidates:
     def submit(self, solved: CandidateResult, twin: CandidateResult | None,
                seconds: float = 0.0) -> None:
         """Measure `solved` (whose solve took `seconds`) in a forked process once one is
-        free; `twin` is the earlier candidate it ended at the same net as, measured."""
+        free; `twin` is the earlier candidate it ended at the same net as, measured. A
+        measuring of this very solve begun ahead (`measure_ahead`) is taken instead when
+        it had no twin either."""
+        self._queued = [q for q in self._queued if q[0] is not solved]
+        for job in [j for j in self._running if j.ahead and j.solved is solved]:
+            if twin is None:
+                job.ahead, job.seconds = False, seconds
+                return
+            self._stop(job)
+        for job, status in [f for f in self._finished_ahead if f[0].solved is solved]:
+            self._finished_ahead.remove((job, status))
+            if twin is None:
+                job.ahead, job.seconds = False, seconds
+                self._finish(job, status)
+                return
+            job.path.unlink(missing_ok=True)
         while len(self._running) >= self.processes:
             self._reap(wait=True)
+        self._fork(solved, twin, seconds)
+
+    def measure_ahead(self, solved: CandidateResult, seconds: float = 0.0) -> None:
+        """Measure `solved`, a candidate solved ahead of its round (whose solve took
+        `seconds`; one with no twin among the candidates before it), once a process is
+        free; kept apart until its round `submit`s it."""
+        self._queued.append((solved, seconds))
+        self._start_queued()
+
+    def drop_ahead(self, keep: Iterable[CandidateResult] = ()) -> None:
+        """Stop measuring ahead every solve but those in `keep` (that no round will take),
+        and forget what was measured of them."""
+        kept = {id(solved) for solved in keep}
+        self._queued = [q for q in self._queued if id(q[0]) in kept]
+        for job in [j for j in self._running if j.ahead and id(j.solved) not in kept]:
+            self._stop(job)
+        for job, status in [f for f in self._finished_ahead if id(f[0].solved) not in kept]:
+            self._finished_ahead.remove((job, status))
+            job.path.unlink(missing_ok=True)
+
+    def _start_queued(self) -> None:
+        """Begin measuring ahead the queued solves that a free process can take."""
+        while self._queued and len(self._running) < self.processes:
+            solved, seconds = self._queued.pop(0)
+            self._fork(solved, None, seconds, ahead=True)
+
+    def _stop(self, job: _Job) -> None:
+        """Kill the process of `job` and forget it."""
+        with contextlib.suppress(ProcessLookupError, ChildProcessError):
+            os.kill(job.pid, signal.SIGKILL)
+            os.waitpid(job.pid, 0)
+        self._running.remove(job)
+        job.path.unlink(missing_ok=True)
+
+    def _fork(self, solved: CandidateResult, twin: CandidateResult | None, seconds: float,
+              ahead: bool = False) -> None:
+        """Measure `solved` in a new forked process (see `submit`)."""
         if self._folder is None:
             self._folder = tempfile.TemporaryDirectory(prefix="fabplan-candidates-")
         self._count += 1
@@ -162,18 +227,24 @@ class BackgroundCandidates:
                 code = 0
             finally:
                 os._exit(code)
-        self._running.append(_Job(solved, twin, pid, path, seconds))
+        self._running.append(_Job(solved, twin, pid, path, seconds, ahead))
         self._reap(wait=False)
+
+    def _round_jobs(self) -> list[_Job]:
+        """The processes measuring candidates submitted by their round."""
+        return [job for job in self._running if not job.ahead]
 
     def is_busy(self) -> bool:
-        """Whether a candidate is still being measured (the finished ones taken in)."""
+        """Whether a candidate is still being measured (the finished ones taken in;
+        those measured ahead of their round do not count)."""
         self._reap(wait=False)
-        return bool(self._running)
+        return bool(self._round_jobs())
 
     def measuring(self) -> set[str]:
-        """The names of the candidates still being measured (the finished ones taken in)."""
+        """The names of the candidates still being measured (the finished ones taken in;
+        those measured ahead of their round do not count)."""
         self._reap(wait=False)
-        return {job.solved.name for job in self._running}
+        return {job.solved.name for job in self._round_jobs()}
 
     def measured(self) -> dict[str, CandidateResult]:
         """The candidates measured so far, by name (the finished ones taken in)."""
@@ -183,67 +254,83 @@ class BackgroundCandidates:
     def complete(self, name: str) -> CandidateResult | None:
         """The measured candidate `name`, waiting for its process; None when it was not
         submitted here."""
-        while name not in self._done and any(j.solved.name == name for j in self._running):
+        while name not in self._done and any(j.solved.name == name
+                                             for j in self._round_jobs()):
             self._reap(wait=True)
         return self._done.get(name)
 
     def cancel(self) -> None:
         """Stop every process still measuring (the run was interrupted or failed)."""
-        for job in self._running:
-            try:
-                os.kill(job.pid, signal.SIGKILL)
-                os.waitpid(job.pid, 0)
-            except (ProcessLookupError, ChildProcessError):
-                pass
-        self._running = []
-        if self._folder is not None:
-            self._folder.cleanup()
-            self._folder = None
+        for job in list(self._running):
+            self._stop(job)
+        self._queued, self._finished_ahead = [], []
+        self._clean_up()
 
     def collect(self) -> dict[str, CandidateResult]:
-        """Wait for every process; the measured candidates by name."""
-        while self._running:
-            self._reap(wait=True)
+        """Wait for every candidate submitted (not those measured ahead of their round);
+        the measured candidates by name."""
+        while self._round_jobs():
+            if self._queued:
+                # a process that ends frees a place for a solve measured ahead: polled
+                time.sleep(POLL_SECONDS)
+                self._reap(wait=False)
+            else:
+                self._reap(wait=True)
+        if not self._running and not self._finished_ahead:
+            self._clean_up()
+        return self._done
+
+    def _clean_up(self) -> None:
         if self._folder is not None:
             self._folder.cleanup()
             self._folder = None
-        return self._done
 
     def _reap(self, *, wait: bool) -> None:
-        """Take in the finished processes (with `wait`, at least the oldest)."""
+        """Take in the finished processes (with `wait`, at least the oldest submitted by
+        its round, or else the oldest); those measured ahead are kept apart."""
+        waiting = self._round_jobs() or self._running
+        first = waiting[0] if waiting else None
+        for job in list(self._running):
+            pid, status = os.waitpid(job.pid, 0 if wait and job is first else os.WNOHANG)
+            if pid == 0:
+                continue
+            self._running.remove(job)
+            if job.ahead:
+                self._finished_ahead.append((job, status))
+            else:
+                self._finish(job, status)
+        self._start_queued()
+
+    def _finish(self, job: _Job, status: int) -> None:
+        """Take in the measured candidate of `job`, whose process ended with `status`."""
         from .candidate_measure import fabricate_candidate
         from .result import CandidateResult
         from .run import failure_reason
 
-        for k, job in enumerate(list(self._running)):
-            pid, status = os.waitpid(job.pid, 0 if wait and k == 0 else os.WNOHANG)
-            if pid == 0:
-                continue
-            self._running.remove(job)
-            solved, name = job.solved, job.solved.name
-            if os.waitstatus_to_exitcode(status) == 0 and job.path.is_file():
-                result, failure, lines, made, spent = pickle.loads(job.path.read_bytes())
-                job.path.unlink()
-                for line in lines:
-                    self.say(f"    {name}: {line.strip()}")
-            else:   # the process died: measured here, as the serial run does
-                clock = time.perf_counter()
-                failure, made = None, None
-                try:
-                    result = fabricate_candidate(self.study, self.design, solved, job.twin,
-                                                 self.say)
-                except (FabplanError, ArithmeticError, ValueError,
-                        np.linalg.LinAlgError) as exc:
-                    failure = failure_reason(exc)
-                spent = time.perf_counter() - clock
-            if failure is not None:
-                self.say(f"    {name}: failed: {failure}")
-                result = CandidateResult(solved.candidate, error=failure, reasons=[failure])
-            else:
-                result = replace(result, net=solved.net)
-            result.metrics.setdefault("seconds", {})["total"] = job.seconds + spent
-            if made is not None:
-                self.made_files[name] = made
-            self._done[name] = result
-            if self.done is not None:
-                self.done(result)
+        solved, name = job.solved, job.solved.name
+        if os.waitstatus_to_exitcode(status) == 0 and job.path.is_file():
+            result, failure, lines, made, spent = pickle.loads(job.path.read_bytes())
+            job.path.unlink()
+            for line in lines:
+                self.say(f"    {name}: {line.strip()}")
+        else:   # the process died: measured here, as the serial run does
+            clock = time.perf_counter()
+            failure, made = None, None
+            try:
+                result = fabricate_candidate(self.study, self.design, solved, job.twin,
+                                             self.say)
+            except (FabplanError, ArithmeticError, ValueError,
+                    np.linalg.LinAlgError) as exc:
+                failure = failure_reason(exc)
+            spent = time.perf_counter() - clock
+        if failure is not None:
+            self.say(f"    {name}: failed: {failure}")
+            result = CandidateResult(solved.candidate, error=failure, reasons=[failure])
+        else:
+            result = replace(result, net=solved.net)
+        result.metrics.setdefault("seconds", {})["total"] = job.seconds + spent
+        if made is not None:
+            self.made_files[name] = made
+        self._done[name] = result
+        if self.done is not None:
+            self.done(result)

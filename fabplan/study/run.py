@@ -140,6 +140,8 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
     def run(candidates: list[Candidate], title: str = "") -> None:
         """Run `candidates` after the ones in `results`, measured before it returns."""
         nonlocal results
+        if helper is not None:   # what was measured ahead for other points is not needed
+            helper.drop_ahead(keep=[ahead[c][0] for c in candidates if c in ahead])
         _run_candidates(study, design, helper, cache, resume, layouts, starts, solves, say,
                         candidates, results, title, ahead)
         if helper is not None:
@@ -155,6 +157,8 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
             if not more:
                 break
             run(more, f"search round {k}: ")
+        if helper is not None:
+            helper.drop_ahead()
     except BaseException:
         if helper is not None:
             helper.cancel()
@@ -194,7 +198,11 @@ def _solve_ahead(study: Study, design: DesignSurface, helper: Any, results: list
     a point solved here instead of solving it. A guess it does not take costs the time
     the run waited, and at most one solve more: a solve is not stopped when the
     measuring ends. Solves are deterministic, so the results are those of a run that
-    solves every point in its round."""
+    solves every point in its round.
+
+    A point solved here whose net is no earlier candidate's is measured ahead too, in a
+    process the round's last candidates leave free (`helper.measure_ahead`); its round
+    takes that measuring when it takes the solve, and stops it when it does not."""
     if not study.searches or not helper.is_busy():
         return
     measuring = helper.measuring()
@@ -217,7 +225,10 @@ def _solve_ahead(study: Study, design: DesignSurface, helper: Any, results: list
             solved = solve_candidate(study, design, candidate, layouts, starts, lines.append)
         except Exception:     # noqa: BLE001 - solved again in its round, which records why
             continue
-        ahead[candidate] = (solved, lines, time.perf_counter() - clock)
+        seconds = time.perf_counter() - clock
+        ahead[candidate] = (solved, lines, seconds)
+        if _twin_index(study, results, candidate, solved) is None:
+            helper.measure_ahead(solved, seconds)
 
 
 def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: CandidateCache | None,
@@ -343,10 +354,17 @@ def _solve_with_twin(study: Study, design: DesignSurface, candidate: Candidate,
         if solved is None:
             solved = solve_candidate(study, design, candidate, layouts, starts, say)
         solves[candidate.solve_key] = solved
+    j = _twin_index(study, earlier, candidate, solved)
+    return solved, None if j is None else earlier[j]
+
+
+def _twin_index(study: Study, earlier: list[CandidateResult], candidate: Candidate,
+                solved: CandidateResult) -> int | None:
+    """The index in `earlier` of the candidate that `candidate`, solved (`solved`), ended
+    at the same net as (`twin_of`), or None."""
     position = {r.name: k for k, r in enumerate(earlier)}
     twins = [None if r.twin is None else position[r.twin] for r in earlier]
-    j = twin_of(len(earlier), [*(r.candidate for r in earlier), candidate],
-                [r.net.mesh if r.net is not None else None for r in [*earlier, solved]], twins,
-                study)
-    return solved, None if j is None else earlier[j]
+    return twin_of(len(earlier), [*(r.candidate for r in earlier), candidate],
+                   [r.net.mesh if r.net is not None else None for r in [*earlier, solved]],
+                   twins, study)
 
