@@ -64,8 +64,10 @@ def compact_png(png: bytes) -> bytes:
 
     image = Image.open(io.BytesIO(png)).convert("RGB")
     out = io.BytesIO()
+    # zlib's default level: its best (``optimize``) costs four times the time for 3 % of
+    # the bytes
     image.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
-        out, format="png", optimize=True)
+        out, format="png", compress_level=6)
     return out.getvalue() if out.tell() < len(png) else png
 
 

@@ -170,7 +170,9 @@ def _draw(fig, block: _Block, top: float) -> None:
     elif block.kind == "image":
         (pixels,) = block.data
         ax = fig.add_axes((_LEFT, top - block.height, _WIDTH, block.height))
-        ax.imshow(pixels)
+        # the picture's own pixels go into the file, not resampled to the figure's dpi:
+        # sharper, half the bytes, and less time
+        ax.imshow(pixels, interpolation="none")
         ax.set_axis_off()
     else:
         kind, cells, share, size = block.data
