@@ -205,9 +205,11 @@ def test_a_search_solved_ahead_of_its_round_gives_the_serial_run(monkeypatch):
 
 
 def test_a_solve_measured_ahead_is_taken_once_or_dropped_without_a_trace():
-    """A solve measured ahead of its round: not counted as busy; dropped, it leaves no
-    candidate and no files; submitted, its process is taken instead of a new one, with
-    the measurements the run makes here."""
+    """A solve measured ahead of its round: not counted as busy; dropped (finished or
+    still running), it leaves no candidate, file, line or process; submitted, its
+    process is taken instead of a new one, with the measurements the run makes here; a
+    twin found by the round has it measured again."""
+    import os
     import time
 
     from fabplan.study.background import BackgroundCandidates, background_processes
@@ -221,24 +223,52 @@ def test_a_solve_measured_ahead_is_taken_once_or_dropped_without_a_trace():
     candidate = study.candidates[0]
     solved = solve_candidate(study, design, candidate, {(90.0, study.panel_size): baseline}, {},
                              quiet)
-    helper = BackgroundCandidates(study, design, quiet, files=True)
-    helper.measure_ahead(solved, 1.0)
-    assert not helper.is_busy() and helper.measuring() == set()
-    while helper._running:                    # measured to the end, then dropped
+    lines: list[str] = []
+    done: list = []
+    helper = BackgroundCandidates(study, design, lines.append, files=True, done=done.append)
+
+    def gone(pid: int) -> bool:
+        try:
+            os.waitpid(pid, os.WNOHANG)
+        except ChildProcessError:
+            return True
+        return False
+
+    helper.measure_ahead(solved)
+    (job,) = helper._running
+    assert job.ahead and not helper.is_busy() and helper.measuring() == set()
+    deadline = time.monotonic() + 300
+    while helper._running and time.monotonic() < deadline:      # measured to the end
         time.sleep(0.05)
         helper.is_busy()
+    assert helper._finished_ahead == [job] and job.path.is_file()
+    folder = job.path.parent
     helper.drop_ahead()
-    assert helper.collect() == {} and helper.made_files == {}
+    assert not folder.exists() and gone(job.pid)
+    assert helper.collect() == {} and helper.made_files == {} and not lines and not done
 
-    helper.measure_ahead(solved, 1.0)
+    helper.measure_ahead(solved)           # dropped while it runs
+    (job,) = helper._running
+    helper.drop_ahead()
+    assert not helper._running and gone(job.pid) and not job.path.parent.exists()
+
+    helper.measure_ahead(solved)           # taken while it runs
     started = [job.pid for job in helper._running]
-    helper.submit(solved, None, 2.0)
+    helper.submit(solved, None, 1e6)
     assert [job.pid for job in helper._running] == started and helper.is_busy()
     measured = helper.collect()[candidate.name]
     here = fabricate_candidate(study, design, solved, None, quiet)
     assert measured.metrics["molds"] == here.metrics["molds"]
-    assert measured.metrics["seconds"]["total"] >= 2.0
-    assert set(helper.made_files) == {candidate.name}
+    assert 1e6 <= measured.metrics["seconds"]["total"] < 1e6 + 600
+    assert set(helper.made_files) == {candidate.name} and done == [measured] and lines
+
+    helper.measure_ahead(solved)           # a twin after all: measured again, with it
+    (job,) = helper._running
+    helper.submit(solved, measured, 0.0)
+    assert gone(job.pid) and [j.pid for j in helper._running] != [job.pid]
+    assert not any(j.ahead for j in helper._running)
+    helper.collect()
+    assert len(done) == 2 and not helper._running and not helper._finished_ahead
 
 
 def test_a_search_without_a_feasible_point_refines_beside_the_least_infeasible():

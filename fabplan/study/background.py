@@ -47,7 +47,7 @@ BACKGROUND_NICENESS = 10
 
 #: how often a run waiting for its round's candidates looks for a free process to measure
 #: a solve ahead (seconds)
-POLL_SECONDS = 0.02
+_POLL_SECONDS = 0.02
 
 
 def background_processes(processes: int | None = None) -> int:
@@ -73,7 +73,7 @@ def _warm_up(files: bool) -> None:
         figures.png_bytes(fig)
 
 
-@dataclass
+@dataclass(eq=False)
 class _Job:
     solved: CandidateResult
     twin: CandidateResult | None
@@ -81,6 +81,7 @@ class _Job:
     path: Path
     seconds: float          # the candidate's solve
     ahead: bool = False     # measured ahead of its round, not taken by it (yet)
+    status: int = 0         # how its process ended (`os.waitpid`), once it has
 
 
 def _measure(study: Study, design: DesignSurface, solved: CandidateResult,
@@ -132,8 +133,8 @@ class BackgroundCandidates:
         self.processes = background_processes(processes)
         self.made_files: dict[str, tuple] = {}
         self._running: list[_Job] = []
-        self._queued: list[tuple[CandidateResult, float]] = []   # to measure ahead
-        self._finished_ahead: list[tuple[_Job, int]] = []        # (job, exit status)
+        self._queued: list[CandidateResult] = []        # solves to measure ahead
+        self._finished_ahead: list[_Job] = []
         self._done: dict[str, CandidateResult] = {}
         self._folder: tempfile.TemporaryDirectory | None = None
         self._count = 0
@@ -151,46 +152,47 @@ class BackgroundCandidates:
         free; `twin` is the earlier candidate it ended at the same net as, measured. A
         measuring of this very solve begun ahead (`measure_ahead`) is taken instead when
         it had no twin either."""
-        self._queued = [q for q in self._queued if q[0] is not solved]
+        self._queued = [q for q in self._queued if q is not solved]
         for job in [j for j in self._running if j.ahead and j.solved is solved]:
             if twin is None:
                 job.ahead, job.seconds = False, seconds
                 return
             self._stop(job)
-        for job, status in [f for f in self._finished_ahead if f[0].solved is solved]:
-            self._finished_ahead.remove((job, status))
+        for job in [j for j in self._finished_ahead if j.solved is solved]:
+            self._forget(job)
             if twin is None:
                 job.ahead, job.seconds = False, seconds
-                self._finish(job, status)
+                self._finish(job)
                 return
-            job.path.unlink(missing_ok=True)
+        # a free process goes to this candidate before any solve measured ahead
         while len(self._running) >= self.processes:
-            self._reap(wait=True)
+            self._reap(wait=True, start_queued=False)
         self._fork(solved, twin, seconds)
+        self._start_queued()
 
-    def measure_ahead(self, solved: CandidateResult, seconds: float = 0.0) -> None:
-        """Measure `solved`, a candidate solved ahead of its round (whose solve took
-        `seconds`; one with no twin among the candidates before it), once a process is
-        free; kept apart until its round `submit`s it."""
-        self._queued.append((solved, seconds))
+    def measure_ahead(self, solved: CandidateResult) -> None:
+        """Measure `solved`, a candidate solved ahead of its round (one with no twin
+        among the candidates before it), once a process is free; kept apart until its
+        round `submit`s it."""
+        self._queued.append(solved)
         self._start_queued()
 
     def drop_ahead(self, keep: Iterable[CandidateResult] = ()) -> None:
         """Stop measuring ahead every solve but those in `keep` (that no round will take),
         and forget what was measured of them."""
         kept = {id(solved) for solved in keep}
-        self._queued = [q for q in self._queued if id(q[0]) in kept]
+        self._queued = [q for q in self._queued if id(q) in kept]
         for job in [j for j in self._running if j.ahead and id(j.solved) not in kept]:
             self._stop(job)
-        for job, status in [f for f in self._finished_ahead if id(f[0].solved) not in kept]:
-            self._finished_ahead.remove((job, status))
-            job.path.unlink(missing_ok=True)
+        for job in [j for j in self._finished_ahead if id(j.solved) not in kept]:
+            self._forget(job)
+        if not self._running and not self._finished_ahead:
+            self._clean_up()
 
     def _start_queued(self) -> None:
         """Begin measuring ahead the queued solves that a free process can take."""
         while self._queued and len(self._running) < self.processes:
-            solved, seconds = self._queued.pop(0)
-            self._fork(solved, None, seconds, ahead=True)
+            self._fork(self._queued.pop(0), None, 0.0, ahead=True)
 
     def _stop(self, job: _Job) -> None:
         """Kill the process of `job` and forget it."""
@@ -198,7 +200,14 @@ class BackgroundCandidates:
             os.kill(job.pid, signal.SIGKILL)
             os.waitpid(job.pid, 0)
         self._running.remove(job)
+        self._forget(job)
+
+    def _forget(self, job: _Job) -> None:
+        """Remove what the process of `job` (ended) wrote, and the job from the finished."""
+        if job in self._finished_ahead:
+            self._finished_ahead.remove(job)
         job.path.unlink(missing_ok=True)
+        job.path.with_suffix(".part").unlink(missing_ok=True)
 
     def _fork(self, solved: CandidateResult, twin: CandidateResult | None, seconds: float,
               ahead: bool = False) -> None:
@@ -263,7 +272,9 @@ class BackgroundCandidates:
         """Stop every process still measuring (the run was interrupted or failed)."""
         for job in list(self._running):
             self._stop(job)
-        self._queued, self._finished_ahead = [], []
+        self._queued = []
+        for job in list(self._finished_ahead):
+            self._forget(job)
         self._clean_up()
 
     def collect(self) -> dict[str, CandidateResult]:
@@ -272,7 +283,7 @@ class BackgroundCandidates:
         while self._round_jobs():
             if self._queued:
                 # a process that ends frees a place for a solve measured ahead: polled
-                time.sleep(POLL_SECONDS)
+                time.sleep(_POLL_SECONDS)
                 self._reap(wait=False)
             else:
                 self._reap(wait=True)
@@ -281,34 +292,37 @@ class BackgroundCandidates:
         return self._done
 
     def _clean_up(self) -> None:
+        """Remove the folder the processes write their results into."""
         if self._folder is not None:
             self._folder.cleanup()
             self._folder = None
 
-    def _reap(self, *, wait: bool) -> None:
+    def _reap(self, *, wait: bool, start_queued: bool = True) -> None:
         """Take in the finished processes (with `wait`, at least the oldest submitted by
-        its round, or else the oldest); those measured ahead are kept apart."""
+        its round, or else the oldest); those measured ahead are kept apart. With
+        `start_queued`, the processes freed begin measuring queued solves ahead."""
         waiting = self._round_jobs() or self._running
         first = waiting[0] if waiting else None
         for job in list(self._running):
-            pid, status = os.waitpid(job.pid, 0 if wait and job is first else os.WNOHANG)
+            pid, job.status = os.waitpid(job.pid, 0 if wait and job is first else os.WNOHANG)
             if pid == 0:
                 continue
             self._running.remove(job)
             if job.ahead:
-                self._finished_ahead.append((job, status))
+                self._finished_ahead.append(job)
             else:
-                self._finish(job, status)
-        self._start_queued()
+                self._finish(job)
+        if start_queued:
+            self._start_queued()
 
-    def _finish(self, job: _Job, status: int) -> None:
-        """Take in the measured candidate of `job`, whose process ended with `status`."""
+    def _finish(self, job: _Job) -> None:
+        """Take in the measured candidate of `job`, whose process has ended."""
         from .candidate_measure import fabricate_candidate
         from .result import CandidateResult
         from .run import failure_reason
 
         solved, name = job.solved, job.solved.name
-        if os.waitstatus_to_exitcode(status) == 0 and job.path.is_file():
+        if os.waitstatus_to_exitcode(job.status) == 0 and job.path.is_file():
             result, failure, lines, made, spent = pickle.loads(job.path.read_bytes())
             job.path.unlink()
             for line in lines:

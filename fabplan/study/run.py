@@ -109,12 +109,13 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         memory holds, `fabplan.io.resources.default_max_panels`).
     cache : where finished candidates are kept (`fabplan.study.cache.CandidateCache`).
     resume : take the candidates the cache already holds instead of computing them.
-    background : `fabplan.study.background.BackgroundCandidates` (or another class like
-        it), to measure every solved candidate (molds, strips, measurements) in a forked
-        process beside the next candidates' solves, one process per core (on Linux, else
-        here); with `files` (and `rhino`, `ifc` as in `write_study`) its files too, which come
-        back in `StudyResult.made_files` for `write_study` to write. The results are those
-        of the serial run. None: every candidate is measured here, in turn.
+    background : `fabplan.study.background.BackgroundCandidates` (or a subclass), to
+        measure every solved candidate (molds, strips, measurements) in a forked process
+        beside the next candidates' solves, one process per core (on Linux, else here),
+        and the points of a search solved ahead of their round too; with `files` (and
+        `rhino`, `ifc` as in `write_study`) its files too, which come back in
+        `StudyResult.made_files` for `write_study` to write. The results are those of the
+        serial run. None: every candidate is measured here, in turn.
 
     Raises
     ------
@@ -145,6 +146,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         _run_candidates(study, design, helper, cache, resume, layouts, starts, solves, say,
                         candidates, results, title, ahead)
         if helper is not None:
+            helper.drop_ahead()      # those the round did not take (a solve it shared)
             _solve_ahead(study, design, helper, results, layouts, starts, solves, ahead)
             measured = helper.collect()
             results = [measured.get(r.name, r) for r in results]
@@ -225,10 +227,9 @@ def _solve_ahead(study: Study, design: DesignSurface, helper: Any, results: list
             solved = solve_candidate(study, design, candidate, layouts, starts, lines.append)
         except Exception:     # noqa: BLE001 - solved again in its round, which records why
             continue
-        seconds = time.perf_counter() - clock
-        ahead[candidate] = (solved, lines, seconds)
+        ahead[candidate] = (solved, lines, time.perf_counter() - clock)
         if _twin_index(study, results, candidate, solved) is None:
-            helper.measure_ahead(solved, seconds)
+            helper.measure_ahead(solved)
 
 
 def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: CandidateCache | None,
