@@ -212,6 +212,30 @@ def test_measuring_only_what_may_leave_the_design_changes_no_number(door_net, mo
     assert np.array_equal(kept.point, every.point, equal_nan=True)
 
 
+def test_a_face_outline_measured_once_gives_the_average_of_its_two_fans(door_net):
+    """`faces_off_design` measures a face's outline once for both fans: the areas of
+    `area_off_design` of each fan, averaged, to rounding; and a face that runs over a
+    corner twice (its two fans' outlines differ) measured fan by fan as before."""
+    from fabplan.layout.off_design import area_off_design, faces_off_design
+
+    design, _, h, net = door_net
+    pieces = [*net.mesh.faces, *(np.asarray(q) + net.mesh.vertex_count
+                                 for q in net.boundary_panels.polygons)]
+    V = np.vstack([net.mesh.vertices, net.boundary_panels.vertices])
+    rng = np.random.default_rng(11)
+    V = V + rng.normal(scale=0.1 * h, size=V.shape) * (rng.random((len(V), 1)) < 0.2)
+    quad = np.asarray(net.mesh.faces[0])
+    pieces.append(np.array([quad[0], quad[1], quad[1], quad[2]]))       # a corner twice
+    measured = faces_off_design(design, V, pieces, h)
+    fans = [np.array([[f[k], f[(k + j) % len(f)], f[(k + j + 1) % len(f)]]
+                      for f in pieces for j in range(1, len(f) - 1)]) for k in (0, 1)]
+    owner = np.repeat(np.arange(len(pieces)), [len(f) - 2 for f in pieces])
+    each = [area_off_design(design, V, fan, owner, len(pieces), h) for fan in fans]
+    assert (measured.area > 0).sum() >= 3
+    assert np.allclose(measured.area, 0.5 * (each[0].area + each[1].area), rtol=1e-12,
+                       atol=1e-15 * h * h)
+
+
 def test_a_boundary_file_folded_over_the_net_names_the_panel_in_the_file(tmp_path, capsys):
     """A boundary panel running along a net face's side the same way (written by hand or
     by an older cut) is named by its face in NET.boundary.obj, not by its number in a

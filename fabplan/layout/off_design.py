@@ -150,17 +150,19 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
     curves = design.boundary_curves()
     if len(triangles) == 0 or not curves:
         return OffDesign(np.zeros(count), np.full((count, 3), np.nan))
-    rim = _rim_sides(triangles, owner, count, len(points))
-    sides = _sides_off_design(design, points, *rim, count, panel_size, curves)
-    return _with_inside(design, points, triangles, owner, count, panel_size, level, curves,
-                        sides)
+    outline = _outline_sides(triangles, owner, count, len(points))
+    sides = _sides_off_design(design, points, *outline, count, panel_size, curves)
+    return _area_given_outline(design, points, triangles, owner, count, panel_size, level,
+                               curves, sides)
 
 
-def _with_inside(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
-                 owner: np.ndarray, count: int, panel_size: float, level: int, curves: list,
-                 sides: tuple[np.ndarray, np.ndarray, np.ndarray]) -> OffDesign:
-    """`area_off_design` of the (t, 3) `triangles` given what `_sides_off_design` measured
-    along their pieces' outlines (`sides`): the samples inside the triangles added."""
+def _area_given_outline(design: DesignSurface, points: np.ndarray, triangles: np.ndarray,
+                        owner: np.ndarray, count: int, panel_size: float, level: int,
+                        curves: list, sides: tuple[np.ndarray, np.ndarray, np.ndarray]
+                        ) -> OffDesign:
+    """The `OffDesign` of `area_off_design` (its arguments, and the design's boundary
+    `curves`) given what `_sides_off_design` measured along the pieces' outlines
+    (`sides`): the samples inside the triangles added to it."""
     where = np.full((count, 3), np.nan)
     pattern = _sample_pattern(level)
     T = points[triangles]                                              # (t, 3, 3)
@@ -262,11 +264,11 @@ def may_leave_design(design: DesignSurface, centre: np.ndarray, radius: np.ndarr
 SIDE_SAMPLES = 32
 
 
-def _rim_sides(triangles: np.ndarray, owner: np.ndarray, count: int, span: int
+def _outline_sides(triangles: np.ndarray, owner: np.ndarray, count: int, span: int
                ) -> tuple[np.ndarray, np.ndarray]:
     """The outline of each piece: (k, 2) int, the sides of `triangles` (t, 3) int (into
-    `span` points) that no other triangle of the same piece shares, as the triangles run;
-    (k,) int, the piece of each (`owner` (t,) int, in ``0 .. count - 1``)."""
+    `span` points) that no other triangle of the same piece shares, each as its triangle
+    runs; (k,) int, the piece of each (`owner` (t,) int, in ``0 .. count - 1``)."""
     sides = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     piece = np.tile(owner, 3)
     lo_hi = np.sort(sides, axis=1)
@@ -278,15 +280,15 @@ def _rim_sides(triangles: np.ndarray, owner: np.ndarray, count: int, span: int
     else:
         _, inverse, counts = np.unique(np.column_stack([lo_hi, piece]), axis=0,
                                        return_inverse=True, return_counts=True)
-    rim = counts[inverse.ravel()] == 1
-    return sides[rim], piece[rim]
+    alone = counts[inverse.ravel()] == 1
+    return sides[alone], piece[alone]
 
 
 def _sides_off_design(design: DesignSurface, points: np.ndarray, sides: np.ndarray,
                       piece: np.ndarray, count: int, panel_size: float, curves: list
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(count,) float, the area between each piece's outline (its `sides` (k, 2) int into
-    `points`, of `piece` (k,) int each: `_rim_sides`) and the design boundary where the
+    `points`, of `piece` (k,) int each: `_outline_sides`) and the design boundary where the
     outline leaves the design (its distance off the design integrated along it,
     `SIDE_SAMPLES` samples a side), less its chords of the boundary; (count, 3) float,
     the point farthest off (NaN where none); (count,) float, the area between each
@@ -433,21 +435,23 @@ def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | 
     curves = design.boundary_curves()
     if len(face) == 0 or not curves:
         return OffDesign(area, point)
-    measured: tuple | None = None
-    outline = np.zeros((0, 3), np.int64)
+    measured: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    measured_rows: np.ndarray | None = None
     for first in (0, 1):          # the fan from corner 0, then from corner 1
         corner = [ring[start[face] + (first + k) % sizes[face]] for k in (0 * j, j, j + 1)]
         fan = np.stack(corner, axis=1)
-        rim = _rim_sides(fan, face, count, len(vertices))
-        rows = np.column_stack([rim[1], rim[0]])
+        outline = _outline_sides(fan, face, count, len(vertices))
+        rows = np.column_stack([outline[1], outline[0]])       # (piece, side start, end)
         rows = rows[np.lexsort(rows.T[::-1])]
         # both fans of a face have its sides for outline (but for a face that runs over a
         # corner twice): measured once
-        if measured is None or not np.array_equal(rows, outline):
-            measured = _sides_off_design(design, vertices, *rim, count, panel_size, curves)
-            outline = rows
-        off = _with_inside(design, vertices, fan, face, count, panel_size, SAMPLE_LEVEL,
-                           curves, measured)
+        if measured is None or measured_rows is None or not np.array_equal(rows,
+                                                                          measured_rows):
+            measured = _sides_off_design(design, vertices, *outline, count, panel_size,
+                                         curves)
+            measured_rows = rows
+        off = _area_given_outline(design, vertices, fan, face, count, panel_size,
+                                  SAMPLE_LEVEL, curves, measured)
         area += 0.5 * off.area
         point = np.where(np.isnan(point), off.point, point)
     return OffDesign(area, point)
