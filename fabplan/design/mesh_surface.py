@@ -257,22 +257,12 @@ class DesignSurface:
             uv[..., 0] -= period * (uv[..., 0] - uv[:, :1, 0] > period / 2)
         return uv
 
-    @cached_property
+    @property
     def chord_error(self) -> float:
         """How far the triangulation of a parametric design is off the exact surface: the
         largest distance of a triangle's centre or edge midpoint from it (0 for a mesh
-        design)."""
-        if self.parametric is None or self.uv is None:
-            return 0.0
-        tri = np.arange(len(self.triangles))
-        X, UV = self.vertices[self.triangles], self.triangle_uv(tri)
-        weights = np.array([[1, 1, 1], [1, 1, 0], [0, 1, 1], [1, 0, 1]]) / \
-            np.array([[3], [2], [2], [2]])
-        points = np.einsum("sk,tkj->tsj", weights, X).reshape(-1, 3)
-        start = np.einsum("sk,tkj->tsj", weights, UV).reshape(-1, 2)
-        uv = self.parametric.closest_parameters(points, start)
-        return float(np.linalg.norm(self.parametric.points(uv[:, 0], uv[:, 1]) - points,
-                                    axis=1).max())
+        design; `ReferenceSurface.chord_error`)."""
+        return self.reference.chord_error
 
     @cached_property
     def reference(self) -> ReferenceSurface:

@@ -241,7 +241,7 @@ def _admissible(mesh: QuadMesh, families: list,
                     turns=state.data.get("line_turns"), normals=normals):
             return False
         if bound is not None and float(bound.distances(state).max(initial=0.0)) > \
-                bound.limit / state.length_scale:
+                bound.held_limit / state.length_scale:
             return False
         if closeness is None:
             return True

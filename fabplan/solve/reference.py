@@ -7,6 +7,7 @@ about 1.5 microseconds per query point on this machine kind).
 from __future__ import annotations
 
 import os
+from functools import cached_property
 from typing import Callable
 
 import igl
@@ -33,7 +34,7 @@ class ReferenceSurface:
     exact_distances : for the triangulation of an exact surface (a built-in or NURBS
         design), ``points (m, 3) -> (m,)`` distances to that surface, which `distances`
         then reports instead of those to the chords; None otherwise. The solver's
-        closest points stay on the triangles.
+        closest points stay on the triangles (`held_distance`).
     """
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray):
@@ -87,6 +88,30 @@ class ReferenceSurface:
         _, triangle, foot = self._tree.squared_distance(self.vertices, self.triangles, P)
         triangle = np.asarray(triangle, dtype=np.int64)
         return np.asarray(foot), self.face_normals[triangle], triangle
+
+    @cached_property
+    def chord_error(self) -> float:
+        """How far the triangles lie from the exact surface `exact_distances` measures
+        (model units): the largest distance of a triangle's centre or side midpoint from
+        it; 0 without one."""
+        if self.exact_distances is None or len(self.triangles) == 0:
+            return 0.0
+        T = self.vertices[self.triangles]
+        points = np.concatenate([T.mean(axis=1), 0.5 * (T + T[:, [1, 2, 0]]).reshape(-1, 3)])
+        return float(np.max(self.exact_distances(points)))
+
+    def held_distance(self, limit: float) -> float:
+        """The distance to the triangles that keeps a point within `limit` of the surface
+        `distances` measures: `limit` less the triangles' `chord_error` (at least half of
+        `limit`, for a triangulation as coarse as the limit is tight).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> ReferenceSurface(np.eye(3), np.array([[0, 1, 2]])).held_distance(0.1)
+        0.1
+        """
+        return max(limit - self.chord_error, 0.5 * limit)
 
     def on_boundary(self, foot: np.ndarray, triangle: np.ndarray, *,
                     tolerance: float = 1e-9) -> np.ndarray:

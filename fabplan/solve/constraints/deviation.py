@@ -6,6 +6,10 @@ signed distance ``delta_k = sign(n_k . (v_k - p_k)) |v_k - p_k|`` (``n_k`` the r
 normal at ``p_k``) is ``D sin(s_k)``, with one auxiliary angle per vertex. It is an
 inequality, not a pull: inside the band the net is free, and the limit does not fade.
 
+The closest points are on the reference's triangles. Where the reference triangulates an
+exact surface (a built-in or NURBS design), the limit is met on that surface: the band is
+held narrower by how far the triangles lie from it (`ReferenceSurface.held_distance`).
+
 The gradient of the distance is the unit offset ``(v - p) / |v - p|`` (the closest point
 moves, but only along the surface): it turns continuously where the closest point passes
 from one triangle to the next or over the surface's boundary, where a point-to-plane
@@ -28,8 +32,9 @@ class DeviationBound(Constraint):
     Parameters
     ----------
     reference : surface in model units, with ``closest_points`` (a `ReferenceSurface`).
-    limit : the largest distance allowed (model units, > 0). It may be changed between
-        runs of a solver (a continuation tightening it).
+    limit : the largest distance allowed (model units, > 0), to the exact surface where
+        the reference has one. It may be changed between runs of a solver (a
+        continuation tightening it).
     vertices : (k,) int, the vertices held to it; None (default): every vertex. A vertex
         in no star (a zigzag tip) is placed after the solve, or lies past the design's
         edge where the net is continued, and is left out.
@@ -50,6 +55,13 @@ class DeviationBound(Constraint):
         if self.vertices is None:
             self.vertices = np.arange(state.mesh.vertex_count)
         return self.vertices
+
+    @property
+    def held_limit(self) -> float:
+        """The largest distance to the reference's triangles that keeps a vertex within
+        `limit` of the surface they stand for (model units)."""
+        held = getattr(self.reference, "held_distance", None)
+        return self.limit if held is None else held(self.limit)
 
     def declare(self, state):
         return {f"{self.name}-band": (len(self._held(state)),)}
@@ -78,7 +90,7 @@ class DeviationBound(Constraint):
         self.prepare(state)
         signed, _ = self._signed(state)
         state.blocks.view(state.x, f"{self.name}-band")[:] = slack_start(
-            signed, 0.0, self.limit / state.length_scale)
+            signed, 0.0, self.held_limit / state.length_scale)
 
     def columns(self, state):
         return np.c_[state.blocks.index("vertices")[self._held(state)],
@@ -87,5 +99,5 @@ class DeviationBound(Constraint):
     def evaluate(self, state):
         signed, gradient = self._signed(state)
         s = state.blocks.view(state.x, f"{self.name}-band")
-        limit = self.limit / state.length_scale
+        limit = self.held_limit / state.length_scale
         return signed - limit * np.sin(s), np.c_[gradient, -limit * np.cos(s)]
