@@ -258,3 +258,41 @@ def test_layout_and_measure_refuse_bad_limits_before_working(tmp_path, capsys):
 
 def _stars_of(mesh: QuadMesh) -> tuple:
     return mesh.vertices, interior_stars(mesh.faces, mesh.vertex_count)
+
+
+def test_a_deviation_limit_on_an_exact_surface_is_held_on_its_triangles_less_their_chord():
+    """A triangulated sphere whose distances are measured to the exact sphere: its chord
+    error is the largest sag of a triangle's centre or side midpoint, and the deviation
+    bound holds the triangles that much nearer (at least half the limit)."""
+    import trimesh
+
+    from fabplan.solve.constraints.deviation import DeviationBound
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    triangles = ReferenceSurface(sphere.vertices, sphere.faces)
+    assert triangles.chord_error == 0.0 and triangles.held_distance(0.1) == 0.1
+    reference = ReferenceSurface(sphere.vertices, sphere.faces)
+    reference.exact_distances = lambda p: np.abs(np.linalg.norm(p, axis=1) - 1.0)
+    T = reference.vertices[reference.triangles]
+    sag = 1.0 - np.linalg.norm(T.mean(axis=1), axis=1).min()
+    assert reference.chord_error == pytest.approx(sag, rel=1e-12) and 0.01 < sag < 0.05
+    assert DeviationBound(reference, 0.2).held_limit == pytest.approx(0.2 - sag, rel=1e-12)
+    assert DeviationBound(reference, sag).held_limit == 0.5 * sag
+
+
+@pytest.mark.slow
+def test_a_deviation_limit_on_a_coarse_triangulation_is_met_on_the_exact_surface():
+    """A constant-radius net on a paraboloid of 1,200 triangles (sag 6 mm) held within a
+    third of its free drift: its vertices within the limit of the exact surface, where
+    held on the triangles alone they ended 14 % beyond it."""
+    from fabplan.design.load import load_design
+    from fabplan.layout.surface_layout import glide, layout_surface
+
+    design = load_design("paraboloid", triangles=1200)
+    reference = design.reference
+    start = glide(layout_surface(design, 0.8, angle=80.0), "snet", boundary_panels=False).mesh
+    free = fabplan.optimize(start, "const-radius", reference=reference)
+    limit = reference.distances(free.mesh.vertices).max() / 3
+    assert reference.chord_error > 0.1 * limit
+    held = fabplan.optimize(start, "const-radius", reference=reference, max_deviation=limit)
+    assert reference.distances(held.mesh.vertices).max() <= limit * (1 + 1e-6)
