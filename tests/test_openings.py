@@ -190,6 +190,17 @@ def test_a_chord_of_a_round_opening_is_no_panel_over_it():
     assert off.area[1] > 2.5
 
 
+def _pushed_pieces(net, h: float, seed: int) -> tuple[list, np.ndarray]:
+    """The net faces and boundary panels of `net` (panel size `h`), a fifth of their
+    corners pushed about a tenth of a panel at random: the pieces (into the points) and
+    the points (n, 3)."""
+    pieces = [*net.mesh.faces, *(np.asarray(q) + net.mesh.vertex_count
+                                 for q in net.boundary_panels.polygons)]
+    V = np.vstack([net.mesh.vertices, net.boundary_panels.vertices])
+    rng = np.random.default_rng(seed)
+    return pieces, V + rng.normal(scale=0.1 * h, size=V.shape) * (rng.random((len(V), 1)) < 0.2)
+
+
 def test_measuring_only_what_may_leave_the_design_changes_no_number(door_net, monkeypatch):
     """The net faces and boundary panels of a door facade, lifted off it and pushed past
     its edges in places, measured as `faces_off_design` does (only the triangles and sides
@@ -198,11 +209,7 @@ def test_measuring_only_what_may_leave_the_design_changes_no_number(door_net, mo
     import fabplan.layout.off_design as off_design
 
     design, _, h, net = door_net
-    pieces = [*net.mesh.faces, *(np.asarray(q) + net.mesh.vertex_count
-                                 for q in net.boundary_panels.polygons)]
-    V = np.vstack([net.mesh.vertices, net.boundary_panels.vertices])
-    rng = np.random.default_rng(7)
-    V = V + rng.normal(scale=0.1 * h, size=V.shape) * (rng.random((len(V), 1)) < 0.2)
+    pieces, V = _pushed_pieces(net, h, seed=7)
     kept = off_design.faces_off_design(design, V, pieces, h)
     monkeypatch.setattr(off_design, "may_leave_design",
                         lambda d, centre, *args: np.ones(len(centre), bool))
@@ -219,11 +226,7 @@ def test_a_face_outline_measured_once_gives_the_average_of_its_two_fans(door_net
     from fabplan.layout.off_design import area_off_design, faces_off_design
 
     design, _, h, net = door_net
-    pieces = [*net.mesh.faces, *(np.asarray(q) + net.mesh.vertex_count
-                                 for q in net.boundary_panels.polygons)]
-    V = np.vstack([net.mesh.vertices, net.boundary_panels.vertices])
-    rng = np.random.default_rng(11)
-    V = V + rng.normal(scale=0.1 * h, size=V.shape) * (rng.random((len(V), 1)) < 0.2)
+    pieces, V = _pushed_pieces(net, h, seed=11)
     quad = np.asarray(net.mesh.faces[0])
     pieces.append(np.array([quad[0], quad[1], quad[1], quad[2]]))       # a corner twice
     measured = faces_off_design(design, V, pieces, h)
