@@ -80,6 +80,36 @@ def test_relaxing_the_limits_as_said_makes_the_nearest_candidate_feasible(judged
     assert next(c for c in again.candidates if c.name == nearest.name).feasible
 
 
+def test_every_infeasible_candidate_says_what_would_make_it_feasible_or_what_to_try(judged):
+    """Each infeasible candidate's record and report verdict: the relaxation that makes it
+    feasible, or, for a solve that did not converge (no limit relaxed would do), what to
+    try instead."""
+    from fabplan.study.records import study_record
+    from fabplan.study.tables import candidate_facts
+
+    study, result = judged
+    tight = dataclasses.replace(study, limits=dataclasses.replace(
+        study.limits, max_deviation_mm=0.01, max_molds=1))
+    strict = judge_study(tight, result.design, result.candidates)
+    records = {r["name"]: r for r in study_record(strict)["candidates"]}
+    for c in strict.candidates:
+        record = records[c.name]
+        if c.failed or c.feasible:
+            assert record["next_steps"] == [] or c.failed
+            continue
+        verdict, _ = candidate_facts(c, strict)
+        assert record["relaxation"] and f"feasible with {record['relaxation']}" in verdict
+        assert "a smaller panel size" in " ".join(record["next_steps"])
+    # a solve that stopped short: nothing to relax, what to try said
+    c = next(c for c in strict.candidates if not c.failed)
+    stopped = {"limit": "max_sphere_residual", "bound": 1e-6, "measured": 0.003, "ok": False,
+               "margin": -3000.0, "relax_to": None, "text": "the solve stopped"}
+    stuck = dataclasses.replace(c, checks=[stopped, *c.checks], feasible=False)
+    assert relaxation_text(stuck.checks) == ""
+    verdict, _ = candidate_facts(stuck, strict)
+    assert "To try: let the solve run longer (max_iterations)" in verdict
+
+
 def test_the_recommendation_names_the_limit_that_binds_hardest(judged):
     _, result = judged
     if result.recommended is None:

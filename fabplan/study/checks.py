@@ -8,8 +8,8 @@ import math
 
 from ..fabricate.limits import LIMITS
 
-__all__ = ["check", "binding_check", "violation", "relaxation_text", "nice_value", "LIMIT_NAMES",
-           "limit_words", "limit_value"]
+__all__ = ["check", "binding_check", "violation", "relaxation_text", "next_steps", "nice_value",
+           "LIMIT_NAMES", "limit_words", "limit_value"]
 
 #: every limit of a study in words, with its unit; those the commands also check
 #: (`fabplan.fabricate.limits.LIMITS`) in the same words
@@ -110,6 +110,36 @@ def violation(checks: list[dict]) -> float:
             return math.inf
         excess += -c["margin"]
     return excess
+
+
+#: what else to try for a failed check, beside relaxing its limit (`next_steps`)
+TRY = {
+    "max_sphere_residual": "let the solve run longer (max_iterations) or try another angle or "
+                           "panel size: the net did not converge",
+    "max_deviation_mm": "keep the net nearer the design: a net type that glides on it "
+                        "(isogonal, orthogonal, the baseline) or a smaller panel size",
+    "mold_tolerance_mm": "a larger mold_tolerance_mm, or a smaller panel size",
+    "max_molds": "a net type whose panels share molds (linear Weingarten, constant radius) or "
+                 "a larger mold_tolerance_mm",
+    "max_panel_step_mm": "a smaller panel size or a larger mold_tolerance_mm",
+    "max_kink_deg": "a smaller panel size",
+    "max_line_turn_deg": "another net type or angle, or a smaller panel size",
+    "planarity_tolerance_mm": "a net type with planar panels (char-conjugate)",
+}
+
+
+def next_steps(checks: list[dict]) -> list[str]:
+    """What to try for a candidate's failed `checks`, beside relaxing their limits
+    (`relaxation_text`): one suggestion per failed limit, each once, in the checks' order.
+
+    Examples
+    --------
+    >>> next_steps([{"limit": "max_kink_deg", "ok": False},
+    ...             {"limit": "max_molds", "ok": True}])
+    ['a smaller panel size']
+    """
+    return list(dict.fromkeys(TRY[c["limit"]] for c in checks
+                              if not c["ok"] and c["limit"] in TRY))
 
 
 def relaxation_text(checks: list[dict]) -> str:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..report.html import counted
-from .checks import LIMIT_NAMES, binding_check, relaxation_text, violation
+from .checks import LIMIT_NAMES, binding_check, next_steps, relaxation_text, violation
 from .definition import Candidate, Study
 from .mold_counts import material_sentence
 from .result import CandidateResult, StudyResult, by_rank
@@ -150,7 +150,7 @@ def recommend(results: list[CandidateResult], study: Study, *,
         relax = relaxation_text(best.checks)
         if relax:
             text += f" It would be feasible with {relax}, the other limits as they are."
-        steps = _next_steps(best)
+        steps = next_steps(best.checks)
         return None, text + (f" Other ways: {'; '.join(steps)}." if steps else "")
     best = feasible[0]
     base = baseline_of(best.candidate, results)
@@ -204,33 +204,10 @@ def _g3(value: float | None) -> str:
 
 
 #: what to try when a limit fails, by limit
-_TRY = {
-    "max_sphere_residual": "let the solve run longer (max_iterations) or try another angle or "
-                           "panel size: the net did not converge",
-    "max_deviation_mm": "keep the net nearer the design: a net type that glides on it "
-                        "(isogonal, orthogonal, the baseline) or a smaller panel size",
-    "mold_tolerance_mm": "a larger mold_tolerance_mm, or a smaller panel size",
-    "max_molds": "a net type whose panels share molds (linear Weingarten, constant radius) or "
-                 "a larger mold_tolerance_mm",
-    "max_panel_step_mm": "a smaller panel size or a larger mold_tolerance_mm",
-    "max_kink_deg": "a smaller panel size",
-    "max_line_turn_deg": "another net type or angle, or a smaller panel size",
-    "planarity_tolerance_mm": "a net type with planar panels (char-conjugate)",
-}
-
-
 def _named(result: CandidateResult) -> str:
     """A candidate's name, with its description where that says more."""
     described = result.candidate.describe()
     return result.name if described == result.name else f"{result.name} ({described})"
-
-
-def _next_steps(best: CandidateResult) -> list[str]:
-    """What else to try for the nearest candidate of a study without a feasible one,
-    beside relaxing its failed limits (`relaxation_text`): one suggestion per failed
-    limit."""
-    steps = [_TRY[c["limit"]] for c in best.checks if not c["ok"] and c["limit"] in _TRY]
-    return list(dict.fromkeys(steps))
 
 
 def baseline_of(candidate: Candidate, results: list[CandidateResult]) -> CandidateResult | None:

@@ -9,7 +9,7 @@ import csv
 import io
 from typing import TYPE_CHECKING
 
-from .checks import binding_check, relaxation_text
+from .checks import binding_check, next_steps, relaxation_text
 from .result import CandidateResult, StudyResult
 from .search import search_record
 
@@ -42,6 +42,7 @@ def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None
         "checks": c.checks,
         "binding_limit": None if (b := binding_check(c.checks)) is None else b["limit"],
         "relaxation": relaxation_text(c.checks) or None,
+        "next_steps": [] if c.feasible else next_steps(c.checks),
         "metrics": c.metrics,
         "cost": c.cost,
         "cost_terms": c.cost_terms,

@@ -11,7 +11,7 @@ import math
 from ..layout.picture import kink_text as layout_kink_text
 from ..report import html
 from ..report.html import counted, format_range
-from .checks import LIMIT_NAMES
+from .checks import LIMIT_NAMES, next_steps, relaxation_text
 from .mold_counts import material_sentence, molds_text
 from .result import CandidateResult, StudyResult
 from .verdict import every_panel_flat
@@ -320,6 +320,12 @@ def candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[
     m = c.metrics
     units = result.study.design.units
     verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
+    relax = "" if c.feasible else relaxation_text(c.checks)
+    steps = [] if c.feasible else next_steps(c.checks)
+    if relax:
+        verdict += f" It would be feasible with {relax}, the other limits as they are."
+    elif steps:        # a solve that did not converge: no limit relaxed makes it feasible
+        verdict += " To try: " + "; ".join(steps) + "."
     if c.notes:
         verdict += " Note: " + "; ".join(c.notes) + "."
     types = m["molds"]["panel_types"]
