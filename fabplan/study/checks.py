@@ -114,8 +114,9 @@ def violation(checks: list[dict]) -> float:
 
 #: what else to try for a failed check, beside relaxing its limit (`next_steps`)
 TRY = {
-    "max_sphere_residual": "let the solve run longer (max_iterations) or try another angle or "
-                           "panel size: the net did not converge",
+    "max_sphere_residual": "let the solve run longer (max_iterations), lay the design out "
+                           "from several starts (layout_starts) or try another angle or panel "
+                           "size: the net did not converge",
     "max_deviation_mm": "keep the net nearer the design: a net type that glides on it "
                         "(isogonal, orthogonal, the baseline) or a smaller panel size",
     "mold_tolerance_mm": "a larger mold_tolerance_mm, or a smaller panel size",
