@@ -8,8 +8,8 @@ import math
 
 from ..fabricate.limits import LIMITS
 
-__all__ = ["check", "binding_check", "violation", "relaxation_text", "next_steps", "nice_value",
-           "LIMIT_NAMES", "limit_words", "limit_value"]
+__all__ = ["check", "binding_check", "violation", "relaxation_text", "feasible_with", "next_steps",
+           "nice_value", "LIMIT_NAMES", "limit_words", "limit_value"]
 
 #: every limit of a study in words, with its unit; those the commands also check
 #: (`fabplan.fabricate.limits.LIMITS`) in the same words
@@ -113,7 +113,7 @@ def violation(checks: list[dict]) -> float:
 
 
 #: what else to try for a failed check, beside relaxing its limit (`next_steps`)
-TRY = {
+_TRY = {
     "max_sphere_residual": "let the solve run longer (max_iterations), lay the design out "
                            "from several starts (layout_starts) or try another angle or panel "
                            "size: the net did not converge",
@@ -139,8 +139,15 @@ def next_steps(checks: list[dict]) -> list[str]:
     ...             {"limit": "max_molds", "ok": True}])
     ['a smaller panel size']
     """
-    return list(dict.fromkeys(TRY[c["limit"]] for c in checks
-                              if not c["ok"] and c["limit"] in TRY))
+    return list(dict.fromkeys(_TRY[c["limit"]] for c in checks
+                              if not c["ok"] and c["limit"] in _TRY))
+
+
+def feasible_with(checks: list[dict]) -> str:
+    """The sentence that says which limits, relaxed to what, make a candidate feasible
+    (`relaxation_text`), with a leading space; '' when none would."""
+    relax = relaxation_text(checks)
+    return f" It would be feasible with {relax}, the other limits as they are." if relax else ""
 
 
 def relaxation_text(checks: list[dict]) -> str:

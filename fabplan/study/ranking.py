@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..report.html import counted
-from .checks import LIMIT_NAMES, binding_check, next_steps, relaxation_text, violation
+from .checks import LIMIT_NAMES, binding_check, feasible_with, next_steps, violation
 from .definition import Candidate, Study
 from .mold_counts import material_sentence
 from .result import CandidateResult, StudyResult, by_rank
@@ -147,9 +147,7 @@ def recommend(results: list[CandidateResult], study: Study, *,
         best = measured[0]
         text = (f"No candidate meets every limit. The nearest is {_named(best)}, which "
                 "fails: " + "; ".join(best.reasons) + ".")
-        relax = relaxation_text(best.checks)
-        if relax:
-            text += f" It would be feasible with {relax}, the other limits as they are."
+        text += feasible_with(best.checks)
         steps = next_steps(best.checks)
         return None, text + (f" Other ways: {'; '.join(steps)}." if steps else "")
     best = feasible[0]
@@ -203,7 +201,6 @@ def _g3(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3g}"
 
 
-#: what to try when a limit fails, by limit
 def _named(result: CandidateResult) -> str:
     """A candidate's name, with its description where that says more."""
     described = result.candidate.describe()

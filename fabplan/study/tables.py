@@ -11,7 +11,7 @@ import math
 from ..layout.picture import kink_text as layout_kink_text
 from ..report import html
 from ..report.html import counted, format_range
-from .checks import LIMIT_NAMES, next_steps, relaxation_text
+from .checks import LIMIT_NAMES, feasible_with, next_steps
 from .mold_counts import material_sentence, molds_text
 from .result import CandidateResult, StudyResult
 from .verdict import every_panel_flat
@@ -320,12 +320,11 @@ def candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[
     m = c.metrics
     units = result.study.design.units
     verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
-    relax = "" if c.feasible else relaxation_text(c.checks)
-    steps = [] if c.feasible else next_steps(c.checks)
-    if relax:
-        verdict += f" It would be feasible with {relax}, the other limits as they are."
-    elif steps:        # a solve that did not converge: no limit relaxed makes it feasible
-        verdict += " To try: " + "; ".join(steps) + "."
+    if not c.feasible:
+        relax = feasible_with(c.checks)
+        # else a check no relaxed limit meets (a solve that did not converge): what to try
+        steps = [] if relax else next_steps(c.checks)
+        verdict += relax + (" To try: " + "; ".join(steps) + "." if steps else "")
     if c.notes:
         verdict += " Note: " + "; ".join(c.notes) + "."
     types = m["molds"]["panel_types"]
