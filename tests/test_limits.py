@@ -110,6 +110,81 @@ def test_every_infeasible_candidate_says_what_would_make_it_feasible_or_what_to_
     assert "To try: let the solve run longer (max_iterations)" in verdict
 
 
+def test_a_stalled_solve_names_what_it_left_unmet_and_says_when_no_relaxation_exists(judged):
+    """A solve that stopped short: its check names the worst unmet families; its advice
+    comes from what the solve tried (a deviation continuation that found no net at any
+    limit: another net type; several layout starts: not those again), and it is the only
+    advice (the other checks measured no net yet)."""
+    from fabplan.study.checks import next_steps
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    c = next(c for c in result.candidates if not c.failed)
+    limits = dataclasses.replace(study.limits, max_molds=1)       # a mold check fails too
+    metrics = {**c.metrics, "converged": False, "status": "stagnated",
+               "unmet": {"sphere": 0.027, "edge-collapse": 0.07, "angle": 0.015,
+                         "convex-quads": 0.044},
+               "deviation_search": {"loosest_mm": 4320.0, "smallest_converged_mm": None}}
+    checks = verdict(metrics, limits)
+    solve = next(k for k in checks if k["limit"] == "max_sphere_residual")
+    assert not solve["ok"] and solve["relax_to"] is None
+    assert ("short on edge-collapse (0.07), convex-quads (0.044), sphere (0.027) and 1 more"
+            in solve["text"])
+    assert any(not k["ok"] and k["limit"] == "max_molds" for k in checks)
+    assert relaxation_text(checks) == ""
+    steps = next_steps(checks)
+    assert len(steps) == 1 and steps[0].startswith("another net type") and "4,320 mm" in steps[0]
+    # no continuation, several starts tried: the solve's advice does not ask for them again
+    several = next_steps(verdict({**metrics, "deviation_search": None, "layout_starts": 5}, limits))
+    assert several == ["let the solve run longer (max_iterations) or try another angle or panel "
+                       "size: the net did not converge from 5 layout starts"]
+    # one start: the general advice, which names several starts
+    one = next_steps(verdict({**metrics, "deviation_search": None, "layout_starts": 1}, limits))
+    assert len(one) == 1 and "layout_starts" in one[0]
+    # a net that met its constraints but crumpled: no longer solve, another lattice
+    crumpled = next_steps(verdict({**metrics, "status": "crumpled", "unmet": {}}, limits))
+    assert len(crumpled) == 1 and crumpled[0].startswith("another angle or panel size")
+    assert "crumpled" in crumpled[0] and "max_iterations" not in crumpled[0]
+    # a converged net names no unmet family and gets no solve advice
+    done = verdict({**c.metrics, "unmet": {"angle": 0.3}}, limits)
+    assert "short on" not in done[0]["text"] and done[0]["advice"] is None
+
+
+def test_a_gliding_candidate_that_stalls_on_the_study_layout_is_solved_from_several_starts(
+        judged, monkeypatch):
+    """With one layout start, a gliding net that does not converge is solved again from
+    `RETRY_STARTS` starts, the fairest kept (and kept as the S-net start of the others)."""
+    import fabplan.layout.surface_layout as surface_layout
+    from fabplan.study.candidate_solve import RETRY_STARTS, _CandidateSolve
+
+    study, result = judged
+    stalled = dataclasses.replace(result.candidates[0].net, status="stagnated")
+    assert not stalled.converged
+    asked = []
+
+    def fairest(self, net_type, net_angle, starts=None):
+        asked.append((net_type, starts))
+        return "layout of the fairest", "net of the fairest"
+
+    monkeypatch.setattr(surface_layout, "glide", lambda *a, **k: stalled)
+    monkeypatch.setattr(_CandidateSolve, "fairest", fairest)
+    said: list[str] = []
+    for net_type in ("isogonal", "snet"):
+        solve = _CandidateSolve(study, result.design, dataclasses.replace(
+            study.candidates[0], net=net_type), {}, {}, said.append, 60.0, 1.0, None)
+        net, layout = solve.gliding("layout of the study")
+        assert (net, layout) == ("net of the fairest", "layout of the fairest")
+        assert asked[-1] == (net_type, RETRY_STARTS)
+    assert solve.starts[solve.key] == "net of the fairest"
+    assert solve.layouts[solve.key] == "layout of the fairest"
+    assert f"stagnated from the study's layout: solved from {RETRY_STARTS} layout starts" in said[0]
+    # a converged glide is kept as it is
+    monkeypatch.setattr(surface_layout, "glide", lambda *a, **k: result.candidates[0].net)
+    assert result.candidates[0].net.converged
+    assert solve.gliding("layout of the study")[0] is result.candidates[0].net
+    assert len(asked) == 2
+
+
 def test_the_recommendation_names_the_limit_that_binds_hardest(judged):
     _, result = judged
     if result.recommended is None:

@@ -436,7 +436,9 @@ def optimize(mesh: QuadMesh, net: str = "snet", *, angle: float | None = None,
                   "multilevel": {"levels": levels, "full_iterations": solver.accepted_steps}
                   if chosen.name == "multilevel" else None,
                   "max_line_turn_deg": max_line_turn, "max_deviation": max_deviation,
-                  "deviation": deviation}
+                  "deviation": deviation,
+                  # the hard families a solve that stopped short left above the tolerance
+                  "unmet": unmet_constraints(solver) if solver.status != "converged" else {}}
     status = result_status(solver.status, build)
     return OptimizationResult(
         mesh=result_mesh,

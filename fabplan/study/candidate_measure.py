@@ -198,6 +198,11 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "parameters": {k: v for k, v in net.parameters.items()
                        if k in ("angle_deg", "radius") and v is not None},
         "sphere_residual_relative_max": residual,
+        # a solve that stopped short: its hard families above the tolerance, and how far
+        # its deviation continuation looked for a net of the type (`_deviation_search`)
+        "unmet": {k: float(v) for k, v in (net.parameters.get("unmet") or {}).items()},
+        "deviation_search": _deviation_search(net.parameters.get("deviation"), mm_per_unit),
+        "layout_starts": len(props.get("layout_starts") or [None]),
         "deviation_mm": {"max": float(deviation.max()), "mean": float(deviation.mean()),
                          "p95": float(np.percentile(deviation, 95)),
                          # the vertices the net's conditions hold (in a star), apart from
@@ -303,3 +308,13 @@ def _pick(stats: dict | None) -> dict | None:
         return None
     return {"min": stats["min"], "max": stats["max"]}
 
+
+def _deviation_search(record: dict | None, mm_per_unit: float) -> dict | None:
+    """The deviation continuation of a solve (`fabplan.solve.attempts.deviation_continuation`)
+    in millimetres: the loosest limit it tried and the smallest it converged buildable to
+    (None when none did); None when the solve needed none."""
+    if not record or not record.get("tried"):
+        return None
+    smallest = record.get("smallest_converged")
+    return {"loosest_mm": float(record["tried"][0]) * mm_per_unit,
+            "smallest_converged_mm": None if smallest is None else float(smallest) * mm_per_unit}

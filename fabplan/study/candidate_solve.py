@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..solve.solver import IterationRecord, SolverSettings
 
 __all__ = ["Layouts", "Starts", "solve_candidate", "planarity_held", "optimize_held", "start_angle",
-           "DEVIATION_HELD", "PLANARITY_HELD"]
+           "DEVIATION_HELD", "PLANARITY_HELD", "RETRY_STARTS"]
 
 
 #: Layouts of a study by start angle (degrees) and panel size (model units).
@@ -76,7 +76,7 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         net, layout = solve.past_edges(continued, seconds)
     else:
         net, layout = solve.off_design(layout)
-    _count_solve_seconds(seconds, net, clock, laid_before, solve.several)
+    _count_solve_seconds(seconds, net, clock, laid_before)
     say(f"    {net.status} after {net.iterations} iterations ({seconds['optimize']:.1f} s)")
     net.properties["units"] = study.design.units     # read back by the commands on net.obj
     return CandidateResult(candidate, metrics={"seconds": seconds}, net=net,
@@ -113,14 +113,16 @@ class _CandidateSolve:
         if rec.iteration % 10 == 0:
             self.say(f"    iteration {rec.iteration:3d}  residual {rec.hard_residual:.2e}")
 
-    def fairest(self, net_type: str, net_angle: float | None
+    def fairest(self, net_type: str, net_angle: float | None, starts: int | None = None
                 ) -> tuple[SurfaceLayout, OptimizationResult]:
-        """A gliding net of several starts, the fairest kept (`fabplan.layout.starts`)."""
+        """A gliding net of several starts (default: the study's), the fairest kept
+        (`fabplan.layout.starts`)."""
         from ..layout.starts import glide_fairest
 
         laid, solved = glide_fairest(self.design, self.size, net_type, angle=self.angle,
                                      net_angle=net_angle, solver=self.settings,
-                                     starts=self.study.layout_starts, progress=self.report)
+                                     starts=starts or self.study.layout_starts,
+                                     progress=self.report)
         self.say(f"    {net_type} from {len(solved.properties['layout_starts'])} starts: "
                  + ", ".join(f"{t['start']} {t['status']}" + (" (kept)" if t["chosen"] else "")
                              for t in solved.properties["layout_starts"]))
@@ -142,6 +144,14 @@ class _CandidateSolve:
             assert layout is not None
             net = glide(layout, candidate.net, angle=candidate.angle, settings=self.settings,
                         progress=self.report)
+            if not net.converged:
+                # one start's lattice may lie where the net type stalls on this design;
+                # other starts often do not (a wavy facade's isogonal net: 1 of 5 converged)
+                self.say(f"    {net.status} from the study's layout: solved from "
+                         f"{RETRY_STARTS} layout starts")
+                layout, net = self.fairest(candidate.net, candidate.angle, RETRY_STARTS)
+                if candidate.net == "snet":
+                    self.layouts[key] = layout
             if candidate.net == "snet":
                 self.starts[key] = net
         return net, layout
@@ -240,17 +250,20 @@ class _CandidateSolve:
 #: solve: the rest is left to their boundary panels, which continue the net's surface
 #: past its edge and so stand off the design a little further than the net
 DEVIATION_HELD = 0.9
+#: the layout starts a gliding candidate is solved from again when it did not converge from
+#: the study's one layout (`fabplan.layout.starts`)
+RETRY_STARTS = 5
 #: the share of a study's planarity tolerance its nets' quads are held within in the solve
 #: (`planarity_held`)
 PLANARITY_HELD = 0.8
 
 
 def _count_solve_seconds(seconds: dict[str, float], net: OptimizationResult, clock: float,
-                         laid_before: float, several: bool) -> None:
+                         laid_before: float) -> None:
     """``seconds["optimize"]``: the solve's time since `clock`, less the layouts made in it
     (counted as layout time, as are the layouts of several starts)."""
     seconds["optimize"] = time.perf_counter() - clock - (seconds["layout"] - laid_before)
-    if several and "layout_starts" in net.properties:
+    if "layout_starts" in net.properties:
         # the starts' layouts were made in the solve: counted as layout time
         laid_out = sum(t.get("layout_seconds", 0.0) for t in net.properties["layout_starts"])
         seconds["layout"] += laid_out

@@ -60,9 +60,12 @@ def limit_value(limit: str, value: float) -> str:
     return f"{value:g} {unit}"
 
 
-def check(limit: str, bound: float, measured: float | None, ok: bool, text: str) -> dict:
+def check(limit: str, bound: float, measured: float | None, ok: bool, text: str, *,
+          advice: str | None = None) -> dict:
     """One check: with its `margin` (the share of the bound left, negative when it fails)
-    and, when it fails, `relax_to` (the value of the limit at which it would pass)."""
+    and, when it fails, `relax_to` (the value of the limit at which it would pass) and
+    `advice` (what to try, when the candidate's own record says more than `next_steps`'s
+    general word)."""
     lower = limit.startswith("min_")          # min_*: the measured value must reach the bound
     margin = None
     if measured is not None and bound and math.isfinite(measured) and math.isfinite(bound):
@@ -73,7 +76,7 @@ def check(limit: str, bound: float, measured: float | None, ok: bool, text: str)
         relax_to = (int(math.ceil(measured)) if limit in ("max_molds", "max_sheets")
                     else nice_value(float(measured), up=not lower))
     return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text,
-            "margin": margin, "relax_to": relax_to}
+            "margin": margin, "relax_to": relax_to, "advice": advice}
 
 
 def nice_value(value: float, *, up: bool) -> float:
@@ -122,7 +125,8 @@ _TRY = {
     "mold_tolerance_mm": "a larger mold_tolerance_mm, or a smaller panel size",
     "max_molds": "a net type whose panels share molds (linear Weingarten, constant radius) or "
                  "a larger mold_tolerance_mm",
-    "max_panel_step_mm": "a smaller panel size or a larger mold_tolerance_mm",
+    # the same words as the mold tolerance's: the two fail together, and are said once
+    "max_panel_step_mm": "a larger mold_tolerance_mm, or a smaller panel size",
     "max_kink_deg": "a smaller panel size",
     "max_line_turn_deg": "another net type or angle, or a smaller panel size",
     "planarity_tolerance_mm": "a net type with planar panels (char-conjugate)",
@@ -131,7 +135,9 @@ _TRY = {
 
 def next_steps(checks: list[dict]) -> list[str]:
     """What to try for a candidate's failed `checks`, beside relaxing their limits
-    (`relaxation_text`): one suggestion per failed limit, each once, in the checks' order.
+    (`relaxation_text`): one suggestion per failed limit (its check's own `advice`, else
+    the general one), each once, in the checks' order; for a solve that did not converge,
+    only what to try for the solve.
 
     Examples
     --------
@@ -139,8 +145,12 @@ def next_steps(checks: list[dict]) -> list[str]:
     ...             {"limit": "max_molds", "ok": True}])
     ['a smaller panel size']
     """
-    return list(dict.fromkeys(_TRY[c["limit"]] for c in checks
-                              if not c["ok"] and c["limit"] in _TRY))
+    failed = [c for c in checks if not c["ok"] and (c.get("advice") or c["limit"] in _TRY)]
+    if any(c["limit"] == "max_sphere_residual" for c in failed):
+        # a solve that did not converge gave no net yet: the other checks measured a net
+        # that is not one, and their advice would mislead
+        failed = [c for c in failed if c["limit"] == "max_sphere_residual"]
+    return list(dict.fromkeys(c.get("advice") or _TRY[c["limit"]] for c in failed))
 
 
 def feasible_with(checks: list[dict]) -> str:

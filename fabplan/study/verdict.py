@@ -32,8 +32,11 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     state = _solve_state(metrics)
     checks.append(_check(
         "max_sphere_residual", limits.max_sphere_residual, res, res_ok,
-        f"the solve {state} after {metrics['iterations']} iterations; largest sphere residual "
-        f"{_g(res)} of an edge (limit {limits.max_sphere_residual:g})"))
+        f"the solve {state} after {metrics['iterations']} iterations"
+        + (f", short on {_unmet_words(unmet)}" if (unmet := metrics.get("unmet")) and not met
+           else "")
+        + f"; largest sphere residual {_g(res)} of an edge (limit {limits.max_sphere_residual:g})",
+        advice=None if res_ok else _unconverged_advice(metrics)))
     dev = metrics["deviation_mm"]["max"]
     edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
     both = metrics["largest_deviation_mm"]
@@ -77,6 +80,32 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     if strips is not None:
         checks += _strip_checks(strips, limits)
     return checks
+
+
+def _unmet_words(unmet: dict) -> str:
+    """The families a solve left unmet, the three worst with their residuals: ``angle
+    (0.015), radius (0.011)``."""
+    worst = sorted(unmet.items(), key=lambda kv: -kv[1])
+    more = f" and {len(worst) - 3} more" if len(worst) > 3 else ""
+    return ", ".join(f"{name} ({_g(r)})" for name, r in worst[:3]) + more
+
+
+def _unconverged_advice(metrics: dict) -> str | None:
+    """What to try for a solve that did not give a net, from what it tried already; None
+    for the general advice (`fabplan.study.checks.next_steps`)."""
+    search, status = metrics.get("deviation_search"), metrics["status"]
+    if status in ("folded", "crumpled", "degenerate"):
+        # it met its constraints: longer solves would not help, another lattice may
+        return (f"another angle or panel size, or a design smoothed where the net is {status}: "
+                "the net met its constraints but cannot be built as it is")
+    if search and search["smallest_converged_mm"] is None:
+        return (f"another net type: no net of this type converged buildable on this design "
+                f"within {search['loosest_mm']:,.0f} mm of it, the loosest deviation its solve "
+                "tried, so no limit relaxed makes it feasible")
+    if metrics.get("layout_starts", 1) > 1:
+        return ("let the solve run longer (max_iterations) or try another angle or panel size: "
+                f"the net did not converge from {metrics['layout_starts']} layout starts")
+    return None
 
 
 def _solve_state(metrics: dict) -> str:
