@@ -67,9 +67,13 @@ __all__ = [
     "SEARCH_BUDGET",
     "read_study",
     "parse_study",
+    "MAX_STUDY_BYTES",
     "AUTO_CANDIDATES",
 ]
 
+#: The largest study file read (bytes of UTF-8): its tables fit in a few KB, with
+#: `fabplan.study.candidates.MAX_CANDIDATES` candidates in about 40.
+MAX_STUDY_BYTES = 256 * 1024
 #: The tables of a study file.
 TABLES = ("study", "design", "panels", "limits", "strips", "material", "cost", "candidates")
 
@@ -88,7 +92,38 @@ def read_study(path: str | Path) -> Study:
     if not path.exists() and not path.is_symlink():
         raise InputError(f"{path}: no such study file")
     check_input_file(path, "a study file")
+    if (size := path.stat().st_size) > MAX_STUDY_BYTES:
+        raise _too_large(str(path), size)          # refused before it is read
     return parse_study(check_text(path, "TOML study"), path=path)
+
+
+def _parsed(text: str, file: str) -> dict:
+    """The tables of a study's TOML `text` (from `file`, for messages).
+
+    Raises
+    ------
+    InputError
+        When the text is over `MAX_STUDY_BYTES`, not valid TOML or nests too deep.
+    """
+    if len(text) > MAX_STUDY_BYTES // 4 and len(text.encode("utf-8")) > MAX_STUDY_BYTES:
+        # parsing TOML costs about 0.1 s per 10,000 keys: a file the size of a data set
+        # would keep the command busy for minutes before any check could refuse it
+        raise _too_large(file, len(text.encode("utf-8")))
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{file}: not a valid TOML study file: {exc}") from None
+    except RecursionError:
+        # the parser recurses once per level of nested arrays and inline tables
+        raise InputError(f"{file}: not a valid TOML study file: its arrays or tables nest "
+                         "too deep (a study nests a few levels)") from None
+
+
+def _too_large(file: str, size: int) -> InputError:
+    """The refusal of a study file of `size` bytes, over `MAX_STUDY_BYTES`."""
+    return InputError(f"{file}: a study file of {size:,} bytes: at most {MAX_STUDY_BYTES:,} "
+                      "(its tables take a few thousand; profiles, heights and control points "
+                      "go in the files it names)")
 
 
 def parse_study(text: str, *, path: Path | None = None) -> Study:
@@ -116,15 +151,7 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     fabplan.errors.InputError: study: panels.size must be a positive number (model units), got -1
     """
     file = str(path) if path else "study"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{file}: not a valid TOML study file: {exc}") from None
-    except RecursionError:
-        # the parser recurses once per level of nested arrays and inline tables
-        raise InputError(f"{file}: not a valid TOML study file: its arrays or tables nest "
-                         "too deep (a study nests a few levels)") from None
-    top = Table(data, "", file)
+    top = Table(_parsed(text, file), "", file)
     top.only(TABLES)
     folder = path.parent if path else Path.cwd()
 
