@@ -1,6 +1,6 @@
 """Error hierarchy: every failure fabplan reports to a user derives from `FabplanError`."""
 
-__all__ = ["FabplanError", "InputError", "SolverError", "CannotMakeError"]
+__all__ = ["FabplanError", "InputError", "BrokenLayoutError", "SolverError", "CannotMakeError"]
 
 
 class FabplanError(Exception):
@@ -9,6 +9,12 @@ class FabplanError(Exception):
 
 class InputError(FabplanError, ValueError):
     """Bad input: a missing or malformed file, an impossible parameter, unusable geometry."""
+
+
+class BrokenLayoutError(InputError):
+    """A design whose layout at the panel size asked does not hold together (umbilics,
+    directions that turn within a panel): another panel size may
+    (`fabplan.layout.surface_layout.holding_panel_size`)."""
 
 
 class SolverError(FabplanError, RuntimeError):

@@ -749,3 +749,53 @@ def test_a_lattice_broken_by_umbilics_is_refused_with_the_reason(tmp_path, capsy
     coarse = tmp_path / "coarse" / "net.obj"
     assert main(["layout", "paraboloid", "--net", "snet", "--panel-size", "4.2", "-o", str(coarse),
                  "-q"]) == 0
+
+
+def _dune(folder: Path) -> str:
+    """A new user's dune roof, 24 x 16 m: a bump, a ripple and noise (seeded), whose
+    principal directions have many umbilics at panel sizes near a metre."""
+    rng = np.random.default_rng(77)
+    x, y = np.meshgrid(np.linspace(-12, 12, 11), np.linspace(-8, 8, 9), indexing="ij")
+    heights = (1.2 * np.exp(-(x / 9) ** 2 - (y / 7) ** 2) + 0.3 * np.sin(x / 4)
+               + 0.03 * rng.normal(size=x.shape))
+    np.savetxt(folder / "dune-heights.txt", heights)
+    return f"height-field:heights={folder / 'dune-heights.txt'},width=24,depth=16"
+
+
+@pytest.mark.slow
+def test_a_layout_that_does_not_hold_together_says_at_which_panel_size_it_does(tmp_path, capsys):
+    """At 1.2 m the dune's lattice breaks apart; a study at 1.2 m is refused in one line
+    that gives the panel size at which it holds (`holding_panel_size`), with nothing
+    written, and the layout at that size is made."""
+    import re
+
+    from fabplan.errors import BrokenLayoutError
+    from fabplan.layout.surface_layout import HOLDING_SIZE_FACTORS
+
+    design = load_design(_dune(tmp_path), triangles=12000)
+    with pytest.raises(BrokenLayoutError, match="does not hold together"):
+        layout_surface(design, 1.2)
+    (tmp_path / "dune.toml").write_text("""
+[design]
+surface = "height-field"
+parameters = { heights = "dune-heights.txt", width = 24, depth = 16 }
+triangles = 12000
+[panels]
+size = 1.2
+[limits]
+max_deviation_mm = 50
+mold_tolerance_mm = 3
+[[candidates]]
+net = "cmc"
+""")
+    code = main(["study", str(tmp_path / "dune.toml"), "-q", "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "the layout at panel size 1.2 does not hold together" in err
+    given = re.search(r"its lattice holds together at panel size ([0-9.]+): give panels.size "
+                      r"= \1$", err.strip())
+    assert given, err
+    held = float(given[1])
+    assert any(np.isclose(held, 1.2 * f) for f in HOLDING_SIZE_FACTORS)
+    assert not (tmp_path / "out").exists()
+    assert len(layout_surface(design, held).mesh.stars) > 0

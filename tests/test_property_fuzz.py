@@ -29,9 +29,9 @@ and molds, strips and mill where they would write their reports (the checks and 
 before them are what is fuzzed; `test_parameter_ranges`, `test_study` and the command
 tests run the rest).
 
-Tiers: the quick tier draws 460 examples in every test run, CI's included (about 30 s on
-this project's 2-core machine). The slow tier draws 5,400 more (5 to 8 minutes there, and
-minutes more to shrink a failure): marked ``slow`` and run only with ``FABPLAN_FUZZ_SLOW=1``,
+Tiers: the quick tier draws 460 examples in every test run, CI's included (about 14 s of
+one core on this project's 2-core machine). The slow tier draws 5,400 more (70 s on its two
+cores, and minutes more to shrink a failure): marked ``slow`` and run only with ``FABPLAN_FUZZ_SLOW=1``,
 which the README's whole-suite command sets, so that a plain ``python -m pytest -q`` while
 working is not a third longer for examples of the same kinds the quick tier draws.
 Examples are derandomized (a fixed seed per test): every run draws the same examples, and

@@ -53,7 +53,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
-from ..errors import InputError
+from ..errors import BrokenLayoutError, InputError
 from ..net.mesh import QuadMesh
 from ..solve.constraints import Constraint, EdgeLengthRange, FamilyLevels
 from .coverage import net_cover, net_coverage
@@ -69,6 +69,7 @@ if TYPE_CHECKING:
     from ..solve.solver import IterationRecord, SolverSettings
 
 __all__ = ["SurfaceLayout", "layout_surface", "layout_again", "layout_angle", "glide",
+           "holding_panel_size", "HOLDING_SIZE_FACTORS",
            "layout_without_faces", "sound_faces"]
 
 
@@ -234,7 +235,8 @@ def layout_surface(design: DesignSurface, panel_size: float, *, angle: float = 9
     InputError
         For a panel size that is not positive or too large for the surface, an angle
         outside (0, 180), a layout without a single regular vertex, or (with
-        `refuse_broken`) one whose lattice does not hold together, naming why.
+        `refuse_broken`) one whose lattice does not hold together, naming why (a
+        `BrokenLayoutError`, as is a layout without a single regular vertex).
     """
     from dataclasses import replace
 
@@ -327,9 +329,9 @@ def _refuse_broken(best: SurfaceLayout, best_net: float | None, best_hole: dict 
     if best_net is None:
         best_net = net_coverage(best.mesh, judged_on, best.panel_size)
     if best_net < s.min_lattice_share:
-        raise InputError(_broken_lattice(best, best_net, lengths))
+        raise BrokenLayoutError(_broken_lattice(best, best_net, lengths))
     if best_hole is not None and best_hole["area_relative_to_panel"] > s.max_gap_panels:
-        raise InputError(_broken_lattice(best, best_net, lengths, best_hole))
+        raise BrokenLayoutError(_broken_lattice(best, best_net, lengths, best_hole))
 
 
 def _doubled_past(tried: dict, length: float) -> bool:
@@ -371,6 +373,26 @@ def _broken_lattice(layout: SurfaceLayout, share: float | None, smoothing: list 
               "panel size")
     return (f"{design.name}: the layout at panel size {h:g} does not hold together: {held}"
             + (f"; the design has {' and '.join(why)}" if why else "") + tried + f"; {advice}")
+
+
+#: the panel sizes `holding_panel_size` tries, as factors of the one asked: larger first
+#: (a lattice of larger panels bridges more of the directions' turns), then smaller
+HOLDING_SIZE_FACTORS = (1.5, 2.0, 0.75, 2.5)
+
+
+def holding_panel_size(design: DesignSurface, panel_size: float, *, angle: float = 90.0
+                       ) -> float | None:
+    """The first panel size of ``HOLDING_SIZE_FACTORS * panel_size`` at which the layout at
+    `angle` on `design` holds together (`layout_surface`), None when none does: what to
+    try where the size asked gives a `BrokenLayoutError`. Costs a layout per size tried
+    (a second or a few each)."""
+    for factor in HOLDING_SIZE_FACTORS:
+        try:
+            layout_surface(design, factor * panel_size, angle=angle)
+        except InputError:
+            continue
+        return factor * panel_size
+    return None
 
 
 def layout_again(record: dict) -> SurfaceLayout:
@@ -463,7 +485,7 @@ def _layout_once(design: DesignSurface, h: float, angle: float, family: str | No
         if design.area / (h * h) < s.min_panels_judged:     # the panel size is why
             raise InputError(f"{design.name}: panel size {h:g} is too large for the surface "
                              "(the layout has no interior vertex with four quads)")
-        raise InputError(_broken_lattice(layout, None, None))
+        raise BrokenLayoutError(_broken_lattice(layout, None, None))
     return layout
 
 
@@ -581,8 +603,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
     Raises
     ------
     InputError
-        For an S*-net type, or when the trimmed net leaves a gap larger than the layout's
-        `max_gap_panels` (its lattice broke there).
+        For an S*-net type; `BrokenLayoutError` when the trimmed net leaves a gap larger
+        than the layout's `max_gap_panels` (its lattice broke there).
     """
     from ..solve.net_types import get_net
 
@@ -598,7 +620,8 @@ def glide(layout: SurfaceLayout, net: str = "snet", *, angle: float | None = Non
         panels = add_boundary_panels(result, layout)
         if panels is not None and panels.gaps and layout.max_gap_panels is not None and \
                 panels.gaps[0]["area_relative_to_panel"] > layout.max_gap_panels:
-            raise InputError(_broken_lattice(layout, panels.coverage_net, None, panels.gaps[0]))
+            raise BrokenLayoutError(_broken_lattice(layout, panels.coverage_net, None,
+                                                    panels.gaps[0]))
     result.properties["layout"] = layout.record()
     result.parameters["panel_size"] = layout.panel_size
     return result

@@ -22,6 +22,7 @@ from .result import CandidateResult
 
 if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs
     from ..design.mesh_surface import DesignSurface
+    from ..errors import BrokenLayoutError
     from ..layout.margin import ContinuedDesign
     from ..layout.surface_layout import SurfaceLayout
     from ..net.mesh import QuadMesh
@@ -29,7 +30,7 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..solve.solver import IterationRecord, SolverSettings
 
 __all__ = ["Layouts", "Starts", "solve_candidate", "planarity_held", "optimize_held", "start_angle",
-           "DEVIATION_HELD", "PLANARITY_HELD", "RETRY_STARTS"]
+           "with_holding_size", "DEVIATION_HELD", "PLANARITY_HELD", "RETRY_STARTS"]
 
 
 #: Layouts of a study by start angle (degrees) and panel size (model units).
@@ -330,6 +331,26 @@ def _continued(study: Study, design: DesignSurface, size: float) -> ContinuedDes
     if size not in cache:
         cache[size] = continued_design(design, MARGIN_PANELS * size)
     return cache[size]
+
+
+def with_holding_size(exc: BrokenLayoutError, design: DesignSurface, size: float,
+                      angle: float, key: str = "panels.size") -> BrokenLayoutError:
+    """`exc`, a layout at panel `size` and `angle` that does not hold together, saying at
+    which panel size its lattice does (`fabplan.layout.surface_layout.holding_panel_size`,
+    found once per design, size and angle) and the study `key` to give it, or that none
+    of those tried does."""
+    from ..errors import BrokenLayoutError
+    from ..layout.surface_layout import HOLDING_SIZE_FACTORS, holding_panel_size
+
+    found = design.__dict__.setdefault("_holding_sizes", {})
+    if (size, angle) not in found:
+        found[size, angle] = holding_panel_size(design, size, angle=angle)
+    held = found[size, angle]
+    if held is None:
+        tried = ", ".join(f"{f * size:g}" for f in HOLDING_SIZE_FACTORS)
+        return BrokenLayoutError(f"{exc}; nor does it at panel sizes {tried}")
+    return BrokenLayoutError(f"{exc}; its lattice holds together at panel size {held:g}: give "
+                             f"{key} = {held:g}")
 
 
 def start_angle(candidate: Candidate, design: DesignSurface) -> float:

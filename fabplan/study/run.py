@@ -32,9 +32,9 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from ..errors import FabplanError
+from ..errors import BrokenLayoutError, FabplanError
 from .candidate_measure import fabricate_candidate, measure_candidate, vertex_deviation_mm
-from .candidate_solve import Layouts, Starts, solve_candidate, start_angle
+from .candidate_solve import Layouts, Starts, solve_candidate, start_angle, with_holding_size
 from .definition import Candidate, Study
 from .mold_counts import material_sentence, mold_metrics, molds_text
 from .ranking import (
@@ -273,6 +273,11 @@ def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: Can
                 continue
             result = fabricate_candidate(study, design, solved, twin, say)
         except (FabplanError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            if isinstance(exc, BrokenLayoutError):
+                exc = with_holding_size(exc, design, study.panel_size_of(candidate),
+                                        start_angle(candidate, design),
+                                        "panels.size" if candidate.panel_size is None
+                                        else "the candidate's panel_size")
             reason = failure_reason(exc)
             result = CandidateResult(candidate, error=reason, reasons=[reason])
             say(f"    failed: {reason}")
@@ -303,7 +308,11 @@ def prepare_design(study: Study, say: Callable[[str], None],
     from ..layout.surface_layout import layout_surface
 
     design = load_study_design(study, say, max_panels)
-    return design, layout_surface(design, study.panel_size, angle=90.0)
+    try:
+        return design, layout_surface(design, study.panel_size, angle=90.0)
+    except BrokenLayoutError as exc:
+        say("the baseline layout does not hold together: trying other panel sizes")
+        raise with_holding_size(exc, design, study.panel_size, 90.0) from None
 
 
 def load_study_design(study: Study, say: Callable[[str], None],
