@@ -499,16 +499,20 @@ def test_a_study_file_the_size_of_a_data_set_is_refused_before_it_is_parsed(tmp_
     text = _study_text() + '[[candidates]]\nnet = "isogonal"\nangle = 80\n' * 8000
     assert len(text.encode()) > spec.MAX_STUDY_BYTES
     study.write_text(text, encoding="utf-8")
-    parsed = []
+    parsed, read = [], []
     monkeypatch.setattr(spec.tomllib, "loads", lambda t: parsed.append(t) or {})
+    monkeypatch.setattr(spec, "check_text", lambda *a: read.append(a) or "")
     err = _one_line(["study", study, "-o", tmp_path / "out"], capsys)
     assert f"{study}: a study file of {len(text.encode()):,} bytes: at most 262,144 (" in err
-    assert not parsed and not (tmp_path / "out").exists()
+    assert not parsed and not read and not (tmp_path / "out").exists()
     # the API's text: non-ASCII counted in bytes, as the file would hold them
     wide = _study_text() + "# " + "é" * (spec.MAX_STUDY_BYTES // 2) + "\n"
     with pytest.raises(InputError, match=r"study: a study file of 262,\d{3} bytes: at most 262,144"):
         spec.parse_study(wide)
     assert not parsed
+    # a lone surrogate (text from Python, not a file) is counted, not an error
+    with pytest.raises(InputError, match="a study file of"):
+        spec.parse_study(wide + "# \ud800\n")
     # a study just under the limit is read
     monkeypatch.undo()
     small = _study_text() + "# " + "x" * (spec.MAX_STUDY_BYTES - len(_study_text()) - 10) + "\n"

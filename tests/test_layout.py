@@ -792,7 +792,8 @@ net = "cmc"
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
     assert "the layout at panel size 1.2 does not hold together" in err
-    given = re.search(r"its lattice holds together at panel size ([0-9.]+): give panels.size "
+    given = re.search(r"a lattice on the design holds together at panel size ([0-9.]+): give "
+                      r"panels.size "
                       r"= \1$", err.strip())
     assert given, err
     held = float(given[1])

@@ -150,34 +150,55 @@ def test_a_stalled_solve_names_what_it_left_unmet_and_says_when_no_relaxation_ex
     assert "short on" not in done[0]["text"] and done[0]["advice"] is None
 
 
+def test_flat_panels_step_against_each_other_not_against_molds(judged):
+    """A net of flat panels has no molds: its step check speaks of the panels."""
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    c = next(c for c in result.candidates if not c.failed)
+    for flat in (True, False):
+        molds = {**c.metrics["molds"], "all_panels_flat": flat, "panel_classes": None,
+                 "max_panel_step_mm": 5.0, "panel_steps_over": 3}
+        step = next(k for k in verdict({**c.metrics, "molds": molds}, study.limits)
+                    if k["limit"] == "max_panel_step_mm")
+        assert not step["ok"]
+        assert step["text"].startswith("neighbouring panels step up to 5.00 mm apart at 3 "
+                                       "shared edges" if flat else
+                                       "the molds of neighbouring panels step up to 5.00 mm")
+
+
 def test_a_gliding_candidate_that_stalls_on_the_study_layout_is_solved_from_several_starts(
         judged, monkeypatch):
-    """With one layout start, a gliding net that does not converge is solved again from
-    `RETRY_STARTS` starts, the fairest kept (and kept as the S-net start of the others)."""
+    """With one layout start, a gliding net that does not converge is solved from the
+    other layout starts too (its first start the glide made already), the fairest kept;
+    the S-net start of the nets that leave the design stays the first glide, whichever
+    candidate makes it, and the study's layouts are left as they are."""
     import fabplan.layout.surface_layout as surface_layout
-    from fabplan.study.candidate_solve import RETRY_STARTS, _CandidateSolve
+    from fabplan.layout.starts import MAX_STARTS
+    from fabplan.study.candidate_solve import _CandidateSolve
 
     study, result = judged
     stalled = dataclasses.replace(result.candidates[0].net, status="stagnated")
     assert not stalled.converged
     asked = []
 
-    def fairest(self, net_type, net_angle, starts=None):
-        asked.append((net_type, starts))
+    def fairest(self, net_type, net_angle, starts=None, first_solved=None):
+        asked.append((net_type, starts, first_solved))
         return "layout of the fairest", "net of the fairest"
 
     monkeypatch.setattr(surface_layout, "glide", lambda *a, **k: stalled)
     monkeypatch.setattr(_CandidateSolve, "fairest", fairest)
     said: list[str] = []
     for net_type in ("isogonal", "snet"):
+        layouts = {"another key": "a layout"}
         solve = _CandidateSolve(study, result.design, dataclasses.replace(
-            study.candidates[0], net=net_type), {}, {}, said.append, 60.0, 1.0, None)
+            study.candidates[0], net=net_type), layouts, {}, said.append, 60.0, 1.0, None)
         net, layout = solve.gliding("layout of the study")
         assert (net, layout) == ("net of the fairest", "layout of the fairest")
-        assert asked[-1] == (net_type, RETRY_STARTS)
-    assert solve.starts[solve.key] == "net of the fairest"
-    assert solve.layouts[solve.key] == "layout of the fairest"
-    assert f"stagnated from the study's layout: solved from {RETRY_STARTS} layout starts" in said[0]
+        assert asked[-1] == (net_type, MAX_STARTS, ("layout of the study", stalled))
+        assert layouts == {"another key": "a layout"}
+    assert solve.starts == {solve.key: stalled}
+    assert "stagnated from the study's layout: solved from other layout starts too" in said[0]
     # a converged glide is kept as it is
     monkeypatch.setattr(surface_layout, "glide", lambda *a, **k: result.candidates[0].net)
     assert result.candidates[0].net.converged

@@ -40,9 +40,7 @@ a failure prints the argv (or the study's text) that reproduces it.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
-import functools
 import hashlib
 import inspect
 import io
@@ -61,7 +59,7 @@ from helpers import memory_cap
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from fabplan.cli import InRange, build_parser, main
+from fabplan.cli import InRange, build_parser, command_parser, main
 from fabplan.design.parametric import FILE_PARAMETERS, SURFACES
 from fabplan.errors import InputError
 from fabplan.io.parameters import SURFACE_PARAMETERS, Parameter
@@ -503,19 +501,12 @@ def sandbox(tmp_path_factory, monkeypatch):
         yield make
 
 
-@functools.cache
-def _parser() -> argparse.ArgumentParser:
-    """The command line's parser, built once: it reads an argv as `main` does, and takes
-    about 10 ms to build, which every example paid once per input file it names."""
-    return build_parser()
-
-
 def _output_of(argv: list[str]) -> str | None:
     """The output `argv` names, as the command's own parser reads it (the last ``-o``,
     ``--output=X`` and so on); None when it does not parse or names none."""
     with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
         try:
-            namespace = _parser().parse_args(argv)
+            namespace = command_parser().parse_args(argv)
         except SystemExit:
             return None
     return getattr(namespace, "output", None)

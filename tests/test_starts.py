@@ -113,6 +113,30 @@ def test_one_start_is_one_layout_and_one_solve(tower):
         glide_fairest(design, h, "snet", angle=90.0, starts=0)
 
 
+def test_a_first_start_made_already_is_kept_not_made_again(tower, monkeypatch):
+    """`first_solved`: the first start's layout and net are taken as given (a study's
+    stalled glide solved again from the other starts); only the others are laid out and
+    glided, and the record lists every start."""
+    import fabplan.layout.starts as starts_module
+
+    design, h = tower
+    layout, result = glide_fairest(design, h, "snet", angle=90.0, starts=1)
+    calls: list[str] = []
+    for name in ("glide", "layout_surface"):
+        real = getattr(starts_module, name)
+        monkeypatch.setattr(starts_module, name,
+                            lambda *a, _real=real, _name=name, **k: calls.append(_name) or
+                            _real(*a, **k))
+    glide_fairest(design, h, "snet", angle=90.0, starts=3)
+    made = {name: calls.count(name) for name in ("glide", "layout_surface")}
+    calls.clear()
+    _, kept = glide_fairest(design, h, "snet", angle=90.0, starts=3, first_solved=(layout, result))
+    assert calls.count("glide") == made["glide"] - 1
+    assert calls.count("layout_surface") == made["layout_surface"] - 1
+    records = kept.properties["layout_starts"]
+    assert len(records) == 3 and records[0]["start"] == "as set"
+
+
 def test_a_start_whose_solve_breaks_down_leaves_the_others(tower, monkeypatch):
     """A later start's solver failing (here: made to) is recorded with its reason; the
     net comes from the starts that solved."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from .arguments import InRange
 from .cladding import boundary_text, boundary_warnings
-from .command_line import build_parser, main
+from .command_line import build_parser, command_parser, main
 from .layout import LINE_TURN_WARNING_DEG, layout_warnings
 from .limits import deviation_check, limits_exit
 from .registry import COMMANDS, Command, register
@@ -25,5 +25,6 @@ from .running import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, stopped_by_signals
 
 __all__ = ["COMMANDS", "Command", "EXIT_BAD_INPUT", "EXIT_NOT_CONVERGED", "InRange",
            "LINE_TURN_WARNING_DEG", "boundary_text", "boundary_warnings", "build_parser",
+           "command_parser",
            "deviation_check", "layout_warnings", "limits_exit", "main", "register",
            "stopped_by_signals"]

@@ -19,7 +19,7 @@ from .arguments import Parser
 from .registry import COMMANDS
 from .running import EXIT_BAD_INPUT, run_command, unparsable
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "command_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,16 +34,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 @functools.cache
-def _parser() -> argparse.ArgumentParser:
-    """The parser `main` reads command lines with, built once per process: it keeps
-    nothing of a run, and building it takes about 10 ms (a tenth of a refused run's time,
-    paid on every call of `main` from Python)."""
+def command_parser() -> argparse.ArgumentParser:
+    """The parser `main` reads command lines with (`build_parser`), built once per process
+    after every command registered: it keeps nothing of a run (each parse makes its own
+    namespace), and building it takes about 10 ms, a tenth of a refused run's time when
+    `main` is called from Python."""
     return build_parser()
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
-    parser = _parser()
+    parser = command_parser()
     refused = unparsable(sys.argv[1:] if argv is None else argv)
     if refused is not None:
         print(f"fabplan: error: {refused}", file=sys.stderr)

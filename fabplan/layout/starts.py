@@ -269,6 +269,7 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
                   progress: Callable[[IterationRecord], None] | None = None,
                   on_start: Callable[[int, int, str], None] | None = None,
                   max_line_turn: float = 90.0,
+                  first_solved: tuple[SurfaceLayout, OptimizationResult] | None = None,
                   ) -> tuple[SurfaceLayout, OptimizationResult]:
     """Lay out and glide a net from each of `layout_starts` and keep the fairest.
 
@@ -286,6 +287,8 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
     on_start : called as ``on_start(k, n, name)`` before start k (0-based) of n.
     max_line_turn : a converged net's lines turn by at most this (degrees; see
         `fabplan.optimize`).
+    first_solved : the first start's layout and glided net, when they were made already
+        (with `settings` and `solver` as given): kept as they are, not made again.
 
     Returns
     -------
@@ -315,6 +318,10 @@ def glide_fairest(design: DesignSurface, panel_size: float, net: str, *, angle: 
         line_field = start.layout is not None and start.layout.max_smoothing == 0.0
         if line_field and first is not None and first.direction_field == "line":
             left_out.append({"start": start.name, "why": "the first layout is a line field"})
+            continue
+        if k == 0 and first_solved is not None:
+            first = first_solved[0]
+            tried.append(_Tried(start, first, first_solved[1], None, 0.0))
             continue
         if on_start is not None:
             on_start(k, len(plan), start.name)

@@ -382,14 +382,26 @@ HOLDING_SIZE_FACTORS = (1.5, 2.0, 0.75, 2.5)
 
 def holding_panel_size(design: DesignSurface, panel_size: float, *, angle: float = 90.0
                        ) -> float | None:
-    """The first panel size of ``HOLDING_SIZE_FACTORS * panel_size`` at which the layout at
-    `angle` on `design` holds together (`layout_surface`), None when none does: what to
-    try where the size asked gives a `BrokenLayoutError`. Costs a layout per size tried
-    (a second or a few each)."""
+    """Where to look when the size asked gives a `BrokenLayoutError`: another panel size
+    whose lattice holds together.
+
+    Parameters
+    ----------
+    design : the surface.
+    panel_size : the size that broke (model units).
+    angle : the layout's intersection angle (degrees).
+
+    Returns
+    -------
+    float or None: the first of ``HOLDING_SIZE_FACTORS * panel_size`` (model units) at
+    which `layout_surface` (default settings, on `design` itself) makes a lattice that holds
+    together; None when none does. A layout per size tried, a second or a few each. The
+    lattice only: gliding a net on it may still leave a gap.
+    """
     for factor in HOLDING_SIZE_FACTORS:
         try:
             layout_surface(design, factor * panel_size, angle=angle)
-        except InputError:
+        except (InputError, ArithmeticError, np.linalg.LinAlgError):
             continue
         return factor * panel_size
     return None

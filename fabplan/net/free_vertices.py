@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .buildable import BuildLimits, BuildReport, measure_buildable
+from .folds import SurfaceWithNormals
 from .quadrics import (
     edge_steps,
     face_frames,
@@ -22,7 +24,7 @@ from .quadrics import (
     height_field_values,
 )
 
-__all__ = ["free_vertices", "settle_free_vertices"]
+__all__ = ["free_vertices", "settle_free_vertices", "undo_new_darts"]
 
 
 def free_vertices(mesh) -> np.ndarray:
@@ -114,3 +116,57 @@ def settle_free_vertices(mesh, keep: np.ndarray | None = None, step: float = 0.0
     moved = count > 0
     Y[moved] = total[moved] / count[moved, None]
     return mesh.with_vertices(Y), np.linalg.norm(Y - X, axis=1)
+
+
+def undo_new_darts(mesh, settled: np.ndarray, solved: np.ndarray, moved: np.ndarray,
+                   before: BuildReport, *, reference: SurfaceWithNormals | None = None,
+                   limits: BuildLimits | None = None, rounds: int = 3
+                   ) -> tuple[np.ndarray, np.ndarray, BuildReport]:
+    """Put back where the solve left them the settled vertices whose move made a face
+    non-convex or a line turn too much that did not before (`settle_free_vertices` lifts
+    a tip along a face normal by up to half a panel: near a steep fold of the continued
+    surface that can turn a corner the wrong way).
+
+    Parameters
+    ----------
+    mesh : `fabplan.net.mesh.QuadMesh`, the combinatorics.
+    settled, solved : (n, 3) float, the positions after and before settling.
+    moved : (n,) float, how far each vertex moved (model units).
+    before : the `BuildReport` of `solved`.
+    reference, limits : as `fabplan.net.buildable.measure_buildable` takes them.
+    rounds : at most this many rounds of putting back (a vertex put back may leave its
+        neighbour's move to blame).
+
+    Returns
+    -------
+    positions : (n, 3) float; moved : (n,) float, zero where put back; the `BuildReport`
+    of the positions.
+
+    Examples
+    --------
+    >>> from fabplan.net.generate import height_field_grid
+    >>> grid = height_field_grid(4, 4, lambda x, y: 0 * x)
+    >>> before = measure_buildable(grid)
+    >>> X = grid.vertices.copy()
+    >>> X[0, :2] = X[5, :2] + 0.2 * (X[5, :2] - X[0, :2])   # a corner pushed past the centre
+    >>> moved = np.linalg.norm(X - grid.vertices, axis=1)
+    >>> measure_buildable(grid, X).buildable
+    False
+    >>> Y, left, build = undo_new_darts(grid, X, grid.vertices, moved, before)
+    >>> bool(np.array_equal(Y, grid.vertices)), float(left.max()), build.buildable
+    (True, 0.0, True)
+    """
+    X, moved = settled.copy(), moved.copy()
+    stars = np.asarray(mesh.stars).reshape(-1, 5)
+    for _ in range(rounds):
+        build = measure_buildable(mesh, X, reference=reference, limits=limits)
+        blamed = np.zeros(len(X), bool)
+        faces = np.setdiff1d(build.nonconvex_faces, before.nonconvex_faces)
+        blamed[mesh.face_indices[np.isin(mesh.corner_faces, faces)]] = True
+        turns = np.setdiff1d(build.sharp_turns, before.sharp_turns)
+        blamed[stars[np.isin(stars[:, 0], turns)].ravel()] = True
+        blamed &= moved > 0
+        if not blamed.any():
+            return X, moved, build
+        X[blamed], moved[blamed] = solved[blamed], 0.0
+    return X, moved, measure_buildable(mesh, X, reference=reference, limits=limits)

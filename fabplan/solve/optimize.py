@@ -17,7 +17,7 @@ from ..io.parameters import OPTIONS
 from ..io.records import json_text
 from ..net.buildable import BuildLimits, BuildReport, crumpled, measure_buildable
 from ..net.folds import fold_edge_mask
-from ..net.free_vertices import free_vertices, settle_free_vertices
+from ..net.free_vertices import free_vertices, settle_free_vertices, undo_new_darts
 from ..net.geometry import (
     canonical_stars,
     face_normals,
@@ -569,8 +569,11 @@ def _settled(chosen: Attempt, mesh: QuadMesh, held: np.ndarray, limits: BuildLim
     if settle_free is not None and free.any() and not faces_held and not glide:
         result_mesh, moved = settle_free_vertices(result_mesh, keep=held, step=settle_free)
         if moved.any():
-            build = measure_buildable(mesh, result_mesh.vertices, reference=solver.reference,
-                                      limits=limits)
+            # a settled tip that turns a corner the wrong way stays where the solve left it
+            X, moved, build = undo_new_darts(mesh, result_mesh.vertices, solver.vertices,
+                                             moved, build, reference=solver.reference,
+                                             limits=limits)
+            result_mesh = result_mesh.with_vertices(X)
     return result_mesh, build, free, moved
 
 

@@ -45,7 +45,7 @@ __all__ = ["CACHE_FOLDER", "CACHE_FORMAT", "CandidateCache", "cached_types"]
 
 CACHE_FOLDER = ".fabplan-cache"
 #: what a kept candidate's JSON says it is, and the version of its layout
-CACHE_FORMAT = {"format": "fabplan-candidate", "version": 2}
+CACHE_FORMAT = {"format": "fabplan-candidate", "version": 3}
 #: largest kept file read back (a crafted huge file is ignored, not read)
 MAX_ENTRY_BYTES = 2**29
 #: room for the header of every array in a kept .npz beyond its values

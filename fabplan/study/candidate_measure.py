@@ -198,11 +198,7 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
         "parameters": {k: v for k, v in net.parameters.items()
                        if k in ("angle_deg", "radius") and v is not None},
         "sphere_residual_relative_max": residual,
-        # a solve that stopped short: its hard families above the tolerance, and how far
-        # its deviation continuation looked for a net of the type (`_deviation_search`)
-        "unmet": {k: float(v) for k, v in (net.parameters.get("unmet") or {}).items()},
-        "deviation_search": _deviation_search(net.parameters.get("deviation"), mm_per_unit),
-        "layout_starts": len(props.get("layout_starts") or [None]),
+        **_solve_record(net, mm_per_unit),
         "deviation_mm": {"max": float(deviation.max()), "mean": float(deviation.mean()),
                          "p95": float(np.percentile(deviation, 95)),
                          # the vertices the net's conditions hold (in a star), apart from
@@ -307,6 +303,17 @@ def _pick(stats: dict | None) -> dict | None:
     if not stats or stats.get("min") is None:
         return None
     return {"min": stats["min"], "max": stats["max"]}
+
+
+def _solve_record(net: OptimizationResult, mm_per_unit: float) -> dict:
+    """What a candidate's solve tried and left: ``unmet`` (the hard families a solve that
+    stopped short left above the tolerance), ``deviation_search`` (how far its deviation
+    continuation looked for a net of the type: `_deviation_search`) and ``layout_starts``
+    (a gliding net's own starts, else those of the S-net a net past the edges began at)."""
+    return {"unmet": {k: float(v) for k, v in (net.parameters.get("unmet") or {}).items()},
+            "deviation_search": _deviation_search(net.parameters.get("deviation"), mm_per_unit),
+            "layout_starts": len(net.properties.get("layout_starts") or [])
+            or int((net.parameters.get("continued") or {}).get("starts", 1))}
 
 
 def _deviation_search(record: dict | None, mm_per_unit: float) -> dict | None:

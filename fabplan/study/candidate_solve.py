@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..solve.solver import IterationRecord, SolverSettings
 
 __all__ = ["Layouts", "Starts", "solve_candidate", "planarity_held", "optimize_held", "start_angle",
-           "with_holding_size", "DEVIATION_HELD", "PLANARITY_HELD", "RETRY_STARTS"]
+           "with_holding_size", "DEVIATION_HELD", "PLANARITY_HELD"]
 
 
 #: Layouts of a study by start angle (degrees) and panel size (model units).
@@ -46,7 +46,9 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
     panel size) and its solved net (an S-net start for the nets that leave the design,
     cached in `starts`). With `Study.layout_starts` above 1 a net that glides on the design
     is the fairest of its starts, on its own layout, and so is the S-net start (its layout
-    then replaces the cached one).
+    then replaces the cached one). With one, a net that glides and does not converge on
+    the study's layout is solved from the other layout starts too, the fairest kept (the
+    S-net start stays the first glide).
 
     Returns
     -------
@@ -114,16 +116,17 @@ class _CandidateSolve:
         if rec.iteration % 10 == 0:
             self.say(f"    iteration {rec.iteration:3d}  residual {rec.hard_residual:.2e}")
 
-    def fairest(self, net_type: str, net_angle: float | None, starts: int | None = None
+    def fairest(self, net_type: str, net_angle: float | None, starts: int | None = None,
+                first_solved: tuple[SurfaceLayout, OptimizationResult] | None = None
                 ) -> tuple[SurfaceLayout, OptimizationResult]:
         """A gliding net of several starts (default: the study's), the fairest kept
-        (`fabplan.layout.starts`)."""
+        (`fabplan.layout.starts`); `first_solved` the first start, made already."""
         from ..layout.starts import glide_fairest
 
         laid, solved = glide_fairest(self.design, self.size, net_type, angle=self.angle,
                                      net_angle=net_angle, solver=self.settings,
                                      starts=starts or self.study.layout_starts,
-                                     progress=self.report)
+                                     progress=self.report, first_solved=first_solved)
         self.say(f"    {net_type} from {len(solved.properties['layout_starts'])} starts: "
                  + ", ".join(f"{t['start']} {t['status']}" + (" (kept)" if t["chosen"] else "")
                              for t in solved.properties["layout_starts"]))
@@ -134,6 +137,7 @@ class _CandidateSolve:
         """A net that exists on every surface, glided on the design from `layout` (the
         fairest of several starts, on its own layout); a general S-net is kept as the
         start of the nets that leave the design."""
+        from ..layout.starts import MAX_STARTS
         from ..layout.surface_layout import glide
 
         candidate, key = self.candidate, self.key
@@ -145,16 +149,17 @@ class _CandidateSolve:
             assert layout is not None
             net = glide(layout, candidate.net, angle=candidate.angle, settings=self.settings,
                         progress=self.report)
+            if candidate.net == "snet":
+                # the start of the nets that leave the design, whichever candidate makes it
+                # first: the same glide, so that no result depends on the candidates' order
+                self.starts[key] = net
             if not net.converged:
                 # one start's lattice may lie where the net type stalls on this design;
-                # other starts often do not (a wavy facade's isogonal net: 1 of 5 converged)
-                self.say(f"    {net.status} from the study's layout: solved from "
-                         f"{RETRY_STARTS} layout starts")
-                layout, net = self.fairest(candidate.net, candidate.angle, RETRY_STARTS)
-                if candidate.net == "snet":
-                    self.layouts[key] = layout
-            if candidate.net == "snet":
-                self.starts[key] = net
+                # other starts often do not (a wavy facade's isogonal net: 1 of 4 converged)
+                self.say(f"    {net.status} from the study's layout: solved from other "
+                         "layout starts too")
+                layout, net = self.fairest(candidate.net, candidate.angle, MAX_STARTS,
+                                           first_solved=(layout, net))
         return net, layout
 
     def off_design(self, layout: SurfaceLayout | None
@@ -251,9 +256,6 @@ class _CandidateSolve:
 #: solve: the rest is left to their boundary panels, which continue the net's surface
 #: past its edge and so stand off the design a little further than the net
 DEVIATION_HELD = 0.9
-#: the layout starts a gliding candidate is solved from again when it did not converge from
-#: the study's one layout (`fabplan.layout.starts`)
-RETRY_STARTS = 5
 #: the share of a study's planarity tolerance its nets' quads are held within in the solve
 #: (`planarity_held`)
 PLANARITY_HELD = 0.8
@@ -336,9 +338,9 @@ def _continued(study: Study, design: DesignSurface, size: float) -> ContinuedDes
 def with_holding_size(exc: BrokenLayoutError, design: DesignSurface, size: float,
                       angle: float, key: str = "panels.size") -> BrokenLayoutError:
     """`exc`, a layout at panel `size` and `angle` that does not hold together, saying at
-    which panel size its lattice does (`fabplan.layout.surface_layout.holding_panel_size`,
-    found once per design, size and angle) and the study `key` to give it, or that none
-    of those tried does."""
+    which panel size its lattice on the design does (`fabplan.layout.surface_layout.
+    holding_panel_size`, found once per design object, size and angle) and the study `key`
+    to give it, or that none of those tried does."""
     from ..errors import BrokenLayoutError
     from ..layout.surface_layout import HOLDING_SIZE_FACTORS, holding_panel_size
 
@@ -349,8 +351,8 @@ def with_holding_size(exc: BrokenLayoutError, design: DesignSurface, size: float
     if held is None:
         tried = ", ".join(f"{f * size:g}" for f in HOLDING_SIZE_FACTORS)
         return BrokenLayoutError(f"{exc}; nor does it at panel sizes {tried}")
-    return BrokenLayoutError(f"{exc}; its lattice holds together at panel size {held:g}: give "
-                             f"{key} = {held:g}")
+    return BrokenLayoutError(f"{exc}; a lattice on the design holds together at panel size "
+                             f"{held:g}: give {key} = {held:g}")
 
 
 def start_angle(candidate: Candidate, design: DesignSurface) -> float:

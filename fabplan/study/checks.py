@@ -117,9 +117,10 @@ def violation(checks: list[dict]) -> float:
 
 #: what else to try for a failed check, beside relaxing its limit (`next_steps`)
 _TRY = {
-    "max_sphere_residual": "let the solve run longer (max_iterations), lay the design out "
-                           "from several starts (layout_starts) or try another angle or panel "
-                           "size: the net did not converge",
+    # a net whose solve converged above a tightened limit (one that did not converge is
+    # told what to try by its check's own advice: `fabplan.study.verdict`)
+    "max_sphere_residual": "let the solve run longer (max_iterations) or relax "
+                           "max_sphere_residual",
     "max_deviation_mm": "keep the net nearer the design: a net type that glides on it "
                         "(isogonal, orthogonal, the baseline) or a smaller panel size",
     "mold_tolerance_mm": "a larger mold_tolerance_mm, or a smaller panel size",
@@ -146,7 +147,7 @@ def next_steps(checks: list[dict]) -> list[str]:
     ['a smaller panel size']
     """
     failed = [c for c in checks if not c["ok"] and (c.get("advice") or c["limit"] in _TRY)]
-    if any(c["limit"] == "max_sphere_residual" for c in failed):
+    if any(c["limit"] == "max_sphere_residual" and c.get("advice") for c in failed):
         # a solve that did not converge gave no net yet: the other checks measured a net
         # that is not one, and their advice would mislead
         failed = [c for c in failed if c["limit"] == "max_sphere_residual"]

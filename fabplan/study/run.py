@@ -277,7 +277,7 @@ def _run_candidates(study: Study, design: DesignSurface, helper: Any, cache: Can
                 exc = with_holding_size(exc, design, study.panel_size_of(candidate),
                                         start_angle(candidate, design),
                                         "panels.size" if candidate.panel_size is None
-                                        else "the candidate's panel_size")
+                                        else "panels.size (among the sizes it sweeps)")
             reason = failure_reason(exc)
             result = CandidateResult(candidate, error=reason, reasons=[reason])
             say(f"    failed: {reason}")

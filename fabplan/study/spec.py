@@ -105,10 +105,11 @@ def _parsed(text: str, file: str) -> dict:
     InputError
         When the text is over `MAX_STUDY_BYTES`, not valid TOML or nests too deep.
     """
-    if len(text) > MAX_STUDY_BYTES // 4 and len(text.encode("utf-8")) > MAX_STUDY_BYTES:
+    size = len(text.encode("utf-8", "surrogatepass")) if len(text) > MAX_STUDY_BYTES // 4 else 0
+    if size > MAX_STUDY_BYTES:
         # parsing TOML costs about 0.1 s per 10,000 keys: a file the size of a data set
         # would keep the command busy for minutes before any check could refuse it
-        raise _too_large(file, len(text.encode("utf-8")))
+        raise _too_large(file, size)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

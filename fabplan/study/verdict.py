@@ -36,7 +36,7 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         + (f", short on {_unmet_words(unmet)}" if (unmet := metrics.get("unmet")) and not met
            else "")
         + f"; largest sphere residual {_g(res)} of an edge (limit {limits.max_sphere_residual:g})",
-        advice=None if res_ok else _unconverged_advice(metrics)))
+        advice=None if met else _unconverged_advice(metrics)))
     dev = metrics["deviation_mm"]["max"]
     edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
     both = metrics["largest_deviation_mm"]
@@ -90,9 +90,8 @@ def _unmet_words(unmet: dict) -> str:
     return ", ".join(f"{name} ({_g(r)})" for name, r in worst[:3]) + more
 
 
-def _unconverged_advice(metrics: dict) -> str | None:
-    """What to try for a solve that did not give a net, from what it tried already; None
-    for the general advice (`fabplan.study.checks.next_steps`)."""
+def _unconverged_advice(metrics: dict) -> str:
+    """What to try for a solve that did not give a net, from what it tried already."""
     search, status = metrics.get("deviation_search"), metrics["status"]
     if status in ("folded", "crumpled", "degenerate"):
         # it met its constraints: longer solves would not help, another lattice may
@@ -105,7 +104,9 @@ def _unconverged_advice(metrics: dict) -> str | None:
     if metrics.get("layout_starts", 1) > 1:
         return ("let the solve run longer (max_iterations) or try another angle or panel size: "
                 f"the net did not converge from {metrics['layout_starts']} layout starts")
-    return None
+    return ("let the solve run longer (max_iterations), lay the design out from several "
+            "starts (layout_starts) or try another angle or panel size: the net did not "
+            "converge")
 
 
 def _solve_state(metrics: dict) -> str:
@@ -143,11 +144,14 @@ def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
     step = molds.get("max_panel_step_mm")
     if step is not None:
         step_limit = limits.panel_step_limit_mm
+        # flat panels are cut, not molded: their own edges step
+        between, apart = ("them", "neighbouring panels") if every_panel_flat(molds) else \
+            ("their molds", "the molds of neighbouring panels")
         checks.append(_check(
             "max_panel_step_mm", step_limit, step, step <= step_limit,
-            f"neighbouring panels meet: the largest step between their molds is {step:.2f} mm "
+            f"neighbouring panels meet: the largest step between {between} is {step:.2f} mm "
             f"(limit {step_limit:g} mm)" if step <= step_limit else
-            f"the molds of neighbouring panels step up to {step:.2f} mm apart at "
+            f"{apart} step up to {step:.2f} mm apart at "
             f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
     if limits.max_molds is not None:
         n = molds["count"]
