@@ -167,6 +167,29 @@ def test_flat_panels_step_against_each_other_not_against_molds(judged):
                                        "the molds of neighbouring panels step up to 5.00 mm")
 
 
+def test_a_net_within_the_deviation_limit_whose_boundary_panels_are_not_is_told_so(judged):
+    """Where only the boundary panels as cut from their molds stand off the design beyond
+    the limit, the advice is a smaller panel size, not a net type that glides (the net
+    may glide already)."""
+    from fabplan.study.checks import next_steps
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    c = next(c for c in result.candidates if not c.failed)
+    limit = study.limits.max_deviation_mm
+    for net, edge, told in ((0.5 * limit, 1.5 * limit, True), (1.2 * limit, 1.5 * limit, False)):
+        metrics = {**c.metrics, "deviation_mm": {**c.metrics["deviation_mm"], "max": net},
+                   "largest_deviation_mm": max(net, edge),
+                   "boundary_panels": {**(c.metrics.get("boundary_panels") or {}),
+                                       "deviation_max_mm": edge}}
+        checks = verdict(metrics, study.limits)
+        deviation = next(k for k in checks if k["limit"] == "max_deviation_mm")
+        assert not deviation["ok"]
+        steps = next_steps(checks)
+        assert any(s.startswith("a smaller panel size: the net keeps within") for s in steps) == told
+        assert any("a net type that glides" in s for s in steps) != told
+
+
 def test_a_gliding_candidate_that_stalls_on_the_study_layout_is_solved_from_several_starts(
         judged, monkeypatch):
     """With one layout start, a gliding net that does not converge is solved from the

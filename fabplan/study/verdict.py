@@ -50,7 +50,11 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         + (f", its boundary panels as cut from their molds up to {edge:.1f} mm"
            + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
            if edge is not None else "")
-        + f" (limit {limits.max_deviation_mm:g} mm)"))
+        + f" (limit {limits.max_deviation_mm:g} mm)",
+        # the net keeps to the limit, the boundary panels cut from its molds do not
+        advice="a smaller panel size: the net keeps within the limit, its boundary panels "
+               "as cut from their molds do not" if edge is not None
+        and dev <= limits.max_deviation_mm < edge else None))
     checks += _mold_checks(metrics["molds"], limits)
     if limits.planar_panels:
         p = metrics["planarity_mm"]["max"]
