@@ -155,7 +155,7 @@ class _CandidateSolve:
                 self.starts[key] = net
             if not net.converged:
                 # one start's lattice may lie where the net type stalls on this design;
-                # other starts often do not (a wavy facade's isogonal net: 1 of 4 converged)
+                # other starts often do not (a wavy facade's isogonal net: 1 of 5 converged)
                 self.say(f"    {net.status} from the study's layout: solved from other "
                          "layout starts too")
                 layout, net = self.fairest(candidate.net, candidate.angle, MAX_STARTS,
