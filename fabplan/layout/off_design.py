@@ -435,23 +435,20 @@ def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | 
     curves = design.boundary_curves()
     if len(face) == 0 or not curves:
         return OffDesign(area, point)
-    measured: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-    measured_rows: np.ndarray | None = None
+    # both fans of a face have its sides for outline (but for a face that runs over a
+    # corner twice): each outline measured once, keyed by its sorted (piece, side) rows
+    measured: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
     for first in (0, 1):          # the fan from corner 0, then from corner 1
         corner = [ring[start[face] + (first + k) % sizes[face]] for k in (0 * j, j, j + 1)]
         fan = np.stack(corner, axis=1)
         outline = _outline_sides(fan, face, count, len(vertices))
         rows = np.column_stack([outline[1], outline[0]])       # (piece, side start, end)
-        rows = rows[np.lexsort(rows.T[::-1])]
-        # both fans of a face have its sides for outline (but for a face that runs over a
-        # corner twice): measured once
-        if measured is None or measured_rows is None or not np.array_equal(rows,
-                                                                          measured_rows):
-            measured = _sides_off_design(design, vertices, *outline, count, panel_size,
-                                         curves)
-            measured_rows = rows
+        key = np.ascontiguousarray(rows[np.lexsort(rows.T[::-1])]).tobytes()
+        if key not in measured:
+            measured[key] = _sides_off_design(design, vertices, *outline, count, panel_size,
+                                              curves)
         off = _area_given_outline(design, vertices, fan, face, count, panel_size,
-                                  SAMPLE_LEVEL, curves, measured)
+                                  SAMPLE_LEVEL, curves, measured[key])
         area += 0.5 * off.area
         point = np.where(np.isnan(point), off.point, point)
     return OffDesign(area, point)

@@ -16,13 +16,13 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
+from ..errors import BrokenLayoutError
 from .definition import Candidate, Study
 from .ranking import is_lamella_study
 from .result import CandidateResult
 
 if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs
     from ..design.mesh_surface import DesignSurface
-    from ..errors import BrokenLayoutError
     from ..layout.margin import ContinuedDesign
     from ..layout.surface_layout import SurfaceLayout
     from ..net.mesh import QuadMesh
@@ -341,7 +341,6 @@ def with_holding_size(exc: BrokenLayoutError, design: DesignSurface, size: float
     which panel size its lattice on the design does (`fabplan.layout.surface_layout.
     holding_panel_size`, found once per design object, size and angle) and the study `key`
     to give it, or that none of those tried does."""
-    from ..errors import BrokenLayoutError
     from ..layout.surface_layout import HOLDING_SIZE_FACTORS, holding_panel_size
 
     found = design.__dict__.setdefault("_holding_sizes", {})
