@@ -181,7 +181,7 @@ def test_the_molds_of_a_net_off_its_design_are_rechecked_from_the_files(off_desi
     assert len(boundary) >= 20
     assert max(boundary.max(), steps["net-net"].max()) <= limit
     assert boundary.max() == pytest.approx(bp["step_max_mm"], rel=0.1, abs=0.05)
-    assert bp["molds_in_all"] == found["molds_in_all"] == record["mold_count"] + bp["own_molds"]
+    assert bp["molds_in_all"] == found["molds_in_all"] == record["molds_made"] + bp["own_molds"]
     # the panels as cut stand off the design about as far as the net does
     cut, _ = read_obj(out / "boundary-panels.obj")
     assert design.distances(cut).max() <= design.distances(net.mesh.vertices).max() + 0.03

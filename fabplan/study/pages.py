@@ -143,7 +143,7 @@ def study_viewer_scenes(result: StudyResult) -> tuple[list[viewer.ViewerScene], 
             c.molds, title=f"{c.rank}. {c.name}", deviation_mm=deviation,
             deviation_limit_mm=limit, gaps=gaps,
             infinite_radius=INFINITE_RADIUS_FACTOR * result.design_size,
-            molds_in_all=c.metrics["molds"]["count"])
+            boundary_own=c.metrics["molds"].get("boundary_own_molds", 0))
         if trimmed:
             scene.layer = boundary_layer(
                 panels, units=result.study.design.units,

@@ -183,7 +183,7 @@ def _net_and_mold_files(c: CandidateResult, folder: Path, study: Study
     record = molds_plan.record()
     if c.boundary_molds is not None:
         # the same count as the report's: the net's molds and the boundary panels' own
-        record["boundary_panels"] = c.boundary_molds.record(net_molds=molds_plan.mold_count)
+        record["boundary_panels"] = c.boundary_molds.record(net_molds=molds_plan.made_mold_count)
     output.write_texts({folder / "molds.csv": molds_plan.panels_csv(),
                         folder / "molds.json": json_text(record),
                         folder / "reproduce.sh": reproduce_script(c, study)})

@@ -211,8 +211,9 @@ class BoundaryMolds:
         return None if self.panels is None else boundary_cut_mesh(self.panels, self.cut_outlines)
 
     def record(self, net_molds: int | None = None) -> dict:
-        """JSON-ready summary; with the net's own mold count `net_molds`, also
-        ``molds_in_all`` (the net's and the boundary panels' own)."""
+        """JSON-ready summary; with the molds the net's panels need made `net_molds`
+        (`MoldPlan.made_mold_count`), also ``molds_in_all`` (those and the boundary panels'
+        own: every mold to make)."""
         gap = self.outline_gap_mm[~self.extension]
         cut = self.cut_mesh()
         rec = {
@@ -250,7 +251,8 @@ class BoundaryMolds:
 
 
 def boundary_molds_text(molds: BoundaryMolds, net_molds: int, source: object = None) -> str:
-    """One sentence: how the boundary panels are made, and the molds in all with theirs."""
+    """One sentence: how the boundary panels are made, and the molds in all with theirs
+    (`net_molds`: the molds the net's panels need made, `MoldPlan.made_mold_count`)."""
     slivers = (f", {int(molds.extension.sum())} slivers cut with their full panel"
                if molds.extension.any() else "")
     head = f"{molds.count} boundary panels" + (f" ({source})" if source is not None else "")

@@ -103,7 +103,7 @@ def facade_view(mesh) -> tuple:
 def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | None = None,
                      deviation_limit_mm: float | None = None, gaps: np.ndarray | None = None,
                      infinite_radius: float | None = None,
-                     molds_in_all: int | None = None) -> viewer.ViewerScene:
+                     boundary_own: int = 0) -> viewer.ViewerScene:
     """The 3D view of a net and its molds (`fabplan.report.viewer`).
 
     Parameters
@@ -115,8 +115,8 @@ def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | N
     deviation_limit_mm : the limit marked on the deviation scale.
     gaps : (g, 3, 3) float, triangles of the design the net leaves uncovered, or None.
     infinite_radius : Meusnier radii above this (model units) show as planar (grey).
-    molds_in_all : the molds of the whole plan when its boundary panels need molds of their
-        own beyond the net's (a study's count), said beside the net's.
+    boundary_own : the molds the net's boundary panels need of their own beyond the net's
+        (a study's ``boundary_own_molds``), said beside the net's.
 
     Returns
     -------
@@ -128,10 +128,9 @@ def net_viewer_scene(plan: MoldPlan, *, title: str, deviation_mm: np.ndarray | N
                       mm_per_unit=settings.mm_per_unit, deviation_mm=deviation_mm,
                       deviation_limit_mm=deviation_limit_mm, gaps=gaps,
                       infinite_radius=infinite_radius)
-    extra = (molds_in_all or plan.mold_count) - plan.mold_count
     said = (f"the net's panels use {counted(plan.mold_count, 'mold')}, and its boundary panels "
-            f"{extra} more of their own: {counted(plan.mold_count + extra, 'mold')} in all"
-            if extra > 0 else counted(plan.mold_count, 'mold'))
+            f"{boundary_own} more of their own" if boundary_own > 0
+            else counted(plan.mold_count, 'mold'))
     molds = viewer.ColourMode(
         "mold", "mold (one colour per mold)",
         f"Each colour is one mold ({said}); click a panel for its mold id, the row of the "
@@ -527,7 +526,7 @@ def _summary_rows(plan: MoldPlan, r: dict, boundary: BoundaryMolds | None,
                       limit_row_text(c)] for c in (limits or {}).values()]
     if boundary is not None:
         summary_rows.insert(6, ["boundary panels (boundary-panels.csv)",
-                                boundary_molds_text(boundary, plan.mold_count)])
+                                boundary_molds_text(boundary, plan.made_mold_count)])
     return summary_rows
 
 
@@ -667,7 +666,7 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None, *,
         ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
         *_verification_rows(r),
         *([["boundary panels (boundary-panels.csv)",
-            boundary_molds_text(boundary, plan.mold_count)]] if boundary is not None else []),
+            boundary_molds_text(boundary, plan.made_mold_count)]] if boundary is not None else []),
         *[[f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})",
            limit_row_text(c)] for c in (limits or {}).values()],
     ], widths=[2, 1])
@@ -712,7 +711,7 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
     texts = {"panels.csv": plan.panels_csv()}
     if boundary is not None:
         panels, molds = boundary
-        record["boundary_panels"] = molds.record(net_molds=plan.mold_count)
+        record["boundary_panels"] = molds.record(net_molds=plan.made_mold_count)
         texts["boundary-panels.csv"] = boundary_panels_csv(panels, molds)
         texts["boundary-panels.obj"] = molds.cut_obj_text(
             "fabplan boundary panels as cut from their molds (placements in "
