@@ -353,13 +353,17 @@ def test_a_search_solved_ahead_of_its_round_gives_the_serial_run(monkeypatch):
     assert forked.recommended == serial.recommended
 
 
-def test_a_solve_measured_ahead_is_taken_once_or_dropped_without_a_trace():
+def test_a_solve_measured_ahead_is_taken_once_or_dropped_without_a_trace(monkeypatch, tmp_path):
     """A solve measured ahead of its round: not counted as busy; dropped (finished or
-    still running), it leaves no candidate, file, line or process; submitted, its
-    process is taken instead of a new one, with the measurements the run makes here; a
-    twin found by the round has it measured again."""
+    still running, halfway through its files), it leaves no candidate, file (in the
+    temporary folder either), line or process; submitted, its process is taken instead
+    of a new one, with the measurements the run makes here; a twin found by the round
+    has it measured again."""
     import os
+    import tempfile
     import time
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
 
     from fabplan.study.background import BackgroundCandidates, background_processes
     from fabplan.study.run import fabricate_candidate, prepare_design, solve_candidate
@@ -401,6 +405,16 @@ def test_a_solve_measured_ahead_is_taken_once_or_dropped_without_a_trace():
     helper.drop_ahead()
     assert not helper._running and gone(job.pid) and not job.path.parent.exists()
 
+    helper.measure_ahead(solved)           # dropped halfway through its files
+    (job,) = helper._running
+    scratch = job.path.with_suffix(".tmp")
+    deadline = time.monotonic() + 300
+    while not any(p.is_file() for p in scratch.rglob("*")) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert any(p.is_file() for p in scratch.rglob("*"))
+    helper.drop_ahead()
+    assert gone(job.pid) and list(tmp_path.iterdir()) == []
+
     helper.measure_ahead(solved)           # taken while it runs
     started = [job.pid for job in helper._running]
     helper.submit(solved, None, 1e6)
@@ -418,6 +432,7 @@ def test_a_solve_measured_ahead_is_taken_once_or_dropped_without_a_trace():
     assert not any(j.ahead for j in helper._running)
     helper.collect()
     assert len(done) == 2 and not helper._running and not helper._finished_ahead
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_search_without_a_feasible_point_refines_beside_the_least_infeasible():

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
+import shutil
 import signal
 import sys
 import tempfile
@@ -208,6 +209,7 @@ class BackgroundCandidates:
             self._finished_ahead.remove(job)
         job.path.unlink(missing_ok=True)
         job.path.with_suffix(".part").unlink(missing_ok=True)
+        shutil.rmtree(job.path.with_suffix(".tmp"), ignore_errors=True)
 
     def _fork(self, solved: CandidateResult, twin: CandidateResult | None, seconds: float,
               ahead: bool = False) -> None:
@@ -228,6 +230,12 @@ class BackgroundCandidates:
                 with contextlib.suppress(OSError):
                     os.nice(BACKGROUND_NICENESS)
                 sys.stdout = sys.stderr = open(os.devnull, "w")
+                # what the measuring writes on its way goes into the run's own folder,
+                # which the run removes: a process stopped halfway (a solve measured
+                # ahead that no round took) leaves nothing behind
+                scratch = path.with_suffix(".tmp")
+                scratch.mkdir()
+                tempfile.tempdir = str(scratch)
                 made = _measure(self.study, self.design, solved, twin, self.files, self.rhino,
                                 None if twin_made is None else twin_made[0], ifc=self.ifc)
                 part = path.with_suffix(".part")
@@ -322,6 +330,7 @@ class BackgroundCandidates:
         from .run import failure_reason
 
         solved, name = job.solved, job.solved.name
+        shutil.rmtree(job.path.with_suffix(".tmp"), ignore_errors=True)
         if os.waitstatus_to_exitcode(job.status) == 0 and job.path.is_file():
             result, failure, lines, made, spent = pickle.loads(job.path.read_bytes())
             job.path.unlink()
