@@ -73,7 +73,10 @@ def test_compiled_and_numpy_fits_find_the_same_placements(monkeypatch, free):
     free_shape = np.full(len(P), free)
     a = _fit(monkeypatch, "numpy", P, W, start, K0, free_shape=free_shape)
     b = _fit(monkeypatch, "", P, W, start, K0, free_shape=free_shape)
-    np.testing.assert_allclose(b[0], a[0], rtol=1e-8, atol=1e-6)     # shifts of 50 m in mm
+    # shifts of 50 m in mm; a mold of its own that comes out nearly flat (radius 300 m:
+    # panel 5) slides along itself at a gap below a micrometre, so the two sums' rounding
+    # (which differs with the processor's vector width) places it within 1e-6 only
+    np.testing.assert_allclose(b[0], a[0], rtol=1e-5 if free else 1e-8, atol=1e-6)
     np.testing.assert_allclose(b[1], a[1], rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(b[2], a[2], rtol=0, atol=1e-6)
     # both found the mold the points lie on: the gaps recomputed here, padding left out
