@@ -450,6 +450,23 @@ def test_a_study_panel_size_implausible_in_its_units_is_refused(tmp_path, capsys
     refused(["study", study, "-o", tmp_path / "out"], capsys, tmp_path, fragment)
 
 
+def test_a_study_of_a_millimetre_design_read_in_metres_names_the_units(tmp_path, capsys):
+    """A design 57 km across with panels of 2 m: refused for its panel count, and told that
+    the design is likely in millimetres, not only to give larger panels."""
+    study = tmp_path / "s.toml"
+    study.write_text(_study_text().replace(
+        'surface = "hyperbolic-paraboloid"',
+        'surface = "hyperbolic-paraboloid"\n'
+        'parameters = { width = 20000, depth = 20000, rise = 2500 }'), encoding="utf-8")
+    code = main(["study", str(study), "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    last = err.rstrip().splitlines()[-1]
+    assert code == 2 and last.startswith("fabplan: error: "), err
+    assert "more than the limit of" in last and "the design is 56,789 m across" in last
+    assert 'is it in mm? Set design.units = "mm"' in last
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
+
+
 @pytest.mark.parametrize("option, what", [
     (["--fix"], "a file of vertex ids"), (["--handle"], "a file of handles"),
     (["--reference"], "a surface file"), (["--family"], "a file of polylines")])

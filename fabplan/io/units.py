@@ -15,7 +15,7 @@ import math
 from ..errors import InputError
 
 __all__ = ["MM_PER_UNIT", "UNIT_WORDS", "DEFAULT_UNITS", "PLAUSIBLE_PANEL_MM",
-           "PLAUSIBLE_DESIGN_MM", "check_units", "units_warning"]
+           "PLAUSIBLE_DESIGN_MM", "check_units", "units_warning", "likely_design_units"]
 
 #: millimetres per model unit, for every unit a command takes
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "ft": 304.8}
@@ -65,6 +65,24 @@ def _likely(panel: float | None, extent: float | None, units: str) -> str | None
     system = ("in", "ft") if units in ("in", "ft") else ("mm", "cm", "m")
     best = min(system, key=lambda u: abs(math.log(size * MM_PER_UNIT[u] / target)))
     return None if best == units else best
+
+
+def likely_design_units(extent: float, units: str) -> str | None:
+    """The unit a design `extent` (model units) across is likely drawn in, when read in
+    `units` it lies outside `PLAUSIBLE_DESIGN_MM`; None when it fits.
+
+    Examples
+    --------
+    >>> likely_design_units(24_000.0, "m")
+    'mm'
+    >>> likely_design_units(24.0, "m") is None
+    True
+    """
+    size_mm = extent * MM_PER_UNIT[units]
+    low = PLAUSIBLE_DESIGN_MM[0] if units in _LARGE_UNITS else 0.0
+    if low <= size_mm <= PLAUSIBLE_DESIGN_MM[1]:
+        return None
+    return _likely(None, extent, units)
 
 
 def units_warning(name: str, units: str, *, panel: float | None = None,

@@ -327,18 +327,29 @@ def load_study_design(study: Study, say: Callable[[str], None],
     """
     from ..design.load import load_design
     from ..io.resources import STUDY_BYTES_PER_PANEL, check_panel_count
+    from ..io.units import likely_design_units
 
     source, triangles = study.design.source, study.design.triangles
+    units = study.design.units
     design = load_design(source) if triangles is None else load_design(source, triangles=triangles)
     say(f"design {study.design.label}: {len(design.triangles)} triangles, area "
-        f"{design.area:.4g} {study.design.units}^2")
+        f"{design.area:.4g} {units}^2")
+    fix = "give a larger panels.size"
+    likely = likely_design_units(design.extent, units)
+    if likely is not None:
+        # a design 24 km across is a millimetre file read in metres, and its panels too many
+        across = f"{design.extent:,.0f}" if design.extent >= 10 else f"{design.extent:.3g}"
+        unit_fix = (f"the design is {across} {units} across: is it in {likely}? "
+                    f'Set design.units = "{likely}"')
+        say(f"warning: {unit_fix}")
+        fix = f"{unit_fix}, or {fix}"
     smallest = min(study.panel_size_of(c) for c in study.candidates)
     check_panel_count(design.area / smallest**2, max_panels=max_panels,
                       bytes_per_panel=STUDY_BYTES_PER_PANEL,
                       what=f"{study.path or study.name}: layouts of panel size "
-                           f"{smallest:g} {study.design.units} on a design of area "
-                           f"{design.area:.4g} {study.design.units}^2",
-                      fix="give a larger panels.size")
+                           f"{smallest:g} {units} on a design of area "
+                           f"{design.area:.4g} {units}^2",
+                      fix=fix)
     return design
 
 
