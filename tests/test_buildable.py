@@ -88,6 +88,24 @@ def test_the_record_carries_the_buildable_counts_and_the_limits():
     assert far["far_vertices"]["worst"]["distance"] == pytest.approx(0.3, rel=1e-6)
 
 
+def test_a_collapsed_edge_keeps_a_net_from_being_built_in_the_record_and_the_line():
+    """A net whose lines meet an edge of a twentieth of the mean edge is degenerate: not
+    buildable, in the JSON and in the line `fabplan measure` prints (which said
+    "buildable" under "folds: 1 collapsed edges")."""
+    from fabplan.net.measure import format_summary
+
+    grid = _grid()
+    X = grid.vertices.copy()
+    X[24] = X[23] + 0.05 * (X[24] - X[23])      # the edge 23-24 shrunk to 1/20
+    record = measure_net(grid.with_vertices(X))
+    assert record["folds"]["collapsed_edges"]["count"] >= 1
+    assert record["buildable"]["buildable"] is False and record["buildable"]["crumpled"] is False
+    line = [t for t in format_summary(record).splitlines() if "buildable" in t]
+    assert line == [line[0]] and line[0].startswith("not buildable: ")
+    assert f"{record['folds']['collapsed_edges']['count']} collapsed edges" in line[0]
+    assert measure_net(grid)["buildable"]["buildable"] is True
+
+
 def _solve(name: str, net: str, angle: float | None) -> tuple:
     start = HARD_STARTS[name]()
     result = fabplan.optimize(start, net, angle=angle)

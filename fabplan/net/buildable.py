@@ -215,7 +215,10 @@ class BuildReport:
 
     @property
     def buildable(self) -> bool:
-        return not (self.folds.folded or self.crumpled or self.off_design)
+        """No fold, no degenerate star or collapsed edge, not crumpled, not off the design:
+        what a converged net is."""
+        return not (self.folds.folded or self.folds.degenerate or self.crumpled
+                    or self.off_design)
 
     def record(self, *, listed: int = 200) -> dict:
         """JSON-ready counts, (up to `listed`) element ids and the worst place of each."""

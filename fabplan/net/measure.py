@@ -78,6 +78,8 @@ def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None,
     if len(stars):
         spheres = fit_star_spheres(X, stars)
         k1, k2 = principal_curvatures(X, stars, spheres.curvature)
+        with np.errstate(invalid="ignore"):     # a collapsed star's curvatures: inf - inf
+            mean_curvature = (k1 + k2) / 2      # (its stats keep the finite values only)
         record.update({
             "sphere_residual": _stats(spheres.residual),
             "sphere_residual_relative": _stats(spheres.residual / L),
@@ -86,7 +88,7 @@ def measure_net(mesh: QuadMesh, *, reference: SurfaceWithNormals | None = None,
             "intersection_angle_deg": _stats(np.degrees(intersection_angles(X, stars))),
             "principal_curvature_1": _stats(k1),
             "principal_curvature_2": _stats(k2),
-            "mean_curvature": _stats((k1 + k2) / 2),
+            "mean_curvature": _stats(mean_curvature),
             "star_planarity_relative": _stats(star_planarity(X, stars) / L),
         })
     if mesh.normals is not None and len(stars):
@@ -154,7 +156,7 @@ def format_summary(record: dict) -> str:
         lines.append("folds: " + (", ".join(f"{n} {what}" for n, what in counts if n) or "none"))
     build = record.get("buildable")
     if build:
-        lines.append(buildable_summary(build))
+        lines.append(buildable_summary(build, folds))
     turn = (record.get("fairness") or {}).get("line_turn_deg") or {}
     if turn.get("max") is not None:
         lines.append(f"lines turn in the surface by up to {turn['max']:.2f} deg (median "
@@ -162,14 +164,18 @@ def format_summary(record: dict) -> str:
     return "\n".join(lines)
 
 
-def buildable_summary(build: dict) -> str:
-    """One line from the ``buildable`` part of a `measure_net` record: what keeps the net
-    from being built, or that nothing does."""
+def buildable_summary(build: dict, folds: dict | None = None) -> str:
+    """One line from the ``buildable`` part of a `measure_net` record (and its ``folds``,
+    whose degenerate stars and collapsed edges keep a net from being built too): what
+    keeps the net from being built, or that nothing does."""
     said = [(build["nonconvex_faces"], "non-convex faces"),
             (build["self_crossing_faces"], "self-crossing faces"),
             (build["sharp_line_turns"], f"vertices where a line turns more than "
              f"{build['sharp_line_turns']['turn_above_deg']:g} deg"),
             (build.get("far_vertices") or {"count": 0}, "vertices beyond the deviation limit")]
+    if folds:
+        said += [(folds["degenerate_stars"], "stars whose lines run together"),
+                 (folds["collapsed_edges"], "collapsed edges")]
     found = ", ".join(f"{part['count']} {what}" for part, what in said if part["count"])
     jumps = build["edge_jumps"]
     jump = (f"; {jumps['count']} edge jumps over {jumps['ratio_above']:g}x along the lines"
