@@ -35,8 +35,9 @@ angle = 80
 def _run_script(folder: Path, monkeypatch) -> list[list[str]]:
     """Run a candidate's reproduce.sh line by line through `main`, in its folder."""
     lines = (folder / "reproduce.sh").read_text(encoding="utf-8").splitlines()
-    assert lines[0] == "#!/bin/sh" and 'cd "$(dirname "$0")"' in lines
-    commands = [shlex.split(line) for line in lines if line.startswith("fabplan ")]
+    assert lines[0] == "#!/bin/sh" and 'cd "$(dirname "$0")" || exit 2' in lines
+    commands = [shlex.split(line.partition(" || ")[0]) for line in lines
+                if line.startswith("fabplan ")]
     monkeypatch.chdir(folder)
     for command in commands:
         assert main([*command[1:], "-q"]) in (0, 3), command
@@ -127,3 +128,38 @@ def test_every_canopy_candidate_is_reproduced_by_its_commands(canopy_study, tmp_
             ours = json.loads((folder / "reproduced" / "strips" / "strips.json").read_text())["summary"]
             study = candidate["metrics"]["strips"]
             assert ours["strips"] == study["strips"] and ours["sheets"] == study["sheets"]
+
+
+@pytest.mark.parametrize("molds_exit, strips_run, script_exit", [(0, True, 0), (3, True, 3),
+                                                                 (2, False, 2)])
+def test_reproduce_sh_goes_on_past_a_limit_not_met_and_stops_at_a_failure(
+        tmp_path, monkeypatch, molds_exit, strips_run, script_exit):
+    """An infeasible candidate's molds end with exit 3 (written, a limit not met): its
+    strips are still made and the script ends with 3; an error stops the script with its
+    code. (`set -e` stopped at the molds, so an infeasible candidate never had strips.)"""
+    import os
+    import subprocess
+    from types import SimpleNamespace
+
+    from fabplan.study import report
+
+    monkeypatch.setattr(report, "reproduce_commands", lambda c, study: [
+        ["fabplan", "molds", "net.obj", "-o", "reproduced/molds"],
+        ["fabplan", "strips", "net.obj", "-o", "reproduced/strips"]])
+    folder = tmp_path / "candidate"
+    folder.mkdir()
+    script = folder / "reproduce.sh"
+    script.write_text(report.reproduce_script(SimpleNamespace(name="c"), None), encoding="utf-8")
+    bin_folder = tmp_path / "bin"
+    bin_folder.mkdir()
+    stub = bin_folder / "fabplan"          # records each command and its folder
+    stub.write_text('#!/bin/sh\necho "$1 $(pwd)" >> "$LOG"\n'
+                    '[ "$1" = molds ] && exit "$MOLDS_EXIT"\nexit 0\n', encoding="utf-8")
+    stub.chmod(0o755)
+    log = tmp_path / "log"
+    env = {**os.environ, "PATH": f"{bin_folder}:{os.environ['PATH']}", "LOG": str(log),
+           "MOLDS_EXIT": str(molds_exit)}
+    done = subprocess.run(["sh", str(script)], cwd=tmp_path, env=env)
+    assert done.returncode == script_exit
+    ran = log.read_text().splitlines()
+    assert ran == [f"molds {folder}"] + ([f"strips {folder}"] if strips_run else [])

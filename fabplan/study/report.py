@@ -141,9 +141,15 @@ def reproduce_script(c: CandidateResult, study: Study) -> str:
 
     lines = ["#!/bin/sh",
              f"# {c.name}: the commands that give this candidate's net molds and strips from",
-             "# net.obj, as the study planned them, in reproduced/molds and reproduced/strips",
-             "set -e", 'cd "$(dirname "$0")"']
-    return "\n".join([*lines, *(shlex.join(cmd) for cmd in reproduce_commands(c, study))]) + "\n"
+             "# net.obj, as the study planned them, in reproduced/molds and reproduced/strips.",
+             "# A command that exits with 3 wrote its files and found a fabrication limit not",
+             "# met, as the study did: the script goes on, and exits with 3. Any other failure",
+             "# stops it.",
+             'cd "$(dirname "$0")" || exit 2', "status=0"]
+    # `set -e` would stop at the molds of an infeasible candidate, before its strips
+    carry_on = ' || { code=$?; [ "$code" -eq 3 ] || exit "$code"; status=3; }'
+    commands = [shlex.join(cmd) + carry_on for cmd in reproduce_commands(c, study)]
+    return "\n".join([*lines, *commands, 'exit "$status"']) + "\n"
 
 
 def _candidate_files(c: CandidateResult, folder: Path, study: Study, design: DesignSurface,
