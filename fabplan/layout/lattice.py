@@ -46,7 +46,7 @@ from .parametrization import (
 )
 from .settings import LayoutSettings
 
-__all__ = ["Lattice", "layout_lattice"]
+__all__ = ["Lattice", "layout_lattice", "umbilic_design", "axis_directions", "UMBILIC_ANISOTROPY"]
 
 
 @dataclass
@@ -116,19 +116,25 @@ def layout_lattice(design: DesignSurface, h: float, angle: float, family: str | 
     V = design.vertices
     normal = design.face_normals
     k1, k2, e1 = face_principal_frames(design, radius=s.curvature_radius)
+    anisotropy = np.abs(k1 - k2)
+    if umbilic_design(k1, k2, design.face_areas):
+        # a sphere (a dome) has no principal directions: every net on it is an S-net, so
+        # the lines follow the design's long axis, which has no singular point on a cap
+        e1 = axis_directions(design)
+        anisotropy = np.ones_like(k1)
     if s.bisector == "min":
         e1 = np.cross(normal, e1)
     e1_raw = e1       # the bisector's principal direction (`LayoutSettings.bisector`)
     lap("principal_directions")
     e1, symmetry, smoothing = _smoothed_directions(
-        design, e1, np.abs(k1 - k2) * design.face_areas, h, s, cross=family is None)
+        design, e1, anisotropy * design.face_areas, h, s, cross=family is None)
     if symmetry == 4 and angle != 90.0:
         # the combed cross field is a principal direction everywhere, continuous across
         # the lines where the larger principal curvature swaps direction (a wave's
         # inflections): the bisector of the families, turned to the `bisector` setting
         # where most of the design's anisotropy is
         agree = np.abs(np.sum(e1 * e1_raw, axis=1)) >= math.sqrt(0.5)
-        weight = np.abs(k1 - k2) * design.face_areas
+        weight = anisotropy * design.face_areas
         if weight[agree].sum() < weight[~agree].sum():
             e1 = np.cross(normal, e1)
     lap("smoothing")
@@ -138,7 +144,7 @@ def layout_lattice(design: DesignSurface, h: float, angle: float, family: str | 
     turning = _turning_spots(design, direction_turning(design, e1, h), s.max_turning_deg, h)
     lap("combing")
     whole_turns, turn_starts = find_whole_turns(V, singular, index[singular], h)
-    fields = _gradient_fields(design, e1, np.abs(k1 - k2), h, angle, family, whole_turns, s)
+    fields = _gradient_fields(design, e1, anisotropy, h, angle, family, whole_turns, s)
     lap("directions")
     cut = _cut_open(design, fields, seam, e1, turn_starts)
     lap("cuts")
@@ -302,6 +308,50 @@ def _extract(design: DesignSurface, P2: np.ndarray, transitions: list, h: float,
         verts, quads, keys, _ = fill_boundary_cells(
             verts, quads, keys, design, h, min_edge=s.boundary_min_edge, max_edge=s.max_edge)
     return verts, quads, keys, off
+
+
+#: a design whose principal curvatures differ by less than this share of their mean size
+#: (on 90 % of its area) is a sphere to the layout: its principal directions are noise
+UMBILIC_ANISOTROPY = 0.02
+
+
+def umbilic_design(k1: np.ndarray, k2: np.ndarray, area: np.ndarray) -> bool:
+    """Whether a design is umbilic (a sphere) nearly everywhere: ``|k1 - k2|`` below
+    `UMBILIC_ANISOTROPY` of ``(|k1| + |k2|) / 2`` on 90 % of its area (a plane, without
+    curvature, is not).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> umbilic_design(np.full(4, 0.0501), np.full(4, 0.05), np.ones(4))
+    True
+    >>> umbilic_design(np.array([0.13, 0.13]), np.zeros(2), np.ones(2))
+    False
+    """
+    size = 0.5 * (np.abs(k1) + np.abs(k2))
+    if not np.any(size > 0):
+        return False
+    close = np.abs(k1 - k2) <= UMBILIC_ANISOTROPY * size
+    close &= size > 1e-6 * float(np.max(size))
+    return bool(np.sum(area[close]) >= 0.9 * np.sum(area))
+
+
+def axis_directions(design: DesignSurface) -> np.ndarray:
+    """(t, 3) float, the design's long axis (the principal axis of its area in which it is
+    widest, of those across its mean normal) in every triangle's plane, unit; a
+    triangle facing along the axis takes the next axis."""
+    centres = design.vertices[design.triangles].mean(axis=1)
+    centre = np.average(centres, axis=0, weights=design.face_areas)
+    spread = (centres - centre) * np.sqrt(design.face_areas)[:, None]
+    _, _, axes = np.linalg.svd(spread, full_matrices=False)          # widest first
+    up = np.average(design.face_normals, axis=0, weights=design.face_areas)
+    # of the two widest axes, the one across the mean normal (a cap's plan, not its rise)
+    axis, other = sorted(axes[:2], key=lambda a: abs(float(a @ up)))
+    n = design.face_normals
+    along = axis - np.sum(n * axis, axis=1, keepdims=True) * n
+    weak = np.linalg.norm(along, axis=1) < 0.1
+    along[weak] = other - np.sum(n[weak] * other, axis=1, keepdims=True) * n[weak]
+    return along / np.linalg.norm(along, axis=1, keepdims=True)
 
 
 def _smoothed_directions(design: DesignSurface, e1: np.ndarray, weight: np.ndarray,
