@@ -66,6 +66,8 @@ def test_relaxing_the_limits_as_said_makes_the_nearest_candidate_feasible(judged
                   key=lambda c: violation(c.checks))
     assert math.isfinite(violation(nearest.checks))
     assert f"The nearest is {nearest.name}" in strict.recommendation
+    # the ranking counts the limits failed first: a nearest that ranks lower says so
+    assert (f"(ranked {nearest.rank}:" in strict.recommendation) == (nearest.rank != 1)
     relax = relaxation_text(nearest.checks)
     assert relax and f"It would be feasible with {relax}" in strict.recommendation
     assert "Other ways: keep the net nearer the design" in strict.recommendation
@@ -471,3 +473,16 @@ def test_a_study_searches_an_angle_and_reports_it(tmp_path):
         assert search["best"] == min(feasible, key=lambda p: p["cost"])["candidate"]
     page = (tmp_path / "out" / "report.html").read_text()
     assert 'id="search-0"' in page and "Search: isogonal" in page
+
+
+def test_boundary_panels_on_molds_of_their_own_are_not_said_to_be_cut_from_the_nets():
+    """"110 boundary panels ..., each cut from a mold of the net's panels ..., 38 panels
+    on a mold of its own" said two things of the 38."""
+    from fabplan.study.tables import _boundary_text
+
+    record = {"count": 110, "own_molds": 38, "flat": 72, "step_max_mm": 118.55,
+              "deviation_max_mm": 290.2}
+    text = _boundary_text(record)
+    assert "each" not in text and "38 on molds of their own, the others cut from a mold" in text
+    assert "each cut from a mold" in _boundary_text({**record, "own_molds": 0})
+    assert "1 on a mold of its own" in _boundary_text({**record, "own_molds": 1})

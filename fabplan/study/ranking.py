@@ -145,8 +145,13 @@ def recommend(results: list[CandidateResult], study: Study, *,
         if not measured:
             return None, "No candidate produced a net; see the reasons of each below."
         best = measured[0]
-        text = (f"No candidate meets every limit. The nearest is {_named(best)}, which "
-                "fails: " + "; ".join(best.reasons) + ".")
+        # nearest by how far it exceeds its limits; the ranking counts the limits failed
+        # first, so the two may differ, and the text says which it means
+        ranked = "" if best.rank in (None, 1) else (
+            f" (ranked {best.rank}: the ranking counts the limits failed first, this is "
+            "the one that exceeds its limits least)")
+        text = (f"No candidate meets every limit. The nearest is {_named(best)}{ranked}, "
+                "which fails: " + "; ".join(best.reasons) + ".")
         text += feasible_with(best.checks)
         steps = next_steps(best.checks)
         return None, text + (f" Other ways: {'; '.join(steps)}." if steps else "")

@@ -245,17 +245,20 @@ def _boundary_text(boundary: dict | None) -> str:
     if flat == boundary["count"]:
         how = "all flat (no molds), placed to meet their neighbours"
     else:
-        how = "each cut from a mold of the net's panels and placed to meet its neighbours"
+        # those on molds of their own are said after the steps: "each" would not hold
+        each = "each" if not own else "the others"
+        how = f"{each} cut from a mold of the net's panels and placed to meet its neighbours"
         if flat:
             how += f" ({flat} of them flat)"
-    text = f"; and {counted(boundary['count'], 'boundary panel')} trimmed to the design boundary, {how}"
+    text = f"; and {counted(boundary['count'], 'boundary panel')} trimmed to the design boundary"
+    if own:
+        text += f", {counted(own, 'on a mold of its own', 'on molds of their own')}"
+    text += f", {how}"
     if boundary.get("step_max_mm") is not None:
         text += f" (steps up to {boundary['step_max_mm']:.2f} mm"
         if boundary.get("deviation_max_mm") is not None:
             text += f", up to {boundary['deviation_max_mm']:.1f} mm from the design"
         text += ")"
-    if own:
-        text += f", {counted(own, 'panel')} on a mold of its own"
     if boundary.get("flipped"):
         text += f"; {counted(boundary['flipped'], 'boundary panel')} facing against the design"
     return text
