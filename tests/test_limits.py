@@ -486,3 +486,23 @@ def test_boundary_panels_on_molds_of_their_own_are_not_said_to_be_cut_from_the_n
     assert "each" not in text and "38 on molds of their own, the others cut from a mold" in text
     assert "each cut from a mold" in _boundary_text({**record, "own_molds": 0})
     assert "1 on a mold of its own" in _boundary_text({**record, "own_molds": 1})
+
+
+def test_a_char_conjugate_net_on_a_partly_saddle_shaped_design_is_told_to_trim_it():
+    """A characteristic conjugate net exists only where the Gaussian curvature is
+    positive: a torus run past its parabolic lines got "a smaller panel size" for its
+    290 mm boundary panels, which no panel size cures."""
+    from fabplan.design.load import load_design
+    from fabplan.study.candidate_measure import anticlastic_share
+    from fabplan.study.verdict import _deviation_advice
+
+    assert anticlastic_share(load_design("hyperbolic-paraboloid")) > 0.99
+    assert anticlastic_share(load_design("paraboloid")) < 0.01
+    limits = parse_study(STUDY).limits
+    bound = limits.max_deviation_mm
+    near = {"design_anticlastic": 0.08}
+    assert "8 % of it is saddle-shaped" in _deviation_advice(near, limits, 0.5 * bound, 4 * bound)
+    # a synclastic design: the boundary panels' advice, as before
+    assert _deviation_advice({"design_anticlastic": 0.0}, limits, 0.5 * bound,
+                             4 * bound).startswith("a smaller panel size")
+    assert _deviation_advice({}, limits, 2 * bound, None) is None

@@ -101,6 +101,9 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     metrics = measure_candidate(net, design, molds, strips, mm_per_unit=study.design.mm_per_unit,
                                 deviation_mm=deviation, boundary=bounds)
     _within_study_limit(metrics, study.limits_of(candidate).max_deviation_mm)
+    if candidate.net == "char-conjugate":
+        # its directions are real only where the design is synclastic: the verdict says so
+        metrics["design_anticlastic"] = anticlastic_share(design)
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
                            singular_points=solved.singular_points, boundary_molds=bounds,
@@ -232,6 +235,24 @@ def measure_candidate(net: OptimizationResult, design: DesignSurface, molds: Mol
     metrics["largest_deviation_mm"] = (max(metrics["deviation_mm"]["max"], edge)
                                        if edge is not None else metrics["deviation_mm"]["max"])
     return metrics
+
+
+def anticlastic_share(design: DesignSurface) -> float:
+    """The share of the design's area that is saddle-shaped (Gaussian curvature below
+    zero, the principal curvatures of opposite signs beyond a thousandth of their typical
+    size), found once per design. No characteristic conjugate net exists there: its two
+    directions, symmetric to the principal ones and conjugate, are real only where the
+    Gaussian curvature is positive."""
+    cached = design.__dict__.get("_anticlastic_share")
+    if cached is None:
+        from ..layout.directions import face_principal_frames
+
+        k1, k2, _ = face_principal_frames(design)
+        typical = float(np.median(np.abs(k1) + np.abs(k2))) or 1.0
+        saddle = k1 * k2 < -(1e-3 * typical) ** 2
+        cached = float(design.face_areas[saddle].sum() / design.face_areas.sum())
+        design.__dict__["_anticlastic_share"] = cached
+    return cached
 
 
 def _boundary_panel_metrics(boundary: BoundaryMolds, trimmed: dict) -> dict:

@@ -51,10 +51,7 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
            + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
            if edge is not None else "")
         + f" (limit {limits.max_deviation_mm:g} mm)",
-        # the net keeps to the limit, the boundary panels cut from its molds do not
-        advice="a smaller panel size: the net keeps within the limit, its boundary panels "
-               "as cut from their molds do not" if edge is not None
-        and dev <= limits.max_deviation_mm < edge else None))
+        advice=_deviation_advice(metrics, limits, dev, edge)))
     checks += _mold_checks(metrics["molds"], limits)
     if limits.planar_panels:
         p = metrics["planarity_mm"]["max"]
@@ -84,6 +81,24 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     if strips is not None:
         checks += _strip_checks(strips, limits)
     return checks
+
+
+def _deviation_advice(metrics: dict, limits: Limits, dev: float, edge: float | None
+                      ) -> str | None:
+    """What to try when a converged net is too far from the design, where the general
+    advice would mislead: a characteristic conjugate net on a design partly saddle-shaped
+    (it cannot exist there), or a net within the limit whose boundary panels are not."""
+    saddle = metrics.get("design_anticlastic") or 0.0
+    if saddle > 0.02:
+        return (f"trim the design to where it curves the same way in every direction: "
+                f"{100 * saddle:.0f} % of it is saddle-shaped, where no characteristic "
+                "conjugate net exists (its directions are real only where the Gaussian "
+                "curvature is positive); or another net type there")
+    if edge is not None and dev <= limits.max_deviation_mm < edge:
+        # the net keeps to the limit, the boundary panels cut from its molds do not
+        return ("a smaller panel size: the net keeps within the limit, its boundary panels "
+                "as cut from their molds do not")
+    return None
 
 
 def _unmet_words(unmet: dict) -> str:
