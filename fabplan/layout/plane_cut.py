@@ -78,8 +78,9 @@ def pieces_in_plane(mesh: QuadMesh, cuts: list, chart: ParameterChart, p_net: np
             chart, faces, mesh, h, grid, 1e-6 * cell)
     else:
         net = shapely.union_all(_polygonal(shapely.make_valid(faces)), grid_size=grid)
-        domain = shapely.union_all(_polygonal([shapely.set_precision(chart.domain, grid)]),
-                                   grid_size=grid)
+        domain = shapely.union_all(_polygonal([shapely.set_precision(
+            _through_gliding_vertices(chart.domain, p_net[touching & mesh.is_boundary_vertex],
+                                      grid), grid)]), grid_size=grid)
         regions = [shapely.union_all(_polygonal([shapely.difference(domain, net, grid_size=grid)]),
                                      grid_size=grid)]
     # regions of different sheets may overlap in the plane: each is cut on its own
@@ -93,6 +94,18 @@ def pieces_in_plane(mesh: QuadMesh, cuts: list, chart: ParameterChart, p_net: np
         piece_region = np.repeat(np.arange(len(cut)), [len(c[0]) for c in cut])
         sheets = (rest, rest_triangle, rest_region, piece_region)
     return pieces, rays, patch, sheets
+
+
+def _through_gliding_vertices(domain, points: np.ndarray, grid: float):
+    """The `domain` with its outline moved onto the net's vertices `points` (k, 2) that lie
+    within two `grid` steps of it (vertices gliding on the design boundary, a fraction of
+    the grid off it to rounding). Whether the overlays' snap-rounding would node such a
+    vertex on the outline depends on where the grid falls: the strip beside it would be
+    parted there in metres and run on through a neck in millimetres. On the outline, it is
+    parted at every scale; farther vertices are joined to it by `_connectors`."""
+    if len(points) == 0:
+        return domain
+    return shapely.make_valid(shapely.snap(domain, shapely.multipoints(points), 2 * grid))
 
 
 def _polygonal(geometries) -> np.ndarray:
