@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...net.mesh import QuadMesh
+from ...report.html import counted
 from .mold_shapes import MOLD_TYPES, PANEL_TYPES, MoldSettings, mold_count_bound
 from .panel_classes import CLASSES, PanelClasses
 from .panel_meshes import PANEL_MESH_LEVEL, PanelMesh
@@ -335,7 +336,7 @@ class MoldPlan:
         lines = [
             f"{r['panel_count']} panels ({t['planar']} planar, {t['single_curved']} single curved, "
             f"{t['double_curved']} double curved) at {r['tolerance_mm']:g} mm",
-            f"{r['mold_count']} molds ({r['mold_types']['plane']} plane, "
+            f"{counted(r['mold_count'], 'mold')} ({r['mold_types']['plane']} plane, "
             f"{r['mold_types']['cylinder']} cylinder, {r['mold_types']['paraboloid']} paraboloid)"
             + (" with every curved panel molded" if self.classes is not None else "")
             + f"; M / sqrt(N) = {r['molds_per_sqrt_panels']:.2f}",
@@ -345,13 +346,13 @@ class MoldPlan:
             f"largest step between neighbouring panels' molds {self.max_step_mm:.3f} mm "
             f"(limit {self.step_limit_mm:g} mm, {self.steps_over.size} shared edges over it); "
             f"the curvature set's length over one mold's reach suggests about "
-            f"{r['mold_count_bound']['molds']} molds (an estimate, not a bound)",
+            f"{counted(r['mold_count_bound']['molds'], 'mold')} (an estimate, not a bound)",
         ]
         if self.classes is not None:
             c = self.classes.counts
             lines.append(f"{self.classes.material.label}: {c['flat']} flat, {c['cold_bent']} "
                          f"cold-bent, {c['roll_bent']} roll-bent, {c['molded']} molded panels: "
-                         f"{self.made_mold_count} molds to make, {self.molds_saved} saved by "
+                         f"{counted(self.made_mold_count, 'mold')} to make, {self.molds_saved} saved by "
                          "the material")
         if w.get("thickness") is not None:
             lines.append(f"Weingarten residual: rms {w['line_residual_rms'] * 1000:.4g} 1/m from the "
