@@ -159,7 +159,8 @@ def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
         "mold_tolerance_mm", limits.mold_tolerance_mm, molds["max_deviation_mm"], panels_fit,
         f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
         f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
-        f"{molds['failures']} panels fit no mold within {limits.mold_tolerance_mm:g} mm"))
+        f"{counted(molds['failures'], 'panel fits', 'panels fit')} no mold within "
+        f"{limits.mold_tolerance_mm:g} mm"))
     step = molds.get("max_panel_step_mm")
     if step is not None:
         step_limit = limits.panel_step_limit_mm
