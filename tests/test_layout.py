@@ -8,6 +8,7 @@ edge lengths against the requested panel size, angles between osculating tangent
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,11 +28,15 @@ from fabplan.layout.directions import (
     line_field_index,
     smooth_direction_field,
 )
+from fabplan.layout.lattice import umbilic_design
 from fabplan.layout.settings import SURFACE_TOLERANCE, LayoutSettings
 from fabplan.layout.surface_layout import glide, layout_surface
 from fabplan.net.geometry import canonical_stars, fit_star_spheres, intersection_angles
 from fabplan.net.mesh import QuadMesh
 from fabplan.solve.constraints.closeness import closest_points_on_polylines
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from check_buildable import check  # noqa: E402
 
 
 def _facade_height(x, y):
@@ -830,9 +835,6 @@ def test_a_dome_is_laid_out_along_its_long_axis_and_glides_as_an_s_net(size):
     0.75 m named six singular points. Every net on a sphere is an S-net: the lines follow
     the dome's long axis, without a singular point, and the net glides on the dome to a
     converged S-net whose spheres are the dome's."""
-    from fabplan.layout.directions import face_principal_frames
-    from fabplan.layout.lattice import umbilic_design
-
     design = _spherical_cap()
     k1, k2, _ = face_principal_frames(design)
     assert umbilic_design(k1, k2, design.face_areas)
@@ -841,6 +843,9 @@ def test_a_dome_is_laid_out_along_its_long_axis_and_glides_as_an_s_net(size):
     assert layout.mesh.irregular_vertices.size == 0
     result = glide(layout, net="snet")
     assert result.converged, result.message
+    # buildable by the benchmarks' own check: no dart, no line turning back
+    own = check(result.mesh.vertices, result.mesh.faces, max_turn_deg=45.0)
+    assert own["buildable"] and own["darts"] == 0, own
     stars = canonical_stars(result.mesh.vertices, result.mesh.stars)
     spheres = fit_star_spheres(result.mesh.vertices, stars)
     # the dome's triangles are its chords, and the net glides on them within a tolerance:

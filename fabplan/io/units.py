@@ -78,11 +78,14 @@ def likely_design_units(extent: float, units: str) -> str | None:
     >>> likely_design_units(24.0, "m") is None
     True
     """
-    size_mm = extent * MM_PER_UNIT[units]
+    return _likely(None, extent, units) if _implausible_design(extent, units) else None
+
+
+def _implausible_design(extent: float, units: str) -> bool:
+    """Whether a design `extent` (model units) across lies outside `PLAUSIBLE_DESIGN_MM`
+    read in `units` (its lower bound checked in the large units only)."""
     low = PLAUSIBLE_DESIGN_MM[0] if units in _LARGE_UNITS else 0.0
-    if low <= size_mm <= PLAUSIBLE_DESIGN_MM[1]:
-        return None
-    return _likely(None, extent, units)
+    return not low <= extent * MM_PER_UNIT[units] <= PLAUSIBLE_DESIGN_MM[1]
 
 
 def units_warning(name: str, units: str, *, panel: float | None = None,
@@ -130,11 +133,9 @@ building; if the file is in metres, give --units m
                              f"{UNIT_WORDS[other]}? Give --units {other}")
         if not low <= edge_mm <= high:
             problems.append(said)
-    if extent is not None:
-        low_design = PLAUSIBLE_DESIGN_MM[0] if units in _LARGE_UNITS else 0.0
-        if not low_design <= extent * mm <= PLAUSIBLE_DESIGN_MM[1]:
-            across = f"a design {extent * mm:.3g} mm across"
-            problems.append(f"on {across}" if problems else f"{name}: {across}")
+    if extent is not None and _implausible_design(extent, units):
+        across = f"a design {extent * mm:.3g} mm across"
+        problems.append(f"on {across}" if problems else f"{name}: {across}")
     if not problems:
         return None
     # the size that is out of place tells the unit

@@ -56,9 +56,8 @@ class Attempt:
 
     @property
     def succeeded(self) -> bool:
-        """Converged, buildable and without degenerate stars or collapsed edges."""
-        return self.solver.status == "converged" and self.build.buildable \
-            and not self.folds.degenerate
+        """Converged and buildable (which includes no degenerate star or collapsed edge)."""
+        return self.solver.status == "converged" and self.build.buildable
 
     @property
     def needs_guards(self) -> bool:
@@ -175,13 +174,13 @@ def explain_result(solver: GuidedProjection, status: str, build: BuildReport, st
         unmet = describe_unmet(unmet_constraints(solver))
         parts.append(f"stopped ({status}) with {unmet or 'residuals above the tolerance'}")
         best = solver.best
-        if best is not None and best.admissible and build.buildable and not folds.degenerate:
+        if best is not None and best.admissible and build.buildable:
             parts.append("the net written is the best iterate, buildable (no fold, dart or line "
                          "doubling back)")
         if best is not None and best.iteration <= solver.run_start:
             parts.append("no step improved on the start: it may be far from any net of this "
                          "type, or the type may not exist on this surface")
-        if not build.buildable or folds.degenerate:
+        if not build.buildable:
             parts.append(f"on the net written {_obstacles(build)}")
     if deviation is not None and build.off_design:
         smallest = deviation["smallest_converged"]
