@@ -140,14 +140,16 @@ def _boundary_panels_again(source: Path, mesh, result, progress) -> str | None:
     recorded in ``NET.json`` is made again (`layout_again`) and, when it gives the net's
     faces, the optimized net's boundary panels are cut from it. Only for a net with a
     ``NET.boundary.obj`` beside it. Returns a note when the panels could not be cut."""
+    old = boundary_path(source)
+    if not old.is_file():
+        return None
+    # imported here: the layout's modules take a third of a second, and most nets have no
+    # boundary panels
     import numpy as np
 
     from ..layout.surface_layout import layout_again
     from ..layout.trim import OFF_DESIGN_TOUCH, add_boundary_panels
 
-    old = boundary_path(source)
-    if not old.is_file():
-        return None
     lost = (f"the boundary panels of {old} belong to the net before it was optimized and "
             "were not carried over")
     layout_record = net_properties(source).get("layout")
