@@ -287,6 +287,78 @@ def test_read_obj_accepts_utf8_byte_order_mark(tmp_path):
     assert vertices.shape == (4, 3) and faces[0].tolist() == [0, 1, 2, 3]
 
 
+_READER_CASES = {
+    # read in bulk
+    "plain": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nf 1 2 3 4\nf 2 5 3\n",
+    "objects and comments": "# cad\no part\ng side\ns off\nusemtl steel\nvt 0 0\nv 0 0 0\n"
+                            "v 1 0 0\nv 1 1 0\nv 0 1 0\n\nf 1/1 2/1 3/1 4/1\n",
+    "normals": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nvn 0 0 1\nvn 0 0 1\n"
+               "vn 0 0 1\nf 1//1 2//2 3//3 4//4\n",
+    "extra columns": "v 0 0 0 0.5 0.5 0.5\nv 1 0 0 1 1 1\nv 1 1 0 1 1 1\nf 1 2 3\n",
+    "windows lines": "v 0 0 0\r\nv 1 0 0\r\nv 1 1 0\r\nf 1 2 3\r\n",
+    "fewer normals": "v 0 0 0\nv 1 0 0\nv 1 1 0\nvn 0 0 1\nf 1 2 3\n",
+    # read a line at a time (the bulk reader declines them)
+    "negative indices": "v 0 0 0\nv 1 0 0\nv 1 1 0\nf -3 -2 -1\n",
+    "tabs and spaces": "v\t0 0 0\nv 1 0 0\nv 1 1 0\nf 1  2 3\n",
+    # refused alike
+    "a bad coordinate": "v 0 0 0\nv 1 0 x\nv 1 1 0\nf 1 2 3\n",
+    "an infinite coordinate": "v 0 0 0\nv 1e999 0 0\nv 1 1 0\nf 1 2 3\n",
+    "an index past the end": "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 4\n",
+    "a two-corner face": "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2\nf 1 2 3\n",
+    "an unknown line": "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\nbevel 2\n",
+    "a bad normal": "v 0 0 0\nv 1 0 0\nv 1 1 0\nvn 0 0 z\nf 1 2 3\n",
+}
+
+
+@pytest.mark.parametrize("case", list(_READER_CASES))
+def test_the_bulk_obj_reader_reads_as_the_line_reader_does(case, tmp_path, monkeypatch):
+    """Most files are read in bulk (`_parse_plain`); what it reads must be what the
+    line-by-line reader reads, to the bit, and what it declines must still be read or
+    refused with the line named."""
+    from fabplan.io import obj
+
+    path = tmp_path / "case.obj"
+    path.write_bytes(_READER_CASES[case].encode())
+    text = path.read_text()
+
+    def read():
+        try:
+            return obj.parse_obj(path)
+        except InputError as exc:
+            return str(exc)
+
+    bulk = read()
+    monkeypatch.setattr(obj, "_parse_plain", lambda text: None)
+    by_line = read()
+    if isinstance(by_line, str):
+        assert bulk == by_line and str(path) in by_line
+        return
+    assert not isinstance(bulk, str)
+    _assert_same_mesh(bulk[0], bulk[1], by_line[0], by_line[1])
+    assert (bulk[2] is None) == (by_line[2] is None)
+    if bulk[2] is not None:
+        assert bulk[2].tobytes() == by_line[2].tobytes()
+    # the first six cases are the bulk reader's own
+    monkeypatch.undo()
+    assert (obj._parse_plain(text) is not None) == (list(_READER_CASES).index(case) < 6)
+
+
+def test_the_bulk_obj_reader_keeps_every_digit(tmp_path):
+    """Coordinates of every magnitude, written by fabplan, come back to the bit through
+    the bulk reader."""
+    from fabplan.io import obj
+
+    rng = np.random.default_rng(5)
+    vertices = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-300, 300, size=(500, 3))
+    vertices[0] = [5e-324, -0.0, np.finfo(float).max]
+    faces = rng.integers(0, 500, size=(300, 4))
+    write_obj(tmp_path / "n.obj", vertices, faces)
+    text = (tmp_path / "n.obj").read_text()
+    again, again_faces, _ = obj._parse_plain(text)
+    assert again.tobytes() == vertices.tobytes()
+    assert np.array_equal(np.asarray(again_faces), faces)
+
+
 # ---------------------------------------------------------------------------- counts
 
 

@@ -25,7 +25,7 @@ import numpy.typing as npt
 import scipy.sparse as sp
 
 from ..errors import InputError
-from ..io.obj import parse_obj, write_obj
+from ..io.obj import parse_obj, split_faces, write_obj
 from .forest import break_cycles, pointer_jump, tree_parity
 
 __all__ = ["QuadMesh", "Polylines", "load_mesh"]
@@ -154,7 +154,7 @@ class QuadMesh:
     @property
     def faces(self) -> list:
         """list of (k,) int arrays, one per face."""
-        return np.split(self.face_indices, self.face_indptr[1:-1])
+        return split_faces(self.face_indices, self.face_sizes)
 
     @cached_property
     def quads(self) -> np.ndarray:
