@@ -389,6 +389,13 @@ def test_canopy_minimal_surface_within_the_limit(canopy_study):
     check = next(k for k in c["checks"] if k["limit"] == "max_molds")
     assert check["ok"] and "no panel is molded" in check["text"]
     assert "molds saved by the material [count]" in page
+    # the limit the report names as binding hardest is the one study.json records (they
+    # differed: a lamella study's words leave the molds' limits out, its record did not)
+    from fabplan.study.checks import LIMIT_NAMES
+
+    binding = c["binding_limit"]
+    assert binding not in ("mold_tolerance_mm", "max_molds", "max_panel_step_mm")
+    assert f"The limit that binds hardest is the {LIMIT_NAMES[binding][0]}" in record["recommendation"]
 
 
 def test_canopy_description_states_the_design_sizes():

@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..design.mesh_surface import DesignSurface
 
 __all__ = ["judge_study", "cost_drivers", "pareto_optimal", "rank_candidates", "is_lamella_study",
-           "recommend", "baseline_of"]
+           "binding_limit", "recommend", "baseline_of"]
 
 
 # the limits a lamella study does not speak of: its strips are bent, not molded
@@ -118,6 +118,14 @@ def rank_candidates(results: list[CandidateResult]) -> None:
         r.rank = i
 
 
+def binding_limit(result: CandidateResult, study: Study) -> dict | None:
+    """The check of `result` that binds hardest (`binding_check`), as the report names it
+    and ``study.json`` records it: in a lamella study (`is_lamella_study`) among the
+    limits other than the molds', of which it does not speak."""
+    return binding_check([c for c in result.checks if not (
+        is_lamella_study(study) and c["limit"] in _MOLD_LIMITS)])
+
+
 def is_lamella_study(study: Study) -> bool:
     """Whether a study is about lamella strips rather than panels: every candidate gets
     strips (``[strips] nets = "all"``) or a strip limit is set."""
@@ -172,8 +180,7 @@ def recommend(results: list[CandidateResult], study: Study, *,
         words.append(f"It ends at the same net as {best.same_net_as}.")
     words += _achievements(best, None if best.candidate.baseline else base, study)
     # a lamella study is told in strips: its binding limit among the others
-    binding = binding_check([c for c in best.checks if not (
-        is_lamella_study(study) and c["limit"] in _MOLD_LIMITS)])
+    binding = binding_limit(best, study)
     if binding is not None:
         name = LIMIT_NAMES.get(binding["limit"], (binding["limit"],))[0]
         words.append(f"The limit that binds hardest is the {name}: "

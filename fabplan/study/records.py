@@ -9,7 +9,8 @@ import csv
 import io
 from typing import TYPE_CHECKING
 
-from .checks import binding_check, next_steps, relaxation_text
+from .checks import next_steps, relaxation_text
+from .ranking import binding_limit
 from .result import CandidateResult, StudyResult
 from .search import search_record
 
@@ -40,7 +41,7 @@ def _candidate_record(c: CandidateResult, outputs: dict, recommended: str | None
         "notes": c.notes,
         "error": c.error,
         "checks": c.checks,
-        "binding_limit": None if (b := binding_check(c.checks)) is None else b["limit"],
+        "binding_limit": None if (b := binding_limit(c, study)) is None else b["limit"],
         "relaxation": relaxation_text(c.checks) or None,
         "next_steps": [] if c.feasible else next_steps(c.checks),
         "metrics": c.metrics,
