@@ -43,8 +43,10 @@ def test_every_check_has_its_margin_and_a_failed_one_its_relaxation(judged):
         if c.failed:
             continue
         for check in c.checks:
-            assert check["ok"] == (check["margin"] is None or check["margin"] >= 0 or
-                                   check["limit"] == "max_sphere_residual"), check
+            # a failed check has no margin to spare: negative, or none when it failed on
+            # another ground than its measure (a solve that did not converge)
+            assert check["ok"] or check["margin"] is None or check["margin"] < 0, check
+            assert not check["ok"] or check["margin"] is None or check["margin"] >= 0, check
             if check["ok"] or check["limit"] == "max_sphere_residual":
                 assert check["relax_to"] is None
             else:                    # the relaxed limit would be met by the measured value
@@ -130,6 +132,14 @@ def test_a_stalled_solve_names_what_it_left_unmet_and_says_when_no_relaxation_ex
     checks = verdict(metrics, limits)
     solve = next(k for k in checks if k["limit"] == "max_sphere_residual")
     assert not solve["ok"] and solve["relax_to"] is None
+    # its sphere residual may be within the bound: the check fails on the solve, and has
+    # no margin left (it had a positive one, shown as a failed check beside a value within
+    # its limit)
+    if solve["measured"] is not None and solve["measured"] <= solve["bound"]:
+        assert solve["margin"] is None
+    within = verdict({**metrics, "sphere_residual_relative_max": 1e-15}, limits)
+    solve = next(k for k in within if k["limit"] == "max_sphere_residual")
+    assert not solve["ok"] and solve["margin"] is None and solve["measured"] == 1e-15
     assert ("short on edge-collapse (0.07), convex-quads (0.044), sphere (0.027) and 1 more"
             in solve["text"])
     assert any(not k["ok"] and k["limit"] == "max_molds" for k in checks)

@@ -29,7 +29,9 @@ LIMIT_NAMES = {
     "congruence_tolerance_mm": (LIMITS["congruence_tolerance_mm"].words,
                                 LIMITS["congruence_tolerance_mm"].unit),
     "min_coverage": ("smallest share of the design covered by panels", "%"),
-    "max_sphere_residual": ("largest sphere residual (of the mean edge length)", "ratio"),
+    # the check of a solve: it fails for a solve that did not converge, whatever the residual
+    "max_sphere_residual": ("converged, with a largest sphere residual (of the mean edge "
+                            "length)", "ratio"),
 }
 
 
@@ -70,6 +72,10 @@ def check(limit: str, bound: float, measured: float | None, ok: bool, text: str,
     margin = None
     if measured is not None and bound and math.isfinite(measured) and math.isfinite(bound):
         margin = float((measured - bound) / abs(bound) if lower else (bound - measured) / abs(bound))
+    if not ok and margin is not None and margin >= 0:
+        # failed on another ground than its measure (a solve that did not converge, with
+        # its sphere residual within the limit): no share of the limit is left to rate
+        margin = None
     relax_to = None
     # a solve that did not converge is no limit to relax: it is no net yet
     if not ok and margin is not None and measured is not None and limit != "max_sphere_residual":
