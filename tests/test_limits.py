@@ -140,6 +140,8 @@ def test_a_stalled_solve_names_what_it_left_unmet_and_says_when_no_relaxation_ex
     within = verdict({**metrics, "sphere_residual_relative_max": 1e-15}, limits)
     solve = next(k for k in within if k["limit"] == "max_sphere_residual")
     assert not solve["ok"] and solve["margin"] is None and solve["measured"] == 1e-15
+    # no check of an unfinished net says at which limit it would pass
+    assert all(k["relax_to"] is None for k in checks + within)
     assert ("short on edge-collapse (0.07), convex-quads (0.044), sphere (0.027) and 1 more"
             in solve["text"])
     assert any(not k["ok"] and k["limit"] == "max_molds" for k in checks)

@@ -80,6 +80,11 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
     strips = metrics.get("strips")
     if strips is not None:
         checks += _strip_checks(strips, limits)
+    if not met:
+        # a solve that did not converge is no net yet: its other measures say how far the
+        # unfinished net is, not a limit at which it would be feasible
+        for c in checks:
+            c["relax_to"] = None
     return checks
 
 
