@@ -9,6 +9,7 @@ import math
 
 import pytest
 
+from fabplan.errors import InputError
 from fabplan.study.checks import binding_check, relaxation_text, violation
 from fabplan.study.run import judge_study, run_study
 from fabplan.study.spec import parse_study
@@ -518,3 +519,28 @@ def test_a_char_conjugate_net_on_a_partly_saddle_shaped_design_is_told_to_trim_i
     assert _deviation_advice({"design_anticlastic": 0.0}, limits, 0.5 * bound,
                              4 * bound).startswith("a smaller panel size")
     assert _deviation_advice({}, limits, 2 * bound, None) is None
+
+
+def test_strips_that_twist_past_the_limit_fail_as_the_strips_command_says(judged):
+    """The study's lamella strips are held to the twist `fabplan strips` holds them to:
+    a study recommended a net whose own reproduce.sh then stopped on strips twisting
+    99 deg/m (the strips command's default limit is 30)."""
+    from fabplan.fabricate.limits import DEFAULT_MAX_TWIST_DEG_PER_M
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    assert study.limits.max_twist_deg_per_m == DEFAULT_MAX_TWIST_DEG_PER_M
+    c = next(c for c in result.candidates if not c.failed)
+    twisted = {**c.metrics, "strips": {"max_twist_deg_per_m": 99.0, "sheets": 3}}
+    twist = next(k for k in verdict(twisted, study.limits) if k["limit"] == "max_twist_deg_per_m")
+    assert not twist["ok"] and twist["relax_to"] == 99.0 and "99.0 deg/m" in twist["text"]
+    looser = dataclasses.replace(study.limits, max_twist_deg_per_m=120.0)
+    assert next(k for k in verdict(twisted, looser) if k["limit"] == "max_twist_deg_per_m")["ok"]
+    # a candidate kept from before the twist was measured is not judged on it
+    kept = {**c.metrics, "strips": {"sheets": 3}}
+    assert all(k["limit"] != "max_twist_deg_per_m" for k in verdict(kept, study.limits))
+    # the limit is read from the study file, and a bad one refused with its key named
+    assert parse_study(STUDY.replace("max_molds = 3", "max_molds = 3\nmax_twist_deg_per_m = 12")
+                       ).limits.max_twist_deg_per_m == 12.0
+    with pytest.raises(InputError, match="max_twist_deg_per_m"):
+        parse_study(STUDY.replace("max_molds = 3", "max_molds = 3\nmax_twist_deg_per_m = 0"))

@@ -91,7 +91,8 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
             clock = time.perf_counter()
             strips = plan_strips(net.mesh, StripSettings(
                 height_mm=options.height_mm, thickness_mm=options.thickness_mm, units=units,
-                sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm),
+                sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm,
+                max_twist_deg_per_m=study.limits_of(candidate).max_twist_deg_per_m),
                 boundary=net.boundary_panels)
             seconds["strips"] = time.perf_counter() - clock
             s = strips.summary()
@@ -286,6 +287,7 @@ def _strip_metrics(strips: StripPlan) -> dict:
         "straight": s["straight"],
         "congruent": s["congruent"],
         "congruence_deviation_mm": s["congruence_deviation_mm"],
+        "max_twist_deg_per_m": s["twist_deg_per_m"],
         "radius_mm": None if radius is None else
         {"min": radius["min"], "max": radius["max"], "median": radius["median"]},
         "min_radius_mm": math.inf if radius is None else radius["min"],

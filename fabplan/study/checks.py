@@ -25,6 +25,7 @@ LIMIT_NAMES = {
     "min_strip_radius_mm": ("smallest arc radius of an unrolled strip", "mm"),
     "max_strip_radius_mm": ("largest arc radius of an unrolled strip", "mm"),
     "max_sheets": ("most sheets of strip material", "sheets"),
+    "max_twist_deg_per_m": ("largest twist of a lamella strip", "deg/m"),
     "congruent_strips": ("strips must be congruent (one bending jig)", ""),
     "congruence_tolerance_mm": (LIMITS["congruence_tolerance_mm"].words,
                                 LIMITS["congruence_tolerance_mm"].unit),
@@ -137,6 +138,8 @@ _TRY = {
     "max_kink_deg": "a smaller panel size",
     "max_line_turn_deg": "another net type or angle, or a smaller panel size",
     "planarity_tolerance_mm": "a net type with planar panels (char-conjugate)",
+    "max_twist_deg_per_m": "another net type or angle: lamellas along lines nearer the "
+                           "design's principal directions twist less",
 }
 
 

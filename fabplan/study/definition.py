@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from ..fabricate.limits import DEFAULT_MAX_TWIST_DEG_PER_M
 from ..fabricate.molds.materials import Material
 from ..io.units import MM_PER_UNIT
 from ..solve.net_types import get_net
@@ -84,6 +85,9 @@ class Limits:
     min_strip_radius_mm, max_strip_radius_mm : range of the arc radii of the unrolled
         lamella strips (a straight strip has an infinite radius).
     max_sheets : most sheets of strip material.
+    max_twist_deg_per_m : largest twist of a lamella strip (its normals' rotation about
+        its edges per metre), as ``fabplan strips --max-twist`` checks it (the same
+        default).
     congruent_strips : every strip must be cut from one circle (or line): all parts
         congruent within `congruence_tolerance_mm`, so one bending form or jig serves all.
     congruence_tolerance_mm : how far a strip part may differ from the common arc and
@@ -106,6 +110,7 @@ class Limits:
     min_strip_radius_mm: float | None = None
     max_strip_radius_mm: float | None = None
     max_sheets: int | None = None
+    max_twist_deg_per_m: float = DEFAULT_MAX_TWIST_DEG_PER_M
     congruent_strips: bool = False
     congruence_tolerance_mm: float = 0.1
     min_coverage: float | None = None

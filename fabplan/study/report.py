@@ -130,7 +130,8 @@ def reproduce_commands(c: CandidateResult, study: Study) -> list[list[str]]:
         commands.append(["fabplan", "strips", "net.obj", "--height", f"{options.height_mm!r}",
                          "--thickness", f"{options.thickness_mm!r}", "--units", units,
                          "--sheet", f"{options.sheet_mm[0]!r}x{options.sheet_mm[1]!r}",
-                         "--tolerance", f"{options.congruence_tolerance_mm!r}", "-o",
+                         "--tolerance", f"{options.congruence_tolerance_mm!r}",
+                         "--max-twist", f"{limits.max_twist_deg_per_m!r}", "-o",
                          "reproduced/strips"])
     return commands
 

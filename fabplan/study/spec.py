@@ -33,6 +33,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
+from ..fabricate.limits import DEFAULT_MAX_TWIST_DEG_PER_M
 from ..fabricate.molds.materials import material_from_table
 from ..io.inputs import check_input_file, check_text
 from ..io.units import MM_PER_UNIT
@@ -349,6 +350,8 @@ def _limits(t: Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits, 
         min_strip_radius_mm=t.number("min_strip_radius_mm", unit="mm"),
         max_strip_radius_mm=t.number("max_strip_radius_mm", unit="mm"),
         max_sheets=t.number("max_sheets", integer=True),
+        max_twist_deg_per_m=t.number("max_twist_deg_per_m", DEFAULT_MAX_TWIST_DEG_PER_M,
+                                     unit="deg/m"),
         congruent_strips=t.boolean("congruent_strips"),
         congruence_tolerance_mm=congruence_tolerance_mm,
         min_coverage=t.number("min_coverage"),
@@ -366,6 +369,8 @@ def _limits(t: Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits, 
     if limits.min_coverage is not None and limits.min_coverage > 1:
         t.fail("min_coverage", f"is a fraction of the design's area, at most 1; got "
                f"{limits.min_coverage:g}")
+    if not limits.max_twist_deg_per_m > 0:
+        t.fail("max_twist_deg_per_m", f"must be positive, got {limits.max_twist_deg_per_m:g}")
     lo, hi = limits.min_strip_radius_mm, limits.max_strip_radius_mm
     if lo is not None and hi is not None and lo > hi:
         t.fail("min_strip_radius_mm", f"({lo:g}) is larger than max_strip_radius_mm ({hi:g})")

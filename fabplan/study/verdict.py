@@ -193,7 +193,8 @@ def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
 
 def _strip_checks(strips: dict, limits: Limits) -> list[dict]:
     """The checks of a candidate's strips (``metrics["strips"]``) against the strip limits
-    that are set: radii, congruence, sheets."""
+    that are set: radii, congruence, twist (always: `fabplan strips` checks it too),
+    sheets."""
     checks = []
     if limits.min_strip_radius_mm is not None:
         r = strips["min_radius_mm"]
@@ -217,6 +218,13 @@ def _strip_checks(strips: dict, limits: Limits) -> list[dict]:
             ("all strip parts are congruent" if ok else "the strip parts are not congruent")
             + f" (they differ from one common arc {differ_by(d)}; congruence "
             f"tolerance {tol:g} mm)"))
+    twist = strips.get("max_twist_deg_per_m")       # absent from candidates kept before it
+    if twist is not None:
+        checks.append(_check(
+            "max_twist_deg_per_m", limits.max_twist_deg_per_m, twist,
+            twist <= limits.max_twist_deg_per_m,
+            f"the strips twist by up to {twist:.1f} deg/m (limit {limits.max_twist_deg_per_m:g} "
+            "deg/m)"))
     if limits.max_sheets is not None:
         n = strips["sheets"]
         checks.append(_check("max_sheets", limits.max_sheets, n, n <= limits.max_sheets,
