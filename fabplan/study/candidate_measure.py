@@ -15,7 +15,7 @@ from ..net.free_vertices import free_vertices
 from ..net.geometry import face_planarity, kink_angles
 from ..report.html import counted
 from .candidate_solve import DEVIATION_HELD
-from .definition import Study
+from .definition import Candidate, Study
 from .mold_counts import mold_metrics, molds_text
 from .result import CandidateResult
 
@@ -24,6 +24,7 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..fabricate.molds.boundary_molds import BoundaryMolds
     from ..fabricate.molds.mold_plan import MoldPlan
     from ..fabricate.strips.strip_plan import StripPlan
+    from ..fabricate.strips.strip_set import StripSettings
     from ..net.mesh import QuadMesh
     from ..solve.optimize import OptimizationResult
 
@@ -44,7 +45,6 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     from ..fabricate.molds.mold_assignment import plan_molds
     from ..fabricate.molds.mold_shapes import MoldSettings
     from ..fabricate.strips.strip_plan import plan_strips
-    from ..fabricate.strips.strip_set import StripSettings
 
     net, candidate = solved.net, solved.candidate
     assert net is not None
@@ -89,11 +89,8 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
             strips = twin.strips
         else:
             clock = time.perf_counter()
-            strips = plan_strips(net.mesh, StripSettings(
-                height_mm=options.height_mm, thickness_mm=options.thickness_mm, units=units,
-                sheet_mm=options.sheet_mm, tolerance_mm=options.congruence_tolerance_mm,
-                max_twist_deg_per_m=study.limits_of(candidate).max_twist_deg_per_m),
-                boundary=net.boundary_panels)
+            strips = plan_strips(net.mesh, _strip_settings(study, candidate, units),
+                                 boundary=net.boundary_panels)
             seconds["strips"] = time.perf_counter() - clock
             s = strips.summary()
             say(f"    {counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
@@ -254,6 +251,19 @@ def anticlastic_share(design: DesignSurface) -> float:
         cached = float(design.face_areas[saddle].sum() / design.face_areas.sum())
         design.__dict__["_anticlastic_share"] = cached
     return cached
+
+
+def _strip_settings(study: Study, candidate: Candidate, units: str) -> StripSettings:
+    """The strips of a candidate as the study plans them: its ``[strips]`` options and the
+    candidate's twist limit."""
+    from ..fabricate.strips.strip_set import StripSettings
+
+    options = study.strips
+    assert options is not None
+    return StripSettings(height_mm=options.height_mm, thickness_mm=options.thickness_mm,
+                         units=units, sheet_mm=options.sheet_mm,
+                         tolerance_mm=options.congruence_tolerance_mm,
+                         max_twist_deg_per_m=study.limits_of(candidate).max_twist_deg_per_m)
 
 
 def _boundary_panel_metrics(boundary: BoundaryMolds, trimmed: dict) -> dict:
