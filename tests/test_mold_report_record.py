@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import html
 import json
+import math
 import re
 
 import pytest
@@ -132,5 +133,8 @@ def test_boundary_panels_and_limits_are_shown_as_recorded(tmp_path):
     boundary = summary["boundary panels (boundary-panels.csv)"]
     assert boundary.startswith(f"{bounds['panels']} boundary panels: {bounds['on_molds_full_panels_use']} "
                                "cut from molds the net's panels use")
-    assert boundary.endswith(f"{bounds['molds_in_all']} molds in all")
+    # counted as a study counts them: the molds in all against every panel
+    m, n = bounds["molds_in_all"], record["panel_count"] + bounds["panels"]
+    assert boundary.endswith(f"{m} mold{'s' * (m != 1)} in all for {n:,} panels "
+                             f"(M / sqrt(N) = {m / math.sqrt(n):.2f})")
     assert boundary in pdf

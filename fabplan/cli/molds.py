@@ -124,7 +124,7 @@ def _print_molds(args: argparse.Namespace, plan: Any, settings: Any, boundary: A
     else:
         print(plan.summary())
         if boundary is not None:
-            print(boundary_molds_text(boundary[1], plan.made_mold_count, boundary_file))
+            print(boundary_molds_text(boundary[1], plan, boundary_file))
         for check in limits:
             print(f"limit: {check.text()}")
         print(f"wrote {', '.join(str(f) for f in files)}")

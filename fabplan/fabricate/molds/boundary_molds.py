@@ -48,12 +48,14 @@ Everything here is a function of the net, its mold plan and the boundary panels'
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
 from ...layout.boundary_panels import BoundaryPanels
+from ...report.html import counted
 from ...report.viewer import PanelInfo
 from .boundary_sides import BoundarySides, boundary_sides
 from .flat_boundary import flat_boundary_panels
@@ -250,9 +252,10 @@ class BoundaryMolds:
         return format_obj(points, faces, header)
 
 
-def boundary_molds_text(molds: BoundaryMolds, net_molds: int, source: object = None) -> str:
+def boundary_molds_text(molds: BoundaryMolds, plan: MoldPlan, source: object = None) -> str:
     """One sentence: how the boundary panels are made, and the molds in all with theirs
-    (`net_molds`: the molds the net's panels need made, `MoldPlan.made_mold_count`)."""
+    (the molds the net's panels need made, `MoldPlan.made_mold_count`, and their own)
+    against every panel, as a study counts them (`fabplan.study.mold_counts`)."""
     slivers = (f", {int(molds.extension.sum())} slivers cut with their full panel"
                if molds.extension.any() else "")
     head = f"{molds.count} boundary panels" + (f" ({source})" if source is not None else "")
@@ -260,9 +263,11 @@ def boundary_molds_text(molds: BoundaryMolds, net_molds: int, source: object = N
     steps = (f"steps up to {molds.step_max_mm:.2f} mm (limit {molds.step_limit_mm:g} mm"
              + (f", {len(over)} over it" if len(over) else "") + ")")
     flat = f" ({molds.flat} flat)" if molds.flat else ""
+    in_all, panels = plan.made_mold_count + molds.own_molds, plan.panel_count + molds.count
     return (f"{head}: {molds.on_net_molds} cut from molds the net's panels use{flat}, "
             f"{molds.own_molds} on molds of their own{slivers}, placed to meet their "
-            f"neighbours: {steps}; {net_molds + molds.own_molds} molds in all")
+            f"neighbours: {steps}; {counted(in_all, 'mold')} in all for {panels:,} panels "
+            f"(M / sqrt(N) = {in_all / math.sqrt(panels):.2f})")
 
 
 def boundary_panels_csv(panels: BoundaryPanels, molds: BoundaryMolds) -> str:

@@ -526,7 +526,7 @@ def _summary_rows(plan: MoldPlan, r: dict, boundary: BoundaryMolds | None,
                       limit_row_text(c)] for c in (limits or {}).values()]
     if boundary is not None:
         summary_rows.insert(6, ["boundary panels (boundary-panels.csv)",
-                                boundary_molds_text(boundary, plan.made_mold_count)])
+                                boundary_molds_text(boundary, plan)])
     return summary_rows
 
 
@@ -666,7 +666,7 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None, *,
         ["tolerance (largest gap between a panel and its mold)", f"{r['tolerance_mm']:g} mm"],
         *_verification_rows(r),
         *([["boundary panels (boundary-panels.csv)",
-            boundary_molds_text(boundary, plan.made_mold_count)]] if boundary is not None else []),
+            boundary_molds_text(boundary, plan)]] if boundary is not None else []),
         *[[f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})",
            limit_row_text(c)] for c in (limits or {}).values()],
     ], widths=[2, 1])
