@@ -279,11 +279,34 @@ def test_a_member_that_eats_the_last_panel_is_questioned(laid_out, tmp_path, cap
     assert main(["strips", str(laid_out / "saddle.obj"), *common, "--boundary-member", "1000",
                  "-o", str(tmp_path / "thick")]) == 0
     err = capsys.readouterr().err
-    assert "boundary member sets" in err and "--boundary-member is in mm" in err
+    assert "by the 1000 mm boundary member: is it that thick?" in err
+    assert "--boundary-member is in mm" in err and "nearly along each other" not in err
     summary = _record(tmp_path / "thick")["summary"]
-    assert summary["ends_set_back_past_half_an_edge"] > 0
+    assert summary["ends_set_back_past_half_an_edge"] > 0 and summary["ends_set_back_at_tips"] == 0
     assert summary["member_setback_max_mm"] >= 500.0
     assert _record(laid_out / "to-edge")["summary"]["ends_set_back_past_half_an_edge"] == 0
+
+
+def test_ends_cut_back_where_two_strips_meet_the_edge_together_are_not_blamed_on_the_member(
+        tmp_path, capsys):
+    """Where two lines of a net end at one node of the edge nearly along each other, each
+    strip is cut back to clear the other (344 mm here, with a 6 mm member): the warning
+    said "the 6 mm boundary member sets 4 strip ends back ...: is it that thick?"."""
+    from pathlib import Path
+
+    data = Path(__file__).parent / "data"
+    for name in ("strip-tips.obj", "strip-tips.boundary.obj"):
+        (tmp_path / name).write_bytes((data / name).read_bytes())
+    assert main(["strips", str(tmp_path / "strip-tips.obj"), "--height", str(HEIGHT),
+                 "--thickness", str(THICKNESS), "--no-previews", "-q",
+                 "-o", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    summary = _record(tmp_path / "out")["summary"]
+    past = summary["ends_set_back_past_half_an_edge"]
+    assert past > 0 and summary["ends_set_back_at_tips"] == past
+    assert summary["member_setback_max_mm"] > 100.0
+    assert (f"{past} strip ends are set back by more than half their last edge" in err
+            and "nearly along each other" in err and "is it that thick" not in err)
 
 
 def test_member_ends_lie_on_the_edge_also_without_the_layouts_record(laid_out, tmp_path):

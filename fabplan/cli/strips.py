@@ -72,11 +72,7 @@ def run(args: argparse.Namespace) -> int:
         files = plan.write(out, previews=not args.no_previews,
                            workers=worker_count(args.workers), protect=inputs) + viewers
     s = plan.summary()
-    if s["ends_set_back_past_half_an_edge"]:      # a warning, so also with --quiet
-        print(f"fabplan: warning: the {settings.member_mm:g} mm boundary member sets "
-              f"{counted(s['ends_set_back_past_half_an_edge'], 'strip end')} back by more "
-              f"than half their last edge (up to {s['member_setback_max_mm']:.0f} mm): is it "
-              "that thick? (--boundary-member is in mm)", file=sys.stderr)
+    _warn_setbacks(s, settings)
     if args.quiet:
         print(f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
               f"{counted(s['sheets'], 'sheet')}; wrote {len(files)} files to {out}")
@@ -250,6 +246,23 @@ def _strip_boundary(args, mesh):
     if path is None:
         return None, None
     return path, StripBoundary.from_obj(mesh, path, boundary_record(args))
+
+
+def _warn_setbacks(s: dict, settings) -> None:
+    """Warn of strip ends set back by more than half their last edge (also with --quiet):
+    by the boundary member (is it that thick?), or where two strips end at one node
+    nearly along each other (each clears the other), which no member thickness changes."""
+    past, tips = s["ends_set_back_past_half_an_edge"], s["ends_set_back_at_tips"]
+    if not past:
+        return
+    head = f"fabplan: warning: {counted(past, 'strip end')} {'is' if past == 1 else 'are'} " \
+           f"set back by more than half their last edge (up to {s['member_setback_max_mm']:.0f} mm)"
+    if tips:
+        print(f"{head}: at {tips} of them two strips end at one node of the edge nearly "
+              "along each other, and each is cut back to clear the other", file=sys.stderr)
+    else:
+        print(f"{head} by the {settings.member_mm:g} mm boundary member: is it that thick? "
+              "(--boundary-member is in mm)", file=sys.stderr)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

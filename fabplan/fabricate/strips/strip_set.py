@@ -554,12 +554,19 @@ class StripSet:
         }
         angles = [a for s in self.strips for a in s.end_angle_deg if math.isfinite(a)]
         rec["member_angle_min_deg"] = float(min(angles)) if angles else None
-        setbacks = [(e, last) for s in self.strips
-                    for e, last in zip(s.end_setback_mm, (s.edge_mm[0], s.edge_mm[-1]), strict=True)
+        settings = self.settings
+        setbacks = [(e, last, member_setback_mm(settings.member_mm, settings.thickness_mm, a))
+                    for s in self.strips
+                    for e, last, a in zip(s.end_setback_mm, (s.edge_mm[0], s.edge_mm[-1]),
+                                          s.end_angle_deg, strict=True)
                     if e is not None]
-        rec["member_setback_max_mm"] = max((e for e, _ in setbacks), default=None)
-        # a member eating up more than half the last edge of a strip is no edge member
-        rec["ends_set_back_past_half_an_edge"] = sum(e > 0.5 * last for e, last in setbacks)
+        rec["member_setback_max_mm"] = max((e for e, _, _ in setbacks), default=None)
+        # a member eating up more than half the last edge of a strip is no edge member;
+        # unless another strip ending at the node sets it back further (each clears the
+        # other: two lines that meet the edge nearly along each other)
+        past = [(e, member) for e, last, member in setbacks if e > 0.5 * last]
+        rec["ends_set_back_past_half_an_edge"] = len(past)
+        rec["ends_set_back_at_tips"] = sum(e > member + 1e-6 for e, member in past)
         if radii.size:
             med = float(np.median(radii))
             rec["radius_mm"] = {"median": med, "min": float(radii.min()), "max": float(radii.max()),
