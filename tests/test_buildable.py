@@ -266,7 +266,7 @@ def test_layout_and_measure_refuse_bad_limits_before_working(tmp_path, capsys):
     assert main(["measure", net, "--max-deviation", "0.1", "-o", str(tmp_path / "m.json")]) == 2
     assert "--max-deviation needs --reference" in capsys.readouterr().err
     assert main(["measure", net, "--reference", net, "--max-deviation", "0.1", "--max-line-turn", "5",
-                 "-o", str(tmp_path / "m.json")]) == 0
+                 "-o", str(tmp_path / "m.json")]) == 3
     record = json.loads((tmp_path / "m.json").read_text())["buildable"]
     turns = line_turns(*_stars_of(QuadMesh.from_obj(net)))[0]
     assert record["sharp_line_turns"]["count"] == int(np.sum((turns > 5).any(axis=1)))

@@ -207,10 +207,13 @@ def test_measure_reports_folds(tmp_path, capsys):
     X[14, :2] += 1.6 * (X[20, :2] - X[14, :2] + X[15, :2] - X[14, :2])
     path = tmp_path / "folded.obj"
     grid.with_vertices(X).write_obj(path)
-    assert main(["measure", str(path), "-o", str(tmp_path / "m.json")]) == 0
+    # a net that cannot be built ends in exit 3, its record written, the warning saying why
+    assert main(["measure", str(path), "-o", str(tmp_path / "m.json")]) == 3
     record = json.loads((tmp_path / "m.json").read_text())
-    assert record["folds"]["folded"] is True
-    assert "folds:" in capsys.readouterr().out
+    assert record["folds"]["folded"] is True and record["buildable"]["buildable"] is False
+    said = capsys.readouterr()
+    assert "folds:" in said.out
+    assert f"{path} is not buildable" in said.err and "(buildable)" in said.err
 
 
 def test_an_absurd_radius_is_refused_with_the_smallest_possible_one(tmp_path, capsys):

@@ -69,9 +69,14 @@ def add_max_panels(p: argparse.ArgumentParser, *, memory: bool = False) -> None:
                "half the available memory holds, at least 20000)")
 
 
-def add_max_line_turn(p: argparse.ArgumentParser) -> None:
+def add_max_line_turn(p: argparse.ArgumentParser, *, measured: bool = False) -> None:
+    """--max-line-turn: for a command that solves (`measured` False) or one that measures a
+    net as it is (`fabplan measure`)."""
     add_number(p, "--max-line-turn", default=90.0, metavar="DEG",
-               help="a converged net's lines turn in the surface by at most DEG at any vertex "
+               help="a buildable net's lines turn in the surface by at most DEG at any vertex "
+               "(default 90: over it a line doubles back); a net that turns more, or has a "
+               "non-convex quad, is not buildable (exit 3)" if measured else
+               "a converged net's lines turn in the surface by at most DEG at any vertex "
                "(default 90: over it a line doubles back); a net within tolerance that "
                "turns more, or has a non-convex quad, ends 'crumpled' (exit 3)")
 

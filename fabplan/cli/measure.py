@@ -4,19 +4,21 @@ JSON."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..errors import InputError
 from ..io.output import output_argument
 from ..io.records import write_json
 from ..net.buildable import BuildLimits
-from ..net.measure import format_summary, measure_net
+from ..net.measure import buildable_summary, format_summary, measure_net
 from ..net.validate import load_net
 from ..solve.optimize import check_limits
 from .arguments import add_max_line_turn, add_number, add_units
 from .files import check_outputs, file_inputs, net_inputs
 from .records import check_units, net_units, reference_surface
 from .registry import Command, register
+from .running import EXIT_NOT_CONVERGED
 
 __all__ = ["COMMAND", "add_arguments", "run"]
 
@@ -39,6 +41,14 @@ def run(args: argparse.Namespace) -> int:
     write_json(out, record)           # the file first: the terminal may go away
     print(format_summary(record))
     print(f"wrote {out}")
+    build = record.get("buildable")
+    if build is not None and not build["buildable"]:
+        # measured against its limits, as the other commands' parts are: a script can
+        # tell a net that cannot be built from one that can
+        print(f"fabplan: warning: {args.net} is "
+              f"{buildable_summary(build, record.get('folds'))}; counted in {out} "
+              "(buildable)", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return 0
 
 
@@ -50,7 +60,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_number(p, "--max-deviation", metavar="D",
                help="count the vertices farther than D (model units) from --reference as "
                     "keeping the net from being built")
-    add_max_line_turn(p)
+    add_max_line_turn(p, measured=True)
     add_units(p)
 
 
