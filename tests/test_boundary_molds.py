@@ -283,3 +283,30 @@ def test_flat_boundary_panels_are_found_again_from_their_file(flat_glass):
     assert found["molds_in_all"] == 0 and found["cut_gap_mm"] <= 1e-6
     bp = found["record"]["boundary_panels"]
     assert bp["flat"] == bp["panels"] == molds.count and bp["own_molds"] == 0
+
+
+def test_a_run_without_boundary_panels_leaves_none_of_an_earlier_runs(flat_glass, tmp_path):
+    """`fabplan molds` run again into its folder without boundary panels: the earlier
+    run's boundary-panels.csv and .obj are removed (they stayed beside a molds.json that
+    records none, two runs in one folder); a file of that name in a folder no molds run
+    wrote is left alone."""
+    folder = flat_glass[-1]
+    work = tmp_path / "work"
+    work.mkdir()
+    for name in ("net.obj", "net.json", "net.boundary.obj"):
+        (work / name).write_bytes((folder / name).read_bytes())
+    common = ["--tolerance-mm", "1", "--units", "m", "--no-3d", "-q"]
+    assert main(["molds", str(work / "net.obj"), *common, "-o", str(work / "molds")]) == 0
+    assert (work / "molds" / "boundary-panels.obj").is_file()
+    assert main(["molds", str(work / "net.obj"), *common, "--no-boundary",
+                 "-o", str(work / "molds")]) == 0
+    record = json.loads((work / "molds" / "molds.json").read_text(encoding="utf-8"))
+    assert record.get("boundary_panels") is None
+    assert not (work / "molds" / "boundary-panels.obj").exists()
+    assert not (work / "molds" / "boundary-panels.csv").exists()
+    # a folder of the user's own with such a file and no molds.json: nothing removed
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "boundary-panels.csv").write_text("my own\n", encoding="utf-8")
+    assert main(["molds", str(work / "net.obj"), *common, "--no-boundary", "-o", str(mine)]) == 0
+    assert (mine / "boundary-panels.csv").read_text(encoding="utf-8") == "my own\n"

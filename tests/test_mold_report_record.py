@@ -135,6 +135,6 @@ def test_boundary_panels_and_limits_are_shown_as_recorded(tmp_path):
                                "cut from molds the net's panels use")
     # counted as a study counts them: the molds in all against every panel
     m, n = bounds["molds_in_all"], record["panel_count"] + bounds["panels"]
-    assert boundary.endswith(f"{m} mold{'s' * (m != 1)} in all for {n:,} panels "
+    assert boundary.endswith(f"{m} mold{'s' * (m != 1)} to make in all for {n:,} panels "
                              f"(M / sqrt(N) = {m / math.sqrt(n):.2f})")
     assert boundary in pdf

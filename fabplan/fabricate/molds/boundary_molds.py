@@ -253,9 +253,10 @@ class BoundaryMolds:
 
 
 def boundary_molds_text(molds: BoundaryMolds, plan: MoldPlan, source: object = None) -> str:
-    """One sentence: how the boundary panels are made, and the molds in all with theirs
-    (the molds the net's panels need made, `MoldPlan.made_mold_count`, and their own)
-    against every panel, as a study counts them (`fabplan.study.mold_counts`)."""
+    """One sentence: how the boundary panels are made, and the molds to make in all with
+    theirs (the net's panels' molds to make, `MoldPlan.made_mold_count`: no plane, none
+    a material saves; and the boundary panels' own) against every panel, as a study
+    counts them (`fabplan.study.mold_counts`)."""
     slivers = (f", {int(molds.extension.sum())} slivers cut with their full panel"
                if molds.extension.any() else "")
     head = f"{molds.count} boundary panels" + (f" ({source})" if source is not None else "")
@@ -266,7 +267,7 @@ def boundary_molds_text(molds: BoundaryMolds, plan: MoldPlan, source: object = N
     in_all, panels = plan.made_mold_count + molds.own_molds, plan.panel_count + molds.count
     return (f"{head}: {molds.on_net_molds} cut from molds the net's panels use{flat}, "
             f"{molds.own_molds} on molds of their own{slivers}, placed to meet their "
-            f"neighbours: {steps}; {counted(in_all, 'mold')} in all for {panels:,} panels "
+            f"neighbours: {steps}; {counted(in_all, 'mold')} to make in all for {panels:,} panels "
             f"(M / sqrt(N) = {in_all / math.sqrt(panels):.2f})")
 
 

@@ -8,6 +8,7 @@ plane with the molds, then one table row per mold and per panel.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from pathlib import Path
@@ -716,6 +717,8 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
         texts["boundary-panels.obj"] = molds.cut_obj_text(
             "fabplan boundary panels as cut from their molds (placements in "
             "boundary-panels.csv), one face per panel of the net's boundary panels")
+    inputs = {Path(p).resolve() for p in (protect or {})}
+    stale = [p for p in _stale_boundary_files(folder, texts) if p.resolve() not in inputs]
     with output_folder(folder, protect=protect) as staging:
         write_texts({staging / "report.html": mold_report_html(
                          plan, view_3d=view_3d, pictures=pictures,
@@ -725,7 +728,24 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
                      **{staging / name: text for name, text in texts.items()}})
         mold_report_pdf(plan, pictures, boundary=None if boundary is None else boundary[1],
                         limits=record["limits"]).write(staging / "report.pdf")
+    for path in stale:
+        path.unlink(missing_ok=True)
     return [folder / name for name in ("report.html", "report.pdf", "molds.json", *texts)]
+
+
+def _stale_boundary_files(folder: Path, texts: dict) -> list[Path]:
+    """The boundary panels' files an earlier run wrote into `folder` that this run (whose
+    files are `texts`) does not: they would mix two runs in one folder. Only when the
+    earlier ``molds.json`` records boundary panels, and only regular files."""
+    try:
+        earlier = json.loads((folder / "molds.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    if not isinstance(earlier, dict) or not earlier.get("boundary_panels"):
+        return []
+    paths = [folder / name for name in ("boundary-panels.csv", "boundary-panels.obj")
+             if name not in texts]
+    return [p for p in paths if p.is_file() and not p.is_symlink()]
 
 
 #: the files `write_mold_report` may write into its folder
