@@ -344,6 +344,20 @@ def test_coverage_counts_a_net_standing_off_and_tilted_against_the_design():
     assert "cover only 90.0 %" in text and f"lies inside the design around ({where})" in text
 
 
+def test_panels_off_the_design_are_told_in_the_nets_units():
+    """The area of panels off the design is said in the net's units ("6180 units squared"
+    read as mm^2 or m^2 alike)."""
+    from fabplan.cli import boundary_warnings
+
+    off = {"area": 6180.0, "faces": 1, "panels": 0,
+           "places": [{"area": 6180.0, "face": 102, "point": [7055.0, 7011.0, 3141.0]}]}
+    properties = {"coverage": 1.0, "units": "mm", "boundary_panels": {"off_design": off}}
+    text = boundary_warnings(properties)[0]
+    assert text.startswith("6180 mm^2 of panels lie off the design") and "6180 mm^2 of face 102" in text
+    del properties["units"]
+    assert boundary_warnings(properties)[0].startswith("6180 model units squared of panels")
+
+
 def _gaps(net, design: DesignSurface, h: float) -> list:
     from fabplan.layout.coverage import clad_points, coverage_gaps, design_samples
 

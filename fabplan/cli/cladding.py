@@ -53,14 +53,17 @@ def boundary_warnings(properties: dict) -> list:
                    "properties.boundary_panels.crossed): the outline turns back at a net vertex "
                    "off the design boundary; trim the net there by hand")
     off = panels.get("off_design") or {}
+    # in the net's units where it records them (an area said without units read as mm^2
+    # or m^2 alike)
+    area_unit = f"{units}^2" if (units := properties.get("units")) else "model units squared"
     if off.get("area", 0.0) > 0:
         places = off.get("places") or []
         where = "" if not places else (
-            f"; the largest, {places[0]['area']:.4g} units squared of "
+            f"; the largest, {places[0]['area']:.4g} {area_unit} of "
             f"{'face' if 'face' in places[0] else 'boundary panel'} "
             f"{places[0].get('face', places[0].get('panel'))}, around "
             f"({', '.join(f'{v:.4g}' for v in places[0]['point'])})")
-        out.append(f"{off['area']:.4g} units squared of panels lie off the design, over a hole "
+        out.append(f"{off['area']:.4g} {area_unit} of panels lie off the design, over a hole "
                    f"or past its boundary ({off.get('faces', 0)} net faces and "
                    f"{off.get('panels', 0)} boundary panels{where}; listed under "
                    "properties.boundary_panels.off_design): trim them there by hand")
