@@ -138,8 +138,11 @@ def test_optimize_noisy_cmc_net(tmp_path, capsys, cmc1):
     out_obj = tmp_path / "out.obj"
     assert main(["optimize", str(source), "--net", "cmc", "-o", str(out_obj)]) == 0
     out, err = capsys.readouterr()
-    # off a terminal: a line per stage (fabplan.report.progress), no warning
-    assert [line for line in err.splitlines() if not PROGRESS_LINE.match(line)] == []
+    # off a terminal: a line per stage (fabplan.report.progress), no warning; only the note
+    # of how far the net moved with nothing holding it to a design (43 mm here)
+    said = [line for line in err.splitlines() if not PROGRESS_LINE.match(line)]
+    assert len(said) <= 1 and all(line.startswith("fabplan: note: the net moved up to ")
+                                  for line in said)
     out_json = tmp_path / "out.json"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["noisy.obj", "out.json", "out.obj"]
     assert source.read_bytes() == original

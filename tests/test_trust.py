@@ -259,3 +259,20 @@ def test_a_layout_and_a_study_candidate_carry_the_fold_counts(tmp_path):
 
     first = verdict(metrics, Limits(max_deviation_mm=1e9, mold_tolerance_mm=5.0))[0]
     assert not first["ok"] and "3 flipped faces" in first["text"]
+
+
+def test_optimize_without_a_reference_says_how_far_the_net_moved(tmp_path, capsys):
+    """Without --reference no deviation limit is checked (nothing holds the net to a
+    design): the net moved up to 162 mm, exit 0, and not a word. Its record says how far
+    it moved, and beyond the default limit a note says that nothing held it."""
+    grid = height_field_grid(8, 8, lambda x, y: 0.2 * x * y)
+    source = tmp_path / "saddle.obj"
+    grid.write_obj(source)
+    out = tmp_path / "minimal.obj"
+    main(["optimize", str(source), "--net", "minimal", "--units", "m", "-o", str(out)])
+    record = json.loads(out.with_suffix(".json").read_text())
+    moved = float(np.linalg.norm(QuadMesh.from_obj(out).vertices - grid.vertices, axis=1).max())
+    assert record["properties"]["moved_from_input_max"] == pytest.approx(moved, rel=1e-12)
+    err = capsys.readouterr().err
+    assert (f"the net moved up to {1000 * moved:.1f} mm from the input" in err) == (moved > 0.02)
+    assert moved > 0.02, "the case must move farther than the default limit to test the note"

@@ -73,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
         limits = [deviation_check(reference.distances(result.mesh.vertices), units=units,
                                   max_deviation=args.max_deviation, option="--max-deviation")]
         result.properties["limits"] = limits_record(limits)
+    else:
+        _note_the_move(mesh, result, units)
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             html_file(args, out) as page, \
@@ -122,6 +124,24 @@ def run(args: argparse.Namespace) -> int:
         warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
     return limits_exit(limits, json_path)
+
+
+def _note_the_move(mesh, result, units: str) -> None:
+    """Without --reference nothing holds the net to a design, and no deviation limit is
+    checked: record how far its vertices moved from the input (model units,
+    ``moved_from_input_max``), and say so where that is more than the deviation limit a
+    reference would be checked against."""
+    import numpy as np
+
+    from ..io.units import MM_PER_UNIT
+
+    moved = float(np.linalg.norm(result.mesh.vertices - mesh.vertices, axis=1).max(initial=0.0))
+    result.properties["moved_from_input_max"] = moved
+    mm = moved * MM_PER_UNIT[units]
+    if mm > DEFAULT_MAX_DEVIATION_MM:
+        print(f"fabplan: note: the net moved up to {mm:.1f} mm from the input, and nothing held "
+              "it to a design: give --reference DESIGN to keep it within "
+              f"{DEFAULT_MAX_DEVIATION_MM:g} mm (or --max-deviation) of it", file=sys.stderr)
 
 
 def _output_path(args) -> Path:
