@@ -154,8 +154,15 @@ def layout_lattice(design: DesignSurface, h: float, angle: float, family: str | 
                                        fields.prescribed is not None, whole_turns)
     lap("extraction")
     if len(quads) == 0:
-        raise InputError(f"{design.name}: no quad could be laid out at panel size {h:g} "
-                         "(too large for the surface, or a degenerate direction field)")
+        panels = design.area / (h * h)
+        # the reason that holds: the size (a design of a few panels), else the field
+        why = (f"too large for the surface: about {panels:.0f} panels" if panels < s.min_panels_judged
+               else f"at about {panels:.0f} panels the line field gives no quad: "
+                    f"{len(singular)} singular points (umbilics) and "
+                    f"{len(turning[0])} places where it turns "
+                    "too fast for the size; try other panel sizes, --smoothing, or a design "
+                    "smoothed there")
+        raise InputError(f"{design.name}: no quad could be laid out at panel size {h:g} ({why})")
     faces = list(quads)
     verts, faces, filled, opened = fill_holes(
         verts, faces, design, h, s.fill_holes_up_to,
