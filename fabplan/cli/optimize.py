@@ -68,13 +68,7 @@ def run(args: argparse.Namespace) -> int:
                           max_deviation=args.max_deviation, max_line_turn=args.max_line_turn,
                           progress=report)
     result.properties["units"] = units
-    limits = []
-    if reference is not None:
-        limits = [deviation_check(reference.distances(result.mesh.vertices), units=units,
-                                  max_deviation=args.max_deviation, option="--max-deviation")]
-        result.properties["limits"] = limits_record(limits)
-    else:
-        _note_the_move(mesh, result, units)
+    limits = _deviation_limits(mesh, result, reference, units, args.max_deviation)
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             html_file(args, out) as page, \
@@ -124,6 +118,18 @@ def run(args: argparse.Namespace) -> int:
         warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED
     return limits_exit(limits, json_path)
+
+
+def _deviation_limits(mesh, result, reference, units: str, max_deviation: float | None) -> list:
+    """The net against the deviation limit from its reference, recorded under
+    ``properties.limits``; without a reference none (`_note_the_move`)."""
+    if reference is None:
+        _note_the_move(mesh, result, units)
+        return []
+    limits = [deviation_check(reference.distances(result.mesh.vertices), units=units,
+                              max_deviation=max_deviation, option="--max-deviation")]
+    result.properties["limits"] = limits_record(limits)
+    return limits
 
 
 def _note_the_move(mesh, result, units: str) -> None:

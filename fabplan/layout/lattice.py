@@ -154,15 +154,7 @@ def layout_lattice(design: DesignSurface, h: float, angle: float, family: str | 
                                        fields.prescribed is not None, whole_turns)
     lap("extraction")
     if len(quads) == 0:
-        panels = design.area / (h * h)
-        # the reason that holds: the size (a design of a few panels), else the field
-        why = (f"too large for the surface: about {panels:.0f} panels" if panels < s.min_panels_judged
-               else f"at about {panels:.0f} panels the line field gives no quad: "
-                    f"{len(singular)} singular points (umbilics) and "
-                    f"{len(turning[0])} places where it turns "
-                    "too fast for the size; try other panel sizes, --smoothing, or a design "
-                    "smoothed there")
-        raise InputError(f"{design.name}: no quad could be laid out at panel size {h:g} ({why})")
+        raise InputError(_no_quad(design, h, s, len(singular), len(turning[0])))
     faces = list(quads)
     verts, faces, filled, opened = fill_holes(
         verts, faces, design, h, s.fill_holes_up_to,
@@ -392,6 +384,19 @@ def _smoothed_directions(design: DesignSurface, e1: np.ndarray, weight: np.ndarr
         length *= 2
     d, _ = smooth_direction_field(design, e1, weight, s.smoothing * panel_size, symmetry=2)
     return d, 2, s.smoothing
+
+
+def _no_quad(design: DesignSurface, h: float, s: LayoutSettings, singular: int,
+             turning: int) -> str:
+    """Why no quad could be laid out at panel size `h`, with the reason that holds: the
+    size (a design of a few panels), else the line field (its `singular` points and the
+    `turning` places where it turns too fast for the size)."""
+    panels = design.area / (h * h)
+    why = (f"too large for the surface: about {panels:.0f} panels" if panels < s.min_panels_judged
+           else f"at about {panels:.0f} panels the line field gives no quad: {singular} singular "
+                f"points (umbilics) and {turning} places where it turns too fast for the size; "
+                "try other panel sizes, --smoothing, or a design smoothed there")
+    return f"{design.name}: no quad could be laid out at panel size {h:g} ({why})"
 
 
 def _turning_spots(design: DesignSurface, turning: np.ndarray, limit: float,
