@@ -111,7 +111,7 @@ def _parse_plain(text: str) -> tuple[np.ndarray, list[np.ndarray], np.ndarray | 
     ``vn`` and ``f`` lines, faces with single spaces and positive indices, finite
     coordinates, and the lines both readers pass over (`_SKIPPED`) or empty ones. None
     for anything else, which the line-by-line reader then reads (and names the line of
-    any error in). Line by line, a million vertices take 18 s; in bulk, about 6."""
+    any error in). A net of 100k vertices reads in 1.8 s line by line, in 0.56 s in bulk."""
     lines = text.splitlines()
     v = [line for line in lines if line.startswith("v ")]
     vn = [line for line in lines if line.startswith("vn ")]
