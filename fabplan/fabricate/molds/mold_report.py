@@ -17,7 +17,7 @@ from typing import Mapping
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ...io.output import output_folder, write_texts
+from ...io.output import check_apart, output_folder, write_texts
 from ...io.records import json_text
 from ...layout.boundary_panels import BoundaryPanels
 from ...net.geometry import face_normals
@@ -717,8 +717,8 @@ def write_mold_report(plan: MoldPlan, folder: str | os.PathLike, *, view_3d: boo
         texts["boundary-panels.obj"] = molds.cut_obj_text(
             "fabplan boundary panels as cut from their molds (placements in "
             "boundary-panels.csv), one face per panel of the net's boundary panels")
-    inputs = {Path(p).resolve() for p in (protect or {})}
-    stale = [p for p in _stale_boundary_files(folder, texts) if p.resolve() not in inputs]
+    stale = _stale_boundary_files(folder, texts)
+    check_apart(stale, protect or {})          # removed like the files written: never an input
     with output_folder(folder, protect=protect) as staging:
         write_texts({staging / "report.html": mold_report_html(
                          plan, view_3d=view_3d, pictures=pictures,
@@ -743,8 +743,8 @@ def _stale_boundary_files(folder: Path, texts: dict) -> list[Path]:
         return []
     if not isinstance(earlier, dict) or not earlier.get("boundary_panels"):
         return []
-    paths = [folder / name for name in ("boundary-panels.csv", "boundary-panels.obj")
-             if name not in texts]
+    paths = [folder / name for name in MOLD_FILES
+             if name.startswith("boundary-panels.") and name not in texts]
     return [p for p in paths if p.is_file() and not p.is_symlink()]
 
 

@@ -563,7 +563,9 @@ class StripSet:
         rec["member_setback_max_mm"] = max((e for e, _, _ in setbacks), default=None)
         # a member eating up more than half the last edge of a strip is no edge member;
         # unless another strip ending at the node sets it back further (each clears the
-        # other: two lines that meet the edge nearly along each other)
+        # other: two lines that meet the edge nearly along each other). The member's own
+        # set-back is taken without the hair an end may run on past its node (not kept on
+        # the strip), so a tip clearance within that hair of it counts as the member's
         past = [(e, member) for e, last, member in setbacks if e > 0.5 * last]
         rec["ends_set_back_past_half_an_edge"] = len(past)
         rec["ends_set_back_at_tips"] = sum(e > member + 1e-6 for e, member in past)
