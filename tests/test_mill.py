@@ -607,3 +607,70 @@ def test_a_design_its_record_names_that_is_gone_is_said_and_the_net_measured(tmp
     assert f"the design {gone} that {tmp_path / 'bowl.json'} names could not be read" in err
     record = json.loads((out / "mill.json").read_text())
     assert record["target"]["surface"] == "net" and record["paths"]["placed_on"] == "net"
+
+
+# ------------------------------------------------------------------------------ limits
+def test_safety_radii_between_nodes_stay_between_the_nodes_radii():
+    """Radii that jump between long segments (a CMC net of a 20 m canopy, one pass): the
+    safety radius of every location lies between its nodes' radii, never negative."""
+    from fabplan.fabricate.milling import evaluate_pass_frames, pass_frames
+
+    s = np.array([0.0, 3520.2, 4560.0, 5294.5, 6432.5, 9162.6, 10308.7])
+    R = np.array([55599.0, 55961.0, 36230.0, 51566.0, 64255.0, 57078.0, 58510.0])
+    P = np.column_stack([s, np.zeros(7), np.zeros(7)])
+    _, splines = pass_frames(P, np.tile([0.0, 0, 1], (7, 1)), np.tile([0.0, 1, 0], (7, 1)), R)
+    t = np.linspace(0.0, s[-1], 5001)
+    radius = evaluate_pass_frames(splines, t)[3]
+    segment = np.clip(np.searchsorted(s, t, side="right") - 1, 0, len(s) - 2)
+    low = np.minimum(R[segment], R[segment + 1])
+    high = np.maximum(R[segment], R[segment + 1])
+    assert np.all(radius >= low * (1 - 1e-12)) and np.all(radius <= high * (1 + 1e-12))
+
+
+def test_lines_farther_apart_than_a_pass_cuts_are_not_milled(tmp_path, capsys):
+    """A 10 mm cutter on a net whose lines lie 7.5 mm apart cuts between them; one of
+    2 mm does not: exit 3, one line naming the spacing, nothing written."""
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    out = tmp_path / "out"
+    code = main(["mill", str(net), "--tool", "face:D=2", "--no-simulation", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 3 and not out.exists()
+    assert len(err.strip().splitlines()) == 1
+    assert "leave bands uncut between them" in err
+    gap = float(re.search(r"lines lie up to ([0-9.]+) mm apart", err).group(1))
+    assert 7.5 <= gap < 7.7   # the grid's step, along the sphere
+
+
+@pytest.mark.parametrize("scallop, code", [(0.0001, 3), (0.05, 0)])
+def test_a_predicted_scallop_over_the_limit_ends_in_exit_3(tmp_path, capsys, scallop, code):
+    """Without a simulation the prediction is held to --scallop: passes along every line
+    of the bowl leave more than 0.0001 mm (exit 3, the files written and the limit
+    counted), and less than 0.05 mm."""
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    out = tmp_path / "out"
+    assert main(["mill", str(net), "--tool", "face:D=40", "--no-simulation", "--scallop",
+                 str(scallop), "-o", str(out)]) == code
+    record = json.loads((out / "mill.json").read_text())
+    check = record["limits"]["max_scallop_mm"]
+    assert check["exceeded"] == (code == 3) and check["limit"] == scallop
+    assert check["worst"] == pytest.approx(record["predicted_scallop_mm"])
+    err = capsys.readouterr().err
+    assert ("largest scallop between milling passes" in err) == (code == 3)
+
+
+def test_a_simulated_scallop_over_the_limit_ends_in_exit_3(milled, tmp_path, capsys):
+    """The simulated scallop of the bowl's cut is held to the limit as well: a limit
+    under it ends in exit 3 with the strips over it counted."""
+    out, _ = milled
+    simulated = json.loads((out / "mill.json").read_text())["simulation"]["max_scallop_mm"]
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    folder = tmp_path / "tight"
+    code = main(["mill", str(net), "--tool", "face:D=40", "--sim-step", "1.0", "--margin",
+                 str(json.loads((out / "mill.json").read_text())["margin_mm"]),
+                 "--scallop", "0.003", "-o", str(folder)])
+    record = json.loads((folder / "mill.json").read_text())
+    check = record["limits"]["max_scallop_mm"]
+    assert check["parts"] == "strips between passes"
+    assert check["worst"] == pytest.approx(simulated)
+    assert code == (3 if simulated > 0.003 else 0) and check["exceeded"] == (simulated > 0.003)
+    capsys.readouterr()

@@ -264,7 +264,7 @@ def test_a_cone_too_long_for_the_safety_spheres_is_refused(tmp_path, capsys, con
     assert 0 < longest < 20
     out = tmp_path / "fits"
     assert main(["mill", str(net), "--tool", f"cone:angle=45,length={longest * 0.99:.4f},tip=30",
-                 "--no-simulation", "-q", "-o", str(out)]) == 0
+                 "--no-simulation", "--scallop", "0.1", "-q", "-o", str(out)]) == 0
 
 
 def test_a_given_margin_moves_the_contact_circle_towards_the_tip(tmp_path, cone_milled):
@@ -272,8 +272,8 @@ def test_a_given_margin_moves_the_contact_circle_towards_the_tip(tmp_path, cone_
     flank's wide end, and stay on the flank between the nodes too."""
     _, net = cone_milled
     out = tmp_path / "out"
-    assert main(["mill", str(net), "--tool", TOOL, "--margin", "20", "--no-simulation", "-q",
-                 "-o", str(out)]) == 0
+    assert main(["mill", str(net), "--tool", TOOL, "--margin", "20", "--no-simulation",
+                 "--scallop", "0.1", "-q", "-o", str(out)]) == 0
     tip, axis, col, cutter = read_locations(out)
     contact_radius = col["contact_radius_mm"]
     assert contact_radius.max() <= cutter[0] / 2 + cutter[6] + 1e-9   # tan 45 = 1

@@ -169,7 +169,8 @@ def test_a_simulation_beyond_the_memory_is_refused_naming_the_step(tmp_path, cap
 def test_a_net_within_the_memory_is_milled(tmp_path, capsys, monkeypatch):
     _memory(monkeypatch, 2)
     net = _dome(tmp_path / "small.obj", 11)
-    code = main(["mill", str(net), "--units", "m", "--tool", "face:D=40", "--no-simulation",
+    # in cm: lines 10 mm apart, which a 40 mm cutter mills
+    code = main(["mill", str(net), "--units", "cm", "--tool", "face:D=40", "--no-simulation",
                  "-q", "-o", str(tmp_path / "p")])
     assert code in (0, 3), capsys.readouterr().err
     assert (tmp_path / "p" / "mill.json").is_file()

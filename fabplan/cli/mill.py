@@ -16,6 +16,7 @@ from ..net.validate import load_net
 from ..report.html import counted
 from .arguments import add_max_panels, add_number, add_units, add_verbosity
 from .files import file_inputs, folder_apart, layout_design_inputs, net_inputs
+from .limits import limits_exit
 from .memory import check_net_memory, check_simulation_memory
 from .records import net_properties, net_units
 from .registry import Command, register
@@ -58,6 +59,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {', '.join(str(f) for f in files)}")
         for note in result.plan.notes:
             warn(note)
+    gouged = _warn_gouge(result, out)
+    code = limits_exit([result.scallop_check], out / "mill.json")
+    return EXIT_NOT_CONVERGED if gouged else code
+
+
+def _warn_gouge(result: Any, out: Path) -> bool:
+    """Warn when the simulated cut gouges its target, saying why; True when it does."""
     if not result.gouge_free and result.simulation is not None:
         # a margin keeps the tool inside the spheres; a face wider than the surface's
         # curvature allows over its width gouges whatever the margin
@@ -71,8 +79,8 @@ def run(args: argparse.Namespace) -> int:
               f"{'the net' if result.design is None else 'the design'} by "
               f"{result.simulation.max_gouge_mm:.4g} mm: {why} "
               f"(details in {out / 'report.html'})", file=sys.stderr)
-        return EXIT_NOT_CONVERGED
-    return 0
+        return True
+    return False
 
 
 def _mill_design(args: argparse.Namespace, units: str) -> Any:

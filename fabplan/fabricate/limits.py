@@ -14,6 +14,9 @@ code 3 when a part exceeds one. The defaults and where they come from are in
 - ``congruence_tolerance_mm``: on a net that claims a constant radius (or an infinite one),
   the largest difference of a strip part from the common arc (`fabplan.fabricate.strips.nesting.
   congruence`), ``strips --tolerance`` (the cutting tolerance, as in a study).
+- ``max_scallop_mm``: the largest height of material a milling plan leaves between
+  neighbouring passes: simulated, else predicted (`fabplan.fabricate.milling`),
+  ``mill --scallop``.
 - ``max_deviation_mm``: the largest distance of a net vertex from its design or reference,
   ``optimize --max-deviation`` (model units, also held in the solve), ``molds
   --max-deviation-mm`` and ``strips --max-deviation-mm`` (with ``--design``).
@@ -74,6 +77,8 @@ LIMITS: dict[str, FabricationLimit] = {limit.name: limit for limit in (
                      "arc", "mm", 0.1, "--tolerance"),
     FabricationLimit("max_deviation_mm", "largest deviation from the design", "mm",
                      DEFAULT_MAX_DEVIATION_MM, "--max-deviation-mm"),
+    FabricationLimit("max_scallop_mm", "largest scallop between milling passes", "mm", 0.01,
+                     "--scallop"),
 )}
 
 

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import CubicSpline, PchipInterpolator
 from scipy.sparse import csgraph
 
 from ...errors import CannotMakeError, InputError
@@ -56,6 +56,7 @@ __all__ = [
     "PassLines",
     "pass_lines",
     "choose_stride",
+    "check_passes_cover",
     "walk_across_lines",
     "trace_passes",
     "place_passes_on_design",
@@ -410,6 +411,35 @@ def choose_stride(per_node: np.ndarray, lines: PassLines,
     return predicted, int(fits.max()) + 1 if fits.size else 1
 
 
+def check_passes_cover(mesh: QuadMesh, per_node: np.ndarray, lines: PassLines,
+                       vertex: np.ndarray, cross_neighbour: np.ndarray, mm_per_unit: float,
+                       tool: MillTool, family: str) -> None:
+    """CannotMakeError where passes along every line leave a band uncut between them (a
+    predicted scallop of inf): the lines lie farther apart than one pass cuts across.
+
+    Parameters
+    ----------
+    mesh : the net (its name and vertices, model units).
+    per_node : (max_stride, s) float, predicted scallops (`choose_stride`'s input).
+    lines : the lines of the passes.
+    vertex, cross_neighbour : (s,) and (s, 2) int, each node's vertex and its neighbours
+        on the lines beside its own.
+    mm_per_unit : the net's scale.
+    tool : the cutter, named in the message.
+    family : ``"A"`` or ``"B"``, the family the passes run along.
+    """
+    uncut = np.flatnonzero(lines.on_pass(1) & np.isposinf(per_node[0]))
+    if uncut.size == 0:
+        return
+    X = mesh.vertices * mm_per_unit
+    gap = np.linalg.norm(X[cross_neighbour[uncut]] - X[vertex[uncut], None], axis=2).max()
+    raise CannotMakeError(
+        f"{mesh.name}: passes along every line of family {family} leave bands uncut between "
+        f"them at {describe_region(mesh, vertex[uncut])}: the lines lie up to {gap:.4g} mm "
+        f"apart, farther than a pass of tool {tool.spec()} cuts across; mill a net whose "
+        "lines lie closer (a layout at a smaller --size), or use a wider tool")
+
+
 def walk_across_lines(vertex: np.ndarray, cross_neighbour: np.ndarray, node_of_vertex: np.ndarray,
                       towards: np.ndarray, max_stride: int
                       ) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
@@ -534,7 +564,9 @@ def pass_frames(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
 
     Returns
     -------
-    s : (k,) float, arc length of the nodes; splines : list of four `CubicSpline`.
+    s : (k,) float, arc length of the nodes; splines : list of three `CubicSpline` (contact,
+        normal, cross) and a `PchipInterpolator` of the safety curvature, which stays
+        between its values at the nodes.
     """
     seg = np.linalg.norm(np.diff(contact, axis=0), axis=1)
     s = np.r_[0.0, np.cumsum(seg)]
@@ -543,7 +575,9 @@ def pass_frames(contact: np.ndarray, normal: np.ndarray, cross: np.ndarray,
                CubicSpline(s, cross, bc_type=kind)]
     finite = np.isfinite(safety)
     curvature = np.where(finite, 1.0 / np.where(finite, safety, 1.0), 0.0)
-    splines.append(CubicSpline(s, curvature, bc_type=kind))
+    # monotone between nodes: a cubic overshoots where the radii jump between long
+    # segments, and a curvature crossing zero there turns the safety radius negative
+    splines.append(PchipInterpolator(s, curvature))
     return s, splines
 
 
@@ -768,6 +802,8 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
     per_node = _predicted_scallops(nodes, X, safety, r, tool.corner_mm, lines.max_stride,
                                    mesh.star_of_vertex, lines.towards,
                                    _trailing_directions(nodes, lines))
+    check_passes_cover(mesh, per_node, lines, nodes.vertex, nodes.cross_neighbour,
+                       settings.mm_per_unit, tool, settings.along)
     predicted, stride = choose_stride(per_node, lines, settings.scallop_mm)
     notes = []
     residual = float(nodes.sphere_residual.max())
@@ -798,4 +834,4 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
                     margin_rule=rule, stride=stride, lines=lines.count, predicted_scallop_mm=predicted,
                     meusnier_radius_mm=nodes.radius, side=side, sphere_residual_mm=residual,
                     seconds=time.perf_counter() - started, notes=notes, placed_on=placed_on,
-                    node_shift_mm=shift)
+                    node_shift_mm=shift, scallop_by_node_mm=per_node[stride - 1, lines.on_pass(stride)])

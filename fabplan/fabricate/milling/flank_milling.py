@@ -52,6 +52,7 @@ from ...net.geometry import (
 from ...net.mesh import QuadMesh
 from .face_milling import (
     beyond_design_notes,
+    check_passes_cover,
     choose_stride,
     describe_region,
     pass_lines,
@@ -554,6 +555,8 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *
                        nodes.node_of_vertex)
     per_node = _predicted_scallops(nodes, safety, tool, lines.max_stride, nodes.node_of_vertex,
                                    lines.towards)
+    check_passes_cover(mesh, per_node, lines, nodes.vertex, nodes.cross_neighbour,
+                       settings.mm_per_unit, tool, settings.along)
     predicted, stride = choose_stride(per_node, lines, settings.scallop_mm)
     notes = []
     left_out = len(mesh.stars) - len(nodes.vertex)
@@ -585,6 +588,7 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *
                     meusnier_radius_mm=nodes.radius, side=side,
                     sphere_residual_mm=float(nodes.residual.max()),
                     seconds=time.perf_counter() - started, notes=notes, placed_on=placed_on,
-                    node_shift_mm=shift, ruling_curvature=nodes.ruling_curvature,
+                    node_shift_mm=shift, scallop_by_node_mm=per_node[stride - 1, lines.on_pass(stride)],
+                    ruling_curvature=nodes.ruling_curvature,
                     foot_offset_mm=nodes.foot_offset,
                     flank_reach_mm=np.array([ahead.min(), behind.min()]))

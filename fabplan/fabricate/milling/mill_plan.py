@@ -315,6 +315,8 @@ class MillPlan:
         closest points to them, with its normals).
     node_shift_mm : (m,) float, distance each pass node was moved from its vertex onto the
         design (mm; empty when placed on the net).
+    scallop_by_node_mm : (p,) float, the predicted scallop beside each node of the passes
+        (mm; NaN beside the last pass).
     """
 
     net: str
@@ -333,6 +335,7 @@ class MillPlan:
     notes: list = field(default_factory=list)
     placed_on: str = "net"
     node_shift_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    scallop_by_node_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def predicted_max_scallop_mm(self) -> float:

@@ -25,6 +25,7 @@ from ...io.records import json_text
 from ...io.rhino_write import Rhino3dmWriter
 from ...net.mesh import QuadMesh
 from ...report import figures, html
+from ..limits import LimitCheck, limit_check
 from .face_milling import plan_face_milling
 from .flank_milling import plan_flank_milling
 from .mill_design import NetDistance, design_heights, net_distance_from_design
@@ -54,7 +55,8 @@ class MillResult:
     ----------
     plan : the passes.
     target : the target height map (None without simulation): the design's heights when
-        a design is given, else the net's surface (the spline through its vertices).
+        a design is given, else the net's surface (`height_target`: its star vertices'
+        best-fit sphere and the spline through their departures from it).
     simulation : the simulated adaptive cut, measured against `target` (None without
         simulation).
     conventional : the simulated ball-end cut through the same contacts (or None).
@@ -79,7 +81,8 @@ class MillResult:
     def measured_against(self) -> str:
         """What the cut is measured against, in words."""
         if self.design is None:
-            return "the net's surface (the spline through its vertices; no design given)"
+            return ("the net's surface (its best-fit sphere and the spline through its vertices; "
+                    "no design given)")
         return f"the design {self.design}"
 
     @property
@@ -89,9 +92,20 @@ class MillResult:
         sim = self.simulation
         return sim is None or sim.max_gouge_mm <= self.simulation_settings.gouge_tolerance_mm
 
+    @property
+    def scallop_check(self) -> LimitCheck:
+        """The scallop limit (``--scallop``): the simulated scallop of every strip between
+        neighbouring passes, else the predicted scallop beside every pass node."""
+        if self.simulation is not None:
+            values, parts = self.simulation.scallop_by_strip_mm, "strips between passes"
+        else:
+            values, parts = self.plan.scallop_by_node_mm, "pass nodes (predicted)"
+        return limit_check("max_scallop_mm", values, self.plan.settings.scallop_mm, parts=parts)
+
     def record(self) -> dict:
         """The contents of ``mill.json``."""
         record = self.plan.record()
+        record["limits"] = {"max_scallop_mm": self.scallop_check.to_json()}
         sim, conv = self.simulation, self.conventional
         settings = self.simulation_settings
         record["simulation_settings"] = {
@@ -172,7 +186,7 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
     mesh : the net.
     tool, settings : see `plan_face_milling` and `plan_flank_milling` (for a cone).
     simulate : run the simulation. The target is the design's heights when `design` is
-        given, else the thin-plate spline through the net's vertices, on a grid seen from
+        given, else the net's surface through its star vertices (`height_target`), on a grid seen from
         the mean tool-side normal over the part the net's faces cover.
     simulation : its resolution.
     conventional : also simulate the conventional ball-end path (face mills only).
@@ -198,8 +212,12 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
         clock = time.perf_counter()
         path = plan.path
         up = path.normal.mean(axis=0)
+        # a vertex in no star (a grid's corner) is bound by no sphere: it outlines the
+        # part but does not shape the target
+        in_star = np.zeros(len(mesh.vertices), bool)
+        in_star[mesh.stars.ravel()] = True
         net_target = target = height_target(mesh.vertices * scale, mesh.triangles(), up,
-                                            step_mm=sim_settings.step_mm)
+                                            step_mm=sim_settings.step_mm, samples=in_star)
         if design is not None:
             target = replace(net_target, z=design_heights(design, net_target, scale))
         seconds["target"] = time.perf_counter() - clock

@@ -160,12 +160,17 @@ def simulation_cells(points_mm: np.ndarray, triangles: np.ndarray, step_mm: floa
 
 
 def height_target(points_mm: np.ndarray, triangles: np.ndarray, up: np.ndarray, *,
-                  step_mm: float, max_cells: int = MAX_SIMULATION_CELLS) -> HeightTarget:
+                  step_mm: float, max_cells: int = MAX_SIMULATION_CELLS,
+                  samples: np.ndarray | None = None) -> HeightTarget:
     """The target height map of a surface sampled by points (a net's vertices).
 
-    Heights are interpolated by a thin-plate spline with a quadratic polynomial part
-    (exact on quadrics, smooth between samples); the part is where the projected
-    triangles lie.
+    Heights are the samples' best-fit sphere plus a thin-plate spline with a quadratic
+    polynomial part through what departs from it (exact on spheres and on quadratic
+    height fields, smooth between samples); the part is where the projected triangles
+    lie. The sphere carries the curvature out to the part's edges, where a spline alone,
+    with samples on one side only, runs off a curved surface by a fraction of a
+    millimetre (0.04 mm between the last vertices of a sphere of radius 360 mm sampled
+    every 15 mm).
 
     Parameters
     ----------
@@ -174,6 +179,8 @@ def height_target(points_mm: np.ndarray, triangles: np.ndarray, up: np.ndarray, 
     up : (3,) float, the mill direction (towards the tool).
     step_mm : grid spacing.
     max_cells : refuse grids larger than this.
+    samples : (n,) bool, the points that sample the surface (default: all); the others
+        only outline the part (a net's vertices in no star, which no sphere binds).
 
     Raises
     ------
@@ -204,14 +211,36 @@ def height_target(points_mm: np.ndarray, triangles: np.ndarray, up: np.ndarray, 
     gx, gy = np.meshgrid(x, y)
     tri = Triangulation(P[:, 0], P[:, 1], triangles)
     inside = np.asarray(tri.get_trifinder()(gx, gy)) >= 0
-    neighbours = None if len(P) <= 3000 else 60
-    spline = RBFInterpolator(P[:, :2], P[:, 2], kernel="thin_plate_spline", degree=2,
-                             neighbors=neighbours)
-    z = np.full(gx.shape, np.nan)
     query = np.column_stack([gx[inside], gy[inside]])
-    z[inside] = np.concatenate([spline(chunk) for chunk in np.array_split(
-        query, max(1, len(query) // 20000))]) if len(query) else []
+    if samples is not None:
+        P = P[samples]
+    base = _sphere_heights(P, np.vstack([P[:, :2], query]))
+    neighbours = None if len(P) <= 3000 else 60
+    spline = RBFInterpolator(P[:, :2], P[:, 2] - base[:len(P)], kernel="thin_plate_spline",
+                             degree=2, neighbors=neighbours)
+    z = np.full(gx.shape, np.nan)
+    z[inside] = base[len(P):] + (np.concatenate([spline(chunk) for chunk in np.array_split(
+        query, max(1, len(query) // 20000))]) if len(query) else 0.0)
     return HeightTarget(x=x, y=y, z=z, rotation=rotation, origin=origin)
+
+
+def _sphere_heights(P: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(m,) float, heights at `xy` (m, 2) of the least-squares sphere of the points `P`
+    (n, 3), on the points' side of its equator; zero everywhere when the sphere does not
+    span every `xy` (a nearly flat or a steep part), so that the spline alone remains."""
+    A = np.column_stack([2 * P, np.ones(len(P))])
+    solution, *_ = np.linalg.lstsq(A, np.sum(P * P, axis=1), rcond=None)
+    centre, radius2 = solution[:3], solution[3] + solution[:3] @ solution[:3]
+    under = radius2 - np.sum((xy - centre[:2]) ** 2, axis=1)
+    extent = np.ptp(P[:, :2], axis=0).max()
+    if not np.isfinite(radius2) or radius2 > (1e4 * extent) ** 2 or np.any(under <= 0):
+        return np.zeros(len(xy))
+    side = 1.0 if np.median(P[:, 2] - centre[2]) >= 0 else -1.0
+    heights = centre[2] + side * np.sqrt(under)
+    # a part past the sphere's equator, or one the sphere fits badly, keeps the spline alone
+    if np.abs(heights[:len(P)] - P[:, 2]).max() > 0.1 * extent:
+        return np.zeros(len(xy))
+    return heights
 
 
 def _cylinder_entry(dx, dy, tz, axis, radius, length):
