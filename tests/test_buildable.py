@@ -314,3 +314,22 @@ def test_a_deviation_limit_on_a_coarse_triangulation_is_met_on_the_exact_surface
     assert reference.chord_error > 0.1 * limit
     held = fabplan.optimize(start, "const-radius", reference=reference, max_deviation=limit)
     assert reference.distances(held.mesh.vertices).max() <= limit * (1 + 1e-6)
+
+
+def test_a_converged_net_with_edge_jumps_is_said_so(tmp_path, capsys):
+    """A grid on a sphere is an S-net whatever its spacing: with one row of panels four
+    times as long as its neighbours it converges at once, buildable, and the command
+    says where its panels change size abruptly (the count is the record's)."""
+    theta = np.r_[0.3, np.cumsum([0.05, 0.05, 0.05, 0.2, 0.05, 0.05, 0.05]) + 0.3]
+    t, p = np.meshgrid(theta, np.linspace(0.0, 0.4, 9), indexing="ij")
+    points = 10 * np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+    net = tmp_path / "rows.obj"
+    QuadMesh.grid(points).write_obj(net)
+    out = tmp_path / "out.obj"
+    assert main(["optimize", str(net), "--net", "snet", "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    record = json.loads(out.with_suffix(".json").read_text())
+    jumps = record["properties"]["buildable"]["edge_jumps"]
+    assert record["properties"]["buildable"]["buildable"] and jumps["count"] > 0
+    assert (f"{jumps['count']} vertices where consecutive edges of a line differ more than 3x "
+            "in length (up to 4") in err

@@ -12,7 +12,7 @@ from typing import Any
 from ..errors import InputError
 from ..io.output import atomic_path
 from ..io.units import DEFAULT_UNITS, UNIT_WORDS, units_warning
-from ..net.measure import format_summary
+from ..net.measure import edge_jump_warning, format_summary
 from ..report.html import counted
 from ..solve.net_types import NETS, check_angle
 from ..solve.optimize import check_limits
@@ -324,6 +324,8 @@ def layout_warnings(properties: dict) -> list:
                    f"{turn['p95']:.0f}): the solve bent the layout's lines to make a net of its "
                    "type; a smaller --panel-size or another net type may be fairer (a study "
                    "judges it with max_line_turn_deg)")
+    if (jumps := edge_jump_warning(properties.get("buildable"))) is not None:
+        out.append(jumps)
     folds = properties.get("folds") or {}
     if folds.get("folded"):
         out.append(f"the net folds: {folds['flipped_faces']['count']} flipped faces (ids in the "

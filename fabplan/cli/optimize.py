@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..fabricate.limits import DEFAULT_MAX_DEVIATION_MM, limits_record
-from ..net.measure import format_summary
+from ..net.measure import edge_jump_warning, format_summary
 from ..net.validate import load_net
 from ..report.html import counted
 from ..solve.handles import read_fixed, read_handles
@@ -114,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         for warning in boundary_warnings(result.properties):
             warn(warning)
+    if (jumps := edge_jump_warning(result.properties.get("buildable"))) is not None:
+        warn(jumps)
     if not result.converged:
         warn_not_converged(result, json_path)
         return EXIT_NOT_CONVERGED

@@ -27,7 +27,7 @@ from .geometry import (
 if TYPE_CHECKING:
     from .mesh import QuadMesh
 
-__all__ = ["measure_net", "format_summary", "buildable_summary"]
+__all__ = ["measure_net", "format_summary", "buildable_summary", "edge_jump_warning"]
 
 
 def _stats(values: np.ndarray) -> dict:
@@ -183,3 +183,25 @@ def buildable_summary(build: dict, folds: dict | None = None) -> str:
     if build["buildable"]:
         return f"buildable: no fold, dart or line doubling back{jump}"
     return f"not buildable: {found or 'folded'}{jump}"
+
+
+def edge_jump_warning(build: dict | None) -> str | None:
+    """The edge jumps of the ``buildable`` part of a net's record in plain words, or None
+    when there are none: a net that meets its conditions with panels that change size
+    abruptly along a line is buildable, but rarely what was meant.
+
+    Examples
+    --------
+    >>> print(edge_jump_warning({"edge_jumps": {"count": 2, "ratio_above": 3.0,
+    ...                          "worst": {"edge_ratio": 9.3, "id": 214}}})[:101])
+    2 vertices where consecutive edges of a line differ more than 3x in length (up to 9.3x at vertex 214)
+    """
+    jumps = (build or {}).get("edge_jumps") or {}
+    if not jumps.get("count"):
+        return None
+    worst = jumps.get("worst") or {}
+    return (f"{jumps['count']} vertices where consecutive edges of a line differ more than "
+            f"{jumps['ratio_above']:g}x in length (up to {worst.get('edge_ratio', float('nan')):.2g}x "
+            f"at vertex {worst.get('id')}): the panels change size abruptly there, where the "
+            "net's conditions pull it out of shape (ids under properties.buildable.edge_jumps)")
+

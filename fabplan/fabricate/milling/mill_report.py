@@ -211,13 +211,8 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
     if simulate:
         clock = time.perf_counter()
         path = plan.path
-        up = path.normal.mean(axis=0)
-        # a vertex in no star (a grid's corner) is bound by no sphere: it outlines the
-        # part but does not shape the target
-        in_star = np.zeros(len(mesh.vertices), bool)
-        in_star[mesh.stars.ravel()] = True
-        net_target = target = height_target(mesh.vertices * scale, mesh.triangles(), up,
-                                            step_mm=sim_settings.step_mm, samples=in_star)
+        net_target = target = _net_target(mesh, path.normal.mean(axis=0), scale,
+                                          sim_settings.step_mm)
         if design is not None:
             target = replace(net_target, z=design_heights(design, net_target, scale))
         seconds["target"] = time.perf_counter() - clock
@@ -257,6 +252,16 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
                       simulation_settings=sim_settings, seconds=seconds,
                       design=None if design is None else design_label(design),
                       against_net=against_net, net_distance=distance)
+
+
+def _net_target(mesh: QuadMesh, up: np.ndarray, scale: float, step_mm: float) -> HeightTarget:
+    """The net's surface seen from `up` as a height map (`height_target`, mm). A vertex in
+    no star (a grid's corner) is bound by no sphere: it outlines the part but does not
+    shape the target."""
+    in_star = np.zeros(len(mesh.vertices), bool)
+    in_star[mesh.stars.ravel()] = True
+    return height_target(mesh.vertices * scale, mesh.triangles(), up, step_mm=step_mm,
+                         samples=in_star)
 
 
 def design_label(design: Any) -> str:
