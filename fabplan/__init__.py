@@ -42,12 +42,12 @@ _EXPORTS = {
     "load_design": "fabplan.design.load",
     "layout_surface": "fabplan.layout.surface_layout",
     "glide": "fabplan.layout.surface_layout",
-    "plan_molds": "fabplan.study.api",
+    "plan_molds": "fabplan.study.api_products",
     "MoldSettings": "fabplan.fabricate.molds.mold_shapes",
     "MoldPlan": "fabplan.fabricate.molds.mold_plan",
     "StripSettings": "fabplan.fabricate.strips.strip_set",
     "build_strips": "fabplan.fabricate.strips.strip_set",
-    "plan_strips": "fabplan.study.api",
+    "plan_strips": "fabplan.study.api_products",
     "StripPlan": "fabplan.fabricate.strips.strip_plan",
     "read_study": "fabplan.study.spec",
     "run_study": "fabplan.study.api",
@@ -59,12 +59,12 @@ _EXPORTS = {
     "read_obj": "fabplan.study.api",
     "write_obj": "fabplan.study.api",
     "read_3dm": "fabplan.study.api",
-    "write_3dm": "fabplan.study.api",
-    "write_glb": "fabplan.study.api",
+    "write_3dm": "fabplan.study.api_products",
+    "write_glb": "fabplan.study.api_products",
     "NetResult": "fabplan.study.api",
     "Measurement": "fabplan.study.api",
-    "MoldResult": "fabplan.study.api",
-    "StripResult": "fabplan.study.api",
+    "MoldResult": "fabplan.study.api_products",
+    "StripResult": "fabplan.study.api_products",
     "ArcStructure": "fabplan.fabricate.arcs",
     "mill": "fabplan.study.api",
 }
@@ -133,23 +133,18 @@ if TYPE_CHECKING:  # what a type checker and an IDE see; at run time `__getattr_
     from .solve.solver import GuidedProjection, SolverSettings
     from .study.api import (
         Measurement,
-        MoldResult,
         NetResult,
-        StripResult,
         arcs,
         layout_net,
         measure,
         mill,
         optimize,
-        plan_molds,
-        plan_strips,
         read_3dm,
         read_obj,
         run_study,
-        write_3dm,
-        write_glb,
         write_obj,
     )
+    from .study.api_products import MoldResult, StripResult, plan_molds, plan_strips, write_3dm, write_glb
     from .study.spec import read_study
 
 

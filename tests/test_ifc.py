@@ -296,7 +296,8 @@ def test_boundary_panels_and_lamellas(hypar):
 
 @pytest.mark.parametrize("units, scale, name", [("mm", 0.001, None), ("ft", 0.3048, "FOOT")])
 def test_unit_assignment_follows_the_net(tmp_path, units, scale, name):
-    from fabplan.study.api import read_obj, write_ifc
+    from fabplan.study.api import read_obj
+    from fabplan.study.api_products import write_ifc
 
     net = read_obj(WEIN99)
     path = write_ifc(net, tmp_path / "net.ifc", units=units)

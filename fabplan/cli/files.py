@@ -149,7 +149,7 @@ def viewer_files(args: argparse.Namespace, base: Path, mesh: Any, *, units: str,
     with ExitStack() as stack:
         written = []
         if args.rhino:
-            from ..study.api import write_3dm, write_glb
+            from ..study.api_products import write_3dm, write_glb
 
             rhino, glb = base.with_suffix(".3dm"), base.with_suffix(".glb")
             write_3dm(mesh, stack.enter_context(atomic_path(rhino)), molds=molds, strips=strips,
@@ -157,7 +157,7 @@ def viewer_files(args: argparse.Namespace, base: Path, mesh: Any, *, units: str,
             write_glb(mesh, stack.enter_context(atomic_path(glb)), molds=molds, units=units)
             written += [rhino, glb]
         if getattr(args, "ifc", False):
-            from ..study.api import write_ifc
+            from ..study.api_products import write_ifc
 
             ifc = base.with_suffix(".ifc")
             write_ifc(mesh, stack.enter_context(atomic_path(ifc)), molds=molds, boundary=boundary,

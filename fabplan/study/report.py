@@ -270,7 +270,7 @@ def _model_files(c: CandidateResult, folder: Path, study: Study,
     net, molds_plan = c.net, c.molds
     assert net is not None and molds_plan is not None
     if rhino:
-        from .api import write_3dm, write_glb
+        from .api_products import write_3dm, write_glb
 
         write_3dm(net, folder / "net.3dm", molds=molds_plan, strips=c.strips, units=study.design.units,
                   user_text={"candidate": c.name, "net_type": net.net, "status": net.status})
@@ -278,7 +278,7 @@ def _model_files(c: CandidateResult, folder: Path, study: Study,
         outputs["rhino"] = "net.3dm"
         outputs["gltf"] = "net.glb"
     if ifc:
-        from .api import write_ifc
+        from .api_products import write_ifc
 
         write_ifc(net, folder / "net.ifc", molds=molds_plan, boundary=c.boundary_molds,
                   strips=c.strips, units=study.design.units, net_type=net.net, name=c.name)
