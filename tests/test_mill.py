@@ -522,8 +522,10 @@ def test_mill_measures_against_the_design_its_record_names_and_files_agree(tmp_p
                  "--scallop", "0.003", "-o", str(out)]) == 0
     said = capsys.readouterr().out
     record = json.loads((out / "mill.json").read_text())
+    faceting = record["target"].pop("design_faceting_mm")
     assert record["target"] == {"surface": "design", "design": str(design), "units": "mm",
                                 "measured_against": f"the design {design}"}
+    assert 0 < faceting < 0.01          # a fine mesh of the cap: its facets a few microns off
     distance = record["net_from_design"]
     assert distance["units"] == "mm"
     # the design is its triangles here: 0.02 mm off the net's sphere, and their chords
@@ -674,3 +676,30 @@ def test_a_simulated_scallop_over_the_limit_ends_in_exit_3(milled, tmp_path, cap
     assert check["worst"] == pytest.approx(simulated)
     assert code == (3 if simulated > 0.003 else 0) and check["exceeded"] == (simulated > 0.003)
     capsys.readouterr()
+
+
+def test_a_gouge_within_a_coarse_design_meshs_faceting_is_said_to_be_it(tmp_path, capsys):
+    """The bowl's sphere given as a coarse triangle mesh: its flat faces stand inside the
+    sphere, towards the tool, and the cut on the sphere lies below them. The warning says
+    that the design's faceting, not the tool, makes the gouge, and mill.json holds it."""
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    u = np.linspace(-60.0, 60.0, 7)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    z = 300.0 - np.sqrt(300.0**2 - x**2 - y**2)
+    V = np.stack([x, y, z], axis=-1).reshape(-1, 3)
+    k = np.arange(6)[:, None] * 7 + np.arange(6)[None, :]
+    k = k.ravel()
+    T = np.r_[np.c_[k, k + 7, k + 8], np.c_[k, k + 8, k + 1]]
+    design = tmp_path / "coarse.obj"
+    design.write_text("".join(f"v {a:.9f} {b:.9f} {c:.9f}\n" for a, b, c in V)
+                      + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in T))
+    out = tmp_path / "out"
+    code = main(["mill", str(net), "--tool", "face:D=40", "--sim-step", "1.0", "--scallop", "1",
+                 "--design", str(design), "--units", "mm", "-o", str(out)])
+    err = capsys.readouterr().err
+    record = json.loads((out / "mill.json").read_text())
+    gouge, faceting = record["gouge_check"]["max_gouge_mm"], record["target"]["design_faceting_mm"]
+    assert code == 3 and gouge > 0.005 and gouge <= 2 * faceting
+    assert "the design is a triangle mesh whose flat faces stand up to about" in err
+    # sagitta of a 20 mm chord on a sphere of radius 300: 0.17 mm; the estimate is near it
+    assert 0.1 < faceting < 0.5

@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     check_net_memory(args, mesh, "mill")
     if not args.no_simulation:
         check_simulation_memory(mesh, settings.mm_per_unit, args.sim_step)
+        _note_simulation_time(mesh, settings.mm_per_unit, args.sim_step, tool.kind)
     progress = command_progress(args)
     with progress.stage("reading the design"):
         design = _mill_design(args, settings.units)
@@ -64,6 +65,21 @@ def run(args: argparse.Namespace) -> int:
     return EXIT_NOT_CONVERGED if gouged else code
 
 
+def _note_simulation_time(mesh: Any, mm_per_unit: float, step_mm: float, kind: str) -> None:
+    """Say up front when the simulation will take minutes (`SIMULATION_MEMORY`'s time per
+    cell, measured with a face mill's two cuts, its own and the conventional ball end's; a
+    cone has one)."""
+    from ..fabricate.milling.mill_simulation import simulation_cells
+    from ..io.resources import SIMULATION_MEMORY
+
+    cells = simulation_cells(mesh.vertices * mm_per_unit, mesh.triangles(), step_mm)
+    minutes = SIMULATION_MEMORY.seconds_per_unit * cells * (1 if kind == "face" else 0.5) / 60
+    if minutes >= 2:
+        print(f"fabplan: note: the simulation of about {cells:,.0f} cells at --sim-step "
+              f"{step_mm:g} will take about {minutes:.0f} minutes; --sim-step {2 * step_mm:g} "
+              "takes a quarter of that, --no-simulation none", file=sys.stderr)
+
+
 def _warn_gouge(result: Any, out: Path) -> bool:
     """Warn when the simulated cut gouges its target, saying why; True when it does."""
     if not result.gouge_free and result.simulation is not None:
@@ -71,7 +87,13 @@ def _warn_gouge(result: Any, out: Path) -> bool:
         # curvature allows over its width gouges whatever the margin
         why = "try a smaller tool or a larger --margin"
         distance = result.net_distance
-        if distance is not None and result.plan.placed_on == "net":
+        faceting = result.design_faceting_mm
+        if faceting is not None and result.simulation.max_gouge_mm <= 2 * faceting:
+            why = (f"the design is a triangle mesh whose flat faces stand up to about "
+                   f"{faceting:.2g} mm off a smooth surface through its vertices, which the "
+                   "cut follows: give a finer mesh, or the exact design (a .3dm NURBS surface "
+                   "or a built-in spec)")
+        elif distance is not None and result.plan.placed_on == "net":
             why = (f"the passes follow the net, which is up to "
                    f"{distance.vertex_max_mm:.4g} mm off the design: place them on "
                    "the design (--paths-on design) or give a larger --margin")

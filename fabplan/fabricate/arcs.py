@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -645,8 +645,15 @@ def arc_limit_checks(arcs: ArcStructure, *,
     -------
     list of one LimitCheck, ``max_arc_angle_deg`` over the arcs.
     """
-    return [limit_check("max_arc_angle_deg", np.degrees(arcs.angle), max_arc_angle_deg,
-                        parts="arcs")]
+    angle = np.degrees(arcs.angle)
+    check = limit_check("max_arc_angle_deg", angle, max_arc_angle_deg, parts="arcs")
+    if check.exceeded:
+        k = int(np.argmax(angle))
+        v, w = (int(i) for i in arcs.edges[k])
+        middle = ", ".join(f"{c:.4g}" for c in arcs.points(0.5)[k])
+        check = replace(check, where=f"edge {k} between vertices {v} and {w}, its middle at "
+                                     f"({middle})")
+    return [check]
 
 
 def write_arcs(arcs: ArcStructure, path: str | os.PathLike, *, units: str = "m",

@@ -95,6 +95,8 @@ class LimitCheck:
     over : how many exceed the bound.
     worst : the largest value measured (None when no part was measured).
     option : the option that changes the bound (``--max-twist``).
+    where : the worst part in words (``edge 12 between vertices 4 and 5, at (x, y, z)``),
+        or None.
     """
 
     limit: str
@@ -104,6 +106,7 @@ class LimitCheck:
     over: int
     worst: float | None
     option: str
+    where: str | None = None
 
     @property
     def exceeded(self) -> bool:
@@ -118,7 +121,7 @@ class LimitCheck:
         """The check as the command's JSON holds it (``limits.NAME``)."""
         return {"limit": self.bound, "unit": self.unit, "parts": self.parts,
                 "measured": self.measured, "over": self.over, "worst": self.worst,
-                "exceeded": self.exceeded, "option": self.option,
+                "worst_at": self.where, "exceeded": self.exceeded, "option": self.option,
                 "words": LIMITS[self.limit].words}
 
     def text(self) -> str:
@@ -138,8 +141,9 @@ class LimitCheck:
             worst = "" if self.worst is None else f" (up to {_figure(self.worst)} {self.unit})"
             return f"all {self.measured} {self.parts} within {words}{worst}"
         assert self.worst is not None
+        at = f" at {self.where}" if self.where else ""
         return (f"{self.over} of {self.measured} {self.parts} exceed {words}: up to "
-                f"{_figure(self.worst)} {self.unit}, {_figure(self.worst - self.bound)} "
+                f"{_figure(self.worst)} {self.unit}{at}, {_figure(self.worst - self.bound)} "
                 f"{self.unit} over ({self.option})")
 
 

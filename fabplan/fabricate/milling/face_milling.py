@@ -42,7 +42,7 @@ from ...net.geometry import (
     star_normals,
 )
 from ...net.mesh import QuadMesh
-from .mill_plan import MillPlan, MillSettings, MillTool, ToolPath
+from .mill_plan import MillPlan, MillSettings, MillTool, ToolPath, at_most
 
 __all__ = [
     "circle_tool_pose",
@@ -432,12 +432,15 @@ def check_passes_cover(mesh: QuadMesh, per_node: np.ndarray, lines: PassLines,
     if uncut.size == 0:
         return
     X = mesh.vertices * mm_per_unit
-    gap = np.linalg.norm(X[cross_neighbour[uncut]] - X[vertex[uncut], None], axis=2).max()
+    # the spacing to the neighbouring lines that carry passes (their vertices are nodes)
+    on_a_pass = np.isin(cross_neighbour[uncut], vertex)
+    gap = np.linalg.norm(X[cross_neighbour[uncut]] - X[vertex[uncut], None], axis=2)
+    gap = float(np.max(np.where(on_a_pass, gap, 0.0)))
     raise CannotMakeError(
         f"{mesh.name}: passes along every line of family {family} leave bands uncut between "
         f"them at {describe_region(mesh, vertex[uncut])}: the lines lie up to {gap:.4g} mm "
         f"apart, farther than a pass of tool {tool.spec()} cuts across; mill a net whose "
-        "lines lie closer (a layout at a smaller --size), or use a wider tool")
+        "lines lie closer (a layout at a smaller --panel-size), or use a wider tool")
 
 
 def walk_across_lines(vertex: np.ndarray, cross_neighbour: np.ndarray, node_of_vertex: np.ndarray,
@@ -741,7 +744,7 @@ def _safety_radii(mesh: QuadMesh, nodes: _Nodes, tool: MillTool, margin: float) 
             f"{mesh.name}: tool {tool.spec()} is larger than the safety spheres allow at "
             f"{describe_region(mesh, nodes.vertex[too_small])}: the safety "
             f"sphere radius (Meusnier radius {np.min(nodes.radius[too_small]):.4g} mm minus margin "
-            f"{margin:.4g} mm) must exceed the cutter radius; use D <= {max(largest, 0):.4g} mm")
+            f"{margin:.4g} mm) must exceed the cutter radius; use D <= {at_most(largest)} mm")
     return safety
 
 
@@ -811,7 +814,7 @@ def plan_face_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *,
         notes.append(f"the net is not an S-net within 0.001 mm: a star's vertices lie up to "
                      f"{residual:.3g} mm off their least-squares sphere (optimize it first)")
     if predicted[stride - 1] > settings.scallop_mm:
-        notes.append(f"even passes along every line leave a predicted scallop of "
+        notes.append(f"even with passes along every line the predicted scallop is "
                      f"{predicted[0]:.4g} mm, above the limit {settings.scallop_mm:g} mm")
     passes = []
     for run in lines.pass_runs(stride):

@@ -60,7 +60,7 @@ from .face_milling import (
     trace_passes,
     walk_across_lines,
 )
-from .mill_plan import MillPlan, MillSettings, MillTool
+from .mill_plan import MillPlan, MillSettings, MillTool, at_most, every_kth
 
 __all__ = ["ConePlan", "cone_tool_pose", "plan_flank_milling", "default_cone_margin_mm",
            "safety_radii"]
@@ -165,8 +165,8 @@ class ConePlan(MillPlan):
 
     def summary(self) -> str:
         r = self.record()
-        return (f"{r['passes']} flank passes along family {r['along']} (every {self.stride}. of "
-                f"{self.lines} lines), {r['cutter_locations']} cutter locations, tilt "
+        return (f"{r['passes']} flank passes along family {r['along']} "
+                f"({every_kth(self.stride, self.lines)}), {r['cutter_locations']} cutter locations, tilt "
                 f"{r['tilt_deg']['min']:.2f} deg, margin {self.margin_mm:.4g} mm, contact "
                 f"diameter {r['contact_diameter_mm']['min']:.4g} .. "
                 f"{r['contact_diameter_mm']['max']:.4g} mm, predicted scallop "
@@ -386,8 +386,8 @@ def _check_cone(mesh: QuadMesh, nodes: _ConeNodes, field, margin: float, tool: M
         # the flank's circles grow towards its wide end: a shorter flank (or a narrower
         # angle) is what fits; a flank ahead of the contact never needs more than its end
         longest = (widest - tool.radius_mm) / np.tan(a)
-        fix = (f"use length <= {longest:.4g} mm (a flank ending at a diameter <= "
-               f"{2 * widest:.4g} mm)" if longest > 0 else
+        fix = (f"use length <= {at_most(longest)} mm (a flank ending at a diameter <= "
+               f"{at_most(2 * widest)} mm)" if longest > 0 else
                f"use a tip narrower than {2 * widest:.4g} mm")
         return InputError(
             f"{mesh.name}: tool {tool.spec()} is too long (too wide) for the safety spheres at "
@@ -564,7 +564,7 @@ def plan_flank_milling(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *
         notes.append(f"{left_out} of {len(mesh.stars)} stars, those next to the boundary, carry "
                      "no pass: their rulings rest on boundary normals a single sphere holds")
     if predicted[stride - 1] > settings.scallop_mm:
-        notes.append(f"even passes along every line leave a predicted scallop of "
+        notes.append(f"even with passes along every line the predicted scallop is "
                      f"{predicted[0]:.4g} mm, above the limit {settings.scallop_mm:g} mm")
     tilt = 90.0 - tool.angle_deg
     widest = tool.end_radius_mm / np.cos(a)   # splines between nodes must not pass it

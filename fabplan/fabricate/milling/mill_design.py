@@ -18,7 +18,8 @@ import numpy as np
 
 from .mill_simulation import HeightTarget
 
-__all__ = ["design_heights", "design_frames", "NetDistance", "net_distance_from_design"]
+__all__ = ["design_heights", "design_frames", "NetDistance", "net_distance_from_design",
+           "mesh_faceting_mm"]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -184,6 +185,42 @@ def design_heights(design: Any, target: HeightTarget, mm_per_unit: float, *,
                                               target.y[found // nx], target, mm_per_unit)
             z[found] = np.where(converged, exact, z[found])
     return z.reshape(target.z.shape)
+
+
+def mesh_faceting_mm(vertices: np.ndarray, triangles: np.ndarray, mm_per_unit: float) -> float:
+    """How far a triangle mesh's flat faces stand off a smooth surface through its
+    vertices, about (mm): over its inner edges, the curvature ``kappa`` the turn of the
+    two triangles' normals makes over the distance of their centroids, and the sagitta
+    ``kappa L^2 / 6`` of the longer edges ``L`` of an equilateral triangle on it; the 99th
+    percentile, which leaves out a few creases meant as such.
+
+    Examples
+    --------
+    >>> from fabplan.design.parametric import paraboloid
+    >>> mesh = paraboloid(radius_x=300.0, radius_y=300.0, width=50.0, depth=50.0).triangulate(60)
+    >>> X, T = mesh.vertices, mesh.triangles
+    >>> L = np.linalg.norm(X[T[:, 1]] - X[T[:, 0]], axis=1).mean()
+    >>> ratio = mesh_faceting_mm(X, T, 1.0) / (L * L / (8 * 300))
+    >>> bool(0.5 < ratio < 3)
+    True
+    """
+    X = np.asarray(vertices, dtype=np.float64) * mm_per_unit
+    T = np.asarray(triangles)
+    normal = np.cross(X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    centroid = X[T].mean(axis=1)
+    edges = np.sort(np.r_[T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]], axis=1)
+    face = np.tile(np.arange(len(T)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    edges, face = edges[order], face[order]
+    shared = np.flatnonzero(np.all(edges[1:] == edges[:-1], axis=1))
+    if shared.size == 0:
+        return 0.0
+    a, b = face[shared], face[shared + 1]
+    turn = np.arccos(np.clip(np.abs(np.sum(normal[a] * normal[b], axis=1)), 0.0, 1.0))
+    kappa = turn / np.maximum(np.linalg.norm(centroid[a] - centroid[b], axis=1), 1e-300)
+    length = np.linalg.norm(X[edges[shared, 1]] - X[edges[shared, 0]], axis=1)
+    return float(np.percentile(kappa * length * length / 6, 99))
 
 
 def design_frames(design: Any, points_mm: np.ndarray, mm_per_unit: float

@@ -19,6 +19,8 @@ __all__ = [
     "ToolPath",
     "MillPlan",
     "parse_tool",
+    "every_kth",
+    "at_most",
 ]
 
 
@@ -119,7 +121,8 @@ cone:angle=DEG,length=MM[,tip=MM]
             number = float(value)
         except ValueError:
             unit = "degrees" if key == "angle" else "mm"
-            raise InputError(f"--tool {spec}: {key} must be a number of {unit}, got {value!r}") from None
+            said = item.partition("=")[0].strip()     # as the user wrote it (D, not d)
+            raise InputError(f"--tool {spec}: {said} must be a number of {unit}, got {value!r}") from None
         if not (np.isfinite(number) and number >= 0):
             raise InputError(f"--tool {spec}: {key} must be a finite value >= 0, got {value}")
         values[key] = number
@@ -387,8 +390,37 @@ class MillPlan:
 
     def summary(self) -> str:
         r = self.record()
-        return (f"{r['passes']} passes along family {r['along']} (every {self.stride}. of "
-                f"{self.lines} lines), {r['cutter_locations']} cutter locations, tilt "
+        return (f"{r['passes']} passes along family {r['along']} "
+                f"({every_kth(self.stride, self.lines)}), {r['cutter_locations']} cutter locations, tilt "
                 f"{r['tilt_deg']['min']:.2f} .. {r['tilt_deg']['max']:.2f} deg, margin "
                 f"{self.margin_mm:.4g} mm, predicted scallop {self.predicted_max_scallop_mm:.4g} "
                 f"mm, path {r['path_length_mm']:.0f} mm, planned in {self.seconds:.2f} s")
+
+
+def every_kth(stride: int, lines: int) -> str:
+    """Which lines the passes follow, in words.
+
+    Examples
+    --------
+    >>> every_kth(1, 20), every_kth(2, 19), every_kth(3, 30), every_kth(11, 40)
+    ('every one of 20 lines', 'every 2nd of 19 lines', 'every 3rd of 30 lines', 'every 11th of 40 lines')
+    """
+    if stride == 1:
+        return f"every one of {lines} lines"
+    suffix = "th" if 10 <= stride % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(stride % 10, "th")
+    return f"every {stride}{suffix} of {lines} lines"
+
+
+def at_most(value: float) -> str:
+    """`value` to four significant digits, rounded down: a bound the user can give back.
+
+    Examples
+    --------
+    >>> at_most(696.58), at_most(0.012349), at_most(0.0)
+    ('696.5', '0.01234', '0')
+    """
+    if not value > 0:
+        return "0"
+    unit = 10.0 ** (np.floor(np.log10(value)) - 3)
+    return f"{np.floor(value / unit * (1 + 1e-12)) * unit:.4g}"
+

@@ -25,11 +25,11 @@ from ...io.records import json_text
 from ...io.rhino_write import Rhino3dmWriter
 from ...net.mesh import QuadMesh
 from ...report import figures, html
-from ..limits import LimitCheck, limit_check
+from ..limits import LimitCheck, limit_check, limit_row_text
 from .face_milling import plan_face_milling
 from .flank_milling import plan_flank_milling
-from .mill_design import NetDistance, design_heights, net_distance_from_design
-from .mill_plan import MillPlan, MillSettings, MillTool
+from .mill_design import NetDistance, design_heights, mesh_faceting_mm, net_distance_from_design
+from .mill_plan import MillPlan, MillSettings, MillTool, every_kth
 from .mill_simulation import (
     Cutter,
     HeightTarget,
@@ -65,6 +65,9 @@ class MillResult:
     design : name of the design measured against (None: the net's surface).
     against_net : with a design, the same adaptive cut measured against the net's surface.
     net_distance : with a design, the net's distance from it.
+    design_faceting_mm : with a design given as a triangle mesh, about how far its flat
+        faces stand off a smooth surface through its vertices (`mesh_faceting_mm`); None
+        for an exact design or none.
     """
 
     plan: MillPlan
@@ -76,6 +79,7 @@ class MillResult:
     design: str | None = None
     against_net: SimulationResult | None = None
     net_distance: NetDistance | None = None
+    design_faceting_mm: float | None = None
 
     @property
     def measured_against(self) -> str:
@@ -114,7 +118,7 @@ class MillResult:
             "end_trim_mm": settings.end_trim_mm}
         record["target"] = {"surface": "net" if self.design is None else "design",
                             "design": self.design, "measured_against": self.measured_against,
-                            "units": "mm"}
+                            "design_faceting_mm": self.design_faceting_mm, "units": "mm"}
         if self.net_distance is not None:
             record["net_from_design"] = self.net_distance.to_json()
         if sim is not None:
@@ -248,10 +252,13 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
                 "faces cover, seen from the mill direction: the rest is not measured (is it the "
                 "net's design, in the net's units?)")
     seconds["total"] = time.perf_counter() - started
+    faceting = None
+    if design is not None and not getattr(design, "exact", False):
+        faceting = mesh_faceting_mm(design.vertices, design.triangles, scale)
     return MillResult(plan=plan, target=target, simulation=adaptive, conventional=ball,
                       simulation_settings=sim_settings, seconds=seconds,
                       design=None if design is None else design_label(design),
-                      against_net=against_net, net_distance=distance)
+                      against_net=against_net, net_distance=distance, design_faceting_mm=faceting)
 
 
 def _net_target(mesh: QuadMesh, up: np.ndarray, scale: float, step_mm: float) -> HeightTarget:
@@ -341,7 +348,7 @@ def mill_report_html(result: MillResult) -> str:
     cone = result.plan.tool.kind == "cone"
     spheres = "mannheim_radius_mm" if cone else "meusnier_radius_mm"
     rows = [("tool", r["tool"]["spec"]), ("passes", f"{r['passes']} along family {r['along']} "
-                                                    f"(every {r['stride']}. of {r['lines']} lines)"),
+                                                    f"({every_kth(r['stride'], r['lines'])})"),
             ("margin [mm]", f"{r['margin_mm']:.4g} ({r['margin_rule']})"),
             ("tilt [deg]", f"{r['tilt_deg']['min']:.3f} .. {r['tilt_deg']['max']:.3f}"),
             (f"{'Mannheim' if cone else 'Meusnier'} radius [mm]",
@@ -377,6 +384,8 @@ def mill_report_html(result: MillResult) -> str:
         rows += [("the same cut against the net's surface: scallop / gouge [mm]",
                   f"{r['against_net']['max_scallop_mm']:.4g} / "
                   f"{r['against_net']['max_gouge_mm']:.4g}")]
+    rows += [(f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})", limit_row_text(c))
+             for c in r["limits"].values()]
     parts.append(html.html_section("Summary", html.html_table(["quantity", "value"], rows)))
     if "comparison" in r:
         c = r["comparison"]

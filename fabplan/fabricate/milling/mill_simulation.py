@@ -586,26 +586,35 @@ def _strip_masks(target: HeightTarget, contacts: list, end_trim_mm: float) -> li
     either path is one of its ends: beyond the end of the shorter pass only one pass
     cuts, which leaves no scallop between passes but an unfinished corner; cells whose
     closest path point lies within `end_trim_mm` of an end, where the cutter starts and
-    stops, are left out too.
+    stops, are left out too. Only the cells in a strip's bounding box are tested (a
+    strip is a narrow band: testing every cell of a large part against every strip took
+    minutes, in calls that hold the interpreter, so progress stalled).
     """
     from matplotlib.path import Path as PolygonPath
     from scipy.spatial import cKDTree
 
-    gx, gy = np.meshgrid(target.x, target.y)
-    points = np.column_stack([gx.ravel(), gy.ravel()])
+    ny, nx = target.z.shape
     dense = [_densify(c, np.tile([0.0, 0.0, 1.0], (len(c), 1)), target.step)[0][:, :2]
              for c in contacts]
-    inner = []
-    for path in dense:
-        _, nearest = cKDTree(path).query(points)
-        trim = int(np.ceil(end_trim_mm / target.step))
-        inner.append((nearest > trim) & (nearest < len(path) - 1 - trim))
+    trees = [cKDTree(path) for path in dense]
+    trim = int(np.ceil(end_trim_mm / target.step))
     masks = []
     for i, (a, b) in enumerate(zip(contacts[:-1], contacts[1:], strict=False)):
         same_way = np.dot(a[-1, :2] - a[0, :2], b[-1, :2] - b[0, :2]) > 0
         ring = np.vstack([a[:, :2], (b[::-1] if same_way else b)[:, :2]])
-        inside = PolygonPath(ring).contains_points(points) & inner[i] & inner[i + 1]
-        masks.append(inside.reshape(gx.shape))
+        lo = np.searchsorted(target.x, ring[:, 0].min()), np.searchsorted(target.y, ring[:, 1].min())
+        hi = (np.searchsorted(target.x, ring[:, 0].max(), side="right"),
+              np.searchsorted(target.y, ring[:, 1].max(), side="right"))
+        gx, gy = np.meshgrid(target.x[lo[0]:hi[0]], target.y[lo[1]:hi[1]])
+        points = np.column_stack([gx.ravel(), gy.ravel()])
+        inside = PolygonPath(ring).contains_points(points)
+        for k in (i, i + 1):
+            _, nearest = trees[k].query(points[inside])
+            keep = (nearest > trim) & (nearest < len(dense[k]) - 1 - trim)
+            inside[np.flatnonzero(inside)[~keep]] = False
+        mask = np.zeros((ny, nx), bool)
+        mask[lo[1]:hi[1], lo[0]:hi[0]] = inside.reshape(gx.shape)
+        masks.append(mask)
     return masks
 
 
