@@ -192,6 +192,23 @@ def test_optimize_without_a_reference_checks_no_deviation(tmp_path):
     assert "limits" not in json.loads(out.with_suffix(".json").read_text())["properties"]
 
 
+@pytest.mark.parametrize("given, code", [(None, 3), ("0.06", 0)])
+def test_measure_against_a_reference_holds_the_deviation_limit(tmp_path, capsys, given, code):
+    """`fabplan measure --reference` holds the net to the same limit as optimize: cmc1
+    against a copy 50 mm higher is past the default 20 mm (exit 3, counted in its record),
+    and within a given 60 mm."""
+    cmc1 = fabplan.read_obj(CMC1)
+    QuadMesh(cmc1.vertices + [0.0, 0.0, 0.05], cmc1.faces).write_obj(tmp_path / "shifted.obj")
+    out = tmp_path / "m.json"
+    argv = ["measure", str(CMC1), "--reference", str(tmp_path / "shifted.obj"), "-o", str(out)]
+    assert main(argv + ([] if given is None else ["--max-deviation", given])) == code
+    check = json.loads(out.read_text())["limits"]["max_deviation_mm"]
+    assert check["limit"] == (20.0 if given is None else 60.0)
+    assert check["worst"] == pytest.approx(50.0, abs=0.5) and check["exceeded"] == (code == 3)
+    err = capsys.readouterr().err
+    assert ("exceed the largest deviation from the design" in err) == (code == 3)
+
+
 # ---------------------------------------------------------------- deviation: molds
 @pytest.fixture(scope="module")
 def hypar_net(tmp_path_factory) -> Path:

@@ -703,3 +703,28 @@ def test_a_gouge_within_a_coarse_design_meshs_faceting_is_said_to_be_it(tmp_path
     assert "the design is a triangle mesh whose flat faces stand up to about" in err
     # sagitta of a 20 mm chord on a sphere of radius 300: 0.17 mm; the estimate is near it
     assert 0.1 < faceting < 0.5
+
+
+def test_mill_measures_against_the_reference_optimize_held_the_net_to(tmp_path):
+    """`fabplan optimize --reference` names the reference in the net's record, and `fabplan
+    mill` on its result measures the cut against it, not against the net's own surface."""
+    net = write_net(bowl_grid(), tmp_path / "bowl.obj")
+    u = np.linspace(-60.0, 60.0, 25)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    V = np.stack([x, y, 300.0 - np.sqrt(300.0**2 - x**2 - y**2)], axis=-1).reshape(-1, 3)
+    k = (np.arange(24)[:, None] * 25 + np.arange(24)[None, :]).ravel()
+    T = np.r_[np.c_[k, k + 25, k + 26], np.c_[k, k + 26, k + 1]]
+    design = tmp_path / "cap.obj"
+    design.write_text("".join(f"v {a:.9f} {b:.9f} {c:.9f}\n" for a, b, c in V)
+                      + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in T))
+    optimized = tmp_path / "opt.obj"
+    assert main(["optimize", str(net), "--net", "snet", "--reference", str(design), "--units",
+                 "mm", "-q", "-o", str(optimized)]) == 0
+    assert json.loads(optimized.with_suffix(".json").read_text())["properties"]["reference"] \
+        == str(design.resolve())
+    out = tmp_path / "out"
+    assert main(["mill", str(optimized), "--tool", "face:D=40", "--no-simulation", "--scallop",
+                 "0.05", "-q", "-o", str(out)]) == 0
+    record = json.loads((out / "mill.json").read_text())
+    assert record["target"]["surface"] == "design" and record["target"]["design"] == str(design.resolve())
+    assert record["paths"]["placed_on"] == "design"

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
+from ..fabricate.limits import limits_record
 from ..io.output import output_argument
 from ..io.records import write_json
 from ..net.buildable import BuildLimits
@@ -16,6 +17,7 @@ from ..net.validate import load_net
 from ..solve.optimize import check_limits
 from .arguments import add_max_line_turn, add_number, add_units
 from .files import check_outputs, file_inputs, net_inputs
+from .limits import deviation_check, limits_exit
 from .records import check_units, net_units, reference_surface
 from .registry import Command, register
 from .running import EXIT_NOT_CONVERGED
@@ -38,6 +40,11 @@ def run(args: argparse.Namespace) -> int:
         max_line_turn_deg=args.max_line_turn, max_deviation=args.max_deviation))
     record["file"] = str(args.net)
     record["units"] = units
+    limits = []
+    if reference is not None:      # the same limit as optimize's, 20 mm unless given
+        limits = [deviation_check(reference.distances(mesh.vertices), units=units,
+                                  max_deviation=args.max_deviation, option="--max-deviation")]
+        record["limits"] = limits_record(limits)
     write_json(out, record)           # the file first: the terminal may go away
     print(format_summary(record))
     print(f"wrote {out}")
@@ -49,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
               f"{buildable_summary(build, record.get('folds'))}; counted in {out} "
               "(buildable)", file=sys.stderr)
         return EXIT_NOT_CONVERGED
-    return 0
+    return limits_exit(limits, out)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

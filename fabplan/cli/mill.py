@@ -107,7 +107,8 @@ def _warn_gouge(result: Any, out: Path) -> bool:
 
 def _mill_design(args: argparse.Namespace, units: str) -> Any:
     """The design `fabplan mill` measures against: ``--design``, else the design the
-    net's record (``NET.json``, a layout's) names, else None (the net's own surface).
+    net's record (``NET.json``) names (a layout's design, an optimize's reference), else
+    None (the net's own surface).
 
     A design its record names that cannot be loaded again (a file moved) is said in a
     warning, and the net's surface is measured instead. A design whose file states other
@@ -118,8 +119,11 @@ def _mill_design(args: argparse.Namespace, units: str) -> Any:
     if args.design is not None:
         design = load_design(args.design, triangles=args.triangles)
     else:
-        layout = net_properties(args.net).get("layout")
+        properties = net_properties(args.net)
+        layout = properties.get("layout")
         spec = (layout.get("design_spec") or layout.get("design")) if isinstance(layout, dict) else None
+        if not (isinstance(spec, str) and spec):     # an optimize's --reference
+            layout, spec = {}, properties.get("reference")
         if isinstance(spec, str) and spec:
             assert isinstance(layout, dict)
             resolution = layout.get("design_resolution")
@@ -172,8 +176,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the design the net was made for, which the cut is measured against "
                         "(the net's distance from it reported apart): a triangle mesh, a "
                         "Rhino file or a built-in surface spec as for `fabplan layout` "
-                        "(default: the design NET.json names, for a layout's net; else the "
-                        "net's own surface)")
+                        "(default: the design NET.json names, a layout's design or an "
+                        "optimize's --reference; else the net's own surface)")
     add_number(p, "--triangles", default=40000, metavar="N",
                help="triangles of a built-in or NURBS --design's triangulation, where its "
                "exact surface is searched from (default 40000)")

@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
                           progress=report)
     result.properties["units"] = units
     limits = _deviation_limits(mesh, result, reference, units, args.max_deviation)
+    _record_reference(result, args.reference)
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
             html_file(args, out) as page, \
@@ -132,6 +133,16 @@ def _deviation_limits(mesh, result, reference, units: str, max_deviation: float 
                               max_deviation=max_deviation, option="--max-deviation")]
     result.properties["limits"] = limits_record(limits)
     return limits
+
+
+def _record_reference(result, spec: str | None) -> None:
+    """Name the reference in the net's record (``properties.reference``: a file's absolute
+    path, else the built-in spec), so that the commands after (`fabplan mill`) measure
+    against the design the net was held to."""
+    if spec is None:
+        return
+    path = Path(spec)
+    result.properties["reference"] = str(path.resolve()) if path.is_file() else spec
 
 
 def _note_the_move(mesh, result, units: str) -> None:
