@@ -187,7 +187,11 @@ def test_planar_stars_have_zero_curvature_and_infinite_radius(slope):
     assert star_planarity(X, S).max() < 1e-13
     assert face_planarity(X, mesh.quads).max() < 1e-13
     k1, k2 = principal_curvatures(X, S)
-    assert np.isnan(k1).all() and np.isnan(k2).all()
+    # the shape operator of the normals' differences where every neighbour has a normal
+    # (the Gauss map formula divides zero by zero on a plane), NaN elsewhere
+    inner = np.isfinite(k1)
+    assert inner.sum() == 2 and np.isfinite(k2[inner]).all()
+    assert np.abs(k1[inner]).max() < 1e-12 and np.abs(k2[inner]).max() < 1e-12
 
 
 def test_planar_star_centre_is_nan():
@@ -347,3 +351,27 @@ def test_normal_curvatures_of_contact_elements_match_the_quadric():
     stars = np.repeat(grid.stars[centre:centre + 1], len(d), axis=0)
     k = normal_curvatures(grid.vertices, normals, stars, d)
     assert np.allclose(k, np.cos(angles) ** 2 / 50 - np.sin(angles) ** 2 / 80, rtol=1e-3, atol=1e-7)
+
+
+def test_principal_curvatures_where_the_lines_are_asymptotic():
+    """On a hyperbolic paraboloid gridded along its rulings the lines' normal curvature is
+    zero and the Gauss map formula divides zero by zero; the shape operator of the normals'
+    differences gives the principal curvatures instead: mean and Gaussian curvature as
+    the surface's, to 1e-5 and 1 % (before: NaN, and on a roof laid out near its asymptotic
+    directions 7 1/m where the largest is 0.06)."""
+    import fabplan.net.geometry as geometry
+
+    u = np.linspace(-4.0, 4.0, 17)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    mesh = QuadMesh.grid(np.stack([x, y, x * y / 16], axis=-1))
+    X, stars = mesh.vertices, mesh.stars
+    k1, k2 = geometry.principal_curvatures(X, stars)
+    px, py = X[stars[:, 0], 0], X[stars[:, 0], 1]
+    fx, fy = py / 16, px / 16
+    W = 1 + fx**2 + fy**2
+    H = -(2 * fx * fy / 16) / (2 * W**1.5)
+    K = -(1 / 16) ** 2 / W**2
+    inner = np.isfinite(k1)
+    assert inner.sum() == 13 * 13      # every star whose neighbours are star centres
+    assert np.abs((k1 + k2) / 2 - H)[inner].max() < 1e-5
+    assert (np.abs(k1 * k2 - K) / np.abs(K))[inner].max() < 0.01
