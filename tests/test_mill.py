@@ -728,3 +728,20 @@ def test_mill_measures_against_the_reference_optimize_held_the_net_to(tmp_path):
     record = json.loads((out / "mill.json").read_text())
     assert record["target"]["surface"] == "design" and record["target"]["design"] == str(design.resolve())
     assert record["paths"]["placed_on"] == "design"
+
+
+@pytest.mark.parametrize("step, coarser", [(0.5, "--sim-step 1 takes 0.25 of that"),
+                                           (10.0, None)])
+def test_a_simulation_of_minutes_is_announced(capsys, step, coarser):
+    """A 2 m bowl: a million cells and more at 0.5 mm, about 7 minutes; the note names
+    a coarser step where there is one within the option's range."""
+    from fabplan.cli.mill import _note_simulation_time
+
+    mesh = bowl_grid(radius=3000.0, half=1000.0, step=100.0)
+    _note_simulation_time(mesh, 1.0, step, "face")
+    err = capsys.readouterr().err
+    if step == 10.0:           # 40,000 cells: seconds, nothing said
+        assert err == ""
+        return
+    assert err.startswith("fabplan: note: the simulation of about") and "minutes" in err
+    assert coarser in err and err.strip().endswith("--no-simulation none")

@@ -11,6 +11,7 @@ from typing import Any
 
 from ..errors import InputError
 from ..io.output import check_output_folder, output_argument
+from ..io.parameters import option_parameter
 from ..io.units import MM_PER_UNIT
 from ..net.validate import load_net
 from ..report.html import counted
@@ -75,9 +76,13 @@ def _note_simulation_time(mesh: Any, mm_per_unit: float, step_mm: float, kind: s
     cells = simulation_cells(mesh.vertices * mm_per_unit, mesh.triangles(), step_mm)
     minutes = SIMULATION_MEMORY.seconds_per_unit * cells * (1 if kind == "face" else 0.5) / 60
     if minutes >= 2:
+        coarsest = option_parameter("mill", "--sim-step").high or step_mm
+        coarser = min(2 * step_mm, coarsest)
+        faster = (f"--sim-step {coarser:g} takes {(step_mm / coarser) ** 2:.2g} of that, "
+                  if coarser > step_mm else "")
         print(f"fabplan: note: the simulation of about {cells:,.0f} cells at --sim-step "
-              f"{step_mm:g} will take about {minutes:.0f} minutes; --sim-step {2 * step_mm:g} "
-              "takes a quarter of that, --no-simulation none", file=sys.stderr)
+              f"{step_mm:g} will take about {minutes:.0f} minutes; {faster}--no-simulation "
+              "none", file=sys.stderr)
 
 
 def _warn_gouge(result: Any, out: Path) -> bool:
