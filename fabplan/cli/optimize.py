@@ -141,8 +141,12 @@ def _record_reference(result, spec: str | None) -> None:
     against the design the net was held to."""
     if spec is None:
         return
-    path = Path(spec)
-    result.properties["reference"] = str(path.resolve()) if path.is_file() else spec
+    file = spec.split("#")[0]          # a Rhino source keeps its #object=... tail
+    try:
+        found = Path(file).is_file()
+    except OSError:                    # a built-in spec longer than a file name may be
+        found = False
+    result.properties["reference"] = str(Path(file).resolve()) + spec[len(file):] if found else spec
 
 
 def _note_the_move(mesh, result, units: str) -> None:

@@ -450,7 +450,7 @@ def _relax_planes(X: np.ndarray, edges: np.ndarray, normal: np.ndarray, held_arc
     axis[one] = one_tangent
     # projection onto the plane normal to the one arc's tangent (identity without one)
     project = np.eye(3) - axis[moving, :, None] * axis[moving, None, :]
-    pin = axis[moving, :, None] * axis[moving, None, :]
+    pin = axis[moving, :, None] * axis[moving, None, :]     # weighted by the arcs below
     for _ in range(rounds):
         t = _mean_plane_circles(X, v, w, normal)
         t_w = _mirror(t, u)
@@ -460,7 +460,9 @@ def _relax_planes(X: np.ndarray, edges: np.ndarray, normal: np.ndarray, held_arc
         if len(one):
             np.add.at(scatter, one, one_tangent[:, :, None] * one_tangent[:, None, :])
         current = normal[moving]
-        M = project @ scatter[moving] @ project + pin
+        # the held arc's tangent pinned above every in-plane eigenvalue: never the normal
+        weight = 1.0 + np.trace(scatter[moving], axis1=1, axis2=2)
+        M = project @ scatter[moving] @ project + weight[:, None, None] * pin
         fitted = np.linalg.eigh(M)[1][:, :, 0]
         fitted *= np.where(np.sum(fitted * current, axis=1) < 0, -1.0, 1.0)[:, None]
         turn = np.linalg.norm(fitted - current, axis=1).max()
@@ -648,7 +650,7 @@ def arc_limit_checks(arcs: ArcStructure, *,
     angle = np.degrees(arcs.angle)
     check = limit_check("max_arc_angle_deg", angle, max_arc_angle_deg, parts="arcs")
     if check.exceeded:
-        k = int(np.argmax(angle))
+        k = int(np.nanargmax(angle))
         v, w = (int(i) for i in arcs.edges[k])
         middle = ", ".join(f"{c:.4g}" for c in arcs.points(0.5)[k])
         check = replace(check, where=f"edge {k} between vertices {v} and {w}, its middle at "

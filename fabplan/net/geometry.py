@@ -236,7 +236,7 @@ def principal_curvatures(X: np.ndarray, stars: np.ndarray,
     flat = curvature == 0
     k1[flat] = np.nan
     k2[flat] = np.nan
-    lost = ~(balance >= _GAUSS_MAP_BALANCE)
+    lost = flat | ~(balance >= _GAUSS_MAP_BALANCE)
     if lost.any():
         e1, e2 = _unit(t1 + t2), _unit(t1 - t2)
         k1[lost], k2[lost] = _shape_operator_curvatures(X, N, stars[lost], e1[lost], e2[lost])
@@ -267,8 +267,10 @@ def _shape_operator_curvatures(X: np.ndarray, N: np.ndarray, stars: np.ndarray,
     k1, k2 = np.full(len(stars), np.nan), np.full(len(stars), np.nan)
     ok = np.isfinite(A).all(axis=(1, 2)) & np.isfinite(B).all(axis=1)
     if ok.any():
-        solution = np.linalg.solve(np.einsum("sij,sik->sjk", A[ok], A[ok]),
-                                   np.einsum("sij,si->sj", A[ok], B[ok])[:, :, None])[:, :, 0]
+        # least squares through the pseudo-inverse: a star whose chords run in one line
+        # has no unique operator (the minimum-norm one), where a solve would raise
+        solution = np.einsum("sjk,sk->sj", np.linalg.pinv(np.einsum("sij,sik->sjk", A[ok], A[ok])),
+                             np.einsum("sij,si->sj", A[ok], B[ok]))
         k1[ok], k2[ok] = solution[:, 0], solution[:, 2]
     return k1, k2
 

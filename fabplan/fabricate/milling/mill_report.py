@@ -100,11 +100,17 @@ class MillResult:
     def scallop_check(self) -> LimitCheck:
         """The scallop limit (``--scallop``): the simulated scallop of every strip between
         neighbouring passes, else the predicted scallop beside every pass node."""
-        if self.simulation is not None:
-            values, parts = self.simulation.scallop_by_strip_mm, "strips between passes"
-        else:
-            values, parts = self.plan.scallop_by_node_mm, "pass nodes (predicted)"
-        return limit_check("max_scallop_mm", values, self.plan.settings.scallop_mm, parts=parts)
+        bound = self.plan.settings.scallop_mm
+        sim = self.simulation
+        if sim is not None and self.against_net is not None and self.plan.placed_on == "net":
+            sim = self.against_net     # passes on the net: its offset from the design is no scallop
+        if sim is not None:
+            check = limit_check("max_scallop_mm", sim.scallop_by_strip_mm, bound,
+                                parts="strips between passes")
+            if check.measured:
+                return check
+        return limit_check("max_scallop_mm", self.plan.scallop_by_node_mm, bound,
+                           parts="pass nodes (predicted)")
 
     def record(self) -> dict:
         """The contents of ``mill.json``."""
