@@ -259,23 +259,19 @@ def _planes_through(normal: np.ndarray, source: np.ndarray, vertex: np.ndarray,
     source[vertices] = level
 
 
-def _circles_tangent_to_planes(mesh: QuadMesh, v: np.ndarray, w: np.ndarray, normal: np.ndarray,
-                               *, regular: bool) -> np.ndarray:
-    """Unit tangent at ``v`` of the circle through ``v`` and ``w`` tangent to both planes.
+def _circles_tangent_to_planes(mesh: QuadMesh, v: np.ndarray, w: np.ndarray,
+                               normal: np.ndarray) -> np.ndarray:
+    """Unit tangent at ``v`` of the circle through the regular vertices ``v`` and ``w``
+    tangent to both planes: where their spheres meet.
 
     Where the planes are mirror images (two points of one sphere or plane), every circle
-    through both that touches one touches the other: between regular vertices the
-    parameter line's circle through the vertex beyond ``w`` is taken (a circle of the
-    common sphere; a straight line on a plane), else the one in the plane of the chord
-    and the normal at ``v``.
+    through both that touches one touches the other: the parameter line's circle through
+    the vertex beyond ``w`` is taken (a circle of the common sphere; a straight line on a
+    plane).
     """
-    X = mesh.vertices
-    t, sine = _tangent_plane_circles(X, v, w, normal)
+    t, sine = _tangent_plane_circles(mesh.vertices, v, w, normal)
     mirrored = sine < MIRROR_TOLERANCE
-    if regular:
-        t[mirrored] = _line_circle_tangents(mesh, v[mirrored], w[mirrored])
-    else:
-        t[mirrored] = _chord_in_plane(X, v[mirrored], w[mirrored], normal)
+    t[mirrored] = _line_circle_tangents(mesh, v[mirrored], w[mirrored])
     return t
 
 
@@ -328,7 +324,7 @@ def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
 
     # 1. both ends regular: the circle where the two spheres meet
     both = regular[e[:, 0]] & regular[e[:, 1]]
-    tangent[both] = _circles_tangent_to_planes(mesh, e[both, 0], e[both, 1], normal, regular=True)
+    tangent[both] = _circles_tangent_to_planes(mesh, e[both, 0], e[both, 1], normal)
 
     # 2. one end regular: the parameter line's circle through the edge, on that sphere
     one = regular[e[:, 0]] ^ regular[e[:, 1]]
@@ -373,8 +369,7 @@ def _edge_tangents(mesh: QuadMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
         v, w, k = v_all[take], w_all[take], k_all[take]
         u = _unit(X[v] - X[w])
         at_v = _mirror(_chord_in_plane(X, w, v, normal), u)
-        tangent[k] = np.where((e[k, 0] == v)[:, None], at_v, _mirror(at_v, u))
-        decided[k] = True
+        decided[k] = True      # its arc is laid with the others in step 4
         first = np.searchsorted(v, v) == np.arange(len(v))
         second = np.r_[~first[1:], False]     # the first of a pair whose second follows
         suggested = _mirror(normal[w], u)
@@ -449,20 +444,23 @@ def _relax_planes(X: np.ndarray, edges: np.ndarray, normal: np.ndarray, held_arc
     axis = np.zeros((n, 3))
     axis[one] = one_tangent
     # projection onto the plane normal to the one arc's tangent (identity without one)
-    project = np.eye(3) - axis[moving, :, None] * axis[moving, None, :]
-    pin = axis[moving, :, None] * axis[moving, None, :]     # weighted by the arcs below
+    pin = axis[moving, :, None] * axis[moving, None, :]
+    project = np.eye(3) - pin
+    slot = np.full(n, -1)
+    slot[moving] = np.arange(len(moving))
+    at_v, at_w = slot[v] >= 0, slot[w] >= 0       # the edge ends whose planes turn
+    # the held arc's tangent pinned above every in-plane eigenvalue (the unit tangents
+    # of the vertex's arcs add 1 each to the trace): never the normal
+    arcs = np.bincount(np.r_[slot[v][at_v], slot[w][at_w]], minlength=len(moving))
+    pin = pin * (2.0 + arcs)[:, None, None]
     for _ in range(rounds):
         t = _mean_plane_circles(X, v, w, normal)
         t_w = _mirror(t, u)
-        scatter = np.zeros((n, 3, 3))
-        np.add.at(scatter, v, t[:, :, None] * t[:, None, :])
-        np.add.at(scatter, w, t_w[:, :, None] * t_w[:, None, :])
-        if len(one):
-            np.add.at(scatter, one, one_tangent[:, :, None] * one_tangent[:, None, :])
+        scatter = np.zeros((len(moving), 3, 3))
+        np.add.at(scatter, slot[v][at_v], t[at_v, :, None] * t[at_v, None, :])
+        np.add.at(scatter, slot[w][at_w], t_w[at_w, :, None] * t_w[at_w, None, :])
         current = normal[moving]
-        # the held arc's tangent pinned above every in-plane eigenvalue: never the normal
-        weight = 1.0 + np.trace(scatter[moving], axis1=1, axis2=2)
-        M = project @ scatter[moving] @ project + weight[:, None, None] * pin
+        M = project @ scatter @ project + pin
         fitted = np.linalg.eigh(M)[1][:, :, 0]
         fitted *= np.where(np.sum(fitted * current, axis=1) < 0, -1.0, 1.0)[:, None]
         turn = np.linalg.norm(fitted - current, axis=1).max()
