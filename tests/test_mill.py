@@ -736,9 +736,10 @@ def test_a_simulation_of_minutes_is_announced(capsys, step, coarser):
     """A 2 m bowl: a million cells and more at 0.5 mm, about 7 minutes; the note names
     a coarser step where there is one within the option's range."""
     from fabplan.cli.mill import _note_simulation_time
+    from fabplan.fabricate.milling.mill_simulation import simulation_cells
 
     mesh = bowl_grid(radius=3000.0, half=1000.0, step=100.0)
-    _note_simulation_time(mesh, 1.0, step, "face")
+    _note_simulation_time(simulation_cells(mesh.vertices, mesh.triangles(), step), step, "face")
     err = capsys.readouterr().err
     if step == 10.0:           # 40,000 cells: seconds, nothing said
         assert err == ""

@@ -32,21 +32,23 @@ def check_net_memory(args: argparse.Namespace, mesh: Any, command: str) -> None:
                      fix=f"{fix}, or give --max-panels to run it anyway")
 
 
-def check_simulation_memory(mesh: Any, mm_per_unit: float, step_mm: float) -> None:
+def check_simulation_memory(mesh: Any, mm_per_unit: float, step_mm: float) -> float:
     """Refuse a milling simulation whose grid at ``--sim-step`` would need more memory than
     is left beside the plan, naming the smallest step that fits (a grid over the cap of
-    `height_target` is refused there, before it is made)."""
+    `height_target` is refused there, before it is made); returns the grid's estimated
+    cells (`simulation_cells`)."""
     from ..fabricate.milling.mill_simulation import MAX_SIMULATION_CELLS, simulation_cells
     from ..io.resources import MILL_MEMORY, SIMULATION_MEMORY, check_memory, memory_limit
 
     cells = simulation_cells(mesh.vertices * mm_per_unit, mesh.triangles(), step_mm)
     if cells > MAX_SIMULATION_CELLS:
-        return
+        return cells
     plan = MILL_MEMORY.peak_bytes(len(mesh.face_sizes))
     fits = max(SIMULATION_MEMORY.largest_fitting(memory_limit() - plan), 1)
     check_memory(SIMULATION_MEMORY, cells, where=f"--sim-step {step_mm:g}", beside_bytes=plan,
                  fix=f"a --sim-step of {1.01 * step_mm * math.sqrt(cells / fits):.3g} mm or more "
                      "fits, or give --no-simulation")
+    return cells
 
 
 def check_triangles(surface: str, triangles: int) -> None:

@@ -44,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
     mesh = load_net(args.net)
     check_net_memory(args, mesh, "mill")
     if not args.no_simulation:
-        check_simulation_memory(mesh, settings.mm_per_unit, args.sim_step)
-        _note_simulation_time(mesh, settings.mm_per_unit, args.sim_step, tool.kind)
+        cells = check_simulation_memory(mesh, settings.mm_per_unit, args.sim_step)
+        _note_simulation_time(cells, args.sim_step, tool.kind)
     progress = command_progress(args)
     with progress.stage("reading the design"):
         design = _mill_design(args, settings.units)
@@ -66,14 +66,12 @@ def run(args: argparse.Namespace) -> int:
     return EXIT_NOT_CONVERGED if gouged else code
 
 
-def _note_simulation_time(mesh: Any, mm_per_unit: float, step_mm: float, kind: str) -> None:
-    """Say up front when the simulation will take minutes (`SIMULATION_MEMORY`'s time per
-    cell, measured with a face mill's two cuts, its own and the conventional ball end's; a
-    cone has one)."""
-    from ..fabricate.milling.mill_simulation import simulation_cells
+def _note_simulation_time(cells: float, step_mm: float, kind: str) -> None:
+    """Say up front when a simulation of `cells` grid cells will take minutes
+    (`SIMULATION_MEMORY`'s time per cell, measured with a face mill's two cuts, its own
+    and the conventional ball end's; a cone has one)."""
     from ..io.resources import SIMULATION_MEMORY
 
-    cells = simulation_cells(mesh.vertices * mm_per_unit, mesh.triangles(), step_mm)
     minutes = SIMULATION_MEMORY.seconds_per_unit * cells * (1 if kind == "face" else 0.5) / 60
     if minutes >= 2:
         coarsest = option_parameter("mill", "--sim-step").high or step_mm

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FabricationLimit", "LimitCheck", "LIMITS", "limit_check", "limits_record",
-           "exceeded_text", "limit_row_text", "DEFAULT_MAX_TWIST_DEG_PER_M", "DEFAULT_MAX_ARC_ANGLE_DEG",
-           "DEFAULT_MAX_DEVIATION_MM"]
+           "exceeded_text", "limit_row_label", "limit_row_text", "DEFAULT_MAX_TWIST_DEG_PER_M",
+           "DEFAULT_MAX_ARC_ANGLE_DEG", "DEFAULT_MAX_DEVIATION_MM"]
 
 DEFAULT_MAX_TWIST_DEG_PER_M = 30.0
 """A conservative shop default: at 30 deg/m the edges of a 100 mm lamella lengthen by
@@ -200,6 +200,19 @@ def exceeded_text(checks: list[LimitCheck]) -> str | None:
     over = [c.text() for c in checks if c.exceeded]
     return "; ".join(over) if over else None
 
+
+
+def limit_row_label(check: dict) -> str:
+    """A check as the JSON holds it (`LimitCheck.to_json`), named for a report's row: its
+    words, bound, unit and option.
+
+    Examples
+    --------
+    >>> limit_row_label(LimitCheck("max_scallop_mm", 0.01, "pass nodes", 3, 0, 0.004,
+    ...                            "--scallop").to_json())
+    'largest scallop between milling passes (limit 0.01 mm, --scallop)'
+    """
+    return f"{check['words']} (limit {check['limit']:g} {check['unit']}, {check['option']})"
 
 
 def limit_row_text(check: dict) -> str:

@@ -25,7 +25,7 @@ from ...io.records import json_text
 from ...io.rhino_write import Rhino3dmWriter
 from ...net.mesh import QuadMesh
 from ...report import figures, html
-from ..limits import LimitCheck, limit_check, limit_row_text
+from ..limits import LimitCheck, limit_check, limit_row_label, limit_row_text
 from .face_milling import plan_face_milling
 from .flank_milling import plan_flank_milling
 from .mill_design import NetDistance, design_heights, mesh_faceting_mm, net_distance_from_design
@@ -390,8 +390,7 @@ def mill_report_html(result: MillResult) -> str:
         rows += [("the same cut against the net's surface: scallop / gouge [mm]",
                   f"{r['against_net']['max_scallop_mm']:.4g} / "
                   f"{r['against_net']['max_gouge_mm']:.4g}")]
-    rows += [(f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})", limit_row_text(c))
-             for c in r["limits"].values()]
+    rows += [(limit_row_label(c), limit_row_text(c)) for c in r["limits"].values()]
     parts.append(html.html_section("Summary", html.html_table(["quantity", "value"], rows)))
     if "comparison" in r:
         c = r["comparison"]

@@ -25,7 +25,7 @@ from ...net.view import net_edges, net_scene
 from ...report import figures, html, viewer
 from ...report.html import counted
 from ...report.pdf import PdfDocument
-from ..limits import LimitCheck, limit_row_text, limits_record
+from ..limits import LimitCheck, limit_row_label, limit_row_text, limits_record
 from .boundary_molds import BoundaryMolds, boundary_molds_text, boundary_panels_csv
 from .mold_plan import MoldPlan
 from .mold_shapes import MOLD_TYPES, PANEL_TYPES
@@ -523,8 +523,7 @@ def _summary_rows(plan: MoldPlan, r: dict, boundary: BoundaryMolds | None,
          "no limit" if r["max_mold_size_mm"] is None else f"{r['max_mold_size_mm']:g} mm"],
         ["run time", f"{r['seconds']:.1f} s"],
     ]
-    summary_rows += [[f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})",
-                      limit_row_text(c)] for c in (limits or {}).values()]
+    summary_rows += [[limit_row_label(c), limit_row_text(c)] for c in (limits or {}).values()]
     if boundary is not None:
         summary_rows.insert(6, ["boundary panels (boundary-panels.csv)",
                                 boundary_molds_text(boundary, plan)])
@@ -668,8 +667,7 @@ def mold_report_pdf(plan: MoldPlan, pictures: dict[str, str] | None = None, *,
         *_verification_rows(r),
         *([["boundary panels (boundary-panels.csv)",
             boundary_molds_text(boundary, plan)]] if boundary is not None else []),
-        *[[f"{c['words']} (limit {c['limit']:g} {c['unit']}, {c['option']})",
-           limit_row_text(c)] for c in (limits or {}).values()],
+        *[[limit_row_label(c), limit_row_text(c)] for c in (limits or {}).values()],
     ], widths=[2, 1])
     figures_section = doc.section("Pictures")
     for key, caption in (("molds", "Panels coloured by mold; numbers are mold ids."),
