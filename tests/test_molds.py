@@ -241,10 +241,10 @@ def _assert_every_panel_fits(record: dict, mesh: QuadMesh) -> None:
 
 # ----------------------------------------------------------------------------- Weingarten net
 @pytest.fixture(scope="module")
-def wein99_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("molds") / "wein99"
-    code = main(["molds", str(WEIN99), "--tolerance-mm", "5", "--units", "m", "-o", str(out)])
-    return code, out
+def wein99_run(wein99_molds):
+    """`fabplan molds wein99.obj --tolerance-mm 5`, the session's shared run
+    (tests/conftest.py; the bundled net is in metres, as its record says). Read only."""
+    return wein99_molds
 
 
 def test_wein99_needs_at_most_sqrt_n_molds_and_every_panel_fits(wein99_run, wein99):

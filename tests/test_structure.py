@@ -31,24 +31,34 @@ def _module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def _in_type_checking(node: ast.AST, parents: dict) -> bool:
-    while node in parents:
-        node = parents[node]
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            return True
-    return False
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """The parsed file (parsed once: several tests read every module)."""
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
+def _statements(body: list, typing_only: bool = False):
+    """(statement, whether it sits in an ``if TYPE_CHECKING:`` block) for every statement
+    in `body` and the blocks within it: imports are statements, so the expressions (most
+    of a file's nodes) need no walk."""
+    for node in body:
+        yield node, typing_only
+        checking = isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+        for field in ("body", "orelse", "finalbody", "handlers", "cases"):
+            for child in getattr(node, field, None) or []:
+                inner = child.body if isinstance(child, (ast.ExceptHandler, ast.match_case)) else [child]
+                yield from _statements(inner, typing_only or checking)
 
 
 @functools.cache
 def _imports(path: Path, typing_too: bool = False) -> list[tuple[str, list[str], int]]:
     """(module, names, line) of every fabplan import in a file, lazy ones included, those
     only for type checkers left out (unless `typing_too`)."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
-    parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+    tree = _tree(path)
     package = _module_name(path) if path.name == "__init__.py" else _module_name(path).rsplit(".", 1)[0]
     found = []
-    for node in ast.walk(tree):
-        if not typing_too and _in_type_checking(node, parents):
+    for node, typing_only in _statements(tree.body):
+        if typing_only and not typing_too:
             continue
         if isinstance(node, ast.ImportFrom):
             if node.level:
@@ -89,7 +99,7 @@ def _lazy_packages() -> set[str]:
     ``__getattr__`` in their ``__init__``): `fabplan`, the product rooms of fabricate/..."""
     return {m for m, p in MODULES.items() if p.name == "__init__.py"
             and any(isinstance(node, ast.FunctionDef) and node.name == "__getattr__"
-                    for node in ast.parse(p.read_text(encoding="utf-8")).body)}
+                    for node in _tree(p).body)}
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -310,7 +320,7 @@ def test_no_function_is_too_long():
     listed with their reason; a listed one that got shorter leaves the list."""
     long = {f"{module}:{name}": node.end_lineno - node.lineno + 1
             for module, path in MODULES.items() if not module.startswith("fabplan.cli")
-            for name, node in _functions(ast.parse(path.read_text(encoding="utf-8")))
+            for name, node in _functions(_tree(path))
             if node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES}
     unlisted = sorted(f"{k} ({n} lines)" for k, n in long.items() if k not in LONG_FUNCTIONS)
     assert not unlisted, f"over {MAX_FUNCTION_LINES} lines: " + ", ".join(unlisted)
@@ -349,7 +359,7 @@ def test_figures_leave_pyplot_alone(tmp_path):
             "assert 'matplotlib.pyplot' not in sys.modules\n")
     subprocess.run([sys.executable, "-c", code], check=True)
     switching = [f"{_module_name(p)}:{node.lineno}" for p in MODULES.values()
-                 for node in ast.walk(ast.parse(p.read_text(encoding="utf-8")))
+                 for node in ast.walk(_tree(p))
                  if (isinstance(node, ast.Call) and ast.unparse(node.func) in ("matplotlib.use", "os.umask"))
                  or (isinstance(node, (ast.Import, ast.ImportFrom))
                      and "pyplot" in ast.unparse(node))]

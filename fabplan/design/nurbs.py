@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import InputError
+from ..net.index_rows import unique_rows
 from .mesh_surface import DesignSurface
 from .parametric import ParametricSurface
 
@@ -594,7 +595,7 @@ def triangulate_trimmed(trims: list[np.ndarray], domain: tuple,
     # weld the corners that pieces share (computed separately, equal up to rounding)
     span = max(u1 - u0, v1 - v0)
     key = np.round(corners.reshape(-1, 2) / (1e-9 * span)).astype(np.int64)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    _, first, inverse = unique_rows(key, return_index=True, return_inverse=True)
     uv = corners.reshape(-1, 2)[first]
     tri = inverse.ravel().reshape(-1, 3)
     tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])]

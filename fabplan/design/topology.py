@@ -6,6 +6,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from ..net.index_rows import unique_rows
+
 __all__ = ["edge_corners", "triangle_pairs", "triangle_components", "vertex_fan_count"]
 
 
@@ -49,5 +51,5 @@ def vertex_fan_count(T: np.ndarray, n: int) -> np.ndarray:
     dst = np.r_[x1, y1]
     adj = sp.coo_matrix((np.ones(len(src)), (src, dst)), shape=(3 * len(T),) * 2)
     _, label = csgraph.connected_components(adj, directed=False)
-    pairs = np.unique(np.stack([a, label], axis=1), axis=0)
+    pairs = unique_rows(np.stack([a, label], axis=1))
     return np.bincount(pairs[:, 0], minlength=n)

@@ -22,6 +22,7 @@ from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
+from ..net.index_rows import unique_rows
 from ..net.mesh import QuadMesh
 from .off_design import MIN_OFF_PANELS, degenerate_faces, faces_off_design
 
@@ -176,9 +177,9 @@ def extract_quads(P2: np.ndarray, X3: np.ndarray, normals: np.ndarray, panel_siz
                   axis=1) <= 0
     good = (edge.min(axis=1) >= settings.min_edge * h) & (edge.max(axis=1) <= settings.max_edge * h)
     quads = quads[good & ~fold]
-    quads = np.unique(quads[np.lexsort(quads.T[::-1])], axis=0) if len(quads) else quads
+    quads = unique_rows(quads) if len(quads) else quads
     # the same quad found from both sides of a cut
-    _, first_q = np.unique(np.sort(quads, axis=1), axis=0, return_index=True)
+    _, first_q = unique_rows(np.sort(quads, axis=1), return_index=True)
     return vertices, quads[np.sort(first_q)], keys
 
 
@@ -196,7 +197,7 @@ def _distinct_vertices(nodes: _Points, h: float
     first = np.full(vertex_of.max() + 1, len(vertex_of))
     np.minimum.at(first, vertex_of, np.arange(len(vertex_of)))
     vertices = nodes.position[first]
-    entries = np.unique(np.c_[nodes.key, vertex_of], axis=0)
+    entries = unique_rows(np.c_[nodes.key, vertex_of])
     keys = np.zeros((len(vertices), 2), np.int64)
     keys[entries[::-1, 2]] = entries[::-1, :2]
     return vertices, first, entries, keys
@@ -368,8 +369,8 @@ def fill_boundary_cells(vertices: np.ndarray, quads: np.ndarray, keys: np.ndarra
     corner = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
     for _ in range(passes):
         table = _KeyTable(keys, vertices, np.arange(len(keys)))
-        cells = np.unique((keys[:, None, :] - corner[None]).reshape(-1, 2), axis=0)
-        done = np.unique(keys[quads[:, 0]], axis=0)
+        cells = unique_rows((keys[:, None, :] - corner[None]).reshape(-1, 2))
+        done = unique_rows(keys[quads[:, 0]])
         cells = cells[~_rows_in(cells, done)]
         ids = np.stack([_lookup(table, cells + c) for c in corner], axis=1)   # (c, 4), -1 missing
         present = ids >= 0
@@ -397,7 +398,7 @@ def fill_boundary_cells(vertices: np.ndarray, quads: np.ndarray, keys: np.ndarra
                 predicted_pos.append(2 * vertices[v] - vertices[inner[ok]])
         if not predicted_key:
             break
-        pk, inverse = np.unique(np.concatenate(predicted_key), axis=0, return_inverse=True)
+        pk, inverse = unique_rows(np.concatenate(predicted_key), return_inverse=True)
         inverse = inverse.ravel()
         pos = np.zeros((len(pk), 3))
         np.add.at(pos, inverse, np.concatenate(predicted_pos))

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..design.mesh_surface import DesignSurface
+from ..net.index_rows import unique_rows
 
 __all__ = ["OffDesign", "area_off_design", "faces_off_design", "degenerate_faces",
            "boundary_turning", "may_leave_design",
@@ -150,7 +151,7 @@ def area_off_design(design: DesignSurface, points: np.ndarray, triangles: np.nda
     curves = design.boundary_curves()
     if len(triangles) == 0 or not curves:
         return OffDesign(np.zeros(count), np.full((count, 3), np.nan))
-    outline = _outline_sides(triangles, owner, count, len(points))
+    outline = _outline_sides(triangles, owner)
     sides = _sides_off_design(design, points, *outline, count, panel_size, curves)
     return _area_given_outline(design, points, triangles, owner, count, panel_size, level,
                                curves, sides)
@@ -264,23 +265,15 @@ def may_leave_design(design: DesignSurface, centre: np.ndarray, radius: np.ndarr
 SIDE_SAMPLES = 32
 
 
-def _outline_sides(triangles: np.ndarray, owner: np.ndarray, count: int, span: int
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """The outline of each piece: (k, 2) int, the sides of `triangles` (t, 3) int (into
-    `span` points) that no other triangle of the same piece shares, each as its triangle
-    runs; (k,) int, the piece of each (`owner` (t,) int, in ``0 .. count - 1``)."""
+def _outline_sides(triangles: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The outline of each piece: (k, 2) int, the sides of `triangles` (t, 3) int that no
+    other triangle of the same piece shares, each as its triangle runs; (k,) int, the
+    piece of each (`owner` (t,) int)."""
     sides = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     piece = np.tile(owner, 3)
-    lo_hi = np.sort(sides, axis=1)
-    span = max(span, 1)
-    if span * span * max(count, 1) < 2**62:
-        # one integer per (side, piece): a sort of numbers instead of rows
-        key = (lo_hi[:, 0] * span + lo_hi[:, 1]) * max(count, 1) + piece
-        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    else:
-        _, inverse, counts = np.unique(np.column_stack([lo_hi, piece]), axis=0,
-                                       return_inverse=True, return_counts=True)
-    alone = counts[inverse.ravel()] == 1
+    _, inverse, counts = unique_rows(np.column_stack([np.sort(sides, axis=1), piece]),
+                                     return_inverse=True, return_counts=True)
+    alone = counts[inverse] == 1
     return sides[alone], piece[alone]
 
 
@@ -441,7 +434,7 @@ def faces_off_design(design: DesignSurface, vertices: np.ndarray, faces: list | 
     for first in (0, 1):          # the fan from corner 0, then from corner 1
         corner = [ring[start[face] + (first + k) % sizes[face]] for k in (0 * j, j, j + 1)]
         fan = np.stack(corner, axis=1)
-        outline = _outline_sides(fan, face, count, len(vertices))
+        outline = _outline_sides(fan, face)
         rows = np.column_stack([outline[1], outline[0]])       # (piece, side start, end)
         key = np.ascontiguousarray(rows[np.lexsort(rows.T[::-1])]).tobytes()
         if key not in measured:

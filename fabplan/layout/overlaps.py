@@ -16,6 +16,8 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
+from ..net.index_rows import unique_rows
+
 __all__ = ["overlapping_pairs", "edge_clashes", "self_crossing", "OVERLAP_PANELS"]
 
 #: two pieces sharing less area than this share of a full panel touch: seen along one
@@ -138,7 +140,7 @@ def edge_clashes(pieces: list, point_count: int) -> np.ndarray:
     pairs = np.stack([piece[order[same]], piece[order[same + 1]]], axis=1)
     pairs = np.sort(pairs, axis=1)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    return np.unique(pairs, axis=0) if len(pairs) else pairs
+    return unique_rows(pairs) if len(pairs) else pairs
 
 
 def self_crossing(points: np.ndarray, pieces: list) -> np.ndarray:

@@ -12,6 +12,7 @@ import shapely
 from scipy.spatial import cKDTree
 
 from ..design.mesh_surface import DesignSurface
+from ..net.index_rows import unique_rows
 
 __all__ = ["ParameterChart"]
 
@@ -58,7 +59,7 @@ class ParameterChart:
         T = self.design.triangles
         directed = np.stack([T, np.roll(T, -1, axis=1)], axis=2).reshape(-1, 2)
         key = np.sort(directed, axis=1)
-        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        _, inverse, counts = unique_rows(key, return_inverse=True, return_counts=True)
         lone = counts[inverse.ravel()] == 1
         corner = np.flatnonzero(lone)
         tri, k = corner // 3, corner % 3

@@ -19,6 +19,7 @@ from scipy.sparse import csgraph
 
 from ..design.mesh_surface import DesignSurface
 from ..design.topology import edge_corners
+from ..net.index_rows import unique_rows
 from ..solve.linalg import solve_spd_columns
 
 __all__ = ["integrate_directions", "cut_mesh", "CutMesh"]
@@ -59,7 +60,7 @@ def cut_paths(design: DesignSurface, starts: list, avoid: np.ndarray) -> list:
     loops = design.boundary_loops
     if not loops:
         return []
-    e = np.unique(np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1), axis=0)
+    e = unique_rows(np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1))
     length = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1)
     used = np.asarray(avoid, bool).copy()
     paths = []

@@ -27,6 +27,7 @@ import scipy.sparse as sp
 from ..errors import InputError
 from ..io.obj import parse_obj, split_faces, write_obj
 from .forest import break_cycles, pointer_jump, tree_parity
+from .index_rows import unique_rows
 
 __all__ = ["QuadMesh", "Polylines", "load_mesh"]
 
@@ -266,7 +267,7 @@ class QuadMesh:
         """(e, 2) int, each undirected edge once, lower index first, sorted."""
         c = self._corners
         pairs = np.sort(np.stack([c["vert"], c["nxt"]], axis=1), axis=1)
-        return np.unique(pairs, axis=0)
+        return unique_rows(pairs)
 
     @cached_property
     def _interior_corners(self) -> np.ndarray:

@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.resources import REFERENCE_MEMORY, check_memory
 from ..io.triangles import read_triangles
+from ..net.index_rows import unique_rows
 from ..net.mesh import QuadMesh
 
 __all__ = ["ReferenceSurface", "load_reference"]
@@ -124,7 +125,7 @@ class ReferenceSurface:
             T = self.triangles
             sides = np.stack([T[:, [1, 2]], T[:, [2, 0]], T[:, [0, 1]]], axis=1)   # opposite corner k
             key = np.sort(sides, axis=2).reshape(-1, 2)
-            _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+            _, inverse, count = unique_rows(key, return_inverse=True, return_counts=True)
             self._boundary_sides = (count[inverse.ravel()] == 1).reshape(-1, 3)
         sides = self._boundary_sides[triangle]
         # only footpoints on a triangle with a boundary side can be on the boundary: the
