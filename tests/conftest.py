@@ -133,18 +133,14 @@ def tower_study(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def wein99_molds(tmp_path_factory):
-    """`fabplan molds wein99.obj --tolerance-mm 5 -q`, with ``--ifc`` where IfcOpenShell is
-    installed, run once per test run (the molds report's figures, its 3D view and the IFC
-    model are checked on it): (exit code, output folder). Read only."""
-    import importlib.util
-
+    """`fabplan molds wein99.obj --tolerance-mm 5 -q`, run once per test run (the molds
+    report's figures and its 3D view are checked on it): (exit code, output folder).
+    Read only."""
     from fabplan.cli import main
-
-    ifc = ["--ifc"] if importlib.util.find_spec("ifcopenshell") else []
 
     def make(folder: Path) -> dict:
         return {"code": main(["molds", str(fabplan.data_path("wein99.obj")), "--tolerance-mm",
-                              "5", *ifc, "-q", "-o", str(folder / "wein99")])}
+                              "5", "-q", "-o", str(folder / "wein99")])}
 
     folder, record = _once(tmp_path_factory, "molds-wein99", make)
     return record["code"], folder / "wein99"

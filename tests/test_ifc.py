@@ -88,11 +88,10 @@ def _validation_errors(path: Path, *, rules: bool) -> list:
 
 
 @pytest.fixture(scope="module")
-def wein(wein99_molds) -> Path:
-    """`fabplan molds wein99.obj --tolerance-mm 5 --ifc`, shared with the other modules
-    (`wein99_molds`). Read only."""
-    code, out = wein99_molds
-    assert code == 0 and (out / "net.ifc").is_file()
+def wein(tmp_path_factory) -> Path:
+    """`fabplan molds wein99.obj --tolerance-mm 5 --ifc`."""
+    out = tmp_path_factory.mktemp("ifc") / "molds"
+    assert main(["molds", str(WEIN99), "--tolerance-mm", "5", "--ifc", "-q", "-o", str(out)]) == 0
     return out
 
 

@@ -28,7 +28,6 @@ from fabplan.net.mesh import QuadMesh
 from fabplan.net.weingarten import weingarten_fit
 from fabplan.report.figures import isoline_segments
 
-WEIN99 = fabplan.data_path("wein99.obj")
 # the bundled Weingarten net stretched by a volume-preserving affine map: same faces, panel
 # sizes and curvature range, but k1 and k2 no longer tied by a relation (an "ellipsoidal" net)
 STRETCH = np.array([0.8, 1.25, 1.0])
@@ -242,7 +241,7 @@ def _assert_every_panel_fits(record: dict, mesh: QuadMesh) -> None:
 # ----------------------------------------------------------------------------- Weingarten net
 @pytest.fixture(scope="module")
 def wein99_run(wein99_molds):
-    """`fabplan molds wein99.obj --tolerance-mm 5`, the session's shared run
+    """`fabplan molds wein99.obj --tolerance-mm 5 -q`, the session's shared run
     (tests/conftest.py; the bundled net is in metres, as its record says). Read only."""
     return wein99_molds
 
