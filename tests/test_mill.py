@@ -68,6 +68,19 @@ def write_net(mesh: QuadMesh, path: Path) -> Path:
     return path
 
 
+def write_cap_mesh(path: Path, samples: int) -> Path:
+    """`bowl_grid`'s sphere (radius 300 mm) over +-60 mm as a triangle mesh OBJ of
+    `samples` x `samples` vertices, its vertices on the sphere and its faces flat."""
+    u = np.linspace(-60.0, 60.0, samples)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    V = np.stack([x, y, 300.0 - np.sqrt(300.0**2 - x**2 - y**2)], axis=-1).reshape(-1, 3)
+    k = (np.arange(samples - 1)[:, None] * samples + np.arange(samples - 1)[None, :]).ravel()
+    T = np.r_[np.c_[k, k + samples, k + samples + 1], np.c_[k, k + samples + 1, k + 1]]
+    path.write_text("".join(f"v {a:.9f} {b:.9f} {c:.9f}\n" for a, b, c in V)
+                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in T))
+    return path
+
+
 def goto_rows(path: Path) -> tuple[np.ndarray, list]:
     """(k, 6) GOTO values and the pass of each (None for retracts), read independently."""
     rows, passes, current, retract = [], [], -1, False
@@ -683,16 +696,7 @@ def test_a_gouge_within_a_coarse_design_meshs_faceting_is_said_to_be_it(tmp_path
     sphere, towards the tool, and the cut on the sphere lies below them. The warning says
     that the design's faceting, not the tool, makes the gouge, and mill.json holds it."""
     net = write_net(bowl_grid(), tmp_path / "bowl.obj")
-    u = np.linspace(-60.0, 60.0, 7)
-    x, y = np.meshgrid(u, u, indexing="ij")
-    z = 300.0 - np.sqrt(300.0**2 - x**2 - y**2)
-    V = np.stack([x, y, z], axis=-1).reshape(-1, 3)
-    k = np.arange(6)[:, None] * 7 + np.arange(6)[None, :]
-    k = k.ravel()
-    T = np.r_[np.c_[k, k + 7, k + 8], np.c_[k, k + 8, k + 1]]
-    design = tmp_path / "coarse.obj"
-    design.write_text("".join(f"v {a:.9f} {b:.9f} {c:.9f}\n" for a, b, c in V)
-                      + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in T))
+    design = write_cap_mesh(tmp_path / "coarse.obj", 7)
     out = tmp_path / "out"
     code = main(["mill", str(net), "--tool", "face:D=40", "--sim-step", "1.0", "--scallop", "1",
                  "--design", str(design), "--units", "mm", "-o", str(out)])
@@ -709,14 +713,7 @@ def test_mill_measures_against_the_reference_optimize_held_the_net_to(tmp_path):
     """`fabplan optimize --reference` names the reference in the net's record, and `fabplan
     mill` on its result measures the cut against it, not against the net's own surface."""
     net = write_net(bowl_grid(), tmp_path / "bowl.obj")
-    u = np.linspace(-60.0, 60.0, 25)
-    x, y = np.meshgrid(u, u, indexing="ij")
-    V = np.stack([x, y, 300.0 - np.sqrt(300.0**2 - x**2 - y**2)], axis=-1).reshape(-1, 3)
-    k = (np.arange(24)[:, None] * 25 + np.arange(24)[None, :]).ravel()
-    T = np.r_[np.c_[k, k + 25, k + 26], np.c_[k, k + 26, k + 1]]
-    design = tmp_path / "cap.obj"
-    design.write_text("".join(f"v {a:.9f} {b:.9f} {c:.9f}\n" for a, b, c in V)
-                      + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in T))
+    design = write_cap_mesh(tmp_path / "cap.obj", 25)
     optimized = tmp_path / "opt.obj"
     assert main(["optimize", str(net), "--net", "snet", "--reference", str(design), "--units",
                  "mm", "-q", "-o", str(optimized)]) == 0

@@ -201,7 +201,6 @@ def exceeded_text(checks: list[LimitCheck]) -> str | None:
     return "; ".join(over) if over else None
 
 
-
 def limit_row_label(check: dict) -> str:
     """A check as the JSON holds it (`LimitCheck.to_json`), named for a report's row: its
     words, bound, unit and option.

@@ -233,13 +233,11 @@ def principal_curvatures(X: np.ndarray, stars: np.ndarray,
         # normal curvature along them and the denominator both vanish, and their ratio is
         # noise (principal curvatures of 7 1/m on a roof whose largest is 0.06)
         balance = np.abs(denom) / (np.abs(d_v) * (1 + s) + np.abs(d_n) * (1 - s))
-    flat = curvature == 0
-    k1[flat] = np.nan
-    k2[flat] = np.nan
-    lost = flat | ~(balance >= _GAUSS_MAP_BALANCE)
+    # a flat star's sphere is a plane: the formula's 0 / 0, taken by the shape operator too
+    lost = (curvature == 0) | ~(balance >= _GAUSS_MAP_BALANCE)
     if lost.any():
-        e1, e2 = _unit(t1 + t2), _unit(t1 - t2)
-        k1[lost], k2[lost] = _shape_operator_curvatures(X, N, stars[lost], e1[lost], e2[lost])
+        k1[lost], k2[lost] = _shape_operator_curvatures(X, N, stars[lost], _unit(eta1[lost]),
+                                                        _unit(eta2[lost]))
     return k1, k2
 
 

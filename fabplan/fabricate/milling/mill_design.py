@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ...design.topology import edge_corners
 from .mill_simulation import HeightTarget
 
 __all__ = ["design_heights", "design_frames", "NetDistance", "net_distance_from_design",
@@ -206,20 +207,16 @@ def mesh_faceting_mm(vertices: np.ndarray, triangles: np.ndarray, mm_per_unit: f
     """
     X = np.asarray(vertices, dtype=np.float64) * mm_per_unit
     T = np.asarray(triangles)
+    corner, other = edge_corners(T, len(X))      # the two corners of every inner edge
+    if corner.size == 0:
+        return 0.0
     normal = np.cross(X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     centroid = X[T].mean(axis=1)
-    edges = np.sort(np.r_[T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]], axis=1)
-    face = np.tile(np.arange(len(T)), 3)
-    order = np.lexsort((edges[:, 1], edges[:, 0]))
-    edges, face = edges[order], face[order]
-    shared = np.flatnonzero(np.all(edges[1:] == edges[:-1], axis=1))
-    if shared.size == 0:
-        return 0.0
-    a, b = face[shared], face[shared + 1]
+    a, b = corner // 3, other // 3
     turn = np.arccos(np.clip(np.abs(np.sum(normal[a] * normal[b], axis=1)), 0.0, 1.0))
     kappa = turn / np.maximum(np.linalg.norm(centroid[a] - centroid[b], axis=1), 1e-300)
-    length = np.linalg.norm(X[edges[shared, 1]] - X[edges[shared, 0]], axis=1)
+    length = np.linalg.norm(X[T[:, [1, 2, 0]].ravel()[corner]] - X[T.ravel()[corner]], axis=1)
     return float(np.percentile(kappa * length * length / 6, 99))
 
 

@@ -423,4 +423,3 @@ def at_most(value: float) -> str:
         return "0"
     unit = 10.0 ** (np.floor(np.log10(value)) - 3)
     return f"{np.floor(value / unit * (1 + 1e-12)) * unit:.4g}"
-
