@@ -264,7 +264,7 @@ def _point(search, value, *, feasible, cost):
                     "ok": False, "margin": -cost / 10.0, "relax_to": None, "text": ""}
     return CandidateResult(search.candidate(value), feasible=feasible, cost=cost,
                            metrics={"molds": {"count": 1}, "deviation_mm": {"max": 1.0},
-                                    "largest_deviation_mm": 1.0},
+                                    "largest_deviation_mm": 1.0, "status": "converged"},
                            checks=[] if feasible else [failed_check])
 
 
@@ -546,3 +546,168 @@ def test_strips_that_twist_past_the_limit_fail_as_the_strips_command_says(judged
                        ).limits.max_twist_deg_per_m == 12.0
     with pytest.raises(InputError, match="max_twist_deg_per_m"):
         parse_study(STUDY.replace("max_molds = 3", "max_molds = 3\nmax_twist_deg_per_m = 0"))
+
+
+def _failed(limit: str, bound: float, measured: float) -> dict:
+    """A failed check as `fabplan.study.checks.check` makes it."""
+    from fabplan.study.checks import check
+
+    return check(limit, bound, measured, False, f"{limit} {measured}")
+
+
+def test_the_nearest_candidate_is_the_one_least_many_times_over_its_limits():
+    """A net twelve times the deviation limit off the design, its molds stepping thirty
+    times the limit, is farther from feasible than a net on the design whose panels are
+    forty times the tolerance off their molds: the gap and the step between the molds are
+    one failure, and each limit counts by how many times it is missed, not by how far."""
+    off_design = [_failed("max_deviation_mm", 150.0, 1805.4),
+                  _failed("max_panel_step_mm", 2.0, 60.3)]
+    on_design = [_failed("mold_tolerance_mm", 1.0, 43.1), _failed("max_panel_step_mm", 2.0, 83.2),
+                 _failed("max_kink_deg", 10.0, 13.1)]
+    assert violation(on_design) < violation(off_design)
+    assert violation(on_design) == pytest.approx(math.log(43.1) + math.log(1.31))
+    # each limit once: the step alone counts as much as with its gap beside it when larger
+    assert violation(on_design[1:2]) == pytest.approx(math.log(41.6))
+    # a smallest value missed counts by how many times too small it is
+    assert violation([_failed("min_coverage", 0.9, 0.45)]) == pytest.approx(math.log(2.0))
+    assert violation([_failed("min_coverage", 0.9, 0.0)]) == math.inf
+    # nothing failed: feasible
+    assert violation([]) == 0.0
+
+
+def test_panels_that_fit_no_mold_are_told_the_panel_sizes_at_which_they_might(judged):
+    """The advice on a failed mold gap or step names the panel sizes at which both would
+    be within their limits, were they to shrink with the square of the size (at best) or
+    the size itself (at worst), and the panels that makes; a step at the boundary panels,
+    whose slivers come at every size, is named and not counted; no size without the
+    candidate's panel size, no advice when the molds pass."""
+    import re
+
+    from fabplan.study.checks import next_steps
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    c = next(c for c in result.candidates if not c.failed)
+    limits = study.limits
+    gap, step = 9.0 * limits.mold_tolerance_mm, 30.0 * limits.panel_step_limit_mm
+    molds = {**c.metrics["molds"], "failures": 7, "max_deviation_mm": gap,
+             "max_panel_step_mm": step, "panel_steps_over": 4}
+    metrics = {**c.metrics, "molds": molds, "boundary_panels": None}
+
+    def sizes(checks):
+        sized = [s for s in next_steps(checks) if "a smaller panel size (now 2 m" in s]
+        assert len(sized) == 1                     # the gap and the step say it once
+        found = re.search(r"so ([\d.]+) m \(([\d,]+) panels\) at best, ([\d.]+) m "
+                          r"\(([\d,]+) panels\) at worst", sized[0])
+        assert found, sized[0]
+        best, best_n, last, last_n = found.groups()
+        return float(best), int(best_n.replace(",", "")), float(last), \
+            int(last_n.replace(",", "")), sized[0]
+
+    best, best_n, last, last_n, _ = sizes(verdict(metrics, limits, panel_size=2.0, units="m"))
+    assert last < best < 2.0
+    for measured, bound in ((gap, limits.mold_tolerance_mm), (step, limits.panel_step_limit_mm)):
+        assert measured * (best / 2.0) ** 2 <= bound and measured * last / 2.0 <= bound
+    assert best > 0.9 * 2.0 / math.sqrt(30.0) and last > 0.9 * 2.0 / 30.0
+    assert c.metrics["panels"] * (2.0 / best) ** 2 <= best_n < last_n
+    # the largest step at the boundary panels: named, and the sizes from the gap alone
+    edge = {**metrics, "boundary_panels": {"step_max_mm": step}}
+    best, _, last, _, text = sizes(verdict(edge, limits, panel_size=2.0, units="m"))
+    assert "the largest step is at the boundary panels" in text
+    assert best == pytest.approx(2.0 / 3.0, rel=0.02) and last == pytest.approx(2.0 / 9.0, rel=0.02)
+    # without the panel size, the general word; with molds that pass, no advice
+    assert not any("now 2 m" in s for s in next_steps(verdict(metrics, limits)))
+    fine = verdict(c.metrics, dataclasses.replace(limits, mold_tolerance_mm=1e3),
+                   panel_size=2.0, units="m")
+    assert all(k["advice"] is None for k in fine if k["limit"] in ("mold_tolerance_mm",
+                                                                   "max_panel_step_mm"))
+
+
+def test_the_nearest_is_a_net_on_the_design_and_none_is_named_when_no_solve_gave_a_net(judged):
+    """A study without a feasible candidate names as nearest a net on the design before
+    one that met its constraints only off it, however little that one misses; when no
+    solve gave a net it names none (the cheapest unfinished net would mislead) and says
+    what to try."""
+    from fabplan.study.ranking import recommend
+
+    study, result = judged
+    done = [c for c in result.candidates if not c.failed][:2]
+    assert len(done) == 2
+
+    def as_(c, status, checks, rank):
+        return dataclasses.replace(c, feasible=False, checks=checks, rank=rank,
+                                   metrics={**c.metrics, "status": status},
+                                   reasons=[f"reason of {c.name}"])
+
+    gap = [_failed("mold_tolerance_mm", 1.0, 40.0)]
+    off = [_failed("max_deviation_mm", 150.0, 160.0)]
+    on_design, off_design = as_(done[0], "converged", gap, 2), as_(done[1], "off-design", off, 1)
+    _, text = recommend([off_design, on_design], study)
+    assert f"The nearest is {done[0].name}" in text and "ranked 2" in text
+    assert "only off" not in text
+    # only nets off the design: the nearest of them, said to be off it
+    _, text = recommend([off_design], study)
+    assert f"The nearest is {done[1].name}" in text and "met its constraints only off it" in text
+    # no net at all: none is named
+    stuck = [{**_failed("max_sphere_residual", 1e-6, 1e-3), "margin": None,
+              "advice": "another net type"}]
+    _, text = recommend([as_(c, "stagnated", stuck, i + 1) for i, c in enumerate(done)], study)
+    assert "none is near" in text and "The nearest" not in text
+    assert "To try: another net type." in text
+
+
+def test_the_design_bend_radius_is_that_of_its_most_curved_part():
+    """On a cylinder of radius 2 the design bends with radius 2; a plane does not bend."""
+    import numpy as np
+
+    from fabplan.design.mesh_surface import DesignSurface
+    from fabplan.study.candidate_measure import bend_radius
+
+    def grid(height):
+        u, v = np.meshgrid(np.linspace(-1.0, 1.0, 41), np.linspace(0.0, 3.0, 41), indexing="ij")
+        X = np.column_stack([*height(u.ravel(), v.ravel())])
+        i = np.arange(40)[:, None] * 41 + np.arange(40)[None, :]
+        quads = np.stack([i, i + 41, i + 42, i + 1], axis=-1).reshape(-1, 4)
+        return DesignSurface(X, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+
+    cylinder = grid(lambda u, v: (2.0 * np.sin(u), v, 2.0 * np.cos(u)))
+    assert bend_radius(cylinder) == pytest.approx(2.0, rel=0.05)
+    assert bend_radius(grid(lambda u, v: (u, v, 0.0 * u))) == math.inf
+
+
+def test_panels_that_span_much_of_the_design_are_told_the_size_that_would_not(judged):
+    """A kink over its limit where the design's own curvature turns a panel by more than
+    the limit names the panel size that spans the limit; a solve that gave no net on a
+    design a panel spans more than 30 deg of names the size that spans 30 deg first; no
+    size where the design bends gently."""
+    import re
+
+    from fabplan.study.checks import next_steps
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    c = next(c for c in result.candidates if not c.failed)
+    limits = dataclasses.replace(study.limits, max_kink_deg=10.0)
+    sharp = {**c.metrics, "design_bend_radius": 1.0, "kink_deg": {**c.metrics["kink_deg"],
+                                                                   "max": 40.0}}
+
+    def named_size(checks, limit):
+        kink = next(k for k in checks if k["limit"] == limit)
+        found = re.search(r"at most about ([\d.]+) m \(now 2 m\)", kink["advice"] or "")
+        return None if found is None else float(found.group(1))
+
+    size = named_size(verdict(sharp, limits, panel_size=2.0, units="m"), "max_kink_deg")
+    assert size is not None and math.degrees(size / 1.0) <= 10.0 < math.degrees(1.1 * size)
+    gentle = {**sharp, "design_bend_radius": 100.0}
+    assert named_size(verdict(gentle, limits, panel_size=2.0, units="m"), "max_kink_deg") is None
+    # a solve that gave no net
+    stuck = {**sharp, "converged": False, "status": "stagnated", "unmet": {"sphere": 0.1},
+             "deviation_search": None, "layout_starts": 1}
+    checks = verdict(stuck, limits, panel_size=2.0, units="m")
+    size = named_size(checks, "max_sphere_residual")
+    assert size is not None and math.degrees(size) <= 30.0 < math.degrees(1.1 * size)
+    steps = next_steps(checks)
+    assert len(steps) == 1 and steps[0].startswith("a smaller panel size, at most about")
+    assert "layout_starts" in steps[0]                 # the retry advice follows it
+    assert named_size(verdict({**stuck, "design_bend_radius": 100.0}, limits, panel_size=2.0,
+                              units="m"), "max_sphere_residual") is None

@@ -79,6 +79,21 @@ def test_worker_counts_are_checked():
             worker_count(bad)
 
 
+def test_local_workers_leave_nothing_in_the_temporary_folder(tmp_path, monkeypatch):
+    """The local cluster's scratch space and its lock files are the study's own, removed
+    with the workers (Dask's default leaves ``dask-scratch-space`` in the system's
+    temporary folder)."""
+    import tempfile
+
+    from fabplan.study.parallel import dask_client
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with dask_client(1) as client:
+        assert client.submit(sum, [1, 2]).result() == 3
+        assert len(list(tmp_path.iterdir())) == 1           # its scratch folder, while it runs
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.slow
 def test_local_workers_give_the_serial_study(serial, capsys):
     folder, expected = serial

@@ -263,7 +263,7 @@ def test_study_json_records_run_and_total_seconds(study_run):
     assert record["seconds"] == record["seconds_total"]       # the earlier name, kept
     assert 0 < record["seconds_run"] < record["seconds_total"]
     html_text = (out / "report.html").read_text(encoding="utf-8")
-    assert f"run in {record['seconds_total']:.0f} s including writing the files" in html_text
+    assert f"run in {record['seconds_total']:.0f} s including the files of the candidates" in html_text
     per_candidate = sum(c["metrics"]["seconds"]["total"] for c in record["candidates"])
     assert per_candidate <= record["seconds_run"]
 
@@ -285,10 +285,11 @@ def test_gliding_candidates_lie_on_the_design_and_meet_their_type(study_run):
 def test_every_verdict_traces_to_a_measured_number(study_run):
     """The checks in study.json are recomputed from its metrics and limits."""
     path, _, record = study_run
-    limits = read_study(path).limits
+    study = read_study(path)
     for c in record["candidates"]:
         m = c["metrics"]
-        assert verdict(m, limits) == c["checks"]
+        assert verdict(m, study.limits, panel_size=c["requested"]["panel_size"],
+                       units=study.design.units) == c["checks"]
         by_limit = {ck["limit"]: ck for ck in c["checks"]}
         # the net's vertices and its boundary panels on their neighbours' molds
         edge = (m["boundary_panels"] or {}).get("deviation_max_mm")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 from contextlib import ExitStack
+from typing import Any
 
 from ..io.output import output_argument
 from ..report.html import counted
@@ -66,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         verdict = (f"recommended: {result.recommended}" if result.recommended else
                    "no candidate meets the limits")
         print(f"{verdict}; wrote {files[0]} in {done - started:.0f} s")
-        return 0
+        return _study_exit(result)
     for c in result.ranked():
         if c.failed:
             print(f"  {c.name:<28} failed: {c.error}")
@@ -80,7 +81,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {files[0]} (and study.json, candidates.csv, candidates/) in "
           f"{done - started:.0f} s: {result.seconds_run:.0f} s to run the candidates, "
           f"{done - writing:.0f} s to write the files")
-    return 0
+    return _study_exit(result)
+
+
+def _study_exit(result: Any) -> int:
+    """0 with a recommendation, 3 when no candidate meets every limit (a fabrication
+    limit not met, as the other commands say it; the files are written)."""
+    return 0 if result.recommended else 3
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -102,6 +102,9 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
     if candidate.net == "char-conjugate":
         # its directions are real only where the design is synclastic: the verdict says so
         metrics["design_anticlastic"] = anticlastic_share(design)
+    # what the verdict says of kinks and failed solves at this panel size (None: a plane)
+    metrics["design_bend_radius"] = radius if math.isfinite(radius := bend_radius(design)) \
+        else None
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
                            singular_points=solved.singular_points, boundary_molds=bounds,
@@ -250,6 +253,24 @@ def anticlastic_share(design: DesignSurface) -> float:
         saddle = k1 * k2 < -(1e-3 * typical) ** 2
         cached = float(design.face_areas[saddle].sum() / design.face_areas.sum())
         design.__dict__["_anticlastic_share"] = cached
+    return cached
+
+
+def bend_radius(design: DesignSurface, share: float = 0.05) -> float:
+    """The radius (model units) the design curves with over its most curved `share` of
+    area: the smallest radius of curvature, max(|k1|, |k2|) inverted, of all but that
+    share (one stray triangle does not set it), found once per design; inf for a plane."""
+    cached = design.__dict__.get("_bend_radius")
+    if cached is None:
+        from ..layout.directions import face_principal_frames
+
+        k1, k2, _ = face_principal_frames(design)
+        k = np.maximum(np.abs(k1), np.abs(k2))
+        order = np.argsort(k)
+        area = np.cumsum(design.face_areas[order])
+        sharp = float(k[order][min(np.searchsorted(area, (1.0 - share) * area[-1]), k.size - 1)])
+        cached = 1.0 / sharp if sharp > 0 else math.inf
+        design.__dict__["_bend_radius"] = cached
     return cached
 
 

@@ -8,8 +8,8 @@ import math
 
 from ..fabricate.limits import LIMITS
 
-__all__ = ["check", "binding_check", "violation", "relaxation_text", "feasible_with", "next_steps",
-           "nice_value", "LIMIT_NAMES", "limit_words", "limit_value"]
+__all__ = ["check", "binding_check", "violation", "nearness", "relaxation_text", "feasible_with",
+           "next_steps", "nice_value", "LIMIT_NAMES", "limit_words", "limit_value"]
 
 #: every limit of a study in words, with its unit; those the commands also check
 #: (`fabplan.fabricate.limits.LIMITS`) in the same words
@@ -109,17 +109,63 @@ def binding_check(checks: list[dict]) -> dict | None:
     return min(rated, key=lambda c: c["margin"]) if rated else None
 
 
+#: limits that measure one failure, counted once by `violation`: a panel's gap to its mold
+#: makes the step between neighbouring molds (whose limit is twice the gap's unless set)
+_SAME_FAILURE = {"max_panel_step_mm": "mold_tolerance_mm"}
+
+
 def violation(checks: list[dict]) -> float:
-    """How far a candidate is from feasible: the sum of the relative excess of its failed
-    checks (inf when its solve did not converge or a failed check cannot be rated)."""
-    excess = 0.0
+    """How far a candidate is from feasible: over its failed limits, the sum of how many
+    times over its limit each is, on a log scale: ln(measured / bound) for a largest
+    value, ln(bound / measured) for a smallest (inf when its solve did not converge or a
+    failed check cannot be rated).
+
+    On that scale a limit missed by a factor of two counts as much whichever it is, and a
+    gap to the molds forty times the tolerance does not outweigh a net twelve times the
+    deviation limit off the design by the ratio of the two. The gap to the molds and the
+    step between neighbouring molds are one failure: the larger counts.
+
+    Examples
+    --------
+    >>> gap = {"limit": "mold_tolerance_mm", "ok": False, "margin": -3.0}     # 4 times
+    >>> step = {"limit": "max_panel_step_mm", "ok": False, "margin": -1.0}    # 2 times
+    >>> round(violation([gap, step]), 4) == round(math.log(4.0), 4)
+    True
+    >>> violation([{"limit": "min_coverage", "ok": False, "margin": -0.5}]) == math.log(2.0)
+    True
+    """
+    worst: dict[str, float] = {}
     for c in checks:
         if c["ok"]:
             continue
-        if c["limit"] == "max_sphere_residual" or c.get("margin") is None:
+        margin = c.get("margin")
+        if c["limit"] == "max_sphere_residual" or margin is None:
             return math.inf
-        excess += -c["margin"]
-    return excess
+        # how many times the measured value is over its bound (under it, for a smallest)
+        if c["limit"].startswith("min_"):
+            over = math.inf if margin <= -1.0 else 1.0 / (1.0 + margin)
+        else:
+            over = 1.0 - margin
+        key = _SAME_FAILURE.get(c["limit"], c["limit"])
+        worst[key] = max(worst.get(key, 0.0), math.log(over))
+    return sum(worst.values())
+
+
+def nearness(checks: list[dict], status: str) -> tuple[int, float]:
+    """How near a candidate is to feasible, the nearest smallest: a net on the design (0)
+    before one that met its constraints only off it (1: status ``off-design``; however
+    little it misses its limits, held to the deviation limit it cannot be this net type)
+    before a solve that gave no net (2); within each, its `violation`.
+
+    Examples
+    --------
+    >>> gap = [{"limit": "mold_tolerance_mm", "ok": False, "margin": -40.0}]
+    >>> off = [{"limit": "max_deviation_mm", "ok": False, "margin": -0.5}]
+    >>> nearness(gap, "converged") < nearness(off, "off-design")
+    True
+    """
+    v = violation(checks)
+    return (2 if math.isinf(v) else 1 if status == "off-design" else 0), v
 
 
 #: what else to try for a failed check, beside relaxing its limit (`next_steps`)
@@ -146,21 +192,27 @@ _TRY = {
 def next_steps(checks: list[dict]) -> list[str]:
     """What to try for a candidate's failed `checks`, beside relaxing their limits
     (`relaxation_text`): one suggestion per failed limit (its check's own `advice`, else
-    the general one), each once, in the checks' order; for a solve that did not converge,
-    only what to try for the solve.
+    the general one), each once and none said within another, in the checks' order; for a
+    solve that did not converge, only what to try for the solve.
 
     Examples
     --------
     >>> next_steps([{"limit": "max_kink_deg", "ok": False},
     ...             {"limit": "max_molds", "ok": True}])
     ['a smaller panel size']
+    >>> next_steps([{"limit": "max_kink_deg", "ok": False},
+    ...             {"limit": "mold_tolerance_mm", "ok": False, "advice": "a smaller panel "
+    ...              "size: about 0.45 m"}])
+    ['a smaller panel size: about 0.45 m']
     """
     failed = [c for c in checks if not c["ok"] and (c.get("advice") or c["limit"] in _TRY)]
     if any(c["limit"] == "max_sphere_residual" and c.get("advice") for c in failed):
         # a solve that did not converge gave no net yet: the other checks measured a net
         # that is not one, and their advice would mislead
         failed = [c for c in failed if c["limit"] == "max_sphere_residual"]
-    return list(dict.fromkeys(c.get("advice") or _TRY[c["limit"]] for c in failed))
+    steps = list(dict.fromkeys(c.get("advice") or _TRY[c["limit"]] for c in failed))
+    # "a smaller panel size" is said already where another step names the size
+    return [s for s in steps if not any(s in other for other in steps if other != s)]
 
 
 def feasible_with(checks: list[dict]) -> str:

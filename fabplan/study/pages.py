@@ -170,7 +170,7 @@ def study_html(result: StudyResult, pictures: dict, outputs: dict, *,
     seconds = result.seconds_run if seconds_total is None else seconds_total
     sub = (f"{_design_text(study)}, panel size {study.panel_size:g} {study.design.units}, "
            f"{counted(len(result.candidates), 'candidate')}, run in {seconds:.0f} s"
-           + (" including writing the files" if seconds_total is not None else ""))
+           + (" including the files of the candidates" if seconds_total is not None else ""))
     parts = []
     if study.description:
         parts.append(html.html_paragraph(study.description))

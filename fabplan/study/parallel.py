@@ -26,6 +26,7 @@ with its message, and the others go on; a worker that dies has its task retried
 from __future__ import annotations
 
 import contextlib
+import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterator
@@ -133,13 +134,20 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     InputError
         dask.distributed is not installed, or the scheduler cannot be reached.
     """
-    client, cluster = _connect(workers, scheduler)
-    try:
-        yield client
-    finally:
-        client.close()
+    with contextlib.ExitStack() as stack:
+        # the local workers' scratch space (and its lock files) in a folder of the study's
+        # own, removed with them: nothing is left in the system's temporary folder
+        with contextlib.suppress(ImportError):      # without Dask, `_connect` says so
+            import dask
+
+            if scheduler is None:
+                scratch = stack.enter_context(tempfile.TemporaryDirectory(prefix="fabplan-dask-"))
+                stack.enter_context(dask.config.set({"temporary-directory": scratch}))
+        client, cluster = _connect(workers, scheduler)
         if cluster is not None:
-            cluster.close()
+            stack.callback(cluster.close)
+        stack.callback(client.close)                 # closed first
+        yield client
 
 
 def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: str | None = None,

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..report.html import counted
-from .checks import LIMIT_NAMES, binding_check, feasible_with, next_steps, violation
+from .checks import LIMIT_NAMES, binding_check, feasible_with, nearness, next_steps
 from .definition import Candidate, Study
 from .mold_counts import material_sentence
 from .result import CandidateResult, StudyResult, by_rank
@@ -53,7 +53,8 @@ def judge_study(study: Study, design: DesignSurface, results: list[CandidateResu
             judged.append(replace(r, checks=[], feasible=False, cost=None, cost_terms={},
                                   rank=None, notes=[]))
             continue
-        checks = verdict(r.metrics, study.limits_of(r.candidate))
+        checks = verdict(r.metrics, study.limits_of(r.candidate),
+                         panel_size=study.panel_size_of(r.candidate), units=study.design.units)
         feasible = all(c["ok"] for c in checks)
         cost, terms = candidate_cost(r.metrics, study.cost, charge_sheets=charge_sheets)
         notes = [f"the same net as {r.same_net_as} (the same panels, every vertex within "
@@ -148,21 +149,7 @@ def recommend(results: list[CandidateResult], study: Study, *,
     """
     feasible = sorted((r for r in results if r.feasible), key=by_rank)
     if not feasible:
-        measured = sorted((r for r in results if not r.failed),
-                          key=lambda r: (violation(r.checks), by_rank(r)))
-        if not measured:
-            return None, "No candidate produced a net; see the reasons of each below."
-        best = measured[0]
-        # nearest by how far it exceeds its limits; the ranking counts the limits failed
-        # first, so the two may differ, and the text says which it means
-        ranked = "" if best.rank in (None, 1) else (
-            f" (ranked {best.rank}: the ranking counts the limits failed first, this is "
-            "the one that exceeds its limits least)")
-        text = (f"No candidate meets every limit. The nearest is {_named(best)}{ranked}, "
-                "which fails: " + "; ".join(best.reasons) + ".")
-        text += feasible_with(best.checks)
-        steps = next_steps(best.checks)
-        return None, text + (f" Other ways: {'; '.join(steps)}." if steps else "")
+        return None, _nearest_text([r for r in results if not r.failed])
     best = feasible[0]
     base = baseline_of(best.candidate, results)
     limits = study.limits
@@ -211,6 +198,35 @@ def recommend(results: list[CandidateResult], study: Study, *,
 
 def _g3(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3g}"
+
+
+def _nearest_text(measured: list[CandidateResult]) -> str:
+    """What a study without a feasible candidate says: its nearest candidate (`nearness`),
+    what that fails, the relaxation that makes it feasible and the other ways; or, when no
+    solve gave a buildable net, that none is near and what to try."""
+    if not measured:
+        return "No candidate produced a net; see the reasons of each below."
+    near = {r.name: nearness(r.checks, r.metrics["status"]) for r in measured}
+    best = min(measured, key=lambda r: (near[r.name], by_rank(r)))
+    if near[best.name][0] == 2:
+        # no net to be near: naming the cheapest unfinished one would mislead
+        # each candidate's advice, its alternatives ("...; or ...") said once across them
+        steps = list(dict.fromkeys(part for r in measured for step in next_steps(r.checks)
+                                   for part in step.split("; or ")))
+        return ("No candidate meets every limit, and none is near: no solve gave a buildable "
+                "net (see the reasons of each below)."
+                + (f" To try: {'; '.join(steps)}." if steps else ""))
+    # the ranking counts the limits failed first, so it may put another first: the text
+    # says which it means
+    ranked = "" if best.rank in (None, 1) else (
+        f" (ranked {best.rank}: the ranking counts the limits failed first, this is "
+        "the one least many times over its limits)")
+    off = "" if near[best.name][0] == 0 else (
+        " No candidate gave a net on the design: this one met its constraints only off it.")
+    text = (f"No candidate meets every limit. The nearest is {_named(best)}{ranked}, "
+            "which fails: " + "; ".join(best.reasons) + "." + off + feasible_with(best.checks))
+    steps = next_steps(best.checks)
+    return text + (f" Other ways: {'; '.join(steps)}." if steps else "")
 
 
 def _named(result: CandidateResult) -> str:

@@ -8,7 +8,7 @@ sweep's, ``linear-weingarten-41.25``), judged like the others:
 
 1. the first round: up to four points spread evenly over the range, ends included;
 2. every further round: the best point so far (feasible and cheapest; without a feasible
-   one the least infeasible, `fabplan.study.checks.violation`) and the midpoints between it
+   one the nearest, `fabplan.study.checks.nearness`) and the midpoints between it
    and its evaluated neighbours, as long as the budget and the resolution (a 64th of the
    range) allow. A midpoint carries the start angle of the best point: the points of a
    radius search share its layout; a point of an angle search keeps its own angle, and
@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .checks import violation
+from .checks import nearness
 
 if TYPE_CHECKING:
     from .definition import Candidate, Search
@@ -72,7 +72,8 @@ class SearchPoint:
             return (2, float("inf"), 0.0)
         if r.feasible:
             return (0, r.cost if r.cost is not None else float("inf"), 0.0)
-        return (1, violation(r.checks), r.cost if r.cost is not None else float("inf"))
+        return (1, *nearness(r.checks, r.metrics["status"]),
+                r.cost if r.cost is not None else float("inf"))
 
 
 def search_points(search: Search, results: list[CandidateResult]) -> list[SearchPoint]:

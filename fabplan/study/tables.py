@@ -231,8 +231,9 @@ def _coverage_text(coverage: float, full: float | None = None) -> str:
     if full is not None and full < coverage:
         text += f" ({100 * full:.1f} % by full panels, the rest by boundary panels)"
     if coverage < 0.999:
-        text += (f": {100 * (1 - coverage):.1f} % is left unclad, and the panel, mold, sheet and "
-                 "cost figures leave it out")
+        text += (f": {100 * (1 - coverage):.1f} % is left unclad; the panel, mold and sheet "
+                 "counts leave it out, the cost charges its panels (the panel terms divided by "
+                 "the covered share)")
     return text
 
 
@@ -325,9 +326,11 @@ def candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[
     verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
     if not c.feasible:
         relax = feasible_with(c.checks)
-        # else a check no relaxed limit meets (a solve that did not converge): what to try
-        steps = [] if relax else next_steps(c.checks)
-        verdict += relax + (" To try: " + "; ".join(steps) + "." if steps else "")
+        # beside a relaxation, the other ways (a panel size named); without one (a solve
+        # that did not converge) what to try
+        steps = next_steps(c.checks)
+        verdict += relax + (f" {'Other ways' if relax else 'To try'}: " + "; ".join(steps) + "."
+                            if steps else "")
     if c.notes:
         verdict += " Note: " + "; ".join(c.notes) + "."
     types = m["molds"]["panel_types"]

@@ -10,13 +10,22 @@ import math
 from ..fabricate.molds.mold_shapes import PANEL_TYPES
 from ..report.html import counted
 from .checks import check as _check
+from .checks import nice_value
 from .definition import CostWeights, Limits
 
-__all__ = ["verdict", "candidate_cost", "every_panel_flat", "differ_by"]
+__all__ = ["verdict", "smaller_panels", "candidate_cost", "every_panel_flat", "differ_by"]
 
 
-def verdict(metrics: dict, limits: Limits) -> list[dict]:
+def verdict(metrics: dict, limits: Limits, *, panel_size: float | None = None,
+            units: str = "") -> list[dict]:
     """The checks of one candidate's measured `metrics` against the `limits`.
+
+    Parameters
+    ----------
+    metrics : the candidate's measured metrics; limits : the limits it is judged by.
+    panel_size, units : the panel size it was laid out with and the design's units: with
+        them, panels that fit no mold are told the panel size at which they would
+        (`smaller_panels`).
 
     Returns
     -------
@@ -36,23 +45,11 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         + (f", short on {_unmet_words(unmet)}" if (unmet := metrics.get("unmet")) and not met
            else "")
         + f"; largest sphere residual {_g(res)} of an edge (limit {limits.max_sphere_residual:g})",
-        advice=None if met else _unconverged_advice(metrics)))
-    dev = metrics["deviation_mm"]["max"]
-    edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
-    both = metrics["largest_deviation_mm"]
-    own = (metrics.get("boundary_panels") or {}).get("own_molds", 0)
-    checks.append(_check(
-        "max_deviation_mm", limits.max_deviation_mm, both, both <= limits.max_deviation_mm,
-        f"the net deviates up to {dev:.1f} mm from the design"
-        + (f" at its free tips (its other vertices within {held:.1f} mm)"
-           if (held := metrics["deviation_mm"].get("held_max")) is not None
-           and held < 0.9 * dev else "")
-        + (f", its boundary panels as cut from their molds up to {edge:.1f} mm"
-           + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
-           if edge is not None else "")
-        + f" (limit {limits.max_deviation_mm:g} mm)",
-        advice=_deviation_advice(metrics, limits, dev, edge)))
-    checks += _mold_checks(metrics["molds"], limits)
+        advice=None if met else _unconverged_advice(metrics, panel_size, units)))
+    checks.append(_deviation_check(metrics, limits))
+    checks += _mold_checks(metrics["molds"], limits, smaller_panels(
+        metrics["molds"], limits, panel_size, units, metrics.get("panels"),
+        (metrics.get("boundary_panels") or {}).get("step_max_mm")))
     if limits.planar_panels:
         p = metrics["planarity_mm"]["max"]
         checks.append(_check(
@@ -70,7 +67,9 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         k = metrics["kink_deg"]["max"]
         checks.append(_check("max_kink_deg", limits.max_kink_deg, k, k <= limits.max_kink_deg,
                              f"the largest kink between neighbouring panels is {k:.2f} deg (limit "
-                             f"{limits.max_kink_deg:g} deg)"))
+                             f"{limits.max_kink_deg:g} deg)",
+                             advice=_design_bend(metrics, panel_size, units,
+                                                 limits.max_kink_deg)))
     turn = (metrics.get("line_turn_deg") or {}).get("max")
     if limits.max_line_turn_deg is not None and turn is not None:
         checks.append(_check("max_line_turn_deg", limits.max_line_turn_deg, turn,
@@ -86,6 +85,25 @@ def verdict(metrics: dict, limits: Limits) -> list[dict]:
         for c in checks:
             c["relax_to"] = None
     return checks
+
+
+def _deviation_check(metrics: dict, limits: Limits) -> dict:
+    """The check of the net's and its boundary panels' largest deviation from the design."""
+    dev = metrics["deviation_mm"]["max"]
+    edge = (metrics.get("boundary_panels") or {}).get("deviation_max_mm")
+    both = metrics["largest_deviation_mm"]
+    own = (metrics.get("boundary_panels") or {}).get("own_molds", 0)
+    return _check(
+        "max_deviation_mm", limits.max_deviation_mm, both, both <= limits.max_deviation_mm,
+        f"the net deviates up to {dev:.1f} mm from the design"
+        + (f" at its free tips (its other vertices within {held:.1f} mm)"
+           if (held := metrics["deviation_mm"].get("held_max")) is not None
+           and held < 0.9 * dev and dev >= 0.1 * limits.max_deviation_mm else "")
+        + (f", its boundary panels as cut from their molds up to {edge:.1f} mm"
+           + (f" ({counted(own, 'boundary panel')} on molds of their own)" if own else "")
+           if edge is not None else "")
+        + f" (limit {limits.max_deviation_mm:g} mm)",
+        advice=_deviation_advice(metrics, limits, dev, edge))
 
 
 def _deviation_advice(metrics: dict, limits: Limits, dev: float, edge: float | None
@@ -114,8 +132,36 @@ def _unmet_words(unmet: dict) -> str:
     return ", ".join(f"{name} ({_g(r)})" for name, r in worst[:3]) + more
 
 
-def _unconverged_advice(metrics: dict) -> str:
-    """What to try for a solve that did not give a net, from what it tried already."""
+#: the most of the design's curvature a panel may span, in degrees, before the advice on
+#: a solve that gave no net names a smaller panel size (`_design_bend`)
+PANEL_SPAN_DEG = 30.0
+
+
+def _design_bend(metrics: dict, panel_size: float | None, units: str, limit_deg: float
+                 ) -> str | None:
+    """A smaller panel size where the design's own curvature turns a panel by more than
+    `limit_deg` (degrees): neighbouring panels meet at about their size over the radius
+    the design curves with (``design_bend_radius``); None where it does not, or unknown."""
+    radius = metrics.get("design_bend_radius")
+    if not radius or panel_size is None or math.degrees(panel_size / radius) <= limit_deg:
+        return None
+    size = nice_value(math.radians(limit_deg) * radius, up=False)
+    return (f"a smaller panel size, at most about {size:g} {units} (now {panel_size:g} {units}): "
+            f"the design curves with radii down to {radius:.3g} {units} over its most curved "
+            f"5 %, of which a panel spans {math.degrees(panel_size / radius):.0f} deg, and "
+            f"{limit_deg:g} deg at that size")
+
+
+def _unconverged_advice(metrics: dict, panel_size: float | None = None, units: str = "") -> str:
+    """What to try for a solve that did not give a net, from what it tried already; first
+    a smaller panel size where a panel spans more than `PANEL_SPAN_DEG` of the design."""
+    sharp = _design_bend(metrics, panel_size, units, PANEL_SPAN_DEG)
+    advice = _retry_advice(metrics)
+    return advice if sharp is None else f"{sharp}; or {advice}"
+
+
+def _retry_advice(metrics: dict) -> str:
+    """What to try for a solve that did not give a net at this panel size."""
     search, status = metrics.get("deviation_search"), metrics["status"]
     if status in ("folded", "crumpled", "degenerate"):
         # it met its constraints: longer solves would not help, another lattice may
@@ -139,15 +185,18 @@ def _solve_state(metrics: dict) -> str:
     state = "converged" if metrics["converged"] else f"stopped ({metrics['status']})"
     folds = metrics.get("folds")
     if folds and metrics["status"] in ("folded", "degenerate"):
-        state = (f"met its constraints on a net that folds ({folds['flipped_faces']} flipped "
-                 f"faces, {folds['fold_edges']} fold edges)" if folds["folded"] else
-                 f"met its constraints on a degenerate net ({folds['degenerate_stars']} stars "
-                 f"with their lines run together, {folds['collapsed_edges']} collapsed edges)")
+        state = (f"met its constraints on a net that folds ("
+                 f"{counted(folds['flipped_faces'], 'flipped face')}, "
+                 f"{counted(folds['fold_edges'], 'fold edge')})" if folds["folded"] else
+                 f"met its constraints on a degenerate net ("
+                 f"{counted(folds['degenerate_stars'], 'star')} with their lines run together, "
+                 f"{counted(folds['collapsed_edges'], 'collapsed edge')})")
     build = metrics.get("buildable")
     if build and metrics["status"] in ("crumpled", "off-design"):
-        state = (f"met its constraints on a crumpled net ({build['nonconvex_faces']} non-convex "
-                 f"faces, {build['sharp_line_turns']} vertices where a line turns too much)"
-                 if metrics["status"] == "crumpled" else
+        state = (f"met its constraints on a crumpled net ("
+                 f"{counted(build['nonconvex_faces'], 'non-convex face')}, "
+                 f"{counted(build['sharp_line_turns'], 'vertex', 'vertices')} where a line "
+                 "turns too much)" if metrics["status"] == "crumpled" else
                  "met its constraints only off the design (held within the limit it cannot "
                  "be this net type; the nearest it came is below)")
     if metrics.get("status_note"):
@@ -155,9 +204,58 @@ def _solve_state(metrics: dict) -> str:
     return state
 
 
-def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
+def smaller_panels(molds: dict, limits: Limits, panel_size: float | None, units: str,
+                   panels: int | None, boundary_step: float | None = None) -> str | None:
+    """What to try when panels fit no mold or neighbouring molds step apart, with the
+    panel sizes at which they might not: None when they do, or without a panel size.
+
+    A panel's gap to its mold, and so the step between neighbouring molds, shrinks with
+    the panel size to a power between one and two: measured from 2 to 1 m panels on a
+    gentle wavy facade about 1.1 (gap) and 1.6 (step), from 3 to 1.5 m on a sharper one
+    2.6. So the sizes given are a range, the square at best and the size itself at worst.
+    A step at the boundary panels (`boundary_step`, the largest) is not counted: their
+    slivers, cut from the design's edge, come at every panel size.
+
+    Examples
+    --------
+    >>> molds = {"failures": 12, "max_deviation_mm": 23.0, "max_panel_step_mm": 43.0}
+    >>> limits = Limits(max_deviation_mm=150.0, mold_tolerance_mm=1.0)
+    >>> print(smaller_panels(molds, limits, 2.0, "m", 96))  # doctest: +NORMALIZE_WHITESPACE
+    a larger mold_tolerance_mm, or a smaller panel size (now 2 m, 96 panels): the largest
+    gap and step are up to 23 times their limits and shrink with the panel size to a power
+    between one and two, so 0.41 m (2,300 panels) at best, 0.086 m (52,000 panels) at worst
+    """
+    tolerance, step_limit = limits.mold_tolerance_mm, limits.panel_step_limit_mm
+    step = float(molds.get("max_panel_step_mm") or 0.0)
+    over = [molds["max_deviation_mm"] / tolerance] if molds["failures"] else []
+    at_boundary = step > step_limit and boundary_step is not None and boundary_step >= step
+    if step > step_limit and not at_boundary:
+        over.append(step / step_limit)
+    # a step at the boundary panels that no smaller panel size takes away
+    edge = ("the largest step is at the boundary panels, whose slivers come at every panel "
+            "size: see boundary-panels.csv") if at_boundary else ""
+    if not over or panel_size is None:
+        return f"a larger mold_tolerance_mm, or trim the boundary panels: {edge}" if edge \
+            else None
+    worst = max(over)
+    best, last = (nice_value(panel_size / worst ** power, up=False) for power in (0.5, 1.0))
+
+    def at(size: float) -> str:
+        many = "" if not panels else \
+            f" ({nice_value(panels * (panel_size / size) ** 2, up=True):,.0f} panels)"
+        return f"{size:g} {units}{many}"
+
+    return (f"a larger mold_tolerance_mm, or a smaller panel size (now {panel_size:g} {units}"
+            f"{f', {panels:,} panels' if panels else ''}): the largest gap and step are up to "
+            f"{worst:.3g} times their limits and shrink with the panel size to a power between "
+            f"one and two, so {at(best)} at best, {at(last)} at worst"
+            + (f"; {edge}" if edge else ""))
+
+
+def _mold_checks(molds: dict, limits: Limits, smaller: str | None = None) -> list[dict]:
     """The checks of a candidate's molds (``metrics["molds"]``, `mold_metrics`): every
-    panel fits a mold, neighbouring molds meet, and (when limited) how many molds."""
+    panel fits a mold, neighbouring molds meet, and (when limited) how many molds;
+    `smaller` the advice on the first two (`smaller_panels`)."""
     checks = []
     panels_fit = molds["failures"] == 0
     checks.append(_check(
@@ -165,7 +263,7 @@ def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
         f"every panel fits its mold within {limits.mold_tolerance_mm:g} mm (largest gap "
         f"{molds['max_deviation_mm']:.2f} mm)" if panels_fit else
         f"{counted(molds['failures'], 'panel fits', 'panels fit')} no mold within "
-        f"{limits.mold_tolerance_mm:g} mm"))
+        f"{limits.mold_tolerance_mm:g} mm", advice=smaller))
     step = molds.get("max_panel_step_mm")
     if step is not None:
         step_limit = limits.panel_step_limit_mm
@@ -177,7 +275,8 @@ def _mold_checks(molds: dict, limits: Limits) -> list[dict]:
             f"neighbouring panels meet: the largest step between {between} is {step:.2f} mm "
             f"(limit {step_limit:g} mm)" if step <= step_limit else
             f"{apart} step up to {step:.2f} mm apart at "
-            f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)"))
+            f"{counted(molds['panel_steps_over'], 'shared edge')} (limit {step_limit:g} mm)",
+            advice=smaller))
     if limits.max_molds is not None:
         n = molds["count"]
         bent = molds.get("panel_classes") is not None
