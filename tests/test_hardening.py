@@ -385,6 +385,25 @@ def test_a_study_beyond_the_panel_limit_is_refused_before_any_layout(tmp_path, c
             "give a larger panels.size")
 
 
+def test_a_panel_size_meant_in_metres_on_a_millimetre_design_is_told_so(tmp_path, capsys):
+    """``size = 3`` on a design in millimetres asks for 3 mm panels: the refusal says what
+    to give for 3 m panels."""
+    import numpy as np
+
+    u, v = np.meshgrid(np.linspace(0.0, 20_000.0, 21), np.linspace(0.0, 12_000.0, 13))
+    X = np.column_stack([u.ravel(), v.ravel(), 300.0 * np.sin(u.ravel() / 3_000.0)])
+    i = (np.arange(12)[:, None] * 21 + np.arange(20)[None, :]).ravel()
+    lines = [f"v {x:.3f} {y:.3f} {z:.3f}" for x, y, z in X]
+    lines += [f"f {a + 1} {a + 2} {a + 23}\nf {a + 1} {a + 23} {a + 22}" for a in i]
+    (tmp_path / "wall.obj").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    study = tmp_path / "s.toml"
+    study.write_text(_study_text().replace('surface = "hyperbolic-paraboloid"',
+                                           'file = "wall.obj"\nunits = "mm"')
+                     .replace("size = 2.0", "size = 3"), encoding="utf-8")
+    refused(["study", study, "-q", "-o", tmp_path / "out"], capsys, tmp_path,
+            "panels.size is in the design's units (mm): for panels of 3 m give 3000")
+
+
 # ---------------------------------------------------------------------------- units
 def test_molds_in_millimetres_on_a_model_in_metres_is_refused(tmp_path, capsys):
     """`molds --units mm` on a net in metres reported 1 mold for 100 planar panels."""

@@ -10,7 +10,7 @@ import math
 import pytest
 
 from fabplan.errors import InputError
-from fabplan.study.checks import binding_check, relaxation_text, violation
+from fabplan.study.checks import LIMIT_NAMES, binding_check, relaxation_text, violation
 from fabplan.study.run import judge_study, run_study
 from fabplan.study.spec import parse_study
 
@@ -711,3 +711,20 @@ def test_panels_that_span_much_of_the_design_are_told_the_size_that_would_not(ju
     assert "layout_starts" in steps[0]                 # the retry advice follows it
     assert named_size(verdict({**stuck, "design_bend_radius": 100.0}, limits, panel_size=2.0,
                               units="m"), "max_sphere_residual") is None
+
+
+def test_a_failed_solve_within_its_residual_bound_says_why_in_the_check_table(judged):
+    """The check table's row of a solve that gave no buildable net shows, beside a residual
+    within the bound, why it failed ("2.2e-12 ... NO" read as a contradiction)."""
+    from fabplan.study.tables import check_rows
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    c = next(c for c in result.candidates if not c.failed)
+    stuck = {**c.metrics, "converged": False, "status": "crumpled", "unmet": {},
+             "sphere_residual_relative_max": 2.2e-12}
+    rows = check_rows(dataclasses.replace(c, checks=verdict(stuck, study.limits)))
+    solve = next(r for r in rows if r[0] == LIMIT_NAMES["max_sphere_residual"][0])
+    assert solve[3] == "NO" and solve[1].endswith("(no buildable net)")
+    fine = next(r for r in check_rows(c) if r[0] == LIMIT_NAMES["max_sphere_residual"][0])
+    assert fine[1].endswith("(no buildable net)") == (fine[3] == "NO")

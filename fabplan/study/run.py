@@ -344,6 +344,13 @@ def load_study_design(study: Study, say: Callable[[str], None],
         say(f"warning: {unit_fix}")
         fix = f"{unit_fix}, or {fix}"
     smallest = min(study.panel_size_of(c) for c in study.candidates)
+    size_mm = smallest * study.design.mm_per_unit
+    if units != "m" and size_mm < 100.0:
+        # a size meant in metres, given in the design's smaller units
+        given = "(mm)" if units == "mm" else f"({smallest:g} {units} is {size_mm:g} mm)"
+        meant = smallest * 1000.0 / study.design.mm_per_unit
+        fix = (f"panels.size is in the design's units {given}: for panels of {smallest:g} m "
+               f"give {meant:g}, or {fix}")
     check_panel_count(design.area / smallest**2, max_panels=max_panels,
                       bytes_per_panel=STUDY_BYTES_PER_PANEL,
                       what=f"{study.path or study.name}: layouts of panel size "

@@ -314,9 +314,18 @@ def _check_value(key: str, value) -> str:
 
 
 def check_rows(c: CandidateResult) -> list[list]:
-    return [[limit_text(ck["limit"], ck["bound"])[0],
-             _check_value(ck["limit"], ck["measured"]), _check_value(ck["limit"], ck["bound"]),
-             "yes" if ck["ok"] else "NO", ck["text"]] for ck in c.checks]
+    return [[limit_text(ck["limit"], ck["bound"])[0], _measured(ck),
+             _check_value(ck["limit"], ck["bound"]), "yes" if ck["ok"] else "NO", ck["text"]]
+            for ck in c.checks]
+
+
+def _measured(check: dict) -> str:
+    """A check's measured value; a solve's residual within its bound, failed because the
+    solve gave no buildable net, says so beside the number."""
+    value = _check_value(check["limit"], check["measured"])
+    if check["limit"] == "max_sphere_residual" and not check["ok"]:
+        value += " (no buildable net)"
+    return value
 
 
 def candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[list]]:
