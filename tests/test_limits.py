@@ -10,7 +10,13 @@ import math
 import pytest
 
 from fabplan.errors import InputError
-from fabplan.study.checks import LIMIT_NAMES, binding_check, relaxation_text, violation
+from fabplan.study.checks import (
+    LIMIT_NAMES,
+    binding_check,
+    nearness,
+    relaxation_text,
+    violation,
+)
 from fabplan.study.run import judge_study, run_study
 from fabplan.study.spec import parse_study
 
@@ -66,7 +72,7 @@ def test_relaxing_the_limits_as_said_makes_the_nearest_candidate_feasible(judged
     strict = judge_study(tight, result.design, result.candidates)
     assert strict.recommended is None
     nearest = min((c for c in strict.candidates if not c.failed),
-                  key=lambda c: violation(c.checks))
+                  key=lambda c: nearness(c.checks, c.metrics["status"]))
     assert math.isfinite(violation(nearest.checks))
     assert f"The nearest is {nearest.name}" in strict.recommendation
     # the ranking counts the limits failed first: a nearest that ranks lower says so
@@ -597,8 +603,9 @@ def test_panels_that_fit_no_mold_are_told_the_panel_sizes_at_which_they_might(ju
     def sizes(checks):
         sized = [s for s in next_steps(checks) if "a smaller panel size (now 2 m" in s]
         assert len(sized) == 1                     # the gap and the step say it once
-        found = re.search(r"so ([\d.]+) m \(([\d,]+) panels\) at best, ([\d.]+) m "
-                          r"\(([\d,]+) panels\) at worst", sized[0])
+        found = re.search(r"so ([\d.]+) m \(([\d,]+) panels\) were (?:they|it) to shrink with "
+                          r"the square of the panel size, ([\d.]+) m \(([\d,]+) panels\) were "
+                          r"(?:they|it) to shrink in proportion", sized[0])
         assert found, sized[0]
         best, best_n, last, last_n = found.groups()
         return float(best), int(best_n.replace(",", "")), float(last), \
@@ -614,6 +621,7 @@ def test_panels_that_fit_no_mold_are_told_the_panel_sizes_at_which_they_might(ju
     edge = {**metrics, "boundary_panels": {"step_max_mm": step}}
     best, _, last, _, text = sizes(verdict(edge, limits, panel_size=2.0, units="m"))
     assert "the largest step is at the boundary panels" in text
+    assert "the largest gap is up to 9 times its limit" in text
     assert best == pytest.approx(2.0 / 3.0, rel=0.02) and last == pytest.approx(2.0 / 9.0, rel=0.02)
     # without the panel size, the general word; with molds that pass, no advice
     assert not any("now 2 m" in s for s in next_steps(verdict(metrics, limits)))
@@ -643,7 +651,9 @@ def test_the_nearest_is_a_net_on_the_design_and_none_is_named_when_no_solve_gave
     off = [_failed("max_deviation_mm", 150.0, 160.0)]
     on_design, off_design = as_(done[0], "converged", gap, 2), as_(done[1], "off-design", off, 1)
     _, text = recommend([off_design, on_design], study)
-    assert f"The nearest is {done[0].name}" in text and "ranked 2" in text
+    assert f"The nearest is {done[0].name}" in text and (
+        "(ranked 2: the ranking counts the limits failed first; this is the net on the design "
+        "the least many times over its limits)") in text
     assert "only off" not in text
     # only nets off the design: the nearest of them, said to be off it
     _, text = recommend([off_design], study)
@@ -728,3 +738,83 @@ def test_a_failed_solve_within_its_residual_bound_says_why_in_the_check_table(ju
     assert solve[3] == "NO" and solve[1].endswith("(no buildable net)")
     fine = next(r for r in check_rows(c) if r[0] == LIMIT_NAMES["max_sphere_residual"][0])
     assert fine[1].endswith("(no buildable net)") == (fine[3] == "NO")
+
+
+def test_converged_nets_over_a_tightened_residual_are_nets_not_failed_solves(judged):
+    """A converged net whose sphere residual is over a tightened limit gave a net: the
+    study names its nearest (none is "no buildable net"), and the check table shows its
+    residual without saying it gave none."""
+    from fabplan.study.tables import check_rows
+
+    study, result = judged
+    tight = dataclasses.replace(study, limits=dataclasses.replace(
+        study.limits, max_sphere_residual=1e-30))
+    strict = judge_study(tight, result.design, result.candidates)
+    converged = [c for c in strict.candidates if not c.failed and c.metrics["converged"]]
+    assert converged and strict.recommended is None
+    assert "The nearest is" in strict.recommendation and "none is near" not in strict.recommendation
+    for c in converged:
+        assert nearness(c.checks, c.metrics["status"])[0] == 0
+        row = next(r for r in check_rows(c) if r[0] == LIMIT_NAMES["max_sphere_residual"][0])
+        assert row[3] == "NO" and "no buildable net" not in row[1]
+
+
+def test_advice_is_given_on_failed_checks_only(judged):
+    """A kink within its limit on a sharply curved design, and a mold gap within its
+    tolerance beside a failed step, carry no advice; a failed step whose limit is set
+    apart from the tolerance asks for that limit to be larger."""
+    from fabplan.study.verdict import verdict
+
+    study, result = judged
+    c = next(c for c in result.candidates if not c.failed)
+    limits = dataclasses.replace(study.limits, max_kink_deg=90.0, max_panel_step_mm=1.0)
+    molds = {**c.metrics["molds"], "failures": 0, "max_deviation_mm": 0.5,
+             "max_panel_step_mm": 9.0, "panel_steps_over": 2}
+    checks = verdict({**c.metrics, "molds": molds, "design_bend_radius": 0.5,
+                      "boundary_panels": None}, limits, panel_size=2.0, units="m")
+    by = {k["limit"]: k for k in checks}
+    assert by["max_kink_deg"]["ok"] and by["max_kink_deg"]["advice"] is None
+    assert by["mold_tolerance_mm"]["ok"] and by["mold_tolerance_mm"]["advice"] is None
+    step = by["max_panel_step_mm"]
+    assert not step["ok"] and step["advice"].startswith("a larger max_panel_step_mm, or a smaller")
+    assert "the largest step is up to 9 times its limit" in step["advice"]
+    assert all(k["advice"] is None for k in checks if k["ok"])
+
+
+def test_a_search_refines_beside_a_net_on_the_design_before_one_off_it():
+    """Without a feasible point, a search's best point is a net on the design, even when
+    a net off the design misses its limits by less."""
+    from fabplan.study.search import search_points
+    from fabplan.study.spec import Search
+
+    search = Search("lw", "linear-weingarten", "angle", 30.0, 60.0, budget=7)
+    on = _point(search, 40.0, feasible=False, cost=30.0)      # 4 times its limit
+    off = _point(search, 50.0, feasible=False, cost=1.0)      # 1.1 times
+    off.metrics["status"] = "off-design"
+    best = min(search_points(search, [on, off]), key=lambda p: p.rank_key)
+    assert best.value == 40.0
+
+
+def test_the_design_bend_radius_leaves_out_its_most_curved_twentieth():
+    """A sharp part of under 5 % of the design's area does not set its bend radius; one of
+    more does (a strip bent with radius 2, and with radius 0.5 along a part of it)."""
+    import numpy as np
+
+    from fabplan.design.mesh_surface import DesignSurface
+    from fabplan.study.candidate_measure import bend_radius
+
+    def strip(sharp_length, length=10.0, step=0.025):
+        s = np.arange(0.0, length + step / 2, step)
+        sharp = (s > 0.5 * (length - sharp_length)) & (s < 0.5 * (length + sharp_length))
+        turn = np.concatenate([[0.0], np.cumsum(np.where(sharp, 2.0, 0.5)[:-1] * step)])
+        x = np.concatenate([[0.0], np.cumsum(np.cos(turn[:-1]) * step)])
+        z = np.concatenate([[0.0], np.cumsum(np.sin(turn[:-1]) * step)])
+        n, w = len(s), 11
+        X = np.column_stack([np.repeat(x, w), np.tile(np.linspace(0.0, 2.0, w), n),
+                             np.repeat(z, w)])
+        i = (np.arange(n - 1)[:, None] * w + np.arange(w - 1)[None, :]).reshape(-1, 1)
+        quads = np.hstack([i, i + w, i + w + 1, i + 1])
+        return DesignSurface(X, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+
+    assert bend_radius(strip(0.2)) == pytest.approx(2.0, rel=0.05)      # 2 % of the area
+    assert bend_radius(strip(1.0)) == pytest.approx(0.5, rel=0.05)      # 10 %

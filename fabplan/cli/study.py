@@ -6,13 +6,16 @@ from __future__ import annotations
 import argparse
 import time
 from contextlib import ExitStack
-from typing import Any
+from typing import TYPE_CHECKING
 
 from ..io.output import output_argument
 from ..report.html import counted
 from .arguments import add_ifc, add_max_panels
 from .registry import Command, register
 from .running import command_progress
+
+if TYPE_CHECKING:
+    from ..study.result import StudyResult
 
 __all__ = ["COMMAND", "add_arguments", "run"]
 
@@ -84,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     return _study_exit(result)
 
 
-def _study_exit(result: Any) -> int:
+def _study_exit(result: StudyResult) -> int:
     """0 with a recommendation, 3 when no candidate meets every limit (a fabrication
     limit not met, as the other commands say it; the files are written)."""
     return 0 if result.recommended else 3

@@ -211,7 +211,9 @@ class CandidateCache:
                              f"{vertices} vertices")
         if molds.mold.shape != (len(net.mesh.face_sizes),) and result.boundary_molds is None:
             raise ValueError("molds for another number of panels")
-        verdict(result.metrics, self._study.limits_of(result.candidate))
+        verdict(result.metrics, self._study.limits_of(result.candidate),
+                panel_size=self._study.panel_size_of(result.candidate),
+                units=self._study.design.units)
         candidate_cost(result.metrics, self._study.cost)
         json_text({"metrics": result.metrics, "checks": result.checks})
 

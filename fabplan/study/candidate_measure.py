@@ -18,6 +18,7 @@ from .candidate_solve import DEVIATION_HELD
 from .definition import Candidate, Study
 from .mold_counts import mold_metrics, molds_text
 from .result import CandidateResult
+from .verdict import BEND_SHARE
 
 if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when it runs
     from ..design.mesh_surface import DesignSurface
@@ -103,8 +104,8 @@ def fabricate_candidate(study: Study, design: DesignSurface, solved: CandidateRe
         # its directions are real only where the design is synclastic: the verdict says so
         metrics["design_anticlastic"] = anticlastic_share(design)
     # what the verdict says of kinks and failed solves at this panel size (None: a plane)
-    metrics["design_bend_radius"] = radius if math.isfinite(radius := bend_radius(design)) \
-        else None
+    radius = bend_radius(design)
+    metrics["design_bend_radius"] = radius if math.isfinite(radius) else None
     metrics["seconds"] = seconds
     return CandidateResult(candidate, metrics=metrics, net=net, molds=molds, strips=strips,
                            singular_points=solved.singular_points, boundary_molds=bounds,
@@ -256,7 +257,7 @@ def anticlastic_share(design: DesignSurface) -> float:
     return cached
 
 
-def bend_radius(design: DesignSurface, share: float = 0.05) -> float:
+def bend_radius(design: DesignSurface, share: float = BEND_SHARE) -> float:
     """The radius (model units) the design curves with over its most curved `share` of
     area: the smallest radius of curvature, max(|k1|, |k2|) inverted, of all but that
     share (one stray triangle does not set it), found once per design; inf for a plane."""

@@ -83,7 +83,7 @@ def check(limit: str, bound: float, measured: float | None, ok: bool, text: str,
         relax_to = (int(math.ceil(measured)) if limit in ("max_molds", "max_sheets")
                     else nice_value(float(measured), up=not lower))
     return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text,
-            "margin": margin, "relax_to": relax_to, "advice": advice}
+            "margin": margin, "relax_to": relax_to, "advice": None if ok else advice}
 
 
 def nice_value(value: float, *, up: bool) -> float:
@@ -117,8 +117,9 @@ _SAME_FAILURE = {"max_panel_step_mm": "mold_tolerance_mm"}
 def violation(checks: list[dict]) -> float:
     """How far a candidate is from feasible: over its failed limits, the sum of how many
     times over its limit each is, on a log scale: ln(measured / bound) for a largest
-    value, ln(bound / measured) for a smallest (inf when its solve did not converge or a
-    failed check cannot be rated).
+    value, ln(bound / measured) for a smallest (inf when a failed check cannot be rated: it
+    has no margin, as a solve that failed on another ground than its residual, or its
+    measure is unbounded).
 
     On that scale a limit missed by a factor of two counts as much whichever it is, and a
     gap to the molds forty times the tolerance does not outweigh a net twelve times the
@@ -139,7 +140,7 @@ def violation(checks: list[dict]) -> float:
         if c["ok"]:
             continue
         margin = c.get("margin")
-        if c["limit"] == "max_sphere_residual" or margin is None:
+        if margin is None or not math.isfinite(margin):
             return math.inf
         # how many times the measured value is over its bound (under it, for a smallest)
         if c["limit"].startswith("min_"):
@@ -152,20 +153,21 @@ def violation(checks: list[dict]) -> float:
 
 
 def nearness(checks: list[dict], status: str) -> tuple[int, float]:
-    """How near a candidate is to feasible, the nearest smallest: a net on the design (0)
-    before one that met its constraints only off it (1: status ``off-design``; however
-    little it misses its limits, held to the deviation limit it cannot be this net type)
-    before a solve that gave no net (2); within each, its `violation`.
+    """How near a candidate is to feasible, the nearest smallest: a net on the design (0:
+    status ``converged``) before one that met its constraints only off it (1: status
+    ``off-design``; however little it misses its limits, held to the deviation limit it
+    cannot be this net type) before a solve that gave no buildable net (2: it stopped
+    short, or met its constraints on a net that folds, is crumpled or degenerate); within
+    each, its `violation`.
 
     Examples
     --------
     >>> gap = [{"limit": "mold_tolerance_mm", "ok": False, "margin": -40.0}]
     >>> off = [{"limit": "max_deviation_mm", "ok": False, "margin": -0.5}]
-    >>> nearness(gap, "converged") < nearness(off, "off-design")
+    >>> nearness(gap, "converged") < nearness(off, "off-design") < nearness(off, "stagnated")
     True
     """
-    v = violation(checks)
-    return (2 if math.isinf(v) else 1 if status == "off-design" else 0), v
+    return {"converged": 0, "off-design": 1}.get(status, 2), violation(checks)
 
 
 #: what else to try for a failed check, beside relaxing its limit (`next_steps`)

@@ -218,10 +218,11 @@ def _nearest_text(measured: list[CandidateResult]) -> str:
                 + (f" To try: {'; '.join(steps)}." if steps else ""))
     # the ranking counts the limits failed first, so it may put another first: the text
     # says which it means
+    on_design = near[best.name][0] == 0
     ranked = "" if best.rank in (None, 1) else (
-        f" (ranked {best.rank}: the ranking counts the limits failed first, this is "
-        "the one least many times over its limits)")
-    off = "" if near[best.name][0] == 0 else (
+        f" (ranked {best.rank}: the ranking counts the limits failed first; this is the "
+        f"{'net on the design' if on_design else 'net'} the least many times over its limits)")
+    off = "" if on_design else (
         " No candidate gave a net on the design: this one met its constraints only off it.")
     text = (f"No candidate meets every limit. The nearest is {_named(best)}{ranked}, "
             "which fails: " + "; ".join(best.reasons) + "." + off + feasible_with(best.checks))

@@ -315,6 +315,11 @@ def prepare_design(study: Study, say: Callable[[str], None],
         raise with_holding_size(exc, design, study.panel_size, 90.0) from None
 
 
+#: a panel size under this many millimetres, in a design's units smaller than metres, is
+#: taken to be meant in metres when the study is refused for too many panels
+_METRES_MEANT_MM = 100.0
+
+
 def load_study_design(study: Study, say: Callable[[str], None],
                       max_panels: int | None = None) -> DesignSurface:
     """The study's design, checked for the panel count of its smallest panel size.
@@ -345,7 +350,7 @@ def load_study_design(study: Study, say: Callable[[str], None],
         fix = f"{unit_fix}, or {fix}"
     smallest = min(study.panel_size_of(c) for c in study.candidates)
     size_mm = smallest * study.design.mm_per_unit
-    if units != "m" and size_mm < 100.0:
+    if units != "m" and size_mm < _METRES_MEANT_MM:
         # a size meant in metres, given in the design's smaller units
         given = "(mm)" if units == "mm" else f"({smallest:g} {units} is {size_mm:g} mm)"
         meant = smallest * 1000.0 / study.design.mm_per_unit

@@ -321,9 +321,10 @@ def check_rows(c: CandidateResult) -> list[list]:
 
 def _measured(check: dict) -> str:
     """A check's measured value; a solve's residual within its bound, failed because the
-    solve gave no buildable net, says so beside the number."""
+    solve gave no buildable net (no margin to rate: `fabplan.study.checks.check`), says so
+    beside the number."""
     value = _check_value(check["limit"], check["measured"])
-    if check["limit"] == "max_sphere_residual" and not check["ok"]:
+    if check["limit"] == "max_sphere_residual" and not check["ok"] and check["margin"] is None:
         value += " (no buildable net)"
     return value
 

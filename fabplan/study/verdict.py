@@ -13,7 +13,7 @@ from .checks import check as _check
 from .checks import nice_value
 from .definition import CostWeights, Limits
 
-__all__ = ["verdict", "smaller_panels", "candidate_cost", "every_panel_flat", "differ_by"]
+__all__ = ["verdict", "smaller_panels", "BEND_SHARE", "candidate_cost", "every_panel_flat", "differ_by"]
 
 
 def verdict(metrics: dict, limits: Limits, *, panel_size: float | None = None,
@@ -22,10 +22,12 @@ def verdict(metrics: dict, limits: Limits, *, panel_size: float | None = None,
 
     Parameters
     ----------
-    metrics : the candidate's measured metrics; limits : the limits it is judged by.
-    panel_size, units : the panel size it was laid out with and the design's units: with
-        them, panels that fit no mold are told the panel size at which they would
-        (`smaller_panels`).
+    metrics : dict, the candidate's measured metrics.
+    limits : `Limits`, the limits it is judged by.
+    panel_size : float, optional, the panel size it was laid out with (model units): with
+        it, failed mold gaps, steps and kinks are told the panel sizes at which they might
+        pass (`smaller_panels`, `_design_bend`).
+    units : str, the design's units, for those words.
 
     Returns
     -------
@@ -136,6 +138,10 @@ def _unmet_words(unmet: dict) -> str:
 #: a solve that gave no net names a smaller panel size (`_design_bend`)
 PANEL_SPAN_DEG = 30.0
 
+#: the share of the design's area, its most curved, whose radius is not the design's bend
+#: radius (``design_bend_radius``: `fabplan.study.candidate_measure.bend_radius`)
+BEND_SHARE = 0.05
+
 
 def _design_bend(metrics: dict, panel_size: float | None, units: str, limit_deg: float
                  ) -> str | None:
@@ -148,7 +154,8 @@ def _design_bend(metrics: dict, panel_size: float | None, units: str, limit_deg:
     size = nice_value(math.radians(limit_deg) * radius, up=False)
     return (f"a smaller panel size, at most about {size:g} {units} (now {panel_size:g} {units}): "
             f"the design curves with radii down to {radius:.3g} {units} over its most curved "
-            f"5 %, of which a panel spans {math.degrees(panel_size / radius):.0f} deg, and "
+            f"{100 * BEND_SHARE:g} %, of which a panel spans "
+            f"{math.degrees(panel_size / radius):.0f} deg, and "
             f"{limit_deg:g} deg at that size")
 
 
@@ -207,14 +214,28 @@ def _solve_state(metrics: dict) -> str:
 def smaller_panels(molds: dict, limits: Limits, panel_size: float | None, units: str,
                    panels: int | None, boundary_step: float | None = None) -> str | None:
     """What to try when panels fit no mold or neighbouring molds step apart, with the
-    panel sizes at which they might not: None when they do, or without a panel size.
+    panel sizes at which they might not.
 
     A panel's gap to its mold, and so the step between neighbouring molds, shrinks with
-    the panel size to a power between one and two: measured from 2 to 1 m panels on a
-    gentle wavy facade about 1.1 (gap) and 1.6 (step), from 3 to 1.5 m on a sharper one
-    2.6. So the sizes given are a range, the square at best and the size itself at worst.
-    A step at the boundary panels (`boundary_step`, the largest) is not counted: their
-    slivers, cut from the design's edge, come at every panel size.
+    the panel size to a power measured between 1.1 (a gentle wavy facade's gap, 2 to 1 m
+    panels) and 2.6 (a sharper one's, 3 to 1.5 m). So two sizes are given: the one at
+    which the largest would be within its limit were it to shrink with the square of the
+    size, and the one were it to shrink in proportion. A largest step at the boundary
+    panels is named instead of counted: their slivers, cut from the design's edge, come at
+    every panel size (the net's own steps are not known apart then).
+
+    Parameters
+    ----------
+    molds : a candidate's ``metrics["molds"]`` (gap and step in mm).
+    limits : the limits it is judged by.
+    panel_size : its panel size (model units); None gives None (the general advice).
+    units : the design's units, for the text.
+    panels : its panel count, for the counts at the sizes given.
+    boundary_step : the largest step at its boundary panels (mm), if it has them.
+
+    Returns
+    -------
+    str, or None when the gap and the step are within their limits (or unrated).
 
     Examples
     --------
@@ -222,33 +243,43 @@ def smaller_panels(molds: dict, limits: Limits, panel_size: float | None, units:
     >>> limits = Limits(max_deviation_mm=150.0, mold_tolerance_mm=1.0)
     >>> print(smaller_panels(molds, limits, 2.0, "m", 96))  # doctest: +NORMALIZE_WHITESPACE
     a larger mold_tolerance_mm, or a smaller panel size (now 2 m, 96 panels): the largest
-    gap and step are up to 23 times their limits and shrink with the panel size to a power
-    between one and two, so 0.41 m (2,300 panels) at best, 0.086 m (52,000 panels) at worst
+    gap and step are up to 23 times their limits, so 0.41 m (2,300 panels) were they to
+    shrink with the square of the panel size, 0.086 m (52,000 panels) were they to shrink
+    in proportion
     """
     tolerance, step_limit = limits.mold_tolerance_mm, limits.panel_step_limit_mm
-    step = float(molds.get("max_panel_step_mm") or 0.0)
-    over = [molds["max_deviation_mm"] / tolerance] if molds["failures"] else []
+    gap, step = float(molds["max_deviation_mm"]), float(molds.get("max_panel_step_mm") or 0.0)
+    if not (math.isfinite(gap) and math.isfinite(step)):
+        return None
+    over = {"gap": gap / tolerance} if molds["failures"] else {}
     at_boundary = step > step_limit and boundary_step is not None and boundary_step >= step
     if step > step_limit and not at_boundary:
-        over.append(step / step_limit)
-    # a step at the boundary panels that no smaller panel size takes away
+        over["step"] = step / step_limit
+    # the step's own limit, when it is set apart from the mold tolerance's
+    larger = "max_panel_step_mm" if limits.max_panel_step_mm is not None and "gap" not in over \
+        else "mold_tolerance_mm"
     edge = ("the largest step is at the boundary panels, whose slivers come at every panel "
             "size: see boundary-panels.csv") if at_boundary else ""
     if not over or panel_size is None:
-        return f"a larger mold_tolerance_mm, or trim the boundary panels: {edge}" if edge \
-            else None
-    worst = max(over)
-    best, last = (nice_value(panel_size / worst ** power, up=False) for power in (0.5, 1.0))
+        return f"a larger {larger}, or trim the boundary panels: {edge}" if edge else None
+    worst = max(over.values())
+    square, proportion = (nice_value(panel_size / worst ** power, up=False)
+                          for power in (0.5, 1.0))
+
+    def many(count: float) -> str:
+        return f"{count:,.0f} panel{'' if count == 1 else 's'}"
 
     def at(size: float) -> str:
-        many = "" if not panels else \
-            f" ({nice_value(panels * (panel_size / size) ** 2, up=True):,.0f} panels)"
-        return f"{size:g} {units}{many}"
+        return f"{size:g} {units}" + (
+            f" ({many(nice_value(panels * (panel_size / size) ** 2, up=True))})" if panels else "")
 
-    return (f"a larger mold_tolerance_mm, or a smaller panel size (now {panel_size:g} {units}"
-            f"{f', {panels:,} panels' if panels else ''}): the largest gap and step are up to "
-            f"{worst:.3g} times their limits and shrink with the panel size to a power between "
-            f"one and two, so {at(best)} at best, {at(last)} at worst"
+    measured = " and ".join(over)
+    return (f"a larger {larger}, or a smaller panel size (now {panel_size:g} {units}"
+            f"{', ' + many(panels) if panels else ''}): the largest {measured} "
+            f"{'are' if len(over) > 1 else 'is'} up to {worst:.3g} times "
+            f"{'their limits' if len(over) > 1 else 'its limit'}, so {at(square)} were "
+            f"{'they' if len(over) > 1 else 'it'} to shrink with the square of the panel size, "
+            f"{at(proportion)} were {'they' if len(over) > 1 else 'it'} to shrink in proportion"
             + (f"; {edge}" if edge else ""))
 
 
