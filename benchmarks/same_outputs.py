@@ -56,8 +56,10 @@ EXAMPLES = [
     ("bad-input", "molds /nonexistent.obj --tolerance-mm 5 -o OUT/bad"),
 ]
 
-TIME_KEY = re.compile(r"sha256|second|timing|elapsed|wall|created|date|time_s|duration|"
-                      r"timestamp", re.I)
+#: keys and columns of times, dates and hashes of them: whole words of a snake_case name
+#: (a bare "date" matched "candidates", and the study's candidates went uncompared)
+TIME_KEY = re.compile(r"(?:^|_)(?:sha256|seconds?|timings?|elapsed|wall|created|date|time|"
+                      r"duration|timestamp)(?:_|$)", re.I)
 MASKS = [
     (rb"\d{4}-\d\d-\d\d[T ]\d\d:\d\d(:\d\d(\.\d+)?)?([+-]\d\d:?\d\d|Z)?", b"DATE"),
     (rb"\d{4}-\d\d-\d\d", b"DATE"), (rb"\b\d\d:\d\d(:\d\d)?\b", b"TIME"),
