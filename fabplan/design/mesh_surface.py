@@ -22,7 +22,22 @@ from ..net.forest import tree_parity
 from ..solve.reference import ReferenceSurface
 from .topology import triangle_components, triangle_pairs, vertex_fan_count
 
-__all__ = ["DesignSurface", "ExactSurface"]
+__all__ = ["DesignSurface", "ExactSurface", "weighted_quantile"]
+
+
+def weighted_quantile(values: np.ndarray, weights: np.ndarray, share: float) -> float:
+    """The smallest of `values` ((k,) float) at which the `weights` ((k,) float) of those
+    not larger reach `share` (0..1) of their sum: a weighted quantile (0.5: the median).
+
+    Examples
+    --------
+    >>> weighted_quantile(np.array([3.0, 1.0, 2.0]), np.array([1.0, 1.0, 2.0]), 0.5)
+    2.0
+    """
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    at = np.searchsorted(cumulative, share * cumulative[-1])
+    return float(values[order][min(int(at), len(values) - 1)])
 
 
 class ExactSurface(Protocol):

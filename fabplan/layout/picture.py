@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..design.mesh_surface import DesignSurface
+from ..design.mesh_surface import DesignSurface, weighted_quantile
 from ..io.output import atomic_path
 from ..net.mesh import QuadMesh
 from ..report.figures import net_view_angles, new_figure
@@ -138,9 +138,7 @@ def curvature_difference_at(design: DesignSurface, panel_size: float,
     from scipy.spatial import cKDTree
 
     value = _curvature_difference(design, panel_size)
-    order = np.argsort(value)
-    weight = np.cumsum(design.face_areas[order])
-    median = value[order][np.searchsorted(weight, 0.5 * weight[-1])]
+    median = weighted_quantile(value, design.face_areas, 0.5)
     centres = design.vertices[design.triangles].mean(axis=1)
     nearest = cKDTree(centres).query(np.atleast_2d(points))[1]
     return value[nearest] / max(float(median), 1e-300)

@@ -52,7 +52,7 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from ..design.mesh_surface import DesignSurface
+from ..design.mesh_surface import DesignSurface, weighted_quantile
 from ..errors import BrokenLayoutError, InputError
 from ..net.mesh import QuadMesh
 from ..solve.constraints import Constraint, EdgeLengthRange, FamilyLevels
@@ -565,13 +565,7 @@ def layout_angle(net: str, design: DesignSurface, angle: float | None = None) ->
     if area[ok].sum() < 0.5 * area.sum():
         return 90.0
     angles = 2 * np.degrees(np.arctan(np.sqrt(ratio[ok])))
-    return round(_weighted_median(angles, area[ok]), 1)
-
-
-def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
-    order = np.argsort(values)
-    cumulative = np.cumsum(weights[order])
-    return float(values[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+    return round(weighted_quantile(angles, area[ok], 0.5), 1)
 
 
 #: the edge lengths a gliding net keeps, in panel sizes: 0.5 - 2, with a margin

@@ -263,13 +263,12 @@ def bend_radius(design: DesignSurface, share: float = BEND_SHARE) -> float:
     share (one stray triangle does not set it), found once per design; inf for a plane."""
     cached = design.__dict__.get("_bend_radius")
     if cached is None:
+        from ..design.mesh_surface import weighted_quantile
         from ..layout.directions import face_principal_frames
 
         k1, k2, _ = face_principal_frames(design)
-        k = np.maximum(np.abs(k1), np.abs(k2))
-        order = np.argsort(k)
-        area = np.cumsum(design.face_areas[order])
-        sharp = float(k[order][min(np.searchsorted(area, (1.0 - share) * area[-1]), k.size - 1)])
+        sharp = weighted_quantile(np.maximum(np.abs(k1), np.abs(k2)), design.face_areas,
+                                  1.0 - share)
         cached = 1.0 / sharp if sharp > 0 else math.inf
         design.__dict__["_bend_radius"] = cached
     return cached
