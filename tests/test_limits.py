@@ -589,7 +589,7 @@ def test_panels_that_fit_no_mold_are_told_the_panel_sizes_at_which_they_might(ju
     candidate's panel size, no advice when the molds pass."""
     import re
 
-    from fabplan.study.checks import next_steps
+    from fabplan.study.checks import advised_panel_size, next_steps
     from fabplan.study.verdict import verdict
 
     study, result = judged
@@ -611,8 +611,10 @@ def test_panels_that_fit_no_mold_are_told_the_panel_sizes_at_which_they_might(ju
         return float(best), int(best_n.replace(",", "")), float(last), \
             int(last_n.replace(",", "")), sized[0]
 
-    best, best_n, last, last_n, _ = sizes(verdict(metrics, limits, panel_size=2.0, units="m"))
+    checks = verdict(metrics, limits, panel_size=2.0, units="m")
+    best, best_n, last, last_n, _ = sizes(checks)
     assert last < best < 2.0
+    assert advised_panel_size(checks) == best            # the first to try
     for measured, bound in ((gap, limits.mold_tolerance_mm), (step, limits.panel_step_limit_mm)):
         assert measured * (best / 2.0) ** 2 <= bound and measured * last / 2.0 <= bound
     assert best > 0.9 * 2.0 / math.sqrt(30.0) and last > 0.9 * 2.0 / 30.0
@@ -664,6 +666,12 @@ def test_the_nearest_is_a_net_on_the_design_and_none_is_named_when_no_solve_gave
     _, text = recommend([as_(c, "stagnated", stuck, i + 1) for i, c in enumerate(done)], study)
     assert "none is near" in text and "The nearest" not in text
     assert "To try: another net type." in text
+    # the same step for several candidates, for reasons of their own: said once, without
+    retry = "let the solve run longer: the net did not converge from {} layout starts"
+    stuck = [[{**stuck[0], "advice": retry.format(n)}] for n in (4, 5)]
+    _, text = recommend([as_(c, "stagnated", k, i + 1)
+                         for i, (c, k) in enumerate(zip(done, stuck, strict=True))], study)
+    assert "To try: let the solve run longer." in text
 
 
 def test_the_design_bend_radius_is_that_of_its_most_curved_part():
@@ -692,7 +700,7 @@ def test_panels_that_span_much_of_the_design_are_told_the_size_that_would_not(ju
     size where the design bends gently."""
     import re
 
-    from fabplan.study.checks import next_steps
+    from fabplan.study.checks import advised_panel_size, next_steps
     from fabplan.study.verdict import verdict
 
     study, result = judged
@@ -706,8 +714,10 @@ def test_panels_that_span_much_of_the_design_are_told_the_size_that_would_not(ju
         found = re.search(r"at most about ([\d.]+) m \(now 2 m\)", kink["advice"] or "")
         return None if found is None else float(found.group(1))
 
-    size = named_size(verdict(sharp, limits, panel_size=2.0, units="m"), "max_kink_deg")
+    checks = verdict(sharp, limits, panel_size=2.0, units="m")
+    size = named_size(checks, "max_kink_deg")
     assert size is not None and math.degrees(size / 1.0) <= 10.0 < math.degrees(1.1 * size)
+    assert advised_panel_size(checks) == size          # what the study lays out to check
     gentle = {**sharp, "design_bend_radius": 100.0}
     assert named_size(verdict(gentle, limits, panel_size=2.0, units="m"), "max_kink_deg") is None
     # a solve that gave no net
@@ -716,6 +726,7 @@ def test_panels_that_span_much_of_the_design_are_told_the_size_that_would_not(ju
     checks = verdict(stuck, limits, panel_size=2.0, units="m")
     size = named_size(checks, "max_sphere_residual")
     assert size is not None and math.degrees(size) <= 30.0 < math.degrees(1.1 * size)
+    assert advised_panel_size(checks) == size
     steps = next_steps(checks)
     assert len(steps) == 1 and steps[0].startswith("a smaller panel size, at most about")
     assert "layout_starts" in steps[0]                 # the retry advice follows it
@@ -818,3 +829,60 @@ def test_the_design_bend_radius_leaves_out_its_most_curved_twentieth():
 
     assert bend_radius(strip(0.2)) == pytest.approx(2.0, rel=0.05)      # 2 % of the area
     assert bend_radius(strip(1.0)) == pytest.approx(0.5, rel=0.05)      # 10 %
+
+
+def test_the_panel_size_a_study_advises_is_laid_out_before_it_is_advised(judged, monkeypatch):
+    """A study without a feasible candidate lays its design out at the largest panel size
+    it advises, and says whether it holds together there, so that
+    its advice does not send a user to a size the next run refuses (a wavy facade at
+    2.5 m was told 0.52 m, where its 17 umbilics break every lattice)."""
+    import fabplan.layout.surface_layout as surface_layout
+    from fabplan.errors import BrokenLayoutError
+    from fabplan.study.advised_size import check_advised_size
+
+    study, result = judged
+    said = []
+
+    def advising(*sizes):
+        """`result` with no feasible candidate, its nets advised the given sizes."""
+        candidates = [dataclasses.replace(
+            c, feasible=False, checks=[{**_failed("max_kink_deg", 10.0, 40.0),
+                                        "advice": f"a smaller panel size, at most about {s:g} m",
+                                        "advised_panel_size": s}])
+            for c, s in zip([c for c in result.candidates if not c.failed][:len(sizes)], sizes,
+                            strict=True)]
+        return dataclasses.replace(result, candidates=candidates, recommended=None,
+                                   recommendation="No candidate meets every limit.")
+
+    advised = advising(0.5, 1.0)
+    check_advised_size(advised, said.append)
+    record = advised.advised_layout
+    assert record["panel_size"] == 1.0 and record["lays_out"] is True   # the larger first
+    assert record["panels"] >= 0.8 * result.design.area / 1.0**2
+    assert said == ["the panel size advised: laying the design out at 1 m"]
+    assert advised.recommendation.endswith(
+        f"At the largest panel size advised, 1 m, the design lays out ({record['panels']:,} panels "
+        "at 90 deg).")
+    # beyond the study's panel limit it is not laid out, and says so
+    advised = advising(1.0)
+    check_advised_size(advised, said.append, max_panels=10)
+    assert advised.advised_layout["lays_out"] is None
+    assert "was not laid out here: about" in advised.recommendation
+    assert "more than the limit of 10 (--max-panels)" in advised.recommendation
+    # a lattice that does not hold together at that size: its reason, without the name
+    def broken(design, size, **kw):
+        raise BrokenLayoutError(f"{design.name}: the layout at panel size {size:g} does not "
+                                "hold together: 17 umbilics")
+
+    monkeypatch.setattr(surface_layout, "layout_surface", broken)
+    advised = advising(1.0)
+    check_advised_size(advised, said.append)
+    assert advised.advised_layout["lays_out"] is False
+    assert advised.recommendation.endswith(
+        "The largest panel size advised, 1 m, does not lay out on this design, though: the "
+        "layout at panel size 1 does not hold together: 17 umbilics.")
+    # a feasible study, or one that advises no size, is left as it is
+    plain = dataclasses.replace(result, recommended=None, recommendation="x", candidates=[
+        dataclasses.replace(c, checks=[_failed("max_molds", 3, 9)]) for c in result.candidates])
+    check_advised_size(plain, said.append)
+    assert plain.advised_layout is None and plain.recommendation == "x"

@@ -217,5 +217,6 @@ def test_an_impossible_baseline_on_workers_is_one_line(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
     assert "Traceback" not in run.stderr, run.stderr
+    assert "distributed" not in run.stderr, run.stderr       # nor Dask's own warnings
     assert "too large for the surface" in run.stderr
     assert not (tmp_path / "out").exists()

@@ -5,11 +5,12 @@ feasible and which limits, relaxed to what, would make it so."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from ..fabricate.limits import LIMITS
 
-__all__ = ["check", "binding_check", "violation", "nearness", "relaxation_text", "feasible_with",
-           "next_steps", "nice_value", "LIMIT_NAMES", "limit_words", "limit_value"]
+__all__ = ["Advice", "check", "binding_check", "violation", "nearness", "relaxation_text", "feasible_with",
+           "next_steps", "advised_panel_size", "nice_value", "LIMIT_NAMES", "limit_words", "limit_value"]
 
 #: every limit of a study in words, with its unit; those the commands also check
 #: (`fabplan.fabricate.limits.LIMITS`) in the same words
@@ -63,12 +64,23 @@ def limit_value(limit: str, value: float) -> str:
     return f"{value:g} {unit}"
 
 
+class Advice(NamedTuple):
+    """What to try for a failed check (`text`), and the panel size it names first, the
+    largest of those it names (`panel_size`, model units; None: it names none)."""
+
+    text: str
+    panel_size: float | None = None
+
+
 def check(limit: str, bound: float, measured: float | None, ok: bool, text: str, *,
-          advice: str | None = None) -> dict:
+          advice: str | Advice | None = None) -> dict:
     """One check: with its `margin` (the share of the bound left, negative when it fails)
-    and, when it fails, `relax_to` (the value of the limit at which it would pass) and
+    and, when it fails, `relax_to` (the value of the limit at which it would pass),
     `advice` (what to try, when the candidate's own record says more than `next_steps`'s
-    general word)."""
+    general word) and `advised_panel_size` (the panel size that advice names first, model
+    units, or None)."""
+    if isinstance(advice, str):
+        advice = Advice(advice)
     lower = limit.startswith("min_")          # min_*: the measured value must reach the bound
     margin = None
     if measured is not None and bound and math.isfinite(measured) and math.isfinite(bound):
@@ -83,7 +95,9 @@ def check(limit: str, bound: float, measured: float | None, ok: bool, text: str,
         relax_to = (int(math.ceil(measured)) if limit in ("max_molds", "max_sheets")
                     else nice_value(float(measured), up=not lower))
     return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text,
-            "margin": margin, "relax_to": relax_to, "advice": None if ok else advice}
+            "margin": margin, "relax_to": relax_to,
+            "advice": None if ok or advice is None else advice.text,
+            "advised_panel_size": None if ok or advice is None else advice.panel_size}
 
 
 def nice_value(value: float, *, up: bool) -> float:
@@ -207,14 +221,26 @@ def next_steps(checks: list[dict]) -> list[str]:
     ...              "size: about 0.45 m"}])
     ['a smaller panel size: about 0.45 m']
     """
+    steps = list(dict.fromkeys(c.get("advice") or _TRY[c["limit"]] for c in _advised(checks)))
+    # "a smaller panel size" is said already where another step names the size
+    return [s for s in steps if not any(s in other for other in steps if other != s)]
+
+
+def advised_panel_size(checks: list[dict]) -> float | None:
+    """The largest panel size that the advice of `next_steps` names (model units): the
+    first smaller size to try; None when it names none."""
+    sizes = [c["advised_panel_size"] for c in _advised(checks) if c.get("advised_panel_size")]
+    return max(sizes, default=None)
+
+
+def _advised(checks: list[dict]) -> list[dict]:
+    """The failed checks that `next_steps` advises on."""
     failed = [c for c in checks if not c["ok"] and (c.get("advice") or c["limit"] in _TRY)]
     if any(c["limit"] == "max_sphere_residual" and c.get("advice") for c in failed):
         # a solve that did not converge gave no net yet: the other checks measured a net
         # that is not one, and their advice would mislead
         failed = [c for c in failed if c["limit"] == "max_sphere_residual"]
-    steps = list(dict.fromkeys(c.get("advice") or _TRY[c["limit"]] for c in failed))
-    # "a smaller panel size" is said already where another step names the size
-    return [s for s in steps if not any(s in other for other in steps if other != s)]
+    return failed
 
 
 def feasible_with(checks: list[dict]) -> str:

@@ -26,6 +26,7 @@ with its message, and the others go on; a worker that dies has its task retried
 from __future__ import annotations
 
 import contextlib
+import logging
 import tempfile
 import time
 from dataclasses import dataclass, field, replace
@@ -33,11 +34,12 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
-from ..errors import FabplanError, InputError
+from ..errors import BrokenLayoutError, FabplanError, InputError
 from ..io.forked import quiet_interrupts
 from ..io.resources import worker_count
+from .advised_size import check_advised_size
 from .candidate_measure import fabricate_candidate
-from .candidate_solve import solve_candidate, start_angle
+from .candidate_solve import solve_candidate, start_angle, with_holding_size
 from .inputs import shared_inputs
 from .ranking import judge_study
 from .result import CandidateResult, StudyResult
@@ -117,10 +119,12 @@ def _connect(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
             return Client(scheduler, timeout="5s"), None
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-    # the workers leave Ctrl-C to this process, which closes them: no traceback of theirs
+    # the workers leave Ctrl-C to this process, which closes them: no traceback of theirs;
+    # and Dask's warnings stay out of the terminal (a run stopped by a refused input would
+    # end in the workers' notes on their cancelled tasks, not in its one-line reason)
     with quiet_interrupts():
         cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None, silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
@@ -199,8 +203,9 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
                                       tag=f"-r{k}")
             results += found
             made.update(made_now)
-    result = judge_study(searched_study(study, results), design, results,
-                         seconds_run=time.perf_counter() - start)
+    result = judge_study(searched_study(study, results), design, results)
+    check_advised_size(result, say, max_panels)
+    result.seconds_run = time.perf_counter() - start
     result.made_files = made
     return result
 
@@ -229,6 +234,9 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
     refused = baseline.result()
     if isinstance(refused, FabplanError):     # no baseline layout: nothing can be compared
         client.cancel([*waiting, *(graph.solves[key] for key in waiting.values())])
+        if isinstance(refused, BrokenLayoutError):      # as a serial run says it
+            say("the baseline layout does not hold together: trying other panel sizes")
+            raise with_holding_size(refused, design, study.panel_size, 90.0) from None
         raise refused
     graph.submit_ready()
     graph.wait_for_nets(waiting, clock, say, as_completed)

@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # imported where used: a study pulls in every stage only when
     from ..design.mesh_surface import DesignSurface
 
 __all__ = ["judge_study", "cost_drivers", "pareto_optimal", "rank_candidates", "is_lamella_study",
-           "binding_limit", "recommend", "baseline_of"]
+           "binding_limit", "recommend", "baseline_of", "nearest_candidate"]
 
 
 # the limits a lamella study does not speak of: its strips are bent, not molded
@@ -200,25 +200,32 @@ def _g3(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3g}"
 
 
+def nearest_candidate(measured: list[CandidateResult]) -> CandidateResult | None:
+    """The measured candidate nearest to feasible (`nearness`, ties by rank); None when
+    no solve gave a buildable net, and so none is near."""
+    near = {r.name: nearness(r.checks, r.metrics["status"]) for r in measured}
+    best = min(measured, key=lambda r: (near[r.name], by_rank(r)), default=None)
+    return None if best is None or near[best.name][0] == 2 else best
+
+
 def _nearest_text(measured: list[CandidateResult]) -> str:
     """What a study without a feasible candidate says: its nearest candidate (`nearness`),
     what that fails, the relaxation that makes it feasible and the other ways; or, when no
     solve gave a buildable net, that none is near and what to try."""
     if not measured:
         return "No candidate produced a net; see the reasons of each below."
-    near = {r.name: nearness(r.checks, r.metrics["status"]) for r in measured}
-    best = min(measured, key=lambda r: (near[r.name], by_rank(r)))
-    if near[best.name][0] == 2:
+    best = nearest_candidate(measured)
+    if best is None:
         # no net to be near: naming the cheapest unfinished one would mislead
         # each candidate's advice, its alternatives ("...; or ...") said once across them
-        steps = list(dict.fromkeys(part for r in measured for step in next_steps(r.checks)
-                                   for part in step.split("; or ")))
+        steps = _said_once([part for r in measured for step in next_steps(r.checks)
+                            for part in step.split("; or ")])
         return ("No candidate meets every limit, and none is near: no solve gave a buildable "
                 "net (see the reasons of each below)."
                 + (f" To try: {'; '.join(steps)}." if steps else ""))
     # the ranking counts the limits failed first, so it may put another first: the text
     # says which it means
-    on_design = near[best.name][0] == 0
+    on_design = nearness(best.checks, best.metrics["status"])[0] == 0
     ranked = "" if best.rank in (None, 1) else (
         f" (ranked {best.rank}: the ranking counts the limits failed first; this is the "
         f"{'net on the design' if on_design else 'net'} the least many times over its limits)")
@@ -228,6 +235,18 @@ def _nearest_text(measured: list[CandidateResult]) -> str:
             "which fails: " + "; ".join(best.reasons) + "." + off + feasible_with(best.checks))
     steps = next_steps(best.checks)
     return text + (f" Other ways: {'; '.join(steps)}." if steps else "")
+
+
+def _said_once(steps: list[str]) -> list[str]:
+    """`steps` of several candidates, each said once: those that say the same before
+    their reason (the text after the first ": ") and differ in it, said without it
+    ("... from 4 layout starts", "... from 5 layout starts")."""
+    heads: dict[str, set[str]] = {}
+    for step in steps:
+        head, _, reason = step.partition(": ")
+        heads.setdefault(head, set()).add(reason)
+    return [head if len(reasons) > 1 else f"{head}: {reasons.pop()}" if reasons != {""}
+            else head for head, reasons in heads.items()]
 
 
 def _named(result: CandidateResult) -> str:

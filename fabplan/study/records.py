@@ -74,6 +74,7 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
                    "size": result.design_size, "units": result.study.design.units},
         "recommended": result.recommended,
         "recommendation": result.recommendation,
+        "advised_layout": result.advised_layout,
         "sheets_charged": result.sheets_charged,
         "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended,
                                          result.study)

@@ -98,6 +98,9 @@ class StudyResult:
         empty otherwise.
     seconds_run : wall time from loading the design to the last verdict (writing the
         files is not included: `fabplan.study_report.write_study` adds it).
+    advised_layout : for a study without a feasible candidate that advises a smaller
+        panel size, whether the design lays out at it
+        (`fabplan.study.advised_size.check_advised_size`); None otherwise.
     """
 
     study: Study
@@ -108,6 +111,7 @@ class StudyResult:
     sheets_charged: bool = False
     seconds_run: float = 0.0
     made_files: dict = field(default_factory=dict)
+    advised_layout: dict | None = None
 
     @property
     def baseline(self) -> CandidateResult:

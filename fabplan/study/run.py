@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from ..errors import BrokenLayoutError, FabplanError
+from .advised_size import check_advised_size
 from .candidate_measure import fabricate_candidate, measure_candidate, vertex_deviation_mm
 from .candidate_solve import Layouts, Starts, solve_candidate, start_angle, with_holding_size
 from .definition import Candidate, Study
@@ -165,8 +166,9 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
         if helper is not None:
             helper.cancel()
         raise
-    judged = judge_study(searched_study(study, results), design, results,
-                         seconds_run=time.perf_counter() - start)
+    judged = judge_study(searched_study(study, results), design, results)
+    check_advised_size(judged, say, max_panels)
+    judged.seconds_run = time.perf_counter() - start
     judged.made_files = {} if helper is None else helper.made_files
     return judged
 

@@ -9,8 +9,8 @@ import math
 
 from ..fabricate.molds.mold_shapes import PANEL_TYPES
 from ..report.html import counted
+from .checks import Advice, nice_value
 from .checks import check as _check
-from .checks import nice_value
 from .definition import CostWeights, Limits
 
 __all__ = ["verdict", "smaller_panels", "BEND_SHARE", "candidate_cost", "every_panel_flat", "differ_by"]
@@ -144,7 +144,7 @@ BEND_SHARE = 0.05
 
 
 def _design_bend(metrics: dict, panel_size: float | None, units: str, limit_deg: float
-                 ) -> str | None:
+                 ) -> Advice | None:
     """A smaller panel size where the design's own curvature turns a panel by more than
     `limit_deg` (degrees): neighbouring panels meet at about their size over the radius
     the design curves with (``design_bend_radius``); None where it does not, or unknown."""
@@ -152,19 +152,21 @@ def _design_bend(metrics: dict, panel_size: float | None, units: str, limit_deg:
     if not radius or panel_size is None or math.degrees(panel_size / radius) <= limit_deg:
         return None
     size = nice_value(math.radians(limit_deg) * radius, up=False)
-    return (f"a smaller panel size, at most about {size:g} {units} (now {panel_size:g} {units}): "
-            f"the design curves with radii down to {radius:.3g} {units} over its most curved "
-            f"{100 * BEND_SHARE:g} %, of which a panel spans "
-            f"{math.degrees(panel_size / radius):.0f} deg, and "
-            f"{limit_deg:g} deg at that size")
+    return Advice(f"a smaller panel size, at most about {size:g} {units} (now {panel_size:g} "
+                  f"{units}): the design curves with radii down to {radius:.3g} {units} over "
+                  f"its most curved {100 * BEND_SHARE:g} %, of which a panel spans "
+                  f"{math.degrees(panel_size / radius):.0f} deg, and {limit_deg:g} deg at "
+                  "that size", size)
 
 
-def _unconverged_advice(metrics: dict, panel_size: float | None = None, units: str = "") -> str:
+def _unconverged_advice(metrics: dict, panel_size: float | None = None, units: str = ""
+                        ) -> Advice:
     """What to try for a solve that did not give a net, from what it tried already; first
     a smaller panel size where a panel spans more than `PANEL_SPAN_DEG` of the design."""
     sharp = _design_bend(metrics, panel_size, units, PANEL_SPAN_DEG)
     advice = _retry_advice(metrics)
-    return advice if sharp is None else f"{sharp}; or {advice}"
+    return Advice(advice) if sharp is None else Advice(f"{sharp.text}; or {advice}",
+                                                       sharp.panel_size)
 
 
 def _retry_advice(metrics: dict) -> str:
@@ -212,7 +214,7 @@ def _solve_state(metrics: dict) -> str:
 
 
 def smaller_panels(molds: dict, limits: Limits, panel_size: float | None, units: str,
-                   panels: int | None, boundary_step: float | None = None) -> str | None:
+                   panels: int | None, boundary_step: float | None = None) -> Advice | None:
     """What to try when panels fit no mold or neighbouring molds step apart, with the
     panel sizes at which they might not.
 
@@ -235,13 +237,14 @@ def smaller_panels(molds: dict, limits: Limits, panel_size: float | None, units:
 
     Returns
     -------
-    str, or None when the gap and the step are within their limits (or unrated).
+    `Advice` (its panel size the first of the two), or None when the gap and the step are
+    within their limits (or unrated).
 
     Examples
     --------
     >>> molds = {"failures": 12, "max_deviation_mm": 23.0, "max_panel_step_mm": 43.0}
     >>> limits = Limits(max_deviation_mm=150.0, mold_tolerance_mm=1.0)
-    >>> print(smaller_panels(molds, limits, 2.0, "m", 96))  # doctest: +NORMALIZE_WHITESPACE
+    >>> print(smaller_panels(molds, limits, 2.0, "m", 96).text)  # doctest: +NORMALIZE_WHITESPACE
     a larger mold_tolerance_mm, or a smaller panel size (now 2 m, 96 panels): the largest
     gap and step are up to 23 times their limits, so 0.41 m (2,300 panels) were they to
     shrink with the square of the panel size, 0.086 m (52,000 panels) were they to shrink
@@ -261,7 +264,7 @@ def smaller_panels(molds: dict, limits: Limits, panel_size: float | None, units:
     edge = ("the largest step is at the boundary panels, whose slivers come at every panel "
             "size: see boundary-panels.csv") if at_boundary else ""
     if not over or panel_size is None:
-        return f"a larger {larger}, or trim the boundary panels: {edge}" if edge else None
+        return Advice(f"a larger {larger}, or trim the boundary panels: {edge}") if edge else None
     worst = max(over.values())
     square, proportion = (nice_value(panel_size / worst ** power, up=False)
                           for power in (0.5, 1.0))
@@ -274,16 +277,16 @@ def smaller_panels(molds: dict, limits: Limits, panel_size: float | None, units:
             f" ({many(nice_value(panels * (panel_size / size) ** 2, up=True))})" if panels else "")
 
     measured = " and ".join(over)
-    return (f"a larger {larger}, or a smaller panel size (now {panel_size:g} {units}"
+    return Advice(f"a larger {larger}, or a smaller panel size (now {panel_size:g} {units}"
             f"{', ' + many(panels) if panels else ''}): the largest {measured} "
             f"{'are' if len(over) > 1 else 'is'} up to {worst:.3g} times "
             f"{'their limits' if len(over) > 1 else 'its limit'}, so {at(square)} were "
             f"{'they' if len(over) > 1 else 'it'} to shrink with the square of the panel size, "
             f"{at(proportion)} were {'they' if len(over) > 1 else 'it'} to shrink in proportion"
-            + (f"; {edge}" if edge else ""))
+            + (f"; {edge}" if edge else ""), square)
 
 
-def _mold_checks(molds: dict, limits: Limits, smaller: str | None = None) -> list[dict]:
+def _mold_checks(molds: dict, limits: Limits, smaller: Advice | None = None) -> list[dict]:
     """The checks of a candidate's molds (``metrics["molds"]``, `mold_metrics`): every
     panel fits a mold, neighbouring molds meet, and (when limited) how many molds;
     `smaller` the advice on the first two (`smaller_panels`)."""
