@@ -3,6 +3,7 @@ bit (apart from timings), failures recorded, a killed worker's candidates retrie
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -83,15 +84,24 @@ def test_local_workers_leave_nothing_in_the_temporary_folder(tmp_path, monkeypat
     """The local cluster's scratch space and its lock files are the study's own, removed
     with the workers (Dask's default leaves ``dask-scratch-space`` in the system's
     temporary folder)."""
+    import socket
     import tempfile
+    import warnings
 
     from fabplan.study.parallel import dask_client
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    with dask_client(1) as client:
-        assert client.submit(sum, [1, 2]).result() == 3
-        assert len(list(tmp_path.iterdir())) == 1           # its scratch folder, while it runs
+    with socket.socket() as taken, warnings.catch_warnings(record=True) as said:
+        # the scheduler's HTTP port held by another study: nor a warning on the terminal
+        warnings.simplefilter("always")
+        with contextlib.suppress(OSError):              # held by one already
+            taken.bind(("127.0.0.1", 8787))
+            taken.listen()
+        with dask_client(1) as client:
+            assert client.submit(sum, [1, 2]).result() == 3
+            assert len(list(tmp_path.iterdir())) == 1       # its scratch folder, while it runs
     assert list(tmp_path.iterdir()) == []
+    assert not [w for w in said if "already in use" in str(w.message)]
 
 
 @pytest.mark.slow

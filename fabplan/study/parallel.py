@@ -29,6 +29,7 @@ import contextlib
 import logging
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterator
 
@@ -122,7 +123,9 @@ def _connect(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
     # the workers leave Ctrl-C to this process, which closes them: no traceback of theirs;
     # and Dask's warnings stay out of the terminal (a run stopped by a refused input would
     # end in the workers' notes on their cancelled tasks, not in its one-line reason)
-    with quiet_interrupts():
+    with quiet_interrupts(), warnings.catch_warnings():
+        # the scheduler's own HTTP port, taken by another study's cluster: it takes another
+        warnings.filterwarnings("ignore", message="Port .* is already in use")
         cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=logging.ERROR)
     return Client(cluster), cluster
