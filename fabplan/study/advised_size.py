@@ -1,24 +1,28 @@
-"""Whether the smaller panel size a study without a feasible candidate advises lays out
-on its design.
+"""Whether the smaller panel size a study without a feasible candidate advises gives a
+net on its design.
 
 The advice comes from the measured candidates: the size at which the design's own
 curvature turns a panel less (`fabplan.study.verdict`), or at which the mold gaps would
-shrink within their tolerance. Neither knows whether a lattice of that size holds
-together on the design: at smaller panels the layout resolves umbilics that a larger
-one smoothed over, and a design with many of them (an egg-crate facade) lays out at
-2.5 m but not at the 0.5 m its curvature asks for. So the study lays the design out once
-at the size it advises, and says what it found, rather than send its user to a size at
-which the next run is refused.
+shrink within their tolerance. Neither knows whether a net of that size exists on the
+design: at smaller panels the layout resolves umbilics that a larger one smoothed over,
+so a design with many of them (an egg-crate facade) lays out at 2.5 m and not at the
+0.5 m its curvature asks for; and a lattice that holds together may still leave a gap at
+the design boundary that only the solve shows. So the study solves its general S-net at
+the size it advises, as it solves its baseline, and says what it found, rather than send
+its user to a size at which the next run is refused.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 
-from ..errors import InputError
+from ..design.mesh_surface import DesignSurface
+from ..errors import InputError, SolverError
 from .checks import advised_panel_size
+from .definition import Candidate, Study
 from .ranking import nearest_candidate
 from .result import StudyResult
 
@@ -27,19 +31,20 @@ __all__ = ["check_advised_size"]
 
 def check_advised_size(result: StudyResult, say: Callable[[str], None],
                        max_panels: int | None = None) -> None:
-    """Lay the design out at the largest panel size a study without a feasible candidate
-    advises, and add what was found to its recommendation.
+    """Solve the study's general S-net at the largest panel size a study without a
+    feasible candidate advises, and add what was found to its recommendation.
 
     The size is the largest that the next steps of the nearest candidate name
     (`fabplan.study.checks.advised_panel_size`), or of every candidate when none is near.
-    The layout is the baseline's (90 deg, default settings). `result.advised_layout`
-    records ``{panel_size, panels, lays_out, text}``: `panels` the layout's panel count
-    (None when it does not hold together, or is not tried because its estimate exceeds
-    `max_panels`, the study's limit), `lays_out` true, false, or None when not tried.
+    The study's general S-net (its baseline) is laid out and solved there, as the study
+    solves it (`_general_net_at`). `result.advised_layout` records ``{panel_size, panels,
+    lays_out, text}``: `panels` the net's panel count, boundary panels included (None
+    when its layout does not hold together, or is not tried because its estimate exceeds
+    `max_panels`, the study's limit), `lays_out` whether the net converged (None: not
+    tried).
     Nothing is done when a candidate is feasible or no size is advised.
     """
     from ..io.resources import STUDY_BYTES_PER_PANEL, default_max_panels
-    from ..layout.surface_layout import layout_surface
 
     measured = [r for r in result.candidates if not r.failed]
     if result.recommended is not None or not measured:
@@ -59,18 +64,37 @@ def check_advised_size(result: StudyResult, say: Callable[[str], None],
                 f"{design.area / size**2:,.0f} panels, more than the limit of {limit:,} "
                 "(--max-panels).")
     else:
-        say(f"the panel size advised: laying the design out at {at}")
-        try:
-            layout = layout_surface(design, size, angle=90.0)
-        except (InputError, ArithmeticError, np.linalg.LinAlgError) as exc:
-            lays_out = False
-            text = (f"The largest panel size advised, {at}, does not lay out on this design, "
-                    f"though: {str(exc).removeprefix(f'{design.name}: ')}.")
-        else:
-            lays_out, panels = True, len(layout.mesh.faces)
-            text = (f"At the largest panel size advised, {at}, the design lays out "
-                    f"({panels:,} panels at 90 deg).")
+        say(f"the panel size advised: a general S-net laid out and solved on the design at {at}")
+        lays_out, panels, text = _general_net_at(result.study, design,
+                                                 result.baseline.candidate, size, at, say)
     result.advised_layout = {"panel_size": size, "panels": panels, "lays_out": lays_out,
                              "text": text}
     result.recommendation = f"{result.recommendation} {text}"
 
+
+def _general_net_at(study: Study, design: DesignSurface, baseline: Candidate, size: float,
+                    at: str, say: Callable[[str], None]) -> tuple[bool, int | None, str]:
+    """Whether the study's `baseline` (its general S-net) lays out and converges on
+    `design` at panel `size`, solved as the study solves it (`solve_candidate`: its layout
+    starts, its iterations): (it does, its panels, the sentence that says so). The lattice
+    alone is not enough: one that holds together may leave a gap at the design boundary
+    that only the solve on the design shows."""
+    from .candidate_solve import solve_candidate
+
+    try:
+        solved = solve_candidate(replace(study, panel_size=size), design,
+                                 replace(baseline, panel_size=None), {}, {}, say)
+    except (InputError, SolverError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return False, None, (f"The largest panel size advised, {at}, does not lay out on "
+                             f"this design, though: {str(exc).removeprefix(f'{design.name}: ')}.")
+    net = solved.net
+    assert net is not None
+    panels = len(net.mesh.faces) + int((net.properties.get("boundary_panels") or {}).get("count", 0))
+    cover = net.properties.get("coverage")
+    clad = "" if cover is None else f", {100 * cover:.1f} % of the design clad"
+    if not net.converged:
+        return False, panels, (f"At the largest panel size advised, {at}, the general S-net "
+                               f"laid out on the design does not converge, though ({net.status}"
+                               f"{clad}): a smaller panel size alone may not do.")
+    return True, panels, (f"At the largest panel size advised, {at}, the general S-net on "
+                          f"the design converges ({panels:,} panels{clad}).")
