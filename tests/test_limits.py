@@ -890,3 +890,47 @@ def test_the_panel_size_a_study_advises_is_laid_out_before_it_is_advised(judged,
         dataclasses.replace(c, checks=[_failed("max_molds", 3, 9)]) for c in result.candidates])
     check_advised_size(plain, said.append)
     assert plain.advised_layout is None and plain.recommendation == "x"
+
+
+def test_a_relaxation_a_study_file_would_refuse_is_none_and_says_why():
+    """A strips congruence tolerance relaxed past the range a cutting machine works to,
+    or a kink past 180 deg, is no relaxation: the check has no relax_to (so the candidate
+    is not said to be feasible with it) and its advice says why (a roof was told 11 mm,
+    which the study file then refused after a whole run)."""
+    from fabplan.study.checks import check, next_steps
+
+    strips = check("congruent_strips", 0.1, 10.6, False, "x")
+    assert strips["relax_to"] is None and relaxation_text([strips]) == ""
+    assert next_steps([strips]) == [
+        "no relaxation: a congruence tolerance of the strips of 10.6 mm would be needed, and "
+        "the limit must be at most 10 mm (range [0.001, 10])"]
+    kink = check("max_kink_deg", 10.0, 179.5, False, "x", advice="a smaller panel size")
+    assert kink["relax_to"] is None
+    assert kink["advice"].endswith("must lie between 0 and 180 degrees; or a smaller panel size")
+    # within range, as before
+    assert check("congruent_strips", 0.1, 8.4, False, "x")["relax_to"] == 8.4
+    assert check("mold_tolerance_mm", 1.0, 40.2, False, "x")["relax_to"] == 41.0
+
+
+def test_a_relaxation_of_the_mold_tolerance_with_other_limits_says_the_molds_change():
+    """Relaxing the mold tolerance re-plans the molds, so the other figures a relaxation
+    names for the same candidate move with them (a new user's facade, every limit set as
+    told, missed the deviation named by 19 mm): the sentence says so; alone, or without
+    it, it does not."""
+    from fabplan.study.checks import feasible_with
+
+    gap, dev = _failed("mold_tolerance_mm", 1.0, 40.2), _failed("max_deviation_mm", 30.0, 185.3)
+    assert "planned anew" in feasible_with([gap, dev])
+    assert "planned anew" not in feasible_with([gap])
+    assert "planned anew" not in feasible_with([dev])
+
+
+def test_a_candidate_whose_solve_gave_no_net_is_bound_by_that_not_by_a_limit_it_passes():
+    """A crumpled net's binding limit was a mold check it passed (39.7 of 41 mm): a failed
+    check without a margin binds first."""
+    from fabplan.study.checks import check
+
+    solve = {**_failed("max_sphere_residual", 1e-6, 2.8e-15), "margin": None}
+    gap = check("mold_tolerance_mm", 41.0, 39.7, True, "x")
+    assert binding_check([gap, solve])["limit"] == "max_sphere_residual"
+    assert binding_check([gap])["limit"] == "mold_tolerance_mm"

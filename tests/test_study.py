@@ -152,6 +152,10 @@ def test_auto_candidates_cover_the_rationalizations():
     (("triangles = 4000", "triangles = 4000\nresolution = 3"), "design.resolution is not a known key"),
     (("sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = 0"),
      "strips.congruence_tolerance_mm must be a positive number (mm), got 0"),
+    # the range of the strips' own tolerance, before anything runs (it was refused only
+    # after every candidate had been solved)
+    (("sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = 11"),
+     "strips.congruence_tolerance_mm must be at most 10 mm"),
     (("sheet_mm = [1200, 600]", "sheet_mm = [1200, 600]\ncongruence_tolerance_mm = \"fine\""),
      "strips.congruence_tolerance_mm must be a positive number (mm)"),
     (("net = \"const-radius\"", "net = \"const-radius\"\nangle = 70"),

@@ -94,10 +94,35 @@ def check(limit: str, bound: float, measured: float | None, ok: bool, text: str,
     if not ok and margin is not None and measured is not None and limit != "max_sphere_residual":
         relax_to = (int(math.ceil(measured)) if limit in ("max_molds", "max_sheets")
                     else nice_value(float(measured), up=not lower))
+        beyond = _out_of_range(limit, relax_to)
+        if beyond is not None:
+            # a study file refuses that value: no relaxation, and the advice says why
+            relax_to = None
+            advice = Advice(f"no relaxation: {limit_words(limit, float(measured))} would be "
+                            f"needed, and the limit {beyond}"
+                            + (f"; or {advice.text}" if advice else ""),
+                            None if advice is None else advice.panel_size)
     return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text,
             "margin": margin, "relax_to": relax_to,
             "advice": None if ok or advice is None else advice.text,
             "advised_panel_size": None if ok or advice is None else advice.panel_size}
+
+
+#: the limits whose range a study file checks (`fabplan.study.spec`), by the command-line
+#: option they are handed to
+_LIMIT_OPTIONS = {"mold_tolerance_mm": "--tolerance-mm", "max_panel_step_mm": "--step-limit",
+                  "max_line_turn_deg": "--max-line-turn", "congruent_strips": "--tolerance"}
+
+
+def _out_of_range(limit: str, value: float) -> str | None:
+    """Why a study file refuses `limit` set to `value` (``must be at most 10 mm ...``),
+    or None where it takes it."""
+    from ..io.parameters import OPTIONS
+
+    if limit in ("max_kink_deg", "max_line_turn_deg") and value >= 180:
+        return "must lie between 0 and 180 degrees"
+    option = _LIMIT_OPTIONS.get(limit)
+    return None if option is None else OPTIONS[option].reason(value)
 
 
 def nice_value(value: float, *, up: bool) -> float:
@@ -118,7 +143,11 @@ def nice_value(value: float, *, up: bool) -> float:
 
 def binding_check(checks: list[dict]) -> dict | None:
     """The check with the least margin: the limit that binds hardest (for a feasible
-    candidate, the first to fail if the limits were tightened)."""
+    candidate, the first to fail if the limits were tightened); a failed check without a
+    margin first (a solve that gave no buildable net: no limit it passes binds it)."""
+    unrated = [c for c in checks if not c["ok"] and c.get("margin") is None]
+    if unrated:
+        return unrated[0]
     rated = [c for c in checks if c.get("margin") is not None]
     return min(rated, key=lambda c: c["margin"]) if rated else None
 
@@ -247,7 +276,15 @@ def feasible_with(checks: list[dict]) -> str:
     """The sentence that says which limits, relaxed to what, make a candidate feasible
     (`relaxation_text`), with a leading space; '' when none would."""
     relax = relaxation_text(checks)
-    return f" It would be feasible with {relax}, the other limits as they are." if relax else ""
+    if not relax:
+        return ""
+    replanned = any(c["limit"] == "mold_tolerance_mm" and not c["ok"] for c in checks) and \
+        any(c["limit"] != "mold_tolerance_mm" and not c["ok"] for c in checks)
+    # the molds are planned at the tolerance: at another they are other molds
+    return (f" It would be feasible with {relax}, the other limits as they are"
+            + (" (as measured on today's molds: at that mold tolerance the molds are planned "
+               "anew, and their count, their steps and the boundary panels cut from them "
+               "move with them)" if replanned else "") + ".")
 
 
 def relaxation_text(checks: list[dict]) -> str:

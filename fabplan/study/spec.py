@@ -400,6 +400,7 @@ def _strips(t: Table) -> StripOptions:
                            sheet_mm=(float(sheet[0]), float(sheet[1])), nets=nets,
                            congruence_tolerance_mm=t.number("congruence_tolerance_mm", 0.1,
                                                             unit="mm"))
+    t.within("congruence_tolerance_mm", options.congruence_tolerance_mm, "--tolerance")
     t.within("height_mm", options.height_mm, "--height")
     t.within("thickness_mm", options.thickness_mm, "--thickness")
     t.done()

@@ -428,9 +428,15 @@ def comparison_rows(result: StudyResult) -> tuple[list[str], list[list]]:
 
 
 def limit_items(result: StudyResult) -> list[tuple[str, object]]:
+    """The limits a study judges by, as its report lists them: those set, the step between
+    neighbouring molds always (twice the mold tolerance unless set), the strips' twist
+    only where a candidate has strips."""
     from dataclasses import asdict
 
     limits = asdict(result.study.limits)
+    limits["max_panel_step_mm"] = result.study.limits.panel_step_limit_mm
+    if not any(c.metrics.get("strips") for c in result.candidates if not c.failed):
+        del limits["max_twist_deg_per_m"]
     if not limits["planar_panels"]:
         del limits["planarity_tolerance_mm"]
     if not limits["congruent_strips"]:

@@ -153,10 +153,15 @@ def _design_bend(metrics: dict, panel_size: float | None, units: str, limit_deg:
         return None
     size = nice_value(math.radians(limit_deg) * radius, up=False)
     return Advice(f"a smaller panel size, at most about {size:g} {units} (now {panel_size:g} "
-                  f"{units}): the design curves with radii down to {radius:.3g} {units} over "
+                  f"{units}): the design curves with radii down to {_length(radius)} {units} over "
                   f"its most curved {100 * BEND_SHARE:g} %, of which a panel spans "
                   f"{math.degrees(panel_size / radius):.0f} deg, and {limit_deg:g} deg at "
                   "that size", size)
+
+
+def _length(value: float) -> str:
+    """A length to three digits, without an exponent where it has more: ``3,650``."""
+    return f"{value:,.0f}" if abs(value) >= 1000 else f"{value:.3g}"
 
 
 def _unconverged_advice(metrics: dict, panel_size: float | None = None, units: str = ""

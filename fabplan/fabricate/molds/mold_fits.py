@@ -314,6 +314,13 @@ def polish_mold_placements(points: np.ndarray, must: np.ndarray, placements: np.
             if res.status != 0:
                 break
             step = res.x[:n] / scale
+            if not np.all(np.abs(step[:3]) < 1e150):
+                # a degenerate panel, its mold missing it by astronomical gaps: a step too
+                # large to turn by fails as a trial does (its rotation would overflow)
+                radius *= 0.25
+                if radius < 1e-6:
+                    break
+                continue
             D = np.eye(4)
             D[:3, :3] = rotation_matrices(step[None, :3])[0]
             D[:3, 3] = step[3:6]
