@@ -672,6 +672,12 @@ def test_the_nearest_is_a_net_on_the_design_and_none_is_named_when_no_solve_gave
     _, text = recommend([as_(c, "stagnated", k, i + 1)
                          for i, (c, k) in enumerate(zip(done, stuck, strict=True))], study)
     assert "To try: let the solve run longer." in text
+    # a step for some of them names those it is for
+    other = [{**stuck[0][0], "advice": "another net type"}]
+    _, text = recommend([as_(done[0], "stagnated", stuck[0], 1),
+                         as_(done[1], "stagnated", other, 2)], study)
+    assert (f"To try: let the solve run longer: the net did not converge from 4 layout starts "
+            f"(for {done[0].name}); another net type (for {done[1].name}).") in text
 
 
 def test_the_design_bend_radius_is_that_of_its_most_curved_part():
@@ -878,13 +884,28 @@ def test_the_panel_size_a_study_advises_is_laid_out_before_it_is_advised(judged,
         raise BrokenLayoutError(f"{design.name}: the layout at panel size {size:g} does not "
                                 "hold together: 17 umbilics")
 
+    layout = surface_layout.layout_surface
     monkeypatch.setattr(surface_layout, "layout_surface", broken)
     advised = advising(1.0)
     check_advised_size(advised, said.append)
     assert advised.advised_layout["lays_out"] is False
+    # and the sizes between it and the study's own (2 m) are tried, smallest first
+    assert [b["panel_size"] for b in advised.advised_layout["between"]] == [1.2, 1.5]
     assert advised.recommendation.endswith(
         "The largest panel size advised, 1 m, does not lay out on this design, though: the "
-        "layout at panel size 1 does not hold together: 17 umbilics.")
+        "layout at panel size 1 does not hold together: 17 umbilics. Nor does the general "
+        "S-net converge at 1.2 or 1.5 m, the sizes tried between 1 m and the study's 2 m.")
+    # a size between that gives a net is named
+    monkeypatch.setattr(surface_layout, "layout_surface", lambda design, size, **kw: (
+        broken(design, size) if size < 1.5 else layout(design, size, **kw)))
+    advised = advising(1.0)
+    check_advised_size(advised, said.append)
+    record = advised.advised_layout
+    assert [(b["panel_size"], b["lays_out"]) for b in record["between"]] == [(1.2, False),
+                                                                            (1.5, True)]
+    assert advised.recommendation.endswith(
+        f"At 1.5 m, between 1 m and the study's 2 m, the general S-net converges "
+        f"({record['between'][1]['panels']:,} panels): the smallest size tried that gives a net.")
     # a feasible study, or one that advises no size, is left as it is
     plain = dataclasses.replace(result, recommended=None, recommendation="x", candidates=[
         dataclasses.replace(c, checks=[_failed("max_molds", 3, 9)]) for c in result.candidates])

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..design.mesh_surface import DesignSurface
 from ..errors import InputError, SolverError
-from .checks import advised_panel_size
+from .checks import advised_panel_size, nice_value
 from .definition import Candidate, Study
 from .ranking import nearest_candidate
 from .result import StudyResult
@@ -41,7 +41,8 @@ def check_advised_size(result: StudyResult, say: Callable[[str], None],
     lays_out, text}``: `panels` the net's panel count, boundary panels included (None
     when its layout does not hold together, or is not tried because its estimate exceeds
     `max_panels`, the study's limit), `lays_out` whether the net converged (None: not
-    tried).
+    tried), `between` the sizes tried between it and the study's own where it did not
+    (`_sizes_between`).
     Nothing is done when a candidate is feasible or no size is advised.
     """
     from ..io.resources import STUDY_BYTES_PER_PANEL, default_max_panels
@@ -67,9 +68,47 @@ def check_advised_size(result: StudyResult, say: Callable[[str], None],
         say(f"the panel size advised: a general S-net laid out and solved on the design at {at}")
         lays_out, panels, text = _general_net_at(result.study, design,
                                                  result.baseline.candidate, size, at, say)
+    between: list[dict] = []
+    if lays_out is False:
+        now = result.study.panel_size_of(nearest.candidate if nearest else
+                                         result.baseline.candidate)
+        between, found = _sizes_between(result, size, now, say)
+        text = f"{text} {found}" if found else text
     result.advised_layout = {"panel_size": size, "panels": panels, "lays_out": lays_out,
-                             "text": text}
+                             "between": between, "text": text}
     result.recommendation = f"{result.recommendation} {text}"
+
+
+#: panel sizes tried between the one advised and the study's own when the one advised
+#: gives no net (`_sizes_between`): each a solve of the general S-net
+BETWEEN_TRIES = 2
+
+
+def _sizes_between(result: StudyResult, advised: float, now: float,
+                   say: Callable[[str], None]) -> tuple[list[dict], str]:
+    """Where the general S-net gives no net at the `advised` size: the sizes between it
+    and the study's own (`now`), in `BETWEEN_TRIES` even steps on a log scale, smallest
+    first, until one converges. Returns each size tried (``{panel_size, lays_out,
+    panels}``) and the sentence that says what was found."""
+    units = result.study.design.units
+    sizes = sorted({nice_value(advised * (now / advised) ** (k / (BETWEEN_TRIES + 1)), up=False)
+                    for k in range(1, BETWEEN_TRIES + 1)} - {advised, now})
+    tried = []
+    for size in sizes:
+        say(f"the panel size advised gives no net: the general S-net at {size:g} {units}")
+        ok, panels, _ = _general_net_at(result.study, result.design, result.baseline.candidate,
+                                        size, f"{size:g} {units}", say)
+        tried.append({"panel_size": size, "lays_out": ok, "panels": panels})
+        if ok:
+            assert panels is not None
+            return tried, (f"At {size:g} {units}, between {advised:g} {units} and the study's "
+                           f"{now:g} {units}, the general S-net converges ({panels:,} panels): "
+                           "the smallest size tried that gives a net.")
+    if not tried:
+        return tried, ""
+    return tried, (f"Nor does the general S-net converge at "
+                   f"{' or '.join(f'{s:g}' for s in sizes)} {units}, the sizes tried between "
+                   f"{advised:g} {units} and the study's {now:g} {units}.")
 
 
 def _general_net_at(study: Study, design: DesignSurface, baseline: Candidate, size: float,

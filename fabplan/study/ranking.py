@@ -218,8 +218,8 @@ def _nearest_text(measured: list[CandidateResult]) -> str:
     if best is None:
         # no net to be near: naming the cheapest unfinished one would mislead
         # each candidate's advice, its alternatives ("...; or ...") said once across them
-        steps = _said_once([part for r in measured for step in next_steps(r.checks)
-                            for part in step.split("; or ")])
+        steps = _said_once([(part, r.name) for r in measured for step in next_steps(r.checks)
+                            for part in step.split("; or ")], len(measured))
         return ("No candidate meets every limit, and none is near: no solve gave a buildable "
                 "net (see the reasons of each below)."
                 + (f" To try: {'; '.join(steps)}." if steps else ""))
@@ -237,16 +237,23 @@ def _nearest_text(measured: list[CandidateResult]) -> str:
     return text + (f" Other ways: {'; '.join(steps)}." if steps else "")
 
 
-def _said_once(steps: list[str]) -> list[str]:
-    """`steps` of several candidates, each said once: those that say the same before
-    their reason (the text after the first ": ") and differ in it, said without it
+def _said_once(steps: list[tuple[str, str]], candidates: int) -> list[str]:
+    """The (step, candidate) `steps` of `candidates` candidates, each step said once, with
+    the candidates it is for where it is not for all of them: those that say the same
+    before their reason (the text after the first ": ") and differ in it, said without it
     ("... from 4 layout starts", "... from 5 layout starts")."""
-    heads: dict[str, set[str]] = {}
-    for step in steps:
+    heads: dict[str, tuple[set[str], list[str]]] = {}
+    for step, name in steps:
         head, _, reason = step.partition(": ")
-        heads.setdefault(head, set()).add(reason)
-    return [head if len(reasons) > 1 else f"{head}: {reasons.pop()}" if reasons != {""}
-            else head for head, reasons in heads.items()]
+        reasons, names = heads.setdefault(head, (set(), []))
+        reasons.add(reason)
+        if name not in names:
+            names.append(name)
+    said = []
+    for head, (reasons, names) in heads.items():
+        text = head if len(reasons) > 1 or reasons == {""} else f"{head}: {reasons.pop()}"
+        said.append(text if len(names) == candidates else f"{text} (for {', '.join(names)})")
+    return said
 
 
 def _named(result: CandidateResult) -> str:
