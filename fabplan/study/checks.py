@@ -98,10 +98,11 @@ def check(limit: str, bound: float, measured: float | None, ok: bool, text: str,
         if beyond is not None:
             # a study file refuses that value: no relaxation, and the advice says why
             relax_to = None
+            other = advice or (Advice(_TRY[limit]) if limit in _TRY else None)
             advice = Advice(f"no relaxation: {limit_words(limit, float(measured))} would be "
                             f"needed, and the limit {beyond}"
-                            + (f"; or {advice.text}" if advice else ""),
-                            None if advice is None else advice.panel_size)
+                            + (f"; or {other.text}" if other else ""),
+                            None if other is None else other.panel_size)
     return {"limit": limit, "bound": bound, "measured": measured, "ok": bool(ok), "text": text,
             "margin": margin, "relax_to": relax_to,
             "advice": None if ok or advice is None else advice.text,
