@@ -971,3 +971,20 @@ def test_a_candidate_whose_solve_gave_no_net_is_bound_by_that_not_by_a_limit_it_
     gap = check("mold_tolerance_mm", 41.0, 39.7, True, "x")
     assert binding_check([gap, solve])["limit"] == "max_sphere_residual"
     assert binding_check([gap])["limit"] == "mold_tolerance_mm"
+
+
+@pytest.mark.slow
+def test_a_study_run_records_the_check_of_its_advised_size():
+    """`run_study` checks the size an infeasible study advises, and study.json and the
+    recommendation carry it: here a kink limit of 0.2 deg asks for panels so small that
+    there are more than are solved to check it."""
+    from fabplan.study.records import study_record
+
+    text = STUDY.replace("max_molds = 3", "max_molds = 3\nmax_kink_deg = 0.2")
+    result = run_study(parse_study(text))
+    assert result.recommended is None
+    record = study_record(result)["advised_layout"]
+    assert record is not None and record["lays_out"] is None and record["between"] == []
+    assert record["text"] in result.recommendation
+    assert record["text"].startswith(f"The largest panel size advised, {record['panel_size']:g} m, "
+                                     "was not tried here: about")
