@@ -9,8 +9,9 @@ from typing import NamedTuple
 
 from ..fabricate.limits import LIMITS
 
-__all__ = ["Advice", "check", "binding_check", "violation", "nearness", "relaxation_text", "feasible_with",
-           "next_steps", "advised_panel_size", "nice_value", "LIMIT_NAMES", "limit_words", "limit_value"]
+__all__ = ["Advice", "check", "binding_check", "violation", "nearness", "relaxation_text",
+           "feasible_with", "next_steps", "advised_panel_size", "out_of_range", "ANGLE_LIMITS",
+           "nice_value", "LIMIT_NAMES", "limit_words", "limit_value"]
 
 #: every limit of a study in words, with its unit; those the commands also check
 #: (`fabplan.fabricate.limits.LIMITS`) in the same words
@@ -94,7 +95,7 @@ def check(limit: str, bound: float, measured: float | None, ok: bool, text: str,
     if not ok and margin is not None and measured is not None and limit != "max_sphere_residual":
         relax_to = (int(math.ceil(measured)) if limit in ("max_molds", "max_sheets")
                     else nice_value(float(measured), up=not lower))
-        beyond = _out_of_range(limit, relax_to)
+        beyond = out_of_range(limit, relax_to)
         if beyond is not None:
             # a study file refuses that value: no relaxation, and the advice says why
             relax_to = None
@@ -115,12 +116,16 @@ _LIMIT_OPTIONS = {"mold_tolerance_mm": "--tolerance-mm", "max_panel_step_mm": "-
                   "max_line_turn_deg": "--max-line-turn", "congruent_strips": "--tolerance"}
 
 
-def _out_of_range(limit: str, value: float) -> str | None:
+#: the limits that are angles between neighbouring panels or along a line
+ANGLE_LIMITS = ("max_kink_deg", "max_line_turn_deg")
+
+
+def out_of_range(limit: str, value: float) -> str | None:
     """Why a study file refuses `limit` set to `value` (``must be at most 10 mm ...``),
     or None where it takes it."""
     from ..io.parameters import OPTIONS
 
-    if limit in ("max_kink_deg", "max_line_turn_deg") and value >= 180:
+    if limit in ANGLE_LIMITS and not 0 < value < 180:
         return "must lie between 0 and 180 degrees"
     option = _LIMIT_OPTIONS.get(limit)
     return None if option is None else OPTIONS[option].reason(value)

@@ -40,11 +40,11 @@ from ..io.forked import quiet_interrupts
 from ..io.resources import worker_count
 from .advised_size import check_advised_size
 from .candidate_measure import fabricate_candidate
-from .candidate_solve import solve_candidate, start_angle, with_holding_size
+from .candidate_solve import solve_candidate, start_angle
 from .inputs import shared_inputs
 from .ranking import judge_study
 from .result import CandidateResult, StudyResult
-from .run import load_study_design, searched_study, with_first_points
+from .run import load_study_design, refused_baseline, searched_study, with_first_points
 from .search import next_points
 from .twins import shared_solve, twin_of
 
@@ -238,8 +238,7 @@ def _run_on(client: Any, study: Study, design: DesignSurface, say: Callable[[str
     if isinstance(refused, FabplanError):     # no baseline layout: nothing can be compared
         client.cancel([*waiting, *(graph.solves[key] for key in waiting.values())])
         if isinstance(refused, BrokenLayoutError):      # as a serial run says it
-            say("the baseline layout does not hold together: trying other panel sizes")
-            raise with_holding_size(refused, design, study.panel_size, 90.0) from None
+            raise refused_baseline(refused, study, design, say) from None
         raise refused
     graph.submit_ready()
     graph.wait_for_nets(waiting, clock, say, as_completed)

@@ -99,8 +99,8 @@ class StudyResult:
     seconds_run : wall time from loading the design to the last verdict (writing the
         files is not included: `fabplan.study_report.write_study` adds it).
     advised_layout : for a study without a feasible candidate that advises a smaller
-        panel size, whether the design lays out at it
-        (`fabplan.study.advised_size.check_advised_size`); None otherwise.
+        panel size, whether its general S-net converges at it (and at sizes between, where
+        it does not: `fabplan.study.advised_size.check_advised_size`); None otherwise.
     """
 
     study: Study

@@ -313,8 +313,15 @@ def prepare_design(study: Study, say: Callable[[str], None],
     try:
         return design, layout_surface(design, study.panel_size, angle=90.0)
     except BrokenLayoutError as exc:
-        say("the baseline layout does not hold together: trying other panel sizes")
-        raise with_holding_size(exc, design, study.panel_size, 90.0) from None
+        raise refused_baseline(exc, study, design, say) from None
+
+
+def refused_baseline(exc: BrokenLayoutError, study: Study, design: DesignSurface,
+                     say: Callable[[str], None]) -> BrokenLayoutError:
+    """Why a study's baseline layout does not hold together, with the panel size at which
+    a lattice on the design does (`with_holding_size`): serial and on workers alike."""
+    say("the baseline layout does not hold together: trying other panel sizes")
+    return with_holding_size(exc, design, study.panel_size, 90.0)
 
 
 #: a panel size under this many millimetres, in a design's units smaller than metres, is

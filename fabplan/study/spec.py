@@ -40,6 +40,7 @@ from ..io.units import MM_PER_UNIT
 from ..layout.settings import MAX_STARTS
 from ..solve.net_types import NETS
 from .candidates import AUTO_CANDIDATES, read_candidates, sweep_candidates, swept_values
+from .checks import ANGLE_LIMITS, out_of_range
 from .definition import (
     SEARCH_BUDGET,
     Candidate,
@@ -362,10 +363,10 @@ def _limits(t: Table, *, congruence_tolerance_mm: float = 0.1) -> tuple[Limits, 
         t.within("mold_tolerance_mm", tolerance, "--tolerance-mm")
     t.within("max_panel_step_mm", limits.max_panel_step_mm, "--step-limit")
     t.within("max_line_turn_deg", limits.max_line_turn_deg, "--max-line-turn")
-    for key in ("max_kink_deg", "max_line_turn_deg"):
+    for key in ANGLE_LIMITS:
         value = getattr(limits, key)
-        if value is not None and not 0 < value < 180:
-            t.fail(key, f"must lie between 0 and 180 degrees, got {value:g}")
+        if value is not None and (reason := out_of_range(key, value)) is not None:
+            t.fail(key, f"{reason}, got {value:g}")
     if limits.min_coverage is not None and limits.min_coverage > 1:
         t.fail("min_coverage", f"is a fraction of the design's area, at most 1; got "
                f"{limits.min_coverage:g}")
