@@ -43,6 +43,7 @@ from .candidate_measure import fabricate_candidate
 from .candidate_solve import solve_candidate, start_angle
 from .inputs import shared_inputs
 from .ranking import judge_study
+from .relaxation_check import check_relaxation
 from .result import CandidateResult, StudyResult
 from .run import load_study_design, refused_baseline, searched_study, with_first_points
 from .search import next_points
@@ -207,6 +208,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
             results += found
             made.update(made_now)
     result = judge_study(searched_study(study, results), design, results)
+    check_relaxation(result, say)
     check_advised_size(result, say, max_panels)
     result.seconds_run = time.perf_counter() - start
     result.made_files = made

@@ -75,6 +75,7 @@ def study_record(result: StudyResult, outputs: dict | None = None, *,
         "recommended": result.recommended,
         "recommendation": result.recommendation,
         "advised_layout": result.advised_layout,
+        "relaxation_check": result.relaxation_check,
         "sheets_charged": result.sheets_charged,
         "candidates": [_candidate_record(c, outputs.get(c.name, {}), result.recommended,
                                          result.study)

@@ -101,6 +101,10 @@ class StudyResult:
     advised_layout : for a study without a feasible candidate that advises a smaller
         panel size, whether its general S-net converges at it (and at sizes between, where
         it does not: `fabplan.study.advised_size.check_advised_size`); None otherwise.
+    relaxation_check : for a study without a feasible candidate whose nearest candidate's
+        relaxation changes what its run is made with (its molds, its held deviation),
+        that candidate run again under the relaxed limits
+        (`fabplan.study.relaxation_check.check_relaxation`); None otherwise.
     """
 
     study: Study
@@ -112,6 +116,7 @@ class StudyResult:
     seconds_run: float = 0.0
     made_files: dict = field(default_factory=dict)
     advised_layout: dict | None = None
+    relaxation_check: dict | None = None
 
     @property
     def baseline(self) -> CandidateResult:

@@ -47,6 +47,7 @@ from .ranking import (
     rank_candidates,
     recommend,
 )
+from .relaxation_check import check_relaxation
 from .result import CandidateResult, StudyResult
 from .search import first_points, next_points, search_points
 from .twins import SAME_NET_TOLERANCE, same_net, shared_solve, twin_of
@@ -167,6 +168,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
             helper.cancel()
         raise
     judged = judge_study(searched_study(study, results), design, results)
+    check_relaxation(judged, say)
     check_advised_size(judged, say, max_panels)
     judged.seconds_run = time.perf_counter() - start
     judged.made_files = {} if helper is None else helper.made_files

@@ -1,0 +1,206 @@
+"""Whether the relaxation a study without a feasible candidate names for its nearest
+candidate makes it feasible.
+
+The relaxation is read off the measured numbers: each failed limit set to what was
+measured (`fabplan.study.checks`). That holds as said for the limits a verdict alone
+judges (molds counted, kinks, coverage), but not for those the run itself is made with:
+the molds are planned at the mold tolerance and the step limit, a net that leaves the
+design holds a share of the deviation limit inside its solve, flat panels a share of the
+planarity tolerance, and the strips are cut at their congruence tolerance. At a relaxed
+mold tolerance the molds are other molds, and the boundary panels cut from them stand
+elsewhere: a user who set every limit to what a study named found a boundary panel
+209 mm off the design, against the 190 mm named. So the study runs its nearest candidate
+again under the relaxed limits, and relaxes once more by what that run measured when it
+still fails (a continuation: each round's limits at least those of the one before).
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields, replace
+from typing import Callable
+
+from .checks import feasible_with, limit_value, limit_words
+from .definition import Limits, Study
+from .ranking import judge_study, nearest_candidate
+from .result import CandidateResult, StudyResult
+
+__all__ = ["check_relaxation", "relaxed_limits", "RUN_LIMITS"]
+
+#: the `Limits` field a check's limit names, where the two differ
+_FIELDS = {"congruent_strips": "congruence_tolerance_mm"}
+
+#: the limits a candidate's run is made with (its solve, molds or strips), not only judged
+#: by: relaxing one of them changes what is measured
+RUN_LIMITS = ("max_deviation_mm", "mold_tolerance_mm", "max_panel_step_mm",
+              "planarity_tolerance_mm", "congruence_tolerance_mm", "max_twist_deg_per_m")
+
+#: runs of the nearest candidate at most: the relaxation named, and once more relaxed by
+#: what that run measured
+ROUNDS = 2
+
+#: the most panels the nearest candidate is run again with (as `fabplan.study.
+#: advised_size.MAX_CHECKED_PANELS`: about a minute's solve)
+MAX_RUN_PANELS = 5000
+
+
+def relaxed_limits(limits: Limits, checks: list[dict]) -> Limits | None:
+    """`limits` with each failed check's limit set to the value that would pass it
+    (``relax_to``); None when a candidate passes every check or a failed check names no
+    relaxation (a solve that gave no buildable net, a value a study file refuses)."""
+    failed = [c for c in checks if not c["ok"]]
+    if not failed or any(c.get("relax_to") is None for c in failed):
+        return None
+    fields = {_FIELDS.get(c["limit"], c["limit"]): c["relax_to"] for c in failed}
+    if not all(hasattr(limits, f) for f in fields):
+        return None
+    return replace(limits, **fields)
+
+
+def check_relaxation(result: StudyResult, say: Callable[[str], None]) -> None:
+    """Run the nearest candidate of a study without a feasible candidate again under the
+    limits its relaxation names, when one of them is a limit the run is made with
+    (`RUN_LIMITS`), and say in its recommendation what that run gave.
+
+    When the run still fails, its own relaxation (from the relaxed limits) is run once
+    more (`ROUNDS`). `result.relaxation_check` records ``{candidate, rounds, feasible,
+    limits, text}``: each round's relaxed limits (``limits``: name to value, the limits
+    changed from the study's), whether it was feasible, the limits it failed (``failed``:
+    name to measured value) and, for the feasible one, the least limits it needs
+    (``least``, `_least`); `feasible` whether a round was; `limits` that round's
+    ``least`` (else None). Nothing is done for a study with a feasible candidate, without
+    a candidate near it, with a relaxation the verdict alone judges, or with more than
+    `MAX_RUN_PANELS` panels; what goes wrong in the run is said and never fails the
+    study.
+    """
+    measured = [r for r in result.candidates if not r.failed]
+    nearest = None if result.recommended is not None else nearest_candidate(measured)
+    if nearest is None:
+        return
+    study = result.study
+    now = study.limits_of(nearest.candidate)
+    limits = relaxed_limits(now, nearest.checks)
+    if limits is None or not _changed(now, limits, RUN_LIMITS):
+        return
+    if _panels(nearest) > MAX_RUN_PANELS:
+        return
+    rounds: list[dict] = []
+    try:
+        text = _rounds(result, nearest, limits, rounds, say)
+    except Exception as exc:          # noqa: BLE001 - the study's results are kept
+        text = (f"Whether {nearest.name} is feasible under those limits could not be checked "
+                f"({type(exc).__name__}: {exc}).")
+    feasible = [r for r in rounds if r["feasible"]]
+    result.relaxation_check = {"candidate": nearest.name, "rounds": rounds,
+                               "feasible": bool(feasible) if rounds else None,
+                               "limits": feasible[0]["least"] if feasible else None,
+                               "text": text}
+    said = feasible_with(nearest.checks)
+    if said and said in result.recommendation:
+        # said right after the relaxation it checks
+        result.recommendation = result.recommendation.replace(said, f"{said} {text}", 1)
+    else:
+        result.recommendation = f"{result.recommendation} {text}"
+
+
+def _rounds(result: StudyResult, nearest: CandidateResult, limits: Limits, rounds: list[dict],
+            say: Callable[[str], None]) -> str:
+    """Run `nearest` under `limits`, and under its own relaxation of them while it fails,
+    at most `ROUNDS` times; each run recorded in `rounds`. Returns the sentence that says
+    what was found."""
+    name, study = nearest.name, result.study
+    now = study.limits_of(nearest.candidate)
+    anew = "(its net solved and its molds planned anew)"
+    said = ""
+    for k in range(ROUNDS):
+        say(f"the relaxation of {name} checked: run again with {_changes_text(now, limits)}")
+        judged = _run_under(_relaxed_study(study, limits), result, nearest, say)
+        failed = [c for c in judged.checks if not c["ok"]]
+        rounds.append({"limits": _changes(now, limits), "feasible": bool(judged.feasible),
+                       "failed": {c["limit"]: c["measured"] for c in failed}})
+        if judged.feasible:
+            least = _least(result, now, limits, judged)
+            rounds[-1]["least"] = _changes(now, least)
+            if k == 0:
+                return (f"Run again under those limits {anew}, {name} meets every limit"
+                        + ("." if least == limits else
+                           f"; it needs no more than {_changes_text(now, least)}, the other "
+                           "limits as they are."))
+            return (f"{said} A second run meets every limit with {_changes_text(now, least)}, "
+                    "the other limits as they are.")
+        more = relaxed_limits(limits, judged.checks)
+        fails = "; ".join(c["text"] for c in failed)
+        said = (f"Run again under those limits {anew}, {name} still fails: {fails}." if k == 0
+                else f"{said} Relaxed by that, a second run still fails: {fails}.")
+        if more is None:
+            return f"{said} No limit relaxed further would do."
+        limits = more
+    return (f"{said} The nearest candidate's measures move with its limits: relax them in "
+            "steps and run the study again, or take the other ways.")
+
+
+def _least(result: StudyResult, now: Limits, limits: Limits, judged: CandidateResult) -> Limits:
+    """The least of `limits` that a feasible run (`judged`) needs: each relaxed limit
+    that only judges it (not in `RUN_LIMITS`: molds counted, kinks) set back to the
+    study's (`now`), or to what the run measured where that is more. The limits the run
+    is made with stay as they were: another value would make another run."""
+    back = {f: getattr(now, f) for f in _changes(now, limits) if f not in RUN_LIMITS}
+    if not back:
+        return limits
+    tight = replace(limits, **back)
+    again = judge_study(_relaxed_study(result.study, tight), result.design, [judged]).candidates[0]
+    if again.feasible:
+        return tight
+    return relaxed_limits(tight, again.checks) or limits
+
+
+def _run_under(study: Study, result: StudyResult, nearest: CandidateResult,
+               say: Callable[[str], None]) -> CandidateResult:
+    """`nearest` solved, fabricated and judged again under `study` (its relaxed limits):
+    the same layout and net type, no cached layout or start."""
+    from .candidate_measure import fabricate_candidate
+    from .candidate_solve import solve_candidate
+
+    candidate = replace(nearest.candidate, mold_tolerance_mm=None)
+    solved = solve_candidate(study, result.design, candidate, {}, {}, say)
+    made = fabricate_candidate(study, result.design, solved, None, say)
+    return judge_study(study, result.design, [made]).candidates[0]
+
+
+def _relaxed_study(study: Study, limits: Limits) -> Study:
+    """`study` judged and run under `limits`; its strips cut at their congruence
+    tolerance."""
+    strips = study.strips
+    if strips is not None and strips.congruence_tolerance_mm != limits.congruence_tolerance_mm:
+        strips = replace(strips, congruence_tolerance_mm=limits.congruence_tolerance_mm)
+    return replace(study, limits=limits, strips=strips)
+
+
+def _changes(before: Limits, after: Limits) -> dict:
+    """The limits of `after` that differ from `before`, by name."""
+    return {f.name: getattr(after, f.name) for f in fields(after)
+            if getattr(after, f.name) != getattr(before, f.name)}
+
+
+def _changed(before: Limits, after: Limits, fields: tuple[str, ...]) -> bool:
+    return any(f in fields for f in _changes(before, after))
+
+
+def _changes_text(before: Limits, after: Limits) -> str:
+    """The limits changed from `before` to `after`, in words (`limit_words`), each with
+    its value in `before`."""
+    names = {v: k for k, v in _FIELDS.items()}
+    return " and ".join(f"{limit_words(names.get(f, f), v)} (now "
+                        f"{limit_value(names.get(f, f), _value(before, f))})"
+                        for f, v in _changes(before, after).items())
+
+
+def _value(limits: Limits, field: str) -> float:
+    """A limit's value as its check bounds it (the step limit: twice the mold tolerance
+    when not given)."""
+    return limits.panel_step_limit_mm if field == "max_panel_step_mm" else getattr(limits, field)
+
+
+def _panels(r: CandidateResult) -> int:
+    """A measured candidate's panels, its boundary panels included."""
+    return int(r.metrics.get("panels") or 0)
+
