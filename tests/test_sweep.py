@@ -5,6 +5,7 @@ report compares them (sortable table, Pareto plot of the cost drivers)."""
 from __future__ import annotations
 
 import csv
+import html
 import json
 
 import numpy as np
@@ -173,6 +174,10 @@ def test_the_report_compares_the_sweep(swept):
     assert "Pareto-optimal:" in page and "Cost drivers" in page
     # sortable cells carry their full value
     assert 'data-v="0.7"' in page and 'data-v="3.0"' in page
+    # the limits list each tolerance of the sweep, and the step limit each implies
+    for name, values in [("largest gap between a panel and its mold", "1.5, 3 mm"),
+                         ("largest step between neighbouring panels' molds", "3, 6 mm")]:
+        assert f"<td>{html.escape(name)}</td><td>{values}</td>" in page
     # strip-less saddle: the tolerance twins share no strip files, every folder is complete
     for c in record["candidates"]:
         assert (out / "candidates" / c["name"] / "net.obj").is_file()

@@ -109,8 +109,12 @@ def limit_text(key: str, value) -> tuple[str, str]:
     ('largest deviation from the design', '40 mm')
     >>> limit_text("min_coverage", 0.95)[1], limit_text("max_molds", 1)[1]
     ('95 %', '1 mold')
+    >>> limit_text("mold_tolerance_mm", (0.5, 1.0))[1]        # a sweep's values
+    '0.5, 1 mm'
     """
     name, unit = LIMIT_NAMES.get(key, (key.replace("_", " "), ""))
+    if isinstance(value, tuple):
+        return name, f"{', '.join(html.format_value(v) for v in value)} {unit}".strip()
     if isinstance(value, bool):
         return name, "yes" if value else "no"
     if unit == "%":
@@ -430,11 +434,19 @@ def comparison_rows(result: StudyResult) -> tuple[list[str], list[list]]:
 def limit_items(result: StudyResult) -> list[tuple[str, object]]:
     """The limits a study judges by, as its report lists them: those set, the step between
     neighbouring molds always (twice the mold tolerance unless set), the strips' twist
-    only where a candidate has strips."""
+    only where a candidate has strips. A sweep of mold tolerances lists each (a tuple),
+    and the step limit of each."""
     from dataclasses import asdict
 
-    limits = asdict(result.study.limits)
-    limits["max_panel_step_mm"] = result.study.limits.panel_step_limit_mm
+    study = result.study
+    limits = asdict(study.limits)
+    limits["max_panel_step_mm"] = study.limits.panel_step_limit_mm
+    swept = study.swept.get("mold_tolerance_mm")
+    if swept:
+        # each tolerance of the sweep, and the step limit each implies when not set
+        limits["mold_tolerance_mm"] = tuple(swept)
+        if study.limits.max_panel_step_mm is None:
+            limits["max_panel_step_mm"] = tuple(2.0 * t for t in swept)
     if not any(c.metrics.get("strips") for c in result.candidates if not c.failed):
         del limits["max_twist_deg_per_m"]
     if not limits["planar_panels"]:
