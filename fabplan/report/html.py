@@ -227,9 +227,17 @@ def html_table(columns: Sequence[str], rows: Iterable[Sequence], *, caption: str
 
 
 def html_paragraph(text: str, *, cls: str | None = None) -> str:
-    """A paragraph of escaped text (``cls``: ``"note"`` or ``"fail"`` for a framed box)."""
+    r"""A paragraph of escaped text (``cls``: ``"note"`` or ``"fail"`` for a framed box);
+    its lines (``\n``) are kept apart.
+
+    Examples
+    --------
+    >>> html_paragraph("a < b\nc")
+    '<p>a &lt; b<br>c</p>'
+    """
     attr = f' class="{cls}"' if cls else ""
-    return f"<p{attr}>{html.escape(text)}</p>"
+    lines = text.split("\n")
+    return f"<p{attr}>{'<br>'.join(html.escape(line) for line in lines)}</p>"
 
 
 def html_links(label: str, links: Sequence[tuple[str, str]]) -> str:

@@ -78,7 +78,7 @@ def check_advised_size(result: StudyResult, say: Callable[[str], None],
                     f"could not be checked ({type(exc).__name__}: {exc}).")
     result.advised_layout = {"panel_size": size, "panels": panels, "lays_out": lays_out,
                              "between": between, "text": text}
-    result.recommendation = f"{result.recommendation} {text}"
+    result.recommendation = f"{result.recommendation}\n{text}"
 
 
 #: the most panels the general S-net is solved with to check an advised size: about a

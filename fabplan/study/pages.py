@@ -236,7 +236,9 @@ def study_pdf(result: StudyResult, pictures: dict, *, seconds_total: float | Non
                       f"{study.design.units}, {counted(len(result.candidates), 'candidate')}, run "
                       f"in {seconds:.0f} s. The interactive 3D view and the files are in "
                       "report.html beside this file.")
-    first = doc.section("Recommendation and comparison").text(result.recommendation)
+    first = doc.section("Recommendation and comparison")
+    for paragraph in result.recommendation.split("\n"):
+        first.text(paragraph)
     columns, rows = comparison_rows(result)
     first.table(columns, rows, widths=[0.5, 1.6, 0.7, 0.7, 0.7, 0.9, 0.8, 2.2])
     first.text(RANK_RULE, size=7.5, style="italic")

@@ -231,10 +231,11 @@ def _nearest_text(measured: list[CandidateResult]) -> str:
         f"{'net on the design' if on_design else 'net'} the least many times over its limits)")
     off = "" if on_design else (
         " No candidate gave a net on the design: this one met its constraints only off it.")
+    relax = feasible_with(best.checks).strip()
     text = (f"No candidate meets every limit. The nearest is {_named(best)}{ranked}, "
-            "which fails: " + "; ".join(best.reasons) + "." + off + feasible_with(best.checks))
+            "which fails: " + "; ".join(best.reasons) + "." + off + (f"\n{relax}" if relax else ""))
     steps = next_steps(best.checks)
-    return text + (f" Other ways: {'; '.join(steps)}." if steps else "")
+    return text + (f"\nOther ways: {'; '.join(steps)}." if steps else "")
 
 
 def _said_once(steps: list[tuple[str, str]], candidates: int) -> list[str]:

@@ -94,12 +94,12 @@ def check_relaxation(result: StudyResult, say: Callable[[str], None]) -> None:
                                "feasible": bool(feasible) if rounds else None,
                                "limits": feasible[0]["least"] if feasible else None,
                                "text": text}
-    said = feasible_with(nearest.checks)
+    said = feasible_with(nearest.checks).strip()
     if said and said in result.recommendation:
         # said right after the relaxation it checks
         result.recommendation = result.recommendation.replace(said, f"{said} {text}", 1)
     else:
-        result.recommendation = f"{result.recommendation} {text}"
+        result.recommendation = f"{result.recommendation}\n{text}"
 
 
 def _rounds(result: StudyResult, nearest: CandidateResult, limits: Limits, rounds: list[dict],

@@ -89,7 +89,9 @@ class StudyResult:
     design : the `fabplan.surfaces.DesignSurface`.
     candidates : `CandidateResult` in the order of the study file (baseline first).
     recommended : name of the recommended candidate, or None when none is feasible.
-    recommendation : the recommendation in plain words.
+    recommendation : the recommendation in plain words, its paragraphs on lines of their
+        own (a study without a feasible candidate: what its nearest fails, the relaxation
+        that makes it feasible, the other ways, the panel size advised).
     sheets_charged : whether strip sheets enter the cost (only when every measured
         candidate has strips, see `judge_study`).
     made_files : the candidates' files made beside the computation, by a parallel run's
