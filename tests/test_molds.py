@@ -598,6 +598,34 @@ def test_panels_of_a_net_on_an_exact_design_are_its_patches():
     assert record["panel_steps"]["panel_surfaces_max_mm"] == 0.0
 
 
+def test_a_net_off_its_design_is_not_cut_from_it():
+    """`auto` cuts a net's panels from the design given only where the net lies on it: a
+    study's linear Weingarten net 13 mm off its saddle got 41 molds cut from the saddle
+    with `--design`, against the 2 of its own surface the study had planned."""
+    from fabplan.net.mesh import QuadMesh
+
+    design = fabplan.load_design("torus", triangles=6000)
+    net = fabplan.glide(fabplan.layout_surface(design, 1.0), "snet").mesh
+    faces = np.asarray(net.faces)
+    X = net.vertices
+    normals = np.zeros_like(X)
+    np.add.at(normals, faces.ravel(), np.repeat(np.cross(X[faces[:, 2]] - X[faces[:, 0]],
+                                                         X[faces[:, 3]] - X[faces[:, 1]]), 4, axis=0))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+
+    def lifted(mm):
+        return QuadMesh(X + mm / 1000 * normals, faces)
+
+    # the net glides on the design's triangles, off its exact surface by their chord error
+    off = lifted(8.0)        # the tolerance 1 mm
+    assert design.distances(off.vertices).max() > 0.001 + design.chord_error
+    assert plan_molds(off, tolerance_mm=1.0, units="m", design=design).record()[
+        "panel_surface"] == "shared"
+    # on it within the tolerance, it is
+    assert plan_molds(lifted(0.5), tolerance_mm=1.0, units="m", design=design).record()[
+        "panel_surface"] == "design"
+
+
 def test_the_design_panel_surface_needs_an_exact_design():
     net = height_field_grid(5, 5, lambda x, y: 0.1 * x * y)
     with pytest.raises(InputError, match="built-in or NURBS"):

@@ -201,7 +201,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "corners (least curved through its corners), design (patches of the "
                         "exact design the net lies on, --design: what a study plans for a "
                         "net on its design), auto (corners for a net of flat faces, else "
-                        "design with --design, else shared); smooth is local_fit's earlier name")
+                        "design with a --design every vertex lies within the tolerance of, "
+                        "else shared); smooth is local_fit's earlier name")
     p.add_argument("--design", metavar="SURFACE",
                    help="the design the net lies on, for --panel-surface design: a built-in "
                         "surface spec or a .3dm NURBS surface as for `fabplan layout`")

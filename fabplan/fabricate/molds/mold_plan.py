@@ -335,7 +335,8 @@ class MoldPlan:
         w = self.weingarten
         lines = [
             f"{r['panel_count']} panels ({t['planar']} planar, {t['single_curved']} single curved, "
-            f"{t['double_curved']} double curved) at {r['tolerance_mm']:g} mm",
+            f"{t['double_curved']} double curved) at {r['tolerance_mm']:g} mm; panel surface "
+            f"{r['panel_surface']}",
             f"{counted(r['mold_count'], 'mold')} ({r['mold_types']['plane']} plane, "
             f"{r['mold_types']['cylinder']} cylinder, {r['mold_types']['paraboloid']} paraboloid)"
             + (" with every curved panel molded" if self.classes is not None else "")

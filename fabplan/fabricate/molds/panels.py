@@ -120,7 +120,11 @@ def check_panels(mesh) -> None:
 def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> str:
     """The panel surface model to use: ``model`` itself, or for ``"auto"`` ``"corners"`` when
     every face lies within `tolerance` (model units) of a plane, else ``"design"`` when
-    `design` (a `fabplan.design.DesignSurface`) has an exact surface, else ``"shared"``.
+    `design` (a `fabplan.design.DesignSurface`) has an exact surface that every vertex of
+    the net lies within `tolerance` of (and of its triangulation's chord error), else
+    ``"shared"``. A net off its design (a net type
+    that leaves it) is not cut from it: its panels would be patches of a surface they are
+    not on, and their molds those of other panels.
 
     Examples
     --------
@@ -148,7 +152,18 @@ def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> s
         starts = mesh.face_indptr[:-1][mesh.face_sizes == k]
         polys = mesh.face_indices[starts[:, None] + np.arange(k)]
         flat &= bool(np.all(face_planarity(X, polys) <= tolerance))
-    return "corners" if flat else ("design" if exact else "shared")
+    if flat:
+        return "corners"
+    return "design" if exact and _on_design(mesh, design, tolerance) else "shared"
+
+
+def _on_design(mesh, design, tolerance: float) -> bool:
+    """Whether every vertex of `mesh` lies within `tolerance` (model units) of `design`,
+    or of its triangulation (a net laid out on the design glides on its triangles, off the
+    exact surface by up to their chord error)."""
+    with np.errstate(all="ignore"):
+        distance = design.distances(mesh.vertices)
+    return bool(np.all(distance <= tolerance + design.chord_error))
 
 
 def panel_neighbourhoods(mesh, model: str = "local_fit") -> tuple[np.ndarray, np.ndarray]:
