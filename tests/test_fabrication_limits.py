@@ -209,6 +209,32 @@ def test_measure_against_a_reference_holds_the_deviation_limit(tmp_path, capsys,
     assert ("exceed the largest deviation from the design" in err) == (code == 3)
 
 
+def test_a_deviation_limit_is_given_in_mm_or_refused_when_larger_than_the_net(tmp_path, capsys):
+    """`--max-deviation` is in the net's units: 28 meant as millimetres on a net in metres
+    was a limit of 28 m, larger than the net, and no net missed it. It is refused, and
+    `--max-deviation-mm` gives the limit in millimetres, as molds and strips take it."""
+    cmc1 = fabplan.read_obj(CMC1)
+    QuadMesh(cmc1.vertices + [0.0, 0.0, 0.05], cmc1.faces).write_obj(tmp_path / "shifted.obj")
+    size = float(np.linalg.norm(np.ptp(cmc1.vertices, axis=0)))
+    out = tmp_path / "m.json"
+    argv = ["measure", str(CMC1), "--reference", str(tmp_path / "shifted.obj"), "-o", str(out)]
+    assert main([*argv, "--max-deviation", f"{1.5 * size:g}"]) == 2 and not out.exists()
+    err = capsys.readouterr().err
+    assert "is in the net's units (m)" in err and "give --max-deviation-mm" in err
+    assert main([*argv, "--max-deviation-mm", "40"]) == 3
+    check = json.loads(out.read_text())["limits"]["max_deviation_mm"]
+    assert check["limit"] == 40.0 and check["exceeded"] and check["option"] == "--max-deviation-mm"
+    assert main([*argv, "--max-deviation-mm", "40", "--max-deviation", "0.04"]) == 2
+    # optimize holds it in the solve: the same limit either way
+    nets = [tmp_path / "a.obj", tmp_path / "b.obj"]
+    for net, given in zip(nets, (["--max-deviation", "0.06"], ["--max-deviation-mm", "60"]),
+                          strict=True):
+        assert main(["optimize", str(CMC1), "--net", "cmc", "--reference",
+                     str(tmp_path / "shifted.obj"), *given, "-q", "-o", str(net)]) == 0
+    a, b = (fabplan.read_obj(n).vertices for n in nets)
+    assert np.array_equal(a, b)
+
+
 # ---------------------------------------------------------------- deviation: molds
 @pytest.fixture(scope="module")
 def hypar_net(tmp_path_factory) -> Path:

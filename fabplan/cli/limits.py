@@ -10,7 +10,41 @@ from typing import Any
 from ..io.units import MM_PER_UNIT
 from .running import EXIT_NOT_CONVERGED
 
-__all__ = ["deviation_check", "limits_exit"]
+__all__ = ["deviation_check", "deviation_limit", "deviation_option", "limits_exit"]
+
+
+def deviation_option(args: Any) -> str:
+    """The option that sets the deviation limit of `measure` and `optimize`, as given."""
+    return "--max-deviation-mm" if getattr(args, "max_deviation_mm", None) is not None \
+        else "--max-deviation"
+
+
+def deviation_limit(args: Any, mesh: Any, units: str) -> float | None:
+    """The deviation limit of `measure` and `optimize` in model units: ``--max-deviation``
+    (model units) or ``--max-deviation-mm``; None when neither is given.
+
+    A ``--max-deviation`` larger than the net itself (the diagonal of its bounding box) is
+    refused as a limit meant in millimetres: 28 on a 12 m canopy in metres was a limit of
+    28,000 mm, which no net misses.
+    """
+    import numpy as np
+
+    from ..errors import InputError
+
+    given, in_mm = args.max_deviation, getattr(args, "max_deviation_mm", None)
+    if given is not None and in_mm is not None:
+        raise InputError("give the deviation limit once: --max-deviation (model units) or "
+                         "--max-deviation-mm")
+    if in_mm is not None:
+        return in_mm / MM_PER_UNIT[units]
+    if given is None:
+        return None
+    size = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    if given > size:
+        raise InputError(f"--max-deviation {given:g} is in the net's units ({units}): "
+                         f"{given:g} {units}, more than the net's own size ({size:.3g} {units}); "
+                         f"for {given:g} mm give --max-deviation-mm {given:g}")
+    return given
 
 
 def deviation_check(distances: Any, *, units: str, max_deviation: float | None = None,

@@ -17,7 +17,7 @@ from ..net.validate import load_net
 from ..solve.optimize import check_limits
 from .arguments import add_max_line_turn, add_number, add_units
 from .files import check_outputs, file_inputs, net_inputs
-from .limits import deviation_check, limits_exit
+from .limits import deviation_check, deviation_limit, deviation_option, limits_exit
 from .records import check_units, net_units, reference_surface
 from .registry import Command, register
 from .running import EXIT_NOT_CONVERGED
@@ -29,12 +29,14 @@ def run(args: argparse.Namespace) -> int:
     out = (output_argument(args.output) if args.output is not None
            else Path(args.net).with_suffix(".measure.json"))
     check_limits(args.max_deviation, args.max_line_turn)
-    if args.max_deviation is not None and args.reference is None:
+    if (args.max_deviation is not None or args.max_deviation_mm is not None) \
+            and args.reference is None:
         raise InputError("--max-deviation needs --reference: the surface to measure the distance to")
     check_outputs([out], {**net_inputs(args.net), **file_inputs((args.reference, "the reference"))})
     mesh = load_net(args.net)
     units = net_units(args, args.net)
     check_units(args, mesh, units)
+    args.max_deviation = deviation_limit(args, mesh, units)
     reference = reference_surface(args.reference)
     record = measure_net(mesh, reference=reference, limits=BuildLimits(
         max_line_turn_deg=args.max_line_turn, max_deviation=args.max_deviation))
@@ -43,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     limits = []
     if reference is not None:      # the same limit as optimize's, 20 mm unless given
         limits = [deviation_check(reference.distances(mesh.vertices), units=units,
-                                  max_deviation=args.max_deviation, option="--max-deviation")]
+                                  max_deviation=args.max_deviation, option=deviation_option(args))]
         record["limits"] = limits_record(limits)
     write_json(out, record)           # the file first: the terminal may go away
     print(format_summary(record))
@@ -67,6 +69,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_number(p, "--max-deviation", metavar="D",
                help="count the vertices farther than D (model units) from --reference as "
                     "keeping the net from being built")
+    add_number(p, "--max-deviation-mm", metavar="MM",
+               help="--max-deviation in mm, whatever the net's units")
     add_max_line_turn(p, measured=True)
     add_units(p)
 

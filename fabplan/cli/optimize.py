@@ -34,7 +34,7 @@ from .files import (
     viewer_files,
     viewer_paths,
 )
-from .limits import deviation_check, limits_exit
+from .limits import deviation_check, deviation_limit, deviation_option, limits_exit
 from .records import check_units, net_properties, net_units, reference_surface
 from .registry import Command, register
 from .running import EXIT_NOT_CONVERGED, command_progress, warn
@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     check_net_input(mesh)
     units = net_units(args, args.input)
     check_units(args, mesh, units)
+    args.max_deviation = deviation_limit(args, mesh, units)
     reference = reference_surface(args.reference)
     fixed = read_fixed(args.fix, mesh)
     handles = read_handles(args.handle)
@@ -68,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
                           max_deviation=args.max_deviation, max_line_turn=args.max_line_turn,
                           progress=report)
     result.properties["units"] = units
-    limits = _deviation_limits(mesh, result, reference, units, args.max_deviation)
+    limits = _deviation_limits(mesh, result, reference, units, args.max_deviation,
+                               deviation_option(args))
     _record_reference(result, args.reference)
     panels_note = _boundary_panels_again(Path(args.input), mesh, result, progress)
     with progress.stage("writing the net" + (" and its page" if args.html else "")), \
@@ -123,14 +125,15 @@ def run(args: argparse.Namespace) -> int:
     return limits_exit(limits, json_path)
 
 
-def _deviation_limits(mesh, result, reference, units: str, max_deviation: float | None) -> list:
+def _deviation_limits(mesh, result, reference, units: str, max_deviation: float | None,
+                      option: str) -> list:
     """The net against the deviation limit from its reference, recorded under
     ``properties.limits``; without a reference none (`_note_the_move`)."""
     if reference is None:
         _note_the_move(mesh, result, units)
         return []
     limits = [deviation_check(reference.distances(result.mesh.vertices), units=units,
-                              max_deviation=max_deviation, option="--max-deviation")]
+                              max_deviation=max_deviation, option=option)]
     result.properties["limits"] = limits_record(limits)
     return limits
 
@@ -244,6 +247,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                "3) with the smallest limit it reached. Without it a net with --reference "
                f"is checked against {DEFAULT_MAX_DEVIATION_MM:g} mm (not held in the "
                "solve; exit 3 beyond it, see docs/fabrication-limits.md)")
+    add_number(p, "--max-deviation-mm", metavar="MM",
+               help="--max-deviation in mm, whatever the net's units")
     add_max_line_turn(p)
     add_number(p, "--max-iter", help="iteration cap (default 50)")
     p.add_argument("--no-multilevel", action="store_true",
