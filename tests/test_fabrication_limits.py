@@ -116,6 +116,31 @@ def test_strips_of_a_constant_radius_net_that_keeps_it_end_in_exit_0(optimized_c
     assert check["over"] == 0 and check["worst"] < 1e-6 and check["measured"] > 0
 
 
+def test_strips_over_the_tolerance_only_with_boundary_panels_say_so(optimized_cmc):
+    """Parts of a constant radius net's strips that miss the common arc only where its
+    boundary panels lengthen them (a linear Weingarten net: 104 of 213 parts up to 6.2 mm,
+    none without the boundary panels) are not blamed on the net type: the warning says
+    the net's own strips keep to it, and that --no-boundary cuts them alone."""
+    from types import SimpleNamespace
+
+    from fabplan.cli.strips import _claim_text
+    from fabplan.fabricate.strips.strip_set import StripSettings
+
+    mesh = fabplan.read_obj(optimized_cmc)
+    settings = StripSettings(height_mm=80, thickness_mm=4)
+    plan = SimpleNamespace(limits=[limit_check("congruence_tolerance_mm", np.array([6.2, 0.0]),
+                                               0.1, parts="strip parts")])
+    with_boundary = _claim_text(plan, "cmc", mesh, settings, boundary=object())
+    assert with_boundary.startswith(" (the net's record names it a cmc net, whose strips are "
+                                    "pieces of one arc: without its boundary panels they are")
+    assert "--no-boundary cuts the net's strips alone)" in with_boundary
+    assert _claim_text(plan, "cmc", mesh, settings, boundary=None).endswith("one arc)")
+    # past the tolerance without them too: the net type's claim alone
+    tight = StripSettings(height_mm=80, thickness_mm=4, tolerance_mm=0.001)
+    claimed = fabplan.read_obj(CMC1)          # radius constant only nearly
+    assert _claim_text(plan, "cmc", claimed, tight, boundary=object()).endswith("one arc)")
+
+
 # ----------------------------------------------------------------------- arc angle
 def test_arcs_longer_than_the_limit_end_in_exit_3(tmp_path, capsys):
     out = tmp_path / "arcs.dxf"

@@ -70,16 +70,14 @@ def deviation_check(distances: Any, *, units: str, max_deviation: float | None =
                        parts="vertices", option=option)
 
 
-def limits_exit(checks: list, record: Path, claim: str | None = None) -> int:
-    """Exit 3, with a warning naming each limit exceeded and by how much, when a part
-    exceeds a fabrication limit (`fabplan.fabricate.limits`); else 0."""
+def limits_exit(checks: list, record: Path, why: str = "") -> int:
+    """Exit 3, with a warning naming each limit exceeded and by how much (and `why`, said
+    after it), when a part exceeds a fabrication limit (`fabplan.fabricate.limits`); else
+    0."""
     from ..fabricate.limits import exceeded_text
 
     text = exceeded_text(checks)
     if text is None:
         return 0
-    why = (f" (the net's record names it a {claim} net, whose strips are pieces of one arc)"
-           if claim is not None and any(c.exceeded and c.limit == "congruence_tolerance_mm"
-                                        for c in checks) else "")
     print(f"fabplan: warning: {text}{why}; counted in {record} (limits)", file=sys.stderr)
     return EXIT_NOT_CONVERGED

@@ -76,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
     if args.quiet:
         print(f"{counted(s['strips'], 'strip')}, {counted(s['parts'], 'part')} on "
               f"{counted(s['sheets'], 'sheet')}; wrote {len(files)} files to {out}")
-        return limits_exit(plan.limits, out / "strips.json", claim)
+        return limits_exit(plan.limits, out / "strips.json",
+                           _claim_text(plan, claim, mesh, settings, boundary))
     _print_strips(s, plan.limits, settings, files, out, started)
     if boundary is not None:
         _print_strip_boundary(s, settings, boundary_file, out)
@@ -84,7 +85,31 @@ def run(args: argparse.Namespace) -> int:
         print(f"fabplan: note: {s['junctions']} vertices join more than one strip of a family "
               "(irregular vertices): no slits there, they need node connectors; listed in "
               f"{out / 'strips.json'}", file=sys.stderr)
-    return limits_exit(plan.limits, out / "strips.json", claim)
+    return limits_exit(plan.limits, out / "strips.json",
+                       _claim_text(plan, claim, mesh, settings, boundary))
+
+
+def _claim_text(plan: Any, claim: str | None, mesh: Any, settings: Any, boundary: Any) -> str:
+    """Why parts past the congruence tolerance matter, said after the warning: the net type
+    its record names claims strips of one arc; and where the net's strips without its
+    boundary panels keep to it, that the boundary panels are what breaks it."""
+    from ..fabricate.strips import build_strips
+    from ..fabricate.strips.nesting import make_parts, part_congruence_mm
+
+    if claim is None or not any(c.exceeded and c.limit == "congruence_tolerance_mm"
+                                for c in plan.limits):
+        return ""
+    why = f" (the net's record names it a {claim} net, whose strips are pieces of one arc"
+    if boundary is None:
+        return why + ")"
+    alone = build_strips(mesh, settings, None)
+    _, deviation = part_congruence_mm(make_parts(alone, settings), alone)
+    if deviation.max(initial=0.0) > settings.tolerance_mm:
+        return why + ")"
+    return (f"{why}: without its boundary panels they are, up to "
+            f"{deviation.max(initial=0.0):.2g} mm: the strips the boundary panels lengthen "
+            "follow the net's surface past its edge, not its radius; --no-boundary cuts the "
+            "net's strips alone)")
 
 
 def _strip_settings(args: argparse.Namespace) -> Any:
