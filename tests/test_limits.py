@@ -158,12 +158,20 @@ def test_a_stalled_solve_names_what_it_left_unmet_and_says_when_no_relaxation_ex
     steps = next_steps(checks)
     assert len(steps) == 1 and steps[0].startswith("another net type") and "4,320 mm" in steps[0]
     # no continuation, several starts tried: the solve's advice does not ask for them again
-    several = next_steps(verdict({**metrics, "deviation_search": None, "layout_starts": 5}, limits))
+    capped = {**metrics, "status": "iteration cap", "deviation_search": None}
+    several = next_steps(verdict({**capped, "layout_starts": 5}, limits))
     assert several == ["let the solve run longer (max_iterations) or try another angle or panel "
                        "size: the net did not converge from 5 layout starts"]
     # one start: the general advice, which names several starts
-    one = next_steps(verdict({**metrics, "deviation_search": None, "layout_starts": 1}, limits))
+    one = next_steps(verdict({**capped, "layout_starts": 1}, limits))
     assert len(one) == 1 and "layout_starts" in one[0]
+    # a solve that stagnated before its iterations ran out: not more of them
+    stalled = {**metrics, "deviation_search": None}
+    assert next_steps(verdict({**stalled, "layout_starts": 5}, limits)) == [
+        "another angle or panel size: the solve stagnated (it stopped making progress from 5 "
+        "layout starts), so more iterations would not help"]
+    one = next_steps(verdict({**stalled, "layout_starts": 1}, limits))
+    assert "max_iterations" not in one[0] and "layout_starts" in one[0]
     # a net that met its constraints but crumpled: no longer solve, another lattice
     crumpled = next_steps(verdict({**metrics, "status": "crumpled", "unmet": {}}, limits))
     assert len(crumpled) == 1 and crumpled[0].startswith("another angle or panel size")

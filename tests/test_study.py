@@ -905,3 +905,21 @@ def test_a_forked_file_is_written_whole_here_when_its_process_fails_and_gone_whe
     stopped.cancel()
     assert time.perf_counter() - clock < 10
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
+
+
+def test_the_report_names_a_rhino_design_by_its_file(tmp_path):
+    """A .3dm design with its choices (``x.3dm#layer=...``) is a file, not a built-in
+    surface: the report's header said "built-in saddle.3dm surface"."""
+    from types import SimpleNamespace
+
+    from fabplan.study.pages import _design_text
+
+    rhino = tmp_path / "saddle.3dm"
+    rhino.write_bytes(b"")
+
+    def study(source, label):
+        return SimpleNamespace(design=SimpleNamespace(source=source, label=label))
+
+    assert _design_text(study(f"{rhino}#layer=roof", "saddle.3dm")) == (
+        "Design saddle.3dm (from saddle.3dm)")
+    assert _design_text(study("torus:major=3", "torus")) == "Design: built-in torus surface"

@@ -153,9 +153,12 @@ def study_viewer_scenes(result: StudyResult) -> tuple[list[viewer.ViewerScene], 
 
 
 def _design_text(study) -> str:
+    """The design as the report's header names it: its file (a mesh or Rhino file, with
+    its choices), else the built-in surface."""
     source = study.design.source
-    if os.path.isfile(source):
-        return f"Design {study.design.label} (from {Path(source).name})"
+    file = source.split("#", 1)[0]
+    if os.path.isfile(file):
+        return f"Design {study.design.label} (from {Path(file).name})"
     return f"Design: built-in {study.design.label} surface"
 
 

@@ -185,9 +185,17 @@ def _retry_advice(metrics: dict) -> str:
         return (f"another net type: no net of this type converged buildable on this design "
                 f"within {search['loosest_mm']:,.0f} mm of it, the loosest deviation its solve "
                 "tried, so no limit relaxed makes it feasible")
-    if metrics.get("layout_starts", 1) > 1:
+    starts = metrics.get("layout_starts", 1)
+    if status == "stagnated":
+        # it stopped making progress before its iterations ran out: more would not help
+        return ("another angle or panel size"
+                + ("" if starts > 1 else ", or several layout starts (layout_starts)")
+                + ": the solve stagnated (it stopped making progress"
+                + (f" from {starts} layout starts" if starts > 1 else "")
+                + "), so more iterations would not help")
+    if starts > 1:
         return ("let the solve run longer (max_iterations) or try another angle or panel size: "
-                f"the net did not converge from {metrics['layout_starts']} layout starts")
+                f"the net did not converge from {starts} layout starts")
     return ("let the solve run longer (max_iterations), lay the design out from several "
             "starts (layout_starts) or try another angle or panel size: the net did not "
             "converge")
