@@ -219,3 +219,20 @@ def test_grid_centre_star_has_the_normal_curvature_of_the_quadric(surface, angle
     assert np.degrees(intersection_angles(grid.vertices, star))[0] == pytest.approx(angle_deg, abs=0.5)
     normal_z = np.cross(*(grid.vertices[star[0, 1:3]] - grid.vertices[centre]))[2]
     assert normal_z > 0
+
+
+def test_a_free_common_angle_is_reported_in_0_90():
+    """An isogonal net of angle a is the net of 180 - a with its families swapped: a free
+    angle solved with a negative cosine was reported as 90.95 deg while `measure` said
+    89.05 deg of the same net."""
+    from types import SimpleNamespace
+
+    from fabplan.solve.optimize import solved_parameters
+
+    def solved(cosine):
+        return SimpleNamespace(state=SimpleNamespace(blocks={"cosine": slice(0, 1)}),
+                               constraints=[], length_scale=1.0,
+                               variable=lambda name: np.array([cosine]))
+
+    below, above = (solved_parameters(solved(c))["angle_deg"] for c in (0.0166, -0.0166))
+    assert below == above == pytest.approx(89.0488, abs=1e-3)

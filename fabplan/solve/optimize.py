@@ -284,7 +284,8 @@ def solved_parameters(solver: GuidedProjection) -> dict:
             k = family.curvature / solver.length_scale
             parameters["radius"] = float(abs(1 / k)) if k != 0 else float("inf")
     if "cosine" in blocks:
-        cosine = np.clip(solver.variable("cosine")[0], -1.0, 1.0)
+        # the same net as the one of 180 - a with its families swapped: said in (0, 90]
+        cosine = np.clip(abs(solver.variable("cosine")[0]), 0.0, 1.0)
         parameters["angle_deg"] = float(np.degrees(np.arccos(cosine)))
     if "curvature" in blocks:
         k = solver.variable("curvature")[0] / solver.length_scale
