@@ -1129,3 +1129,29 @@ def test_the_limits_a_study_names_for_its_nearest_candidate_make_it_feasible():
     ran = next(c for c in rerun.candidates if c.name == record["candidate"])
     assert ran.feasible
     assert ran.metrics["molds"]["count"] <= record["limits"].get("max_molds", 3)
+
+
+def test_the_report_says_where_a_net_off_the_design_was_solved(judged):
+    """A net that leaves the design is solved on the design continued past its edges, or
+    on the design alone, and the candidate's page says which and why: the same linear
+    Weingarten candidate ended 14.8 mm off a saddle in one study and 43.9 mm in the same
+    study with strips added, and nothing said that a lamella study solves it on the design
+    alone."""
+    from fabplan.study.definition import StripOptions
+    from fabplan.study.tables import candidate_facts
+
+    study, result = judged
+    weingarten = next(c for c in result.candidates if c.candidate.net == "linear-weingarten")
+    isogonal = next(c for c in result.candidates if c.candidate.net == "isogonal")
+
+    def solve_row(c, r=result):
+        return dict(candidate_facts(c, r)[1])["solve"]
+
+    assert weingarten.metrics["continued"] is True
+    assert solve_row(weingarten).endswith("; solved on the design continued past its edges")
+    assert "solved on" not in solve_row(isogonal)              # on the design itself
+    lamellas = dataclasses.replace(result, study=dataclasses.replace(
+        study, strips=StripOptions(height_mm=80, thickness_mm=4, nets="all")))
+    alone = dataclasses.replace(weingarten, metrics={**weingarten.metrics, "continued": False})
+    assert solve_row(alone, lamellas).endswith(
+        "; solved on the design alone (a lamella study: its strips end on the net's own tips)")

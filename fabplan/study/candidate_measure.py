@@ -362,9 +362,11 @@ def _pick(stats: dict | None) -> dict | None:
 def _solve_record(net: OptimizationResult, mm_per_unit: float) -> dict:
     """What a candidate's solve tried and left: ``unmet`` (the hard families a solve that
     stopped short left above the tolerance), ``deviation_search`` (how far its deviation
-    continuation looked for a net of the type: `_deviation_search`) and ``layout_starts``
-    (a gliding net's own starts, else those of the S-net a net past the edges began at)."""
+    continuation looked for a net of the type: `_deviation_search`), ``layout_starts``
+    (a gliding net's own starts, else those of the S-net a net past the edges began at)
+    and ``continued`` (whether it was solved on the design continued past its edges)."""
     return {"unmet": {k: float(v) for k, v in (net.parameters.get("unmet") or {}).items()},
+            "continued": bool(net.parameters.get("continued")),
             "deviation_search": _deviation_search(net.parameters.get("deviation"), mm_per_unit),
             "layout_starts": len(net.properties.get("layout_starts") or [])
             or int((net.parameters.get("continued") or {}).get("starts", 1))}

@@ -333,6 +333,26 @@ def _measured(check: dict) -> str:
     return value
 
 
+def _solved_on(c: CandidateResult, study) -> str:
+    """Where a net that leaves the design was solved, and why not past the design's edges
+    where it was not (docs/study-file.md): "" for a net on the design, or a candidate
+    measured before this was recorded."""
+    from ..solve.net_types import get_net
+    from .ranking import is_lamella_study
+
+    continued = c.metrics.get("continued")
+    if c.candidate.glides or continued is None:
+        return ""
+    if continued:
+        return "; solved on the design continued past its edges"
+    why = ("a lamella study: its strips end on the net's own tips" if is_lamella_study(study)
+           else "flat panels are cut in the planes of the net's sides"
+           if get_net(c.candidate.net).planar_faces
+           else "this design is not continued past its edges: a mesh file, a trimmed NURBS "
+                "face, or a formula that breaks down there")
+    return f"; solved on the design alone ({why})"
+
+
 def candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[list]]:
     """The verdict of a measured candidate and its "quantity, value" rows."""
     m = c.metrics
@@ -358,7 +378,8 @@ def candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[
     facts = [
         ["net", c.candidate.describe()],
         ["solve", f"{m['status']} after {m['iterations']} iterations"
-                  + (f" ({m['status_note']})" if m.get("status_note") else "")],
+                  + (f" ({m['status_note']})" if m.get("status_note") else "")
+                  + _solved_on(c, result.study)],
         ["solved parameters", ", ".join(parameters) or "-"],
         ["panels", f"{m['panels']}: {m['quads']} quads, {m['other_faces']} other "
                    f"({m['irregular_vertices']} irregular vertices)"
