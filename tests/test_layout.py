@@ -876,3 +876,24 @@ def test_no_quad_at_a_panel_size_of_hundreds_says_why():
     assert "no quad could be laid out at panel size 1.2" in text
     assert "at about 199 panels the line field gives no quad" in text and "singular points" in text
     assert "too large for the surface" not in text
+
+
+def test_a_row_of_boundary_panels_is_not_said_to_stop_short():
+    """A small part (147 x 126 mm at 12 mm panels) has a tenth of its area in its one row
+    of boundary panels: that is no layout stopping far short of the boundary. More than a
+    row's share is."""
+    from fabplan import load_design
+    from fabplan.cli.layout import boundary_ring_share, layout_warnings
+
+    design = load_design("hyperbolic-paraboloid", triangles=2000)
+    ring = boundary_ring_share(design, 1.0)
+    extent = np.ptp(design.vertices[:, :2], axis=0)
+    assert ring == pytest.approx(2 * extent.sum() / np.prod(extent), rel=0.1)
+    props = {"coverage": 1.0, "coverage_net": 1.0 - 0.9 * ring,
+             "edge_length_relative_to_panel": {"min": 0.9, "max": 1.1},
+             "distance_to_design_relative_to_panel": {"max": 0.0},
+             "distance_to_design": {"max": 0.0}}
+    assert not any("stops far short" in w for w in layout_warnings(props, ring))
+    props["coverage_net"] = 1.0 - 1.2 * ring
+    said = [w for w in layout_warnings(props, ring) if "stops far short" in w]
+    assert said and f"would ({100 * ring:.0f} %)" in said[0]

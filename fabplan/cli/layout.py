@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
         obj_path, json_path = result.write(out)
     if page is not None:
         viewers = [out.with_suffix(".html"), *viewers]
-    _print_layout_result(args, result, layout, obj_path, json_path, [picture, *viewers])
+    _print_layout_result(args, result, layout, obj_path, json_path, [picture, *viewers],
+                         ring=boundary_ring_share(design, args.panel_size))
     if not result.converged:
         warn_not_converged(result, json_path)
         if args.quiet:
@@ -180,7 +181,7 @@ def _write_picture_and_page(args: argparse.Namespace, design: Any, layout: Any, 
 
 
 def _print_layout_result(args: argparse.Namespace, result: Any, layout: Any, obj_path: Path,
-                         json_path: Path, others: list[Path]) -> None:
+                         json_path: Path, others: list[Path], *, ring: float = 0.0) -> None:
     """The solve's outcome in a line with -q; else what was measured on the net, the time
     taken, the files written (the net, its record, its boundary panels, `others`) and the
     warnings."""
@@ -203,7 +204,7 @@ def _print_layout_result(args: argparse.Namespace, result: Any, layout: Any, obj
               + ")"
               + (f" ({params})" if params else ""))
         print(f"wrote {listing([obj_path, json_path, boundary_path(obj_path), *others])}")
-        for warning in layout_warnings(props):
+        for warning in layout_warnings(props, ring):
             print(f"fabplan: warning: {warning}", file=sys.stderr)
 
 
@@ -300,15 +301,26 @@ def _units_said(units: str | None) -> str:
             "ft": "feet"}.get(units or "", "model units (the file has no unit system)")
 
 
-def layout_warnings(properties: dict) -> list:
-    """What a user should know about a layout's measured result, in plain words."""
+def boundary_ring_share(design: Any, panel_size: float) -> float:
+    """The share of a design's area within a panel of its boundary (its boundary's length
+    times the panel size, over its area): what one row of boundary panels may cover."""
+    length = sum(design.loop_length(loop) for loop in design.boundary_loops)
+    return float(length * panel_size / design.area) if design.area > 0 else 0.0
+
+
+def layout_warnings(properties: dict, ring: float = 0.0) -> list:
+    """What a user should know about a layout's measured result, in plain words; `ring`
+    the share of the design that one row of boundary panels may cover
+    (`boundary_ring_share`), which boundary panels and patches may cover before the layout
+    is said to stop short of the boundary."""
     out = boundary_warnings(properties)
     coverage = properties["coverage"]
     net = properties.get("coverage_net", coverage)
-    if coverage - net > 0.1:
+    if coverage - net > max(0.1, ring):
         out.append(f"the full panels cover only {100 * net:.0f} % of the design: the layout stops far "
                    "short of the boundary or leaves holes, and boundary panels and patches cover "
-                   f"{100 * (coverage - net):.0f} % (try a smaller --panel-size)")
+                   f"{100 * (coverage - net):.0f} %, more than a row of panels along the boundary "
+                   f"would ({100 * ring:.0f} %) (try a smaller --panel-size)")
     edge = properties["edge_length_relative_to_panel"]
     if edge["min"] < 0.5 or edge["max"] > 2.0:
         out.append(f"edges range over {edge['min']:.2f} .. {edge['max']:.2f} of the panel size "
