@@ -1041,18 +1041,24 @@ def test_a_relaxation_that_changes_the_run_is_run_before_it_is_told(judged, monk
     _, result = judged
     runs = []
 
-    def run_under(study, result, nearest, say):
+    def run_under(study, result, nearest, say, *kept):
         """The candidate as a run under `study`'s limits measures it: its boundary panels
         209.2 mm off the design at a mold tolerance of 41 mm."""
-        limits = study.limits
-        runs.append(limits)
-        dev = 209.2 if limits.mold_tolerance_mm > 10 else 185.3
+        runs.append(study.limits)
+        dev = 209.2 if study.limits.mold_tolerance_mm > 10 else 185.3
+        return dataclasses.replace(nearest, metrics={**nearest.metrics, "dev": dev})
+
+    def judge(study, design, made):
+        """`made` judged under `study`'s limits, as `judge_study` judges it."""
+        limits, dev = study.limits, made[0].metrics["dev"]
         checks = [check("max_deviation_mm", limits.max_deviation_mm, dev,
                         dev <= limits.max_deviation_mm, f"boundary panels {dev} mm off"),
                   check("mold_tolerance_mm", limits.mold_tolerance_mm, 40.2,
                         40.2 <= limits.mold_tolerance_mm, "gaps of 40.2 mm")]
-        return dataclasses.replace(nearest, checks=checks, feasible=all(c["ok"] for c in checks))
+        return dataclasses.replace(result, candidates=[dataclasses.replace(
+            made[0], checks=checks, feasible=all(c["ok"] for c in checks))])
 
+    monkeypatch.setattr(relaxation, "judge_study", judge)
     monkeypatch.setattr(relaxation, "_run_under", run_under)
     told = [_failed("max_deviation_mm", 30.0, 185.3), _failed("mold_tolerance_mm", 2.0, 40.2)]
     study = _nearest_told(result, *told)
@@ -1063,6 +1069,9 @@ def test_a_relaxation_that_changes_the_run_is_run_before_it_is_told(judged, monk
         {"max_deviation_mm": 190.0, "mold_tolerance_mm": 41.0},
         {"max_deviation_mm": 210.0, "mold_tolerance_mm": 41.0}]
     assert [r["feasible"] for r in record["rounds"]] == [False, True]
+    # the nearest here glides on the design: a deviation relaxed further changes nothing
+    # its run is made with, and the second round judges the first run again
+    assert [r["ran"] for r in record["rounds"]] == [True, False] and len(runs) == 1
     assert record["rounds"][0]["failed"] == {"max_deviation_mm": 209.2}
     assert record["feasible"] is True
     assert record["limits"] == {"max_deviation_mm": 210.0, "mold_tolerance_mm": 41.0}
@@ -1070,18 +1079,39 @@ def test_a_relaxation_that_changes_the_run_is_run_before_it_is_told(judged, monk
     assert f"{feasible_with(told).strip()} {record['text']}" in study.recommendation
     assert record["text"] == (
         f"Run again under those limits (its net solved and its molds planned anew), {name} "
-        f"still fails: boundary panels 209.2 mm off. A second run meets every limit with a "
-        "largest deviation from the design of 210 mm (now 30 mm) and a largest gap between a "
-        "panel and its mold of 41 mm (now 2 mm), the other limits as they are.")
+        f"still fails: boundary panels 209.2 mm off. It meets every limit with a largest "
+        "deviation from the design of 210 mm (now 30 mm) and a largest gap between a panel and "
+        "its mold of 41 mm (now 2 mm), the other limits as they are.")
     # a relaxation of the molds counted only: the verdict alone judges it, nothing is run
     runs.clear()
     counted = _nearest_told(result, _failed("max_molds", 3, 9))
     relaxation.check_relaxation(counted, lambda s: None)
     assert runs == [] and counted.relaxation_check is None
+    # a second round that relaxes only limits the verdict judges: judged on the same run
+    def counting(study, design, made):
+        judged = judge(study, design, made).candidates[0]
+        molds = check("max_molds", study.limits.max_molds, 9, 9 <= study.limits.max_molds,
+                      "9 molds")
+        checks = [*judged.checks, molds]
+        return dataclasses.replace(result, candidates=[dataclasses.replace(
+            judged, checks=checks, feasible=all(c["ok"] for c in checks))])
+
+    monkeypatch.setattr(relaxation, "judge_study", counting)
+    runs.clear()
+    gaps = _nearest_told(result, _failed("mold_tolerance_mm", 2.0, 40.2))
+    relaxation.check_relaxation(gaps, lambda s: None)
+    record = gaps.relaxation_check
+    assert [(r["ran"], r["feasible"]) for r in record["rounds"]] == [(True, False), (False, True)]
+    assert len(runs) == 1 and record["limits"] == {"max_deviation_mm": 210.0,
+                                                   "mold_tolerance_mm": 41.0, "max_molds": 9}
+    assert record["text"].endswith("It meets every limit with a largest deviation from the "
+                                   "design of 210 mm (now 30 mm) and a largest gap between a "
+                                   "panel and its mold of 41 mm (now 2 mm) and at most 9 molds "
+                                   "(now 3), the other limits as they are.")
     # a run that fails as it did, past any relaxation: said, and none is named
-    monkeypatch.setattr(relaxation, "_run_under", lambda study, result, nearest, say:
-                        dataclasses.replace(nearest, feasible=False, checks=[
-                            {**_failed("max_sphere_residual", 1e-6, 0.3), "text": "crumpled"}]))
+    monkeypatch.setattr(relaxation, "judge_study", lambda study, design, made: dataclasses.replace(
+        result, candidates=[dataclasses.replace(made[0], feasible=False, checks=[
+            {**_failed("max_sphere_residual", 1e-6, 0.3), "text": "crumpled"}])]))
     stuck = _nearest_told(result, *told)
     relaxation.check_relaxation(stuck, lambda s: None)
     assert stuck.relaxation_check["feasible"] is False
@@ -1099,6 +1129,26 @@ def test_a_relaxation_that_changes_the_run_is_run_before_it_is_told(judged, monk
     assert broken.relaxation_check["text"] == (
         f"Whether {name} is feasible under those limits could not be checked (TypeError: no "
         "such thing).")
+    # in a second round, after what the first found: its molds at 41 mm leave gaps of 45
+    def wider(study, design, made):
+        gap = 45.0 if study.limits.mold_tolerance_mm == 41.0 else 40.2
+        limit = study.limits.mold_tolerance_mm
+        checks = [check("mold_tolerance_mm", limit, gap, gap <= limit, f"gaps of {gap} mm")]
+        return dataclasses.replace(result, candidates=[dataclasses.replace(
+            made[0], checks=checks, feasible=all(c["ok"] for c in checks))])
+
+    monkeypatch.setattr(relaxation, "judge_study", wider)
+    monkeypatch.setattr(relaxation, "_run_under", lambda study, result, nearest, say, *kept: (
+        run_under(study, result, nearest, say) if not runs else failing()))
+    runs.clear()
+    second = _nearest_told(result, _failed("mold_tolerance_mm", 2.0, 40.2))
+    relaxation.check_relaxation(second, lambda s: None)
+    record = second.relaxation_check
+    assert record["feasible"] is None and len(record["rounds"]) == 1
+    assert record["text"].startswith(f"Run again under those limits (its net solved and its "
+                                     f"molds planned anew), {name} still fails: gaps of 45.0")
+    assert record["text"].endswith(f"Whether {name} is feasible under further relaxed limits "
+                                   "could not be checked (TypeError: no such thing).")
 
 
 @pytest.mark.slow
@@ -1155,3 +1205,27 @@ def test_the_report_says_where_a_net_off_the_design_was_solved(judged):
     alone = dataclasses.replace(weingarten, metrics={**weingarten.metrics, "continued": False})
     assert solve_row(alone, lamellas).endswith(
         "; solved on the design alone (a lamella study: its strips end on the net's own tips)")
+
+
+@pytest.mark.slow
+def test_a_resumed_study_takes_the_runs_of_its_relaxation_from_its_cache(tmp_path, capsys):
+    """`--resume` keeps the nearest candidate's runs under its relaxed limits beside the
+    candidates, and a resumed study takes them from there: the same check, not solved
+    again."""
+    import json
+
+    from fabplan.cli import main
+
+    study = tmp_path / "s.toml"
+    study.write_text(STUDY.replace("mold_tolerance_mm = 2", "mold_tolerance_mm = 0.05"))
+    out = tmp_path / "out"
+    argv = ["study", str(study), "-o", str(out), "--resume", "--workers", "1", "--no-3d"]
+    assert main(argv) == 3
+    first = json.loads((out / "study.json").read_text())["relaxation_check"]
+    assert first is not None and first["rounds"]
+    capsys.readouterr()
+    assert main(argv) == 3
+    said = capsys.readouterr()
+    assert "under those limits: taken from the cache" in said.out + said.err
+    again = json.loads((out / "study.json").read_text())["relaxation_check"]
+    assert again == first

@@ -31,7 +31,8 @@ def run(args: argparse.Namespace) -> int:
     check_limits(args.max_deviation, args.max_line_turn)
     if (args.max_deviation is not None or args.max_deviation_mm is not None) \
             and args.reference is None:
-        raise InputError("--max-deviation needs --reference: the surface to measure the distance to")
+        raise InputError(f"{deviation_option(args)} needs --reference: the surface to measure "
+                         "the distance to")
     check_outputs([out], {**net_inputs(args.net), **file_inputs((args.reference, "the reference"))})
     mesh = load_net(args.net)
     units = net_units(args, args.net)

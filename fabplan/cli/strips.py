@@ -93,8 +93,7 @@ def _claim_text(plan: Any, claim: str | None, mesh: Any, settings: Any, boundary
     """Why parts past the congruence tolerance matter, said after the warning: the net type
     its record names claims strips of one arc; and where the net's strips without its
     boundary panels keep to it, that the boundary panels are what breaks it."""
-    from ..fabricate.strips import build_strips
-    from ..fabricate.strips.nesting import make_parts, part_congruence_mm
+    from ..fabricate.strips.strip_plan import congruence_without_boundary_mm
 
     if claim is None or not any(c.exceeded and c.limit == "congruence_tolerance_mm"
                                 for c in plan.limits):
@@ -102,14 +101,12 @@ def _claim_text(plan: Any, claim: str | None, mesh: Any, settings: Any, boundary
     why = f" (the net's record names it a {claim} net, whose strips are pieces of one arc"
     if boundary is None:
         return why + ")"
-    alone = build_strips(mesh, settings, None)
-    _, deviation = part_congruence_mm(make_parts(alone, settings), alone)
-    if deviation.max(initial=0.0) > settings.tolerance_mm:
+    alone = congruence_without_boundary_mm(mesh, settings)
+    if alone > settings.tolerance_mm:
         return why + ")"
-    return (f"{why}: without its boundary panels they are, up to "
-            f"{deviation.max(initial=0.0):.2g} mm: the strips the boundary panels lengthen "
-            "follow the net's surface past its edge, not its radius; --no-boundary cuts the "
-            "net's strips alone)")
+    return (f"{why}: without its boundary panels they are, up to {alone:.2g} mm: the strips "
+            "the boundary panels lengthen follow the net's surface past its edge, not its "
+            "radius; --no-boundary cuts the net's strips alone)")
 
 
 def _strip_settings(args: argparse.Namespace) -> Any:

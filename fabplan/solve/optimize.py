@@ -279,7 +279,8 @@ def solved_parameters(solver: GuidedProjection) -> dict:
         if isinstance(family, RulingAngle) and family.cosine is not None:
             parameters["angle_deg"] = float(np.degrees(np.arccos(family.cosine)))
         if isinstance(family, ConstantAngle) and family.cosine is not None:
-            parameters["angle_deg"] = float(np.degrees(np.arccos(family.cosine)))
+            # an isogonal net's angle, said in (0, 90] as below
+            parameters["angle_deg"] = float(np.degrees(np.arccos(abs(family.cosine))))
         if isinstance(family, ConstantCurvature) and family.curvature is not None:
             k = family.curvature / solver.length_scale
             parameters["radius"] = float(abs(1 / k)) if k != 0 else float("inf")

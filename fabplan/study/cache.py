@@ -157,6 +157,11 @@ class CandidateCache:
             "layout_starts": record["layout_starts"], "material": record["material"],
         }, sort_keys=True, default=str)
 
+    def under(self, study: Study) -> CandidateCache:
+        """The same folder for the candidates of `study` (another study's limits: the runs
+        of a relaxation, `fabplan.study.relaxation_check`)."""
+        return CandidateCache(self.folder.parent, study, note=self._note)
+
     def key(self, candidate: Candidate) -> str:
         # the candidate's own panel size and limits, so that a sweep that grows keeps
         # the candidates it had

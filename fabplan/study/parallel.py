@@ -208,7 +208,7 @@ def run_study_parallel(study: Study, *, workers: int | None = None, scheduler: s
             results += found
             made.update(made_now)
     result = judge_study(searched_study(study, results), design, results)
-    check_relaxation(result, say)
+    check_relaxation(result, say, cache=cache, resume=resume)
     check_advised_size(result, say, max_panels)
     result.seconds_run = time.perf_counter() - start
     result.made_files = made

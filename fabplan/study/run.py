@@ -168,7 +168,7 @@ def run_study(study: Study, *, progress: Callable[[str], None] | None = None,
             helper.cancel()
         raise
     judged = judge_study(searched_study(study, results), design, results)
-    check_relaxation(judged, say)
+    check_relaxation(judged, say, cache=cache, resume=resume)
     check_advised_size(judged, say, max_panels)
     judged.seconds_run = time.perf_counter() - start
     judged.made_files = {} if helper is None else helper.made_files

@@ -360,6 +360,9 @@ def candidate_facts(c: CandidateResult, result: StudyResult) -> tuple[str, list[
     verdict = ("Feasible: " if c.feasible else "Not feasible: ") + "; ".join(c.reasons) + "."
     if not c.feasible:
         relax = feasible_with(c.checks)
+        check = result.relaxation_check
+        if relax and check is not None and check["candidate"] == c.name:
+            relax += " " + check["text"]        # the relaxation run, as the recommendation says
         # beside a relaxation, the other ways (a panel size named); without one (a solve
         # that did not converge) what to try
         steps = next_steps(c.checks)

@@ -233,24 +233,14 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
         if design is not None:
             target = replace(net_target, z=design_heights(design, net_target, scale))
         seconds["target"] = time.perf_counter() - clock
-        if cone:   # the whole flank cuts
-            cutter = Cutter("cone", tool.radius_mm, tool.length_mm, angle_deg=tool.angle_deg)
-        else:
-            cutter = Cutter("flat", tool.radius_mm, min(tool.body_length_mm, sim_settings.body_mm),
-                            tool.corner_mm)
+        cutter = _cutter(tool, sim_settings)
         adaptive = simulate_milling(target, cutter, path.tip, path.axis, path.contact,
                                     path.pass_id, sim_settings)
         seconds["simulate"] = adaptive.seconds
-        # the rule's margin, where neither the design's facets nor passes on a net off it
-        # explain the gouge (`fabplan.cli.mill` says those)
-        if not cone and settings.margin_mm is None \
-                and adaptive.max_gouge_mm > sim_settings.gouge_tolerance_mm \
-                and (design is None or plan.placed_on == "design") \
-                and not (faceting is not None and adaptive.max_gouge_mm <= 2 * faceting):
-            plan, adaptive = _gouge_free_margin(mesh, tool, settings, design, plan, adaptive,
-                                                (target, cutter, sim_settings))
+        if not cone and _rule_gouges(settings, plan, adaptive, sim_settings, design, faceting):
+            plan, adaptive, seconds["margin_tries"] = _gouge_free_margin(
+                mesh, tool, settings, design, plan, adaptive, (target, cutter, sim_settings))
             path = plan.path
-            seconds["simulate"] += adaptive.seconds
         if design is not None and adaptive.strip is not None:
             against_net = measure_cut(adaptive.cut, net_target.z, adaptive.strip,
                                       len(adaptive.scallop_by_strip_mm),
@@ -281,30 +271,56 @@ def mill_net(mesh: QuadMesh, tool: MillTool, settings: MillSettings, *, simulate
                       against_net=against_net, net_distance=distance, design_faceting_mm=faceting)
 
 
+def _cutter(tool: MillTool, simulation: SimulationSettings) -> Cutter:
+    """The tool as the simulation cuts with it: a cone's whole flank, a face mill's end."""
+    if tool.kind == "cone":
+        return Cutter("cone", tool.radius_mm, tool.length_mm, angle_deg=tool.angle_deg)
+    return Cutter("flat", tool.radius_mm, min(tool.body_length_mm, simulation.body_mm),
+                  tool.corner_mm)
+
+
 #: plans and simulations of a face mill's margin raised past its rule's, at most
 MARGIN_TRIES = 4
+#: the first margin tried past the rule's: this factor of it, plus `MARGIN_STEP_SHARE` of
+#: the largest finite Meusnier radius (a rule's margin of 0 on an umbilic part)
+MARGIN_FIRST_FACTOR = 1.25
+MARGIN_STEP_SHARE = 0.001
+
+
+def _rule_gouges(settings: MillSettings, plan: MillPlan, cut: SimulationResult,
+                 simulation: SimulationSettings, design: Any, faceting: float | None) -> bool:
+    """Whether the margin rule's own cut gouges its target, where neither the design's
+    facets nor passes on a net off it explain the gouge (`fabplan.cli.mill` says those)."""
+    return (settings.margin_mm is None and cut.max_gouge_mm > simulation.gouge_tolerance_mm
+            and (design is None or plan.placed_on == "design")
+            and not (faceting is not None and cut.max_gouge_mm <= 2 * faceting))
 
 
 def _gouge_free_margin(mesh: QuadMesh, tool: MillTool, settings: MillSettings, design: Any,
                        plan: MillPlan, cut: SimulationResult, simulation: tuple
-                       ) -> tuple[MillPlan, SimulationResult]:
+                       ) -> tuple[MillPlan, SimulationResult, float]:
     """A face mill's plan at a margin larger than its rule's, where the rule's cut gouges
     the target in simulation: the rule takes the curvature at the net's nodes, and the
     surface between and beyond them may curve more (a torus part of 147 mm took a margin of
-    about 95 mm where the rule gave 69 mm). The margin is raised by a quarter, then by the
-    secant of the logarithm of the gouge, aiming at half the gouge tolerance, at most
-    `MARGIN_TRIES` times; the first plan whose cut keeps within the tolerance is kept, its
-    rule saying so, else the rule's plan with a note of the margins tried.
+    87 mm where the rule gave 69 mm). The margin is raised by a quarter
+    (`MARGIN_FIRST_FACTOR`), then by the secant of the logarithm of the gouge, aiming at
+    half the gouge tolerance, at most `MARGIN_TRIES` times; the first plan whose cut keeps
+    within the tolerance is kept, its rule saying so, else the rule's plan with a note of
+    the margins tried. Returns the plan, its cut and the seconds the tries took.
     """
     target, cutter, sim = simulation
     tolerance = sim.gouge_tolerance_mm
+    started = time.perf_counter()
     tried = [(plan.margin_mm, cut.max_gouge_mm)]
-    margin = 1.25 * plan.margin_mm + 0.001 * float(np.max(plan.meusnier_radius_mm))
+    radius = plan.meusnier_radius_mm[np.isfinite(plan.meusnier_radius_mm)]
+    margin = MARGIN_FIRST_FACTOR * plan.margin_mm + MARGIN_STEP_SHARE * float(radius.max(initial=0.0))
+    why = "raising the margin past the rule's did not keep the cut within the gouge tolerance"
     for _ in range(MARGIN_TRIES):
         try:
             again = plan_face_milling(mesh, tool, replace(settings, margin_mm=margin),
                                       design=design)
-        except InputError:               # no safety sphere left at that margin
+        except InputError:
+            why = f"at a margin of {margin:.4g} mm no safety sphere is left"
             break
         path = again.path
         result = simulate_milling(target, cutter, path.tip, path.axis, path.contact,
@@ -313,17 +329,15 @@ def _gouge_free_margin(mesh: QuadMesh, tool: MillTool, settings: MillSettings, d
         if result.max_gouge_mm <= tolerance:
             said = ", ".join(f"{m:.4g} mm gouged by {g:.3g} mm" for m, g in tried[:-1])
             again = replace(again, margin_rule=f"{plan.margin_rule}; raised in simulation "
-                            f"({said}) to {margin:.4g} mm, the first tried that keeps the cut within the "
-                            "gouge tolerance")
-            return again, replace(result, seconds=result.seconds + cut.seconds)
+                            f"({said}) to {margin:.4g} mm, the first tried that keeps the cut "
+                            "within the gouge tolerance")
+            return again, result, time.perf_counter() - started
         (m0, g0), (m1, g1) = tried[-2:]
         slope = (np.log(g1) - np.log(g0)) / (m1 - m0) if g0 > 0 and g1 > 0 and m1 != m0 else 0.0
         step = np.log(tolerance / 2 / g1) / slope if slope < 0 else 0.25 * m1
         margin = m1 + float(np.clip(step, 0.05 * m1, 0.5 * m1))
-    plan.notes.append("raising the margin past the rule's did not keep the cut within the "
-                      "gouge tolerance: " + ", ".join(f"{m:.4g} mm gouged by {g:.3g} mm"
-                                                      for m, g in tried))
-    return plan, cut
+    plan.notes.append(f"{why}: " + ", ".join(f"{m:.4g} mm gouged by {g:.3g} mm" for m, g in tried))
+    return plan, cut, time.perf_counter() - started
 
 
 def _net_target(mesh: QuadMesh, up: np.ndarray, scale: float, step_mm: float) -> HeightTarget:

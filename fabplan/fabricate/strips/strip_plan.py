@@ -32,7 +32,8 @@ from .strip_set import Strip, StripSet, StripSettings, build_strips
 if TYPE_CHECKING:
     from .dxf import SheetGeometry
 
-__all__ = ["StripPlan", "plan_strips", "strip_limit_checks", "schedule_rows", "write_plan",
+__all__ = ["StripPlan", "plan_strips", "strip_limit_checks", "congruence_without_boundary_mm",
+           "schedule_rows", "write_plan",
            "SHEETS_PER_PROCESS", "STRIP_FILES"]
 
 SHEETS_PER_PROCESS = 8
@@ -114,6 +115,15 @@ def strip_limit_checks(strips: StripSet, parts: list[Part], *,
         checks.append(limit_check("congruence_tolerance_mm", deviation, settings.tolerance_mm,
                                   parts="strip parts"))
     return checks
+
+
+def congruence_without_boundary_mm(mesh: QuadMesh, settings: StripSettings) -> float:
+    """How far the parts of a net's own strips, without its boundary panels, differ from
+    their common arc at most (mm, `part_congruence_mm`): whether the boundary panels are
+    what takes a constant radius net's strips off one arc."""
+    strips = build_strips(mesh, settings, None)
+    _, deviation = part_congruence_mm(make_parts(strips, settings), strips)
+    return float(deviation.max(initial=0.0))
 
 
 def plan_strips(mesh: QuadMesh, settings: StripSettings, *, boundary: Any = None,
