@@ -923,3 +923,23 @@ def test_the_report_names_a_rhino_design_by_its_file(tmp_path):
     assert _design_text(study(f"{rhino}#layer=roof", "saddle.3dm")) == (
         "Design saddle.3dm (from saddle.3dm)")
     assert _design_text(study("torus:major=3", "torus")) == "Design: built-in torus surface"
+
+
+def test_a_study_smooths_its_layouts_as_its_panels_table_says():
+    """`[panels] smoothing` sets the layouts' smoothing length, as `fabplan layout
+    --smoothing` does: the report's advice of a longer smoothing can be followed in a
+    study. Outside the option's range it is refused with the file."""
+    from fabplan.study.run import run_study
+
+    text = ('[design]\nsurface = "hyperbolic-paraboloid"\n[panels]\nsize = 2.0\nsmoothing = 1.5\n'
+            '[limits]\nmax_deviation_mm = 30\nmold_tolerance_mm = 2\n'
+            '[[candidates]]\nnet = "isogonal"\nangle = 80\n')
+    study = parse_study(text)
+    assert study.smoothing == 1.5 and study.record()["smoothing"] == 1.5
+    result = run_study(study)
+    for c in result.candidates:
+        assert c.net is not None
+        assert c.net.properties["layout"]["smoothing_panels"] == 1.5
+    assert parse_study(text.replace("smoothing = 1.5\n", "")).record()["smoothing"] is None
+    with pytest.raises(InputError, match="panels.smoothing"):
+        parse_study(text.replace("smoothing = 1.5", "smoothing = 30"))

@@ -164,7 +164,8 @@ def kink_text(design: DesignSurface, panel_size: float, properties: dict, *,
                 "make the kink per panel smaller.")
     return (head + ": the principal directions are well defined there, so the turn comes "
             "from the layout, not from the design; a longer smoothing of the directions "
-            "(`fabplan layout --smoothing`) or another start angle may lower it.")
+            "(`fabplan layout --smoothing`, a study's `[panels] smoothing`) or another start "
+            "angle may lower it.")
 
 
 def curvature_difference_figure(design: DesignSurface, panel_size: float, *,

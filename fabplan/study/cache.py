@@ -155,6 +155,7 @@ class CandidateCache:
             "fabplan": __version__, "design": record["design"], "files": _file_digests(study),
             "strips": record["strips"], "max_iterations": record["max_iterations"],
             "layout_starts": record["layout_starts"], "material": record["material"],
+            "smoothing": record["smoothing"],
         }, sort_keys=True, default=str)
 
     def under(self, study: Study) -> CandidateCache:

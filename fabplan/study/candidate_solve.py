@@ -68,7 +68,8 @@ def solve_candidate(study: Study, design: DesignSurface, candidate: Candidate,
         else _continued(study, design, size)
     if solve.key not in layouts and not solve.several and continued is None:
         say(f"    layout at {angle:g} deg, panel size {size:g}")
-        layouts[solve.key] = layout_surface(design, size, angle=angle)
+        layouts[solve.key] = layout_surface(design, size, angle=angle,
+                                            settings=study.layout_settings)
     layout = layouts.get(solve.key)
     seconds["layout"] = time.perf_counter() - clock
     clock, laid_before = time.perf_counter(), seconds["layout"]
@@ -125,6 +126,8 @@ class _CandidateSolve:
 
         laid, solved = glide_fairest(self.design, self.size, net_type, angle=self.angle,
                                      net_angle=net_angle, solver=self.settings,
+                                     settings=self.study.layout_settings,
+                                     vary_smoothing=self.study.smoothing is None,
                                      starts=starts or self.study.layout_starts,
                                      progress=self.report, first_solved=first_solved)
         self.say(f"    {net_type} from {len(solved.properties['layout_starts'])} starts: "
@@ -226,11 +229,13 @@ class _CandidateSolve:
             say(f"    S-nets from {study.layout_starts} starts {where}")
             layouts[key], starts[key] = glide_fairest(
                 continued.design, size, "snet", angle=angle, solver=settings,
+                settings=study.layout_settings, vary_smoothing=study.smoothing is None,
                 starts=study.layout_starts, progress=report)
         if key not in layouts:
             clock = time.perf_counter()
             say(f"    layout {where}")
-            layouts[key] = layout_surface(continued.design, size, angle=angle, judged_on=design)
+            layouts[key] = layout_surface(continued.design, size, angle=angle, judged_on=design,
+                                          settings=study.layout_settings)
             # counted as layout time (`seconds` is the candidate's record)
             seconds["layout"] += time.perf_counter() - clock
         if key not in starts:

@@ -10,11 +10,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..fabricate.limits import DEFAULT_MAX_TWIST_DEG_PER_M
 from ..fabricate.molds.materials import Material
 from ..io.units import MM_PER_UNIT
 from ..solve.net_types import get_net
+
+if TYPE_CHECKING:  # imported where used: a study file is read without the layout stage
+    from ..layout.settings import LayoutSettings
 
 __all__ = ["Study", "DesignSpec", "Limits", "StripOptions", "CostWeights", "Candidate", "Search",
            "SEARCH_BUDGET", "GLIDING_NETS", "candidate_name"]
@@ -306,6 +310,19 @@ class Study:
     extra: dict = field(default_factory=dict)
     searches: tuple[Search, ...] = ()
     material: Material | None = None
+    #: the layouts' direction fields smoothed over this many panels and no other
+    #: (``[panels] smoothing``, as `fabplan layout --smoothing`); None: the layouts'
+    #: own choice, and their longer smoothing one of the layout starts
+    smoothing: float | None = None
+
+    @property
+    def layout_settings(self) -> LayoutSettings | None:
+        """The `LayoutSettings` of the study's layouts: None, or its smoothing alone."""
+        if self.smoothing is None:
+            return None
+        from ..layout.settings import LayoutSettings
+
+        return LayoutSettings(smoothing=self.smoothing, smoothing_tries=())
 
     def panel_size_of(self, candidate: Candidate) -> float:
         """The panel size (model units) a candidate is laid out with."""
@@ -361,6 +378,7 @@ class Study:
             "material": None if self.material is None else self.material.record(),
             "max_iterations": self.max_iterations,
             "layout_starts": self.layout_starts,
+            "smoothing": self.smoothing,
             **({"searches": [asdict(s) for s in self.searches]} if self.searches else {}),
         }
 

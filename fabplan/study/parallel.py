@@ -76,7 +76,8 @@ def _baseline_task(study: Study, design: DesignSurface) -> SurfaceLayout | Fabpl
     from ..layout.surface_layout import layout_surface
 
     try:
-        return layout_surface(design, study.panel_size, angle=90.0)
+        return layout_surface(design, study.panel_size, angle=90.0,
+                              settings=study.layout_settings)
     except FabplanError as exc:
         return exc
 

@@ -313,7 +313,8 @@ def prepare_design(study: Study, say: Callable[[str], None],
 
     design = load_study_design(study, say, max_panels)
     try:
-        return design, layout_surface(design, study.panel_size, angle=90.0)
+        return design, layout_surface(design, study.panel_size, angle=90.0,
+                                      settings=study.layout_settings)
     except BrokenLayoutError as exc:
         raise refused_baseline(exc, study, design, say) from None
 

@@ -171,6 +171,9 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     if not panels.has("size"):
         panels.missing("size", "give a positive number (model units)")
     sizes = swept_values(panels, "size", "model units", free=False)
+    # the direction field's smoothing length, as `fabplan layout --smoothing` sets it
+    smoothing = panels.number("smoothing", unit="panels")
+    panels.within("smoothing", smoothing, "--smoothing")
     panels.done()
 
     design = _design(Table(top.get("design", None) or {}, "design", file), folder)
@@ -197,7 +200,8 @@ def parse_study(text: str, *, path: Path | None = None) -> Study:
     return Study(name=name, path=path, description=description, design=design,
                  panel_size=sizes[0], limits=limits, strips=strips, cost=cost,
                  candidates=candidates, max_iterations=max_iterations,
-                 layout_starts=int(layout_starts), searches=searches, material=material)
+                 layout_starts=int(layout_starts), searches=searches, material=material,
+                 smoothing=smoothing)
 
 
 def _design(t: Table, folder: Path) -> DesignSpec:
