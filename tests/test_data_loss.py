@@ -511,3 +511,23 @@ def test_strips_remove_only_their_own_earlier_files(tmp_path):
     assert (out / "strips-sheets.dxf").is_file()
     assert mine.read_bytes() == b"the user's own picture" and edited.is_file()
     assert not any(p.exists() for p in rest)
+
+
+def test_a_candidate_with_strips_is_kept_for_resume(tmp_path, capsys):
+    """A candidate that gets strips keeps them, their limits checked, in the cache: its
+    strip plan's limit checks were a type the cache would not hold, so every candidate
+    with strips was computed again on every resumed run."""
+    text = (STUDY.format(name="mine").replace('net = "isogonal"\nangle = 80', 'net = "cmc"')
+            + "[strips]\nheight_mm = 60\nthickness_mm = 4\nnets = \"all\"\n")
+    (tmp_path / "s.toml").write_text(text, encoding="utf-8")
+    out = tmp_path / "out"
+    argv = ["study", str(tmp_path / "s.toml"), "-o", str(out), "--resume", "--workers", "1",
+            "--no-3d"]
+    main(argv)
+    said = capsys.readouterr()
+    assert "is not kept for --resume" not in said.out + said.err
+    study = read_study(tmp_path / "s.toml")
+    cache = CandidateCache(out, study)
+    kept = [cache.load(c) for c in study.candidates]
+    assert all(k is not None and k.strips is not None for k in kept)
+    assert all(k.strips.limits for k in kept)

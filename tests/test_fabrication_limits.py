@@ -249,6 +249,11 @@ def test_a_deviation_limit_is_given_in_mm_or_refused_when_larger_than_the_net(tm
     assert main([*argv, "--max-deviation-mm", "40"]) == 3
     check = json.loads(out.read_text())["limits"]["max_deviation_mm"]
     assert check["limit"] == 40.0 and check["exceeded"] and check["option"] == "--max-deviation-mm"
+    # the limit and the worst vertex on the terminal, as the other commands print them
+    printed = capsys.readouterr().out
+    assert re.search(rf"limit: {check['over']} of {check['measured']} vertices exceed the "
+                     r"largest deviation from the design of 40 mm: up to ", printed), printed
+    assert "distance to reference: max" in printed and "(m)" in printed
     assert main([*argv, "--max-deviation-mm", "40", "--max-deviation", "0.04"]) == 2
     # optimize holds it in the solve: the same limit either way
     nets = [tmp_path / "a.obj", tmp_path / "b.obj"]

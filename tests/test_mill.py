@@ -766,10 +766,38 @@ def test_the_margin_rule_raised_where_its_cut_gouges_in_simulation(tmp_path, cap
     assert tried and all(float(g) > 0.005 for _, g in tried), rule
     assert all(float(m) < record["margin_mm"] for m, _ in tried)
     assert f"to {record['margin_mm']:.4g} mm, the first tried that keeps the cut" in rule
-    assert "the margin raised past its rule's in simulation" in said
+    tries = record["margin_tries"]
+    assert tries[0]["gouge_mm"] > 0.005 and tries[-1]["margin_mm"] == record["margin_mm"]
+    assert tries[-1]["gouge_mm"] == pytest.approx(record["gouge_check"]["max_gouge_mm"])
+    assert "margins tried in simulation, the rule's first: " in said
     # the rule's own margin, given by hand, gouges as the record says
     again = tmp_path / "again"
     assert main(["mill", str(part), "--tool", "face:D=16", "--scallop", "1", "--margin",
                  tried[0][0], "-o", str(again)]) == 3
     gouge = json.loads((again / "mill.json").read_text())["gouge_check"]["max_gouge_mm"]
     assert gouge == pytest.approx(float(tried[0][1]), rel=0.01)
+
+
+def test_a_gouge_the_margin_does_not_shrink_keeps_the_least_gouging_plan(monkeypatch):
+    """Where raising the margin stops shrinking the gouge (a face wider than the surface
+    allows, a faceted design), the raise stops, the least gouging plan is kept, not the
+    rule's, and its note and `margin_tries` say what was tried: a part's rule gouged by
+    0.099 mm, 180 and 208 mm both by 0.012 mm, and the rule's plan was kept."""
+    from types import SimpleNamespace
+
+    import fabplan.fabricate.milling.mill_report as report
+
+    mesh, tool = bowl_grid(), parse_tool("face:D=40")
+    plan = plan_face_milling(mesh, tool, MillSettings())
+    gouges = iter([0.0121, 0.0120, 0.0119])
+    monkeypatch.setattr(report, "simulate_milling",
+                        lambda *args: SimpleNamespace(max_gouge_mm=next(gouges), seconds=0.0))
+    rule = SimpleNamespace(max_gouge_mm=0.0988, seconds=0.0)
+    kept, cut, _ = report._gouge_free_margin(mesh, tool, MillSettings(), None, plan, rule,
+                                             (None, None, SimulationSettings()))
+    assert [g for _, g in kept.margin_tries] == [0.0988, 0.0121, 0.0120]     # then it stops
+    first = kept.margin_tries[1][0]
+    assert kept.margin_mm == first > plan.margin_mm and cut.max_gouge_mm == 0.0121
+    assert "the least gouging tried (0.0121 mm)" in kept.margin_rule
+    assert any("the gouge no longer shrinks with the margin" in n for n in kept.notes)
+    assert kept.record()["margin_tries"][0] == {"margin_mm": plan.margin_mm, "gouge_mm": 0.0988}

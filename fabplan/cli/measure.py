@@ -50,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
         record["limits"] = limits_record(limits)
     write_json(out, record)           # the file first: the terminal may go away
     print(format_summary(record))
+    for check in limits:
+        print(f"limit: {check.text()}")
     print(f"wrote {out}")
     build = record.get("buildable")
     if build is not None and not build["buildable"]:

@@ -89,6 +89,10 @@ def _warn_gouge(result: Any, out: Path) -> bool:
         # a margin keeps the tool inside the spheres; a face wider than the surface's
         # curvature allows over its width gouges whatever the margin
         why = "try a smaller tool or a larger --margin"
+        if result.plan.margin_tries:
+            why = ("try a smaller tool: margins up to "
+                   f"{max(m for m, _ in result.plan.margin_tries):.4g} mm were tried in "
+                   "simulation, and the least gouging is kept")
         distance = result.net_distance
         faceting = result.design_faceting_mm
         if faceting is not None and result.simulation.max_gouge_mm <= 2 * faceting:

@@ -268,7 +268,7 @@ class BuildReport:
         if self.far_vertices.size:
             v, n = int(self.far_vertices[0]), self.far_vertices.size
             parts.append(f"{n} {'vertices are' if n > 1 else 'vertex is'} farther than "
-                         f"{self.limits.max_deviation:.4g} from the reference, the farthest "
+                         f"{self.limits.max_deviation:.4g} (model units) from the reference, the farthest "
                          f"vertex {v} {_point(self.points[v])} at {self.deviation[0]:.4g}")
         return "; ".join(parts)
 

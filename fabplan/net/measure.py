@@ -146,7 +146,9 @@ def format_summary(record: dict) -> str:
     lines.append(f"face planarity / mean edge: max {_fmt(record['face_planarity_relative'], 'max', '.3e')}")
     if "distance_to_reference" in record:
         d = record["distance_to_reference"]
-        lines.append(f"distance to reference: max {_fmt(d, 'max', '.3e')}, mean {_fmt(d, 'mean', '.3e')}")
+        unit = record.get("units") or "model units"
+        lines.append(f"distance to reference: max {_fmt(d, 'max', '.3e')}, mean "
+                     f"{_fmt(d, 'mean', '.3e')} ({unit})")
     folds = record.get("folds")
     if folds:
         counts = [(folds["flipped_faces"]["count"], "flipped faces"),

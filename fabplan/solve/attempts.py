@@ -188,7 +188,8 @@ def explain_result(solver: GuidedProjection, status: str, build: BuildReport, st
         if smallest is not None:
             parts.append(f"tightening the limit from {loosest:.4g} step by step, the net converged "
                          f"buildable down to a limit of {smallest:.4g} (the smallest found): give "
-                         f"--max-deviation {smallest:.4g} or more, or another net type")
+                         f"--max-deviation {smallest:.4g} (model units; --max-deviation-mm in mm) "
+                         "or more, or another net type")
         elif loosest is not None:
             parts.append(f"tightening the limit from {loosest:.4g} step by step, no limit gave a "
                          "converged buildable net (none found): this net type may not fit the "

@@ -54,6 +54,7 @@ _NPY_HEADER = 4096
 
 def cached_types() -> dict[str, type]:
     """The only classes a kept candidate may hold: a study candidate's results."""
+    from ..fabricate.limits import LimitCheck
     from ..fabricate.molds.boundary_molds import BoundaryMolds, BoundarySides
     from ..fabricate.molds.materials import Material
     from ..fabricate.molds.mold_plan import MoldPlan
@@ -74,7 +75,7 @@ def cached_types() -> dict[str, type]:
         CandidateResult, Candidate, OptimizationResult, QuadMesh, BoundaryPanels, MoldPlan,
         MoldSettings, BoundaryMolds, BoundarySides, StripPlan, StripSet, Strip, StripSettings, ReferenceCurve,
         ArcRun, Crossing, Part, Label, Placement, Sheet, Nesting, Material, PanelClasses,
-        PanelMesh]
+        PanelMesh, LimitCheck]
     return {cls.__name__: cls for cls in classes}
 
 

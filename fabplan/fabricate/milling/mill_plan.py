@@ -320,6 +320,9 @@ class MillPlan:
         design (mm; empty when placed on the net).
     scallop_by_node_mm : (p,) float, the predicted scallop beside each node of the passes
         (mm; NaN beside the last pass).
+    margin_tries : ``(margin_mm, gouge_mm)`` of the rule's margin and each larger one
+        tried in simulation where the rule's cut gouged (`fabplan.fabricate.milling.
+        mill_report`); empty otherwise.
     """
 
     net: str
@@ -339,6 +342,7 @@ class MillPlan:
     placed_on: str = "net"
     node_shift_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     scallop_by_node_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    margin_tries: tuple = ()
 
     @property
     def predicted_max_scallop_mm(self) -> float:
@@ -357,6 +361,8 @@ class MillPlan:
             "side": self.side,
             "margin_mm": self.margin_mm,
             "margin_rule": self.margin_rule,
+            "margin_tries": [{"margin_mm": float(m), "gouge_mm": float(g)}
+                             for m, g in self.margin_tries],
             "scallop_limit_mm": self.settings.scallop_mm,
             "chordal_tolerance_mm": self.settings.chordal_tolerance_mm,
             "lines": self.lines,

@@ -157,9 +157,11 @@ class MillResult:
 
     def summary(self) -> str:
         lines = [self.plan.summary()]
-        raised = self.plan.margin_rule.partition("; raised in simulation ")[2]
-        if raised:
-            lines.append(f"the margin raised past its rule's in simulation {raised}")
+        tries = self.plan.margin_tries
+        if tries:
+            lines.append("margins tried in simulation, the rule's first: " + ", ".join(
+                f"{m:.4g} mm gouging {g:.3g} mm" for m, g in tries)
+                + f"; kept {self.plan.margin_mm:.4g} mm")
         sim, conv = self.simulation, self.conventional
         distance = self.net_distance
         if distance is not None:
@@ -296,6 +298,11 @@ def _rule_gouges(settings: MillSettings, plan: MillPlan, cut: SimulationResult,
             and not (faceting is not None and cut.max_gouge_mm <= 2 * faceting))
 
 
+#: a gouge that shrinks by less than this factor from one margin tried to the next is no
+#: longer the margin's: the tool's face is wider than the surface allows, or a faceted design
+MARGIN_PLATEAU = 0.8
+
+
 def _gouge_free_margin(mesh: QuadMesh, tool: MillTool, settings: MillSettings, design: Any,
                        plan: MillPlan, cut: SimulationResult, simulation: tuple
                        ) -> tuple[MillPlan, SimulationResult, float]:
@@ -304,40 +311,57 @@ def _gouge_free_margin(mesh: QuadMesh, tool: MillTool, settings: MillSettings, d
     surface between and beyond them may curve more (a torus part of 147 mm took a margin of
     87 mm where the rule gave 69 mm). The margin is raised by a quarter
     (`MARGIN_FIRST_FACTOR`), then by the secant of the logarithm of the gouge, aiming at
-    half the gouge tolerance, at most `MARGIN_TRIES` times; the first plan whose cut keeps
-    within the tolerance is kept, its rule saying so, else the rule's plan with a note of
-    the margins tried. Returns the plan, its cut and the seconds the tries took.
+    half the gouge tolerance, at most `MARGIN_TRIES` times, and no more once the gouge
+    stops shrinking (`MARGIN_PLATEAU`). The first plan whose cut keeps within the
+    tolerance is kept, else the least gouging tried, with a note; its `margin_tries` and
+    rule say so. Returns the plan, its cut and the seconds the tries took.
     """
     target, cutter, sim = simulation
     tolerance = sim.gouge_tolerance_mm
     started = time.perf_counter()
     tried = [(plan.margin_mm, cut.max_gouge_mm)]
+    best = (plan, cut)
     radius = plan.meusnier_radius_mm[np.isfinite(plan.meusnier_radius_mm)]
     margin = MARGIN_FIRST_FACTOR * plan.margin_mm + MARGIN_STEP_SHARE * float(radius.max(initial=0.0))
-    why = "raising the margin past the rule's did not keep the cut within the gouge tolerance"
+    why = f"raising it {MARGIN_TRIES} times did not keep the cut within the gouge tolerance"
     for _ in range(MARGIN_TRIES):
         try:
             again = plan_face_milling(mesh, tool, replace(settings, margin_mm=margin),
                                       design=design)
         except InputError:
-            why = f"at a margin of {margin:.4g} mm no safety sphere is left"
+            why = f"no safety sphere is left at a margin of {margin:.4g} mm"
             break
         path = again.path
         result = simulate_milling(target, cutter, path.tip, path.axis, path.contact,
                                   path.pass_id, sim)
         tried.append((margin, result.max_gouge_mm))
+        if result.max_gouge_mm < MARGIN_PLATEAU * best[1].max_gouge_mm \
+                or result.max_gouge_mm <= tolerance:
+            best = (again, result)           # a smaller margin where the gouge is the same
         if result.max_gouge_mm <= tolerance:
-            said = ", ".join(f"{m:.4g} mm gouged by {g:.3g} mm" for m, g in tried[:-1])
-            again = replace(again, margin_rule=f"{plan.margin_rule}; raised in simulation "
-                            f"({said}) to {margin:.4g} mm, the first tried that keeps the cut "
-                            "within the gouge tolerance")
-            return again, result, time.perf_counter() - started
+            break
         (m0, g0), (m1, g1) = tried[-2:]
+        if g1 > MARGIN_PLATEAU * g0:
+            why = ("the gouge no longer shrinks with the margin: the tool's face is wider than "
+                   "the surface's curvature allows, or the design is faceted")
+            break
         slope = (np.log(g1) - np.log(g0)) / (m1 - m0) if g0 > 0 and g1 > 0 and m1 != m0 else 0.0
         step = np.log(tolerance / 2 / g1) / slope if slope < 0 else 0.25 * m1
         margin = m1 + float(np.clip(step, 0.05 * m1, 0.5 * m1))
-    plan.notes.append(f"{why}: " + ", ".join(f"{m:.4g} mm gouged by {g:.3g} mm" for m, g in tried))
-    return plan, cut, time.perf_counter() - started
+    kept, kept_cut = best
+    said = ", ".join(f"{m:.4g} mm gouged by {g:.3g} mm" for m, g in tried if m != kept.margin_mm)
+    if kept is not plan:
+        within = kept_cut.max_gouge_mm <= tolerance
+        kept = replace(kept, margin_tries=tuple(tried), margin_rule=(
+            f"{plan.margin_rule}; raised in simulation ({said}) to {kept.margin_mm:.4g} mm, "
+            + ("the first tried that keeps the cut within the gouge tolerance" if within else
+               f"the least gouging tried ({kept_cut.max_gouge_mm:.3g} mm)")))
+    else:
+        kept = replace(plan, margin_tries=tuple(tried))
+    if kept_cut.max_gouge_mm > tolerance:
+        kept.notes.append(f"the margin rule's cut gouges, and raising the margin did not keep it "
+                          f"within the gouge tolerance ({why}; tried {said})")
+    return kept, kept_cut, time.perf_counter() - started
 
 
 def _net_target(mesh: QuadMesh, up: np.ndarray, scale: float, step_mm: float) -> HeightTarget:
