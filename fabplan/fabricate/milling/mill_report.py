@@ -359,8 +359,10 @@ def _gouge_free_margin(mesh: QuadMesh, tool: MillTool, settings: MillSettings, d
     else:
         kept = replace(plan, margin_tries=tuple(tried))
     if kept_cut.max_gouge_mm > tolerance:
+        every = ", ".join(f"{m:.4g} mm gouged by {g:.3g} mm" for m, g in tried)
         kept.notes.append(f"the margin rule's cut gouges, and raising the margin did not keep it "
-                          f"within the gouge tolerance ({why}; tried {said})")
+                          f"within the gouge tolerance ({why}; tried {every}; kept "
+                          f"{kept.margin_mm:.4g} mm)")
     return kept, kept_cut, time.perf_counter() - started
 
 

@@ -122,9 +122,9 @@ def surface_model(mesh, tolerance: float, model: str = "auto", design=None) -> s
     every face lies within `tolerance` (model units) of a plane, else ``"design"`` when
     `design` (a `fabplan.design.DesignSurface`) has an exact surface that every vertex of
     the net lies within `tolerance` of (and of its triangulation's chord error), else
-    ``"shared"``. A net off its design (a net type
-    that leaves it) is not cut from it: its panels would be patches of a surface they are
-    not on, and their molds those of other panels.
+    ``"shared"``. A net off its design (a net type that leaves it) is not cut from it: its
+    panels would be patches of a surface they are not on, and their molds those of other
+    panels.
 
     Examples
     --------
