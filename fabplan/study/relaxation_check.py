@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import fields, replace
 from typing import TYPE_CHECKING, Callable
 
+from .advised_size import MAX_CHECKED_PANELS
 from .checks import feasible_with, limit_value, limit_words
 from .definition import Candidate, Limits, Study
 from .ranking import judge_study, nearest_candidate
@@ -48,9 +49,9 @@ def run_limits(candidate: Candidate) -> tuple[str, ...]:
 #: what that run measured
 ROUNDS = 2
 
-#: the most panels the nearest candidate is run again with (as `fabplan.study.
-#: advised_size.MAX_CHECKED_PANELS`: about a minute's solve)
-MAX_RUN_PANELS = 5000
+#: the most panels the nearest candidate is run again with: about a minute's solve, the
+#: bound of the advised panel size's check too
+MAX_RUN_PANELS = MAX_CHECKED_PANELS
 
 
 def relaxed_limits(limits: Limits, checks: list[dict]) -> Limits | None:
